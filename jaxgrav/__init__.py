@@ -1,0 +1,37 @@
+"""jaxgrav: geophysical map-matching aided inertial navigation in JAX.
+
+The public API is re-exported here; see the README for a tour.
+"""
+
+from jaxgrav import constants, geodesy, interp
+from jaxgrav.geodesy import (
+    ecef_to_geodetic,
+    enu_to_geodetic,
+    eotvos,
+    geodetic_to_ecef,
+    geodetic_to_enu,
+    meridian_radius,
+    normal_gravity,
+    prime_vertical_radius,
+)
+from jaxgrav.grid import Grid, Window, sample
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Grid",
+    "Window",
+    "__version__",
+    "constants",
+    "ecef_to_geodetic",
+    "enu_to_geodetic",
+    "eotvos",
+    "geodesy",
+    "geodetic_to_ecef",
+    "geodetic_to_enu",
+    "interp",
+    "meridian_radius",
+    "normal_gravity",
+    "prime_vertical_radius",
+    "sample",
+]

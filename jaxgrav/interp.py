@@ -1,0 +1,209 @@
+"""Interpolation kernels on regular 2-D arrays, in fractional index coordinates.
+
+These are the building blocks of :class:`jaxgrav.Grid` sampling and of layered DOV
+interpolation. They know nothing about latitude or longitude: a point is given by
+its fractional row ``iy`` and column ``ix`` (``iy = 0`` is the first row). Points
+outside ``[0, ny−1] × [0, nx−1]`` give NaN; the arithmetic is done on clipped,
+harmless coordinates first so that gradients stay finite everywhere ("double where").
+
+Methods
+-------
+``bilinear``
+    Paper A's formula, ``g = [g_A (L−h_x)(L−h_y) + g_B (L−h_x) h_y + g_C h_x h_y
+    + g_D h_x (L−h_y)] / L²``, exact for fields linear in each coordinate.
+``bicubic``
+    Tensor-product cubic spline with not-a-knot ends, the same interpolant as SciPy's
+    ``RegularGridInterpolator(method="cubic")``: C² and exact for bicubic fields.
+    It is evaluated as a bicubic Hermite patch from node values and spline slopes
+    (:func:`spline_slopes`), which are linear in the values (a matrix product), so the
+    interpolant stays differentiable in the map values too.
+"""
+
+import functools
+
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = ["METHODS", "bicubic", "bicubic_coefficients", "bilinear", "spline_slopes"]
+
+METHODS = ("bilinear", "bicubic")
+
+
+def _check_method(method):
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}; got {method!r}")
+
+
+def _cell(i, n, eps):
+    """Cell index, local coordinate in [0, 1] and inside flag for fractional index ``i``."""
+    inside = (i >= -eps) & (i <= (n - 1) + eps)
+    i_safe = jnp.clip(jnp.where(inside, i, 0.0), 0.0, n - 1.0)
+    i0 = jnp.clip(jnp.floor(i_safe), 0, max(n - 2, 0)).astype(jnp.int32)
+    return i0, i_safe - i0, inside
+
+
+def _edge_eps(dtype, n):
+    return 8.0 * float(jnp.finfo(dtype).eps) * max(n, 1)
+
+
+def bilinear(values, iy, ix):
+    """Bilinear interpolation of ``values`` at fractional indices.
+
+    Parameters
+    ----------
+    values : Array, shape ``(..., ny, nx)``
+        Node values; leading axes are interpolated together (channels).
+    iy, ix : Array
+        Fractional row and column indices, broadcast together to shape ``P``.
+
+    Returns
+    -------
+    Array, shape ``(..., *P)``
+        Interpolated values; NaN where a point is outside the array.
+    """
+    ny, nx = values.shape[-2:]
+    iy, ix = jnp.broadcast_arrays(jnp.asarray(iy), jnp.asarray(ix))
+    dtype = jnp.result_type(values.dtype, iy.dtype, float)
+    eps = _edge_eps(dtype, max(ny, nx))
+    r0, ty, in_y = _cell(iy, ny, eps)
+    c0, tx, in_x = _cell(ix, nx, eps)
+    r1 = jnp.minimum(r0 + 1, ny - 1)
+    c1 = jnp.minimum(c0 + 1, nx - 1)
+    g_a = values[..., r0, c0]
+    g_b = values[..., r1, c0]  # one step north (h_y)
+    g_c = values[..., r1, c1]
+    g_d = values[..., r0, c1]  # one step east (h_x)
+    out = g_a * (1 - tx) * (1 - ty) + g_b * (1 - tx) * ty + g_c * tx * ty + g_d * tx * (1 - ty)
+    return jnp.where(in_x & in_y, out, jnp.nan).astype(dtype)
+
+
+@functools.lru_cache(maxsize=64)
+def _slope_matrix(n):
+    """Matrix S (n×n) mapping node values to not-a-knot cubic-spline slopes (unit spacing)."""
+    if n < 4:
+        raise ValueError(f"bicubic interpolation needs at least 4 nodes per axis; got {n}")
+    a = np.zeros((n, n))
+    b = np.zeros((n, n))
+    for i in range(1, n - 1):  # interior: m[i-1] + 4 m[i] + m[i+1] = 3 (y[i+1] - y[i-1])
+        a[i, i - 1 : i + 2] = (1.0, 4.0, 1.0)
+        b[i, i - 1], b[i, i + 1] = -3.0, 3.0
+    # not-a-knot: third derivative continuous at nodes 1 and n-2
+    a[0, 0], a[0, 2] = 1.0, -1.0
+    b[0, 0:3] = (-2.0, 4.0, -2.0)
+    a[-1, -1], a[-1, -3] = 1.0, -1.0
+    b[-1, -3:] = (2.0, -4.0, 2.0)
+    return np.linalg.solve(a, b)
+
+
+def spline_slopes(values, axis):
+    """Not-a-knot cubic-spline slopes of ``values`` along ``axis`` (per index step).
+
+    Parameters
+    ----------
+    values : Array
+        Node values; the spline runs along ``axis`` (at least 4 nodes).
+    axis : int
+        Axis along which the spline is fitted.
+
+    Returns
+    -------
+    Array
+        Slopes ``ds/di`` at every node, same shape as ``values``.
+    """
+    values = jnp.asarray(values)
+    s = jnp.asarray(_slope_matrix(values.shape[axis]), dtype=jnp.result_type(values.dtype, float))
+    moved = jnp.moveaxis(values, axis, -1)
+    return jnp.moveaxis(moved @ s.T, -1, axis)
+
+
+def bicubic_coefficients(values):
+    """Stack node values and spline derivatives for :func:`bicubic`.
+
+    Parameters
+    ----------
+    values : Array, shape ``(..., ny, nx)``
+
+    Returns
+    -------
+    Array, shape ``(..., ny, nx, 4)``
+        ``[f, ∂f/∂ix, ∂f/∂iy, ∂²f/∂iy∂ix]`` at each node. Compute once per map and pass
+        to :func:`bicubic` when sampling the same map many times.
+    """
+    fx = spline_slopes(values, -1)
+    fy = spline_slopes(values, -2)
+    fxy = spline_slopes(fx, -2)
+    return jnp.stack([values, fx, fy, fxy], axis=-1)
+
+
+def _hermite(t):
+    t2, t3 = t * t, t * t * t
+    return (2 * t3 - 3 * t2 + 1, -2 * t3 + 3 * t2, t3 - 2 * t2 + t, t3 - t2)
+
+
+def bicubic(coefficients, iy, ix):
+    """Bicubic (not-a-knot spline) interpolation at fractional indices.
+
+    Parameters
+    ----------
+    coefficients : Array, shape ``(..., ny, nx, 4)``
+        Output of :func:`bicubic_coefficients`.
+    iy, ix : Array
+        Fractional row and column indices, broadcast together to shape ``P``.
+
+    Returns
+    -------
+    Array, shape ``(..., *P)``
+        Interpolated values; NaN where a point is outside the array.
+    """
+    ny, nx = coefficients.shape[-3:-1]
+    iy, ix = jnp.broadcast_arrays(jnp.asarray(iy), jnp.asarray(ix))
+    dtype = jnp.result_type(coefficients.dtype, iy.dtype, float)
+    eps = _edge_eps(dtype, max(ny, nx))
+    r0, ty, in_y = _cell(iy, ny, eps)
+    c0, tx, in_x = _cell(ix, nx, eps)
+    hy0, hy1, gy0, gy1 = _hermite(ty)
+    hx0, hx1, gx0, gx1 = _hermite(tx)
+    out = 0.0
+    for r, hy, gy in ((r0, hy0, gy0), (r0 + 1, hy1, gy1)):
+        for col, hx, gx in ((c0, hx0, gx0), (c0 + 1, hx1, gx1)):
+            k = coefficients[..., r, col, :]
+            out = out + (
+                k[..., 0] * hy * hx
+                + k[..., 1] * hy * gx
+                + k[..., 2] * gy * hx
+                + k[..., 3] * gy * gx
+            )
+    return jnp.where(in_x & in_y, out, jnp.nan).astype(dtype)
+
+
+def interpolation_matrix(n, positions, method):
+    """Dense matrix W (len(positions) × n) with ``W @ y`` = 1-D interpolant of ``y`` at positions.
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes (unit spacing, node i at index i).
+    positions : array_like
+        Fractional indices in [0, n−1] (NumPy).
+    method : {"bilinear", "bicubic"}
+        Linear, or not-a-knot cubic spline.
+
+    Returns
+    -------
+    numpy.ndarray, shape ``(len(positions), n)``
+    """
+    _check_method(method)
+    p = np.asarray(positions, dtype=float)
+    i0 = np.clip(np.floor(p), 0, n - 2).astype(int)
+    t = p - i0
+    rows = np.arange(p.size)
+    w = np.zeros((p.size, n))
+    if method == "bilinear":
+        np.add.at(w, (rows, i0), 1 - t)
+        np.add.at(w, (rows, i0 + 1), t)
+        return w
+    h0, h1, g0, g1 = (np.asarray(v) for v in _hermite(t))
+    s = _slope_matrix(n)
+    np.add.at(w, (rows, i0), h0)
+    np.add.at(w, (rows, i0 + 1), h1)
+    return w + g0[:, None] * s[i0] + g1[:, None] * s[i0 + 1]
