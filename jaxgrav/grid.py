@@ -14,8 +14,6 @@ points are wrapped into the grid's own range. Grids are not periodic in longitud
 
 import dataclasses
 import functools
-import os
-import tempfile
 from pathlib import Path
 from typing import NamedTuple
 
@@ -24,10 +22,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import interp
+from jaxgrav._io import atomic_output
 from jaxgrav._validate import check_finite, check_latitude, check_same_shape, concrete
 from jaxgrav.constants import DEG
 
-__all__ = ["Grid", "Window", "sample"]
+__all__ = ["Grid", "Window", "make_sampler", "sample"]
 
 _LAT_NAMES = ("lat", "latitude", "y")
 _LON_NAMES = ("lon", "longitude", "x")
@@ -211,9 +210,6 @@ class Grid:
         """
         import xarray as xr
 
-        path = Path(path)
-        if path.exists() and not force:
-            raise FileExistsError(f"{str(path)!r} exists; pass force=True to overwrite it")
         lead = [f"dim_{i}" for i in range(self.values.ndim - 2)]
         da = xr.DataArray(
             np.asarray(self.values),
@@ -226,15 +222,8 @@ class Grid:
         )
         ds = da.to_dataset(name=self.name or "z")
         ds.attrs.update(attrs or {})
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(suffix=".nc.tmp", dir=path.parent)
-        os.close(fd)
-        try:
+        with atomic_output(path, force=force) as tmp:
             ds.to_netcdf(tmp)
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.remove(tmp)
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -489,7 +478,37 @@ def sample(grid, lat, lon, method="bilinear", *, strict=False):
 
 @functools.partial(jax.jit, static_argnames="method")
 def _sample(grid, lat, lon, method):
-    iy, ix = grid.fractional_index(lat, lon)
+    return make_sampler(grid, method)(lat, lon)
+
+
+def make_sampler(grid, method="bilinear"):
+    """Sampling function with the interpolation coefficients computed once.
+
+    For hot loops that sample the same map many times (matchers, filters): the
+    bicubic spline slopes are computed here, not at every call. No validation is
+    done by the returned function (it is meant for use inside ``jit``).
+
+    Parameters
+    ----------
+    grid : Grid
+    method : {"bilinear", "bicubic"}
+
+    Returns
+    -------
+    callable
+        ``f(lat, lon) -> values``, as :func:`sample` (NaN off the grid).
+    """
+    interp._check_method(method)
     if method == "bilinear":
-        return interp.bilinear(grid.values, iy, ix)
-    return interp.bicubic(interp.bicubic_coefficients(grid.values), iy, ix)
+        values = grid.values
+
+        def f(lat, lon):
+            return interp.bilinear(values, *grid.fractional_index(lat, lon))
+
+        return f
+    coef = interp.bicubic_coefficients(grid.values)
+
+    def f(lat, lon):
+        return interp.bicubic(coef, *grid.fractional_index(lat, lon))
+
+    return f

@@ -1,0 +1,138 @@
+"""Steps 1–3 of paper A: search windows, iso-value masks and padded candidate sets.
+
+Around each INS fix a fixed-size window of map nodes is searched for *iso-value
+points*, nodes whose map value is within a tolerance of the reading:
+``|g_i − M(x_k, y_k)| ≤ δ_k``. The tolerance is the user's δ (an array, so it can
+be swept without recompiling) plus a discretisation allowance: the true position
+is in general not a node, and the nearest node can differ from it by up to the
+local map slope times half the cell diagonal. With ``slope_factor = 1`` that
+allowance is exactly |∇M| · diag/2, so in a noiseless, locally linear field the
+node nearest the truth is never rejected; ``slope_factor = 0`` is the paper's
+plain tolerance.
+
+The iso-points of each window are packed into a padded set of fixed capacity
+(jax-md style): positions, values, a validity mask, the count actually found and
+an overflow flag. On overflow the best-fitting points (smallest
+``|g − M| / δ_k``) are kept and the flag is raised; nothing is dropped silently.
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from jaxgrav.constants import DEG
+from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.match.chains import kmin
+
+__all__ = ["CandidateSet", "iso_candidates", "local_offsets_m"]
+
+
+class CandidateSet(NamedTuple):
+    """Padded iso-value points of every fix.
+
+    Attributes
+    ----------
+    lat, lon : Array, shape ``(N, C)``
+        Node coordinates (degrees).
+    north_m, east_m : Array, shape ``(N, C)``
+        Offset of each node from its INS fix (m, local north/east).
+    value : Array, shape ``(N, C)``
+        Map value at the node (mGal).
+    mask : Array of bool, shape ``(N, C)``
+        Valid slots.
+    count : Array of int, shape ``(N,)``
+        Iso-points found in each window (may exceed C).
+    overflow : Array of bool, shape ``(N,)``
+        ``count > C``: only the C best-fitting points were kept.
+    window_complete : Array of bool, shape ``(N,)``
+        False where the window met the map edge and was shifted inside.
+    """
+
+    lat: jax.Array
+    lon: jax.Array
+    north_m: jax.Array
+    east_m: jax.Array
+    value: jax.Array
+    mask: jax.Array
+    count: jax.Array
+    overflow: jax.Array
+    window_complete: jax.Array
+
+
+def local_offsets_m(lat, lon, lat_ref, lon_ref):
+    """North/east offsets (m) of points from reference points, with the reference's radii.
+
+    Parameters
+    ----------
+    lat, lon : Array
+        Points (degrees).
+    lat_ref, lon_ref : Array
+        Reference points (degrees), broadcast with the points.
+
+    Returns
+    -------
+    tuple of Array
+        ``(north, east)`` in metres.
+    """
+    north = (lat - lat_ref) * DEG * meridian_radius(lat_ref)
+    dlon = jnp.mod(lon - lon_ref + 180.0, 360.0) - 180.0
+    east = dlon * DEG * prime_vertical_radius(lat_ref) * jnp.cos(lat_ref * DEG)
+    return north, east
+
+
+def iso_candidates(grid, lat, lon, readings, *, half_size, capacity, delta, slope_factor=1.0):
+    """Iso-value candidate points of each fix in a fixed window around it.
+
+    Parameters
+    ----------
+    grid : Grid
+        Map (mGal), usually refined (:meth:`Grid.refine`).
+    lat, lon : Array, shape ``(N,)``
+        INS-indicated fixes (degrees).
+    readings : Array, shape ``(N,)``
+        Gravimeter readings, corrected as far as known (mGal).
+    half_size : int
+        Window half-width in nodes (static); windows are ``(2k+1)²`` nodes.
+    capacity : int
+        Candidate slots per fix (static).
+    delta : float or Array, broadcastable to ``(N,)``
+        Iso-value tolerance δ (mGal).
+    slope_factor : float or Array
+        Weight of the discretisation allowance (see module docstring).
+
+    Returns
+    -------
+    CandidateSet
+    """
+    win = grid.window(lat, lon, half_size)
+    s = 2 * half_size + 1
+    rows = win.row0[:, None] + jnp.arange(s)  # (N, s)
+    cols = win.col0[:, None] + jnp.arange(s)
+    node_lat = grid.lat0 + grid.dlat * rows
+    node_lon = grid.lon0 + grid.dlon * cols
+    # map slope magnitude at every window node (central differences inside the window)
+    dy = (meridian_radius(node_lat) * grid.dlat * DEG)[:, :, None]  # (N, s, 1)
+    dx = (prime_vertical_radius(node_lat) * jnp.cos(node_lat * DEG) * grid.dlon * DEG)[:, :, None]
+    gy = jnp.gradient(win.values, axis=-2) / dy
+    gx = jnp.gradient(win.values, axis=-1) / dx
+    half_diag = 0.5 * jnp.sqrt(dy**2 + dx**2)
+    tol = jnp.asarray(delta)[..., None, None] + slope_factor * jnp.hypot(gy, gx) * half_diag
+    misfit = jnp.abs(jnp.asarray(readings)[:, None, None] - win.values) / tol  # (N, s, s)
+    iso = misfit <= 1.0
+    count = jnp.sum(iso, axis=(-2, -1))
+    flat_fit = jnp.where(iso, misfit, jnp.inf).reshape(misfit.shape[0], s * s)
+    capacity = min(int(capacity), s * s)
+    fit, idx = kmin(flat_fit, capacity)  # best-fitting first
+    mask = jnp.isfinite(fit)
+    r, c = idx // s, idx % s
+    take = jax.vmap(lambda a, i: a[i])
+    c_lat = take(node_lat, r)
+    c_lon = take(node_lon, c)
+    value = take(win.values.reshape(-1, s * s), idx)
+    north, east = local_offsets_m(
+        c_lat, c_lon, jnp.asarray(lat)[:, None], jnp.asarray(lon)[:, None]
+    )
+    return CandidateSet(
+        c_lat, c_lon, north, east, value, mask, count, count > capacity, win.complete
+    )

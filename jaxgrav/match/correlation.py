@@ -1,0 +1,213 @@
+"""Correlation-extremum gravity matching (paper A), chain path.
+
+Paper A's pipeline, one step per function (each testable on its own):
+
+1. search windows of fixed size around each INS fix (:meth:`Grid.window`);
+2. iso-value masks ``|g_i − M| ≤ δ`` (:func:`~jaxgrav.match.candidates.iso_candidates`);
+3. padded candidate sets with mask, count and overflow flag (same);
+4. step-length and step-direction constraints, forward and backward elimination
+   (:func:`~jaxgrav.match.chains.eliminate`);
+5. weighted least squares over the surviving chains by k-best min-sum dynamic
+   programming (:func:`~jaxgrav.match.chains.kbest_chains`), with weights μ_i
+   decreasing along the track, on the paper's Eötvös-free difference form (or the
+   absolute form), the K best then re-scored with the requested form
+   (:mod:`~jaxgrav.match.scoring`);
+6. the ``k_best`` (5) best chains, of which the one nearest the INS track is taken.
+
+:func:`match_chains` handles one track; batch it with ``jax.vmap`` over tracks
+(the map is shared). The dense-offset fast path is :mod:`jaxgrav.match.dense`.
+"""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+
+from jaxgrav.constants import DEG
+from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.match.candidates import iso_candidates, local_offsets_m
+from jaxgrav.match.chains import count_chains, eliminate, kbest_chains
+from jaxgrav.match.result import MatchResult, nearest_to_ins
+from jaxgrav.match.scoring import SCORES, decreasing_weights, score_track
+
+__all__ = ["ChainConfig", "match_chains"]
+
+
+def _static(default):
+    return dataclasses.field(default=default, metadata=dict(static=True))
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class ChainConfig:
+    """Settings of the chain matcher.
+
+    Numbers a user may sweep are pytree leaves (changing them does not recompile);
+    the rest decides shapes or code paths and is static.
+
+    Attributes
+    ----------
+    delta : float
+        Iso-value tolerance δ (mGal).
+    node_allowance : float
+        Weight of the allowances for positions quantised to map nodes (0 = the
+        paper's plain tolerances; 1 = exact allowance): the iso-value tolerance
+        grows by map slope × half the cell diagonal (see
+        :mod:`~jaxgrav.match.candidates`) and the step-length tolerance by one cell
+        diagonal (two nodes, each up to half a diagonal from the true position).
+    step_tol_m : float
+        Tolerance on the length of each step between consecutive candidates (m), on
+        top of the node allowance: INS step error over one interval.
+    angle_tol_deg : float
+        Tolerance on the direction of each step (degrees), on top of the angle the
+        length tolerance subtends (see :func:`~jaxgrav.match.chains.compatibility`).
+    weight_decay : float
+        μ_i = exp(−decay · i/(N−1)) (0 = equal weights).
+    half_size : int
+        Window half-width in map nodes (static).
+    capacity : int
+        Candidate slots per fix (static).
+    k_dp : int
+        Chains kept per candidate by the dynamic programme (static).
+    k_best : int
+        Chains among which the final one is selected (static; paper: 5).
+    score : {"difference", "bias", "absolute"}
+        Final score form (static); the programme itself runs on the difference form
+        unless ``"absolute"``.
+    selection : {"nearest", "best"}
+        Paper A's nearest-to-INS rule, or the least score (static).
+    """
+
+    delta: float = 1.0
+    node_allowance: float = 1.0
+    step_tol_m: float = 100.0
+    angle_tol_deg: float = 2.0
+    weight_decay: float = 0.5
+    half_size: int = _static(8)
+    capacity: int = _static(128)
+    k_dp: int = _static(16)
+    k_best: int = _static(5)
+    score: str = _static("difference")
+    selection: str = _static("nearest")
+
+    def __post_init__(self):
+        if isinstance(self.score, str) and self.score not in SCORES:
+            raise ValueError(f"score must be one of {SCORES}; got {self.score!r}")
+        if isinstance(self.selection, str) and self.selection not in ("nearest", "best"):
+            raise ValueError(f"selection must be 'nearest' or 'best'; got {self.selection!r}")
+
+
+def _pair_cost(readings, w_diff):
+    dg = jnp.diff(readings)
+
+    def pair(i, v0, v1):
+        return w_diff[i] * (dg[i] - (v1[None, :] - v0[:, None])) ** 2
+
+    return pair
+
+
+@jax.jit
+def match_chains(grid, lat, lon, readings, config=ChainConfig()):
+    """Match one track by paper A's constrained chain search.
+
+    Parameters
+    ----------
+    grid : Grid
+        Anomaly map (mGal), refined to the node spacing wanted (paper A: 0.005°).
+    lat, lon : Array, shape ``(N,)``
+        INS-indicated fixes (degrees).
+    readings : Array, shape ``(N,)``
+        Gravimeter readings (mGal), Eötvös-corrected if ``config.score="absolute"``.
+    config : ChainConfig
+
+    Returns
+    -------
+    MatchResult
+        If no chain survives, the INS fixes are returned with status bit 1.
+    """
+    lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
+    n = lat.shape[0]
+    cands = iso_candidates(
+        grid,
+        lat,
+        lon,
+        readings,
+        half_size=config.half_size,
+        capacity=config.capacity,
+        delta=config.delta,
+        slope_factor=config.node_allowance,
+    )
+    steps = local_offsets_m(lat[1:], lon[1:], lat[:-1], lon[:-1])
+    dy, dx = _node_spacing_m(grid, jnp.mean(lat))
+    tol = (config.step_tol_m + config.node_allowance * jnp.hypot(dy, dx), config.angle_tol_deg)
+    alive = eliminate(cands, steps, *tol)
+    dtype = jnp.result_type(cands.value.dtype, readings.dtype)
+    work_unconstrained = jnp.prod(cands.count.astype(dtype))
+    work_constrained = count_chains(cands, alive, steps, *tol)
+    work_pairs = jnp.sum(jnp.sum(alive[:-1], axis=1) * jnp.sum(alive[1:], axis=1))
+
+    w = decreasing_weights(n, config.weight_decay)
+    if config.score == "absolute":
+        unary = w[:, None] * (readings[:, None] - cands.value) ** 2
+        pair = lambda i, v0, v1: jnp.zeros((v0.shape[0], v1.shape[0]), dtype)  # noqa: E731
+    else:
+        unary = jnp.zeros(cands.value.shape, dtype)
+        pair = _pair_cost(readings, w[:-1] / jnp.sum(w[:-1]))
+    search = kbest_chains(cands, alive, steps, *tol, unary, pair, config.k_dp)
+
+    fix = jnp.arange(n)[None, :]
+    values = cands.value[fix, search.index]  # (K_dp, N)
+    rescored, bias = score_track(readings, values, w, config.score)
+    rescored = jnp.where(jnp.isfinite(search.score), rescored, jnp.inf)
+    order = jnp.argsort(rescored)[: config.k_best]
+    idx = search.index[order]
+    topk_score = rescored[order]
+    north, east = cands.north_m[fix, idx], cands.east_m[fix, idx]  # (K, N)
+    distance = jnp.sum(jnp.hypot(north, east), axis=1)
+    chosen = nearest_to_ins(topk_score, distance, config.selection)
+    found = jnp.isfinite(topk_score[chosen])
+
+    topk_lat, topk_lon = cands.lat[fix, idx], cands.lon[fix, idx]
+    edge = _on_window_edge(grid, cands, idx[chosen], lat, lon, config.half_size)
+    status = (
+        jnp.where(found, 0, 1)
+        | jnp.where(jnp.any(cands.overflow), 2, 0)
+        | jnp.where(jnp.all(cands.window_complete), 0, 4)
+        | jnp.where(found & edge, 8, 0)
+    )
+    return MatchResult(
+        lat=jnp.where(found, topk_lat[chosen], lat),
+        lon=jnp.where(found, topk_lon[chosen], lon),
+        offset_north_m=jnp.where(found, jnp.mean(north[chosen]), 0.0),
+        offset_east_m=jnp.where(found, jnp.mean(east[chosen]), 0.0),
+        rotation_deg=jnp.zeros((), dtype),
+        score=topk_score[chosen],
+        bias=bias[order][chosen],
+        topk_lat=topk_lat,
+        topk_lon=topk_lon,
+        topk_score=topk_score,
+        chosen=chosen,
+        n_candidates=cands.count,
+        work_unconstrained=work_unconstrained,
+        work_constrained=work_constrained,
+        work_pairs=work_pairs.astype(dtype),
+        status=status,
+    )
+
+
+def _node_spacing_m(grid, lat):
+    """Node spacing (north, east) of the grid in metres at latitude ``lat``."""
+    return (
+        meridian_radius(lat) * grid.dlat * DEG,
+        prime_vertical_radius(lat) * jnp.cos(lat * DEG) * grid.dlon * DEG,
+    )
+
+
+def _on_window_edge(grid, cands, idx, lat, lon, half_size):
+    """True when a chosen candidate sits on the outer ring of its search window."""
+    row = jnp.round((cands.lat[jnp.arange(lat.shape[0]), idx] - grid.lat0) / grid.dlat)
+    col = jnp.round((cands.lon[jnp.arange(lat.shape[0]), idx] - grid.lon0) / grid.dlon)
+    iy, ix = grid.fractional_index(lat, lon)
+    return jnp.any(
+        (jnp.abs(row - jnp.round(iy)) >= half_size) | (jnp.abs(col - jnp.round(ix)) >= half_size)
+    )

@@ -1,0 +1,100 @@
+"""The result of a correlation match, shared by the chain and the dense-offset paths."""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["STATUS", "MatchResult", "nearest_to_ins", "status_messages"]
+
+STATUS = {
+    1: "no candidate track survived (tolerances too tight, or the track is off the map)",
+    2: "candidate capacity overflowed in some window (best-fitting points kept)",
+    4: "a search window met the map edge and was shifted inside",
+    8: "the best candidate lies on the edge of the search region (drift may exceed it)",
+}
+"""Bit flags of :attr:`MatchResult.status`."""
+
+
+class MatchResult(NamedTuple):
+    """Estimated track and diagnostics of one match.
+
+    Attributes
+    ----------
+    lat, lon : Array, shape ``(N,)``
+        Matched positions (degrees).
+    offset_north_m, offset_east_m : Array
+        Mean offset of the matched track from the INS track (m).
+    rotation_deg : Array
+        Rotation of the matched track about the INS track's centroid (degrees;
+        zero for the chain path).
+    score : Array
+        Score of the chosen track (mGal²).
+    bias : Array
+        Estimated common bias, readings minus map (mGal): Eötvös residual plus
+        gravimeter bias.
+    topk_lat, topk_lon : Array, shape ``(K, N)``
+        The K best candidate tracks, best score first.
+    topk_score : Array, shape ``(K,)``
+        Their scores (``inf`` where fewer than K candidates exist).
+    chosen : Array of int
+        Index into the top-K of the returned track.
+    n_candidates : Array, shape ``(N,)``
+        Iso-points (chain path) or offsets (dense path) per fix.
+    work_unconstrained : Array
+        ``∏ N_i``: candidate tracks an exhaustive search would score.
+    work_constrained : Array
+        Complete candidate tracks left after constraint elimination (chain path), or
+        tracks scored (dense path).
+    work_pairs : Array
+        Transitions evaluated by the dynamic programme (chain path) or map samples
+        taken (dense path).
+    status : Array of int
+        Bit flags, see :data:`STATUS`; 0 is a clean match.
+    """
+
+    lat: jax.Array
+    lon: jax.Array
+    offset_north_m: jax.Array
+    offset_east_m: jax.Array
+    rotation_deg: jax.Array
+    score: jax.Array
+    bias: jax.Array
+    topk_lat: jax.Array
+    topk_lon: jax.Array
+    topk_score: jax.Array
+    chosen: jax.Array
+    n_candidates: jax.Array
+    work_unconstrained: jax.Array
+    work_constrained: jax.Array
+    work_pairs: jax.Array
+    status: jax.Array
+
+
+def nearest_to_ins(topk_score, distance, selection):
+    """Paper A step 6: among the K best tracks pick the one nearest the INS track.
+
+    Parameters
+    ----------
+    topk_score : Array, shape ``(K,)``
+        Scores, ascending; ``inf`` marks missing tracks.
+    distance : Array, shape ``(K,)``
+        ``Σ_i ‖T_i − S_i‖`` between each track and the INS track (m).
+    selection : {"nearest", "best"}
+        ``"nearest"`` is the paper's rule; ``"best"`` takes the least score.
+
+    Returns
+    -------
+    Array of int
+        Index into the K tracks.
+    """
+    if selection == "best":
+        return jnp.asarray(0)
+    if selection != "nearest":
+        raise ValueError(f"selection must be 'nearest' or 'best'; got {selection!r}")
+    return jnp.argmin(jnp.where(jnp.isfinite(topk_score), distance, jnp.inf))
+
+
+def status_messages(status):
+    """Human-readable messages of a status bit field (a Python int)."""
+    return [msg for bit, msg in STATUS.items() if int(status) & bit]
