@@ -111,13 +111,12 @@ def iso_candidates(grid, lat, lon, readings, *, half_size, capacity, delta, slop
     cols = win.col0[:, None] + jnp.arange(s)
     node_lat = grid.lat0 + grid.dlat * rows
     node_lon = grid.lon0 + grid.dlon * cols
-    # map slope magnitude at every window node (central differences inside the window)
-    dy = (meridian_radius(node_lat) * grid.dlat * DEG)[:, :, None]  # (N, s, 1)
-    dx = (prime_vertical_radius(node_lat) * jnp.cos(node_lat * DEG) * grid.dlon * DEG)[:, :, None]
-    gy = jnp.gradient(win.values, axis=-2) / dy
-    gx = jnp.gradient(win.values, axis=-1) / dx
-    half_diag = 0.5 * jnp.sqrt(dy**2 + dx**2)
-    tol = jnp.asarray(delta)[..., None, None] + slope_factor * jnp.hypot(gy, gx) * half_diag
+    # largest change to any of the 8 neighbours of each window node (edge-padded)
+    v = win.values
+    pad = jnp.pad(v, ((0, 0), (1, 1), (1, 1)), mode="edge")
+    shifts = [pad[:, 1 + a : 1 + a + s, 1 + b : 1 + b + s] for a in (-1, 0, 1) for b in (-1, 0, 1)]
+    spread = jnp.max(jnp.abs(jnp.stack(shifts) - v[None]), axis=0)
+    tol = jnp.asarray(delta)[..., None, None] + 0.75 * slope_factor * spread
     misfit = jnp.abs(jnp.asarray(readings)[:, None, None] - win.values) / tol  # (N, s, s)
     iso = misfit <= 1.0
     count = jnp.sum(iso, axis=(-2, -1))

@@ -74,9 +74,9 @@ def compatibility(step_north, step_east, north0, east0, north1, east1, step_tol_
     step_tol_m : Array
         Tolerance on the step length (m).
     angle_tol_deg : Array
-        Tolerance on the step direction (degrees), to which the angle the length
-        tolerance subtends, ``atan(step_tol_m / |INS step|)``, is added: a step whose
-        end may move by ``step_tol_m`` may turn by that much.
+        Tolerance on the step direction (degrees), to which the largest turn that a
+        displacement of ``step_tol_m`` can cause, ``asin(step_tol_m / |INS step|)``, is
+        added (any direction when the step is shorter than ``step_tol_m``).
 
     Returns
     -------
@@ -89,7 +89,8 @@ def compatibility(step_north, step_east, north0, east0, north1, east1, step_tol_
     cand_len = jnp.hypot(sn, se)
     ok_len = jnp.abs(cand_len - ins_len) <= step_tol_m
     # angle between candidate and INS steps <= tol  <=>  s·d >= |s||d| cos(tol)  (no arctan)
-    tol = jnp.minimum(angle_tol_deg * DEG + jnp.arctan2(step_tol_m, ins_len), jnp.pi)
+    ratio = jnp.minimum(step_tol_m / jnp.maximum(ins_len, 1e-9), 1.0)
+    tol = jnp.minimum(angle_tol_deg * DEG + jnp.arcsin(ratio), jnp.pi)
     dot = sn * step_north + se * step_east
     ok_dir = dot >= cand_len * ins_len * jnp.cos(tol)
     return ok_len & ok_dir

@@ -52,7 +52,7 @@ class ChainConfig:
     node_allowance : float
         Weight of the allowances for positions quantised to map nodes (0 = the
         paper's plain tolerances; 1 = exact allowance): the iso-value tolerance
-        grows by map slope × half the cell diagonal (see
+        grows by ¾ of the largest change to a neighbouring node (see
         :mod:`~jaxgrav.match.candidates`) and the step-length tolerance by one cell
         diagonal (two nodes, each up to half a diagonal from the true position).
     step_tol_m : float

@@ -1,0 +1,255 @@
+"""Correlation matcher (paper A): each step against brute force, transformations, accuracy."""
+
+import itertools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxgrav as jg
+from jaxgrav import sim
+from jaxgrav.constants import KNOT
+from jaxgrav.match import candidates as cand_mod
+from jaxgrav.match import chains
+from jaxgrav.match.correlation import ChainConfig, _pair_cost, match_chains
+from jaxgrav.match.dense import DenseConfig, match_dense, shifted_tracks
+from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_track
+
+RNG = np.random.default_rng(0)
+LAT = np.linspace(29, 31, 41)
+LON = np.linspace(129, 131, 41)
+
+
+@pytest.fixture(scope="module")
+def rough_grid():
+    return jg.Grid.from_arrays(LAT, LON, RNG.normal(size=(41, 41)) * 5)
+
+
+@pytest.fixture(scope="module")
+def smooth_grid():
+    """A smooth, information-rich synthetic anomaly field (mGal) on a 0.01° grid."""
+    lat = np.linspace(29.5, 30.5, 101)
+    lon = np.linspace(129.5, 130.5, 101)
+    y, x = np.meshgrid(lat - 30, lon - 130, indexing="ij")
+    v = (40 * np.sin(45 * x + 2) * np.cos(35 * y) + 25 * np.cos(60 * x * y + 50 * y)
+         + 20 * np.sin(70 * x - 30 * y) + 15 * x)
+    return jg.Grid.from_arrays(lat, lon, v, units="mGal")
+
+
+def test_scores_by_hand():
+    g = jnp.array([1.0, 2.0, 4.0])
+    m = jnp.array([[1.0, 2.0, 4.0], [2.0, 3.0, 5.0], [0.0, 2.0, 4.0]])
+    w = jnp.ones(3) / 3
+    s_abs, _ = score_track(g, m, w, "absolute")
+    np.testing.assert_allclose(s_abs, [0.0, 1.0, 1 / 3])
+    s_dif, _ = score_track(g, m, w, "difference")
+    np.testing.assert_allclose(s_dif, [0.0, 0.0, 0.5])  # a constant shift cancels
+    s_b, b = score_track(g, m, w, "bias")
+    np.testing.assert_allclose(b, [0.0, -1.0, 1 / 3])
+    np.testing.assert_allclose(s_b, [0.0, 0.0, 2 / 9])
+    # bias prior: sigma_b -> 0 is the absolute form, sigma_b = inf the bias form
+    k0 = bias_precision(w, 1.0, jnp.inf)
+    assert k0 == 0.0
+    s_hi, _ = score_track(g, m, w, "bias", bias_precision(w, 1.0, 1e-6))
+    np.testing.assert_allclose(s_hi, s_abs, rtol=1e-6)
+    # NaN map values (off the map) give an infinite score
+    s_nan, _ = score_track(g, m.at[1, 0].set(jnp.nan), w, "bias")
+    assert np.isinf(s_nan[1]) and np.isfinite(s_nan[0])
+    np.testing.assert_allclose(decreasing_weights(4, 0.0), 0.25)
+    wd = decreasing_weights(5, 1.0)
+    assert np.all(np.diff(wd) < 0) and np.isclose(wd[-1] / wd[0], np.exp(-1))
+
+
+def _brute_force(cands, steps, tol, g, wd):
+    """All complete chains through iso-points, with difference-form scores (NumPy)."""
+    cn, ce, cv, cm = (np.asarray(a) for a in (cands.north_m, cands.east_m, cands.value,
+                                              cands.mask))
+    n = cn.shape[0]
+    compat = [np.asarray(chains.compatibility(steps[0][i], steps[1][i], cn[i], ce[i], cn[i + 1],
+                                              ce[i + 1], *tol)) for i in range(n - 1)]
+    found = []
+    for ch in itertools.product(*[np.flatnonzero(cm[i]) for i in range(n)]):
+        if all(compat[i][ch[i], ch[i + 1]] for i in range(n - 1)):
+            d = np.diff(g) - np.diff([cv[i, ch[i]] for i in range(n)])
+            found.append((float(np.sum(np.asarray(wd) * d**2)), ch))
+    return sorted(found)
+
+
+def test_chain_steps_against_brute_force(rough_grid):
+    n = 4
+    flat = 30 + np.arange(n) * 0.06
+    flon = 130 + np.arange(n) * 0.05
+    g = np.asarray(rough_grid.sample(flat + 0.011, flon - 0.013)) + RNG.normal(size=n) * 0.2
+    cands = cand_mod.iso_candidates(rough_grid, flat, flon, g, half_size=2, capacity=25,
+                                    delta=3.0)
+    # iso masks: exactly the window nodes within the tolerance
+    win = rough_grid.window(flat, flon, 2)
+    assert int(cands.mask.sum()) == int(cands.count.sum())
+    assert np.all(np.asarray(cands.count) <= 25) and not np.any(cands.overflow)
+    for i in range(n):
+        vals = np.sort(np.asarray(cands.value[i])[np.asarray(cands.mask[i])])
+        assert set(vals) <= set(np.asarray(win.values[i]).ravel())
+    steps = cand_mod.local_offsets_m(flat[1:], flon[1:], flat[:-1], flon[:-1])
+    tol = (3000.0, 10.0)
+    alive = np.asarray(chains.eliminate(cands, steps, *tol))
+    w = decreasing_weights(n, 0.5)
+    wd = w[:-1] / jnp.sum(w[:-1])
+    brute = _brute_force(cands, steps, tol, g, wd)
+    assert len(brute) > 10
+    on_chain = np.zeros_like(alive)
+    for _, ch in brute:
+        on_chain[np.arange(n), list(ch)] = True
+    np.testing.assert_array_equal(alive, on_chain)  # elimination keeps exactly the chain nodes
+    assert float(chains.count_chains(cands, jnp.asarray(alive), steps, *tol)) == len(brute)
+    res = chains.kbest_chains(cands, jnp.asarray(alive), steps, *tol, jnp.zeros((n, 25)),
+                              _pair_cost(jnp.asarray(g), wd), 6)
+    np.testing.assert_allclose(res.score, [s for s, _ in brute[:6]], rtol=1e-10)
+    np.testing.assert_array_equal(res.index, [c for _, c in brute[:6]])
+
+
+def test_kmin_and_overflow_reported(rough_grid):
+    x = jnp.array([[3.0, 1.0, 2.0, 0.5]])
+    v, i = chains.kmin(x, 2)
+    np.testing.assert_array_equal(i, [[3, 1]])
+    np.testing.assert_allclose(v, [[0.5, 1.0]])
+    c = cand_mod.iso_candidates(rough_grid, np.array([30.0]), np.array([130.0]),
+                                np.array([0.0]), half_size=3, capacity=4, delta=100.0)
+    assert bool(c.overflow[0]) and int(c.count[0]) == 49 and int(c.mask.sum()) == 4
+
+
+def _scenario(key, grid, n, dt, drift_m, noise, method="bilinear"):
+    k1, k2, k3 = jax.random.split(key, 3)
+    w, e, s, nn = grid.extent
+    lat0, lon0 = sim.random_start(k1, (s, nn, w, e), (0.1, 0.3, 0.1, 0.3))
+    tr = sim.straight_track(lat0, lon0, 10 * KNOT, 10 * KNOT, n, dt)
+    dn, de = sim.drift_offsets(sim.sample_drift(k2, drift_m, law="fixed"), n)
+    ilat, ilon = sim.apply_drift(tr.lat, tr.lon, dn, de)
+    g = sim.gravity_readings(k3, grid, tr, noise_mgal=noise, eotvos_form=None, method=method)
+    return tr, ilat, ilon, g
+
+
+def test_elimination_never_removes_true_chain_noiseless(smooth_grid):
+    """With exact readings the nodes nearest the truth always survive (node allowance)."""
+    fine = smooth_grid
+    cfg = ChainConfig(delta=0.05, half_size=8, capacity=289)
+
+    def one(key):
+        tr, ilat, ilon, g = _scenario(key, fine, 8, 60.0, 700.0, 0.0)
+        cands = cand_mod.iso_candidates(fine, ilat, ilon, g, half_size=cfg.half_size,
+                                        capacity=cfg.capacity, delta=cfg.delta,
+                                        slope_factor=cfg.node_allowance)
+        steps = cand_mod.local_offsets_m(ilat[1:], ilon[1:], ilat[:-1], ilon[:-1])
+        dy = jg.meridian_radius(30.0) * fine.dlat * jg.constants.DEG
+        tol = (cfg.step_tol_m + dy * np.sqrt(2), cfg.angle_tol_deg)
+        alive = chains.eliminate(cands, steps, *tol)
+        # node nearest to each true position
+        r = jnp.round((tr.lat - fine.lat0) / fine.dlat)
+        c = jnp.round((tr.lon - fine.lon0) / fine.dlon)
+        hit = (jnp.abs(cands.lat - (fine.lat0 + r[:, None] * fine.dlat)) < 1e-9) & (
+            jnp.abs(cands.lon - (fine.lon0 + c[:, None] * fine.dlon)) < 1e-9)
+        return jnp.all(jnp.any(hit & alive, axis=1)), jnp.any(cands.overflow)
+
+    keys = jax.random.split(jax.random.key(3), 24)
+    kept, overflow = jax.jit(jax.vmap(one))(keys)
+    assert not np.any(overflow)
+    assert np.all(kept)
+
+
+def test_match_chains_recovers_a_node_track_and_reports_work(smooth_grid):
+    """Truth on map nodes, exact readings: the true chain scores zero and is returned."""
+    i = np.arange(10)
+    t_lat = smooth_grid.lat[20 + 3 * i]
+    t_lon = smooth_grid.lon[30 + 2 * i]
+    g = np.asarray(smooth_grid.values)[20 + 3 * i, 30 + 2 * i]
+    ilat, ilon = t_lat + 0.0263, t_lon - 0.0242  # INS drift of about 3.7 km
+    for score in ("difference", "bias", "absolute"):
+        cfg = ChainConfig(delta=0.05, half_size=4, capacity=81, score=score, selection="best")
+        r = match_chains(smooth_grid, ilat, ilon, g, cfg)
+        assert int(r.status) & 1 == 0
+        np.testing.assert_allclose(r.lat, t_lat, atol=1e-9)
+        np.testing.assert_allclose(r.lon, t_lon, atol=1e-9)
+        np.testing.assert_allclose(r.score, 0.0, atol=1e-12)
+    assert r.topk_lat.shape == (5, 10) and np.all(np.diff(np.asarray(r.topk_score)) >= 0)
+    assert float(r.work_unconstrained) >= float(r.work_constrained) >= 1
+    assert float(r.work_unconstrained) == np.prod(np.asarray(r.n_candidates, float))
+    np.testing.assert_allclose(r.offset_north_m, -0.0263 * 110.85e3, rtol=2e-3)
+
+
+@pytest.mark.parametrize("score", ["bias", "difference", "absolute"])
+def test_match_dense_recovers_offset(smooth_grid, score):
+    tr, ilat, ilon, g = _scenario(jax.random.key(7), smooth_grid, 12, 60.0, 1500.0, 0.0,
+                                  "bicubic")
+    cfg = DenseConfig(spacing_m=400.0, half_size=5, score=score, method="bicubic")
+    r = match_dense(smooth_grid, ilat, ilon, g, cfg)
+    err = np.hypot(*cand_mod.local_offsets_m(r.lat, r.lon, tr.lat, tr.lon))
+    assert int(r.status) == 0
+    assert np.mean(err) < 5.0, np.mean(err)  # exact up to the refinement's convergence
+
+
+def test_match_dense_exact_on_bicubic_truth_and_rotation(smooth_grid):
+    key = jax.random.key(11)
+    tr = sim.straight_track(29.8, 129.8, 6.0, 4.0, 15, 60.0)
+    # INS track: the truth turned by 1.5 degrees about its centroid and shifted
+    ilat, ilon = shifted_tracks(tr.lat, tr.lon, 900.0, -1200.0, jnp.deg2rad(1.5))
+    g = smooth_grid.sample(tr.lat, tr.lon, "bicubic") + 3.0
+    del key
+    cfg = DenseConfig(spacing_m=300.0, half_size=6, n_rotations=5, max_rotation_deg=2.0,
+                      refine_steps=12)
+    r = match_dense(smooth_grid, ilat, ilon, g, cfg)
+    err = np.hypot(*cand_mod.local_offsets_m(r.lat, r.lon, tr.lat, tr.lon))
+    assert np.max(err) < 5.0, err
+    np.testing.assert_allclose(r.bias, 3.0, atol=1e-3)
+
+
+def test_jit_no_retrace_and_vmap_equals_loop(smooth_grid):
+    traces = []
+
+    def f(grid, lat, lon, g, cfg):
+        traces.append(1)
+        return match_dense(grid, lat, lon, g, cfg)
+
+    f = jax.jit(f)
+    keys = jax.random.split(jax.random.key(2), 4)
+    data = [_scenario(k, smooth_grid, 10, 60.0, 800.0, 0.5)[1:] for k in keys]
+    cfg = DenseConfig(spacing_m=400.0, half_size=4)
+    f(smooth_grid, *data[0], cfg)
+    f(smooth_grid, *data[1], DenseConfig(spacing_m=350.0, half_size=4, noise_mgal=2.0))
+    assert len(traces) == 1  # new numbers in the config do not recompile
+    lat, lon, g = (jnp.stack(x) for x in zip(*data, strict=True))
+    batched = jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None))(smooth_grid, lat, lon, g, cfg)
+    for i in range(4):
+        one = match_dense(smooth_grid, lat[i], lon[i], g[i], cfg)
+        np.testing.assert_allclose(batched.lat[i], one.lat, atol=1e-9)
+        np.testing.assert_allclose(batched.score[i], one.score, rtol=1e-8)
+    cc = ChainConfig(half_size=4, capacity=81, delta=2.0)
+    bc = jax.vmap(match_chains, in_axes=(None, 0, 0, 0, None))(smooth_grid, lat, lon, g, cc)
+    for i in range(4):
+        one = match_chains(smooth_grid, lat[i], lon[i], g[i], cc)
+        np.testing.assert_array_equal(bc.lat[i], one.lat)
+        np.testing.assert_array_equal(bc.status[i], one.status)
+
+
+def test_no_chain_returns_ins_with_status(rough_grid):
+    lat = 30 + np.arange(5) * 0.05
+    lon = 130 + np.arange(5) * 0.05
+    r = match_chains(rough_grid, lat, lon, np.full(5, 1e4), ChainConfig(half_size=2, capacity=25))
+    assert int(r.status) & 1
+    np.testing.assert_allclose(r.lat, lat)
+    assert np.isinf(r.score)
+
+
+def test_grad_of_score_through_the_map(smooth_grid):
+    """The dense score is differentiable in the offset (used by the refinement)."""
+    tr = sim.straight_track(29.8, 129.8, 6.0, 4.0, 10, 60.0)
+    g = smooth_grid.sample(tr.lat, tr.lon, "bicubic")
+    w = decreasing_weights(10, 0.0)
+
+    def s(dn):
+        la, lo = shifted_tracks(tr.lat, tr.lon, dn, 0.0, 0.0)
+        return score_track(g, smooth_grid.sample(la, lo, "bicubic"), w, "bias")[0]
+
+    x0 = 120.0
+    fd = (s(x0 + 0.01) - s(x0 - 0.01)) / 0.02
+    np.testing.assert_allclose(jax.grad(s)(x0), fd, rtol=1e-5)
+    np.testing.assert_allclose(jax.jacfwd(s)(x0), jax.grad(s)(x0), rtol=1e-10)
