@@ -1,0 +1,233 @@
+"""The ``jaxgrav`` command.
+
+Sub-commands
+------------
+``demo``            the main job on the shipped data (README quick start)
+``match``           match a track CSV against a map (paper A), write JSON
+``simulate``        write a track CSV (and its truth) from a matching scenario
+``sample``          sample a map along a track CSV
+``data egm2008``    rebuild the shipped EGM2008 regional files (extra ``egm2008``)
+
+Errors in user input are reported as one line on stderr with exit code 2.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+__all__ = ["main"]
+
+
+def _enable_x64():
+    import jax
+
+    jax.config.update("jax_enable_x64", True)  # the CLI may, at start (DESIGN.md, Precision)
+
+
+def _cmd_sample(args):
+    import numpy as np
+
+    from jaxgrav.tracks import read_track_csv, write_track_csv
+
+    grid = _load_map(args.map, args.var)
+    track = read_track_csv(args.track, required=("lat", "lon"))
+    values = np.asarray(grid.sample(track["lat"], track["lon"], args.method, strict=True))
+    cols = dict(track)
+    cols[args.column] = values
+    write_track_csv(args.out, cols, force=args.force)
+    print(f"wrote {args.out}: {values.size} samples of {grid.name or 'map'} ({args.method})")
+
+
+def _load_map(path, var, dataset_default="anomaly_2p5min"):
+    """A Grid from a NetCDF path, or from a shipped dataset as ``ryukyu`` / ``ryukyu:KEY``."""
+    from jaxgrav import datasets
+    from jaxgrav.grid import Grid
+
+    name, _, key = str(path).partition(":")
+    if name in datasets.available() and not Path(path).exists():
+        maps = datasets.load(name)
+        key = key or dataset_default
+        if key not in maps:
+            raise ValueError(f"dataset {name!r} has no map {key!r}; it has {sorted(maps)}")
+        return maps[key]
+    return Grid.from_netcdf(path, var=var)
+
+
+def _cmd_match(args):
+    import json
+
+    import numpy as np
+
+    from jaxgrav._io import atomic_output
+    from jaxgrav.match import match_track, status_messages
+    from jaxgrav.sim import DEG_ARC_M
+    from jaxgrav.tracks import read_track_csv
+
+    grid = _load_map(args.map, args.var)
+    track = read_track_csv(args.track, required=("t", "lat", "lon", "gravity"))
+    if args.drift_radius is not None:
+        radius_deg = args.drift_radius
+    elif "drift_radius" in track and np.isfinite(track["drift_radius"]).any():
+        radius_deg = float(np.nanmax(track["drift_radius"]))
+    else:
+        radius_deg = 0.05
+    if args.refine > 1:
+        grid = grid.refine(args.refine)
+    has_v = "v_east" in track and "v_north" in track and not args.no_eotvos
+    result = match_track(
+        grid, track["lat"], track["lon"], track["gravity"], method=args.method,
+        drift_radius_m=radius_deg * DEG_ARC_M, noise_mgal=args.noise,
+        v_east=track["v_east"] if has_v else None, v_north=track["v_north"] if has_v else None,
+        bias_sigma_mgal=args.bias_sigma, warn=False,
+    )
+    r = {k: np.asarray(v).tolist() for k, v in result._asdict().items()}
+    r["status_messages"] = status_messages(int(result.status))
+    r.update(method=args.method, map=str(args.map), track=str(args.track),
+             drift_radius_deg=radius_deg, eotvos_corrected=has_v)
+    with atomic_output(args.out, force=args.force) as tmp:
+        tmp.write_text(json.dumps(r, indent=1))
+    print(f"wrote {args.out}: {args.method} match of {len(track['lat'])} fixes, offset "
+          f"{float(result.offset_north_m):.0f} m north, {float(result.offset_east_m):.0f} m "
+          f"east, score {float(result.score):.3g} mGal^2")
+    for msg in r["status_messages"]:
+        print(f"warning: {msg}", file=sys.stderr)
+
+
+def _cmd_simulate(args):
+    import jax
+    import numpy as np
+
+    from jaxgrav.constants import KNOT
+    from jaxgrav.scenarios import MatchingScenario, matching_scenario
+    from jaxgrav.tracks import write_track_csv
+
+    grid = _load_map(args.map, args.var)
+    w, e, s, n = grid.extent
+    scen = MatchingScenario(
+        region=(s, n, w, e), v_east=args.v_east * KNOT, v_north=args.v_north * KNOT,
+        dt=args.dt, drift_deg=args.drift, noise_mgal=args.noise, bias_mgal=args.bias,
+        n_fixes=args.n, drift_law=args.drift_law,
+    )
+    if args.n < 2:
+        raise ValueError(f"--n must be at least 2; got {args.n}")
+    run = matching_scenario(jax.random.key(args.seed), grid, scen)
+    truth = run.truth
+    write_track_csv(args.out, {
+        "t": truth.t, "lat": run.ins_lat, "lon": run.ins_lon, "gravity": run.readings,
+        "v_east": truth.v_east, "v_north": truth.v_north,
+        "drift_radius": np.full(args.n, 1.5 * args.drift if args.drift_law == "fixed"
+                                else 3.03 * args.drift),
+    }, force=args.force)
+    if args.truth:
+        write_track_csv(args.truth, {"t": truth.t, "lat": truth.lat, "lon": truth.lon},
+                        force=args.force)
+    drift_m = float(np.hypot(run.drift_north_m, run.drift_east_m).mean())
+    also = f" and {args.truth}" if args.truth else ""
+    print(f"wrote {args.out}{also}: {args.n} fixes, INS drift {drift_m:.0f} m")
+
+
+def _cmd_data_egm2008(args):
+    from jaxgrav.fields import egm2008
+
+    paths = egm2008.build(args.region, Path(args.out), force=args.force)
+    for p in paths:
+        print(f"wrote {p}")
+
+
+def _cmd_demo(args):
+    from jaxgrav.demo import run_demo
+
+    run_demo(Path(args.out), force=args.force, runs=args.runs, seed=args.seed)
+
+
+def build_parser():
+    """The argument parser of the ``jaxgrav`` command."""
+    p = argparse.ArgumentParser(prog="jaxgrav", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    d = sub.add_parser("demo", help="run the main job on the shipped data")
+    d.add_argument("--out", default="demo_output", help="output folder (default demo_output)")
+    d.add_argument("--runs", type=int, default=200, help="Monte Carlo runs (default 200)")
+    d.add_argument("--seed", type=int, default=0, help="PRNG seed")
+    d.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    d.set_defaults(func=_cmd_demo)
+
+    m = sub.add_parser("match", help="match a track CSV against a map (paper A)")
+    m.add_argument("--map", required=True,
+                   help="NetCDF grid with lat/lon coordinates, or a shipped map (ryukyu, "
+                        "ryukyu:anomaly_0p5deg)")
+    m.add_argument("--var", default=None, help="variable to read when the file has several")
+    m.add_argument("--track", required=True,
+                   help="CSV: t (s), lat, lon (INS, degrees), gravity (mGal); optional "
+                        "v_east, v_north (m/s), drift_radius (degrees)")
+    m.add_argument("--out", required=True, help="result JSON")
+    m.add_argument("--method", choices=("dense", "chains"), default="dense",
+                   help="dense (default, most accurate) or chains (paper A's constrained "
+                        "iso-point chains)")
+    m.add_argument("--drift-radius", type=float, default=None,
+                   help="largest INS drift (degrees of arc); default: the track's "
+                        "drift_radius column, else 0.05")
+    m.add_argument("--noise", type=float, default=1.0, help="reading noise sigma (mGal)")
+    m.add_argument("--bias-sigma", type=float, default=None,
+                   help="prior sigma of the reading bias (mGal); default 3 with velocities, "
+                        "else free")
+    m.add_argument("--refine", type=int, default=1,
+                   help="refine the map by this factor first (chains: paper A used 100)")
+    m.add_argument("--no-eotvos", action="store_true",
+                   help="do not Eötvös-correct the readings even if velocities are given")
+    m.add_argument("--force", action="store_true", help="overwrite an existing output")
+    m.set_defaults(func=_cmd_match)
+
+    sim_p = sub.add_parser("simulate", help="write a track CSV from a matching scenario")
+    sim_p.add_argument("--map", default="ryukyu",
+                       help="truth map: NetCDF grid or shipped map (default ryukyu, 2.5')")
+    sim_p.add_argument("--var", default=None)
+    sim_p.add_argument("--out", required=True, help="track CSV (INS fixes and readings)")
+    sim_p.add_argument("--truth", default=None, help="also write the true track here")
+    sim_p.add_argument("--n", type=int, default=30, help="fixes (default 30)")
+    sim_p.add_argument("--dt", type=float, default=120.0, help="interval (s, default 120)")
+    sim_p.add_argument("--v-east", type=float, default=10.0, help="knots (default 10)")
+    sim_p.add_argument("--v-north", type=float, default=10.0, help="knots (default 10)")
+    sim_p.add_argument("--drift", type=float, default=0.035,
+                       help="INS drift (degrees of arc, default 0.035)")
+    sim_p.add_argument("--drift-law", choices=("fixed", "rayleigh"), default="fixed")
+    sim_p.add_argument("--noise", type=float, default=1.0, help="reading noise (mGal)")
+    sim_p.add_argument("--bias", type=float, default=0.0, help="gravimeter bias (mGal)")
+    sim_p.add_argument("--seed", type=int, default=0)
+    sim_p.add_argument("--force", action="store_true")
+    sim_p.set_defaults(func=_cmd_simulate)
+
+    s = sub.add_parser("sample", help="sample a map along a track CSV")
+    s.add_argument("--map", required=True, help="NetCDF grid with lat/lon coordinates")
+    s.add_argument("--var", default=None, help="variable to read when the file has several")
+    s.add_argument("--track", required=True, help="CSV with lat, lon columns (degrees)")
+    s.add_argument("--out", required=True, help="output CSV (track columns + sampled column)")
+    s.add_argument("--method", choices=("bilinear", "bicubic"), default="bicubic")
+    s.add_argument("--column", default="map", help="name of the added column (default map)")
+    s.add_argument("--force", action="store_true", help="overwrite an existing output")
+    s.set_defaults(func=_cmd_sample)
+
+    data = sub.add_parser("data", help="build shipped data sets")
+    dsub = data.add_subparsers(dest="source", required=True)
+    e = dsub.add_parser("egm2008", help="EGM2008 regional grids (needs jaxgrav[egm2008])")
+    e.add_argument("--region", default="all", help="ryukyu, qinling or all")
+    e.add_argument("--out", required=True, help="output folder")
+    e.add_argument("--force", action="store_true", help="overwrite existing files")
+    e.set_defaults(func=_cmd_data_egm2008)
+    return p
+
+
+def main(argv=None):
+    """Entry point of the ``jaxgrav`` command; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    _enable_x64()
+    try:
+        args.func(args)
+    except (ValueError, FileExistsError, FileNotFoundError, ImportError) as err:
+        print(f"jaxgrav {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
