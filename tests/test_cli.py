@@ -1,0 +1,77 @@
+"""End-to-end command-line tests (in-process through ``jaxgrav.cli.main``)."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from jaxgrav.cli import main
+from jaxgrav.tracks import read_track_csv, write_track_csv
+
+
+@pytest.fixture(scope="module")
+def track(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    assert main(["simulate", "--out", str(d / "t.csv"), "--truth", str(d / "truth.csv"),
+                 "--n", "20", "--seed", "3"]) == 0
+    return d
+
+
+def test_simulate_then_match_beats_ins(track):
+    out = track / "r.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"),
+                 "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    truth = read_track_csv(track / "truth.csv", required=("lat", "lon"))
+    ins = read_track_csv(track / "t.csv", required=("lat", "lon"))
+    assert len(r["lat"]) == 20 and len(r["topk_score"]) == 5
+    err = np.hypot(np.subtract(r["lat"], truth["lat"]), np.subtract(r["lon"], truth["lon"]))
+    ins_err = np.hypot(ins["lat"] - truth["lat"], ins["lon"] - truth["lon"])
+    assert np.mean(err) < np.mean(ins_err) / 3
+    assert r["status"] == 0 and r["eotvos_corrected"] is True
+    # existing output is not overwritten without --force
+    assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"),
+                 "--out", str(out)]) == 2
+    assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"),
+                 "--out", str(out), "--force", "--method", "chains", "--refine", "4"]) == 0
+
+
+def test_match_reads_a_user_netcdf_map(track, tmp_path):
+    from jaxgrav import datasets
+
+    datasets.load("ryukyu")["anomaly_2p5min"].to_netcdf(tmp_path / "map.nc")
+    assert main(["match", "--map", str(tmp_path / "map.nc"), "--track", str(track / "t.csv"),
+                 "--out", str(tmp_path / "r.json")]) == 0
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (lambda c: c.pop("gravity"), "lacks column"),
+    (lambda c: c["gravity"].__setitem__(3, np.nan), "column 'gravity' has 1 missing"),
+    (lambda c: c["lon"].__setitem__(slice(None), c["lon"] + 20.0), "leaves the map"),
+    (lambda c: [c.__setitem__(k, v[:3]) for k, v in list(c.items())], "too short"),
+])
+def test_match_bad_tracks_get_clear_errors(track, tmp_path, capsys, edit, message):
+    cols = read_track_csv(track / "t.csv")
+    edit(cols)
+    write_track_csv(tmp_path / "bad.csv", cols)
+    code = main(["match", "--map", "ryukyu", "--track", str(tmp_path / "bad.csv"),
+                 "--out", str(tmp_path / "r.json")])
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_sample_command(track, tmp_path):
+    assert main(["sample", "--map", "ryukyu:anomaly_0p5deg", "--track", str(track / "t.csv"),
+                 "--out", str(tmp_path / "s.csv")]) == 0
+    s = read_track_csv(tmp_path / "s.csv", required=("map",))
+    assert np.all(np.isfinite(s["map"]))
+
+
+def test_console_script_help():
+    r = subprocess.run([sys.executable, "-m", "jaxgrav.cli", "--help"], capture_output=True,
+                       text=True, check=True)
+    for cmd in ("demo", "match", "simulate", "sample", "data"):
+        assert cmd in r.stdout

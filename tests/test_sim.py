@@ -1,0 +1,93 @@
+"""Simulation: tracks, drift, readings, scenarios; track CSV files."""
+
+import jax
+import numpy as np
+import pytest
+
+import jaxgrav as jg
+from jaxgrav import sim
+from jaxgrav.constants import KNOT
+from jaxgrav.scenarios import MatchingScenario, matching_scenario
+from jaxgrav.tracks import read_track_csv, write_track_csv
+
+
+def test_straight_track_against_geodesy():
+    tr = sim.straight_track(30.0, 130.0, 10 * KNOT, 10 * KNOT, 31, 120.0)
+    assert tr.lat.shape == (31,) and float(tr.t[-1]) == 3600.0
+    # one hour at 10 kn north: 18520 m along the meridian
+    north, east, _ = jg.geodetic_to_enu(tr.lat[-1], tr.lon[-1], 0.0, (30.0, 130.0, 0.0))
+    np.testing.assert_allclose(north, 18520.0, rtol=2e-3)
+    np.testing.assert_allclose(east, 18520.0, rtol=2e-3)
+    np.testing.assert_allclose(tr.v_east, 10 * KNOT)
+
+
+def test_turning_track_closes_a_circle():
+    # 360 degrees in 360 s at 1 deg/s: back to the start
+    tr = sim.turning_track(30.0, 130.0, 10.0, 0.0, 1.0, 361, 1.0)
+    d = jg.geodetic_to_enu(tr.lat[-1], tr.lon[-1], 0.0, (30.0, 130.0, 0.0))
+    assert np.hypot(d[0], d[1]) < 1.0
+    radius = 10.0 / np.deg2rad(1.0)
+    np.testing.assert_allclose(np.ptp(np.asarray(tr.lat)) * 110_850.0, 2 * radius, rtol=5e-3)
+
+
+def test_rayleigh_quantile_and_drift_statistics():
+    np.testing.assert_allclose(sim.rayleigh_quantile(1.0, 0.5), np.sqrt(2 * np.log(2)))
+    np.testing.assert_allclose(sim.rayleigh_sigma(sim.rayleigh_quantile(3.0, 0.99), 0.99), 3.0)
+    keys = jax.random.split(jax.random.key(0), 4000)
+    d = jax.vmap(lambda k: sim.sample_drift(k, 1000.0))(keys)
+    # Rayleigh(σ): mean σ√(π/2), 99 % quantile 3.03σ
+    np.testing.assert_allclose(np.mean(d.radius_m), 1000 * np.sqrt(np.pi / 2), rtol=0.03)
+    np.testing.assert_allclose(np.quantile(d.radius_m, 0.99), 3034.9, rtol=0.06)
+    fixed = sim.sample_drift(jax.random.key(1), 500.0, law="fixed", growth=0.5, rotation_deg=4)
+    dn, de = sim.drift_offsets(fixed, 11)
+    r = np.hypot(dn, de)
+    np.testing.assert_allclose([r[0], r[-1]], [500 / 1.5, 500.0])
+    with pytest.raises(ValueError, match="law"):
+        sim.sample_drift(jax.random.key(1), 1.0, law="gauss")
+
+
+def test_readings_model():
+    lat = np.linspace(29, 31, 21)
+    lon = np.linspace(129, 131, 21)
+    grid = jg.Grid.from_arrays(lat, lon, np.add.outer(lat, lon) * 0.0 + 10.0)
+    tr = sim.straight_track(29.5, 129.5, 5.0, 0.0, 8, 60.0)
+    g = sim.gravity_readings(jax.random.key(0), grid, tr, noise_mgal=0.0, bias_mgal=2.0)
+    np.testing.assert_allclose(g, 12.0 - jg.eotvos(tr.lat, tr.v_east, tr.v_north), atol=1e-9)
+    field = lambda la, lo: 0.0 * la + 1.0  # noqa: E731
+    g2 = sim.gravity_readings(jax.random.key(0), field, tr, noise_mgal=1.0, eotvos_form=None)
+    assert np.std(np.asarray(g2) - 1.0) > 0.1
+
+
+def test_scenario_keeps_track_in_region_and_vmaps():
+    from jaxgrav import datasets
+
+    grid = datasets.load("ryukyu")["anomaly_2p5min"]
+    scen = MatchingScenario(n_fixes=20, drift_deg=0.05)
+    runs = jax.vmap(lambda k: matching_scenario(k, grid, scen))(
+        jax.random.split(jax.random.key(0), 64))
+    assert runs.readings.shape == (64, 20)
+    assert np.all(np.isfinite(runs.readings))
+    assert np.all(np.asarray(grid.contains(runs.ins_lat, runs.ins_lon)))
+    np.testing.assert_allclose(np.hypot(runs.drift_north_m, runs.drift_east_m),
+                               0.05 * sim.DEG_ARC_M, rtol=1e-9)
+    one = matching_scenario(jax.random.split(jax.random.key(0), 64)[3], grid, scen)
+    np.testing.assert_allclose(one.readings, runs.readings[3], atol=1e-9)
+
+
+def test_track_csv_roundtrip_and_errors(tmp_path):
+    p = tmp_path / "t.csv"
+    write_track_csv(p, {"t": [0, 1, 2], "lat": [1.0, 2.0, 3.0], "gravity": [1.5, np.nan, 2.0]})
+    t = read_track_csv(p, required=("t", "lat", "gravity"), allow_nan=("gravity",))
+    np.testing.assert_allclose(t["lat"], [1, 2, 3])
+    assert np.isnan(t["gravity"][1])
+    with pytest.raises(ValueError, match=r"column 'gravity' has 1 missing"):
+        read_track_csv(p, required=("t", "gravity"))
+    with pytest.raises(ValueError, match=r"lacks column\(s\) \['lon'\]"):
+        read_track_csv(p, required=("t", "lon"))
+    with pytest.raises(FileExistsError):
+        write_track_csv(p, {"t": [0]})
+    with pytest.raises(ValueError, match="equal lengths"):
+        write_track_csv(tmp_path / "u.csv", {"a": [1, 2], "b": [1]})
+    (tmp_path / "bad.csv").write_text("t,lat\n0,abc\n")
+    with pytest.raises(ValueError, match="'abc' is not a number"):
+        read_track_csv(tmp_path / "bad.csv", required=("t",))
