@@ -77,6 +77,7 @@ def main():
     real = MatchingScenario(n_fixes=30, noise_mgal=1.0)
     radius = 1.2 * real.drift_deg * DEG_ARC_M
     print(f"\nRealistic setting: 2.5' map, 1 mGal noise, 30 fixes, drift 0.035°, {runs} tracks")
+    noiseless = dataclasses.replace(real, noise_mgal=0.0)
     results["realistic"] = {}
     fine8 = fine.refine(8)
     for name, method, mmap, cfg in (
@@ -85,14 +86,24 @@ def main():
         ("dense, bias free", "dense", fine, config_for("dense", fine, radius, noise_mgal=1.0)),
         ("chains on the map refined x8", "chains", fine8,
          config_for("chains", fine8, radius, noise_mgal=1.0)),
+        ("dense, noiseless readings", "dense", fine,
+         config_for("dense", fine, radius, noise_mgal=1.0, bias_sigma_mgal=3.0)),
     ):
         keys = jax.random.split(jax.random.fold_in(key, 3), runs)
-        s = experiments.summarize(experiments.run_batch(keys, fine, mmap, real, method, cfg))
+        scen = noiseless if "noiseless" in name else real
+        s = experiments.summarize(experiments.run_batch(keys, fine, mmap, scen, method, cfg))
         results["realistic"][name] = s
         print(f"  {name:30s} median error {s['error_m_median']:6.0f} m of INS "
               f"{s['ins_error_m_median']:.0f} m (ratio {s['median_ratio']:.2f}), improved "
               f"{100 * s['improved_rate']:.0f} %, < 0.01° {100 * s['success_rate']:.0f} %, "
               f"flagged {100 * s['flagged_rate']:.0f} %")
+        if s["failures_preferred_over_truth"] is not None:
+            print(f"    failures (error > INS/3): {100 * s['failure_rate']:.0f} %, of which "
+                  f"{100 * s['failures_preferred_over_truth']:.0f} % chose a track scoring no "
+                  f"worse than the truth; failure rate by mean slope (mGal/km): "
+                  + ", ".join(f"{k}: {100 * v['failure_rate']:.0f} % of {v['runs']}"
+                              for k, v in s["failure_rate_by_slope_mgal_km"].items()
+                              if v["runs"]))
     print(f"\n({time.perf_counter() - t0:.0f} s)")
     if args.out:
         with open(args.out, "w") as fh:

@@ -17,6 +17,7 @@ from jaxgrav.geodesy import eotvos
 from jaxgrav.match.api import config_for
 from jaxgrav.match.correlation import match_chains
 from jaxgrav.match.dense import match_dense
+from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_track
 from jaxgrav.scenarios import MatchingScenario, matching_scenario, track_error_m
 from jaxgrav.sim import DEG_ARC_M
 
@@ -51,6 +52,7 @@ def run_batch(key, truth_field, match_map, scenario, method, config, *, eotvos_c
         ``work_constrained``, and the last run's tracks for plotting.
     """
     fn = match_dense if method == "dense" else match_chains
+    slope_n, slope_e = match_map.gradient()
 
     def one(truth_field, match_map, key, scenario, config):
         run = matching_scenario(key, truth_field, scenario)
@@ -58,9 +60,21 @@ def run_batch(key, truth_field, match_map, scenario, method, config, *, eotvos_c
         if eotvos_correct:
             g = g + eotvos(run.ins_lat, run.truth.v_east, run.truth.v_north)
         r = fn(match_map, run.ins_lat, run.ins_lon, g, config)
+        slope = jnp.hypot(slope_n.sample(run.truth.lat, run.truth.lon),
+                          slope_e.sample(run.truth.lat, run.truth.lon))
+        if method == "dense":  # the score the matcher would give the true track
+            w = decreasing_weights(g.shape[0], config.weight_decay)
+            prior = bias_precision(w, config.noise_mgal, config.bias_sigma_mgal)
+            m = match_map.sample(run.truth.lat, run.truth.lon, config.method)
+            true_score = score_track(g, m, w, config.score, prior)[0]
+        else:
+            true_score = jnp.nan
         return dict(
             ins_err_m=jnp.mean(jnp.hypot(run.drift_north_m, run.drift_east_m)),
             err_m=track_error_m(r.lat, r.lon, run.truth),
+            score=r.score,
+            true_score=true_score,
+            slope_mgal_km=1e3 * jnp.mean(slope),
             status=r.status,
             work_unconstrained=r.work_unconstrained,
             work_constrained=r.work_constrained,
@@ -80,13 +94,28 @@ def summarize(out, success_deg=0.01):
     -------
     dict
         Medians and means of INS and matched errors, their ratio, the success rate
-        ``error < success_deg`` and the fraction of tracks improved over the INS.
+        ``error < success_deg``, the fraction of tracks improved over the INS, the
+        failure rate (error above a third of the INS error) overall and by mean map
+        slope along the track, and among failures the fraction whose chosen track
+        scores no worse than the true one (ambiguity, not a search failure).
     """
     ins, err = out["ins_err_m"], out["err_m"]
     wu = out["work_unconstrained"]
     wc = out["work_constrained"]
+    failed = err > ins / 3
+    slope = out["slope_mgal_km"]
+    bands = {}
+    for lo, hi in ((0, 1), (1, 2), (2, 4), (4, np.inf)):
+        sel = (slope >= lo) & (slope < hi)
+        bands[f"{lo}-{hi}"] = dict(runs=int(sel.sum()), failure_rate=float(np.mean(failed[sel]))
+                                   if sel.any() else None)
     return dict(
         runs=int(err.size),
+        failure_rate=float(np.mean(failed)),
+        failures_preferred_over_truth=float(np.mean(out["score"][failed]
+                                                    <= out["true_score"][failed]))
+        if failed.any() and np.isfinite(out["true_score"]).all() else None,
+        failure_rate_by_slope_mgal_km=bands,
         ins_error_deg_mean=float(np.mean(ins) / DEG_ARC_M),
         error_deg_mean=float(np.mean(err) / DEG_ARC_M),
         ins_error_m_median=float(np.median(ins)),
