@@ -99,6 +99,7 @@ def _cmd_simulate(args):
 
     from jaxgrav.constants import KNOT
     from jaxgrav.scenarios import MatchingScenario, matching_scenario
+    from jaxgrav.sim import rayleigh_quantile
     from jaxgrav.tracks import write_track_csv
 
     grid = _load_map(args.map, args.var)
@@ -115,8 +116,8 @@ def _cmd_simulate(args):
     write_track_csv(args.out, {
         "t": truth.t, "lat": run.ins_lat, "lon": run.ins_lon, "gravity": run.readings,
         "v_east": truth.v_east, "v_north": truth.v_north,
-        "drift_radius": np.full(args.n, 1.5 * args.drift if args.drift_law == "fixed"
-                                else 3.03 * args.drift),
+        "drift_radius": np.full(args.n, 1.2 * args.drift if args.drift_law == "fixed"
+                                else float(rayleigh_quantile(args.drift, args.probability))),
     }, force=args.force)
     if args.truth:
         write_track_csv(args.truth, {"t": truth.t, "lat": truth.lat, "lon": truth.lon},
@@ -190,7 +191,11 @@ def build_parser():
     sim_p.add_argument("--v-north", type=float, default=10.0, help="knots (default 10)")
     sim_p.add_argument("--drift", type=float, default=0.035,
                        help="INS drift (degrees of arc, default 0.035)")
-    sim_p.add_argument("--drift-law", choices=("fixed", "rayleigh"), default="fixed")
+    sim_p.add_argument("--drift-law", choices=("fixed", "rayleigh"), default="fixed",
+                       help="fixed: the drift is --drift; rayleigh: --drift is the Rayleigh "
+                            "scale and the search radius its --probability quantile")
+    sim_p.add_argument("--probability", type=float, default=0.99,
+                       help="Rayleigh quantile written as drift_radius (default 0.99)")
     sim_p.add_argument("--noise", type=float, default=1.0, help="reading noise (mGal)")
     sim_p.add_argument("--bias", type=float, default=0.0, help="gravimeter bias (mGal)")
     sim_p.add_argument("--seed", type=int, default=0)

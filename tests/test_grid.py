@@ -273,3 +273,19 @@ def test_sample_rejects_mismatched_lengths(n, m):
             g.sample(np.full(n, 30.0), np.full(m, 130.0))
     else:
         assert np.shape(g.sample(np.full(n, 30.0), np.full(m, 130.0))) == (max(n, m),)
+
+
+def test_upward_continue_wrapper_matches_point_mass_field():
+    from jaxgrav.fields import pointmass
+
+    masses = pointmass.PointMasses.create(30.0, 130.0, 3000.0, 5e12)
+    lat = np.linspace(29.7, 30.3, 61)
+    lon = np.linspace(129.65, 130.35, 61)
+    la, lo = np.meshgrid(lat, lon, indexing="ij")
+    g0 = jg.Grid.from_arrays(lat, lon, pointmass.gravity_anomaly(masses, la, lo, 0.0))
+    up = g0.upward_continue(1000.0)
+    exact = np.asarray(pointmass.gravity_anomaly(masses, la, lo, 1000.0))
+    inner = (slice(15, 46), slice(15, 46))
+    peak = np.abs(exact).max()
+    assert np.max(np.abs(np.asarray(up.values)[inner] - exact[inner])) < 0.02 * peak
+    assert up.dlat == g0.dlat and float(up.values.max()) < float(g0.values.max())
