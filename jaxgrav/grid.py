@@ -256,14 +256,28 @@ class Grid:
             self.lat0 + self.dlat * (self.ny - 1),
         )
 
-    def spacing_m(self):
-        """Node spacing ``(dy, dx)`` in metres at the grid's central latitude (WGS84)."""
+    def spacing_m(self, lat=None):
+        """Node spacing ``(dy, dx)`` in metres on the WGS84 ellipsoid.
+
+        Parameters
+        ----------
+        lat : float or Array, optional
+            Latitude (degrees) at which to measure; the grid's central latitude by
+            default, in which case Python floats are returned.
+
+        Returns
+        -------
+        tuple
+            North–south and east–west node spacing (m).
+        """
         from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 
-        lat_c = self.lat0 + 0.5 * self.dlat * (self.ny - 1)
-        dy = float(meridian_radius(lat_c)) * self.dlat * DEG
-        dx = float(prime_vertical_radius(lat_c)) * np.cos(lat_c * DEG) * self.dlon * DEG
-        return dy, float(dx)
+        if lat is None:
+            lat_c = self.lat0 + 0.5 * self.dlat * (self.ny - 1)
+            return tuple(float(v) for v in self.spacing_m(lat_c))
+        dy = meridian_radius(lat) * self.dlat * DEG
+        dx = prime_vertical_radius(lat) * jnp.cos(jnp.asarray(lat) * DEG) * self.dlon * DEG
+        return dy, dx
 
     def fractional_index(self, lat, lon):
         """Fractional (row, column) indices of points; longitudes wrapped into the grid's range.

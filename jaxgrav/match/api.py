@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav._validate import check_latitude
-from jaxgrav.geodesy import eotvos, meridian_radius, prime_vertical_radius
+from jaxgrav.geodesy import eotvos
 from jaxgrav.match.correlation import ChainConfig, match_chains
 from jaxgrav.match.dense import DenseConfig, match_dense
 from jaxgrav.match.result import status_messages
@@ -27,14 +27,6 @@ METHODS = ("dense", "chains")
 
 MIN_FIXES = 5
 """Fewest fixes a track may have (paper A uses N ≥ 10)."""
-
-
-def _node_spacing_m(grid):
-    lat_c = grid.lat0 + 0.5 * grid.dlat * (grid.ny - 1)
-    dy = float(meridian_radius(lat_c)) * math.radians(grid.dlat)
-    dx = float(prime_vertical_radius(lat_c)) * math.cos(math.radians(lat_c)) * math.radians(
-        grid.dlon)
-    return dy, dx
 
 
 def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=math.inf,
@@ -66,7 +58,7 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
     if not drift_radius_m > 0:
         raise ValueError(f"drift_radius_m must be positive (m); got {drift_radius_m!r}")
     reach = 1.2 * float(drift_radius_m)
-    dy, dx = _node_spacing_m(grid)
+    dy, dx = grid.spacing_m()
     if method == "dense":
         spacing = min(max(min(dy, dx) / 8.0, 50.0), reach / 3.0)
         half = math.ceil(reach / spacing)

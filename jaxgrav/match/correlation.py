@@ -23,8 +23,6 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from jaxgrav.constants import DEG
-from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.match.candidates import iso_candidates, local_offsets_m
 from jaxgrav.match.chains import count_chains, eliminate, kbest_chains
 from jaxgrav.match.result import MatchResult, nearest_to_ins
@@ -138,7 +136,7 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
         slope_factor=config.node_allowance,
     )
     steps = local_offsets_m(lat[1:], lon[1:], lat[:-1], lon[:-1])
-    dy, dx = _node_spacing_m(grid, jnp.mean(lat))
+    dy, dx = grid.spacing_m(jnp.mean(lat))
     tol = (config.step_tol_m + config.node_allowance * jnp.hypot(dy, dx), config.angle_tol_deg)
     alive = eliminate(cands, steps, *tol)
     dtype = jnp.result_type(cands.value.dtype, readings.dtype)
@@ -192,14 +190,6 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
         work_constrained=work_constrained,
         work_pairs=work_pairs.astype(dtype),
         status=status,
-    )
-
-
-def _node_spacing_m(grid, lat):
-    """Node spacing (north, east) of the grid in metres at latitude ``lat``."""
-    return (
-        meridian_radius(lat) * grid.dlat * DEG,
-        prime_vertical_radius(lat) * jnp.cos(lat * DEG) * grid.dlon * DEG,
     )
 
 
