@@ -6,6 +6,7 @@ Sub-commands
 ``match``           match a track CSV against a map (paper A), write JSON
 ``simulate``        write a track CSV (and its truth) from a matching scenario
 ``sample``          sample a map along a track CSV
+``dov``             deflection of the vertical along a track (paper C)
 ``data egm2008``    rebuild the shipped EGM2008 regional files (extra ``egm2008``)
 
 Errors in user input are reported as one line on stderr with exit code 2.
@@ -211,6 +212,10 @@ def build_parser():
     s.add_argument("--column", default="map", help="name of the added column (default map)")
     s.add_argument("--force", action="store_true", help="overwrite an existing output")
     s.set_defaults(func=_cmd_sample)
+
+    from jaxgrav import cli_dov
+
+    cli_dov.add_parser(sub)
 
     data = sub.add_parser("data", help="build shipped data sets")
     dsub = data.add_subparsers(dest="source", required=True)

@@ -75,3 +75,23 @@ def test_console_script_help():
                        text=True, check=True)
     for cmd in ("demo", "match", "simulate", "sample", "data"):
         assert cmd in r.stdout
+
+
+def test_dov_command_against_the_exact_model(tmp_path, capsys):
+    from jaxgrav import datasets
+    from jaxgrav.fields import harmonics
+
+    lat = np.array([34.23, 35.0, 36.1, 37.3])
+    lon = np.array([108.33, 109.0, 110.2, 111.0])
+    h = np.array([1000.0, 5000.0, 12000.0, 19000.0])
+    write_track_csv(tmp_path / "track.csv", {"lat": lat, "lon": lon, "h": h})
+    assert main(["dov", "--track", str(tmp_path / "track.csv"),
+                 "--out", str(tmp_path / "dov.csv")]) == 0
+    out = read_track_csv(tmp_path / "dov.csv", required=("lat", "lon", "h", "xi", "eta"))
+    xi, eta = harmonics.deflection(datasets.load("qinling")["coefficients"], lat, lon, h)
+    np.testing.assert_allclose(out["xi"], xi, atol=0.02)
+    np.testing.assert_allclose(out["eta"], eta, atol=0.02)
+    write_track_csv(tmp_path / "high.csv", {"lat": lat, "lon": lon, "h": h + 10000.0})
+    assert main(["dov", "--track", str(tmp_path / "high.csv"),
+                 "--out", str(tmp_path / "x.csv")]) == 2
+    assert "h" in capsys.readouterr().err
