@@ -3,7 +3,8 @@
 The public API is re-exported here; see the README for a tour.
 """
 
-from jaxgrav import constants, geodesy, interp
+from jaxgrav import constants, datasets, dov, fields, geodesy, interp, match, sensitivity, sim
+from jaxgrav.dov import LayeredGrid
 from jaxgrav.geodesy import (
     ecef_to_geodetic,
     enu_to_geodetic,
@@ -20,18 +21,25 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Grid",
+    "LayeredGrid",
     "Window",
     "__version__",
     "constants",
+    "datasets",
+    "dov",
     "ecef_to_geodetic",
     "enu_to_geodetic",
     "eotvos",
+    "fields",
     "geodesy",
     "geodetic_to_ecef",
     "geodetic_to_enu",
     "interp",
+    "match",
     "meridian_radius",
     "normal_gravity",
     "prime_vertical_radius",
     "sample",
+    "sensitivity",
+    "sim",
 ]
