@@ -60,12 +60,18 @@ def _cmd_match(args):
     import numpy as np
 
     from jaxgrav._io import atomic_output
+    from jaxgrav.geodesy import eotvos
     from jaxgrav.match import match_track, status_messages
+    from jaxgrav.match.entropy_iccp import METHODS_B, match_track_b, status_messages_b
     from jaxgrav.sim import DEG_ARC_M
     from jaxgrav.tracks import read_track_csv
 
     grid = _load_map(args.map, args.var)
-    track = read_track_csv(args.track, required=("t", "lat", "lon", "gravity"))
+    track = read_track_csv(args.track, required=("t", "lat", "lon"))
+    field = "magnetic" if "magnetic" in track else "gravity"
+    if field not in track:
+        raise ValueError(f"track file {str(args.track)!r} needs a 'gravity' (mGal) or "
+                         f"'magnetic' (nT) column; it has {sorted(track)}")
     if args.drift_radius is not None:
         radius_deg = args.drift_radius
     elif "drift_radius" in track and np.isfinite(track["drift_radius"]).any():
@@ -74,16 +80,31 @@ def _cmd_match(args):
         radius_deg = 0.05
     if args.refine > 1:
         grid = grid.refine(args.refine)
-    has_v = "v_east" in track and "v_north" in track and not args.no_eotvos
-    result = match_track(
-        grid, track["lat"], track["lon"], track["gravity"], method=args.method,
-        drift_radius_m=radius_deg * DEG_ARC_M, noise_mgal=args.noise,
-        v_east=track["v_east"] if has_v else None, v_north=track["v_north"] if has_v else None,
-        bias_sigma_mgal=args.bias_sigma, warn=False,
-    )
+    has_v = (field == "gravity" and "v_east" in track and "v_north" in track
+             and not args.no_eotvos)
+    if args.method in METHODS_B:
+        z = track[field]
+        if has_v:
+            z = z + np.asarray(eotvos(track["lat"], track["v_east"], track["v_north"]))
+        result = match_track_b(grid, track["lat"], track["lon"], z, method=args.method,
+                               drift_radius_m=radius_deg * DEG_ARC_M, noise=args.noise,
+                               warn=False)
+        messages = status_messages_b(int(result.status))
+    else:
+        if field != "gravity":
+            raise ValueError(f"--method {args.method} matches gravity; use entropy, iccp or "
+                             "entropy+iccp for a magnetic track")
+        result = match_track(
+            grid, track["lat"], track["lon"], track["gravity"], method=args.method,
+            drift_radius_m=radius_deg * DEG_ARC_M, noise_mgal=args.noise,
+            v_east=track["v_east"] if has_v else None,
+            v_north=track["v_north"] if has_v else None,
+            bias_sigma_mgal=args.bias_sigma, warn=False,
+        )
+        messages = status_messages(int(result.status))
     r = {k: np.asarray(v).tolist() for k, v in result._asdict().items()}
-    r["status_messages"] = status_messages(int(result.status))
-    r.update(method=args.method, map=str(args.map), track=str(args.track),
+    r["status_messages"] = messages
+    r.update(method=args.method, field=field, map=str(args.map), track=str(args.track),
              drift_radius_deg=radius_deg, eotvos_corrected=has_v)
     with atomic_output(args.out, force=args.force) as tmp:
         tmp.write_text(json.dumps(r, indent=1))
@@ -160,16 +181,18 @@ def build_parser():
                         "ryukyu:anomaly_0p5deg)")
     m.add_argument("--var", default=None, help="variable to read when the file has several")
     m.add_argument("--track", required=True,
-                   help="CSV: t (s), lat, lon (INS, degrees), gravity (mGal); optional "
-                        "v_east, v_north (m/s), drift_radius (degrees)")
+                   help="CSV: t (s), lat, lon (INS, degrees), gravity (mGal) or magnetic "
+                        "(nT); optional v_east, v_north (m/s), drift_radius (degrees)")
     m.add_argument("--out", required=True, help="result JSON")
-    m.add_argument("--method", choices=("dense", "chains"), default="dense",
-                   help="dense (default, most accurate) or chains (paper A's constrained "
-                        "iso-point chains)")
+    m.add_argument("--method", choices=("dense", "chains", "entropy", "iccp", "entropy+iccp"),
+                   default="dense",
+                   help="dense (default, most accurate), chains (paper A's constrained "
+                        "iso-point chains), or paper B's entropy, iccp, entropy+iccp")
     m.add_argument("--drift-radius", type=float, default=None,
                    help="largest INS drift (degrees of arc); default: the track's "
                         "drift_radius column, else 0.05")
-    m.add_argument("--noise", type=float, default=1.0, help="reading noise sigma (mGal)")
+    m.add_argument("--noise", type=float, default=1.0,
+                   help="reading noise sigma (mGal, or nT for a magnetic track)")
     m.add_argument("--bias-sigma", type=float, default=None,
                    help="prior sigma of the reading bias (mGal); default 3 with velocities, "
                         "else free")

@@ -95,3 +95,12 @@ def test_dov_command_against_the_exact_model(tmp_path, capsys):
     assert main(["dov", "--track", str(tmp_path / "high.csv"),
                  "--out", str(tmp_path / "x.csv")]) == 2
     assert "h" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("method", ["entropy+iccp"])
+def test_match_paper_b_methods(track, tmp_path, method):
+    out = tmp_path / "b.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"), "--out", str(out),
+                 "--method", method]) == 0
+    r = json.loads(out.read_text())
+    assert len(r["lat"]) == 20 and r["method"] == method and r["field"] == "gravity"

@@ -1,0 +1,206 @@
+"""Paper B matchers: entropies by hand, Kabsch, ICCP convergence, coarse search, transforms."""
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxgrav as jg
+from jaxgrav.match import entropy as entropy_mod
+from jaxgrav.match.dense import shifted_tracks
+from jaxgrav.match.entropy import EntropyConfig, entropy_config_for
+from jaxgrav.match.entropy_iccp import (
+    iccp_config_for,
+    match_entropy_iccp,
+    match_track_b,
+)
+from jaxgrav.match.iccp import IccpConfig, kabsch_2d, match_iccp
+from jaxgrav.scenarios import track_error_m
+from jaxgrav.sim import Track
+
+
+@pytest.fixture(scope="module")
+def smooth_grid():
+    """A smooth, information-rich synthetic field on a 0.01° grid (units arbitrary)."""
+    lat = np.linspace(29.5, 30.5, 101)
+    lon = np.linspace(129.5, 130.5, 101)
+    y, x = np.meshgrid(lat - 30, lon - 130, indexing="ij")
+    v = (40 * np.sin(45 * x + 2) * np.cos(35 * y) + 25 * np.cos(60 * x * y + 50 * y)
+         + 20 * np.sin(70 * x - 30 * y) + 15 * x)
+    return jg.Grid.from_arrays(lat, lon, v, units="mGal")
+
+
+# jitted once per input shape: eager dispatch of many tiny ops is slow on a loaded machine
+information_entropy = jax.jit(entropy_mod.information_entropy)
+difference_entropy = jax.jit(entropy_mod.difference_entropy)
+sequence_entropy = jax.jit(entropy_mod.sequence_entropy, static_argnames="kind")
+
+
+def _track(n=20):
+    lat = 29.85 + 0.0045 * np.arange(n)
+    lon = 129.85 + 0.0035 * np.arange(n)
+    return lat, lon
+
+
+# ---------------------------------------------------------------------- entropies
+def test_entropies_by_hand():
+    h = jnp.array([1.0, 2.0, 3.0, 4.0])
+    p = np.array([0.1, 0.2, 0.3, 0.4])
+    assert float(information_entropy(h)) == pytest.approx(-np.sum(p * np.log(p)), rel=1e-12)
+    # C = |h - 2.5| = 1.5, .5, .5, 1.5 -> q = 3/8, 1/8, 1/8, 3/8
+    hand = -2 * (0.375 * math.log(0.375) + 0.125 * math.log(0.125))
+    assert float(difference_entropy(h)) == pytest.approx(hand, rel=1e-12)
+    # uniform sequence: H_XX = ln N; two-valued step: H_CY = ln N
+    assert float(information_entropy(jnp.full(5, 7.0))) == pytest.approx(math.log(5))
+    assert float(difference_entropy(jnp.array([0.0, 0.0, 2.0, 2.0]))) == pytest.approx(math.log(4))
+    # a zero deviation contributes 0 log 0 = 0: C = (1, 0, 1) -> q = (1/2, 0, 1/2)
+    assert float(difference_entropy(jnp.array([-1.0, 0.0, 1.0]))) == pytest.approx(math.log(2))
+
+
+def test_entropy_invariances_and_undefined_cases():
+    rng = np.random.default_rng(1)
+    h = jnp.asarray(rng.normal(size=30))
+    assert float(difference_entropy(h + 1234.5)) == pytest.approx(float(difference_entropy(h)))
+    assert float(difference_entropy(3.0 * h)) == pytest.approx(float(difference_entropy(h)))
+    # H_XX is undefined (NaN, not clipped) for values <= 0; a shift makes it defined
+    assert np.isnan(float(information_entropy(h)))
+    assert np.isfinite(float(sequence_entropy(h, kind="information", shift=10.0)))
+    assert float(sequence_entropy(h, kind="information", shift=10.0)) == pytest.approx(
+        float(information_entropy(h + 10.0)))
+    assert np.isnan(float(difference_entropy(jnp.full(4, 2.0))))
+    # batched over leading axes, gradient finite at a zero deviation
+    hb = jnp.stack([h, h + 1.0, 2 * h])
+    looped = [difference_entropy(hb[i]) for i in range(3)]
+    np.testing.assert_allclose(difference_entropy(hb), looped)
+    g = jax.jit(jax.grad(entropy_mod.difference_entropy))(jnp.array([-1.0, 0.0, 1.0, 3.0]))
+    assert np.all(np.isfinite(g))
+    with pytest.raises(ValueError, match="kind"):
+        entropy_mod.sequence_entropy(h, "shannon")
+
+
+# ---------------------------------------------------------------------- Kabsch
+def test_kabsch_recovers_rotation_and_translation():
+    rng = np.random.default_rng(2)
+    p = rng.normal(size=(25, 2)) * 1000.0
+    th = np.deg2rad(17.3)
+    r = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    t = np.array([312.5, -87.25])
+    x = p @ r.T + t
+    r_est, t_est = kabsch_2d(jnp.asarray(p), jnp.asarray(x))
+    np.testing.assert_allclose(r_est, r, atol=1e-12)
+    np.testing.assert_allclose(t_est, t, atol=1e-9)
+    # zero weights drop outliers exactly
+    x_bad = x.copy()
+    x_bad[:3] += 5000.0
+    w = np.ones(25)
+    w[:3] = 0.0
+    r_w, t_w = kabsch_2d(jnp.asarray(p), jnp.asarray(x_bad), jnp.asarray(w))
+    np.testing.assert_allclose(r_w, r, atol=1e-12)
+    np.testing.assert_allclose(t_w, t, atol=1e-9)
+    # a mirror image is not a rotation: det stays +1
+    r_m, _ = kabsch_2d(jnp.asarray(p), jnp.asarray(p * np.array([1.0, -1.0])))
+    assert float(jnp.linalg.det(r_m)) == pytest.approx(1.0)
+
+
+# ---------------------------------------------------------------------- ICCP
+@pytest.mark.parametrize("d_n,d_e,rot_deg", [(300.0, -200.0, 0.0), (-150.0, 250.0, 1.5)])
+def test_iccp_converges_from_small_offsets(smooth_grid, d_n, d_e, rot_deg):
+    lat, lon = _track()
+    z = smooth_grid.sample(lat, lon, "bicubic")  # noiseless readings at the truth
+    ins_lat, ins_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), d_n, d_e,
+                                      jnp.deg2rad(rot_deg))
+    truth = Track(lat, lat, lon, lat, lat)
+    # ICCP converges linearly: a tight tolerance gives a near-exact answer
+    cfg = IccpConfig(window_m=1500.0, max_step_m=500.0, max_iter=200, tol_m=0.01)
+    res = match_iccp(smooth_grid, ins_lat, ins_lon, z, cfg)
+    assert float(track_error_m(ins_lat, ins_lon, truth)) > 250.0
+    assert float(track_error_m(res.lat, res.lon, truth)) < 0.5
+    assert abs(float(res.rotation_deg) + rot_deg) < 0.01
+    assert int(res.status) == 0  # converged, enough contour points
+    # the default tolerance (1 m per iteration) stops within ~10 m
+    res = match_iccp(smooth_grid, ins_lat, ins_lon, z, dataclasses.replace(cfg, tol_m=1.0))
+    assert float(track_error_m(res.lat, res.lon, truth)) < 10.0
+    # a tolerance never met: status bit 16 (same compiled function: tol_m is data)
+    res = match_iccp(smooth_grid, ins_lat, ins_lon, z, dataclasses.replace(cfg, tol_m=-1.0))
+    assert int(res.status) & 16
+
+
+ENT = EntropyConfig(spacing_m=200.0, half_size=4)
+ICP = IccpConfig(window_m=600.0, max_step_m=300.0, contour_tol=2.0)
+# every combined call below shares these static settings and a 20-fix track: one compile
+
+
+def test_entropy_coarse_finds_exact_offset(smooth_grid):
+    lat, lon = _track()
+    # truth = INS shifted by a grid offset: that candidate has ΔH = 0 and zero misfit
+    ins_lat, ins_lon = jnp.asarray(lat), jnp.asarray(lon)
+    t_lat, t_lon = shifted_tracks(ins_lat, ins_lon, 400.0, -600.0, 0.0)
+    z = smooth_grid.sample(t_lat, t_lon, "bicubic")
+    res = match_entropy_iccp(smooth_grid, ins_lat, ins_lon, z, ENT, ICP)
+    np.testing.assert_allclose(res.topk_lat[0], t_lat, atol=1e-9)  # the coarse stage
+    np.testing.assert_allclose(res.topk_lon[0], t_lon, atol=1e-9)
+    np.testing.assert_allclose(res.lat, t_lat, atol=1e-6)  # ICCP stays there
+    np.testing.assert_allclose(res.lon, t_lon, atol=1e-6)
+    assert float(res.topk_score[0]) < 1e-12
+    assert int(res.status) & ~16 == 0
+    # H_XX needs the shift: the config sets one for a map with negative values
+    assert entropy_config_for(smooth_grid, 800.0, kind="information").shift > 0
+    assert entropy_config_for(smooth_grid, 800.0).shift == 0
+
+
+def test_combined_batched_equals_looped_and_no_retrace(smooth_grid):
+    rng = np.random.default_rng(5)
+    lat, lon = _track()
+    truth_lat, truth_lon, ins_lat, ins_lon, z = [], [], [], [], []
+    for _ in range(3):  # truth = a shifted, turned copy of a base track; INS = base
+        d_n, d_e = rng.uniform(-700, 700, 2)
+        t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), d_n, d_e,
+                                      jnp.deg2rad(rng.uniform(-1.5, 1.5)))
+        truth_lat.append(t_lat)
+        truth_lon.append(t_lon)
+        ins_lat.append(lat)
+        ins_lon.append(lon)
+        z.append(smooth_grid.sample(t_lat, t_lon, "bicubic") + 0.3 * rng.normal(size=lat.size))
+    ins_lat, ins_lon, z = (jnp.asarray(np.stack(a)) for a in (ins_lat, ins_lon, z))
+    batched = jax.vmap(match_entropy_iccp, in_axes=(None, 0, 0, 0, None, None))(
+        smooth_grid, ins_lat, ins_lon, z, ENT, ICP)
+    for i in range(3):
+        one = match_entropy_iccp(smooth_grid, ins_lat[i], ins_lon[i], z[i], ENT, ICP)
+        for a, b in zip(one, batched, strict=True):
+            np.testing.assert_allclose(np.asarray(b)[i], np.asarray(a), rtol=1e-9, atol=1e-9)
+        truth = Track(truth_lat[i], truth_lat[i], truth_lon[i], truth_lat[i], truth_lat[i])
+        # the matcher improves on the INS track
+        err = float(track_error_m(one.lat, one.lon, truth))
+        assert err < 0.5 * float(track_error_m(ins_lat[i], ins_lon[i], truth))
+    # sweeping numbers does not recompile
+    size = match_entropy_iccp._cache_size()
+    match_entropy_iccp(smooth_grid, ins_lat[0], ins_lon[0], z[0],
+                       dataclasses.replace(ENT, spacing_m=120.0, accept_ratio=0.9),
+                       dataclasses.replace(ICP, window_m=800.0, tol_m=0.5))
+    assert match_entropy_iccp._cache_size() == size
+
+
+def test_match_track_b_validates(smooth_grid):
+    lat, lon = _track()
+    t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), -200.0, 400.0, 0.0)
+    z = np.asarray(smooth_grid.sample(t_lat, t_lon, "bicubic"))
+    res = match_track_b(smooth_grid, lat, lon, z, method="entropy+iccp", entropy=ENT, iccp=ICP,
+                        warn=False)
+    assert float(track_error_m(res.lat, res.lon, Track(t_lat, t_lat, t_lon, t_lat, t_lat))) < 20
+    with pytest.raises(ValueError, match="method"):
+        match_track_b(smooth_grid, lat, lon, z, method="icp")
+    with pytest.raises(ValueError, match="equal lengths"):
+        match_track_b(smooth_grid, lat, lon[:-1], z)
+    with pytest.raises(ValueError, match="leaves the map"):
+        match_track_b(smooth_grid, lat + 5.0, lon, z)
+    with pytest.raises(ValueError, match="drift_radius_m"):
+        iccp_config_for(smooth_grid, -1.0)
+    with pytest.raises(ValueError, match="max_iter"):
+        IccpConfig(max_iter=0)
+    with pytest.raises(ValueError, match="kind"):
+        EntropyConfig(kind="shannon")
+    with pytest.raises(ValueError, match="noise"):
+        match_track_b(smooth_grid, lat, lon, z, noise=-1.0)
