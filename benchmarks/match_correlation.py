@@ -1,0 +1,604 @@
+"""How many tracks per second does the correlation matcher handle, against a NumPy loop?
+
+Paper A's scenario on the shipped 2.5′ ``ryukyu`` anomaly map: 16 fixes 2 min apart
+at 10 kn east + 10 kn north, an INS drift of 0.035° of arc (fixed radius, random
+direction), 1 mGal white reading noise (readings Eötvös-corrected; the bias and
+difference score forms cancel any constant residual anyway). Batches of 1, 100 and
+1000 tracks.
+
+* ``dense``: :func:`jaxgrav.match.dense.match_dense` with the default DenseConfig
+  (500 m spacing, half_size sized so that half_size·spacing ≥ 1.2 × drift radius),
+  bicubic map, 8 Gauss–Newton steps; float64, and float32 (``jax_enable_x64`` off)
+  at the end.
+* ``chain``: :func:`jaxgrav.match.correlation.match_chains` on the map refined ×8
+  (bilinear, ≈ 578 m × 500 m nodes), half_size covering 1.2 × the drift, capacity
+  sized from the iso-point counts of the batch so that overflow is rare (the rate is
+  reported).
+
+jaxgrav runs ``jax.jit(jax.vmap(match_*, in_axes=(None, 0, 0, 0, None)))`` with the
+grid passed as an argument; compile time is reported separately (``compile_s``).
+The baseline is ``numpy_correlation.py`` (same algorithms in NumPy/SciPy, one track
+at a time) in a Python loop over the tracks; its map preparation (spline fit,
+refinement) is outside the timing, while jaxgrav's dense path refits its spline
+slopes inside every call. When the loop would take over ~60 s it is timed on a
+subset and extrapolated linearly (field ``baseline_extrapolated_from``). Agreement
+of the two implementations on the timed tracks is reported in every line.
+
+``--profile`` adds lines (bench ``match_correlation_profile``) timing the parts of
+each path at the largest batch and XLA's cost analysis.
+"""
+
+import math
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from _common import best_time, emit
+
+jax.config.update("jax_enable_x64", True)  # a script, not the library
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import numpy_correlation as npc  # noqa: E402
+
+from jaxgrav import datasets, sim  # noqa: E402
+from jaxgrav.constants import KNOT  # noqa: E402
+from jaxgrav.match import candidates, chains  # noqa: E402
+from jaxgrav.match.correlation import ChainConfig, match_chains  # noqa: E402
+from jaxgrav.match.dense import DenseConfig, match_dense  # noqa: E402
+
+BENCH = "match_correlation"
+N_FIX = 16
+DT = 120.0
+DRIFT_M = 0.035 * sim.DEG_ARC_M
+NOISE = 1.0
+BASELINE_BUDGET_S = 60.0
+
+
+def parse_args():
+    import argparse
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="CI-sized run (< 60 s)")
+    p.add_argument("--profile", action="store_true", help="time the parts of each path")
+    p.add_argument("--profile-only", action="store_true", help="only the profile lines")
+    p.add_argument("--paths", default="dense,chain", help="comma-separated: dense,chain")
+    return p.parse_args()
+
+
+def scenario(key, grid):
+    """One track: truth, INS-indicated fixes and readings (bicubic truth on the map)."""
+    k1, k2, k3 = jax.random.split(key, 3)
+    w, e, s, n = grid.extent
+    lat0, lon0 = sim.random_start(k1, (s, n, w, e), (0.3, 0.45, 0.3, 0.45))
+    tr = sim.straight_track(lat0, lon0, 10 * KNOT, 10 * KNOT, N_FIX, DT)
+    dn, de = sim.drift_offsets(sim.sample_drift(k2, DRIFT_M, law="fixed"), N_FIX)
+    ilat, ilon = sim.apply_drift(tr.lat, tr.lon, dn, de)
+    g = sim.gravity_readings(k3, grid, tr, noise_mgal=NOISE, eotvos_form=None, method="bicubic")
+    return tr.lat, tr.lon, ilat, ilon, g
+
+
+def make_tracks(grid, n, seed=0):
+    keys = jax.random.split(jax.random.key(seed), n)
+    out = jax.jit(jax.vmap(scenario, in_axes=(0, None)))(keys, grid)
+    return [np.asarray(a) for a in out]
+
+
+def error_m(lat, lon, tlat, tlon):
+    return np.hypot(*npc.local_offsets_m(lat, lon, tlat, tlon))
+
+
+def baseline_loop(match_np, m, lat, lon, g, cfg, per_track_hint, **kw):
+    """The NumPy loop over the tracks, or over a subset when it would exceed the budget.
+
+    Returns ``(run, n_run)``; ``run()`` returns the list of results.
+    """
+    b = lat.shape[0]
+    n_run = b
+    if per_track_hint is not None and per_track_hint * b > BASELINE_BUDGET_S:
+        n_run = max(1, min(b, math.ceil(0.5 * BASELINE_BUDGET_S / per_track_hint)))
+
+    def run():
+        return [match_np(m, lat[i], lon[i], g[i], cfg, **kw) for i in range(n_run)]
+
+    return run, n_run
+
+
+def measure(fn, args, run_baseline, rounds):
+    """Compile (timed separately), then alternate jaxgrav and baseline runs.
+
+    Alternating the two, best of ``rounds`` each, keeps the ratio fair on a shared
+    machine whose load drifts. Returns ``(jax_out, jax_s, base_results, base_s,
+    compile_s)``.
+    """
+    t0 = time.perf_counter()
+    compiled = fn.lower(*args).compile()
+    compile_s = time.perf_counter() - t0
+    out = jax.block_until_ready(compiled(*args))
+    tj = tb = float("inf")
+    base = None
+    for _ in range(rounds):
+        t0 = time.perf_counter()
+        jax.block_until_ready(compiled(*args))
+        tj = min(tj, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        base = run_baseline()
+        tb = min(tb, time.perf_counter() - t0)
+    return out, tj, base, tb, compile_s
+
+
+# --------------------------------------------------------------------------- agreement
+def dense_agreement(res, base, idx):
+    """Same chosen offset, position and score differences on the tracks in ``idx``."""
+    same, dpos, dscore, status = 0, 0.0, 0.0, 0
+    for j, i in enumerate(idx):
+        a, r = base[j], jax.tree.map(lambda x, i=i: np.asarray(x[i]), res)
+        c = int(r.chosen)
+        same += int(
+            c == a.chosen
+            and np.allclose(r.topk_lat[c], a.topk_lat[a.chosen], rtol=0, atol=1e-9)
+            and np.allclose(r.topk_lon[c], a.topk_lon[a.chosen], rtol=0, atol=1e-9)
+        )
+        dpos = max(dpos, float(np.max(error_m(r.lat, r.lon, a.lat, a.lon))))
+        if np.isfinite(a.score):
+            dscore = max(dscore, abs(float(r.score) - a.score) / max(abs(a.score), 1e-12))
+        status += int(int(r.status) == a.status)
+    n = len(idx)
+    return dict(
+        agree_same_offset=round(same / n, 4),
+        agree_max_pos_diff_m=float(f"{dpos:.3g}"),
+        agree_max_rel_score_diff=float(f"{dscore:.3g}"),
+        agree_same_status=round(status / n, 4),
+        agree_tracks=n,
+    )
+
+
+def chain_agreement(res, base, idx):
+    """Same chain (positions), scores, status and chain counts on the tracks in ``idx``."""
+    same, dscore, status, counts = 0, 0.0, 0, 0
+    for j, i in enumerate(idx):
+        a, r = base[j], jax.tree.map(lambda x, i=i: np.asarray(x[i]), res)
+        found = not int(r.status) & 1
+        same_chain = int(r.chosen) == a.chosen and (
+            not found
+            or (
+                np.allclose(r.lat, a.lat, rtol=0, atol=1e-12)
+                and np.allclose(r.lon, a.lon, rtol=0, atol=1e-12)
+            )
+        )
+        same += int(same_chain)
+        fin = np.isfinite(a.topk_score)
+        if np.array_equal(fin, np.isfinite(r.topk_score)) and fin.any():
+            d = np.abs(r.topk_score[fin] - a.topk_score[fin]) / np.maximum(
+                np.abs(a.topk_score[fin]), 1e-12
+            )
+            dscore = max(dscore, float(d.max()))
+        elif not np.array_equal(fin, np.isfinite(r.topk_score)):
+            dscore = float("inf")
+        status += int(int(r.status) == a.status)
+        counts += int(
+            np.isclose(float(r.work_constrained), a.work_constrained, rtol=1e-12)
+            and float(r.work_pairs) == a.work_pairs
+        )
+    n = len(idx)
+    return dict(
+        agree_same_chain=round(same / n, 4),
+        agree_max_rel_score_diff=float(f"{dscore:.3g}"),
+        agree_same_status=round(status / n, 4),
+        agree_same_chain_counts=round(counts / n, 4),
+        agree_tracks=n,
+    )
+
+
+# --------------------------------------------------------------------------- cases
+def dense_config():
+    """The default DenseConfig, its half_size raised if needed to reach 1.2 × the drift."""
+    h = math.ceil(1.2 * DRIFT_M / DenseConfig().spacing_m)
+    return DenseConfig(half_size=max(h, DenseConfig().half_size))
+
+
+def run_dense(grid, tracks, batches, quick, profile):
+    tlat, tlon, lat, lon, g = tracks
+    cfg = dense_config()
+    m = npc.prepare_grid(grid)
+    fn = jax.jit(jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None)))
+    hint = None
+    res64 = {}
+    for b in batches:
+        rounds = 3 if quick else (10 if b == 1 else 5 if b <= 100 else 3)
+        run, n_run = baseline_loop(npc.match_dense_np, m, lat[:b], lon[:b], g[:b], cfg, hint)
+        args = (grid, jnp.asarray(lat[:b]), jnp.asarray(lon[:b]), jnp.asarray(g[:b]), cfg)
+        out, t, base, bt, compile_s = measure(fn, args, run, rounds)
+        bt, extrap = bt * b / n_run, (n_run if n_run < b else None)
+        res64[b] = out
+        hint = bt / b
+        # the per-point variant of the baseline (no separable grid evaluation), for reference
+        n_pts = min(b, 10 if quick else 50)
+        run_pts, _ = baseline_loop(npc.match_dense_np, m, lat[:n_pts], lon[:n_pts], g[:n_pts],
+                                   cfg, None, sampling="points")
+        pts_t = best_time(run_pts, 1)
+        err = error_m(np.asarray(out.lat), np.asarray(out.lon), tlat[:b], tlon[:b]).mean(axis=1)
+        emit(
+            BENCH, "dense-float64", b, t, "numpy_correlation.match_dense_np loop", bt,
+            tracks_per_s=round(b / t, 1), baseline_tracks_per_s=round(b / bt, 1),
+            compile_s=round(compile_s, 2),
+            baseline_extrapolated_from=extrap,
+            baseline_points_tracks_per_s=round(n_pts / pts_t, 1),
+            config=dict(spacing_m=cfg.spacing_m, half_size=cfg.half_size,
+                        offsets=(2 * cfg.half_size + 1) ** 2, refine_steps=cfg.refine_steps,
+                        score=cfg.score, selection=cfg.selection),
+            median_error_m=round(float(np.median(err)), 1),
+            **dense_agreement(out, base, range(len(base))),
+        )
+    return cfg, m, fn, res64
+
+
+def run_dense_float32(grid, tracks, batches, cfg, m, res64, quick):
+    """Dense path with x64 disabled: float32 map, points and arithmetic."""
+    tlat, tlon, lat, lon, g = tracks
+    values = np.asarray(grid.values)
+    jax.config.update("jax_enable_x64", False)
+    try:
+        import dataclasses
+
+        g32 = dataclasses.replace(grid, values=jnp.asarray(values, jnp.float32))
+        fn = jax.jit(jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None)))
+        hint = None
+        for b in batches:
+            rounds = 3 if quick else (10 if b == 1 else 5 if b <= 100 else 3)
+            la, lo, gg = (jnp.asarray(a[:b], jnp.float32) for a in (lat, lon, g))
+            run, n_run = baseline_loop(npc.match_dense_np, m, lat[:b], lon[:b], g[:b], cfg, hint)
+            out, t, _, bt, compile_s = measure(fn, (g32, la, lo, gg, cfg), run, rounds)
+            bt, extrap = bt * b / n_run, (n_run if n_run < b else None)
+            hint = bt / b
+            out = jax.tree.map(np.asarray, out)
+            ref = res64[b]
+            same = np.mean(
+                [
+                    np.allclose(out.topk_lat[i, int(out.chosen[i])],
+                                np.asarray(ref.topk_lat[i, int(ref.chosen[i])]), rtol=0,
+                                atol=1e-4)
+                    for i in range(b)
+                ]
+            )
+            dpos = error_m(out.lat.astype(np.float64), out.lon.astype(np.float64),
+                           np.asarray(ref.lat), np.asarray(ref.lon))
+            err = error_m(out.lat.astype(np.float64), out.lon.astype(np.float64), tlat[:b],
+                          tlon[:b]).mean(axis=1)
+            emit(
+                BENCH, "dense-float32", b, t, "numpy_correlation.match_dense_np loop (float64)",
+                bt, tracks_per_s=round(b / t, 1), baseline_tracks_per_s=round(b / bt, 1),
+                compile_s=round(compile_s, 2),
+                baseline_extrapolated_from=extrap,
+                median_error_m=round(float(np.median(err)), 1),
+                f32_same_offset_as_f64=round(float(same), 4),
+                f32_median_pos_diff_vs_f64_m=float(f"{np.median(dpos.max(axis=1)):.3g}"),
+                f32_max_pos_diff_vs_f64_m=float(f"{dpos.max():.3g}"),
+            )
+    finally:
+        jax.config.update("jax_enable_x64", True)
+
+
+def chain_config(fine, tracks, quick):
+    """half_size covering 1.2 × drift at the narrowest node spacing; capacity from counts."""
+    _, _, lat, lon, g = tracks
+    lat_max = fine.extent[3]
+    dx_min = float(npc.prime_vertical_radius(lat_max) * np.cos(np.deg2rad(lat_max))
+                   * np.deg2rad(fine.dlon))
+    dy_min = float(npc.meridian_radius(fine.extent[2]) * np.deg2rad(fine.dlat))
+    h = math.ceil(1.2 * DRIFT_M / min(dx_min, dy_min))
+    s2 = (2 * h + 1) ** 2
+    d = ChainConfig()
+    count = jax.jit(
+        jax.vmap(
+            lambda grid, a, b, c: candidates.iso_candidates(
+                grid, a, b, c, half_size=h, capacity=s2, delta=d.delta,
+                slope_factor=d.node_allowance,
+            ).count,
+            in_axes=(None, 0, 0, 0),
+        )
+    )(fine, lat, lon, g)
+    per_track = np.asarray(count).max(axis=1)
+    # capacity: 99th percentile of a track's largest window count, rounded up to 32
+    cap = int(min(s2, 32 * math.ceil(np.percentile(per_track, 99) / 32)))
+    if quick:
+        cap = min(cap, 96)
+    stats = dict(
+        iso_count_median=float(np.median(count)),
+        iso_count_p99=float(np.percentile(count, 99)),
+        window_nodes=s2,
+    )
+    return ChainConfig(half_size=h, capacity=cap), stats
+
+
+def run_chain(grid, tracks, batches, quick, profile):
+    tlat, tlon, lat, lon, g = tracks
+    fine = grid.refine(8)
+    cfg, stats = chain_config(fine, tracks, quick)
+    m = npc.prepare_grid(fine, spline=False)
+    fn = jax.jit(jax.vmap(match_chains, in_axes=(None, 0, 0, 0, None)))
+    hint = None
+    out = None
+    for b in batches:
+        rounds = 2 if quick else (5 if b == 1 else 3 if b <= 100 else 2)
+        run, n_run = baseline_loop(npc.match_chains_np, m, lat[:b], lon[:b], g[:b], cfg, hint)
+        args = (fine, jnp.asarray(lat[:b]), jnp.asarray(lon[:b]), jnp.asarray(g[:b]), cfg)
+        out, t, base, bt, compile_s = measure(fn, args, run, rounds)
+        bt, extrap = bt * b / n_run, (n_run if n_run < b else None)
+        hint = bt / b
+        status = np.asarray(out.status)
+        found = (status & 1) == 0
+        err = error_m(np.asarray(out.lat), np.asarray(out.lon), tlat[:b], tlon[:b]).mean(axis=1)
+        emit(
+            BENCH, "chain-float64", b, t, "numpy_correlation.match_chains_np loop", bt,
+            tracks_per_s=round(b / t, 1), baseline_tracks_per_s=round(b / bt, 1),
+            compile_s=round(compile_s, 2),
+            baseline_extrapolated_from=extrap,
+            config=dict(refine=8, half_size=cfg.half_size, capacity=cfg.capacity,
+                        k_dp=cfg.k_dp, delta=cfg.delta, score=cfg.score),
+            overflow_rate=round(float(np.mean((status & 2) > 0)), 4),
+            found_rate=round(float(found.mean()), 4),
+            median_error_m=round(float(np.median(err[found])), 1) if found.any() else None,
+            **stats,
+            **chain_agreement(out, base, range(len(base))),
+        )
+    return fine, cfg, out
+
+
+# --------------------------------------------------------------------------- profile
+def _cost(compiled, b):
+    ca = compiled.cost_analysis()
+    ca = ca[0] if isinstance(ca, (list, tuple)) else ca
+    return dict(
+        xla_gflop_per_track=round(ca.get("flops", 0.0) / b / 1e9, 5),
+        xla_mbytes_per_track=round(ca.get("bytes accessed", 0.0) / b / 1e6, 3),
+    )
+
+
+def _time_parts(parts, rounds):
+    """Compile every part, then time them round-robin (best of ``rounds`` each).
+
+    Round-robin keeps the parts comparable when the machine's load drifts.
+    Returns ``{name: (seconds, compiled, output)}``.
+    """
+    compiled = {}
+    for name, (f, args) in parts.items():
+        c = jax.jit(f).lower(*args).compile()
+        compiled[name] = (c, args, jax.block_until_ready(c(*args)))
+    best = dict.fromkeys(parts, float("inf"))
+    for _ in range(rounds):
+        for name, (c, args, _) in compiled.items():
+            t0 = time.perf_counter()
+            jax.block_until_ready(c(*args))
+            best[name] = min(best[name], time.perf_counter() - t0)
+    return {name: (best[name], c, out) for name, (c, _, out) in compiled.items()}
+
+
+def _hermite(t):
+    t2, t3 = t * t, t * t * t
+    return (2 * t3 - 3 * t2 + 1, -2 * t3 + 3 * t2, t3 - 2 * t2 + t, t3 - t2)
+
+
+def separable_values(coef, grid, lat, lon, half_size, spacing_m, width):
+    """PROTOTYPE (not in the library): the dense path's map values by separability.
+
+    Without rotation, the shifted positions of fix i form a regular lat/lon lattice,
+    so the bicubic Hermite patch factorises: ``V_i = B_y C_i B_xᵀ`` with per-axis
+    basis matrices ``B`` (value and slope weights of ``width`` nodes) and ``C_i`` the
+    ``2w × 2w`` block of node values/slopes around the fix, cut with one
+    ``dynamic_slice`` — small matrix products instead of 4 gathers per sample.
+    ``width`` (static) must cover the offsets' extent plus one cell; no NaN handling.
+    """
+    from jaxgrav.constants import DEG
+    from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+
+    ny, nx = coef.shape[:2]
+    lat_c, lon_c = jnp.mean(lat), jnp.mean(lon)
+    m_c = meridian_radius(lat_c) * DEG
+    n_c = prime_vertical_radius(lat_c) * jnp.cos(lat_c * DEG) * DEG
+    d = jnp.arange(-half_size, half_size + 1) * spacing_m
+    iy = (lat_c + (((lat - lat_c) * m_c)[:, None] + d) / m_c - grid.lat0) / grid.dlat
+    ix = (lon_c + (((lon - lon_c) * n_c)[:, None] + d) / n_c - grid.lon0) / grid.dlon
+
+    def basis(i, n):
+        i0 = jnp.clip(jnp.floor(i), 0, n - 2).astype(jnp.int32)
+        lo = jnp.clip(i0[:, :1], 0, n - width).astype(jnp.int32)
+        h0, h1, g0, g1 = _hermite(i - i0)
+        oh0 = jax.nn.one_hot(i0 - lo, width, dtype=i.dtype)
+        oh1 = jax.nn.one_hot(i0 - lo + 1, width, dtype=i.dtype)
+        b = jnp.concatenate(
+            [h0[..., None] * oh0 + h1[..., None] * oh1, g0[..., None] * oh0 + g1[..., None] * oh1],
+            -1,
+        )
+        return b, lo[:, 0]
+
+    by, r0 = basis(iy, ny)
+    bx, c0 = basis(ix, nx)
+    zero = jnp.zeros((), jnp.int32)
+    win = jax.vmap(lambda r, c: jax.lax.dynamic_slice(coef, (r, c, zero), (width, width, 4)))(
+        r0, c0
+    )  # (N, w, w, [f, fx, fy, fxy])
+    cmat = jnp.concatenate(
+        [jnp.concatenate([win[..., 0], win[..., 1]], -1),
+         jnp.concatenate([win[..., 2], win[..., 3]], -1)], -2,
+    )
+    return jnp.einsum("nap,npq,nbq->abn", by, cmat, bx).reshape(-1, lat.shape[0])
+
+
+def profile_dense(grid, tracks, cfg, m, b, quick):
+    from jaxgrav import interp
+    from jaxgrav.grid import make_sampler
+    from jaxgrav.match.dense import shifted_tracks
+    from jaxgrav.match.scoring import decreasing_weights, score_track
+
+    _, _, lat, lon, g = tracks
+    args = (grid, jnp.asarray(lat[:b]), jnp.asarray(lon[:b]), jnp.asarray(g[:b]), cfg)
+    h = cfg.half_size
+    reps = 2 if quick else 5
+    dy, dx = grid.spacing_m()
+    dx_min = dx * np.cos(np.deg2rad(grid.extent[3])) / np.cos(
+        np.deg2rad(0.5 * (grid.extent[2] + grid.extent[3])))
+    width = math.ceil(2 * h * cfg.spacing_m / min(dy, dx_min)) + 2
+
+    def offsets(c):
+        g1 = jnp.arange(-h, h + 1) * c.spacing_m
+        return [a.reshape(-1) for a in jnp.meshgrid(g1, g1, indexing="ij")]
+
+    def sampled(grid, a, b_, c):
+        on, oe = offsets(c)
+        return make_sampler(grid, "bicubic")(*shifted_tracks(a, b_, on, oe, 0.0 * on))
+
+    def sampling(grid, la, lo, gg, c):
+        return jax.vmap(lambda a, b_: sampled(grid, a, b_, c))(la, lo)
+
+    def scores(grid, la, lo, gg, c):
+        def one(a, b_, r):
+            v = sampled(grid, a, b_, c)
+            return score_track(r, v, decreasing_weights(a.shape[0], c.weight_decay), "bias")[0]
+        return jax.vmap(one)(la, lo, gg)
+
+    def sep_sampling(grid, la, lo, gg, c):
+        coef = interp.bicubic_coefficients(grid.values)
+        return jax.vmap(
+            lambda a, b_: separable_values(coef, grid, a, b_, h, c.spacing_m, width))(la, lo)
+
+    def sep_scores(grid, la, lo, gg, c):
+        coef = interp.bicubic_coefficients(grid.values)
+
+        def one(a, b_, r):
+            v = separable_values(coef, grid, a, b_, h, c.spacing_m, width)
+            return score_track(r, v, decreasing_weights(a.shape[0], c.weight_decay), "bias")[0]
+        return jax.vmap(one)(la, lo, gg)
+
+    def coefficients(grid, la, lo, gg, c):
+        return interp.bicubic_coefficients(grid.values)
+
+    full = jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None))
+    cfg0 = DenseConfig(spacing_m=cfg.spacing_m, half_size=h, refine_steps=0)
+    parts = {
+        "spline_coefficients_once_per_call": (coefficients, args),
+        "sample_candidates": (sampling, args),
+        "sample_and_score": (scores, args),
+        "full_without_refinement": (full, (*args[:4], cfg0)),
+        "full": (full, args),
+        "PROTOTYPE_separable_sample_candidates": (sep_sampling, args),
+        "PROTOTYPE_separable_sample_and_score": (sep_scores, args),
+    }
+    timed = _time_parts(parts, reps)
+    outs = {name: out for name, (_, _, out) in timed.items()}
+    for name, (t, compiled, out) in timed.items():
+        extra = _cost(compiled, b) if name != "spline_coefficients_once_per_call" else {}
+        if name.startswith("PROTOTYPE"):
+            ref = outs[name.replace("PROTOTYPE_separable_", "")]
+            extra["max_rel_diff_vs_library"] = float(
+                f"{float(jnp.max(jnp.abs(out - ref) / jnp.maximum(jnp.abs(ref), 1))):.3g}")
+        print_profile("dense", name, b, t, **extra)
+    # NumPy baseline: share of the refinement (Python-level loop of 8 small steps)
+    n = min(b, 20 if quick else 100)
+    t_all = best_time(lambda: [npc.match_dense_np(m, lat[i], lon[i], g[i], cfg)
+                               for i in range(n)], 1)
+    t_nore = best_time(lambda: [npc.match_dense_np(m, lat[i], lon[i], g[i], cfg0)
+                                for i in range(n)], 1)
+    print_profile("dense", "numpy_loop", n, t_all,
+                  numpy_refinement_share=round(1 - t_nore / t_all, 3))
+
+
+def profile_chain(fine, tracks, cfg, b, quick):
+    _, _, lat, lon, g = tracks
+    args = (fine, jnp.asarray(lat[:b]), jnp.asarray(lon[:b]), jnp.asarray(g[:b]), cfg)
+
+    def cands_of(grid, a, b_, c, k):
+        return candidates.iso_candidates(grid, a, b_, c, half_size=k.half_size,
+                                         capacity=k.capacity, delta=k.delta,
+                                         slope_factor=k.node_allowance)
+
+    def tol_steps(grid, a, b_, k):
+        steps = candidates.local_offsets_m(a[1:], b_[1:], a[:-1], b_[:-1])
+        dy, dx = grid.spacing_m(jnp.mean(a))
+        return steps, (k.step_tol_m + k.node_allowance * jnp.hypot(dy, dx), k.angle_tol_deg)
+
+    def iso(grid, la, lo, gg, k):
+        return jax.vmap(lambda a, b_, c: cands_of(grid, a, b_, c, k).count)(la, lo, gg)
+
+    def elim(grid, la, lo, gg, k):
+        def one(a, b_, c):
+            cs = cands_of(grid, a, b_, c, k)
+            steps, tol = tol_steps(grid, a, b_, k)
+            return chains.eliminate(cs, steps, *tol)
+        return jax.vmap(one)(la, lo, gg)
+
+    def elim_count(grid, la, lo, gg, k):
+        def one(a, b_, c):
+            cs = cands_of(grid, a, b_, c, k)
+            steps, tol = tol_steps(grid, a, b_, k)
+            alive = chains.eliminate(cs, steps, *tol)
+            return alive, chains.count_chains(cs, alive, steps, *tol)
+        return jax.vmap(one)(la, lo, gg)
+
+    parts = {
+        "iso_candidates": iso,
+        "iso_and_elimination": elim,
+        "iso_elimination_count": elim_count,
+        "full": jax.vmap(match_chains, in_axes=(None, 0, 0, 0, None)),
+    }
+    timed = _time_parts({name: (f, args) for name, f in parts.items()}, 2)
+    for name, (t, compiled, _) in timed.items():
+        print_profile("chain", name, b, t, **_cost(compiled, b))
+    cnt = np.asarray(timed["iso_candidates"][2])
+    alive = np.asarray(timed["iso_and_elimination"][2])
+    print_profile(
+        "chain", "set_sizes", b, 0.0,
+        capacity=cfg.capacity,
+        mean_valid_per_fix=round(float(np.minimum(cnt, cfg.capacity).mean()), 1),
+        mean_alive_per_fix=round(float(alive.sum(-1).mean()), 1),
+        padded_pairs_per_track=(N_FIX - 1) * cfg.capacity**2,
+        valid_pairs_per_track=round(float(np.sum(
+            np.minimum(cnt[:, :-1], cfg.capacity) * np.minimum(cnt[:, 1:], cfg.capacity),
+            axis=-1).mean()), 1),
+        alive_pairs_per_track=round(float(
+            (alive[:, :-1].sum(-1) * alive[:, 1:].sum(-1)).sum(-1).mean()), 1),
+    )
+
+
+def print_profile(path, part, n, seconds, **extra):
+    import json
+
+    print(json.dumps({"bench": f"{BENCH}_profile", "path": path, "part": part, "n": n,
+                      "seconds": round(seconds, 6),
+                      "ms_per_track": round(1e3 * seconds / n, 4), **extra}), flush=True)
+
+
+def main():
+    args = parse_args()
+    paths = set(args.paths.split(","))
+    batches = (10,) if args.quick else (1, 100, 1000)
+    import dataclasses
+
+    grid = datasets.load("ryukyu")["anomaly_2p5min"]
+    # float64 values: the shipped file is float32 (see the float32 case for that precision)
+    grid = dataclasses.replace(grid, values=jnp.asarray(np.asarray(grid.values), jnp.float64))
+    tracks = make_tracks(grid, max(batches))
+    profile = args.profile or args.profile_only
+    if "dense" in paths:
+        if args.profile_only:
+            cfg = dense_config()
+            m = npc.prepare_grid(grid)
+        else:
+            cfg, m, _, res64 = run_dense(grid, tracks, batches, args.quick, profile)
+            if not args.quick:
+                run_dense_float32(grid, tracks, batches, cfg, m, res64, args.quick)
+        if profile:
+            profile_dense(grid, tracks, cfg, m, max(batches), args.quick)
+    if "chain" in paths:
+        if args.profile_only:
+            fine = grid.refine(8)
+            cfg, _ = chain_config(fine, tracks, args.quick)
+        else:
+            fine, cfg, _ = run_chain(grid, tracks, batches, args.quick, profile)
+        if profile:
+            profile_chain(fine, tracks, cfg, min(max(batches), 100), args.quick)
+
+if __name__ == "__main__":
+    main()
