@@ -36,7 +36,7 @@ import numpy as np
 from jaxgrav import dov_interp as _k
 from jaxgrav._io import atomic_output
 from jaxgrav._validate import check_finite, check_latitude, check_same_shape, concrete
-from jaxgrav.grid import Grid
+from jaxgrav.grid import GeographicAxes, Grid
 
 __all__ = [
     "DEFAULT_METHOD",
@@ -71,7 +71,7 @@ class Interpolated(NamedTuple):
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class LayeredGrid:
+class LayeredGrid(GeographicAxes):
     """Channels on a regular lat/lon grid at several heights.
 
     Parameters
@@ -269,31 +269,6 @@ class LayeredGrid:
             ds.to_netcdf(tmp)
 
     # ---------------------------------------------------------------- geometry
-    @property
-    def ny(self):
-        """Rows."""
-        return self.values.shape[-2]
-
-    @property
-    def nx(self):
-        """Columns."""
-        return self.values.shape[-1]
-
-    @property
-    def lat(self):
-        """Node latitudes (degrees), NumPy ``(ny,)``."""
-        return self.lat0 + self.dlat * np.arange(self.ny)
-
-    @property
-    def lon(self):
-        """Node longitudes (degrees), NumPy ``(nx,)``."""
-        return self.lon0 + self.dlon * np.arange(self.nx)
-
-    @property
-    def extent(self):
-        """``(lon_min, lon_max, lat_min, lat_max)`` in degrees."""
-        return (self.lon0, self.lon0 + self.dlon * (self.nx - 1),
-                self.lat0, self.lat0 + self.dlat * (self.ny - 1))
 
     def layer(self, index, channel=0):
         """One layer of one channel as a :class:`Grid` (``channel`` index or name)."""

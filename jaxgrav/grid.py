@@ -70,9 +70,47 @@ class Window(NamedTuple):
     complete: jax.Array
 
 
+class GeographicAxes:
+    """Node geometry shared by :class:`Grid` and :class:`jaxgrav.dov.LayeredGrid`.
+
+    Needs ``values`` (last two axes rows × columns) and static ``lat0``, ``dlat``,
+    ``lon0``, ``dlon``.
+    """
+
+    @property
+    def ny(self):
+        """Number of latitude rows."""
+        return self.values.shape[-2]
+
+    @property
+    def nx(self):
+        """Number of longitude columns."""
+        return self.values.shape[-1]
+
+    @property
+    def lat(self):
+        """Node latitudes (degrees, ascending), NumPy ``(ny,)``."""
+        return self.lat0 + self.dlat * np.arange(self.ny)
+
+    @property
+    def lon(self):
+        """Node longitudes (degrees, ascending), NumPy ``(nx,)``."""
+        return self.lon0 + self.dlon * np.arange(self.nx)
+
+    @property
+    def extent(self):
+        """``(lon_min, lon_max, lat_min, lat_max)`` in degrees (matplotlib order)."""
+        return (
+            self.lon0,
+            self.lon0 + self.dlon * (self.nx - 1),
+            self.lat0,
+            self.lat0 + self.dlat * (self.ny - 1),
+        )
+
+
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class Grid:
+class Grid(GeographicAxes):
     """Values on a regular geographic grid.
 
     Parameters
@@ -226,36 +264,6 @@ class Grid:
             ds.to_netcdf(tmp)
 
     # ------------------------------------------------------------------ geometry
-    @property
-    def ny(self):
-        """Number of latitude rows."""
-        return self.values.shape[-2]
-
-    @property
-    def nx(self):
-        """Number of longitude columns."""
-        return self.values.shape[-1]
-
-    @property
-    def lat(self):
-        """Node latitudes (degrees, ascending), NumPy ``(ny,)``."""
-        return self.lat0 + self.dlat * np.arange(self.ny)
-
-    @property
-    def lon(self):
-        """Node longitudes (degrees, ascending), NumPy ``(nx,)``."""
-        return self.lon0 + self.dlon * np.arange(self.nx)
-
-    @property
-    def extent(self):
-        """``(lon_min, lon_max, lat_min, lat_max)`` in degrees (matplotlib order)."""
-        return (
-            self.lon0,
-            self.lon0 + self.dlon * (self.nx - 1),
-            self.lat0,
-            self.lat0 + self.dlat * (self.ny - 1),
-        )
-
     def spacing_m(self, lat=None):
         """Node spacing ``(dy, dx)`` in metres on the WGS84 ellipsoid.
 

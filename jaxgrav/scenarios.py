@@ -13,14 +13,12 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav import sim
+from jaxgrav._pytree import static_field
 from jaxgrav.constants import KNOT
 from jaxgrav.match.candidates import local_offsets_m
 
 __all__ = ["MatchingRun", "MatchingScenario", "matching_scenario", "track_error_m"]
 
-
-def _static(default):
-    return dataclasses.field(default=default, metadata=dict(static=True))
 
 
 @jax.tree_util.register_dataclass
@@ -53,7 +51,7 @@ class MatchingScenario:
         Interpolation of a Grid truth field (static).
     """
 
-    region: tuple = _static((24.0, 36.0, 124.0, 136.0))
+    region: tuple = static_field((24.0, 36.0, 124.0, 136.0))
     v_east: float = 10 * KNOT
     v_north: float = 10 * KNOT
     dt: float = 120.0
@@ -62,10 +60,10 @@ class MatchingScenario:
     drift_rotation_deg: float = 0.0
     noise_mgal: float = 1.0
     bias_mgal: float = 0.0
-    n_fixes: int = _static(30)
-    drift_law: str = _static("fixed")
-    eotvos: str = _static("full")
-    truth_method: str = _static("bicubic")
+    n_fixes: int = static_field(30)
+    drift_law: str = static_field("fixed")
+    eotvos: str = static_field("full")
+    truth_method: str = static_field("bicubic")
 
 
 class MatchingRun(NamedTuple):

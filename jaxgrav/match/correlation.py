@@ -23,6 +23,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
+from jaxgrav._pytree import static_field
 from jaxgrav.match.candidates import iso_candidates, local_offsets_m
 from jaxgrav.match.chains import count_chains, eliminate, kbest_chains
 from jaxgrav.match.result import MatchResult, nearest_to_ins
@@ -30,9 +31,6 @@ from jaxgrav.match.scoring import SCORES, decreasing_weights, score_track
 
 __all__ = ["ChainConfig", "match_chains"]
 
-
-def _static(default):
-    return dataclasses.field(default=default, metadata=dict(static=True))
 
 
 @jax.tree_util.register_dataclass
@@ -81,12 +79,12 @@ class ChainConfig:
     step_tol_m: float = 100.0
     angle_tol_deg: float = 2.0
     weight_decay: float = 0.5
-    half_size: int = _static(8)
-    capacity: int = _static(128)
-    k_dp: int = _static(16)
-    k_best: int = _static(5)
-    score: str = _static("difference")
-    selection: str = _static("nearest")
+    half_size: int = static_field(8)
+    capacity: int = static_field(128)
+    k_dp: int = static_field(16)
+    k_best: int = static_field(5)
+    score: str = static_field("difference")
+    selection: str = static_field("nearest")
 
     def __post_init__(self):
         if isinstance(self.score, str) and self.score not in SCORES:

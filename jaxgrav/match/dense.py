@@ -17,6 +17,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
+from jaxgrav._pytree import static_field
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.grid import make_sampler
@@ -26,9 +27,6 @@ from jaxgrav.match.scoring import SCORES, bias_precision, decreasing_weights, sc
 
 __all__ = ["DenseConfig", "match_dense", "shifted_tracks"]
 
-
-def _static(default):
-    return dataclasses.field(default=default, metadata=dict(static=True))
 
 
 @jax.tree_util.register_dataclass
@@ -75,13 +73,13 @@ class DenseConfig:
     noise_mgal: float = 1.0
     bias_sigma_mgal: float = float("inf")
     damping: float = 1e-3
-    half_size: int = _static(10)
-    n_rotations: int = _static(1)
-    refine_steps: int = _static(8)
-    k_best: int = _static(5)
-    method: str = _static("bicubic")
-    score: str = _static("bias")
-    selection: str = _static("best")
+    half_size: int = static_field(10)
+    n_rotations: int = static_field(1)
+    refine_steps: int = static_field(8)
+    k_best: int = static_field(5)
+    method: str = static_field("bicubic")
+    score: str = static_field("bias")
+    selection: str = static_field("best")
 
     def __post_init__(self):
         if isinstance(self.score, str) and self.score not in SCORES:

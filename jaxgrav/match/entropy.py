@@ -35,6 +35,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
+from jaxgrav._pytree import static_field
 from jaxgrav.grid import make_sampler
 from jaxgrav.match.candidates import local_offsets_m
 from jaxgrav.match.dense import shifted_tracks
@@ -62,9 +63,6 @@ ENTROPY_STATUS = {
 """Status bits raised by the entropy matcher, in addition to :data:`~jaxgrav.match.STATUS`
 bits 1 (no finite candidate) and 8 (best candidate on the edge of the search region)."""
 
-
-def _static(default):
-    return dataclasses.field(default=default, metadata=dict(static=True))
 
 
 def _neg_plogp(p, valid):
@@ -177,11 +175,11 @@ class EntropyConfig:
     spacing_m: float = 500.0
     shift: float = 0.0
     accept_ratio: float = 1.0
-    half_size: int = _static(10)
-    kind: str = _static("difference")
-    k_best: int = _static(5)
-    selection: str = _static("entropy")
-    method: str = _static("bicubic")
+    half_size: int = static_field(10)
+    kind: str = static_field("difference")
+    k_best: int = static_field(5)
+    selection: str = static_field("entropy")
+    method: str = static_field("bicubic")
 
     def __post_init__(self):
         if isinstance(self.kind, str) and self.kind not in ENTROPIES:

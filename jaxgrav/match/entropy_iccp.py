@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav import sim
+from jaxgrav._pytree import static_field
 from jaxgrav.grid import make_sampler
 from jaxgrav.match.entropy import (
     ENTROPY_STATUS,
@@ -54,9 +55,6 @@ COMBINED_STATUS = {
 
 ALL_STATUS_B = {**STATUS, **ENTROPY_STATUS, **ICCP_STATUS, **COMBINED_STATUS}
 
-
-def _static(default):
-    return dataclasses.field(default=default, metadata=dict(static=True))
 
 
 _DEFAULT_ENTROPY = EntropyConfig()
@@ -246,14 +244,14 @@ class PaperBScenario:
         Fixes per track (static).
     """
 
-    region: tuple = _static((39.0, 41.0, 115.0, 117.0))
+    region: tuple = static_field((39.0, 41.0, 115.0, 117.0))
     speed: float = 10.0
     dt: float = 60.0
     offset_min_deg: float = 0.02
     offset_max_deg: float = 0.03
     rotation_deg: float = 1.5
     noise: float = 1.0
-    n_fixes: int = _static(60)
+    n_fixes: int = static_field(60)
 
 
 def paper_b_scenario(key, truth_field, scenario=PaperBScenario()):

@@ -28,6 +28,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from jaxgrav._pytree import static_field
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.grid import make_sampler
@@ -43,9 +44,6 @@ ICCP_STATUS = {
 }
 """Status bits raised by the ICCP matcher, in addition to :data:`~jaxgrav.match.STATUS` bit 1."""
 
-
-def _static(default):
-    return dataclasses.field(default=default, metadata=dict(static=True))
 
 
 @jax.tree_util.register_dataclass
@@ -76,9 +74,9 @@ class IccpConfig:
     max_step_m: float = 1000.0
     contour_tol: float = float("inf")
     tol_m: float = 1.0
-    max_iter: int = _static(30)
-    newton_steps: int = _static(3)
-    method: str = _static("bicubic")
+    max_iter: int = static_field(30)
+    newton_steps: int = static_field(3)
+    method: str = static_field("bicubic")
 
     def __post_init__(self):
         if isinstance(self.max_iter, int) and self.max_iter < 1:
