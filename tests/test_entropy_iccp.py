@@ -8,7 +8,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import jaxgrav as jg
 from jaxgrav.match import entropy as entropy_mod
 from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.entropy import EntropyConfig, entropy_config_for
@@ -20,18 +19,6 @@ from jaxgrav.match.entropy_iccp import (
 from jaxgrav.match.iccp import IccpConfig, kabsch_2d, match_iccp
 from jaxgrav.scenarios import track_error_m
 from jaxgrav.sim import Track
-
-
-@pytest.fixture(scope="module")
-def smooth_grid():
-    """A smooth, information-rich synthetic field on a 0.01° grid (units arbitrary)."""
-    lat = np.linspace(29.5, 30.5, 101)
-    lon = np.linspace(129.5, 130.5, 101)
-    y, x = np.meshgrid(lat - 30, lon - 130, indexing="ij")
-    v = (40 * np.sin(45 * x + 2) * np.cos(35 * y) + 25 * np.cos(60 * x * y + 50 * y)
-         + 20 * np.sin(70 * x - 30 * y) + 15 * x)
-    return jg.Grid.from_arrays(lat, lon, v, units="mGal")
-
 
 # jitted once per input shape: eager dispatch of many tiny ops is slow on a loaded machine
 information_entropy = jax.jit(entropy_mod.information_entropy)

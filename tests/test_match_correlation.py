@@ -26,17 +26,6 @@ def rough_grid():
     return jg.Grid.from_arrays(LAT, LON, RNG.normal(size=(41, 41)) * 5)
 
 
-@pytest.fixture(scope="module")
-def smooth_grid():
-    """A smooth, information-rich synthetic anomaly field (mGal) on a 0.01° grid."""
-    lat = np.linspace(29.5, 30.5, 101)
-    lon = np.linspace(129.5, 130.5, 101)
-    y, x = np.meshgrid(lat - 30, lon - 130, indexing="ij")
-    v = (40 * np.sin(45 * x + 2) * np.cos(35 * y) + 25 * np.cos(60 * x * y + 50 * y)
-         + 20 * np.sin(70 * x - 30 * y) + 15 * x)
-    return jg.Grid.from_arrays(lat, lon, v, units="mGal")
-
-
 def test_scores_by_hand():
     g = jnp.array([1.0, 2.0, 4.0])
     m = jnp.array([[1.0, 2.0, 4.0], [2.0, 3.0, 5.0], [0.0, 2.0, 4.0]])
