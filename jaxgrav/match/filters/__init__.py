@@ -1,0 +1,49 @@
+"""Gravity/INS filtering (paper D): UKF, EKF and a grid point-mass filter.
+
+All filters share the measurement of :mod:`jaxgrav.match.filters.model` and the
+INS error model of :mod:`jaxgrav.sim.ins`; each is an optax-style ``init`` /
+``update`` pair run with ``lax.scan`` (:func:`run_filter`) and vmapped over runs.
+"""
+
+from jaxgrav.match.filters.kalman import ekf, predict, sigma_weights, ukf
+from jaxgrav.match.filters.model import (
+    STATUS_FILTER,
+    Dynamics,
+    Filter,
+    FilterState,
+    Step,
+    StepInfo,
+    gravity_measurement,
+    map_anomaly,
+    run_filter,
+    status_messages_filter,
+)
+from jaxgrav.match.filters.paper_d import (
+    FilterRun,
+    FilterScenario,
+    filter_scenario,
+    initial_state,
+    run_steps,
+)
+
+__all__ = [
+    "STATUS_FILTER",
+    "Dynamics",
+    "Filter",
+    "FilterRun",
+    "FilterScenario",
+    "FilterState",
+    "Step",
+    "StepInfo",
+    "ekf",
+    "filter_scenario",
+    "gravity_measurement",
+    "initial_state",
+    "map_anomaly",
+    "predict",
+    "run_filter",
+    "run_steps",
+    "sigma_weights",
+    "status_messages_filter",
+    "ukf",
+]
