@@ -34,3 +34,56 @@ __all__ = [
     "track_from_heading",
     "turning_track",
 ]
+
+# --- gravimeter signal chain of paper D (jaxgrav.sim.gravimeter, jaxgrav.sim.fir)
+from jaxgrav.sim.fir import (
+    PAPER_CUTOFF_RANGE,
+    FilteredRecord,
+    LowpassFIR,
+    apply_fir,
+    design_lowpass,
+    estimate_numtaps,
+    max_speed,
+    min_map_spacing,
+    signal_frequency,
+)
+from jaxgrav.sim.gravimeter import (
+    Disturbances,
+    GravimeterConfig,
+    GravimeterRecord,
+    PlatformModel,
+    TiltKF,
+    TiltKFState,
+    eotvos_from_map,
+    platform_discrete,
+    platform_response,
+    run_tilt_kf,
+    simulate_gravimeter,
+    tilt_correction,
+    tilt_kalman,
+)
+
+__all__ += [
+    "PAPER_CUTOFF_RANGE",
+    "Disturbances",
+    "FilteredRecord",
+    "GravimeterConfig",
+    "GravimeterRecord",
+    "LowpassFIR",
+    "PlatformModel",
+    "TiltKF",
+    "TiltKFState",
+    "apply_fir",
+    "design_lowpass",
+    "eotvos_from_map",
+    "estimate_numtaps",
+    "max_speed",
+    "min_map_spacing",
+    "platform_discrete",
+    "platform_response",
+    "run_tilt_kf",
+    "signal_frequency",
+    "simulate_gravimeter",
+    "tilt_correction",
+    "tilt_kalman",
+]
