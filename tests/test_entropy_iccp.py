@@ -8,7 +8,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from jaxgrav.grid import make_sampler
 from jaxgrav.match import entropy as entropy_mod
+from jaxgrav.match.contour import local_field, patch_coefficients, value_grad
 from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.entropy import EntropyConfig, entropy_config_for
 from jaxgrav.match.entropy_iccp import (
@@ -16,7 +18,8 @@ from jaxgrav.match.entropy_iccp import (
     match_entropy_iccp,
     match_track_b,
 )
-from jaxgrav.match.iccp import IccpConfig, kabsch_2d, match_iccp
+from jaxgrav.match.iccp import IccpConfig, _track_frame, kabsch_2d, match_iccp
+from jaxgrav.match.rigid import _solve3, refine_local, rotation_matrix
 from jaxgrav.scenarios import track_error_m
 from jaxgrav.sim import Track
 
@@ -90,6 +93,83 @@ def test_kabsch_recovers_rotation_and_translation():
     # a mirror image is not a rotation: det stays +1
     r_m, _ = kabsch_2d(jnp.asarray(p), jnp.asarray(p * np.array([1.0, -1.0])))
     assert float(jnp.linalg.det(r_m)) == pytest.approx(1.0)
+
+
+def test_kabsch_rotation_bound_is_the_constrained_optimum():
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(30, 2)) * 1000.0
+    x = p @ np.asarray(rotation_matrix(np.deg2rad(17.3))).T + np.array([50.0, -20.0])
+    x += rng.normal(size=x.shape) * 30.0
+    w = rng.uniform(0.5, 2.0, 30)
+    bound = np.deg2rad(5.0)
+    r, t = kabsch_2d(jnp.asarray(p), jnp.asarray(x), jnp.asarray(w), bound)
+    assert float(jnp.arctan2(r[1, 0], r[0, 0])) == pytest.approx(bound, rel=1e-12)
+
+    def cost(theta):  # optimal translation for a fixed angle: the weighted centroids
+        rot = np.asarray(rotation_matrix(theta))
+        tt = (w @ (x - p @ rot.T)) / w.sum()
+        return np.sum(w * np.sum((x - p @ rot.T - tt) ** 2, axis=1)), tt
+
+    thetas = np.linspace(-bound, bound, 2001)
+    best = thetas[np.argmin([cost(th)[0] for th in thetas])]
+    assert best == pytest.approx(bound)
+    np.testing.assert_allclose(t, cost(bound)[1], atol=1e-9)
+    # inside the bound nothing changes
+    r_free, t_free = kabsch_2d(jnp.asarray(p), jnp.asarray(x), jnp.asarray(w))
+    r_wide, t_wide = kabsch_2d(jnp.asarray(p), jnp.asarray(x), jnp.asarray(w), np.deg2rad(30.0))
+    np.testing.assert_allclose(r_wide, r_free, atol=1e-14)
+    np.testing.assert_allclose(t_wide, t_free, atol=1e-9)
+
+
+def test_solve3_matches_numpy():
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(3, 3))
+    a = a @ a.T + np.eye(3)
+    b = rng.normal(size=3)
+    np.testing.assert_allclose(_solve3(jnp.asarray(a), jnp.asarray(b)), np.linalg.solve(a, b),
+                               rtol=1e-10)
+    assert np.all(np.asarray(_solve3(jnp.zeros((3, 3)), jnp.ones(3))) == 0.0)
+
+
+def test_patch_coefficients_are_the_bicubic_interpolant(smooth_grid):
+    """Value and analytic gradient in local metres = the Grid's bicubic sampler + autodiff."""
+    lat_c, lon_c = jnp.asarray(30.0), jnp.asarray(130.0)
+    lat, lon = np.full(2, 30.0), np.array([129.99, 130.01])  # a two-point "track" about the centre
+    p0, field = _track_frame(patch_coefficients(smooth_grid.values), smooth_grid,
+                             jnp.asarray(lat), jnp.asarray(lon))
+    assert np.abs(np.asarray(p0[:, 0])).max() < 1e-6
+    rng = np.random.default_rng(6)
+    x = jnp.asarray(rng.uniform(-40e3, 40e3, (200, 2)))
+    f, g = jax.jit(value_grad)(field, x)
+    sample = make_sampler(smooth_grid, "bicubic")
+    m_c, n_c = 1.0 / (field.sy * smooth_grid.dlat), 1.0 / (field.sx * smooth_grid.dlon)
+    fn = lambda q: sample(lat_c + q[0] / m_c, lon_c + q[1] / n_c)  # noqa: E731
+    np.testing.assert_allclose(f, jax.vmap(fn)(x), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(g, jax.vmap(jax.grad(fn))(x), rtol=1e-9, atol=1e-12)
+    # off the map: NaN value, zero gradient
+    f_off, g_off = value_grad(field, jnp.array([[1e7, 0.0]]))
+    assert np.isnan(float(f_off[0])) and np.all(np.asarray(g_off) == 0.0)
+    assert local_field  # the public constructor used by _track_frame
+
+
+def test_least_squares_refinement_and_rotation_bound(smooth_grid):
+    lat, lon = _track()
+    z = smooth_grid.sample(lat, lon, "bicubic")
+    ins_lat, ins_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), 120.0, -90.0,
+                                      jnp.deg2rad(1.0))
+    p0, field = _track_frame(patch_coefficients(smooth_grid.values), smooth_grid, ins_lat, ins_lon)
+    bound = jnp.deg2rad(3.0)
+    r, t, m = jax.jit(refine_local, static_argnums=6)(field, p0, jnp.asarray(z), jnp.eye(2),
+                                                      jnp.zeros(2), bound, 15)
+    rot = float(jnp.arctan2(r[1, 0], r[0, 0]))
+    res_lat, res_lon = shifted_tracks(ins_lat, ins_lon, t[0], t[1], rot)
+    truth = Track(lat, lat, lon, lat, lat)
+    assert float(m) < 1e-6
+    assert float(track_error_m(res_lat, res_lon, truth)) < 1.0
+    # a bound tighter than the true 1° is respected by ICCP and by the refinement
+    cfg = IccpConfig(window_m=600.0, max_step_m=300.0, max_rotation_deg=0.4, refine_steps=5)
+    res = match_iccp(smooth_grid, ins_lat, ins_lon, z, cfg)
+    assert abs(float(res.rotation_deg)) <= 0.4 + 1e-9
 
 
 # ---------------------------------------------------------------------- ICCP
@@ -168,6 +248,22 @@ def test_combined_batched_equals_looped_and_no_retrace(smooth_grid):
                        dataclasses.replace(ENT, spacing_m=120.0, accept_ratio=0.9),
                        dataclasses.replace(ICP, window_m=800.0, tol_m=0.5))
     assert match_entropy_iccp._cache_size() == size
+
+
+def test_combined_keeps_coarse_unless_significantly_better(smooth_grid):
+    lat, lon = _track()
+    t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), 330.0, -510.0,
+                                  jnp.deg2rad(0.5))
+    z = smooth_grid.sample(t_lat, t_lon, "bicubic")
+    truth = Track(t_lat, t_lat, t_lon, t_lat, t_lat)
+    fine = match_entropy_iccp(smooth_grid, lat, lon, z, ENT, ICP)
+    assert int(fine.chosen) == 1 and not int(fine.status) & 128
+    assert float(fine.score) < float(fine.topk_score[0])
+    assert float(track_error_m(fine.lat, fine.lon, truth)) < 20.0
+    # the same data with a noise σ so large that no gain is significant: coarse kept
+    kept = match_entropy_iccp(smooth_grid, lat, lon, z, ENT, dataclasses.replace(ICP, noise=1e3))
+    assert int(kept.chosen) == 0 and int(kept.status) & 128
+    np.testing.assert_allclose(kept.lat, kept.topk_lat[0])
 
 
 def test_match_track_b_validates(smooth_grid):

@@ -249,7 +249,7 @@ def coarse_search(sample, lat, lon, readings, config):
 
 
 def coarse_offsets(sample, lat, lon, readings, config):
-    """Entropy coarse search with a prepared sampler, also returning the offset chosen.
+    """Entropy coarse search with a prepared sampler, also returning the offsets found.
 
     Parameters
     ----------
@@ -264,10 +264,12 @@ def coarse_offsets(sample, lat, lon, readings, config):
     Returns
     -------
     tuple
-        ``(result, d_north, d_east)``: the :class:`MatchResult` and the chosen offset
-        (m) in the frame of :func:`~jaxgrav.match.dense.shifted_tracks`. In the result,
-        ``score`` is the chosen |ΔH| (nats), ``bias`` is 0, ``topk_score`` the |ΔH| of
-        the ``k_best`` best accepted candidates (``inf`` for missing ones).
+        ``(result, d_north, d_east, topk_north, topk_east)``: the :class:`MatchResult`,
+        the chosen offset (m) in the frame of :func:`~jaxgrav.match.dense.shifted_tracks`
+        and the offsets ``(k_best,)`` of the top-k candidates (the chosen offset where
+        fewer were accepted). In the result, ``score`` is the chosen |ΔH| (nats),
+        ``bias`` is 0, ``topk_score`` the |ΔH| of the ``k_best`` best accepted
+        candidates (``inf`` for missing ones).
     """
     lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
     n = lat.shape[0]
@@ -323,7 +325,8 @@ def coarse_offsets(sample, lat, lon, readings, config):
         work_pairs=n_off * n,
         status=status.astype(jnp.int32),
     )
-    return result, p_n, p_e
+    have = jnp.isfinite(key[top])
+    return result, p_n, p_e, jnp.where(have, d_n[top], p_n), jnp.where(have, d_e[top], p_e)
 
 
 @jax.jit

@@ -6,20 +6,23 @@ shift plus a rotation of the INS track about its centroid. Each iteration:
 
 1. Transform the INS points: ``y_n = R p_n + t``.
 2. Closest contour point: from ``y_n``, a few Newton projection steps onto the level
-   set ``{x : f(x) = z_n}`` of the *bicubic interpolant* f of the map,
-   ``x ← x − (f(x) − z_n) ∇f / |∇f|²`` (each step at most ``max_step_m`` long;
-   the gradient comes from ``jax.value_and_grad`` of the differentiable sampler).
-   For a locally linear field one step is the exact foot of the perpendicular.
+   set ``{x : f(x) = z_n}`` of the *bicubic interpolant* f of the map
+   (:func:`~jaxgrav.match.contour.project_to_contours`, on spline coefficients
+   prepared once per map, with the analytic gradient).
 3. Sliding window: a contour point is used only if it lies within ``window_m`` of
    its current point ``y_n`` (the window moves with the estimate) and the map there
    matches ``z_n`` within ``contour_tol``; others get weight 0.
-4. Rigid transform ``R, t`` minimising ``Σ w_n ‖x_n − (R p_n + t)‖²`` by the SVD
-   (Kabsch) solution, with the reflection guard.
-5. Stop when no point moved more than ``tol_m`` (convergence mask; the loop runs a
-   fixed ``max_iter`` and converged tracks stay frozen, so it vmaps).
+4. Rigid transform ``R, t`` minimising ``Σ w_n ‖x_n − (R p_n + t)‖²`` (Kabsch, closed
+   form in 2-D), with ``|θ| ≤ max_rotation_deg``: the INS heading-error bound, a
+   prior that keeps ICCP from turning a track along an ambiguous contour.
+5. Stop when no point moved more than ``tol_m`` (convergence mask; at most
+   ``max_iter`` iterations, converged tracks stay frozen, so it vmaps).
 
-ICCP assumes the truth near the indicated track: good after a coarse match, poor
-alone for large initial errors (see ``examples/paper_b_entropy_iccp.py``).
+ICCP minimises distances to contours, not the misfit ``mean((z − f)²)`` itself; the
+result carries the misfit so a caller can compare it with other estimates
+(:func:`~jaxgrav.match.entropy_iccp.match_entropy_iccp` does). ICCP assumes the truth
+near the indicated track: good after a coarse match, poor alone for large initial
+errors (see ``examples/paper_b_entropy_iccp.py``).
 """
 
 import dataclasses
@@ -31,12 +34,22 @@ import jax.numpy as jnp
 from jaxgrav._pytree import static_field
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-from jaxgrav.grid import make_sampler
 from jaxgrav.match.candidates import local_offsets_m
+from jaxgrav.match.contour import local_field, patch_coefficients, project_to_contours, value_grad
 from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.result import MatchResult
+from jaxgrav.match.rigid import kabsch_2d, refine_local
 
-__all__ = ["ICCP_STATUS", "IccpConfig", "IccpState", "iccp_local", "kabsch_2d", "match_iccp"]
+__all__ = [
+    "ICCP_STATUS",
+    "IccpConfig",
+    "IccpState",
+    "iccp_fit",
+    "iccp_local",
+    "kabsch_2d",
+    "match_iccp",
+    "refine_local",
+]
 
 ICCP_STATUS = {
     16: "ICCP did not converge within max_iter iterations",
@@ -44,6 +57,7 @@ ICCP_STATUS = {
 }
 """Status bits raised by the ICCP matcher, in addition to :data:`~jaxgrav.match.STATUS` bit 1."""
 
+WEIGHTS = ("uniform", "gradient")
 
 
 @jax.tree_util.register_dataclass
@@ -62,10 +76,29 @@ class IccpConfig:
         Largest ``|f(x) − z|`` (map units) of a usable contour point.
     tol_m : float
         Convergence: largest point movement in one iteration (m).
+    max_rotation_deg : float
+        Bound on the rotation about the centroid (degrees): the INS heading-error
+        bound (default 90, i.e. none that matters).
+    noise : float
+        Reading noise σ, plus map error (map units); used by the combined matcher's
+        acceptance test only.
+    accept_chi2 : float
+        The combined matcher replaces the coarse track by the fine one only if
+        ``N·(misfit_coarse − misfit_fine)/σ² ≥ accept_chi2``: default 7.81, the 95 %
+        point of χ² with 3 degrees of freedom, i.e. the coarse offset lies outside the
+        fine transform's 95 % confidence region. With ``noise = 0``: any decrease.
     max_iter : int
         Iterations (static).
     newton_steps : int
         Newton projection steps per iteration (static).
+    refine_steps : int
+        Least-squares refinement after ICCP (static, default 0 = ICCP only):
+        Levenberg–Marquardt steps on the misfit ``mean((z − f(R p + t))²)`` itself
+        over ``(θ, t)`` with the same rotation bound, accepted only when they lower it.
+    weights : {"uniform", "gradient"}
+        Kabsch weights of usable contour points (static): equal (the paper), or
+        ``|∇f|²`` at the contour point, the inverse variance of its position along
+        the gradient under reading noise.
     method : {"bicubic"}
         Map interpolation (static); projection needs a smooth gradient.
     """
@@ -74,8 +107,13 @@ class IccpConfig:
     max_step_m: float = 1000.0
     contour_tol: float = float("inf")
     tol_m: float = 1.0
+    max_rotation_deg: float = 90.0
+    noise: float = 0.0
+    accept_chi2: float = 7.81
     max_iter: int = static_field(30)
     newton_steps: int = static_field(3)
+    refine_steps: int = static_field(0)
+    weights: str = static_field("uniform")
     method: str = static_field("bicubic")
 
     def __post_init__(self):
@@ -83,43 +121,12 @@ class IccpConfig:
             raise ValueError(f"max_iter must be >= 1; got {self.max_iter!r}")
         if isinstance(self.newton_steps, int) and self.newton_steps < 1:
             raise ValueError(f"newton_steps must be >= 1; got {self.newton_steps!r}")
+        if isinstance(self.refine_steps, int) and self.refine_steps < 0:
+            raise ValueError(f"refine_steps must be >= 0; got {self.refine_steps!r}")
         if isinstance(self.method, str) and self.method != "bicubic":
             raise ValueError(f"method must be 'bicubic' (a smooth gradient); got {self.method!r}")
-
-
-def kabsch_2d(p, x, w=None):
-    """Rigid 2-D transform minimising ``Σ w_n ‖x_n − (R p_n + t)‖²`` (Kabsch, by SVD).
-
-    Parameters
-    ----------
-    p, x : Array, shape ``(N, 2)``
-        Source and target points (m).
-    w : Array, shape ``(N,)``, optional
-        Non-negative weights (default equal); zero weights drop points.
-
-    Returns
-    -------
-    tuple of Array
-        ``(R, t)``: rotation ``(2, 2)`` with det +1 and translation ``(2,)`` (m).
-        With fewer than two weighted points the identity is returned.
-    """
-    p, x = jnp.asarray(p), jnp.asarray(x)
-    w = jnp.ones(p.shape[:-1], p.dtype) if w is None else jnp.asarray(w, p.dtype)
-    total = jnp.sum(w)
-    ok = total > 0
-    wn = w / jnp.where(ok, total, 1.0)
-    p_c = wn @ p
-    x_c = wn @ x
-    h = (p - p_c).T @ ((x - x_c) * wn[:, None])
-    u, _, vt = jnp.linalg.svd(h)
-    d = jnp.sign(jnp.linalg.det(vt.T @ u.T))
-    d = jnp.where(d == 0, 1.0, d)
-    r = vt.T @ jnp.diag(jnp.stack([jnp.ones_like(d), d])) @ u.T
-    eye = jnp.eye(2, dtype=r.dtype)
-    good = ok & (jnp.sum(w > 0) >= 2) & jnp.all(jnp.isfinite(r))
-    r = jnp.where(good, r, eye)
-    t = jnp.where(good, x_c - r @ p_c, jnp.zeros(2, r.dtype))
-    return r, t
+        if isinstance(self.weights, str) and self.weights not in WEIGHTS:
+            raise ValueError(f"weights must be one of {WEIGHTS}; got {self.weights!r}")
 
 
 class IccpState(NamedTuple):
@@ -138,6 +145,9 @@ class IccpState(NamedTuple):
         Contour points used at the last iteration.
     starved : Array of bool
         Some iteration had fewer than 3 usable contour points.
+    misfit : Array
+        Mean squared misfit ``mean((z − f(R p + t))²)`` of the result (map units²;
+        NaN if a point is off the map).
     """
 
     rotation: jax.Array
@@ -146,6 +156,7 @@ class IccpState(NamedTuple):
     n_iter: jax.Array
     n_used: jax.Array
     starved: jax.Array
+    misfit: jax.Array
 
 
 def _local_frame(lat, lon):
@@ -157,12 +168,12 @@ def _local_frame(lat, lon):
 
 
 def iccp_local(field, p0, z, config, r0=None, t0=None):
-    """ICCP on a field given in local metres (the jit-free core).
+    """ICCP on a map prepared in local metres (the jit-free core).
 
     Parameters
     ----------
-    field : callable
-        ``f(north, east) -> value`` for arrays of points (m), differentiable, NaN off the map.
+    field : LocalField
+        The map about the frame's origin (:func:`~jaxgrav.match.contour.local_field`).
     p0 : Array, shape ``(N, 2)``
         Indicated points ``(north, east)`` (m).
     z : Array, shape ``(N,)``
@@ -178,76 +189,82 @@ def iccp_local(field, p0, z, config, r0=None, t0=None):
     dtype = p0.dtype
     r0 = jnp.eye(2, dtype=dtype) if r0 is None else r0
     t0 = jnp.zeros(2, dtype) if t0 is None else t0
+    bound = jnp.deg2rad(jnp.asarray(config.max_rotation_deg, dtype))
 
-    def f_pt(x):
-        return field(x[0], x[1])
-
-    vg = jax.vmap(jax.value_and_grad(f_pt))
-
-    def project(y):
-        def step(_, x):
-            v, g = vg(x)
-            g2 = jnp.sum(g * g, axis=-1)
-            ok = jnp.isfinite(v) & (g2 > 0)
-            d = -jnp.where(ok, v - z, 0.0)[:, None] * g / jnp.where(ok, g2, 1.0)[:, None]
-            length = jnp.linalg.norm(d, axis=-1)
-            scale = jnp.minimum(1.0, config.max_step_m / jnp.where(length > 0, length, 1.0))
-            return x + d * scale[:, None]
-
-        x = jax.lax.fori_loop(0, config.newton_steps, step, y)
-        v = jax.vmap(f_pt)(x)
-        ok = (
-            jnp.all(jnp.isfinite(x), axis=-1)
-            & jnp.isfinite(v)
-            & (jnp.abs(v - z) <= config.contour_tol)
-            & (jnp.linalg.norm(x - y, axis=-1) <= config.window_m)
-        )
-        return jnp.where(ok[:, None], x, y), ok
-
-    def body(_, s):
-        r, t, done, it, _, starved = s
+    def body(s):
+        r, t, _, k, it, _, starved = s
         y = p0 @ r.T + t
-        x, ok = project(y)
+        x, f, g = project_to_contours(field, y, z, config.newton_steps, config.max_step_m)
+        dist2 = jnp.sum((x - y) ** 2, axis=-1)
+        ok = (jnp.isfinite(f) & (jnp.abs(f - z) <= config.contour_tol)
+              & (dist2 <= config.window_m * jnp.abs(config.window_m)))
+        w = ok.astype(dtype)
+        if config.weights == "gradient":
+            w = w * jnp.sum(g * g, axis=-1)
         n_ok = jnp.sum(ok).astype(jnp.int32)
-        r_new, t_new = kabsch_2d(p0, x, ok.astype(dtype))
-        y_new = p0 @ r_new.T + t_new
-        move = jnp.max(jnp.linalg.norm(y_new - y, axis=-1))
+        r_new, t_new = kabsch_2d(p0, jnp.where(ok[:, None], x, y), w, bound)
+        move2 = jnp.max(jnp.sum((p0 @ r_new.T + t_new - y) ** 2, axis=-1))
         enough = n_ok >= 3
-        update = ~done & enough
-        r = jnp.where(update, r_new, r)
-        t = jnp.where(update, t_new, t)
-        conv = done | (enough & (move <= config.tol_m))
-        return r, t, conv, it + update.astype(jnp.int32), n_ok, starved | (~done & ~enough)
+        r = jnp.where(enough, r_new, r)
+        t = jnp.where(enough, t_new, t)
+        conv = enough & (jnp.sqrt(move2) <= config.tol_m)
+        return r, t, conv, k + 1, it + enough.astype(jnp.int32), n_ok, starved | ~enough
 
-    init = (r0, t0, jnp.asarray(False), jnp.asarray(0, jnp.int32), jnp.asarray(0, jnp.int32),
-            jnp.asarray(False))
-    r, t, conv, it, n_ok, starved = jax.lax.fori_loop(0, config.max_iter, body, init)
-    return IccpState(r, t, conv, it, n_ok, starved)
+    def cond(s):
+        return ~s[2] & (s[3] < config.max_iter)
+
+    zero = jnp.asarray(0, jnp.int32)
+    init = (r0, t0, jnp.asarray(False), zero, zero, zero, jnp.asarray(False))
+    r, t, conv, _, it, n_ok, starved = jax.lax.while_loop(cond, body, init)
+    f, _ = value_grad(field, p0 @ r.T + t)
+    return IccpState(r, t, conv, it, n_ok, starved, jnp.mean((z - f) ** 2))
 
 
-def _iccp_result(sample, lat, lon, readings, config, start_n=0.0, start_e=0.0):
-    """ICCP from the INS track shifted by ``(start_n, start_e)`` m; returns MatchResult."""
+def iccp_fit(field, p0, z, config, r0=None, t0=None):
+    """ICCP (:func:`iccp_local`) then ``config.refine_steps`` least-squares steps.
+
+    Returns
+    -------
+    IccpState
+        With the refined transform and its misfit.
+    """
+    st = iccp_local(field, p0, z, config, r0, t0)
+    if config.refine_steps == 0:
+        return st
+    bound = jnp.deg2rad(jnp.asarray(config.max_rotation_deg, p0.dtype))
+    r, t, m = refine_local(field, p0, z, st.rotation, st.translation, bound,
+                           config.refine_steps)
+    return st._replace(rotation=r, translation=t, misfit=m)
+
+
+def _track_frame(coef, grid, lat, lon):
+    """INS points in the local frame and the map prepared in it."""
+    lat_c, lon_c, m_c, n_c = _local_frame(lat, lon)
+    dtype = jnp.result_type(coef.dtype, lat.dtype, float)
+    p0 = jnp.stack([(lat - lat_c) * m_c, (lon - lon_c) * n_c], axis=-1).astype(dtype)
+    return p0, local_field(coef, grid, lat_c, lon_c, m_c, n_c)
+
+
+def _iccp_result(coef, grid, lat, lon, readings, config, start_n=0.0, start_e=0.0):
+    """ICCP from the INS track shifted by ``(start_n, start_e)`` m; returns MatchResult.
+
+    ``coef`` is :func:`~jaxgrav.match.contour.patch_coefficients` of ``grid.values``.
+    """
     lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
     n = lat.shape[0]
-    lat_c, lon_c, m_c, n_c = _local_frame(lat, lon)
-    p0 = jnp.stack([(lat - lat_c) * m_c, (lon - lon_c) * n_c], axis=-1)
-
-    def field(north, east):
-        return sample(lat_c + north / m_c, lon_c + east / n_c)
-
-    t0 = jnp.stack([jnp.asarray(start_n, p0.dtype), jnp.asarray(start_e, p0.dtype)])
-    st = iccp_local(field, p0, readings, config, t0=t0)
+    p0, field = _track_frame(coef, grid, lat, lon)
+    dtype = p0.dtype
+    t0 = jnp.stack([jnp.asarray(start_n, dtype), jnp.asarray(start_e, dtype)])
+    st = iccp_fit(field, p0, readings.astype(dtype), config, t0=t0)
     rot = jnp.arctan2(st.rotation[1, 0], st.rotation[0, 0])
     m_lat, m_lon = shifted_tracks(lat, lon, st.translation[0], st.translation[1], rot)
-    misfit = jnp.mean((readings - sample(m_lat, m_lon)) ** 2)
     off_n, off_e = local_offsets_m(m_lat, m_lon, lat, lon)
-    found = jnp.isfinite(misfit)
+    misfit = st.misfit
     status = (
-        jnp.where(found, 0, 1)
+        jnp.where(jnp.isfinite(misfit), 0, 1)
         | jnp.where(st.converged, 0, 16)
         | jnp.where(st.starved, 64, 0)
     ).astype(jnp.int32)
-    dtype = p0.dtype
     return MatchResult(
         lat=m_lat,
         lon=m_lon,
@@ -288,6 +305,8 @@ def match_iccp(grid, lat, lon, readings, config=IccpConfig()):
         The INS track moved by the estimated rigid transform: ``rotation_deg`` about
         the INS centroid (clockwise), ``score`` the mean squared misfit (map units²),
         ``n_candidates`` the contour points used at the last iteration,
-        ``work_constrained`` the iterations run; status bits in :data:`ICCP_STATUS`.
+        ``work_constrained`` the iterations that changed the estimate; status bits in
+        :data:`ICCP_STATUS`.
     """
-    return _iccp_result(make_sampler(grid, config.method), lat, lon, readings, config)
+    coef = patch_coefficients(grid.values)
+    return _iccp_result(coef, grid, lat, lon, readings, config)

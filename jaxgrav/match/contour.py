@@ -1,0 +1,190 @@
+"""Closest contour points on a map's bicubic interpolant, in local metres (paper B, ICCP).
+
+ICCP evaluates the map and its gradient millions of times (points × Newton steps ×
+iterations × tracks), so this module prepares the map once for that loop:
+
+- :func:`patch_coefficients` turns the not-a-knot bicubic spline of
+  :func:`jaxgrav.interp.bicubic_coefficients` (node values and slopes, Hermite form)
+  into the 16 power-basis coefficients ``a_ij`` of every cell,
+  ``f(ty, tx) = Σ a_ij ty^i tx^j`` for ``ty, tx ∈ [0, 1]``: the *same* interpolant,
+  but one contiguous gather of 16 numbers per point instead of four of four, and the
+  value and both derivatives by two short Horner sums with no basis functions to build.
+- :class:`LocalField` maps local metres ``(north, east)`` about a track's centroid
+  linearly to fractional grid indices (the frame of
+  :func:`~jaxgrav.match.dense.shifted_tracks`), so no latitude/longitude arithmetic
+  is done inside the loop.
+- :func:`value_grad` gives the value and the analytic gradient (per metre) at points;
+  :func:`project_to_contours` does the Newton projection onto each point's level set.
+
+Points off the map give NaN values and zero gradients (computed on clipped, harmless
+coordinates first, so gradients of callers stay finite).
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from jaxgrav import interp
+
+__all__ = ["LocalField", "local_field", "patch_coefficients", "project_to_contours", "value_grad"]
+
+# Hermite basis (h0, h1, g0, g1) in powers (1, t, t², t³): rows are basis functions.
+_HERMITE_POWERS = ((1.0, 0.0, -3.0, 2.0), (0.0, 0.0, 3.0, -2.0),
+                   (0.0, 1.0, -2.0, 1.0), (0.0, 0.0, -1.0, 1.0))
+
+
+def patch_coefficients(values):
+    """Power-basis coefficients of the bicubic (not-a-knot spline) interpolant per cell.
+
+    Parameters
+    ----------
+    values : Array, shape ``(ny, nx)``
+        Node values (map units), ``ny, nx ≥ 4``.
+
+    Returns
+    -------
+    Array, shape ``(ny−1, nx−1, 16)``
+        Cell ``[r, c]`` holds ``a_ij`` at ``4i + j``:
+        ``f = Σ a_ij ty^i tx^j`` with ``ty = iy − r``, ``tx = ix − c`` in ``[0, 1]``.
+    """
+    k = interp.bicubic_coefficients(values)  # (ny, nx, 4): f, f_x, f_y, f_xy per node
+    ny, nx = values.shape[-2:]
+    corner = lambda q, dr, dc: k[dr:ny - 1 + dr, dc:nx - 1 + dc, q]  # noqa: E731
+    # K[a, b]: a = y-basis (value r0, value r1, slope r0, slope r1), b likewise for x
+    kmat = jnp.stack([
+        jnp.stack([corner(0, 0, 0), corner(0, 0, 1), corner(1, 0, 0), corner(1, 0, 1)], -1),
+        jnp.stack([corner(0, 1, 0), corner(0, 1, 1), corner(1, 1, 0), corner(1, 1, 1)], -1),
+        jnp.stack([corner(2, 0, 0), corner(2, 0, 1), corner(3, 0, 0), corner(3, 0, 1)], -1),
+        jnp.stack([corner(2, 1, 0), corner(2, 1, 1), corner(3, 1, 0), corner(3, 1, 1)], -1),
+    ], -2)  # (ny-1, nx-1, 4, 4)
+    m = jnp.asarray(_HERMITE_POWERS, kmat.dtype)
+    a = jnp.einsum("ai,...ab,bj->...ij", m, kmat, m)
+    return a.reshape(ny - 1, nx - 1, 16)
+
+
+class LocalField(NamedTuple):
+    """A map prepared for sampling in local metres about an origin.
+
+    Attributes
+    ----------
+    coef : Array, shape ``(ny−1, nx−1, 16)``
+        :func:`patch_coefficients` of the map.
+    iy0, ix0 : Array
+        Fractional grid indices of the origin.
+    sy, sx : Array
+        Index steps per metre north and east.
+    """
+
+    coef: jax.Array
+    iy0: jax.Array
+    ix0: jax.Array
+    sy: jax.Array
+    sx: jax.Array
+
+
+def local_field(coef, grid, lat_c, lon_c, m_per_deg_lat, m_per_deg_lon):
+    """A :class:`LocalField` about ``(lat_c, lon_c)``.
+
+    Parameters
+    ----------
+    coef : Array
+        :func:`patch_coefficients` of ``grid.values``.
+    grid : Grid
+    lat_c, lon_c : Array
+        Origin (degrees).
+    m_per_deg_lat, m_per_deg_lon : Array
+        Metres per degree north and east at the origin (the local frame's scale).
+
+    Returns
+    -------
+    LocalField
+    """
+    iy0, ix0 = grid.fractional_index(lat_c, lon_c)
+    dtype = jnp.result_type(coef.dtype, iy0.dtype)
+    return LocalField(coef, iy0.astype(dtype), ix0.astype(dtype),
+                      (1.0 / (m_per_deg_lat * grid.dlat)).astype(dtype),
+                      (1.0 / (m_per_deg_lon * grid.dlon)).astype(dtype))
+
+
+def _edge_eps(dtype, n):
+    return 8.0 * float(jnp.finfo(dtype).eps) * n
+
+
+def value_grad(field, x):
+    """Map value and gradient at local points.
+
+    Parameters
+    ----------
+    field : LocalField
+    x : Array, shape ``(..., 2)``
+        Points ``(north, east)`` (m).
+
+    Returns
+    -------
+    tuple of Array
+        ``(f, g)``: values ``(...)`` (map units; NaN off the map) and gradients
+        ``(..., 2)`` (map units per metre, north and east; 0 off the map).
+    """
+    ny, nx = field.coef.shape[0] + 1, field.coef.shape[1] + 1
+    eps = _edge_eps(field.coef.dtype, max(ny, nx))
+    iy = field.iy0 + x[..., 0] * field.sy
+    ix = field.ix0 + x[..., 1] * field.sx
+    inside = (iy >= -eps) & (iy <= ny - 1 + eps) & (ix >= -eps) & (ix <= nx - 1 + eps)
+    iy = jnp.clip(jnp.where(inside, iy, 0.0), 0.0, ny - 1.0)
+    ix = jnp.clip(jnp.where(inside, ix, 0.0), 0.0, nx - 1.0)
+    r0 = jnp.minimum(jnp.floor(iy), ny - 2.0)
+    c0 = jnp.minimum(jnp.floor(ix), nx - 2.0)
+    ty, tx = iy - r0, ix - c0
+    flat = field.coef.reshape((ny - 1) * (nx - 1), 16)
+    a = flat[(r0 * (nx - 1) + c0).astype(jnp.int32)]  # (..., 16): one gather
+    u, du = [], []  # Σ_j a_ij tx^j and its tx-derivative, for i = 0..3
+    for i in range(4):
+        a0, a1, a2, a3 = (a[..., 4 * i + j] for j in range(4))
+        u.append(a0 + tx * (a1 + tx * (a2 + tx * a3)))
+        du.append(a1 + tx * (2.0 * a2 + tx * 3.0 * a3))
+    f = u[0] + ty * (u[1] + ty * (u[2] + ty * u[3]))
+    f_y = u[1] + ty * (2.0 * u[2] + ty * 3.0 * u[3])
+    f_x = du[0] + ty * (du[1] + ty * (du[2] + ty * du[3]))
+    g = jnp.stack([f_y * field.sy, f_x * field.sx], axis=-1)
+    return jnp.where(inside, f, jnp.nan), jnp.where(inside[..., None], g, 0.0)
+
+
+def project_to_contours(field, y, z, steps, max_step_m):
+    """Newton projection of points onto the level sets of their measured values.
+
+    From each ``y_n``, ``steps`` steps ``x ← x − (f(x) − z_n) ∇f / |∇f|²``, each at most
+    ``max_step_m`` long (for a locally linear field one step is the exact foot of the
+    perpendicular on the contour ``f = z_n``).
+
+    Parameters
+    ----------
+    field : LocalField
+    y : Array, shape ``(N, 2)``
+        Starting points (m).
+    z : Array, shape ``(N,)``
+        Measured values (map units).
+    steps : int
+        Newton steps (static, ≥ 1).
+    max_step_m : float
+        Longest single step (m).
+
+    Returns
+    -------
+    tuple of Array
+        ``(x, f, g)``: contour points ``(N, 2)`` and the value and gradient at them
+        (one evaluation after the last step).
+    """
+    x = y
+    f, g = value_grad(field, x)
+    for _ in range(steps):
+        g2 = jnp.sum(g * g, axis=-1)
+        ok = jnp.isfinite(f) & (g2 > 0)
+        d = jnp.where(ok, z - f, 0.0) / jnp.where(ok, g2, 1.0)
+        # step length |d|·|g|, limited to max_step_m: scale = min(1, max / (|d| |g|))
+        length2 = d * d * g2
+        scale = jnp.where(length2 > max_step_m**2,
+                          max_step_m * jax.lax.rsqrt(jnp.where(length2 > 0, length2, 1.0)), 1.0)
+        x = x + (d * scale)[:, None] * g
+        f, g = value_grad(field, x)
+    return x, f, g
