@@ -4,3 +4,20 @@ continuation, EGM2008 regional builds (and, with the ``mag`` extra, magnetic map
 from jaxgrav.fields import harmonics, pointmass, random, spectral
 
 __all__ = ["harmonics", "pointmass", "random", "spectral"]
+
+# point-mass fitting (paper D's model by least squares)
+from jaxgrav.fields import pointmass_fit
+from jaxgrav.fields.pointmass_fit import (
+    PointMassFit,
+    PointMassSweep,
+    fit_point_masses,
+    sweep_point_masses,
+)
+
+__all__ += [
+    "PointMassFit",
+    "PointMassSweep",
+    "fit_point_masses",
+    "pointmass_fit",
+    "sweep_point_masses",
+]
