@@ -13,7 +13,8 @@ iterations × tracks), so this module prepares the map once for that loop:
   linearly to fractional grid indices (the frame of
   :func:`~jaxgrav.match.dense.shifted_tracks`), so no latitude/longitude arithmetic
   is done inside the loop.
-- :func:`value_grad` gives the value and the analytic gradient (per metre) at points;
+- :func:`value_grad` gives the value and the analytic gradient (per metre) at points
+  (:func:`value_grad_ne` with north and east in separate arrays, the hot-loop form);
   :func:`project_to_contours` does the Newton projection onto each point's level set.
 
 Points off the map give NaN values and zero gradients (computed on clipped, harmless
@@ -27,7 +28,14 @@ import jax.numpy as jnp
 
 from jaxgrav import interp
 
-__all__ = ["LocalField", "local_field", "patch_coefficients", "project_to_contours", "value_grad"]
+__all__ = [
+    "LocalField",
+    "local_field",
+    "patch_coefficients",
+    "project_to_contours",
+    "value_grad",
+    "value_grad_ne",
+]
 
 # Hermite basis (h0, h1, g0, g1) in powers (1, t, t², t³): rows are basis functions.
 _HERMITE_POWERS = ((1.0, 0.0, -3.0, 2.0), (0.0, 0.0, 3.0, -2.0),
@@ -111,25 +119,28 @@ def _edge_eps(dtype, n):
     return 8.0 * float(jnp.finfo(dtype).eps) * n
 
 
-def value_grad(field, x):
-    """Map value and gradient at local points.
+def value_grad_ne(field, north, east):
+    """Map value and gradient at local points given as separate coordinate arrays.
+
+    The hot-loop form of :func:`value_grad`: north and east components are kept in
+    separate arrays (no stacking, no reductions over a length-2 axis).
 
     Parameters
     ----------
     field : LocalField
-    x : Array, shape ``(..., 2)``
-        Points ``(north, east)`` (m).
+    north, east : Array
+        Point coordinates (m), same shape.
 
     Returns
     -------
     tuple of Array
-        ``(f, g)``: values ``(...)`` (map units; NaN off the map) and gradients
-        ``(..., 2)`` (map units per metre, north and east; 0 off the map).
+        ``(f, g_north, g_east)``: values (map units; NaN off the map) and gradient
+        components (map units per metre; 0 off the map).
     """
     ny, nx = field.coef.shape[0] + 1, field.coef.shape[1] + 1
     eps = _edge_eps(field.coef.dtype, max(ny, nx))
-    iy = field.iy0 + x[..., 0] * field.sy
-    ix = field.ix0 + x[..., 1] * field.sx
+    iy = field.iy0 + north * field.sy
+    ix = field.ix0 + east * field.sx
     inside = (iy >= -eps) & (iy <= ny - 1 + eps) & (ix >= -eps) & (ix <= nx - 1 + eps)
     iy = jnp.clip(jnp.where(inside, iy, 0.0), 0.0, ny - 1.0)
     ix = jnp.clip(jnp.where(inside, ix, 0.0), 0.0, nx - 1.0)
@@ -146,22 +157,41 @@ def value_grad(field, x):
     f = u[0] + ty * (u[1] + ty * (u[2] + ty * u[3]))
     f_y = u[1] + ty * (2.0 * u[2] + ty * 3.0 * u[3])
     f_x = du[0] + ty * (du[1] + ty * (du[2] + ty * du[3]))
-    g = jnp.stack([f_y * field.sy, f_x * field.sx], axis=-1)
-    return jnp.where(inside, f, jnp.nan), jnp.where(inside[..., None], g, 0.0)
+    return (jnp.where(inside, f, jnp.nan), jnp.where(inside, f_y * field.sy, 0.0),
+            jnp.where(inside, f_x * field.sx, 0.0))
 
 
-def project_to_contours(field, y, z, steps, max_step_m):
-    """Newton projection of points onto the level sets of their measured values.
-
-    From each ``y_n``, ``steps`` steps ``x ← x − (f(x) − z_n) ∇f / |∇f|²``, each at most
-    ``max_step_m`` long (for a locally linear field one step is the exact foot of the
-    perpendicular on the contour ``f = z_n``).
+def value_grad(field, x):
+    """Map value and gradient at local points.
 
     Parameters
     ----------
     field : LocalField
-    y : Array, shape ``(N, 2)``
-        Starting points (m).
+    x : Array, shape ``(..., 2)``
+        Points ``(north, east)`` (m).
+
+    Returns
+    -------
+    tuple of Array
+        ``(f, g)``: values ``(...)`` (map units; NaN off the map) and gradients
+        ``(..., 2)`` (map units per metre, north and east; 0 off the map).
+    """
+    f, g_n, g_e = value_grad_ne(field, x[..., 0], x[..., 1])
+    return f, jnp.stack([g_n, g_e], axis=-1)
+
+
+def project_to_contours(field, y_n, y_e, z, steps, max_step_m):
+    """Newton projection of points onto the level sets of their measured values.
+
+    From each point ``y``, ``steps`` steps ``x ← x − (f(x) − z) ∇f / |∇f|²``, each at
+    most ``max_step_m`` long (for a locally linear field one step is the exact foot of
+    the perpendicular on the contour ``f = z``).
+
+    Parameters
+    ----------
+    field : LocalField
+    y_n, y_e : Array, shape ``(N,)``
+        Starting points, north and east (m).
     z : Array, shape ``(N,)``
         Measured values (map units).
     steps : int
@@ -172,19 +202,19 @@ def project_to_contours(field, y, z, steps, max_step_m):
     Returns
     -------
     tuple of Array
-        ``(x, f, g)``: contour points ``(N, 2)`` and the value and gradient at them
-        (one evaluation after the last step).
+        ``(x_n, x_e, f, g_n, g_e)``: contour points and the value and gradient at
+        them (one evaluation after the last step), each ``(N,)``.
     """
-    x = y
-    f, g = value_grad(field, x)
+    x_n, x_e = y_n, y_e
+    f, g_n, g_e = value_grad_ne(field, x_n, x_e)
     for _ in range(steps):
-        g2 = jnp.sum(g * g, axis=-1)
+        g2 = g_n * g_n + g_e * g_e
         ok = jnp.isfinite(f) & (g2 > 0)
         d = jnp.where(ok, z - f, 0.0) / jnp.where(ok, g2, 1.0)
         # step length |d|·|g|, limited to max_step_m: scale = min(1, max / (|d| |g|))
         length2 = d * d * g2
-        scale = jnp.where(length2 > max_step_m**2,
+        d = d * jnp.where(length2 > max_step_m**2,
                           max_step_m * jax.lax.rsqrt(jnp.where(length2 > 0, length2, 1.0)), 1.0)
-        x = x + (d * scale)[:, None] * g
-        f, g = value_grad(field, x)
-    return x, f, g
+        x_n, x_e = x_n + d * g_n, x_e + d * g_e
+        f, g_n, g_e = value_grad_ne(field, x_n, x_e)
+    return x_n, x_e, f, g_n, g_e

@@ -35,10 +35,15 @@ from jaxgrav._pytree import static_field
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.match.candidates import local_offsets_m
-from jaxgrav.match.contour import local_field, patch_coefficients, project_to_contours, value_grad
+from jaxgrav.match.contour import (
+    local_field,
+    patch_coefficients,
+    project_to_contours,
+    value_grad_ne,
+)
 from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.result import MatchResult
-from jaxgrav.match.rigid import kabsch_2d, refine_local
+from jaxgrav.match.rigid import kabsch_2d, kabsch_ne, refine_local
 
 __all__ = [
     "ICCP_STATUS",
@@ -190,34 +195,42 @@ def iccp_local(field, p0, z, config, r0=None, t0=None):
     r0 = jnp.eye(2, dtype=dtype) if r0 is None else r0
     t0 = jnp.zeros(2, dtype) if t0 is None else t0
     bound = jnp.deg2rad(jnp.asarray(config.max_rotation_deg, dtype))
+    bound = (jnp.cos(bound), jnp.sin(bound))
+    p_n, p_e = p0[:, 0], p0[:, 1]
+    window2 = config.window_m * jnp.abs(config.window_m)
 
     def body(s):
-        r, t, _, k, it, _, starved = s
-        y = p0 @ r.T + t
-        x, f, g = project_to_contours(field, y, z, config.newton_steps, config.max_step_m)
-        dist2 = jnp.sum((x - y) ** 2, axis=-1)
+        c, sn, t_n, t_e, _, k, it, _, starved = s
+        y_n = c * p_n - sn * p_e + t_n
+        y_e = sn * p_n + c * p_e + t_e
+        x_n, x_e, f, g_n, g_e = project_to_contours(field, y_n, y_e, z, config.newton_steps,
+                                                     config.max_step_m)
         ok = (jnp.isfinite(f) & (jnp.abs(f - z) <= config.contour_tol)
-              & (dist2 <= config.window_m * jnp.abs(config.window_m)))
+              & ((x_n - y_n) ** 2 + (x_e - y_e) ** 2 <= window2))
         w = ok.astype(dtype)
+        n_ok = jnp.sum(w).astype(jnp.int32)
         if config.weights == "gradient":
-            w = w * jnp.sum(g * g, axis=-1)
-        n_ok = jnp.sum(ok).astype(jnp.int32)
-        r_new, t_new = kabsch_2d(p0, jnp.where(ok[:, None], x, y), w, bound)
-        move2 = jnp.max(jnp.sum((p0 @ r_new.T + t_new - y) ** 2, axis=-1))
+            w = w * (g_n * g_n + g_e * g_e)
+        c_new, s_new, tn_new, te_new = kabsch_ne(p_n, p_e, jnp.where(ok, x_n, y_n),
+                                                 jnp.where(ok, x_e, y_e), w, bound)
+        move2 = jnp.max((c_new * p_n - s_new * p_e + tn_new - y_n) ** 2
+                        + (s_new * p_n + c_new * p_e + te_new - y_e) ** 2)
         enough = n_ok >= 3
-        r = jnp.where(enough, r_new, r)
-        t = jnp.where(enough, t_new, t)
+        pick = lambda a, b: jnp.where(enough, a, b)  # noqa: E731
         conv = enough & (jnp.sqrt(move2) <= config.tol_m)
-        return r, t, conv, k + 1, it + enough.astype(jnp.int32), n_ok, starved | ~enough
+        return (pick(c_new, c), pick(s_new, sn), pick(tn_new, t_n), pick(te_new, t_e), conv,
+                k + 1, it + enough.astype(jnp.int32), n_ok, starved | ~enough)
 
     def cond(s):
-        return ~s[2] & (s[3] < config.max_iter)
+        return ~s[4] & (s[5] < config.max_iter)
 
     zero = jnp.asarray(0, jnp.int32)
-    init = (r0, t0, jnp.asarray(False), zero, zero, zero, jnp.asarray(False))
-    r, t, conv, _, it, n_ok, starved = jax.lax.while_loop(cond, body, init)
-    f, _ = value_grad(field, p0 @ r.T + t)
-    return IccpState(r, t, conv, it, n_ok, starved, jnp.mean((z - f) ** 2))
+    init = (r0[0, 0], r0[1, 0], t0[0], t0[1], jnp.asarray(False), zero, zero, zero,
+            jnp.asarray(False))
+    c, sn, t_n, t_e, conv, _, it, n_ok, starved = jax.lax.while_loop(cond, body, init)
+    f, _, _ = value_grad_ne(field, c * p_n - sn * p_e + t_n, sn * p_n + c * p_e + t_e)
+    r = jnp.stack([jnp.stack([c, -sn]), jnp.stack([sn, c])])
+    return IccpState(r, jnp.stack([t_n, t_e]), conv, it, n_ok, starved, jnp.mean((z - f) ** 2))
 
 
 def iccp_fit(field, p0, z, config, r0=None, t0=None):

@@ -13,9 +13,9 @@ positive θ turns north towards east (clockwise seen from above).
 import jax
 import jax.numpy as jnp
 
-from jaxgrav.match.contour import value_grad
+from jaxgrav.match.contour import value_grad_ne
 
-__all__ = ["kabsch_2d", "refine_local", "rotation_matrix"]
+__all__ = ["kabsch_2d", "kabsch_ne", "refine_local", "rotation_matrix"]
 
 
 def kabsch_2d(p, x, w=None, max_rotation_rad=None):
@@ -45,27 +45,54 @@ def kabsch_2d(p, x, w=None, max_rotation_rad=None):
     """
     p, x = jnp.asarray(p), jnp.asarray(x)
     w = jnp.ones(p.shape[:-1], p.dtype) if w is None else jnp.asarray(w, p.dtype)
+    bound = None
+    if max_rotation_rad is not None:
+        bound = jnp.asarray(max_rotation_rad, p.dtype)
+        bound = (jnp.cos(bound), jnp.sin(bound))
+    c, s, t_n, t_e = kabsch_ne(p[:, 0], p[:, 1], x[:, 0], x[:, 1], w, bound)
+    return jnp.stack([jnp.stack([c, -s]), jnp.stack([s, c])]), jnp.stack([t_n, t_e])
+
+
+def kabsch_ne(p_n, p_e, x_n, x_e, w, bound=None):
+    """:func:`kabsch_2d` on coordinate arrays (the hot-loop form).
+
+    Parameters
+    ----------
+    p_n, p_e, x_n, x_e : Array, shape ``(N,)``
+        Source and target points, north and east (m).
+    w : Array, shape ``(N,)``
+        Non-negative weights.
+    bound : tuple of Array, optional
+        ``(cos θ_max, sin θ_max)`` of the rotation bound.
+
+    Returns
+    -------
+    tuple of Array
+        ``(cos θ, sin θ, t_north, t_east)``; the identity with fewer than two
+        weighted points.
+    """
     total = jnp.sum(w)
-    wn = w / jnp.where(total > 0, total, 1.0)
-    p_c = wn @ p
-    x_c = wn @ x
-    pp, xx = p - p_c, x - x_c
-    a = jnp.sum(wn * (pp[:, 0] * xx[:, 0] + pp[:, 1] * xx[:, 1]))
-    b = jnp.sum(wn * (pp[:, 0] * xx[:, 1] - pp[:, 1] * xx[:, 0]))
+    enough = (total > 0) & (jnp.sum(jnp.where(w > 0, 1.0, 0.0)) >= 2)
+    inv_w = 1.0 / jnp.where(total > 0, total, 1.0)
+    pc_n, pc_e = jnp.sum(w * p_n) * inv_w, jnp.sum(w * p_e) * inv_w
+    xc_n, xc_e = jnp.sum(w * x_n) * inv_w, jnp.sum(w * x_e) * inv_w
+    # centred sums, without forming the centred arrays: Σw P·X = Σw p·x − W pc·xc, etc.
+    a = jnp.sum(w * (p_n * x_n + p_e * x_e)) * inv_w - (pc_n * xc_n + pc_e * xc_e)
+    b = jnp.sum(w * (p_n * x_e - p_e * x_n)) * inv_w - (pc_n * xc_e - pc_e * xc_n)
     rho2 = a * a + b * b
-    enough = (total > 0) & (jnp.sum(w > 0) >= 2)
     good = enough & (rho2 > 0) & jnp.isfinite(rho2)
     inv = jax.lax.rsqrt(jnp.where(good, rho2, 1.0))
     c = jnp.where(good, a * inv, 1.0)
     s = jnp.where(good, b * inv, 0.0)
-    if max_rotation_rad is not None:
-        bound = jnp.asarray(max_rotation_rad, p.dtype)
-        outside = c < jnp.cos(bound)
-        s = jnp.where(outside, jnp.where(s < 0, -1.0, 1.0) * jnp.sin(bound), s)
-        c = jnp.where(outside, jnp.cos(bound), c)
-    r = jnp.stack([jnp.stack([c, -s]), jnp.stack([s, c])])
-    t = jnp.where(enough & jnp.all(jnp.isfinite(x_c)), x_c - r @ p_c, jnp.zeros(2, p.dtype))
-    return r, t
+    if bound is not None:
+        cos_b, sin_b = bound
+        outside = c < cos_b
+        s = jnp.where(outside, jnp.where(s < 0, -sin_b, sin_b), s)
+        c = jnp.where(outside, cos_b, c)
+    ok = enough & jnp.isfinite(xc_n) & jnp.isfinite(xc_e)
+    t_n = jnp.where(ok, xc_n - (c * pc_n - s * pc_e), 0.0)
+    t_e = jnp.where(ok, xc_e - (s * pc_n + c * pc_e), 0.0)
+    return c, s, t_n, t_e
 
 
 def rotation_matrix(theta):
@@ -101,26 +128,29 @@ def refine_local(field, p0, z, r, t, max_rotation_rad, steps):
         ``(R, t, misfit)``.
     """
     theta0 = jnp.arctan2(r[1, 0], r[0, 0])
+    p_n, p_e = p0[:, 0], p0[:, 1]
 
     def evaluate(theta, t):
-        rp = p0 @ rotation_matrix(theta).T
-        f, g = value_grad(field, rp + t)
+        c, s = jnp.cos(theta), jnp.sin(theta)
+        rp_n, rp_e = c * p_n - s * p_e, s * p_n + c * p_e
+        f, g_n, g_e = value_grad_ne(field, rp_n + t[0], rp_e + t[1])
         res = jnp.where(jnp.isfinite(f), f - z, 0.0)
-        jac = jnp.stack([g[:, 1] * rp[:, 0] - g[:, 0] * rp[:, 1], g[:, 0], g[:, 1]], -1)
-        return jnp.mean((f - z) ** 2), res, jac
+        j_th = g_e * rp_n - g_n * rp_e  # d f / d theta
+        cols = (j_th, g_n, g_e)
+        jtj = jnp.stack([jnp.stack([jnp.sum(u * v) for v in cols]) for u in cols])
+        jtr = jnp.stack([jnp.sum(u * res) for u in cols])
+        return jnp.mean((f - z) ** 2), jtj, jtr
 
     def step(_, s):
-        theta, t, m, res, jac, lam = s
-        a = jac.T @ jac
-        a = a + lam * jnp.diag(jnp.diag(a))
-        d = _solve3(a, -(jac.T @ res))
+        theta, t, m, jtj, jtr, lam = s
+        d = _solve3(jtj + lam * jnp.diag(jnp.diag(jtj)), -jtr)
         theta_n = jnp.clip(theta + d[0], -max_rotation_rad, max_rotation_rad)
         t_n = t + d[1:]
-        m_n, res_n, jac_n = evaluate(theta_n, t_n)
+        m_n, jtj_n, jtr_n = evaluate(theta_n, t_n)
         keep = m_n < m  # False for NaN
         pick = lambda a, b: jnp.where(keep, a, b)  # noqa: E731
-        return (pick(theta_n, theta), pick(t_n, t), pick(m_n, m), pick(res_n, res),
-                pick(jac_n, jac), jnp.where(keep, 0.3 * lam, 10.0 * lam))
+        return (pick(theta_n, theta), pick(t_n, t), pick(m_n, m), pick(jtj_n, jtj),
+                pick(jtr_n, jtr), jnp.where(keep, 0.3 * lam, 10.0 * lam))
 
     init = (theta0, t, *evaluate(theta0, t), jnp.asarray(1e-3, p0.dtype))
     theta, t, m, *_ = jax.lax.fori_loop(0, steps, step, init)
