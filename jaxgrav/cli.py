@@ -7,6 +7,8 @@ Sub-commands
 ``simulate``        write a track CSV (and its truth) from a matching scenario
 ``sample``          sample a map along a track CSV
 ``dov``             deflection of the vertical along a track (paper C)
+``montecarlo``      Monte Carlo runs of a method over all devices; NetCDF, summary, PNG
+``bench``           run every benchmark script; Markdown table of ratios
 ``data egm2008``    rebuild the shipped EGM2008 regional files (extra ``egm2008``)
 
 Errors in user input are reported as one line on stderr with exit code 2.
@@ -239,6 +241,10 @@ def build_parser():
     from jaxgrav import cli_dov
 
     cli_dov.add_parser(sub)
+
+    from jaxgrav import cli_montecarlo
+
+    cli_montecarlo.add_parsers(sub)
 
     data = sub.add_parser("data", help="build shipped data sets")
     dsub = data.add_subparsers(dest="source", required=True)

@@ -1,0 +1,163 @@
+"""How does the Monte Carlo runner scale with devices and chunk size, and is memory bounded?
+
+Method ``correlation`` (paper A's dense matcher on the shipped 2.5′ ``ryukyu`` map,
+30 fixes, 0.035° drift; :mod:`jaxgrav.montecarlo_methods`) run by
+:func:`jaxgrav.montecarlo.run` in float64. Every case is a fresh subprocess with
+``XLA_FLAGS=--xla_force_host_platform_device_count=D`` (the flag must be set before
+JAX starts). Virtual CPU devices share the machine's cores: more devices than cores
+cannot add compute, only let XLA run the shards' work in parallel.
+
+Lines (JSON, ``_common.emit``):
+
+* ``montecarlo_scaling``: wall time of ``n`` runs (compiled already) for D = 1, 2, 8
+  devices and several chunk sizes; baseline = 1 device with the smallest chunk;
+  ``runs_per_s``.
+* ``montecarlo_compile``: the first call of the entry point (trace + compile + one
+  chunk) against a second call with *new parameter values* (another noise level):
+  ``compile_s`` is their difference, ``recompiled`` whether the second call compiled
+  anything (counted with ``jax.monitoring``); the full run adds ``entropy+iccp``.
+* ``montecarlo_memory``: peak RSS (``ru_maxrss`` of the subprocess) for ``n`` = 4, 16
+  (not with ``--quick``) and 64 chunks against the same ``n`` in one chunk (baseline;
+  for 64 chunks, which would need GBs in one chunk, against the previous chunked
+  case); ``maxrss_one_chunk_mb`` is
+  the chunked process's peak after its first (compiling) chunk, so a flat memory shows
+  as a small ``growth_after_first_chunk_mb`` whatever ``n`` (a process that had to
+  compile peaks during compilation, which hides the chunk; compare the growth).
+
+All subprocesses share a persistent compilation cache in a temporary folder (a case
+with the shape of an earlier one loads its executable). Timed runs exclude
+compilation (the key split for each ``n`` is compiled before timing too). The full
+run adds float32 cases (``jax_enable_x64`` off).
+
+Run ``python benchmarks/montecarlo_scaling.py [--quick]``. Absolute times on a shared
+machine are noise; compare within one run.
+"""
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+BENCH = "montecarlo_scaling"
+
+
+# ------------------------------------------------------------------ child process
+def child(spec):
+    import jax
+
+    jax.config.update("jax_enable_x64", spec.get("x64", True))  # a script, not the library
+    jax.config.update("jax_compilation_cache_dir", spec["cache"])
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    compiles = []
+    jax.monitoring.register_event_duration_secs_listener(
+        lambda name, secs, **kw: compiles.append(secs) if "backend_compile" in name else None)
+    from jaxgrav import montecarlo, montecarlo_methods
+
+    def maxrss_mb():
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+    grid = montecarlo_methods.default_grid()
+    method, chunk, n = spec["method"], spec["chunk"], spec["n"]
+    m = montecarlo_methods.build(method, grid)
+    key = jax.random.key(0)
+    out = {"devices": len(jax.devices())}
+
+    def go(n_runs, ch, spec_=m):
+        t0 = time.perf_counter()
+        montecarlo.run(spec_.fn, key, n_runs, chunk=ch, progress=False, args=spec_.args)
+        return time.perf_counter() - t0
+
+    out["first_s"] = go(chunk, chunk)  # trace + compile + one chunk
+    out["maxrss_one_chunk_mb"] = maxrss_mb()
+    if spec.get("compile"):
+        other = montecarlo_methods.build(method, grid, noise=1.5)  # new parameter values
+        before = len(compiles)
+        out["second_s"] = go(chunk, chunk, other)
+        out["recompiled"] = len(compiles) > before
+    if n:
+        jax.random.split(key, n).block_until_ready()  # run() splits once: compiled per n
+        out["run_s"] = min(go(n, chunk) for _ in range(spec.get("repeats", 1)))
+    out["maxrss_mb"] = maxrss_mb()
+    print("RESULT " + json.dumps(out), flush=True)
+
+
+def spawn(devices, **spec):
+    env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}",
+               JAX_PLATFORMS="cpu")
+    env.pop("JAX_NUM_CPU_DEVICES", None)
+    proc = subprocess.run([sys.executable, __file__, "--child", json.dumps(spec)], env=env,
+                          capture_output=True, text=True, timeout=3600)
+    for line in proc.stdout.splitlines():
+        if line.startswith("RESULT "):
+            return json.loads(line[7:])
+    raise RuntimeError(f"child {spec} on {devices} devices failed:\n{proc.stderr[-3000:]}")
+
+
+# ------------------------------------------------------------------------ parent
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="CI-sized run")
+    p.add_argument("--child", help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.child:
+        return child(json.loads(args.child))
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from _common import emit
+
+    if args.quick:
+        n, repeats, mem_chunk = 256, 2, 16
+        cases = [(1, 16, True), (1, 64, True), (2, 64, True), (8, 64, True)]
+        compile_methods = ("correlation",)
+    else:
+        n, repeats, mem_chunk = 2048, 2, 64
+        cases = [(d, c, True) for d in (1, 2, 8) for c in (16, 64, 256)]
+        cases += [(1, 64, False), (8, 64, False)]
+        compile_methods = ("correlation", "entropy+iccp")
+    cmin = min(c for _, c, _ in cases)
+    with tempfile.TemporaryDirectory(prefix="jaxgrav-cc-") as cache:
+        base = None
+        for devices, c, x64 in cases:
+            first = base is None
+            dtype = "float64" if x64 else "float32"
+            r = spawn(devices, method="correlation", chunk=c, n=n, repeats=repeats,
+                      compile=first, cache=cache, x64=x64)
+            if first:
+                base = r
+                emit("montecarlo_compile", f"correlation devices=1 chunk={c}", c,
+                     r["second_s"], "first call (trace + compile + run)", r["first_s"],
+                     compile_s=round(r["first_s"] - r["second_s"], 3),
+                     recompiled=r["recompiled"], dtype=dtype)
+            emit(BENCH, f"correlation devices={devices} chunk={c} {dtype}", n, r["run_s"],
+                 f"devices=1 chunk={cmin} float64", base["run_s"],
+                 runs_per_s=round(n / r["run_s"], 1),
+                 compile_and_first_chunk_s=round(r["first_s"], 3), dtype=dtype)
+        for method in compile_methods[1:]:
+            r = spawn(1, method=method, chunk=cmin, n=0, compile=True, cache=cache)
+            emit("montecarlo_compile", f"{method} devices=1 chunk={cmin}", cmin,
+                 r["second_s"], "first call (trace + compile + run)", r["first_s"],
+                 compile_s=round(r["first_s"] - r["second_s"], 3),
+                 recompiled=r["recompiled"], dtype="float64")
+        runs = {}
+        ks = (4, 64) if args.quick else (4, 16, 64)  # quick: 4 chunks of 16 = a cached shape
+        for i, k in enumerate(ks):
+            nn = k * mem_chunk
+            r = runs[k] = spawn(1, method="correlation", chunk=mem_chunk, n=nn, cache=cache)
+            if k < 64:  # baseline: the same runs in one chunk
+                b, label = spawn(1, method="correlation", chunk=nn, n=nn, cache=cache), \
+                    f"n={nn} in one chunk"
+            else:  # one chunk of 64·chunk runs would need GBs: compare with fewer chunks
+                b, label = runs[ks[i - 1]], f"n={ks[i - 1] * mem_chunk} chunk={mem_chunk}"
+            emit("montecarlo_memory", f"n={nn} chunk={mem_chunk}", nn, r["run_s"], label,
+                 b["run_s"], maxrss_mb=round(r["maxrss_mb"], 1),
+                 maxrss_one_chunk_mb=round(r["maxrss_one_chunk_mb"], 1),
+                 growth_after_first_chunk_mb=round(r["maxrss_mb"] - r["maxrss_one_chunk_mb"], 1),
+                 baseline_maxrss_mb=round(b["maxrss_mb"], 1), devices=1, dtype="float64")
+    return None
+
+
+if __name__ == "__main__":
+    main()

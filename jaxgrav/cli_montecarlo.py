@@ -1,0 +1,322 @@
+"""``jaxgrav montecarlo`` and ``jaxgrav bench``.
+
+Wire into :mod:`jaxgrav.cli` with ``cli_montecarlo.add_parsers(sub)``; the command
+functions are :func:`cmd_montecarlo` and :func:`cmd_bench`.
+"""
+
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["add_parsers", "cmd_bench", "cmd_montecarlo", "format_summary", "summarize"]
+
+PERCENTILES = (5, 25, 50, 75, 95)
+
+
+def add_parsers(subparsers):
+    """Add the ``montecarlo`` and ``bench`` sub-commands to an ``argparse`` sub-parser set."""
+    from jaxgrav.montecarlo_methods import BUILDERS
+
+    m = subparsers.add_parser("montecarlo", help="Monte Carlo runs of a method on all devices")
+    m.add_argument("--method", required=True, choices=sorted(BUILDERS),
+                   help="correlation: paper A dense matcher; entropy+iccp: paper B")
+    m.add_argument("--runs", type=int, required=True, help="number of simulated runs")
+    m.add_argument("--chunk", type=int, default=None,
+                   help="runs per compiled call (bounds memory; default 256)")
+    m.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
+    m.add_argument("--devices", type=int, default=None,
+                   help="use this many devices (default all; on a CPU the host is split "
+                        "into this many devices when JAX has not started yet)")
+    m.add_argument("--map", default="ryukyu",
+                   help="map simulated and matched: NetCDF grid or shipped map (default "
+                        "ryukyu, the 2.5' EGM2008 anomaly)")
+    m.add_argument("--drift", type=float, default=None,
+                   help="INS drift (degrees of arc); correlation: fixed radius (default "
+                        "0.035); entropy+iccp: offset uniform in [2/3, 1] x drift (default 0.03)")
+    m.add_argument("--noise", type=float, default=None,
+                   help="reading noise sigma (mGal, default 1)")
+    m.add_argument("--fixes", type=int, default=None,
+                   help="fixes per track (default 30 correlation, 60 entropy+iccp)")
+    m.add_argument("--out", required=True,
+                   help="results NetCDF (one value per run); a PNG of the errors is written "
+                        "next to it with suffix .png")
+    m.add_argument("--no-progress", action="store_true", help="no progress bar")
+    m.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    m.set_defaults(func=cmd_montecarlo)
+
+    b = subparsers.add_parser("bench", help="run every benchmark script, write a Markdown table")
+    b.add_argument("--quick", action="store_true", help="pass --quick to every script")
+    b.add_argument("--dir", default="benchmarks", help="folder of scripts (default benchmarks)")
+    b.add_argument("--out", default="bench.md", help="Markdown report (default bench.md)")
+    b.add_argument("--timeout", type=float, default=3600.0,
+                   help="seconds allowed per script (default 3600)")
+    b.add_argument("--force", action="store_true", help="overwrite an existing report")
+    b.set_defaults(func=cmd_bench)
+    return m, b
+
+
+# ----------------------------------------------------------------------- montecarlo
+def summarize(results):
+    """Summary of per-run errors.
+
+    Parameters
+    ----------
+    results : dict
+        ``ins_err_m``, ``err_m`` (m) and ``status``, each of shape ``(n_runs,)``.
+
+    Returns
+    -------
+    dict
+        ``runs``; ``ins_err_m``, ``err_m`` and ``ratio`` (error / INS error, per run),
+        each a dict of ``mean`` and ``p5 … p95`` over finite values; ``failure_rate``
+        (error > INS/3, or not finite), ``flagged_rate`` (status ≠ 0),
+        ``improved_rate`` (error < INS), ``nonfinite`` (count).
+    """
+    ins = np.asarray(results["ins_err_m"], float)
+    err = np.asarray(results["err_m"], float)
+    status = np.asarray(results["status"])
+    ratio = err / np.where(ins > 0, ins, np.nan)
+
+    def stats(v):
+        v = v[np.isfinite(v)]
+        if not v.size:
+            return {"mean": float("nan"), **{f"p{p}": float("nan") for p in PERCENTILES}}
+        return {"mean": float(v.mean()),
+                **{f"p{p}": float(q) for p, q in zip(PERCENTILES, np.percentile(v, PERCENTILES),
+                                                     strict=True)}}
+
+    finite = np.isfinite(err)
+    return dict(
+        runs=int(err.size),
+        ins_err_m=stats(ins),
+        err_m=stats(err),
+        ratio=stats(ratio),
+        failure_rate=float(np.mean(~finite | (err > ins / 3))),
+        flagged_rate=float(np.mean(status != 0)),
+        improved_rate=float(np.mean(finite & (err < ins))),
+        nonfinite=int((~finite).sum()),
+    )
+
+
+def format_summary(s):
+    """A fixed-width table of :func:`summarize`'s output."""
+    cols = ["mean", *[f"p{p}" for p in PERCENTILES]]
+    head = f"{'':<16}" + "".join(f"{'median' if c == 'p50' else c:>10}" for c in cols)
+    rows = [head]
+    for label, key, fmt in (("INS error (m)", "ins_err_m", "{:>10.0f}"),
+                            ("error (m)", "err_m", "{:>10.0f}"),
+                            ("error / INS", "ratio", "{:>10.3f}")):
+        rows.append(f"{label:<16}" + "".join(fmt.format(s[key][c]) for c in cols))
+    rows.append(f"failure rate (error > INS/3 or not finite): {100 * s['failure_rate']:.1f} %; "
+                f"improved on the INS: {100 * s['improved_rate']:.1f} %; "
+                f"status flagged: {100 * s['flagged_rate']:.1f} %")
+    return "\n".join(rows)
+
+
+def _plot_errors(results, summary, title, path, force):
+    import matplotlib.pyplot as plt
+
+    from jaxgrav.plot import save_figure
+
+    ins = np.asarray(results["ins_err_m"], float)
+    err = np.asarray(results["err_m"], float)
+    pos = np.concatenate([ins, err])
+    pos = pos[np.isfinite(pos) & (pos > 0)]
+    lo, hi = (pos.min(), pos.max()) if pos.size else (1.0, 10.0)
+    bins = np.geomspace(max(lo, 1e-3), max(hi, lo * 1.01, 1e-3 * 1.01), 40)
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(12, 4.5))
+    for label, v in (("INS", ins), ("matched", err)):
+        v = v[np.isfinite(v)]
+        ax0.hist(v, bins=bins, alpha=0.6, label=f"{label} (median {np.median(v):.0f} m)"
+                 if v.size else label)
+        ax1.plot(np.sort(v), np.arange(1, v.size + 1) / max(v.size, 1), label=label)
+    ax0.set_xscale("log")
+    ax0.set_xlabel("mean track error (m)")
+    ax0.set_ylabel("runs")
+    ax0.legend()
+    ax1.set_xscale("log")
+    ax1.set_xlabel("mean track error (m)")
+    ax1.set_ylabel("fraction of runs ≤ error")
+    ax1.grid(True, which="both", alpha=0.3)
+    ax1.legend(loc="lower right")
+    ax0.set_title(title)
+    ax1.set_title(f"failure rate {100 * summary['failure_rate']:.1f} %, median error / INS "
+                  f"{summary['ratio']['p50']:.3f}")
+    save_figure(fig, path, force=force)
+
+
+def _split_cpu(n):
+    """Ask for ``n`` CPU devices if JAX has not started its backend yet (else no-op)."""
+    if "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", ""):
+        return
+    import jax
+
+    try:
+        if n > 1:
+            jax.config.update("jax_num_cpu_devices", n)
+    except RuntimeError:  # the backend already runs (e.g. called from Python); keep it
+        pass
+
+
+def _command(args):
+    opts = [("--method", args.method), ("--runs", args.runs), ("--chunk", args.chunk),
+            ("--seed", args.seed), ("--devices", args.devices), ("--map", args.map),
+            ("--drift", args.drift), ("--noise", args.noise), ("--fixes", args.fixes)]
+    return "jaxgrav montecarlo " + " ".join(f"{k} {v}" for k, v in opts if v is not None)
+
+
+def cmd_montecarlo(args):
+    """Run ``jaxgrav montecarlo`` (x64 is enabled by the CLI entry point)."""
+    if args.devices is not None:
+        if args.devices < 1:
+            raise ValueError(f"--devices must be at least 1; got {args.devices}")
+        _split_cpu(args.devices)
+    import jax
+
+    from jaxgrav import __version__, montecarlo
+    from jaxgrav.cli import _load_map
+    from jaxgrav.montecarlo_methods import METRICS, build
+
+    out = Path(args.out)
+    png = out.with_suffix(".png")
+    if out.suffix == ".png":
+        raise ValueError(f"--out must be a NetCDF file (the PNG goes next to it); got {out}")
+    existing = [str(p) for p in (out, png) if p.exists()]
+    if existing and not args.force:
+        raise FileExistsError(f"{existing} exist; pass --force to overwrite")
+    for name, value in (("--runs", args.runs), ("--chunk", args.chunk)):
+        if value is not None and value < 1:
+            raise ValueError(f"{name} must be a positive number of runs; got {value}")
+    grid = _load_map(args.map, None)
+    spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes)
+    n_dev = args.devices or len(jax.devices())
+    print(f"jaxgrav montecarlo: {args.method} ({spec.settings['description']}), {args.runs} "
+          f"runs on {n_dev} {jax.devices()[0].platform} device(s), map {args.map}")
+    t0 = time.perf_counter()
+    results = montecarlo.run(spec.fn, jax.random.key(args.seed), args.runs, chunk=args.chunk,
+                             devices=args.devices, progress=not args.no_progress,
+                             args=spec.args)
+    seconds = time.perf_counter() - t0
+    missing = [k for k in METRICS if k not in results]
+    if missing:
+        raise ValueError(f"method {args.method!r} does not return {missing}")
+    summary = summarize(results)
+    print(format_summary(summary))
+    print(f"{args.runs} runs in {seconds:.1f} s ({args.runs / seconds:.1f} runs/s, "
+          "compilation included)")
+    attrs = dict(
+        title=f"jaxgrav montecarlo --method {args.method}", method=args.method,
+        runs=args.runs, seed=args.seed, chunk=args.chunk or montecarlo.DEFAULT_CHUNK,
+        devices=n_dev, map=str(args.map), seconds=round(seconds, 3),
+        jax_version=jax.__version__, jaxgrav_version=__version__,
+        command=_command(args),
+        status_bits=json.dumps({str(k): v for k, v in spec.status_bits.items()}),
+        **{f"setting_{k}": v for k, v in spec.settings.items()},
+        **{f"summary_{k}": v for k, v in summary.items() if not isinstance(v, dict)},
+        **{f"summary_{k}_{c}": v for k, d in summary.items() if isinstance(d, dict)
+           for c, v in d.items()},
+    )
+    montecarlo.write_netcdf(results, out, attrs=attrs, force=args.force)
+    _plot_errors(results, summary, f"{args.method}: {args.runs} runs", png, args.force)
+    print(f"wrote {out} and {png}")
+
+
+# --------------------------------------------------------------------------- bench
+_COLS = ("bench", "case", "n", "jaxgrav_s", "baseline", "baseline_s", "ratio")
+
+
+def _fmt(v):
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return "" if v is None else str(v).replace("|", "\\|")
+
+
+def _report(command, rows, runs, failures):
+    lines = [
+        "# jaxgrav benchmarks", "",
+        f"Command: `{command}` on {platform.machine()}, {os.cpu_count()} cores, "
+        f"{time.strftime('%Y-%m-%d %H:%M')}. `ratio` = baseline_s / jaxgrav_s "
+        "(> 1: jaxgrav is faster). Times on a shared machine are noisy; ratios are "
+        "measured within one run.", "",
+        "| script | " + " | ".join(_COLS) + " | other fields |", "|" + "---|" * (len(_COLS) + 2),
+    ]
+    for script, row in rows:
+        other = ", ".join(f"{k}={_fmt(v)}" for k, v in row.items()
+                          if k not in _COLS and k != "machine")
+        other = other if len(other) <= 160 else other[:157] + "..."  # all in the JSON below
+        lines.append(f"| {script} | " + " | ".join(_fmt(row.get(c)) for c in _COLS)
+                     + f" | {other} |")
+    lines += ["", "## Scripts", "", "| script | status | seconds | JSON lines |",
+              "|---|---|---|---|"]
+    lines += [f"| {s} | {st} | {sec:.1f} | {n} |" for s, st, sec, n in runs]
+    if failures:
+        lines += ["", "## Failed scripts", ""]
+        for script, why, tail in failures:
+            lines += [f"### {script}: {why}", "", "```", tail, "```", ""]
+    lines += ["", "## Raw JSON lines", "", "```jsonl"]
+    lines += [json.dumps(row) for _, row in rows]
+    lines += ["```", ""]
+    return "\n".join(lines)
+
+
+def cmd_bench(args):
+    """Run ``jaxgrav bench``: every ``--dir/*.py`` not starting with ``_``, as a subprocess."""
+    from jaxgrav._io import atomic_output
+
+    bdir, out = Path(args.dir), Path(args.out)
+    if not bdir.is_dir():
+        raise FileNotFoundError(f"--dir {str(bdir)!r} is not a folder of benchmark scripts")
+    scripts = sorted(p for p in bdir.glob("*.py") if not p.name.startswith("_"))
+    if not scripts:
+        raise ValueError(f"--dir {str(bdir)!r} has no benchmark scripts (*.py not starting "
+                         "with _)")
+    if out.exists() and not args.force:
+        raise FileExistsError(f"{str(out)!r} exists; pass --force to overwrite it")
+    rows, runs, failures = [], [], []
+    for i, script in enumerate(scripts, 1):
+        cmd = [sys.executable, str(script), *(["--quick"] if args.quick else [])]
+        print(f"[{i}/{len(scripts)}] {' '.join(cmd[1:])} ...", end=" ", flush=True)
+        t0 = time.perf_counter()
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout)
+            stdout, stderr, code = proc.stdout, proc.stderr, proc.returncode
+        except subprocess.TimeoutExpired as err:
+            stdout = err.stdout.decode() if isinstance(err.stdout, bytes) else err.stdout or ""
+            stderr = err.stderr.decode() if isinstance(err.stderr, bytes) else err.stderr or ""
+            code = f"timeout after {args.timeout:g} s"
+        sec = time.perf_counter() - t0
+        found = []
+        for line in stdout.splitlines():
+            line = line.strip()
+            if line.startswith("{"):
+                try:
+                    row = json.loads(line)
+                except json.JSONDecodeError:
+                    continue
+                if isinstance(row, dict) and "bench" in row:
+                    found.append((script.name, row))
+        rows += found
+        if code != 0:
+            why = code if isinstance(code, str) else f"exit code {code}"
+            tail = "\n".join((stderr or stdout).strip().splitlines()[-15:])
+            failures.append((script.name, why, tail))
+            runs.append((script.name, f"FAILED ({why})", sec, len(found)))
+            print(f"FAILED ({why}, {sec:.0f} s)")
+        else:
+            runs.append((script.name, "ok", sec, len(found)))
+            print(f"ok ({len(found)} lines, {sec:.0f} s)")
+    command = "jaxgrav bench" + (" --quick" if args.quick else "")
+    with atomic_output(out, force=args.force) as tmp:
+        tmp.write_text(_report(command, rows, runs, failures))
+    print(f"wrote {out}: {len(rows)} results from {len(scripts) - len(failures)} of "
+          f"{len(scripts)} scripts")
+    if failures:
+        for script, why, tail in failures:
+            print(f"jaxgrav bench: {script} failed ({why}):\n{tail}", file=sys.stderr)
+        raise SystemExit(1)

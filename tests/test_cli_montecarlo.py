@@ -1,0 +1,161 @@
+"""``jaxgrav montecarlo`` and ``jaxgrav bench``, in-process through ``jaxgrav.cli.main``."""
+
+import json
+import os
+import textwrap
+
+import jax
+import numpy as np
+import pytest
+import xarray as xr
+
+from jaxgrav import montecarlo, montecarlo_methods
+from jaxgrav.cli import main
+
+slow = pytest.mark.skipif(
+    os.environ.get("JAXGRAV_SLOW") != "1", reason="slow: set JAXGRAV_SLOW=1 to run"
+)
+
+
+@pytest.fixture(scope="module")
+def mc_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("mc") / "corr.nc"
+    code = main(["montecarlo", "--method", "correlation", "--runs", "8", "--chunk", "4",
+                 "--seed", "3", "--fixes", "20", "--drift", "0.03", "--out", str(out),
+                 "--no-progress"])
+    return code, out
+
+
+def test_montecarlo_writes_netcdf_png_and_summary(mc_run, capsys):
+    code, out = mc_run
+    assert code == 0
+    assert out.with_suffix(".png").stat().st_size > 10_000
+    with xr.open_dataset(out) as ds:
+        assert ds.sizes["run"] == 8
+        for k in montecarlo_methods.METRICS:
+            assert ds[k].dims == ("run",)
+        assert ds["status"].dtype == np.int32
+        assert np.all(ds["ins_err_m"] > 0) and np.all(np.isfinite(ds["err_m"]))
+        a = ds.attrs
+        assert (a["method"], a["runs"], a["seed"], a["chunk"]) == ("correlation", 8, 3, 4)
+        assert a["setting_n_fixes"] == 20 and a["setting_drift_deg"] == 0.03
+        assert 0 <= a["summary_failure_rate"] <= 1
+        assert a["summary_err_m_p50"] == pytest.approx(float(np.median(ds["err_m"])))
+        assert "--runs 8 --chunk 4" in a["command"]
+        assert json.loads(a["status_bits"])["8"].startswith("the best candidate")
+        # the same keys through the library give the same numbers
+        spec = montecarlo_methods.build("correlation", drift_deg=0.03, n_fixes=20)
+        lib = montecarlo.run(spec.fn, jax.random.key(3), 8, chunk=4, args=spec.args,
+                             progress=False)
+        np.testing.assert_array_equal(ds["err_m"].values, lib["err_m"])
+
+
+def test_montecarlo_prints_summary_table(tmp_path, capsys):
+    out = tmp_path / "again.nc"  # compiled already: same shapes as mc_run
+    assert main(["montecarlo", "--method", "correlation", "--runs", "8", "--chunk", "4",
+                 "--seed", "3", "--fixes", "20", "--drift", "0.03", "--out", str(out)]) == 0
+    cap = capsys.readouterr()
+    assert "8/8" in cap.err and "runs/s" in cap.err  # the progress bar
+    for text in ("INS error (m)", "error / INS", "median", "p95", "failure rate",
+                 "runs/s", f"wrote {out}"):
+        assert text in cap.out
+
+
+def test_montecarlo_refuses_to_overwrite(mc_run, capsys):
+    _, out = mc_run
+    args = ["montecarlo", "--method", "correlation", "--runs", "8", "--out", str(out)]
+    assert main(args) == 2
+    assert "exist; pass --force" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--runs", "0"], "--runs must be a positive number of runs; got 0"),
+    (["--runs", "8", "--chunk", "0"], "--chunk must be a positive number of runs; got 0"),
+    (["--runs", "8", "--devices", "64"], "devices=64 but JAX sees 1 device"),
+    (["--runs", "8", "--noise", "-1"], "noise must be a non-negative standard deviation"),
+    (["--runs", "8", "--drift", "0"], "drift must be a positive angle"),
+    (["--runs", "8", "--fixes", "2"], "fixes must be at least 5 per track; got 2"),
+])
+def test_montecarlo_bad_input(tmp_path, capsys, args, match):
+    code = main(["montecarlo", "--method", "correlation", *args, "--out",
+                 str(tmp_path / "x.nc")])
+    assert code == 2
+    assert match in capsys.readouterr().err
+    assert not (tmp_path / "x.nc").exists()
+
+
+@slow
+def test_montecarlo_entropy_iccp(tmp_path):
+    out = tmp_path / "b.nc"
+    assert main(["montecarlo", "--method", "entropy+iccp", "--runs", "6", "--chunk", "3",
+                 "--out", str(out), "--no-progress"]) == 0
+    with xr.open_dataset(out) as ds:
+        assert ds.sizes["run"] == 6 and "rotation_deg" in ds
+        assert np.median(ds["err_m"]) < np.median(ds["ins_err_m"])
+
+
+# --------------------------------------------------------------------------- bench
+_GOOD = """
+import json, sys
+quick = "--quick" in sys.argv
+print("warming up")
+for n in (10, 100):
+    print(json.dumps({"bench": "fake", "case": "quick" if quick else "full", "n": n,
+                      "jaxgrav_s": 0.5, "baseline": "numpy", "baseline_s": 2.0, "ratio": 4.0,
+                      "machine": "x", "note": "a|b"}))
+"""
+_BAD = """
+import sys
+print('{"bench": "half", "case": "before the crash", "n": 1, "jaxgrav_s": 1, '
+      '"baseline": "b", "baseline_s": 1, "ratio": 1.0}')
+print("Traceback: something broke", file=sys.stderr)
+sys.exit(3)
+"""
+
+
+@pytest.fixture
+def bench_dir(tmp_path):
+    d = tmp_path / "benchmarks"
+    d.mkdir()
+    (d / "good.py").write_text(textwrap.dedent(_GOOD))
+    (d / "_common.py").write_text("raise SystemExit('helpers are not benchmarks')\n")
+    return d
+
+
+def test_bench_quick_writes_table(bench_dir, tmp_path, capsys):
+    out = tmp_path / "bench.md"
+    assert main(["bench", "--quick", "--dir", str(bench_dir), "--out", str(out)]) == 0
+    md = out.read_text()
+    assert "Command: `jaxgrav bench --quick`" in md
+    assert "| good.py | fake | quick | 10 | 0.5 | numpy | 2 | 4 | note=a\\|b |" in md
+    assert "| good.py | ok |" in md and "_common" not in md
+    raw = md.split("```jsonl\n")[1].split("```")[0].splitlines()
+    assert [json.loads(r)["n"] for r in raw] == [10, 100]
+    assert "wrote" in capsys.readouterr().out
+    assert main(["bench", "--dir", str(bench_dir), "--out", str(out)]) == 2  # no --force
+    assert main(["bench", "--dir", str(bench_dir), "--out", str(out), "--force"]) == 0
+    assert "| fake | full |" in out.read_text()
+
+
+def test_bench_reports_failed_scripts(bench_dir, tmp_path, capsys):
+    (bench_dir / "bad.py").write_text(textwrap.dedent(_BAD))
+    out = tmp_path / "bench.md"
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "--quick", "--dir", str(bench_dir), "--out", str(out)])
+    assert exc.value.code == 1
+    md = out.read_text()
+    assert "| bad.py | FAILED (exit code 3) |" in md
+    assert "### bad.py: exit code 3" in md and "Traceback: something broke" in md
+    assert "| bad.py | half | before the crash |" in md  # its lines are kept
+    assert "| good.py | fake | quick | 100 |" in md
+    err = capsys.readouterr().err
+    assert "bad.py failed (exit code 3)" in err and "something broke" in err
+
+
+def test_bench_bad_dir(tmp_path, capsys):
+    assert main(["bench", "--dir", str(tmp_path / "nope"), "--out", str(tmp_path / "b.md")]) == 2
+    assert "is not a folder of benchmark scripts" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    assert main(["bench", "--dir", str(tmp_path / "empty"), "--out",
+                 str(tmp_path / "b.md")]) == 2
+    assert "has no benchmark scripts" in capsys.readouterr().err
