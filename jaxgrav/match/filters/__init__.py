@@ -5,6 +5,7 @@ INS error model of :mod:`jaxgrav.sim.ins`; each is an optax-style ``init`` /
 ``update`` pair run with ``lax.scan`` (:func:`run_filter`) and vmapped over runs.
 """
 
+from jaxgrav.match.filters.gaussian_sum import GaussianSumState, gaussian_sum, split_prior
 from jaxgrav.match.filters.kalman import ekf, predict, sigma_weights, ukf
 from jaxgrav.match.filters.model import (
     STATUS_FILTER,
@@ -25,6 +26,7 @@ from jaxgrav.match.filters.paper_d import (
     initial_state,
     run_steps,
 )
+from jaxgrav.match.filters.pmf import PMFState, pmf, run_pmf
 
 __all__ = [
     "STATUS_FILTER",
@@ -33,17 +35,23 @@ __all__ = [
     "FilterRun",
     "FilterScenario",
     "FilterState",
+    "GaussianSumState",
+    "PMFState",
     "Step",
     "StepInfo",
     "ekf",
     "filter_scenario",
+    "gaussian_sum",
     "gravity_measurement",
     "initial_state",
     "map_anomaly",
+    "pmf",
     "predict",
     "run_filter",
+    "run_pmf",
     "run_steps",
     "sigma_weights",
+    "split_prior",
     "status_messages_filter",
     "ukf",
 ]
