@@ -10,6 +10,17 @@ shifted fixes (no node quantisation). The best candidates are ranked, one is
 selected (least score, or paper A's nearest-to-INS rule among the top k), and its
 offset, heading error and bias are then refined below the offset spacing by a few
 damped Gauss–Newton steps on the differentiable (bicubic) map.
+
+Work is done in local metres about the track's centroid and in fractional map
+indices, which keeps float32 accurate. For one fix the shifted positions form a
+regular lattice of map indices, so the map under all candidates is evaluated
+separably (:mod:`~jaxgrav.match.lattice`: one block of spline coefficients and two
+small matrix products per fix) rather than point by point; when the offsets span
+more map cells than ``DenseConfig.lattice_block`` allows, every shifted fix is
+sampled on its own instead (same values, slower). The refinement uses the analytic
+gradient of the bicubic patch and a closed-form solve of its 4 × 4 normal equations.
+The map's spline coefficients may be prepared once (:func:`prepare_map`) and passed
+in, as a hot loop over many calls should.
 """
 
 import dataclasses
@@ -17,16 +28,24 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
+from jaxgrav import interp
 from jaxgrav._pytree import static_field
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-from jaxgrav.grid import make_sampler
 from jaxgrav.match.candidates import local_offsets_m
+from jaxgrav.match.lattice import interleave, lattice_values, patch_values
+from jaxgrav.match.refine import gauss_newton, residual_function
 from jaxgrav.match.result import MatchResult, nearest_to_ins
-from jaxgrav.match.scoring import SCORES, bias_precision, decreasing_weights, score_track
+from jaxgrav.match.scoring import (
+    SCORES,
+    bias_precision,
+    decreasing_weights,
+    k_smallest,
+    score_track,
+    sums,
+)
 
-__all__ = ["DenseConfig", "match_dense", "shifted_tracks"]
-
+__all__ = ["DenseConfig", "match_dense", "prepare_map", "shifted_tracks"]
 
 
 @jax.tree_util.register_dataclass
@@ -65,6 +84,12 @@ class DenseConfig:
         Score form (static), see :mod:`~jaxgrav.match.scoring`.
     selection : {"best", "nearest"}
         Least score, or paper A's nearest-to-INS rule among the k best (static).
+    lattice_block : int
+        Map nodes per axis of the block from which each fix's offset lattice is
+        evaluated (static). The separable evaluation is used when the offsets span
+        at most ``lattice_block − 2`` map cells per axis (checked at run time from
+        ``spacing_m`` and the map; the default 8 covers ±half_size·spacing_m up to 3
+        cells); otherwise, or with 0, every shifted fix is sampled on its own.
     """
 
     spacing_m: float = 500.0
@@ -80,12 +105,39 @@ class DenseConfig:
     method: str = static_field("bicubic")
     score: str = static_field("bias")
     selection: str = static_field("best")
+    lattice_block: int = static_field(8)
 
     def __post_init__(self):
         if isinstance(self.score, str) and self.score not in SCORES:
             raise ValueError(f"score must be one of {SCORES}; got {self.score!r}")
         if isinstance(self.n_rotations, int) and self.n_rotations < 1:
             raise ValueError(f"n_rotations must be >= 1; got {self.n_rotations!r}")
+        if isinstance(self.lattice_block, int) and self.lattice_block < 0:
+            raise ValueError(f"lattice_block must be >= 0; got {self.lattice_block!r}")
+
+
+def prepare_map(grid, method="bicubic"):
+    """The map as :func:`match_dense` reads it, to compute once per map and pass in.
+
+    Parameters
+    ----------
+    grid : Grid
+        Anomaly map (mGal).
+    method : {"bicubic", "bilinear"}
+        ``DenseConfig.method``.
+
+    Returns
+    -------
+    Array
+        ``bicubic``: the not-a-knot spline coefficients
+        (:func:`jaxgrav.interp.bicubic_coefficients`) interleaved into one
+        ``(2·ny, 2·nx)`` table (:func:`jaxgrav.match.lattice.interleave`);
+        ``bilinear``: the node values ``(ny, nx)``.
+    """
+    interp._check_method(method)
+    if method == "bilinear":
+        return jnp.asarray(grid.values)
+    return interleave(interp.bicubic_coefficients(grid.values))
 
 
 def shifted_tracks(lat, lon, d_north, d_east, rotation_rad):
@@ -105,7 +157,7 @@ def shifted_tracks(lat, lon, d_north, d_east, rotation_rad):
     tuple of Array
         ``(lat, lon)`` of shape ``(*S, N)`` in degrees.
     """
-    lat_c, lon_c = jnp.mean(lat), jnp.mean(lon)
+    lat_c, lon_c = _means(lat, lon)
     m_c = meridian_radius(lat_c) * DEG
     n_c = prime_vertical_radius(lat_c) * jnp.cos(lat_c * DEG) * DEG
     north, east = (lat - lat_c) * m_c, (lon - lon_c) * n_c
@@ -115,53 +167,114 @@ def shifted_tracks(lat, lon, d_north, d_east, rotation_rad):
     return lat_c + rn / m_c, lon_c + re / n_c
 
 
-def _residuals(sample, lat, lon, g, w, kind, prior):
-    """Weighted residual vector of parameters p = (north, east, rotation, bias).
+def _means(*xs):
+    """Means over the last axis, as one variadic reduction (:func:`~.scoring.sums`)."""
+    return [t / xs[0].shape[-1] for t in sums(xs, -1)]
 
-    Its squared norm is :func:`~jaxgrav.match.scoring.score_track` of the shifted track.
+
+def _frame(grid, lat, lon):
+    """The frame of :func:`shifted_tracks` in map indices.
+
+    Returns ``(iy_c, ix_c, ky, kx, north, east)``: fractional map index of the
+    centroid (longitude taken within 180° of the map's middle), index steps per
+    metre north and east, and the fixes' offsets from the centroid (m). A fix
+    turned and shifted to local ``(rn, re)`` lies at index ``(iy_c + ky·rn, ix_c + kx·re)``.
     """
-    sqrt_w = jnp.sqrt(w / jnp.sum(w))
-    sqrt_wd = jnp.sqrt(w[:-1] / jnp.sum(w[:-1]))
-
-    def res(p):
-        la, lo = shifted_tracks(lat, lon, p[0], p[1], p[2])
-        r = g - sample(la, lo)
-        if kind == "difference":
-            return sqrt_wd * jnp.diff(r)
-        if kind == "bias":
-            return jnp.concatenate([sqrt_w * (r - p[3]), jnp.sqrt(prior)[None] * p[3:4]])
-        return sqrt_w * r
-
-    return res
+    lat_c, lon_c = _means(lat, lon)
+    m_c = meridian_radius(lat_c) * DEG
+    n_c = prime_vertical_radius(lat_c) * jnp.cos(lat_c * DEG) * DEG
+    north, east = (lat - lat_c) * m_c, (lon - lon_c) * n_c
+    lon_mid = grid.lon0 + 0.5 * (grid.nx - 1) * grid.dlon
+    iy_c = (lat_c - grid.lat0) / grid.dlat
+    ix_c = (jnp.mod(lon_c - lon_mid + 180.0, 360.0) - 180.0 + (lon_mid - grid.lon0)) / grid.dlon
+    return iy_c, ix_c, 1.0 / (m_c * grid.dlat), 1.0 / (n_c * grid.dlon), north, east
 
 
-def _refine(res, p0, free, step_max, damping, n_steps):
-    """Damped Gauss–Newton on the free parameters; a step is kept only if it lowers the cost."""
-    cost = lambda p: jnp.sum(res(p) ** 2)  # noqa: E731
+def _lattice_fits(grid, config):
+    """Whether every fix's offset lattice fits a block of ``lattice_block`` nodes.
 
-    def body(_, state):
-        p, c, lam = state
-        r = res(p)
-        j = jax.jacfwd(res)(p) * free
-        jtj = j.T @ j
-        a = jtj + lam * jnp.diag(jnp.diag(jtj)) + jnp.diag(1.0 - free) + 1e-12 * jnp.eye(4)
-        dp = -jnp.linalg.solve(a, j.T @ r) * free
-        scale = jnp.minimum(1.0, jnp.min(step_max / jnp.maximum(jnp.abs(dp), 1e-30)))
-        trial = p + scale * dp
-        c_new = cost(trial)
-        better = jnp.isfinite(c_new) & (c_new < c)
-        return (
-            jnp.where(better, trial, p),
-            jnp.where(better, c_new, c),
-            jnp.where(better, lam * 0.3, lam * 10.0),
-        )
+    Depends on the map and the config only (not on the track), so under ``vmap``
+    over tracks it stays one branch. A track's centroid can only produce an
+    all-on-map candidate within ``half_size·spacing_m`` of the map, so the bound is
+    taken over the map's latitudes widened by that reach.
+    """
+    block = config.lattice_block
+    span_lon = (grid.nx - 1) * grid.dlon
+    if block < 3 or min(grid.ny, grid.nx) < 3 or span_lon > 300.0:
+        return None
+    extent = 2.0 * config.half_size * jnp.asarray(config.spacing_m)
+    m_min = meridian_radius(0.0) * DEG  # smallest metres per degree of latitude
+    reach_deg = 0.5 * extent / m_min
+    lat_hi = jnp.minimum(
+        jnp.maximum(abs(grid.lat0), abs(grid.lat0 + (grid.ny - 1) * grid.dlat)) + reach_deg, 89.0
+    )
+    n_min = prime_vertical_radius(lat_hi) * jnp.cos(lat_hi * DEG) * DEG
+    return (
+        (extent / (m_min * grid.dlat) <= min(block, grid.ny) - 2)
+        & (extent / (n_min * grid.dlon) <= min(block, grid.nx) - 2)
+        & (0.5 * extent / n_min < 180.0 - 0.5 * span_lon)
+    )
 
-    p, _, _ = jax.lax.fori_loop(0, n_steps, body, (p0, cost(p0), jnp.asarray(damping, p0.dtype)))
-    return p
+
+def _grid_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, config):
+    """Scores and biases of every candidate, flattened rotation-major then (north, east)."""
+    iy_c, ix_c, ky, kx, north, east = frame
+    c, s = jnp.cos(rot)[:, None], jnp.sin(rot)[:, None]
+    rn, re = c * north - s * east, s * north + c * east  # (R, N) turned fixes
+    n_rot, n = rn.shape
+
+    def separable(_):
+        rows = iy_c + ky * (rn.reshape(-1)[:, None] + d_1d)
+        cols = ix_c + kx * (re.reshape(-1)[:, None] + d_1d)
+        v, in_y, in_x = lattice_values(table, rows, cols, config.lattice_block, config.method)
+        a = d_1d.shape[0]
+        v = v.reshape(n_rot, n, a, a)
+        bad = (jnp.any(~in_y.reshape(n_rot, n, a), axis=1)[:, :, None]
+               | jnp.any(~in_x.reshape(n_rot, n, a), axis=1)[:, None, :])
+        sc, b = _lattice_scores(readings, v, w, config.score, prior, config.half_size)
+        return jnp.where(bad, jnp.inf, sc).reshape(-1), b.reshape(-1)
+
+    def points(_):
+        r_of = jnp.repeat(jnp.arange(n_rot), d_n.shape[0] // n_rot)
+        iy = iy_c + ky * (rn[r_of] + d_n[:, None])
+        ix = ix_c + kx * (re[r_of] + d_e[:, None])
+        return score_track(readings, patch_values(table, iy, ix, config.method), w,
+                           config.score, prior)
+
+    fits = _lattice_fits(grid, config)
+    if fits is None:
+        return points(None)
+    return jax.lax.cond(fits, separable, points, None)
+
+
+def _lattice_scores(g, v, w, kind, prior, centre):
+    """:func:`~jaxgrav.match.scoring.score_track` of lattice values ``v`` ``(R, N, A, B)``.
+
+    One pass over ``v`` (weighted sums of the residuals and of their squares, one
+    variadic reduction). For the bias form the residuals are taken about the bias
+    at the lattice centre (zero offset) so that the one-pass form does not cancel
+    badly in float32.
+    """
+    w = w / jnp.sum(w)
+    shape = (1, -1, 1, 1)
+    r = g.reshape(shape) - v
+    if kind == "difference":
+        wd = jnp.concatenate([w[:-1] / jnp.sum(w[:-1]), jnp.zeros((1,), w.dtype)])
+        d = jnp.concatenate([r[:, 1:] - r[:, :-1], jnp.zeros_like(r[:, :1])], axis=1)
+        return tuple(sums([wd.reshape(shape) * d * d, w.reshape(shape) * r], 1))
+    if kind == "absolute":
+        score, _ = sums([w.reshape(shape) * r * r, r], 1)
+        return score, jnp.zeros_like(score)
+    c = sums([w[None, :] * r[:, :, centre, centre]], 1)[0][:, None, None]  # (R, 1, 1)
+    u = r - c[:, None]
+    s1, s2 = sums([w.reshape(shape) * u, w.reshape(shape) * u * u], 1)
+    bias = (s1 + c) / (1.0 + prior)
+    e = bias - c
+    return s2 - 2.0 * e * s1 + e * e + prior * bias * bias, bias
 
 
 @jax.jit
-def match_dense(grid, lat, lon, readings, config=DenseConfig()):
+def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None):
     """Match one track by scoring every shift of the INS track on an offset grid.
 
     Parameters
@@ -173,6 +286,10 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig()):
     readings : Array, shape ``(N,)``
         Gravimeter readings (mGal).
     config : DenseConfig
+    prepared : Array, optional
+        :func:`prepare_map` of ``grid`` for ``config.method``, computed once per map;
+        computed here when omitted (under ``vmap`` with the grid shared, once per
+        call).
 
     Returns
     -------
@@ -181,66 +298,75 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig()):
         ``work_pairs`` the number of map samples taken.
     """
     lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
+    table = prepare_map(grid, config.method) if prepared is None else prepared
+    f = 2 if config.method == "bicubic" else 1
+    if table.shape != (f * grid.ny, f * grid.nx):
+        raise ValueError(f"prepared must have shape {(f * grid.ny, f * grid.nx)} (prepare_map of "
+                         f"the grid for method={config.method!r}); got {table.shape}")
+    dtype = jnp.result_type(table.dtype, lat.dtype, float)
+    lat, lon, readings = lat.astype(dtype), lon.astype(dtype), readings.astype(dtype)
     n = lat.shape[0]
-    sample = make_sampler(grid, config.method)
     h = config.half_size
-    grid_1d = jnp.arange(-h, h + 1) * config.spacing_m
-    on, oe = (a.reshape(-1) for a in jnp.meshgrid(grid_1d, grid_1d, indexing="ij"))
+    d_1d = jnp.arange(-h, h + 1, dtype=dtype) * jnp.asarray(config.spacing_m, dtype)
+    on, oe = (a.reshape(-1) for a in jnp.meshgrid(d_1d, d_1d, indexing="ij"))
     if config.n_rotations == 1:
-        rot = jnp.zeros((1,), on.dtype)
+        rot = jnp.zeros((1,), dtype)
     else:
-        rot = jnp.linspace(-1.0, 1.0, config.n_rotations) * config.max_rotation_deg * DEG
+        rot = jnp.linspace(-1.0, 1.0, config.n_rotations, dtype=dtype) * (
+            jnp.asarray(config.max_rotation_deg, dtype) * DEG)
     d_n, d_e = jnp.tile(on, config.n_rotations), jnp.tile(oe, config.n_rotations)
     rr = jnp.repeat(rot, on.shape[0])
-    la, lo = shifted_tracks(lat, lon, d_n, d_e, rr)  # (R*O, N)
-    w = decreasing_weights(n, config.weight_decay)
-    prior = bias_precision(w, config.noise_mgal, config.bias_sigma_mgal)
-    scores, biases = score_track(readings, sample(la, lo), w, config.score, prior)
+    w = decreasing_weights(n, config.weight_decay).astype(dtype)
+    prior = bias_precision(w, config.noise_mgal, config.bias_sigma_mgal).astype(dtype)
+    frame = _frame(grid, lat, lon)
+    scores, biases = _grid_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e,
+                                  rot, config)
     k = min(config.k_best, scores.shape[0])
-    _, top = jax.lax.top_k(-scores.astype(jnp.float32), k)
+    top = k_smallest(scores, k)
     topk_score = scores[top]
-    distance = jnp.sum(jnp.hypot(*local_offsets_m(la[top], lo[top], lat, lon)), axis=-1)
+    topk_lat, topk_lon = shifted_tracks(lat, lon, d_n[top], d_e[top], rr[top])  # (k, N)
+    (distance,) = sums([jnp.hypot(*local_offsets_m(topk_lat, topk_lon, lat, lon))], -1)
     chosen = nearest_to_ins(topk_score, distance, config.selection)
     i = top[chosen]
     found = jnp.isfinite(scores[i])
 
     p0 = jnp.stack([d_n[i], d_e[i], rr[i], biases[i]])
-    free = jnp.array(
-        [1.0, 1.0, 1.0 if config.n_rotations > 1 else 0.0, 1.0 if config.score == "bias" else 0.0],
-        p0.dtype,
-    )
+    free = (True, True, config.n_rotations > 1, config.score == "bias")
     step_max = jnp.stack(
         [
-            config.spacing_m,
-            config.spacing_m,
-            config.max_rotation_deg * DEG / max(config.n_rotations - 1, 1),
-            jnp.asarray(jnp.inf, p0.dtype),
+            jnp.asarray(config.spacing_m, dtype),
+            jnp.asarray(config.spacing_m, dtype),
+            jnp.asarray(config.max_rotation_deg, dtype) * DEG / max(config.n_rotations - 1, 1),
+            jnp.asarray(jnp.inf, dtype),
         ]
-    ).astype(p0.dtype)
-    res = _residuals(sample, lat, lon, readings, w, config.score, prior)
+    )
+    res = residual_function(table, frame, readings, w, config.score, prior, config.method)
     p = (
-        _refine(res, p0, free, step_max, config.damping, config.refine_steps)
+        gauss_newton(res, p0, free, step_max, config.damping, config.refine_steps)
         if config.refine_steps
         else p0
     )
     p = jnp.where(found, p, jnp.zeros_like(p))
     m_lat, m_lon = shifted_tracks(lat, lon, p[0], p[1], p[2])
-    final_score, final_bias = score_track(readings, sample(m_lat, m_lon), w, config.score, prior)
-    off_n, off_e = local_offsets_m(m_lat, m_lon, lat, lon)
+    iy_c, ix_c, ky, kx, north, east = frame
+    c, s = jnp.cos(p[2]), jnp.sin(p[2])
+    v = patch_values(table, iy_c + ky * (c * north - s * east + p[0]),
+                     ix_c + kx * (s * north + c * east + p[1]), config.method)
+    final_score, final_bias = score_track(readings, v, w, config.score, prior)
+    mean_off = _means(*local_offsets_m(m_lat, m_lon, lat, lon))
     reach = h * config.spacing_m
     edge = (jnp.abs(p[0]) >= reach) | (jnp.abs(p[1]) >= reach)
-    dtype = scores.dtype
     n_off = jnp.asarray(scores.shape[0], dtype)
     return MatchResult(
         lat=m_lat,
         lon=m_lon,
-        offset_north_m=jnp.mean(off_n),
-        offset_east_m=jnp.mean(off_e),
+        offset_north_m=mean_off[0],
+        offset_east_m=mean_off[1],
         rotation_deg=p[2] / DEG,
         score=jnp.where(found, final_score, jnp.inf),
         bias=jnp.where(found, final_bias, 0.0) if config.score != "bias" else p[3],
-        topk_lat=la[top],
-        topk_lon=lo[top],
+        topk_lat=topk_lat,
+        topk_lon=topk_lon,
         topk_score=topk_score,
         chosen=chosen,
         n_candidates=jnp.full((n,), scores.shape[0], jnp.int32),

@@ -1,0 +1,232 @@
+"""Map values on regular lattices of points by separable (tensor-product) evaluation.
+
+The dense-offset matcher shifts every INS fix by every offset of a regular grid of
+offsets (in metres, north and east). For one fix the shifted positions therefore
+form a regular lattice in fractional map indices: rows ``iy + a·s_y`` and columns
+``ix + b·s_x``. Both interpolants of :mod:`jaxgrav.interp` are tensor products of
+1-D bases, so on such a lattice they factorise,
+
+``V = B_y C B_xᵀ``,
+
+with ``B_y`` (lattice rows × node weights) and ``B_x`` (lattice columns × node
+weights) the 1-D basis weights and ``C`` one block of map coefficients around the
+fix. Each fix costs one contiguous block read and two small matrix products instead
+of four gathers per lattice point.
+
+For the bicubic spline the coefficients are stored interleaved
+(:func:`interleave`): node ``(r, c)`` holds ``[[f, f_x], [f_y, f_xy]]`` at rows
+``2r, 2r+1`` and columns ``2c, 2c+1``, so that a block of nodes is one 2-D slice,
+and the 16 coefficients of one bicubic patch are one ``4 × 4`` slice. The basis
+weights are interleaved alike: Hermite value and slope weights of node ``k`` at
+``2k`` and ``2k+1`` (bilinear: hat weights on the plain node values).
+
+The block has a static size (``block`` nodes per axis), so a lattice must span at
+most ``block − 2`` map cells per axis; callers check it (see
+:func:`jaxgrav.match.dense.match_dense`) and fall back to point-by-point sampling
+when it does not hold.
+"""
+
+import jax
+import jax.numpy as jnp
+
+from jaxgrav import interp
+
+__all__ = ["interleave", "lattice_values", "patch_values"]
+
+
+def interleave(coefficients):
+    """Bicubic coefficients ``(ny, nx, 4)`` as one interleaved ``(2·ny, 2·nx)`` array.
+
+    Parameters
+    ----------
+    coefficients : Array, shape ``(ny, nx, 4)``
+        Output of :func:`jaxgrav.interp.bicubic_coefficients`.
+
+    Returns
+    -------
+    Array, shape ``(2·ny, 2·nx)``
+        ``out[2r + u, 2c + v]`` is ``f, f_x, f_y, f_xy`` for ``(u, v)`` = (0, 0),
+        (0, 1), (1, 0), (1, 1) at node ``(r, c)``.
+    """
+    ny, nx = coefficients.shape[:2]
+    c = coefficients.reshape(ny, nx, 2, 2)
+    return jnp.transpose(c, (0, 2, 1, 3)).reshape(2 * ny, 2 * nx)
+
+
+def _basis(i, n, block, cubic):
+    """1-D weights of lattice positions ``i`` on a block of ``block`` nodes.
+
+    Parameters
+    ----------
+    i : Array, shape ``(P, A)``
+        Fractional indices, ascending along the last axis.
+    n : int
+        Nodes along this axis of the map.
+    block : int
+        Nodes in the block (≤ n).
+    cubic : bool
+        Interleaved Hermite value and slope weights, or hat weights.
+
+    Returns
+    -------
+    weights : Array, shape ``(P, K, A)``
+        ``K = 2·block`` (cubic) or ``block``.
+    start : Array of int32, shape ``(P,)``
+        First node of each block.
+    inside : Array of bool, shape ``(P, A)``
+    """
+    eps = interp._edge_eps(i.dtype, n)
+    inside = (i >= -eps) & (i <= (n - 1) + eps)
+    i_safe = jnp.clip(i, 0.0, n - 1.0)
+    start = jnp.clip(jnp.floor(i_safe[:, :1]), 0, n - block)
+    x = i_safe - start
+    cell = jnp.clip(jnp.floor(x), 0, block - 2)
+    t = x - cell  # local coordinate in the cell, as interp._cell
+    weights = interp._hermite(t) if cubic else (1.0 - t, t)
+    cell, start, weights = _computed_once((cell, start, weights), i)
+    zero = jnp.zeros((), i.dtype)
+    if cubic:  # node k's value weight at row 2k, its slope weight at 2k + 1
+        h0, h1, g0, g1 = (a[:, None, :] for a in weights)
+        k = jnp.arange(2 * block, dtype=i.dtype)[None, :, None] - 2 * cell[:, None, :]
+        w = jnp.where(k == 0, h0, jnp.where(k == 1, g0, jnp.where(
+            k == 2, h1, jnp.where(k == 3, g1, zero))))
+    else:
+        k = jnp.arange(block, dtype=i.dtype)[None, :, None] - cell[:, None, :]
+        w = jnp.where(k == 0, weights[0][:, None, :], jnp.where(k == 1, weights[1][:, None, :],
+                                                                  zero))
+    return w, start[:, 0].astype(jnp.int32), inside
+
+
+def _computed_once(xs, like):
+    """``xs`` unchanged, but computed once rather than inside every consumer element.
+
+    XLA fuses cheap element-wise producers into their consumers and recomputes
+    them per consumer element; for the K-fold expansion of per-point weights into
+    basis matrices that recomputation (lattice positions, cells, Hermite weights)
+    costs more than the expansion. A floating division is "expensive" to XLA and
+    is not duplicated, so dividing by a run-time one (from ``like``, not a
+    constant that would fold away, nor a broadcast one that XLA turns into a
+    multiplication) makes XLA compute the values once.
+    ``jax.lax.optimization_barrier`` does not survive XLA's CPU pipeline.
+    """
+    one = 1.0 + 0.0 * jnp.abs(like)  # full shape: a broadcast divisor becomes a multiply
+    return jax.tree.map(lambda x: x / (one if x.shape == one.shape else one[:, :1]), xs)
+
+
+def lattice_values(table, rows, cols, block, method="bicubic"):
+    """Interpolated map values on a batch of regular lattices.
+
+    Parameters
+    ----------
+    table : Array
+        :func:`interleave` d bicubic coefficients ``(2·ny, 2·nx)`` for ``bicubic``,
+        or the node values ``(ny, nx)`` for ``bilinear``.
+    rows : Array, shape ``(P, A)``
+        Fractional row indices of each lattice, ascending, spanning at most
+        ``block − 2`` cells.
+    cols : Array, shape ``(P, B)``
+        Fractional column indices, likewise.
+    block : int
+        Nodes per axis of the block read for each lattice (static).
+    method : {"bicubic", "bilinear"}
+
+    Returns
+    -------
+    values : Array, shape ``(P, A, B)``
+        ``values[p, a, b]`` at ``(rows[p, a], cols[p, b])``, equal to
+        :func:`jaxgrav.interp.bicubic` (or ``bilinear``) there up to rounding when
+        the point is on the map and the span condition holds. Points off the map
+        carry finite, meaningless values (see ``in_rows``, ``in_cols``).
+    in_rows : Array of bool, shape ``(P, A)``
+        Rows inside the map.
+    in_cols : Array of bool, shape ``(P, B)``
+        Columns inside the map.
+    """
+    interp._check_method(method)
+    cubic = method == "bicubic"
+    f = 2 if cubic else 1
+    ny, nx = table.shape[0] // f, table.shape[1] // f
+    by_, bx_ = min(block, ny), min(block, nx)
+    dtype = jnp.result_type(table.dtype, rows.dtype, float)
+    wy, r0, in_y = _basis(rows.astype(dtype), ny, by_, cubic)  # (P, Ky, A)
+    wx, c0, in_x = _basis(cols.astype(dtype), nx, bx_, cubic)  # (P, Kx, B)
+    table = table.astype(dtype)
+    blk = jax.vmap(lambda r, c: jax.lax.dynamic_slice(table, (f * r, f * c), (f * by_, f * bx_)))(
+        r0, c0
+    )  # (P, Ky, Kx)
+    # rows first: an unrolled sum of outer products (XLA fuses it; a batched dot of
+    # these tiny matrices is slower on CPU), then columns as a batched matrix product
+    t = sum(wy[:, k, :, None] * blk[:, k, None, :] for k in range(blk.shape[1]))  # (P, A, Kx)
+    v = jnp.einsum("paq,pqb->pab", t, wx)
+    return v, in_y, in_x
+
+
+def patch_values(table, iy, ix, method="bicubic", gradient=False):
+    """Point values (and gradient) from an :func:`interleave` d table: one slice per point.
+
+    Parameters
+    ----------
+    table : Array
+        As in :func:`lattice_values`.
+    iy, ix : Array, shape ``P``
+        Fractional row and column indices.
+    method : {"bicubic", "bilinear"}
+    gradient : bool
+        Also return the derivatives per index step.
+
+    Returns
+    -------
+    Array, shape ``P`` (or a tuple ``value, d_iy, d_ix``)
+        Values NaN off the map, derivatives 0 there; the same as
+        :func:`jaxgrav.interp.bicubic` and :func:`jaxgrav.interp.bicubic_value_and_gradient`.
+    """
+    interp._check_method(method)
+    cubic = method == "bicubic"
+    f = 2 if cubic else 1
+    ny, nx = table.shape[0] // f, table.shape[1] // f
+    iy, ix = jnp.broadcast_arrays(jnp.asarray(iy), jnp.asarray(ix))
+    dtype = jnp.result_type(table.dtype, iy.dtype, float)
+    eps = interp._edge_eps(dtype, max(ny, nx))
+    r0, ty, in_y = interp._cell(iy.astype(dtype), ny, eps)
+    c0, tx, in_x = interp._cell(ix.astype(dtype), nx, eps)
+    shape = iy.shape
+    r0, c0, ty, tx = (a.reshape(-1) for a in (r0, c0, ty, tx))
+    p = jax.vmap(lambda r, c: jax.lax.dynamic_slice(table, (f * r, f * c), (2 * f, 2 * f)))(
+        r0, c0
+    ).astype(dtype)  # (P, 2f, 2f)
+    if cubic:  # weights in the interleaved order: node 0 value, slope, node 1 value, slope
+        h0, h1, g0, g1 = interp._hermite(ty)
+        hy = (h0, g0, h1, g1)
+        h0, h1, g0, g1 = interp._hermite(tx)
+        hx = (h0, g0, h1, g1)
+    else:
+        hy, hx = (1.0 - ty, ty), (1.0 - tx, tx)
+    rows = _rows(hy, p)  # the patch interpolated along y, one array per column
+    val = _dot(rows, hx).reshape(shape)
+    inside = (in_y & in_x).reshape(shape)
+    val = jnp.where(inside, val, jnp.nan)
+    if not gradient:
+        return val
+    if cubic:
+        d0, d1, e0, e1 = interp._hermite_derivative(ty)
+        dy = (d0, e0, d1, e1)
+        d0, d1, e0, e1 = interp._hermite_derivative(tx)
+        dx = (d0, e0, d1, e1)
+    else:
+        one = jnp.ones_like(ty)
+        dy = dx = (-one, one)
+    zero = jnp.zeros((), dtype)
+    d_y = _dot(_rows(dy, p), hx).reshape(shape)
+    d_x = _dot(rows, dx).reshape(shape)
+    return val, jnp.where(inside, d_y, zero), jnp.where(inside, d_x, zero)
+
+
+def _rows(weights, patch):
+    """``[Σ_k weights[k] · patch[:, k, q] for q]``, unrolled (element-wise, fuses on CPU)."""
+    n = patch.shape[1]
+    return [sum(weights[k] * patch[:, k, q] for k in range(n)) for q in range(patch.shape[2])]
+
+
+def _dot(a, b):
+    """``Σ_k a[k] b[k]`` over two short lists of arrays."""
+    return sum(x * y for x, y in zip(a, b, strict=True))
