@@ -54,8 +54,12 @@ class FilterScenario:
         Reading noise σ and gravimeter bias (mGal).
     n_steps : int
         Steps per run including the start (static): 2 h at 2 s is 3601.
-    geometry : {"east-west", "north-east", "mixed"}
-        Track family (static); ``"mixed"`` draws one of the two per run.
+    geometry : {"east-west", "north-east", "mixed", "random"}
+        Track family (static); ``"mixed"`` draws one of the two per run;
+        ``"random"`` is a straight track from a uniform start in ``region`` with a
+        uniform heading (for maps other than paper D's masses).
+    region : tuple of float
+        ``(lat_min, lat_max, lon_min, lon_max)`` of ``"random"`` starts (static).
     ins : INSErrorModel
         Sensor error parameters.
     """
@@ -69,6 +73,7 @@ class FilterScenario:
     bias_mgal: float = 1.0
     n_steps: int = static_field(3601)
     geometry: str = static_field("mixed")
+    region: tuple = static_field((24.5, 35.5, 124.5, 135.5))
     ins: INSErrorModel = _DEFAULT_INS
 
 
@@ -108,6 +113,12 @@ def _true_track(key, s):
     lat_ne = jax.random.uniform(k_lat, (), minval=24.03, maxval=24.10)
     lon_ne = MASS_LON + jax.random.uniform(k_lon, (), minval=-0.05, maxval=0.05)
     head_ne = jnp.where(jnp.arange(n) < n // 2, 0.0, 90.0)
+    if s.geometry == "random":
+        k_a, k_b, k_c = jax.random.split(k_geo, 3)
+        lat0 = jax.random.uniform(k_a, (), minval=s.region[0], maxval=s.region[1])
+        lon0 = jax.random.uniform(k_b, (), minval=s.region[2], maxval=s.region[3])
+        heading = jnp.full(n, jax.random.uniform(k_c, (), minval=0.0, maxval=360.0))
+        return track_from_heading(lat0, lon0, s.speed, heading, s.dt)
     if s.geometry == "east-west":
         use_ew = True
     elif s.geometry == "north-east":
