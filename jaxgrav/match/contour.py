@@ -37,9 +37,9 @@ __all__ = [
     "value_grad_ne",
 ]
 
-# Hermite basis (h0, h1, g0, g1) in powers (1, t, t², t³): rows are basis functions.
-_HERMITE_POWERS = ((1.0, 0.0, -3.0, 2.0), (0.0, 0.0, 3.0, -2.0),
-                   (0.0, 1.0, -2.0, 1.0), (0.0, 0.0, -1.0, 1.0))
+def _hermite_to_powers(v0, v1, s0, s1):
+    """Coefficients of ``1, t, t², t³`` of ``v0 h0 + v1 h1 + s0 g0 + s1 g1`` (Hermite basis)."""
+    return v0, s0, 3.0 * (v1 - v0) - 2.0 * s0 - s1, 2.0 * (v0 - v1) + s0 + s1
 
 
 def patch_coefficients(values):
@@ -59,16 +59,14 @@ def patch_coefficients(values):
     k = interp.bicubic_coefficients(values)  # (ny, nx, 4): f, f_x, f_y, f_xy per node
     ny, nx = values.shape[-2:]
     corner = lambda q, dr, dc: k[dr:ny - 1 + dr, dc:nx - 1 + dc, q]  # noqa: E731
-    # K[a, b]: a = y-basis (value r0, value r1, slope r0, slope r1), b likewise for x
-    kmat = jnp.stack([
-        jnp.stack([corner(0, 0, 0), corner(0, 0, 1), corner(1, 0, 0), corner(1, 0, 1)], -1),
-        jnp.stack([corner(0, 1, 0), corner(0, 1, 1), corner(1, 1, 0), corner(1, 1, 1)], -1),
-        jnp.stack([corner(2, 0, 0), corner(2, 0, 1), corner(3, 0, 0), corner(3, 0, 1)], -1),
-        jnp.stack([corner(2, 1, 0), corner(2, 1, 1), corner(3, 1, 0), corner(3, 1, 1)], -1),
-    ], -2)  # (ny-1, nx-1, 4, 4)
-    m = jnp.asarray(_HERMITE_POWERS, kmat.dtype)
-    a = jnp.einsum("ai,...ab,bj->...ij", m, kmat, m)
-    return a.reshape(ny - 1, nx - 1, 16)
+    # along x first: for each row r0/r1 and each y-kind (value f / slope f_y), the
+    # x-polynomial from the values (f or f_y) and x-slopes (f_x or f_xy) at c0, c1
+    rows = [_hermite_to_powers(corner(q, dr, 0), corner(q, dr, 1), corner(q + 1, dr, 0),
+                               corner(q + 1, dr, 1))
+            for q, dr in ((0, 0), (0, 1), (2, 0), (2, 1))]  # value r0, value r1, slope r0, r1
+    # then along y, per x-power j
+    cols = [_hermite_to_powers(*(rows[a][j] for a in range(4))) for j in range(4)]
+    return jnp.stack([cols[j][i] for i in range(4) for j in range(4)], axis=-1)
 
 
 class LocalField(NamedTuple):
