@@ -1,5 +1,6 @@
 """Correlation matcher (paper A): each step against brute force, transformations, accuracy."""
 
+import dataclasses
 import itertools
 
 import jax
@@ -13,7 +14,7 @@ from jaxgrav.constants import KNOT
 from jaxgrav.match import candidates as cand_mod
 from jaxgrav.match import chains
 from jaxgrav.match.correlation import ChainConfig, _pair_cost, match_chains
-from jaxgrav.match.dense import DenseConfig, match_dense, shifted_tracks
+from jaxgrav.match.dense import DenseConfig, match_dense, prepare_map, shifted_tracks
 from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_track
 
 RNG = np.random.default_rng(0)
@@ -189,6 +190,33 @@ def test_match_dense_exact_on_bicubic_truth_and_rotation(smooth_grid):
     err = np.hypot(*cand_mod.local_offsets_m(r.lat, r.lon, tr.lat, tr.lon))
     assert np.max(err) < 5.0, err
     np.testing.assert_allclose(r.bias, 3.0, atol=1e-3)
+
+
+@pytest.mark.parametrize("score", ["bias", "difference"])
+def test_dense_grid_search_paths_agree(smooth_grid, score):
+    """Separable lattice (small block, large block) and point-by-point sampling agree."""
+    tr, ilat, ilon, g = _scenario(jax.random.key(5), smooth_grid, 12, 60.0, 600.0, 0.5,
+                                  "bicubic")
+    # the offsets span 2*6*150 m = 1.8 km, 1.6-1.9 cells of this 0.01 degree map
+    base = DenseConfig(spacing_m=150.0, half_size=6, n_rotations=3, score=score,
+                       selection="nearest", bias_sigma_mgal=4.0)
+    table = prepare_map(smooth_grid)
+    runs = {block: match_dense(smooth_grid, ilat, ilon, g,
+                               dataclasses.replace(base, lattice_block=block), table)
+            for block in (6, 3, 0)}  # fits the small block; needs the large one; points
+    ref = runs[0]
+    for block in (6, 3):
+        r = runs[block]
+        assert int(r.chosen) == int(ref.chosen)
+        np.testing.assert_allclose(r.topk_score, ref.topk_score, rtol=1e-9)
+        np.testing.assert_allclose(r.topk_lat, ref.topk_lat, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(r.lat, ref.lat, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(r.score, ref.score, rtol=1e-7)
+    # the prepared table is what match_dense computes when none is given
+    np.testing.assert_allclose(match_dense(smooth_grid, ilat, ilon, g, base).lat, ref.lat,
+                               atol=1e-9)
+    with pytest.raises(ValueError, match="prepared must have shape"):
+        match_dense(smooth_grid, ilat, ilon, g, base, table[:-2])
 
 
 def test_jit_no_retrace_and_vmap_equals_loop(smooth_grid):

@@ -14,11 +14,13 @@ damped Gauss–Newton steps on the differentiable (bicubic) map.
 Work is done in local metres about the track's centroid and in fractional map
 indices, which keeps float32 accurate. For one fix the shifted positions form a
 regular lattice of map indices, so the map under all candidates is evaluated
-separably (:mod:`~jaxgrav.match.lattice`: one block of spline coefficients and two
-small matrix products per fix) rather than point by point; when the offsets span
-more map cells than ``DenseConfig.lattice_block`` allows, every shifted fix is
-sampled on its own instead (same values, slower). The refinement uses the analytic
-gradient of the bicubic patch and a closed-form solve of its 4 × 4 normal equations.
+separably (:mod:`~jaxgrav.match.lattice`: a few short reads of spline coefficients
+and one small matrix product per fix) rather than point by point; the block of map
+nodes this reads has a static size (``DenseConfig.lattice_block``, or a larger one
+when the offsets span more cells), and an offset grid coarser than the map falls
+back to sampling every shifted fix on its own (same values, slower). The refinement
+uses the analytic gradient of the bicubic patch and a closed-form solve of its 4 × 4
+normal equations.
 The map's spline coefficients may be prepared once (:func:`prepare_map`) and passed
 in, as a hot loop over many calls should.
 """
@@ -86,10 +88,12 @@ class DenseConfig:
         Least score, or paper A's nearest-to-INS rule among the k best (static).
     lattice_block : int
         Map nodes per axis of the block from which each fix's offset lattice is
-        evaluated (static). The separable evaluation is used when the offsets span
-        at most ``lattice_block − 2`` map cells per axis (checked at run time from
-        ``spacing_m`` and the map; the default 8 covers ±half_size·spacing_m up to 3
-        cells); otherwise, or with 0, every shifted fix is sampled on its own.
+        evaluated separably (static; cost grows with it). Used when the offsets
+        span at most ``lattice_block − 2`` map cells per axis (checked at run time
+        from ``spacing_m`` and the map; the default 6 covers ±half_size·spacing_m up
+        to 2 cells); otherwise a block of ``2·half_size + 2`` nodes, which fits
+        whenever ``spacing_m`` is at most the node spacing; otherwise, or with 0,
+        every shifted fix is sampled on its own (same values, slowest).
     """
 
     spacing_m: float = 500.0
@@ -105,7 +109,7 @@ class DenseConfig:
     method: str = static_field("bicubic")
     score: str = static_field("bias")
     selection: str = static_field("best")
-    lattice_block: int = static_field(8)
+    lattice_block: int = static_field(6)
 
     def __post_init__(self):
         if isinstance(self.score, str) and self.score not in SCORES:
@@ -190,18 +194,15 @@ def _frame(grid, lat, lon):
     return iy_c, ix_c, 1.0 / (m_c * grid.dlat), 1.0 / (n_c * grid.dlon), north, east
 
 
-def _lattice_fits(grid, config):
-    """Whether every fix's offset lattice fits a block of ``lattice_block`` nodes.
+def _lattice_fits(grid, config, block):
+    """Whether every fix's offset lattice fits a block of ``block`` nodes (traced bool).
 
     Depends on the map and the config only (not on the track), so under ``vmap``
-    over tracks it stays one branch. A track's centroid can only produce an
-    all-on-map candidate within ``half_size·spacing_m`` of the map, so the bound is
-    taken over the map's latitudes widened by that reach.
+    over tracks the branch stays one branch. A track's centroid can only produce
+    an all-on-map candidate within ``half_size·spacing_m`` of the map, so the bound
+    is taken over the map's latitudes widened by that reach.
     """
-    block = config.lattice_block
     span_lon = (grid.nx - 1) * grid.dlon
-    if block < 3 or min(grid.ny, grid.nx) < 3 or span_lon > 300.0:
-        return None
     extent = 2.0 * config.half_size * jnp.asarray(config.spacing_m)
     m_min = meridian_radius(0.0) * DEG  # smallest metres per degree of latitude
     reach_deg = 0.5 * extent / m_min
@@ -216,6 +217,18 @@ def _lattice_fits(grid, config):
     )
 
 
+def _lattice_blocks(grid, config):
+    """Static block sizes to try, smallest first: ``lattice_block``, then one that
+    fits whenever the offset spacing is at most the node spacing (as
+    :func:`~jaxgrav.match.api.config_for` sizes it). None for maps spanning
+    (nearly) all longitudes, too small maps or ``lattice_block`` 0."""
+    if (config.lattice_block < 3 or min(grid.ny, grid.nx) < 4
+            or (grid.nx - 1) * grid.dlon > 300.0):
+        return []
+    big = min(2 * config.half_size + 2, max(grid.ny, grid.nx))
+    return [config.lattice_block] + ([big] if big > config.lattice_block else [])
+
+
 def _grid_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, config):
     """Scores and biases of every candidate, flattened rotation-major then (north, east)."""
     iy_c, ix_c, ky, kx, north, east = frame
@@ -223,16 +236,19 @@ def _grid_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, co
     rn, re = c * north - s * east, s * north + c * east  # (R, N) turned fixes
     n_rot, n = rn.shape
 
-    def separable(_):
-        rows = iy_c + ky * (rn.reshape(-1)[:, None] + d_1d)
-        cols = ix_c + kx * (re.reshape(-1)[:, None] + d_1d)
-        v, in_y, in_x = lattice_values(table, rows, cols, config.lattice_block, config.method)
-        a = d_1d.shape[0]
-        v = v.reshape(n_rot, n, a, a)
-        bad = (jnp.any(~in_y.reshape(n_rot, n, a), axis=1)[:, :, None]
-               | jnp.any(~in_x.reshape(n_rot, n, a), axis=1)[:, None, :])
-        sc, b = _lattice_scores(readings, v, w, config.score, prior, config.half_size)
-        return jnp.where(bad, jnp.inf, sc).reshape(-1), b.reshape(-1)
+    def separable(block):
+        def run(_):
+            rows = iy_c + ky * (rn.reshape(-1)[:, None] + d_1d)
+            cols = ix_c + kx * (re.reshape(-1)[:, None] + d_1d)
+            v, in_y, in_x = lattice_values(table, rows, cols, block, config.method)
+            a = d_1d.shape[0]
+            v = v.reshape(n_rot, n, a, a)
+            bad = (jnp.any(~in_y.reshape(n_rot, n, a), axis=1)[:, :, None]
+                   | jnp.any(~in_x.reshape(n_rot, n, a), axis=1)[:, None, :])
+            sc, b = _lattice_scores(readings, v, w, config.score, prior, config.half_size)
+            return jnp.where(bad, jnp.inf, sc).reshape(-1), b.reshape(-1)
+
+        return run
 
     def points(_):
         r_of = jnp.repeat(jnp.arange(n_rot), d_n.shape[0] // n_rot)
@@ -241,10 +257,13 @@ def _grid_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, co
         return score_track(readings, patch_values(table, iy, ix, config.method), w,
                            config.score, prior)
 
-    fits = _lattice_fits(grid, config)
-    if fits is None:
+    blocks = _lattice_blocks(grid, config)
+    if not blocks:
         return points(None)
-    return jax.lax.cond(fits, separable, points, None)
+    index = jnp.asarray(len(blocks), jnp.int32)  # points, unless a block fits
+    for k in reversed(range(len(blocks))):
+        index = jnp.where(_lattice_fits(grid, config, blocks[k]), k, index)
+    return jax.lax.switch(index, [separable(b) for b in blocks] + [points], None)
 
 
 def _lattice_scores(g, v, w, kind, prior, centre):

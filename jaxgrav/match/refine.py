@@ -112,7 +112,7 @@ def _normal_equations(cols, r, free):
     n = len(cols)
     pairs = [(a, b) for a in range(n) for b in range(a, n) if free[a] and free[b]]
     terms = [cols[a] * cols[b] for a, b in pairs] + [cols[a] * r for a in range(n) if free[a]]
-    out = sums([*terms, r * r], 0)
+    out = list(sums([jnp.stack([*terms, r * r])], 1)[0])
     zero = jnp.zeros_like(out[-1])
     m = dict(zip(pairs, out, strict=False))
     jtj = jnp.stack([jnp.stack([m.get((min(a, b), max(a, b)), zero) for b in range(n)])
