@@ -195,7 +195,7 @@ def test_match_dense_exact_on_bicubic_truth_and_rotation(smooth_grid):
 @pytest.mark.parametrize("score", ["bias", "difference"])
 def test_dense_grid_search_paths_agree(smooth_grid, score):
     """Separable lattice (small block, large block) and point-by-point sampling agree."""
-    tr, ilat, ilon, g = _scenario(jax.random.key(5), smooth_grid, 12, 60.0, 600.0, 0.5,
+    _, ilat, ilon, g = _scenario(jax.random.key(5), smooth_grid, 12, 60.0, 600.0, 0.5,
                                   "bicubic")
     # the offsets span 2*6*150 m = 1.8 km, 1.6-1.9 cells of this 0.01 degree map
     base = DenseConfig(spacing_m=150.0, half_size=6, n_rotations=3, score=score,
