@@ -3,7 +3,18 @@
 The public API is re-exported here; see the README for a tour.
 """
 
-from jaxgrav import constants, datasets, dov, fields, geodesy, interp, match, sensitivity, sim
+from jaxgrav import (
+    constants,
+    datasets,
+    dov,
+    fields,
+    geodesy,
+    interp,
+    match,
+    montecarlo,
+    sensitivity,
+    sim,
+)
 from jaxgrav.dov import LayeredGrid
 from jaxgrav.geodesy import (
     ecef_to_geodetic,
@@ -37,6 +48,7 @@ __all__ = [
     "interp",
     "match",
     "meridian_radius",
+    "montecarlo",
     "normal_gravity",
     "prime_vertical_radius",
     "sample",
