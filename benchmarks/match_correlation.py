@@ -7,27 +7,33 @@ difference score forms cancel any constant residual anyway). Batches of 1, 100 a
 1000 tracks.
 
 * ``dense``: :func:`jaxgrav.match.dense.match_dense` with the default DenseConfig
-  (500 m spacing, half_size sized so that half_size·spacing ≥ 1.2 × drift radius),
-  bicubic map, 8 Gauss–Newton steps; float64, and float32 (``jax_enable_x64`` off)
-  at the end.
+  (500 m spacing, half_size sized so that half_size·spacing ≥ 1.2 × drift radius:
+  441 offsets), bicubic map, 8 Gauss–Newton steps; float64, and float32
+  (``jax_enable_x64`` off) at the end. The map is prepared once
+  (:func:`~jaxgrav.match.dense.prepare_map`, the spline coefficients), as the
+  baseline builds its spline once; ``with_prepare_*`` fields time jaxgrav preparing
+  it inside every call instead.
 * ``chain``: :func:`jaxgrav.match.correlation.match_chains` on the map refined ×8
   (bilinear, ≈ 578 m × 500 m nodes), half_size covering 1.2 × the drift, capacity
   sized from the iso-point counts of the batch so that overflow is rare (the rate is
   reported).
 
-jaxgrav runs ``jax.jit(jax.vmap(match_*, in_axes=(None, 0, 0, 0, None)))`` with the
-grid passed as an argument; compile time is reported separately (``compile_s``).
-The baseline is ``numpy_correlation.py`` (same algorithms in NumPy/SciPy, one track
-at a time) in a Python loop over the tracks; its map preparation (spline fit,
-refinement) is outside the timing, while jaxgrav's dense path refits its spline
-slopes inside every call. When the loop would take over ~60 s it is timed on a
-subset and extrapolated linearly (field ``baseline_extrapolated_from``). Agreement
-of the two implementations on the timed tracks is reported in every line.
+jaxgrav runs ``jax.jit(jax.vmap(match_*, in_axes=(None, 0, 0, 0, None, ...)))`` with
+the grid passed as an argument; compile time is reported separately (``compile_s``).
+The baseline is ``numpy_correlation.py`` (the same algorithms in NumPy/SciPy, one
+track at a time, vectorised over candidates; for the dense path the separable
+evaluation of the offset lattice is FITPACK's grid mode, exactly the algorithm of
+jaxgrav's :mod:`~jaxgrav.match.lattice`) in a Python loop over the tracks; its map
+preparation (spline fit, refinement) is outside the timing. When the loop would take
+over ~60 s it is timed on a subset and extrapolated linearly (field
+``baseline_extrapolated_from``). Timing alternates jaxgrav and baseline rounds and
+keeps the best of each; ``*_cpu_s`` fields give the process CPU time of the same
+best rounds (jaxgrav may use both cores). Agreement of the two implementations on
+the timed tracks is reported in every line.
 
 ``--profile`` adds lines (bench ``match_correlation_profile``) timing the parts of
 each path at the largest batch and XLA's cost analysis.
 """
-
 import math
 import sys
 import time
@@ -47,7 +53,7 @@ from jaxgrav import datasets, sim  # noqa: E402
 from jaxgrav.constants import KNOT  # noqa: E402
 from jaxgrav.match import candidates, chains  # noqa: E402
 from jaxgrav.match.correlation import ChainConfig, match_chains  # noqa: E402
-from jaxgrav.match.dense import DenseConfig, match_dense  # noqa: E402
+from jaxgrav.match.dense import DenseConfig, match_dense, prepare_map  # noqa: E402
 
 BENCH = "match_correlation"
 N_FIX = 16
@@ -110,23 +116,29 @@ def measure(fn, args, run_baseline, rounds):
     """Compile (timed separately), then alternate jaxgrav and baseline runs.
 
     Alternating the two, best of ``rounds`` each, keeps the ratio fair on a shared
-    machine whose load drifts. Returns ``(jax_out, jax_s, base_results, base_s,
-    compile_s)``.
+    machine whose load drifts. Returns ``(jax_out, (jax_s, jax_cpu_s), base_results,
+    (base_s, base_cpu_s), compile_s)``; the CPU times are those of the best rounds.
     """
     t0 = time.perf_counter()
     compiled = fn.lower(*args).compile()
     compile_s = time.perf_counter() - t0
     out = jax.block_until_ready(compiled(*args))
-    tj = tb = float("inf")
+    tj = tb = (float("inf"), 0.0)
     base = None
     for _ in range(rounds):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         jax.block_until_ready(compiled(*args))
-        tj = min(tj, time.perf_counter() - t0)
-        t0 = time.perf_counter()
+        tj = min(tj, (time.perf_counter() - t0, time.process_time() - c0))
+        t0, c0 = time.perf_counter(), time.process_time()
         base = run_baseline()
-        tb = min(tb, time.perf_counter() - t0)
+        tb = min(tb, (time.perf_counter() - t0, time.process_time() - c0))
     return out, tj, base, tb, compile_s
+
+
+def best_of(fn, args, rounds):
+    """Best wall time of an already compiled call."""
+    jax.block_until_ready(fn(*args))
+    return best_time(lambda: jax.block_until_ready(fn(*args)), rounds)
 
 
 # --------------------------------------------------------------------------- agreement
@@ -199,19 +211,32 @@ def dense_config():
     return DenseConfig(half_size=max(h, DenseConfig().half_size))
 
 
+def _dense_fns():
+    """Batched dense matcher with the map prepared outside, and preparing it inside."""
+    prepared = jax.jit(jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None, None)))
+    inside = jax.jit(jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None)))
+    return prepared, inside
+
+
+def _rounds(b, quick):
+    return 3 if quick else (10 if b == 1 else 5)
+
+
 def run_dense(grid, tracks, batches, quick, profile):
     tlat, tlon, lat, lon, g = tracks
     cfg = dense_config()
     m = npc.prepare_grid(grid)
-    fn = jax.jit(jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None)))
+    fn, fn_inside = _dense_fns()
+    table = prepare_map(grid)
     hint = None
     res64 = {}
     for b in batches:
-        rounds = 3 if quick else (10 if b == 1 else 5 if b <= 100 else 3)
         run, n_run = baseline_loop(npc.match_dense_np, m, lat[:b], lon[:b], g[:b], cfg, hint)
-        args = (grid, jnp.asarray(lat[:b]), jnp.asarray(lon[:b]), jnp.asarray(g[:b]), cfg)
-        out, t, base, bt, compile_s = measure(fn, args, run, rounds)
-        bt, extrap = bt * b / n_run, (n_run if n_run < b else None)
+        data = (jnp.asarray(lat[:b]), jnp.asarray(lon[:b]), jnp.asarray(g[:b]))
+        args = (grid, *data, cfg, table)
+        out, (t, t_cpu), base, (bt, bt_cpu), compile_s = measure(fn, args, run, _rounds(b, quick))
+        bt, bt_cpu, extrap = bt * b / n_run, bt_cpu * b / n_run, (n_run if n_run < b else None)
+        t_inside = best_of(fn_inside, (grid, *data, cfg), 3)
         res64[b] = out
         hint = bt / b
         # the per-point variant of the baseline (no separable grid evaluation), for reference
@@ -224,11 +249,15 @@ def run_dense(grid, tracks, batches, quick, profile):
             BENCH, "dense-float64", b, t, "numpy_correlation.match_dense_np loop", bt,
             tracks_per_s=round(b / t, 1), baseline_tracks_per_s=round(b / bt, 1),
             compile_s=round(compile_s, 2),
+            jaxgrav_cpu_s=round(t_cpu, 6), baseline_cpu_s=round(bt_cpu, 6),
+            cpu_ratio=round(bt_cpu / max(t_cpu, 1e-9), 2),
+            with_prepare_s=round(t_inside, 6), with_prepare_ratio=round(bt / t_inside, 2),
             baseline_extrapolated_from=extrap,
             baseline_points_tracks_per_s=round(n_pts / pts_t, 1),
             config=dict(spacing_m=cfg.spacing_m, half_size=cfg.half_size,
                         offsets=(2 * cfg.half_size + 1) ** 2, refine_steps=cfg.refine_steps,
-                        score=cfg.score, selection=cfg.selection),
+                        score=cfg.score, selection=cfg.selection,
+                        lattice_block=cfg.lattice_block),
             median_error_m=round(float(np.median(err)), 1),
             **dense_agreement(out, base, range(len(base))),
         )
@@ -244,14 +273,16 @@ def run_dense_float32(grid, tracks, batches, cfg, m, res64, quick):
         import dataclasses
 
         g32 = dataclasses.replace(grid, values=jnp.asarray(values, jnp.float32))
-        fn = jax.jit(jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None)))
+        table = prepare_map(g32)
+        fn, fn_inside = _dense_fns()
         hint = None
         for b in batches:
-            rounds = 3 if quick else (10 if b == 1 else 5 if b <= 100 else 3)
-            la, lo, gg = (jnp.asarray(a[:b], jnp.float32) for a in (lat, lon, g))
+            data = tuple(jnp.asarray(a[:b], jnp.float32) for a in (lat, lon, g))
             run, n_run = baseline_loop(npc.match_dense_np, m, lat[:b], lon[:b], g[:b], cfg, hint)
-            out, t, _, bt, compile_s = measure(fn, (g32, la, lo, gg, cfg), run, rounds)
-            bt, extrap = bt * b / n_run, (n_run if n_run < b else None)
+            out, (t, t_cpu), _, (bt, bt_cpu), compile_s = measure(
+                fn, (g32, *data, cfg, table), run, _rounds(b, quick))
+            bt, bt_cpu, extrap = bt * b / n_run, bt_cpu * b / n_run, (n_run if n_run < b else None)
+            t_inside = best_of(fn_inside, (g32, *data, cfg), 3)
             hint = bt / b
             out = jax.tree.map(np.asarray, out)
             ref = res64[b]
@@ -271,6 +302,9 @@ def run_dense_float32(grid, tracks, batches, cfg, m, res64, quick):
                 BENCH, "dense-float32", b, t, "numpy_correlation.match_dense_np loop (float64)",
                 bt, tracks_per_s=round(b / t, 1), baseline_tracks_per_s=round(b / bt, 1),
                 compile_s=round(compile_s, 2),
+                jaxgrav_cpu_s=round(t_cpu, 6), baseline_cpu_s=round(bt_cpu, 6),
+                cpu_ratio=round(bt_cpu / max(t_cpu, 1e-9), 2),
+                with_prepare_s=round(t_inside, 6), with_prepare_ratio=round(bt / t_inside, 2),
                 baseline_extrapolated_from=extrap,
                 median_error_m=round(float(np.median(err)), 1),
                 f32_same_offset_as_f64=round(float(same), 4),
@@ -325,8 +359,8 @@ def run_chain(grid, tracks, batches, quick, profile):
         rounds = 2 if quick else (5 if b == 1 else 3 if b <= 100 else 2)
         run, n_run = baseline_loop(npc.match_chains_np, m, lat[:b], lon[:b], g[:b], cfg, hint)
         args = (fine, jnp.asarray(lat[:b]), jnp.asarray(lon[:b]), jnp.asarray(g[:b]), cfg)
-        out, t, base, bt, compile_s = measure(fn, args, run, rounds)
-        bt, extrap = bt * b / n_run, (n_run if n_run < b else None)
+        out, (t, t_cpu), base, (bt, bt_cpu), compile_s = measure(fn, args, run, rounds)
+        bt, bt_cpu, extrap = bt * b / n_run, bt_cpu * b / n_run, (n_run if n_run < b else None)
         hint = bt / b
         status = np.asarray(out.status)
         found = (status & 1) == 0
@@ -335,6 +369,8 @@ def run_chain(grid, tracks, batches, quick, profile):
             BENCH, "chain-float64", b, t, "numpy_correlation.match_chains_np loop", bt,
             tracks_per_s=round(b / t, 1), baseline_tracks_per_s=round(b / bt, 1),
             compile_s=round(compile_s, 2),
+            jaxgrav_cpu_s=round(t_cpu, 6), baseline_cpu_s=round(bt_cpu, 6),
+            cpu_ratio=round(bt_cpu / max(t_cpu, 1e-9), 2),
             baseline_extrapolated_from=extrap,
             config=dict(refine=8, half_size=cfg.half_size, capacity=cfg.capacity,
                         k_dp=cfg.k_dp, delta=cfg.delta, score=cfg.score),
@@ -376,124 +412,48 @@ def _time_parts(parts, rounds):
     return {name: (best[name], c, out) for name, (c, _, out) in compiled.items()}
 
 
-def _hermite(t):
-    t2, t3 = t * t, t * t * t
-    return (2 * t3 - 3 * t2 + 1, -2 * t3 + 3 * t2, t3 - 2 * t2 + t, t3 - t2)
-
-
-def separable_values(coef, grid, lat, lon, half_size, spacing_m, width):
-    """PROTOTYPE (not in the library): the dense path's map values by separability.
-
-    Without rotation, the shifted positions of fix i form a regular lat/lon lattice,
-    so the bicubic Hermite patch factorises: ``V_i = B_y C_i B_xᵀ`` with per-axis
-    basis matrices ``B`` (value and slope weights of ``width`` nodes) and ``C_i`` the
-    ``2w × 2w`` block of node values/slopes around the fix, cut with one
-    ``dynamic_slice`` — small matrix products instead of 4 gathers per sample.
-    ``width`` (static) must cover the offsets' extent plus one cell; no NaN handling.
-    """
-    from jaxgrav.constants import DEG
-    from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-
-    ny, nx = coef.shape[:2]
-    lat_c, lon_c = jnp.mean(lat), jnp.mean(lon)
-    m_c = meridian_radius(lat_c) * DEG
-    n_c = prime_vertical_radius(lat_c) * jnp.cos(lat_c * DEG) * DEG
-    d = jnp.arange(-half_size, half_size + 1) * spacing_m
-    iy = (lat_c + (((lat - lat_c) * m_c)[:, None] + d) / m_c - grid.lat0) / grid.dlat
-    ix = (lon_c + (((lon - lon_c) * n_c)[:, None] + d) / n_c - grid.lon0) / grid.dlon
-
-    def basis(i, n):
-        i0 = jnp.clip(jnp.floor(i), 0, n - 2).astype(jnp.int32)
-        lo = jnp.clip(i0[:, :1], 0, n - width).astype(jnp.int32)
-        h0, h1, g0, g1 = _hermite(i - i0)
-        oh0 = jax.nn.one_hot(i0 - lo, width, dtype=i.dtype)
-        oh1 = jax.nn.one_hot(i0 - lo + 1, width, dtype=i.dtype)
-        b = jnp.concatenate(
-            [h0[..., None] * oh0 + h1[..., None] * oh1, g0[..., None] * oh0 + g1[..., None] * oh1],
-            -1,
-        )
-        return b, lo[:, 0]
-
-    by, r0 = basis(iy, ny)
-    bx, c0 = basis(ix, nx)
-    zero = jnp.zeros((), jnp.int32)
-    win = jax.vmap(lambda r, c: jax.lax.dynamic_slice(coef, (r, c, zero), (width, width, 4)))(
-        r0, c0
-    )  # (N, w, w, [f, fx, fy, fxy])
-    cmat = jnp.concatenate(
-        [jnp.concatenate([win[..., 0], win[..., 1]], -1),
-         jnp.concatenate([win[..., 2], win[..., 3]], -1)], -2,
-    )
-    return jnp.einsum("nap,npq,nbq->abn", by, cmat, bx).reshape(-1, lat.shape[0])
-
-
 def profile_dense(grid, tracks, cfg, m, b, quick):
-    from jaxgrav import interp
-    from jaxgrav.grid import make_sampler
-    from jaxgrav.match.dense import shifted_tracks
-    from jaxgrav.match.scoring import decreasing_weights, score_track
+    """Time the parts of the dense path (float64) and the NumPy loop's refinement share."""
+    from jaxgrav.match import dense as dense_mod
+    from jaxgrav.match.lattice import lattice_values
+    from jaxgrav.match.scoring import decreasing_weights
 
     _, _, lat, lon, g = tracks
-    args = (grid, jnp.asarray(lat[:b]), jnp.asarray(lon[:b]), jnp.asarray(g[:b]), cfg)
+    table = prepare_map(grid)
+    data = (jnp.asarray(lat[:b]), jnp.asarray(lon[:b]), jnp.asarray(g[:b]))
+    args = (grid, *data, cfg, table)
     h = cfg.half_size
     reps = 2 if quick else 5
-    dy, dx = grid.spacing_m()
-    dx_min = dx * np.cos(np.deg2rad(grid.extent[3])) / np.cos(
-        np.deg2rad(0.5 * (grid.extent[2] + grid.extent[3])))
-    width = math.ceil(2 * h * cfg.spacing_m / min(dy, dx_min)) + 2
 
-    def offsets(c):
-        g1 = jnp.arange(-h, h + 1) * c.spacing_m
-        return [a.reshape(-1) for a in jnp.meshgrid(g1, g1, indexing="ij")]
-
-    def sampled(grid, a, b_, c):
-        on, oe = offsets(c)
-        return make_sampler(grid, "bicubic")(*shifted_tracks(a, b_, on, oe, 0.0 * on))
-
-    def sampling(grid, la, lo, gg, c):
-        return jax.vmap(lambda a, b_: sampled(grid, a, b_, c))(la, lo)
-
-    def scores(grid, la, lo, gg, c):
+    def lattice(grid, la, lo, gg, c, tab, score=False):
         def one(a, b_, r):
-            v = sampled(grid, a, b_, c)
-            return score_track(r, v, decreasing_weights(a.shape[0], c.weight_decay), "bias")[0]
+            iy_c, ix_c, ky, kx, north, east = dense_mod._frame(grid, a, b_)
+            d = jnp.arange(-h, h + 1) * c.spacing_m
+            v, _, _ = lattice_values(tab, iy_c + ky * (north[:, None] + d),
+                                     ix_c + kx * (east[:, None] + d), c.lattice_block)
+            if not score:
+                return v
+            w = decreasing_weights(a.shape[0], c.weight_decay)
+            return dense_mod._lattice_scores(r, v[None], w, c.score, 0.0, h)[0]
         return jax.vmap(one)(la, lo, gg)
 
-    def sep_sampling(grid, la, lo, gg, c):
-        coef = interp.bicubic_coefficients(grid.values)
-        return jax.vmap(
-            lambda a, b_: separable_values(coef, grid, a, b_, h, c.spacing_m, width))(la, lo)
+    def prepare(grid, la, lo, gg, c, tab):
+        return prepare_map(grid)
 
-    def sep_scores(grid, la, lo, gg, c):
-        coef = interp.bicubic_coefficients(grid.values)
-
-        def one(a, b_, r):
-            v = separable_values(coef, grid, a, b_, h, c.spacing_m, width)
-            return score_track(r, v, decreasing_weights(a.shape[0], c.weight_decay), "bias")[0]
-        return jax.vmap(one)(la, lo, gg)
-
-    def coefficients(grid, la, lo, gg, c):
-        return interp.bicubic_coefficients(grid.values)
-
-    full = jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None))
+    full = jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None, None))
     cfg0 = DenseConfig(spacing_m=cfg.spacing_m, half_size=h, refine_steps=0)
+    cfg_pts = DenseConfig(spacing_m=cfg.spacing_m, half_size=h, lattice_block=0)
     parts = {
-        "spline_coefficients_once_per_call": (coefficients, args),
-        "sample_candidates": (sampling, args),
-        "sample_and_score": (scores, args),
-        "full_without_refinement": (full, (*args[:4], cfg0)),
+        "prepare_map_once_per_map": (prepare, args),
+        "lattice_values": (lattice, args),
+        "lattice_values_and_scores": (lambda *a: lattice(*a, score=True), args),
+        "full_without_refinement": (full, (*args[:4], cfg0, table)),
         "full": (full, args),
-        "PROTOTYPE_separable_sample_candidates": (sep_sampling, args),
-        "PROTOTYPE_separable_sample_and_score": (sep_scores, args),
+        "full_point_sampling_instead_of_lattice": (full, (*args[:4], cfg_pts, table)),
     }
     timed = _time_parts(parts, reps)
-    outs = {name: out for name, (_, _, out) in timed.items()}
-    for name, (t, compiled, out) in timed.items():
-        extra = _cost(compiled, b) if name != "spline_coefficients_once_per_call" else {}
-        if name.startswith("PROTOTYPE"):
-            ref = outs[name.replace("PROTOTYPE_separable_", "")]
-            extra["max_rel_diff_vs_library"] = float(
-                f"{float(jnp.max(jnp.abs(out - ref) / jnp.maximum(jnp.abs(ref), 1))):.3g}")
+    for name, (t, compiled, _) in timed.items():
+        extra = _cost(compiled, b) if name != "prepare_map_once_per_map" else {}
         print_profile("dense", name, b, t, **extra)
     # NumPy baseline: share of the refinement (Python-level loop of 8 small steps)
     n = min(b, 20 if quick else 100)

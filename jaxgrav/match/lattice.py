@@ -81,7 +81,7 @@ def _cells(i, n, block, cubic):
     inside = (i >= -eps) & (i <= (n - 1) + eps)
     i_safe = jnp.clip(i, 0.0, n - 1.0)
     start = jnp.clip(jnp.floor(i_safe[:, :1]), 0, n - block)
-    x = i_safe - start
+    (x,) = _computed_once((i_safe - start,), i)  # position in the block
     cell = jnp.clip(jnp.floor(x), 0, block - 2)
     t = x - cell  # local coordinate in the cell, as interp._cell
     if cubic:
@@ -121,8 +121,8 @@ def _computed_once(xs, like):
     """
     leaves, tree = jax.tree.flatten(xs)
     one = 1.0 + 0.0 * jnp.abs(like)
-    stacked = jnp.stack(leaves, axis=-1) / one[..., None]  # one pass for all of them
-    return jax.tree.unflatten(tree, [stacked[..., k] for k in range(len(leaves))])
+    stacked = jnp.stack(leaves) / one  # one pass for all of them
+    return jax.tree.unflatten(tree, list(stacked))
 
 
 def lattice_values(table, rows, cols, block, method="bicubic"):

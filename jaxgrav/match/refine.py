@@ -13,7 +13,7 @@ few element-wise operations per step rather than per-track LAPACK calls.
 import jax
 import jax.numpy as jnp
 
-from jaxgrav.match.lattice import patch_values
+from jaxgrav.match.lattice import _computed_once, patch_values
 from jaxgrav.match.scoring import sums
 
 __all__ = ["gauss_newton", "residual_function", "solve_spd"]
@@ -40,30 +40,36 @@ def residual_function(table, frame, g, w, kind, prior, method):
     Returns
     -------
     callable
-        ``res(p) -> (r, J)``: residuals ``r`` of shape ``(M,)`` and the columns of
-        ``J = dr/dp``, a tuple of four ``(M,)`` arrays.
+        ``res(p) -> (r, cols, extra)``: residuals of the fixes ``r`` ``(M,)``, the
+        columns of ``J = dr/dp`` (four ``(M,)`` arrays) and, for the bias form with
+        a prior, the prior's residual row ``(r_κ, j_κ)`` (scalar, ``(4,)``; zeros
+        otherwise), kept apart so that no concatenation splits XLA's fusions.
     """
     iy_c, ix_c, ky, kx, north, east = frame
     sqrt_w = jnp.sqrt(w / jnp.sum(w))
     sqrt_wd = jnp.sqrt(w[:-1] / jnp.sum(w[:-1]))
     zero = jnp.zeros_like(north)
+    no_prior = jnp.zeros((), north.dtype), jnp.zeros((4,), north.dtype)
 
     def res(p):
         c, s = jnp.cos(p[2]), jnp.sin(p[2])
         rn, re = c * north - s * east, s * north + c * east
         v, v_y, v_x = patch_values(table, iy_c + ky * (rn + p[0]), ix_c + kx * (re + p[1]),
                                    method, gradient=True)
+        # computed once: each of the normal equations' 15 products would recompute them
+        v, v_y, v_x = _computed_once((v, v_y, v_x), v)
         r = g - v
         a, b = v_y * ky, v_x * kx  # dv/d(north), dv/d(east)
         cols = (-a, -b, a * re - b * rn)  # dr/dp for the shift and turn
         if kind == "difference":
-            return sqrt_wd * jnp.diff(r), (*(sqrt_wd * jnp.diff(x) for x in cols), zero[1:])
+            d_cols = (*(sqrt_wd * jnp.diff(x) for x in cols), zero[1:])
+            return sqrt_wd * jnp.diff(r), d_cols, no_prior
         if kind == "bias":
-            sp = jnp.sqrt(prior)[None]
-            end = lambda x, last: jnp.concatenate([x, last])  # noqa: E731  prior row
-            return (end(sqrt_w * (r - p[3]), sp * p[3:4]),
-                    (*(end(sqrt_w * x, 0.0 * sp) for x in cols), end(-sqrt_w, sp)))
-        return sqrt_w * r, (*(sqrt_w * x for x in cols), zero)
+            sp = jnp.sqrt(prior)
+            j_prior = jnp.zeros((4,), north.dtype).at[3].set(sp)
+            return (sqrt_w * (r - p[3]), (*(sqrt_w * x for x in cols), -sqrt_w),
+                    (sp * p[3], j_prior))
+        return sqrt_w * r, (*(sqrt_w * x for x in cols), zero), no_prior
 
     return res
 
@@ -103,23 +109,27 @@ def solve_spd(a, b):
     return jnp.stack(x) * d
 
 
-def _normal_equations(cols, r, free):
+def _normal_equations(r, cols, extra, free):
     """``JᵀJ``, ``Jᵀr`` and ``rᵀr`` in one reduction (tiny; batched dots are slower on CPU).
 
-    ``cols`` are the columns of ``J``; ``free`` (static tuple of bools) zeroes the
-    fixed parameters' columns.
+    ``cols`` are the columns of ``J`` over the fixes, ``extra = (r_κ, j_κ)`` one more
+    row (the bias prior); ``free`` (static tuple of bools) zeroes the fixed
+    parameters' rows and columns.
     """
     n = len(cols)
     pairs = [(a, b) for a in range(n) for b in range(a, n) if free[a] and free[b]]
     terms = [cols[a] * cols[b] for a, b in pairs] + [cols[a] * r for a in range(n) if free[a]]
     out = list(sums([jnp.stack([*terms, r * r])], 1)[0])
+    r_x, j_x = extra
+    mask = jnp.asarray(free, r.dtype)
+    j_x = j_x * mask
     zero = jnp.zeros_like(out[-1])
     m = dict(zip(pairs, out, strict=False))
     jtj = jnp.stack([jnp.stack([m.get((min(a, b), max(a, b)), zero) for b in range(n)])
-                     for a in range(n)])
+                     for a in range(n)]) + j_x[:, None] * j_x[None, :]
     it = iter(out[len(pairs):-1])
-    jtr = jnp.stack([next(it) if free[a] else zero for a in range(n)])
-    return jtj, jtr, out[-1]
+    jtr = jnp.stack([next(it) if free[a] else zero for a in range(n)]) + j_x * r_x
+    return jtj, jtr, out[-1] + r_x * r_x
 
 
 def gauss_newton(res, p0, free, step_max, damping, n_steps):
@@ -156,13 +166,11 @@ def gauss_newton(res, p0, free, step_max, damping, n_steps):
         dp = -solve_spd(a, jtr) * mask
         scale = jnp.minimum(1.0, jnp.min(step_max / jnp.maximum(jnp.abs(dp), 1e-30)))
         trial = p + scale * dp
-        r_new, cols_new = res(trial)
-        jtj_new, jtr_new, c_new = _normal_equations(cols_new, r_new, free)
+        jtj_new, jtr_new, c_new = _normal_equations(*res(trial), free)
         better = jnp.isfinite(c_new) & (c_new < c)
         keep = lambda new, old: jnp.where(better, new, old)  # noqa: E731
         return (keep(trial, p), keep(jtj_new, jtj), keep(jtr_new, jtr), keep(c_new, c),
                 jnp.where(better, lam * 0.3, lam * 10.0))
 
-    r0, cols0 = res(p0)
-    state = (p0, *_normal_equations(cols0, r0, free), jnp.asarray(damping, p0.dtype))
+    state = (p0, *_normal_equations(*res(p0), free), jnp.asarray(damping, p0.dtype))
     return jax.lax.fori_loop(0, n_steps, body, state)[0]
