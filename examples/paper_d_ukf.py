@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import datasets
+from jaxgrav._linalg import inv_2x2
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.match.filters import (
     FilterScenario,
@@ -57,7 +58,7 @@ def run_metrics(run, est, p_pos):
     half = true.shape[0] // 2
     rms_f = jnp.sqrt(jnp.mean(jnp.sum(err[half:] ** 2, -1)))
     rms_i = jnp.sqrt(jnp.mean(jnp.sum(true[half:] ** 2, -1)))
-    nees = jax.vmap(lambda e, p: e @ jnp.linalg.solve(p, e))(err[half:], p_pos[half:])
+    nees = jax.vmap(lambda e, p: e @ inv_2x2(p) @ e)(err[half:], p_pos[half:])
     return rms_i, rms_f, jnp.mean(nees)
 
 

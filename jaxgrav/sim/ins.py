@@ -37,8 +37,8 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 
+from jaxgrav._linalg import expm, psd_sqrt
 from jaxgrav.constants import DEG, EARTH_RATE, MGAL, WGS84_MEAN_RADIUS
 from jaxgrav.geodesy import normal_gravity
 
@@ -181,7 +181,7 @@ def transition(model, lat_deg, dt):
     a, qc = continuous_model(model, lat_deg)
     n = N_STATES
     block = jnp.block([[-a, qc], [jnp.zeros((n, n)), a.T]]) * dt
-    e = jsl.expm(block)
+    e = expm(block)
     f = e[n:, n:].T
     q = f @ e[:n, n:]
     return f, 0.5 * (q + q.T)
@@ -265,8 +265,7 @@ def simulate_errors(key, f, q, x0, n_steps):
     Array, shape ``(n_steps, 13)``
         Error states at each step; the INS indicates truth + error.
     """
-    w, v = jnp.linalg.eigh(q)  # Q is only semi-definite (no noise enters position directly)
-    root = v * jnp.sqrt(jnp.clip(w, 0.0, None))
+    root = psd_sqrt(q)  # Q is only semi-definite (no noise enters position directly)
     noise = jax.random.normal(key, (n_steps - 1, N_STATES)) @ root.T
 
     def step(x, w):

@@ -21,6 +21,7 @@ prediction.
 import jax
 import jax.numpy as jnp
 
+from jaxgrav._linalg import cholesky
 from jaxgrav.match.filters.model import (
     STATUS_FILTER,
     Filter,
@@ -69,10 +70,10 @@ def sigma_weights(n, alpha, beta, kappa):
 def _robust_cholesky(p):
     """Cholesky of ``p``, retried with relative jitter; returns (L, repaired, failed)."""
     n = p.shape[0]
-    chol = jnp.linalg.cholesky(p)
+    chol = cholesky(p)
     bad = ~jnp.all(jnp.isfinite(chol))
     jitter = _JITTER * (jnp.trace(p) / n + 1e-300)
-    chol_j = jnp.linalg.cholesky(p + jitter * jnp.eye(n, dtype=p.dtype))
+    chol_j = cholesky(p + jitter * jnp.eye(n, dtype=p.dtype))
     chol = jnp.where(bad, chol_j, chol)
     failed = ~jnp.all(jnp.isfinite(chol))
     return jnp.where(failed, 0.0, chol), bad, failed

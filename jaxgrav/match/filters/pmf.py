@@ -24,6 +24,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from jaxgrav._linalg import inv_2x2
 from jaxgrav.match.filters.model import STATUS_FILTER, Filter, StepInfo, gravity_measurement
 
 __all__ = ["PMFState", "pmf", "run_pmf"]
@@ -88,7 +89,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, measurement=gravity_measurement)
 
     def init(x0, p0):
         d = jnp.stack([dn - x0[0], de - x0[1]], -1)
-        info = jnp.linalg.inv(p0[:2, :2])
+        info = inv_2x2(p0[:2, :2])
         logw = -0.5 * jnp.einsum("...i,ij,...j->...", d, info, d)
         w = jnp.exp(logw - logw.max())
         shape = (n_cells, n_cells)

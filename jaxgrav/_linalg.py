@@ -1,0 +1,101 @@
+"""Small dense linear algebra in plain JAX operations (no LAPACK custom calls).
+
+The filters factor a 13 × 13 covariance per run and per step. Under ``vmap`` the
+``jnp.linalg`` routines become batched LAPACK custom calls, which on CPU (jaxlib
+0.10.2) split the batch over XLA's intra-op thread pool from inside that same pool
+(``jax::ParallelBatchMap``); on a 2-core machine every worker can end up waiting for
+sub-tasks that no free worker will run — a deadlock we hit repeatedly in Monte Carlo
+runs (all threads parked on futexes, native stacks in ``lapack_dpotrf_ffi``). For
+matrices this small, unrolled elementwise code is also faster than a library call,
+so jaxgrav uses these instead inside vmapped code.
+"""
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["cholesky", "expm", "inv_2x2", "psd_sqrt"]
+
+
+def cholesky(a):
+    """Lower Cholesky factor of a small symmetric matrix; NaN where it is not positive definite.
+
+    Parameters
+    ----------
+    a : Array, shape ``(n, n)``
+        ``n`` is static and small (the loop over columns unrolls at trace time).
+
+    Returns
+    -------
+    Array, shape ``(n, n)``
+    """
+    n = a.shape[-1]
+    low = jnp.zeros_like(a)
+    for j in range(n):
+        d = jnp.sqrt(a[j, j] - jnp.sum(low[j, :j] ** 2))
+        low = low.at[j, j].set(d)
+        if j + 1 < n:
+            low = low.at[j + 1 :, j].set((a[j + 1 :, j] - low[j + 1 :, :j] @ low[j, :j]) / d)
+    return low
+
+
+def psd_sqrt(a, rtol=1e-12):
+    """A factor ``L`` with ``L Lᵀ = a`` for a positive *semi*-definite ``a``.
+
+    Cholesky with pivots below ``rtol · max(diag a)`` treated as zero (their column of
+    ``L`` is zero), as for a process-noise matrix with noise-free states.
+
+    Parameters
+    ----------
+    a : Array, shape ``(n, n)``
+    rtol : float
+
+    Returns
+    -------
+    Array, shape ``(n, n)``
+    """
+    n = a.shape[-1]
+    tol = rtol * jnp.max(jnp.abs(jnp.diag(a)))
+    low = jnp.zeros_like(a)
+    for j in range(n):
+        pivot = a[j, j] - jnp.sum(low[j, :j] ** 2)
+        ok = pivot > tol
+        d = jnp.sqrt(jnp.where(ok, pivot, 1.0))
+        low = low.at[j, j].set(jnp.where(ok, d, 0.0))
+        if j + 1 < n:
+            col = (a[j + 1 :, j] - low[j + 1 :, :j] @ low[j, :j]) / d
+            low = low.at[j + 1 :, j].set(jnp.where(ok, col, 0.0))
+    return low
+
+
+def expm(a, order=14):
+    """Matrix exponential by scaling and squaring of a Taylor polynomial (matmuls only).
+
+    The matrix is scaled by ``2^-s`` until its 1-norm is at most 0.5, where the
+    truncated series of degree ``order`` is exact to about ``0.5^{order+1}/(order+1)!``
+    (1e-16 for the default), then squared ``s`` times.
+
+    Parameters
+    ----------
+    a : Array, shape ``(n, n)``
+    order : int
+        Taylor degree (static).
+
+    Returns
+    -------
+    Array, shape ``(n, n)``
+    """
+    norm = jnp.max(jnp.sum(jnp.abs(a), axis=0))
+    s = jnp.maximum(0, jnp.ceil(jnp.log2(jnp.maximum(norm, 1e-300) / 0.5))).astype(jnp.int32)
+    scaled = a / jnp.exp2(s.astype(a.dtype))
+    eye = jnp.eye(a.shape[-1], dtype=a.dtype)
+    term, result = eye, eye
+    for k in range(1, order + 1):
+        term = term @ scaled / k
+        result = result + term
+    return jax.lax.fori_loop(0, s, lambda _, e: e @ e, result)
+
+
+def inv_2x2(a):
+    """Inverse of a 2 × 2 matrix by the closed form (NaN/inf if singular)."""
+    det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+    return jnp.array([[a[1, 1], -a[0, 1]], [-a[1, 0], a[0, 0]]]) / det
