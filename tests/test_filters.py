@@ -1,0 +1,534 @@
+"""Tests of the paper D filters (jaxgrav.match.filters): UKF, EKF, Gaussian sum, point-mass filter.
+
+References: filterpy's UnscentedKalmanFilter (same sigma points), a NumPy linear Kalman
+filter, central finite differences and a brute-force NumPy Bayes grid. The runs are
+built here in NumPy (straight tracks over paper D's masses, the INS error propagated
+with F, Q from the library's continuous model by SciPy's Van Loan) so that the module
+compiles few programs.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.linalg
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+from jaxgrav.constants import DEG
+from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
+from jaxgrav.match import filters as fl
+from jaxgrav.match.filters.paper_d import MASS_LON
+from jaxgrav.sim import ins
+
+FLAGS = fl.STATUS_FILTER
+DT = 10.0
+N_STEPS = 60
+LAT_REF = 24.27
+FIELD = paper_d()
+MODEL = ins.INSErrorModel()
+
+# module-level filters: a Filter is a pair of closures, the static argument of the jits below
+UKF = fl.ukf()
+EKF = fl.ekf()
+PMF_CELL, PMF_Q = 400.0, 400.0  # v = q dt / cell² = 0.025 per 10 s
+PMF = fl.pmf(n_cells=15, cell_m=PMF_CELL, q_pos=PMF_Q)
+
+_TRACES = []
+
+
+def _run_one(filt, field, dynamics, x0, p0, steps):
+    _TRACES.append(filt)
+    return fl.run_filter(filt, field, dynamics, x0, p0, steps)
+
+
+# Compiling dominates this module's time: the tests share these few programs (same
+# static filter, same argument types), and loops of single steps reuse `update`.
+run_one = jax.jit(_run_one, static_argnums=0)
+run_batch = jax.jit(
+    jax.vmap(fl.run_filter, in_axes=(None, None, None, 0, None, 0)), static_argnums=0
+)
+run_pmf_batch = jax.jit(
+    jax.vmap(fl.run_pmf, in_axes=(None, None, None, 0, None, 0, None)), static_argnums=(0, 6)
+)
+update = jax.jit(
+    lambda filt, state, step, field, dyn: filt.update(state, step, field, dyn), static_argnums=0
+)
+init = jax.jit(lambda filt, x0, p0: filt.init(x0, p0), static_argnums=0)
+measure = jax.jit(fl.gravity_measurement)
+
+
+# --------------------------------------------------------------------------- problem
+
+
+def _radii(lat):
+    a, e2 = 6378137.0, 6.69437999014e-3
+    s2 = np.sin(lat * DEG) ** 2
+    return a * (1 - e2) / (1 - e2 * s2) ** 1.5, a / np.sqrt(1 - e2 * s2)
+
+
+def _ins_position(lat, lon, d_n, d_e):
+    """Shift a position by a north/east error (m), as the measurement model does in reverse."""
+    m, n = _radii(lat)
+    return lat + d_n / m / DEG, lon + d_e / (n * np.cos(lat * DEG)) / DEG
+
+
+@pytest.fixture(scope="module")
+def dynamics():
+    """F, Q by Van Loan in SciPy (test_ins checks ins.transition against the same)."""
+    a, qc = (np.asarray(m) for m in ins.continuous_model(MODEL, LAT_REF))
+    n = a.shape[0]
+    e = scipy.linalg.expm(np.block([[-a, qc], [np.zeros((n, n)), a.T]]) * DT)
+    f = e[n:, n:].T
+    q = f @ e[:n, n:]
+    return fl.Dynamics(jnp.asarray(f), jnp.asarray(0.5 * (q + q.T)))
+
+
+@pytest.fixture(scope="module")
+def prior():
+    p0 = ins.initial_covariance(MODEL, 2000.0 / np.sqrt(2.0), 0.2 / np.sqrt(2.0))
+    return jnp.zeros(ins.N_STATES), p0
+
+
+def _make_runs(dynamics, n_runs, seed, n_steps=N_STEPS, speed=20.0):
+    """Straight eastward tracks across the mass line; a reading every other step (NaN between).
+
+    Returns the filter inputs :class:`Step` with leading axes ``(n_runs, n_steps)``
+    and the true INS errors ``(n_runs, n_steps + 1, 13)``.
+    """
+    rng = np.random.default_rng(seed)
+    f, q = np.asarray(dynamics.f), np.asarray(dynamics.q)
+    w, v = np.linalg.eigh(q)
+    root = v * np.sqrt(np.clip(w, 0.0, None))
+    lat = rng.uniform(24.15, 24.40, n_runs)[:, None] + np.zeros(n_steps + 1)
+    east = speed * DT * np.arange(n_steps + 1)
+    lon = MASS_LON - 0.06 + east / (111320.0 * np.cos(lat * DEG))
+    err = np.zeros((n_runs, n_steps + 1, ins.N_STATES))
+    a_pos, a_vel = rng.uniform(0, 2 * np.pi, (2, n_runs))
+    err[:, 0, 0], err[:, 0, 1] = 2000.0 * np.cos(a_pos), 2000.0 * np.sin(a_pos)
+    err[:, 0, 2], err[:, 0, 3] = 0.2 * np.cos(a_vel), 0.2 * np.sin(a_vel)
+    err[:, 0, 12] = 1.0
+    for k in range(n_steps):
+        err[:, k + 1] = err[:, k] @ f.T + rng.standard_normal((n_runs, ins.N_STATES)) @ root.T
+    ins_lat, ins_lon = _ins_position(lat, lon, err[..., 0], err[..., 1])
+    z = np.asarray(fl.map_anomaly(FIELD, lat, lon)) + err[..., 12]
+    z = z + rng.standard_normal(z.shape)
+    z[:, 1::2] = np.nan
+    steps = fl.Step(
+        *(jnp.asarray(a[:, 1:]) for a in (ins_lat, ins_lon, z)), jnp.ones((n_runs, n_steps))
+    )
+    return steps, err
+
+
+@pytest.fixture(scope="module")
+def runs(dynamics):
+    return _make_runs(dynamics, 3, seed=0)
+
+
+def _one(steps, i):
+    return jax.tree.map(lambda a, i=i: a[i], steps)
+
+
+# --------------------------------------------------------------------------- references
+
+
+def _filterpy_ukf(dynamics, x0, p0, steps, hx, alpha=0.5, beta=2.0, kappa=0.0):
+    f, q = np.asarray(dynamics.f), np.asarray(dynamics.q)
+    n = f.shape[0]
+    points = MerweScaledSigmaPoints(n, alpha=alpha, beta=beta, kappa=kappa)
+    u = UnscentedKalmanFilter(n, 1, DT, hx=hx, fx=lambda x, dt: f @ x, points=points)
+    u.x, u.P, u.Q = np.array(x0, dtype=float), np.array(p0, dtype=float), q
+    xs, ps = [], []
+    for k in range(steps.z.shape[0]):
+        u.predict()
+        z = float(steps.z[k])
+        if np.isfinite(z):
+            u.update(
+                np.array([z]),
+                R=np.array([[float(steps.r[k])]]),
+                lat=float(steps.lat[k]),
+                lon=float(steps.lon[k]),
+            )
+        xs.append(u.x.copy())
+        ps.append(u.P.copy())
+    return np.array(xs), np.array(ps)
+
+
+def _numpy_kalman(dynamics, x0, p0, steps, a, c):
+    """Textbook linear Kalman filter for ``z = a·x + c + v``."""
+    f, q = np.asarray(dynamics.f), np.asarray(dynamics.q)
+    x, p = np.array(x0, dtype=float), np.array(p0, dtype=float)
+    xs, ps = [], []
+    for k in range(steps.z.shape[0]):
+        x, p = f @ x, f @ p @ f.T + q
+        z = float(steps.z[k])
+        if np.isfinite(z):
+            s = a @ p @ a + float(steps.r[k])
+            gain = p @ a / s
+            x = x + gain * (z - a @ x - c)
+            p = p - s * np.outer(gain, gain)
+        xs.append(x)
+        ps.append(p)
+    return np.array(xs), np.array(ps)
+
+
+def _normalised(x, p, x_ref, p_ref):
+    """Max difference of states in σ units and of covariances in correlation units."""
+    sd = np.sqrt(np.einsum("...ii->...i", p_ref))
+    dx = np.abs(x - x_ref) / sd
+    dp = np.abs(p - p_ref) / (sd[..., :, None] * sd[..., None, :])
+    return dx.max(), dp.max()
+
+
+# --------------------------------------------------------------------------- UKF / EKF
+
+
+def test_sigma_weights_sum_to_one_and_match_filterpy():
+    for n, alpha, beta, kappa in [
+        (13, 0.5, 2.0, 0.0),
+        (13, 1e-3, 2.0, 0.0),
+        (5, 0.3, 0.0, 3 - 5),
+        (2, 1.0, 2.0, 1.0),
+    ]:
+        scale, wm, wc = fl.sigma_weights(n, alpha, beta, kappa)
+        ref = MerweScaledSigmaPoints(n, alpha=alpha, beta=beta, kappa=kappa)
+        np.testing.assert_allclose(float(jnp.sum(wm)), 1.0, rtol=1e-9)
+        np.testing.assert_allclose(float(jnp.sum(wc)), 2.0 - alpha**2 + beta, rtol=1e-9)
+        np.testing.assert_allclose(np.asarray(wm), ref.Wm, rtol=1e-12)
+        np.testing.assert_allclose(np.asarray(wc), ref.Wc, rtol=1e-12)
+        np.testing.assert_allclose(float(scale), alpha**2 * (n + kappa), rtol=1e-9)
+
+
+def test_ukf_equals_filterpy_on_the_gravity_measurement(dynamics, prior, runs):
+    steps = _one(runs[0], 0)
+    x0, p0 = prior
+    final, infos = run_one(UKF, FIELD, dynamics, x0, p0, steps)
+    xs, ps = _filterpy_ukf(
+        dynamics,
+        x0,
+        p0,
+        steps,
+        lambda x, lat, lon: np.atleast_1d(np.asarray(measure(FIELD, x, lat, lon))),
+    )
+    assert np.all(
+        np.asarray(infos.status) == np.where(np.isfinite(steps.z), 0, FLAGS["no_reading"])
+    )
+    dx = np.abs(np.asarray(infos.x) - xs) / np.sqrt(np.einsum("kii->ki", ps))
+    assert dx.max() < 1e-8, dx.max()
+    np.testing.assert_allclose(
+        np.asarray(infos.sigma), np.sqrt(np.einsum("kii->ki", ps)), rtol=1e-8
+    )
+    np.testing.assert_allclose(np.asarray(infos.p_pos), ps[:, :2, :2], rtol=1e-8, atol=1e-6)
+    _, dp_final = _normalised(np.asarray(final.x), np.asarray(final.p), xs[-1], ps[-1])
+    assert dp_final < 1e-8
+    # the readings did move the filter: a nonlinear problem, not a trivial one
+    assert np.sqrt(ps[-1, 0, 0]) < 0.5 * np.sqrt(float(p0[0, 0]))
+
+
+LIN_A = np.zeros(ins.N_STATES)
+LIN_A[[0, 1, 2, 12]] = [2e-3, -1.5e-3, 0.3, 1.0]
+LIN_C = 5.0
+
+
+def _linear_h(field, x, lat, lon):
+    return jnp.asarray(LIN_A, x.dtype) @ x + LIN_C
+
+
+UKF_LIN = fl.ukf(_linear_h)
+EKF_LIN = fl.ekf(_linear_h)
+
+
+@pytest.mark.parametrize("which", ["ukf", "ekf"])
+def test_linear_measurement_equals_the_kalman_filter(which, dynamics, prior, runs):
+    filt = UKF_LIN if which == "ukf" else EKF_LIN
+    x0, p0 = prior
+    steps = _one(runs[0], 1)
+    _, err = runs
+    z = LIN_A @ err[1, 1:].T + LIN_C + np.random.default_rng(1).standard_normal(N_STEPS)
+    steps = steps._replace(z=jnp.where(jnp.isfinite(steps.z), z, jnp.nan))
+    _, infos = run_one(filt, None, dynamics, x0, p0, steps)
+    xs, ps = _numpy_kalman(dynamics, x0, p0, steps, LIN_A, LIN_C)
+    sd = np.sqrt(np.einsum("kii->ki", ps))
+    np.testing.assert_allclose(np.asarray(infos.x) / sd, xs / sd, rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(
+        np.asarray(infos.sigma), np.sqrt(np.einsum("kii->ki", ps)), rtol=1e-8
+    )
+    np.testing.assert_allclose(np.asarray(infos.p_pos), ps[:, :2, :2], rtol=1e-8, atol=1e-6)
+    assert np.sqrt(ps[-1, 0, 0]) < 0.8 * np.sqrt(float(p0[0, 0]))
+
+
+@pytest.mark.parametrize("map_kind", ["pointmass", "grid"])
+def test_ekf_jacobian_equals_finite_differences(map_kind, smooth_grid):
+    if map_kind == "pointmass":
+        field, lat, lon = FIELD, 24.2, MASS_LON + 0.03
+    else:
+        field, lat, lon = smooth_grid, 30.05, 130.1
+    x = jnp.zeros(ins.N_STATES).at[0].set(700.0).at[1].set(-400.0).at[12].set(1.0)
+    jac = np.asarray(jax.jit(jax.jacfwd(fl.gravity_measurement, argnums=1))(field, x, lat, lon))
+    h = measure
+    eps = 1.0  # m (and mGal for the bias)
+    fd = np.zeros(ins.N_STATES)
+    for i in range(ins.N_STATES):
+        e = jnp.zeros(ins.N_STATES).at[i].set(eps)
+        fd[i] = (float(h(field, x + e, lat, lon)) - float(h(field, x - e, lat, lon))) / (2 * eps)
+    np.testing.assert_allclose(jac, fd, rtol=1e-6, atol=1e-9)
+    assert np.all(jac[2:12] == 0.0) and jac[12] == 1.0 and np.all(jac[:2] != 0.0)
+
+
+def _assert_same_state(state, ref):
+    """Equal to rounding (the jitted update may fuse the prediction's arithmetic)."""
+    dx, dp = _normalised(
+        np.asarray(state.x), np.asarray(state.p), np.asarray(ref.x), np.asarray(ref.p)
+    )
+    assert dx < 1e-13 and dp < 1e-13, (dx, dp)
+
+
+def _one_step(z, lat=24.25, lon=MASS_LON + 0.02, r=1.0):
+    """One Step of float64 scalars (the types of a slice of a run: no recompiles)."""
+    return fl.Step(*(jnp.asarray(v, dtype=jnp.float64) for v in (lat, lon, z, r)))
+
+
+@pytest.mark.parametrize("filt", [UKF, EKF], ids=["ukf", "ekf"])
+def test_nan_reading_leaves_the_prediction(filt, dynamics, prior):
+    x0, p0 = prior
+    state = fl.FilterState(x0.at[0].set(300.0).at[3].set(0.1), p0)
+    new, info = update(filt, state, _one_step(jnp.nan), FIELD, dynamics)
+    pred = fl.predict(state, dynamics.f, dynamics.q)
+    _assert_same_state(new, pred)
+    assert int(info.status) == FLAGS["no_reading"]
+    assert np.isnan(float(info.innovation))
+    # ... and a reading does change it
+    z = float(fl.gravity_measurement(FIELD, pred.x, 24.25, MASS_LON + 0.02)) + 3.0
+    moved, info = update(filt, state, _one_step(z), FIELD, dynamics)
+    assert int(info.status) == 0 and not np.allclose(np.asarray(moved.x), np.asarray(pred.x))
+
+
+@pytest.mark.parametrize("filt", [UKF, EKF], ids=["ukf", "ekf"])
+def test_off_map_position_skips_the_update(filt, dynamics, prior, smooth_grid):
+    x0, p0 = prior
+    state = fl.FilterState(x0, p0)
+    pred = fl.predict(state, dynamics.f, dynamics.q)
+    # INS off the map (EKF's mean and UKF's centre point), and at the edge, where
+    # only the UKF's spread sigma points leave it
+    cases = [(30.6, 130.0), (30.0, 130.49)] if filt is UKF else [(30.6, 130.0), (29.0, 131.0)]
+    for lat, lon in cases:
+        new, info = update(filt, state, _one_step(10.0, lat, lon), smooth_grid, dynamics)
+        assert int(info.status) & FLAGS["off_map"], (lat, lon)
+        _assert_same_state(new, pred)
+    # well inside: an ordinary update
+    new, info = update(filt, state, _one_step(10.0, 30.0, 130.0), smooth_grid, dynamics)
+    assert int(info.status) == 0
+    assert not np.allclose(np.asarray(new.x), np.asarray(pred.x))
+
+
+# --------------------------------------------------------------------------- point-mass filter
+
+
+def _np_diffuse(a, v):
+    def along(x, axis):
+        x = np.moveaxis(x, axis, 0)
+        lo = np.concatenate([x[:1], x[:-1]])
+        hi = np.concatenate([x[1:], x[-1:]])
+        return np.moveaxis((1 - v) * x + 0.5 * v * (lo + hi), 0, axis)
+
+    return along(along(a, 0), 1)
+
+
+def _pmf_prior_weights(offsets, x0, p0):
+    dn, de = np.meshgrid(offsets, offsets, indexing="ij")
+    d = np.stack([dn - x0[0], de - x0[1]], -1)
+    lw = -0.5 * np.einsum("...i,ij,...j->...", d, np.linalg.inv(p0[:2, :2]), d)
+    w = np.exp(lw - lw.max())
+    return dn, de, w / w.sum()
+
+
+def test_pmf_one_update_equals_a_brute_force_bayes_grid(prior):
+    n_cells, cell, q_pos, dt = 15, PMF_CELL, PMF_Q, 40.0  # v = q_pos dt / cell² = 0.1
+    x0, p0 = (np.asarray(a) for a in prior)
+    x0 = x0.copy()
+    x0[[0, 1, 12]] = [300.0, -200.0, 0.5]
+    p0 = p0.copy()
+    p0[:2, :2] = [[800.0**2, 2.0e5], [2.0e5, 600.0**2]]
+    lat, lon, z, r = 24.2, MASS_LON + 0.02, 3.0, 0.7
+    state = init(PMF, jnp.asarray(x0), jnp.asarray(p0))
+    new, info = update(PMF, state, _one_step(z, lat, lon, r), FIELD, dt)
+
+    # brute force: Gaussian prior on the cells, diffusion, Bayes with the bias marginalised
+    offsets = (np.arange(n_cells) - (n_cells - 1) / 2) * cell
+    dn, de, w = _pmf_prior_weights(offsets, x0, p0)
+    w = _np_diffuse(w, q_pos * dt / cell**2)
+    true_lat, true_lon = _ins_position(lat, lon, -dn, -de)  # cell = INS − true
+    g = np.asarray(gravity_anomaly(FIELD, true_lat, true_lon))
+    b0, s0 = x0[12], p0[12, 12]
+    like = np.exp(-0.5 * (z - g - b0) ** 2 / (s0 + r))
+    post = w * like / np.sum(w * like)
+    mean = np.array([np.sum(post * dn), np.sum(post * de)])
+    d = np.stack([dn - mean[0], de - mean[1]], -1)
+    cov = np.einsum("ij,ija,ijb->ab", post, d, d) + np.eye(2) * cell**2 / 12
+    b_post = b0 + s0 / (s0 + r) * (z - g - b0)
+    bias = np.sum(post * b_post)
+
+    np.testing.assert_allclose(np.asarray(new.w), post, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(np.asarray(info.x)[[0, 1, 12]], [*mean, bias], rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(info.p_pos), cov, rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(info.sigma)[:2], np.sqrt(np.diag(cov)), rtol=1e-9)
+    # a ±2.8 km grid holds the prior's tails at its edges: only grid_edge may be set
+    assert int(info.status) & ~FLAGS["grid_edge"] == 0
+    assert np.abs(post - w).max() > 1e-3  # the reading was informative
+
+
+def test_pmf_nan_reading_is_the_pure_diffusion(prior):
+    x0, p0 = prior
+    state = init(PMF, x0, p0)
+    new, info = update(PMF, state, _one_step(jnp.nan), FIELD, 50.0)
+    v = PMF_Q * 50.0 / PMF_CELL**2
+    np.testing.assert_allclose(
+        np.asarray(new.w), _np_diffuse(np.asarray(state.w), v), rtol=1e-12, atol=1e-18
+    )
+    np.testing.assert_allclose(np.asarray(new.bias_mean), float(x0[12]), atol=1e-12)
+    np.testing.assert_allclose(np.asarray(new.bias_var), float(p0[12, 12]), rtol=1e-9)
+    assert int(info.status) & FLAGS["no_reading"] and np.isnan(float(info.innovation))
+
+
+def test_pmf_off_map(prior, smooth_grid):
+    x0, p0 = prior
+    state = init(PMF, x0, p0)
+    # the whole grid off the map: no update, flagged
+    new, info = update(PMF, state, _one_step(5.0, 35.0, 130.0), smooth_grid, DT)
+    v = PMF_Q * DT / PMF_CELL**2
+    np.testing.assert_allclose(
+        np.asarray(new.w), _np_diffuse(np.asarray(state.w), v), rtol=1e-12, atol=1e-18
+    )
+    assert int(info.status) & FLAGS["off_map"]
+    # partly off (INS near the east edge): flagged, off-map cells lose their weight
+    new, info = update(PMF, state, _one_step(5.0, 30.0, 130.49), smooth_grid, DT)
+    assert int(info.status) & FLAGS["off_map"]
+    # cell (i, j) is offset east by de_j; true lon = INS lon − de_j/(N cos φ): cells with
+    # a large negative de are east of the INS, off the grid
+    w = np.asarray(new.w)
+    assert w[:, 0].sum() == 0.0 and w[:, -1].sum() > 0.0
+    np.testing.assert_allclose(w.sum(), 1.0, rtol=1e-12)
+
+
+# --------------------------------------------------------------------------- batching, jit
+
+
+def _assert_trees_close(a, b, **tol):
+    for u, v in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+        np.testing.assert_allclose(np.asarray(u), np.asarray(v), **tol)
+
+
+def _stack(infos):
+    return jax.tree.map(lambda *a: np.stack(a), *infos)
+
+
+@pytest.mark.parametrize("filt", [UKF, EKF], ids=["ukf", "ekf"])
+def test_batched_equals_loop(filt, dynamics, prior, runs):
+    """vmap(run_filter) over runs equals a Python loop over runs and steps of ``update``."""
+    steps = runs[0]
+    x0, p0 = prior
+    x0s = jnp.stack([x0.at[12].set(b) for b in (0.0, 0.5, -0.5)])
+    final_b, infos_b = run_batch(filt, FIELD, dynamics, x0s, p0, steps)
+    assert infos_b.x.shape == (3, N_STEPS, ins.N_STATES)
+    for i in range(3):
+        state, infos = init(filt, x0s[i], p0), []
+        for k in range(N_STEPS):
+            state, info = update(filt, state, _one(_one(steps, i), k), FIELD, dynamics)
+            infos.append(info)
+        _assert_trees_close(
+            jax.tree.map(lambda a, i=i: a[i], final_b), state, rtol=1e-8, atol=1e-12
+        )
+        _assert_trees_close(
+            jax.tree.map(lambda a, i=i: a[i], infos_b), _stack(infos), rtol=1e-8, atol=1e-12
+        )
+
+
+def test_pmf_batched_equals_loop(prior, runs):
+    steps = runs[0]
+    x0, p0 = prior
+    x0s = jnp.stack([x0.at[0].set(d) for d in (0.0, 200.0, -300.0)])
+    final_b, infos_b = run_pmf_batch(PMF, FIELD, DT, x0s, p0, steps, 2)
+    assert infos_b.x.shape == (3, N_STEPS, ins.N_STATES)
+    for i in range(3):
+        # run_pmf(every=2): one update of 2·DT per reading (steps 1, 3, …), info held
+        state, infos = init(PMF, x0s[i], p0), []
+        for k in range(1, N_STEPS, 2):
+            state, info = update(PMF, state, _one(_one(steps, i), k), FIELD, 2 * DT)
+            infos += [info, info]
+        _assert_trees_close(
+            jax.tree.map(lambda a, i=i: a[i], final_b), state, rtol=1e-8, atol=1e-12
+        )
+        _assert_trees_close(
+            jax.tree.map(lambda a, i=i: a[i], infos_b), _stack(infos), rtol=1e-8, atol=1e-12
+        )
+    # the readings sit on the odd steps here (index 0 is the first step after x0), so
+    # run_pmf with every=2 updates exactly on them
+    assert not np.any(np.asarray(infos_b.status) & FLAGS["no_reading"])
+
+
+def test_jit_does_not_retrace_on_new_values(dynamics, prior):
+    x0, p0 = prior
+    steps_a, _ = _make_runs(dynamics, 1, seed=11)
+    steps_b, _ = _make_runs(dynamics, 1, seed=12)
+    run_one(UKF, FIELD, dynamics, x0, p0, _one(steps_a, 0))
+    n = len(_TRACES)
+    other = fl.Dynamics(dynamics.f * 1.0, dynamics.q * 2.0)
+    field2 = jax.tree.map(lambda a: a * 1.1, FIELD)
+    steps2 = _one(steps_b, 0)._replace(r=2.0 * steps_b.r[0])
+    run_one(UKF, field2, other, x0.at[0].set(50.0), 2.0 * p0, steps2)
+    assert len(_TRACES) == n
+
+
+def test_sigma_point_parameters_sweep_without_recompiling(dynamics, prior, runs):
+    """α, β, κ are closure constants of ``ukf``; built inside jit they are traced values."""
+    traces = []
+
+    @jax.jit
+    def final_sigma(alpha, x0, p0, steps):
+        traces.append(1)
+        final, _ = fl.run_filter(fl.ukf(alpha=alpha), FIELD, dynamics, x0, p0, steps)
+        return jnp.sqrt(final.p[0, 0])
+
+    x0, p0 = prior
+    steps = _one(runs[0], 2)
+    a = final_sigma(0.5, x0, p0, steps)
+    b = final_sigma(0.9, x0, p0, steps)
+    assert len(traces) == 1 and float(a) != float(b)
+    _, infos = run_one(UKF, FIELD, dynamics, x0, p0, steps)
+    np.testing.assert_allclose(float(a), float(infos.sigma[-1, 0]), rtol=1e-10)
+
+
+# --------------------------------------------------------------------------- Gaussian sum
+
+
+def test_gaussian_sum_with_one_component_equals_its_base(dynamics, prior, runs):
+    steps = _one(runs[0], 0)
+    x0, p0 = prior
+    gs = fl.gaussian_sum(UKF, per_axis=1)
+    _, infos_gs = run_one(gs, FIELD, dynamics, x0, p0, steps)
+    _, infos = run_one(UKF, FIELD, dynamics, x0, p0, steps)
+    for name in fl.StepInfo._fields:
+        a, b = np.asarray(getattr(infos, name)), np.asarray(getattr(infos_gs, name))
+        np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12, err_msg=name)
+
+
+@pytest.mark.parametrize(("per_axis", "spacing"), [(5, 0.8), (3, 0.5), (7, 0.6)])
+def test_split_prior_preserves_mean_and_covariance(per_axis, spacing, prior):
+    x0, p0 = prior
+    x0 = x0.at[0].set(150.0).at[1].set(-80.0).at[12].set(0.3)
+    x, p, log_w = jax.jit(fl.split_prior, static_argnums=2)(x0, p0, per_axis, spacing)
+    assert x.shape == (per_axis**2, ins.N_STATES) and p.shape == (per_axis**2, 13, 13)
+    w = np.exp(np.asarray(log_w))
+    np.testing.assert_allclose(w.sum(), 1.0, rtol=1e-12)
+    x, p = np.asarray(x), np.asarray(p)
+    mean = w @ x
+    cov = np.einsum("m,mi,mj->ij", w, x - mean, x - mean) + np.einsum("m,mij->ij", w, p)
+    np.testing.assert_allclose(mean, np.asarray(x0), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(
+        cov[:2, :2], np.asarray(p0)[:2, :2], rtol=1e-10, atol=1e-12 * float(p0[0, 0])
+    )
+    # p0 is diagonal: the whole mixture covariance is p0
+    sd = np.sqrt(np.diag(np.asarray(p0)))
+    np.testing.assert_allclose(
+        cov / np.outer(sd, sd), np.asarray(p0) / np.outer(sd, sd), atol=1e-10
+    )
+    assert np.all(np.linalg.eigvalsh(p[:, :2, :2]) > 0)
