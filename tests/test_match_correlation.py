@@ -14,7 +14,13 @@ from jaxgrav.constants import KNOT
 from jaxgrav.match import candidates as cand_mod
 from jaxgrav.match import chains
 from jaxgrav.match.correlation import ChainConfig, _pair_cost, match_chains
-from jaxgrav.match.dense import DenseConfig, match_dense, prepare_map, shifted_tracks
+from jaxgrav.match.dense import (
+    DenseConfig,
+    match_dense,
+    match_dense_batch,
+    prepare_map,
+    shifted_tracks,
+)
 from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_track
 
 RNG = np.random.default_rng(0)
@@ -239,6 +245,11 @@ def test_jit_no_retrace_and_vmap_equals_loop(smooth_grid):
         one = match_dense(smooth_grid, lat[i], lon[i], g[i], cfg)
         np.testing.assert_allclose(batched.lat[i], one.lat, atol=1e-9)
         np.testing.assert_allclose(batched.score[i], one.score, rtol=1e-8)
+    chunked = match_dense_batch(smooth_grid, lat, lon, g, cfg, chunk=3)  # 3 + a remainder of 1
+    np.testing.assert_allclose(chunked.lat, batched.lat, atol=1e-9)
+    np.testing.assert_allclose(chunked.score, batched.score, rtol=1e-8)
+    np.testing.assert_array_equal(chunked.chosen, batched.chosen)
+    np.testing.assert_allclose(chunked.topk_score, batched.topk_score, rtol=1e-10)
     cc = ChainConfig(half_size=4, capacity=81, delta=2.0)
     bc = jax.vmap(match_chains, in_axes=(None, 0, 0, 0, None))(smooth_grid, lat, lon, g, cc)
     for i in range(4):

@@ -14,18 +14,20 @@ damped Gauss–Newton steps on the differentiable (bicubic) map.
 Work is done in local metres about the track's centroid and in fractional map
 indices, which keeps float32 accurate. For one fix the shifted positions form a
 regular lattice of map indices, so the map under all candidates is evaluated
-separably (:mod:`~jaxgrav.match.lattice`: a few short reads of spline coefficients
-and one small matrix product per fix) rather than point by point; the block of map
-nodes this reads has a static size (``DenseConfig.lattice_block``, or a larger one
-when the offsets span more cells), and an offset grid coarser than the map falls
-back to sampling every shifted fix on its own (same values, slower). The refinement
+separably (:mod:`~jaxgrav.match.offsets`, :mod:`~jaxgrav.match.lattice`: a few
+short reads of spline coefficients and one small matrix product per fix) rather
+than point by point; the block of map nodes this reads has a static size
+(``DenseConfig.lattice_block``, or a larger one when the offsets span more cells),
+and an offset grid coarser than the map falls back to sampling every shifted fix
+on its own (same values, slower). The refinement
 uses the analytic gradient of the bicubic patch and a closed-form solve of its 4 × 4
-normal equations.
-The map's spline coefficients may be prepared once (:func:`prepare_map`) and passed
-in, as a hot loop over many calls should.
+normal equations (:mod:`~jaxgrav.match.refine`). The map's spline coefficients may
+be prepared once (:func:`prepare_map`) and passed in, as a hot loop over many calls
+should; :func:`match_dense_batch` matches many tracks in cache-sized chunks.
 """
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -35,7 +37,8 @@ from jaxgrav._pytree import static_field
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.match.candidates import local_offsets_m
-from jaxgrav.match.lattice import interleave, lattice_values, patch_values
+from jaxgrav.match.lattice import interleave, patch_values
+from jaxgrav.match.offsets import means, offset_scores, track_frame
 from jaxgrav.match.refine import gauss_newton, residual_function
 from jaxgrav.match.result import MatchResult, nearest_to_ins
 from jaxgrav.match.scoring import (
@@ -47,7 +50,7 @@ from jaxgrav.match.scoring import (
     sums,
 )
 
-__all__ = ["DenseConfig", "match_dense", "prepare_map", "shifted_tracks"]
+__all__ = ["DenseConfig", "match_dense", "match_dense_batch", "prepare_map", "shifted_tracks"]
 
 
 @jax.tree_util.register_dataclass
@@ -161,7 +164,7 @@ def shifted_tracks(lat, lon, d_north, d_east, rotation_rad):
     tuple of Array
         ``(lat, lon)`` of shape ``(*S, N)`` in degrees.
     """
-    lat_c, lon_c = _means(lat, lon)
+    lat_c, lon_c = means(lat, lon)
     m_c = meridian_radius(lat_c) * DEG
     n_c = prime_vertical_radius(lat_c) * jnp.cos(lat_c * DEG) * DEG
     north, east = (lat - lat_c) * m_c, (lon - lon_c) * n_c
@@ -169,127 +172,6 @@ def shifted_tracks(lat, lon, d_north, d_east, rotation_rad):
     rn = c * north - s * east + jnp.asarray(d_north)[..., None]
     re = s * north + c * east + jnp.asarray(d_east)[..., None]
     return lat_c + rn / m_c, lon_c + re / n_c
-
-
-def _means(*xs):
-    """Means over the last axis, as one variadic reduction (:func:`~.scoring.sums`)."""
-    return [t / xs[0].shape[-1] for t in sums(xs, -1)]
-
-
-def _frame(grid, lat, lon):
-    """The frame of :func:`shifted_tracks` in map indices.
-
-    Returns ``(iy_c, ix_c, ky, kx, north, east)``: fractional map index of the
-    centroid (longitude taken within 180° of the map's middle), index steps per
-    metre north and east, and the fixes' offsets from the centroid (m). A fix
-    turned and shifted to local ``(rn, re)`` lies at index ``(iy_c + ky·rn, ix_c + kx·re)``.
-    """
-    lat_c, lon_c = _means(lat, lon)
-    m_c = meridian_radius(lat_c) * DEG
-    n_c = prime_vertical_radius(lat_c) * jnp.cos(lat_c * DEG) * DEG
-    north, east = (lat - lat_c) * m_c, (lon - lon_c) * n_c
-    lon_mid = grid.lon0 + 0.5 * (grid.nx - 1) * grid.dlon
-    iy_c = (lat_c - grid.lat0) / grid.dlat
-    ix_c = (jnp.mod(lon_c - lon_mid + 180.0, 360.0) - 180.0 + (lon_mid - grid.lon0)) / grid.dlon
-    return iy_c, ix_c, 1.0 / (m_c * grid.dlat), 1.0 / (n_c * grid.dlon), north, east
-
-
-def _lattice_fits(grid, config, block):
-    """Whether every fix's offset lattice fits a block of ``block`` nodes (traced bool).
-
-    Depends on the map and the config only (not on the track), so under ``vmap``
-    over tracks the branch stays one branch. A track's centroid can only produce
-    an all-on-map candidate within ``half_size·spacing_m`` of the map, so the bound
-    is taken over the map's latitudes widened by that reach.
-    """
-    span_lon = (grid.nx - 1) * grid.dlon
-    extent = 2.0 * config.half_size * jnp.asarray(config.spacing_m)
-    m_min = meridian_radius(0.0) * DEG  # smallest metres per degree of latitude
-    reach_deg = 0.5 * extent / m_min
-    lat_hi = jnp.minimum(
-        jnp.maximum(abs(grid.lat0), abs(grid.lat0 + (grid.ny - 1) * grid.dlat)) + reach_deg, 89.0
-    )
-    n_min = prime_vertical_radius(lat_hi) * jnp.cos(lat_hi * DEG) * DEG
-    return (
-        (extent / (m_min * grid.dlat) <= min(block, grid.ny) - 2)
-        & (extent / (n_min * grid.dlon) <= min(block, grid.nx) - 2)
-        & (0.5 * extent / n_min < 180.0 - 0.5 * span_lon)
-    )
-
-
-def _lattice_blocks(grid, config):
-    """Static block sizes to try, smallest first: ``lattice_block``, then one that
-    fits whenever the offset spacing is at most the node spacing (as
-    :func:`~jaxgrav.match.api.config_for` sizes it). None for maps spanning
-    (nearly) all longitudes, too small maps or ``lattice_block`` 0."""
-    if (config.lattice_block < 3 or min(grid.ny, grid.nx) < 4
-            or (grid.nx - 1) * grid.dlon > 300.0):
-        return []
-    big = min(2 * config.half_size + 2, max(grid.ny, grid.nx))
-    return [config.lattice_block] + ([big] if big > config.lattice_block else [])
-
-
-def _grid_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, config):
-    """Scores and biases of every candidate, flattened rotation-major then (north, east)."""
-    iy_c, ix_c, ky, kx, north, east = frame
-    c, s = jnp.cos(rot)[:, None], jnp.sin(rot)[:, None]
-    rn, re = c * north - s * east, s * north + c * east  # (R, N) turned fixes
-    n_rot, n = rn.shape
-
-    def separable(block):
-        def run(_):
-            rows = iy_c + ky * (rn.reshape(-1)[:, None] + d_1d)
-            cols = ix_c + kx * (re.reshape(-1)[:, None] + d_1d)
-            v, in_y, in_x = lattice_values(table, rows, cols, block, config.method)
-            a = d_1d.shape[0]
-            v = v.reshape(n_rot, n, a, a)
-            bad = (jnp.any(~in_y.reshape(n_rot, n, a), axis=1)[:, :, None]
-                   | jnp.any(~in_x.reshape(n_rot, n, a), axis=1)[:, None, :])
-            sc, b = _lattice_scores(readings, v, w, config.score, prior, config.half_size)
-            return jnp.where(bad, jnp.inf, sc).reshape(-1), b.reshape(-1)
-
-        return run
-
-    def points(_):
-        r_of = jnp.repeat(jnp.arange(n_rot), d_n.shape[0] // n_rot)
-        iy = iy_c + ky * (rn[r_of] + d_n[:, None])
-        ix = ix_c + kx * (re[r_of] + d_e[:, None])
-        return score_track(readings, patch_values(table, iy, ix, config.method), w,
-                           config.score, prior)
-
-    blocks = _lattice_blocks(grid, config)
-    if not blocks:
-        return points(None)
-    index = jnp.asarray(len(blocks), jnp.int32)  # points, unless a block fits
-    for k in reversed(range(len(blocks))):
-        index = jnp.where(_lattice_fits(grid, config, blocks[k]), k, index)
-    return jax.lax.switch(index, [separable(b) for b in blocks] + [points], None)
-
-
-def _lattice_scores(g, v, w, kind, prior, centre):
-    """:func:`~jaxgrav.match.scoring.score_track` of lattice values ``v`` ``(R, N, A, B)``.
-
-    One pass over ``v`` (weighted sums of the residuals and of their squares, one
-    variadic reduction). For the bias form the residuals are taken about the bias
-    at the lattice centre (zero offset) so that the one-pass form does not cancel
-    badly in float32.
-    """
-    w = w / jnp.sum(w)
-    shape = (1, -1, 1, 1)
-    r = g.reshape(shape) - v
-    if kind == "difference":
-        wd = jnp.concatenate([w[:-1] / jnp.sum(w[:-1]), jnp.zeros((1,), w.dtype)])
-        d = jnp.concatenate([r[:, 1:] - r[:, :-1], jnp.zeros_like(r[:, :1])], axis=1)
-        return tuple(sums([wd.reshape(shape) * d * d, w.reshape(shape) * r], 1))
-    if kind == "absolute":
-        score, _ = sums([w.reshape(shape) * r * r, r], 1)
-        return score, jnp.zeros_like(score)
-    c = sums([w[None, :] * r[:, :, centre, centre]], 1)[0][:, None, None]  # (R, 1, 1)
-    u = r - c[:, None]
-    s1, s2 = sums([w.reshape(shape) * u, w.reshape(shape) * u * u], 1)
-    bias = (s1 + c) / (1.0 + prior)
-    e = bias - c
-    return s2 - 2.0 * e * s1 + e * e + prior * bias * bias, bias
 
 
 @jax.jit
@@ -337,9 +219,9 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None):
     rr = jnp.repeat(rot, on.shape[0])
     w = decreasing_weights(n, config.weight_decay).astype(dtype)
     prior = bias_precision(w, config.noise_mgal, config.bias_sigma_mgal).astype(dtype)
-    frame = _frame(grid, lat, lon)
-    scores, biases = _grid_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e,
-                                  rot, config)
+    frame = track_frame(grid, lat, lon)
+    scores, biases = offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e,
+                                   rot, config)
     k = min(config.k_best, scores.shape[0])
     top = k_smallest(scores, k)
     topk_score = scores[top]
@@ -372,7 +254,7 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None):
     v = patch_values(table, iy_c + ky * (c * north - s * east + p[0]),
                      ix_c + kx * (s * north + c * east + p[1]), config.method)
     final_score, final_bias = score_track(readings, v, w, config.score, prior)
-    mean_off = _means(*local_offsets_m(m_lat, m_lon, lat, lon))
+    mean_off = means(*local_offsets_m(m_lat, m_lon, lat, lon))
     reach = h * config.spacing_m
     edge = (jnp.abs(p[0]) >= reach) | (jnp.abs(p[1]) >= reach)
     n_off = jnp.asarray(scores.shape[0], dtype)
@@ -394,3 +276,36 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None):
         work_pairs=n_off * n,
         status=jnp.where(found, 0, 1) | jnp.where(found & edge, 8, 0),
     )
+
+
+@functools.partial(jax.jit, static_argnames=("chunk",))
+def match_dense_batch(grid, lat, lon, readings, config=DenseConfig(), prepared=None, chunk=128):
+    """:func:`match_dense` over a batch of tracks sharing one map, in chunks.
+
+    Equal to ``jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None, None))``; tracks
+    are matched ``chunk`` at a time (vectorised within a chunk, a loop over chunks),
+    which keeps the intermediates cache-sized: on CPU faster than one ``vmap`` over
+    thousands of tracks.
+
+    Parameters
+    ----------
+    grid : Grid
+        Anomaly map (mGal).
+    lat, lon : Array, shape ``(B, N)``
+        INS-indicated fixes of ``B`` tracks (degrees).
+    readings : Array, shape ``(B, N)``
+        Gravimeter readings (mGal).
+    config : DenseConfig
+    prepared : Array, optional
+        :func:`prepare_map` of ``grid``; computed once here when omitted.
+    chunk : int
+        Tracks per chunk (static).
+
+    Returns
+    -------
+    MatchResult
+        Fields with a leading batch axis ``B``.
+    """
+    table = prepare_map(grid, config.method) if prepared is None else prepared
+    return jax.lax.map(lambda x: match_dense(grid, *x, config, table), (lat, lon, readings),
+                       batch_size=min(chunk, lat.shape[0]))
