@@ -5,6 +5,8 @@ Sub-commands
 ``demo``            the main job on the shipped data (README quick start)
 ``match``           match a track CSV against a map (paper A), write JSON
 ``simulate``        write a track CSV (and its truth) from a matching scenario
+``filter``          gravity/INS filtering of a track CSV: UKF, EKF, Gaussian sum, PMF (paper D)
+``simulate-filter`` write a track CSV (and its truth) from paper D's filtering scenario
 ``sample``          sample a map along a track CSV
 ``dov``             deflection of the vertical along a track (paper C)
 ``montecarlo``      Monte Carlo runs of a method over all devices; NetCDF, summary, PNG
@@ -238,9 +240,10 @@ def build_parser():
     s.add_argument("--force", action="store_true", help="overwrite an existing output")
     s.set_defaults(func=_cmd_sample)
 
-    from jaxgrav import cli_dov
+    from jaxgrav import cli_dov, cli_filter
 
     cli_dov.add_parser(sub)
+    cli_filter.add_parsers(sub)
 
     from jaxgrav import cli_montecarlo
 

@@ -1,0 +1,215 @@
+"""``jaxgrav simulate-filter`` and ``jaxgrav filter`` end to end, in-process through ``main``.
+
+Tracks are tiny (20 min at 10 s, a reading every row) and every command runs in this
+process, so each filter compiles once per module: ukf, pmf on point masses, ekf on a
+NetCDF map; gsf (one more compilation) runs with ``JAXGRAV_SLOW=1``.
+"""
+
+import os
+
+import numpy as np
+import pytest
+
+import jaxgrav as jg
+from jaxgrav.cli import main
+from jaxgrav.constants import DEG
+from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
+from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.tracks import read_track_csv, write_track_csv
+
+OUT_COLUMNS = ["t", "lat", "lon", "sigma_north", "sigma_east"]
+slow = pytest.mark.skipif(
+    os.environ.get("JAXGRAV_SLOW") != "1", reason="slow: set JAXGRAV_SLOW=1 to run"
+)
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    d = tmp_path_factory.mktemp("filter")
+    assert main(["simulate-filter", "--out", str(d / "track.csv"), "--truth",
+                 str(d / "truth.csv"), "--minutes", "20", "--dt", "10", "--reading-every", "1",
+                 "--geometry", "east-west", "--seed", "0"]) == 0
+    return d
+
+
+def _rms_error_m(lat, lon, truth):
+    dn = (lat - truth["lat"]) * DEG * np.asarray(meridian_radius(truth["lat"]))
+    de = ((lon - truth["lon"]) * DEG * np.asarray(prime_vertical_radius(truth["lat"]))
+          * np.cos(truth["lat"] * DEG))
+    half = truth["lat"].size // 2
+    return float(np.sqrt(np.mean(dn[half:] ** 2 + de[half:] ** 2)))
+
+
+def _filter(track, out, *extra, source=("--point-masses", "paper-d")):
+    return main(["filter", *source, "--track", str(track), "--out", str(out), *extra])
+
+
+def test_simulate_filter_writes_track_and_truth(sim):
+    track = read_track_csv(sim / "track.csv")
+    truth = read_track_csv(sim / "truth.csv")
+    assert list(track) == ["t", "lat", "lon", "v_east", "v_north", "gravity"]
+    assert list(truth) == ["t", "lat", "lon", "v_east", "v_north"]
+    assert track["t"].size == truth["t"].size == 121
+    np.testing.assert_allclose(np.diff(track["t"]), 10.0)
+    assert np.isfinite(track["gravity"]).all()
+    assert np.all(np.abs(truth["v_north"]) < 1e-9) and np.allclose(np.abs(truth["v_east"]), 5)
+    # the INS starts 2 km off the truth (paper D)
+    dn = (track["lat"][0] - truth["lat"][0]) * DEG * float(meridian_radius(truth["lat"][0]))
+    de = ((track["lon"][0] - truth["lon"][0]) * DEG * np.cos(truth["lat"][0] * DEG)
+          * float(prime_vertical_radius(truth["lat"][0])))
+    assert np.hypot(dn, de) == pytest.approx(2000.0, rel=1e-6)
+
+
+def test_ukf_beats_the_ins_on_an_east_west_track(sim, tmp_path, capsys):
+    out = tmp_path / "ukf.csv"
+    assert _filter(sim / "track.csv", out, "--method", "ukf") == 0
+    cap = capsys.readouterr()
+    assert f"wrote {out}: ukf over 121 rows (121 readings)" in cap.out
+    assert cap.err == ""  # no status warnings on a clean run
+    res = read_track_csv(out)
+    track = read_track_csv(sim / "track.csv")
+    truth = read_track_csv(sim / "truth.csv")
+    assert list(res) == OUT_COLUMNS
+    np.testing.assert_array_equal(res["t"], track["t"])
+    ins = _rms_error_m(track["lat"], track["lon"], truth)
+    err = _rms_error_m(res["lat"], res["lon"], truth)
+    assert err < 0.7 * ins, (err, ins)
+    # 1-σ shrinks from the prior (1414 m per axis) and is honest to a factor of 3
+    assert np.all(res["sigma_north"][-10:] < 1000) and np.all(res["sigma_east"] <= 1415)
+    assert err < 3 * np.hypot(res["sigma_north"][-1], res["sigma_east"][-1])
+
+
+def _anomaly_map(path, lat, lon):
+    """Paper D's point-mass anomaly sampled on a NetCDF grid (mGal)."""
+    la, lo = np.meshgrid(lat, lon, indexing="ij")
+    values = np.asarray(gravity_anomaly(paper_d(), la, lo))
+    jg.Grid.from_arrays(lat, lon, values, units="mGal").to_netcdf(path)
+    return path
+
+
+def test_ekf_on_a_netcdf_map(sim, tmp_path, capsys):
+    nc = _anomaly_map(tmp_path / "pd.nc", np.linspace(23.9, 24.7, 81),
+                      np.linspace(122.6, 123.3, 71))
+    out = tmp_path / "ekf.csv"
+    assert _filter(sim / "track.csv", out, "--method", "ekf", source=("--map", str(nc))) == 0
+    assert f"on map {nc}" in capsys.readouterr().out
+    res = read_track_csv(out)
+    truth = read_track_csv(sim / "truth.csv")
+    track = read_track_csv(sim / "track.csv")
+    assert list(res) == OUT_COLUMNS and res["t"].size == 121
+    assert np.all(res["sigma_north"] > 0) and np.all(res["sigma_east"] > 0)
+    assert (_rms_error_m(res["lat"], res["lon"], truth)
+            < 0.8 * _rms_error_m(track["lat"], track["lon"], truth))
+
+
+@slow
+def test_gsf_runs(sim, tmp_path):
+    out = tmp_path / "gsf.csv"
+    assert _filter(sim / "track.csv", out, "--method", "gsf") == 0
+    res = read_track_csv(out)
+    truth = read_track_csv(sim / "truth.csv")
+    track = read_track_csv(sim / "track.csv")
+    assert list(res) == OUT_COLUMNS
+    assert (_rms_error_m(res["lat"], res["lon"], truth)
+            < _rms_error_m(track["lat"], track["lon"], truth))
+
+
+@pytest.fixture(scope="module")
+def stride_track(sim):
+    cols = read_track_csv(sim / "track.csv")
+    g = np.full_like(cols["gravity"], np.nan)
+    g[2::3] = cols["gravity"][2::3]  # a reading every 3rd row, from row 2
+    cols["gravity"] = g
+    write_track_csv(sim / "stride.csv", cols)
+    return sim / "stride.csv"
+
+
+def test_pmf_on_a_reading_stride_is_causal(sim, stride_track, tmp_path, capsys):
+    cols = read_track_csv(stride_track)
+    out = tmp_path / "pmf.csv"
+    assert _filter(stride_track, out, "--method", "pmf") == 0
+    assert "(40 readings, updates every 3 rows)" in capsys.readouterr().out
+    res = read_track_csv(out)
+    assert list(res) == OUT_COLUMNS and res["t"].size == 121
+    # rows before the first reading hold the prior; each update is held until the next
+    np.testing.assert_allclose(res["sigma_north"][:2], 1414.2)
+    np.testing.assert_allclose(res["lat"][:2], cols["lat"][:2])
+    for a, b in ((2, 4), (5, 7), (116, 118)):
+        assert np.ptp(res["sigma_east"][a:b + 1]) == 0
+        assert res["sigma_east"][b + 1] != res["sigma_east"][b]
+    truth = read_track_csv(sim / "truth.csv")
+    assert (_rms_error_m(res["lat"], res["lon"], truth)
+            < _rms_error_m(cols["lat"], cols["lon"], truth))
+
+
+def test_force_overwrites_and_its_absence_protects(sim, tmp_path, capsys):
+    out = tmp_path / "o.csv"
+    out.write_text("keep me\n")
+    assert _filter(sim / "track.csv", out) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--out" in err and "exists; pass --force" in err
+    assert out.read_text() == "keep me\n"
+    assert _filter(sim / "track.csv", out, "--force") == 0
+    assert list(read_track_csv(out)) == OUT_COLUMNS
+    # simulate-filter refuses to overwrite either output without --force
+    assert main(["simulate-filter", "--out", str(tmp_path / "new.csv"), "--truth", str(out),
+                 "--minutes", "20", "--dt", "10", "--reading-every", "1"]) == 2
+    assert "exist(s); pass --force" in capsys.readouterr().err
+    assert not (tmp_path / "new.csv").exists()
+
+
+def test_pmf_grid_too_small_warns(stride_track, tmp_path, capsys):
+    # --sigma-pos 300 m: the grid spans ±1.2 km, the INS is 2 km off
+    assert _filter(stride_track, tmp_path / "o.csv", "--method", "pmf",
+                   "--sigma-pos", "300") == 0
+    err = capsys.readouterr().err
+    assert "warning: grid_edge on" in err and "of 121 rows" in err and "--sigma-pos" in err
+
+
+def _bad(kind, cols):
+    if kind == "missing":
+        cols.pop("gravity")
+    elif kind == "nonuniform":
+        cols["t"][7:] += 3.0
+    elif kind == "no readings":
+        cols["gravity"][:] = np.nan
+    elif kind == "nan lat":
+        cols["lat"][3] = np.nan
+    elif kind == "stride":
+        cols["gravity"][:] = np.nan
+        cols["gravity"][[0, 5, 10, 16]] = 1.0
+    return cols
+
+
+@pytest.mark.parametrize(("kind", "extra", "message"), [
+    ("missing", (), "lacks column(s) ['gravity']"),
+    ("nonuniform", (), "column t must have a uniform step; t goes 60 -> 73 s (step 13 s) on "
+                       "lines 8-9, expected 10 s"),
+    ("no readings", (), "column 'gravity' has no readings (all 121 cells empty or NaN)"),
+    ("nan lat", (), "column 'lat' has 1 missing or NaN value(s), first on line 5"),
+    ("stride", ("--method", "pmf"), "--method pmf needs gravity readings at a fixed row stride"),
+    ("ok", ("--map", "ryukyu"), "121 of 121 positions are off the map --map ryukyu"),
+    ("ok", ("--map", "ryukyu", "--point-masses", "paper-d"),
+     "give exactly one of --map MAP.nc and --point-masses paper-d; got both"),
+    ("ok", ("--sigma-pos", "-1"), "--sigma-pos must be a positive, finite standard deviation"),
+    ("ok", ("--sigma-gravity", "nan"), "--sigma-gravity must be a positive"),
+    ("ok", ("--method", "pmf", "--sigma-pos", "10"), "too fine for a 10 s prediction"),
+])
+def test_bad_input_gets_one_clear_line(sim, tmp_path, capsys, kind, extra, message):
+    cols = _bad(kind, read_track_csv(sim / "track.csv"))
+    write_track_csv(tmp_path / "bad.csv", cols)
+    source = () if "--map" in extra else ("--point-masses", "paper-d")
+    code = main(["filter", *source, "--track", str(tmp_path / "bad.csv"),
+                 "--out", str(tmp_path / "o.csv"), *extra])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err.startswith("jaxgrav filter: error: ") and err.count("\n") == 1
+    assert message in err
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_neither_map_nor_point_masses(sim, tmp_path, capsys):
+    code = main(["filter", "--track", str(sim / "track.csv"), "--out", str(tmp_path / "o.csv")])
+    assert code == 2
+    assert "give exactly one of --map MAP.nc and --point-masses paper-d; got neither" in (
+        capsys.readouterr().err)
