@@ -41,8 +41,10 @@ def cholesky(a):
 def psd_sqrt(a, rtol=1e-12):
     """A factor ``L`` with ``L Lᵀ = a`` for a positive *semi*-definite ``a``.
 
-    Cholesky with pivots below ``rtol · max(diag a)`` treated as zero (their column of
-    ``L`` is zero), as for a process-noise matrix with noise-free states.
+    Cholesky with a pivot below ``rtol`` times its own diagonal entry treated as zero
+    (its column of ``L`` is zero), as for a process-noise matrix with noise-free
+    states. The test is relative per state, so states in very different units
+    (m/s next to rad/s) keep their noise.
 
     Parameters
     ----------
@@ -54,11 +56,10 @@ def psd_sqrt(a, rtol=1e-12):
     Array, shape ``(n, n)``
     """
     n = a.shape[-1]
-    tol = rtol * jnp.max(jnp.abs(jnp.diag(a)))
     low = jnp.zeros_like(a)
     for j in range(n):
         pivot = a[j, j] - jnp.sum(low[j, :j] ** 2)
-        ok = pivot > tol
+        ok = pivot > rtol * jnp.abs(a[j, j])
         d = jnp.sqrt(jnp.where(ok, pivot, 1.0))
         low = low.at[j, j].set(jnp.where(ok, d, 0.0))
         if j + 1 < n:

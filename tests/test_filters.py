@@ -508,7 +508,8 @@ def test_gaussian_sum_with_one_component_equals_its_base(dynamics, prior, runs):
     _, infos = run_one(UKF, FIELD, dynamics, x0, p0, steps)
     for name in fl.StepInfo._fields:
         a, b = np.asarray(getattr(infos, name)), np.asarray(getattr(infos_gs, name))
-        np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12, err_msg=name)
+        # equal but for rounding: the base runs inside a vmap over one component
+        np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-9, err_msg=name)
 
 
 @pytest.mark.parametrize(("per_axis", "spacing"), [(5, 0.8), (3, 0.5), (7, 0.6)])
