@@ -299,7 +299,8 @@ def match_dense_batch(grid, lat, lon, readings, config=DenseConfig(), prepared=N
     prepared : Array, optional
         :func:`prepare_map` of ``grid``; computed once here when omitted.
     chunk : int
-        Tracks per chunk (static).
+        Most tracks per chunk (static); the batch is cut into equal chunks, the
+        last one padded with copies of the first track (results dropped).
 
     Returns
     -------
@@ -307,5 +308,12 @@ def match_dense_batch(grid, lat, lon, readings, config=DenseConfig(), prepared=N
         Fields with a leading batch axis ``B``.
     """
     table = prepare_map(grid, config.method) if prepared is None else prepared
-    return jax.lax.map(lambda x: match_dense(grid, *x, config, table), (lat, lon, readings),
-                       batch_size=min(chunk, lat.shape[0]))
+    b = lat.shape[0]
+    n_chunks = -(-b // chunk)
+    size = -(-b // n_chunks)  # equal chunks: one compiled body (no remainder branch)
+    pad = n_chunks * size - b
+    xs = tuple(jnp.concatenate([a, jnp.broadcast_to(a[:1], (pad, *a.shape[1:]))])
+               if pad else a for a in (lat, lon, readings))
+    xs = tuple(a.reshape(n_chunks, size, *a.shape[1:]) for a in xs)
+    out = jax.lax.map(jax.vmap(lambda x: match_dense(grid, *x, config, table)), xs)
+    return jax.tree.map(lambda a: a.reshape(n_chunks * size, *a.shape[2:])[:b], out)
