@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav.constants import DEG
+from jaxgrav.match.scoring import k_smallest
 
 __all__ = [
     "ChainSearch",
@@ -54,12 +55,13 @@ class ChainSearch(NamedTuple):
 def kmin(x, k):
     """The k smallest entries along the last axis, ascending, and their indices.
 
-    Ranks in float32 (XLA's CPU top-k is many times faster in float32 than in
-    float64) and returns the exact values gathered from ``x``; entries closer than
-    float32 resolution may come out in either order. (For the k = 16 of the chain
-    search a sort beats k arg-min passes, unlike the dense path's k = 5.)
+    Ranks in float32 with ties to the lower index (the ranking of
+    ``lax.top_k(-x.astype(float32), k)``), by ``k`` arg-min passes
+    (:func:`~jaxgrav.match.scoring.k_smallest`; XLA's CPU top-k sorts whole rows),
+    and returns the exact values gathered from ``x``; entries closer than float32
+    resolution may come out in either order.
     """
-    _, idx = jax.lax.top_k(-x.astype(jnp.float32), k)
+    idx = k_smallest(x, k)
     return jnp.take_along_axis(x, idx, axis=-1), idx
 
 
