@@ -258,30 +258,6 @@ def test_jit_no_retrace_and_vmap_equals_loop(smooth_grid):
         np.testing.assert_array_equal(bc.status[i], one.status)
 
 
-def test_chain_survivor_compaction(smooth_grid):
-    """Compacting survivors changes nothing but the work; too few slots raise overflow."""
-    keys = jax.random.split(jax.random.key(9), 3)
-    data = [_scenario(k, smooth_grid, 8, 60.0, 700.0, 0.3)[1:] for k in keys]
-    lat, lon, g = (jnp.stack(x) for x in zip(*data, strict=True))
-    base = ChainConfig(half_size=6, capacity=169, delta=1.0)
-    run = jax.vmap(match_chains, in_axes=(None, 0, 0, 0, None))
-    full = run(smooth_grid, lat, lon, g, base)
-    alive = jax.vmap(lambda a, b, c: jnp.sum(chains.eliminate(
-        cand_mod.iso_candidates(smooth_grid, a, b, c, half_size=6, capacity=169, delta=1.0),
-        cand_mod.local_offsets_m(a[1:], b[1:], a[:-1], b[:-1]),
-        base.step_tol_m + jnp.hypot(*smooth_grid.spacing_m(jnp.mean(a))),
-        base.angle_tol_deg), axis=1))(lat, lon, g)
-    most = int(jnp.max(alive))
-    assert 2 < most < 169
-    comp = run(smooth_grid, lat, lon, g, dataclasses.replace(base, survivor_capacity=most))
-    for name in ("lat", "lon", "score", "topk_score", "chosen", "status", "work_constrained",
-                 "work_pairs", "n_candidates"):
-        np.testing.assert_allclose(getattr(comp, name), getattr(full, name), rtol=1e-12,
-                                   err_msg=name)
-    tight = run(smooth_grid, lat, lon, g, dataclasses.replace(base, survivor_capacity=2))
-    assert np.all(np.asarray(tight.status) & 2)
-
-
 def test_no_chain_returns_ins_with_status(rough_grid):
     lat = 30 + np.arange(5) * 0.05
     lon = 130 + np.arange(5) * 0.05

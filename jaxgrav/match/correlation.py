@@ -25,13 +25,7 @@ import jax.numpy as jnp
 
 from jaxgrav._pytree import static_field
 from jaxgrav.match.candidates import iso_candidates, local_offsets_m
-from jaxgrav.match.chains import (
-    compact,
-    count_chains,
-    eliminate,
-    kbest_chains,
-    step_compatibility,
-)
+from jaxgrav.match.chains import count_chains, eliminate, kbest_chains
 from jaxgrav.match.result import MatchResult, nearest_to_ins
 from jaxgrav.match.scoring import SCORES, decreasing_weights, score_track
 
@@ -69,12 +63,6 @@ class ChainConfig:
         Window half-width in map nodes (static).
     capacity : int
         Candidate slots per fix (static).
-    survivor_capacity : int
-        Slots per fix after elimination (static; 0 = ``capacity``). The survivors
-        are moved into this smaller set, on which the compatibility of each step is
-        computed once and the chain count and dynamic programme run: far less work
-        than on all ``capacity`` slots. More survivors than this raise the overflow
-        flag (the best-fitting are kept; the elimination is repeated on them).
     k_dp : int
         Chains kept per candidate by the dynamic programme (static).
     k_best : int
@@ -93,7 +81,6 @@ class ChainConfig:
     weight_decay: float = 0.5
     half_size: int = static_field(8)
     capacity: int = static_field(128)
-    survivor_capacity: int = static_field(0)
     k_dp: int = static_field(16)
     k_best: int = static_field(5)
     score: str = static_field("difference")
@@ -152,15 +139,8 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
     alive = eliminate(cands, steps, *tol)
     dtype = jnp.result_type(cands.value.dtype, readings.dtype)
     work_unconstrained = jnp.prod(cands.count.astype(dtype))
+    work_constrained = count_chains(cands, alive, steps, *tol)
     work_pairs = jnp.sum(jnp.sum(alive[:-1], axis=1) * jnp.sum(alive[1:], axis=1))
-    n_candidates, complete, overflow = cands.count, cands.window_complete, cands.overflow
-    compat = None
-    if 0 < config.survivor_capacity < config.capacity:
-        cands, lost = compact(cands, alive, config.survivor_capacity)
-        compat = step_compatibility(cands, steps, *tol)
-        alive = eliminate(cands, steps, *tol, compat=compat)  # unchanged unless `lost`
-        overflow = overflow | lost
-    work_constrained = count_chains(cands, alive, steps, *tol, compat=compat)
 
     w = decreasing_weights(n, config.weight_decay)
     if config.score == "absolute":
@@ -169,7 +149,7 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
     else:
         unary = jnp.zeros(cands.value.shape, dtype)
         pair = _pair_cost(readings, w[:-1] / jnp.sum(w[:-1]))
-    search = kbest_chains(cands, alive, steps, *tol, unary, pair, config.k_dp, compat=compat)
+    search = kbest_chains(cands, alive, steps, *tol, unary, pair, config.k_dp)
 
     fix = jnp.arange(n)[None, :]
     values = cands.value[fix, search.index]  # (K_dp, N)
@@ -187,8 +167,8 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
     edge = _on_window_edge(grid, cands, idx[chosen], lat, lon, config.half_size)
     status = (
         jnp.where(found, 0, 1)
-        | jnp.where(jnp.any(overflow), 2, 0)
-        | jnp.where(jnp.all(complete), 0, 4)
+        | jnp.where(jnp.any(cands.overflow), 2, 0)
+        | jnp.where(jnp.all(cands.window_complete), 0, 4)
         | jnp.where(found & edge, 8, 0)
     )
     return MatchResult(
@@ -203,7 +183,7 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
         topk_lon=topk_lon,
         topk_score=topk_score,
         chosen=chosen,
-        n_candidates=n_candidates,
+        n_candidates=cands.count,
         work_unconstrained=work_unconstrained,
         work_constrained=work_constrained,
         work_pairs=work_pairs.astype(dtype),
