@@ -35,7 +35,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import datasets
-from jaxgrav._linalg import inv_2x2
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.match.filters import (
     FilterScenario,
@@ -45,21 +44,11 @@ from jaxgrav.match.filters import (
     initial_state,
     pmf,
     run_filter,
+    run_metrics,
     run_pmf,
     run_steps,
     ukf,
 )
-
-
-def run_metrics(run, est, p_pos):
-    """Second-hour RMS of INS and filter position errors (m), and mean position NEES."""
-    true = run.errors[1:, :2]
-    err = true - est
-    half = true.shape[0] // 2
-    rms_f = jnp.sqrt(jnp.mean(jnp.sum(err[half:] ** 2, -1)))
-    rms_i = jnp.sqrt(jnp.mean(jnp.sum(true[half:] ** 2, -1)))
-    nees = jax.vmap(lambda e, p: e @ inv_2x2(p) @ e)(err[half:], p_pos[half:])
-    return rms_i, rms_f, jnp.mean(nees)
 
 
 def make_one(method, scenario):
@@ -74,9 +63,9 @@ def make_one(method, scenario):
         else:
             filt = {"ekf": ekf(), "ukf": ukf(), "gsf-ukf": gaussian_sum(ukf(), 3, 1.0)}[method]
             _, info = run_filter(filt, field, dynamics, x0, p0, steps)
-        rms_i, rms_f, nees = run_metrics(run, info.x[:, :2], info.p_pos)
+        m = run_metrics(run, info)
         turned = jnp.abs(run.truth.lat[-1] - run.truth.lat[0]) > 0.05
-        return rms_i, rms_f, nees, turned
+        return m["ins_err_m"], m["err_m"], m["nees"], turned
 
     return one
 

@@ -16,6 +16,21 @@ import jax.numpy as jnp
 __all__ = ["cholesky", "expm", "inv_2x2", "psd_sqrt"]
 
 
+def _cholesky(a, rtol):
+    """Column-by-column Cholesky; ``rtol=None``: NaN on a non-positive pivot, else zero column."""
+    n = a.shape[-1]
+    low = jnp.zeros_like(a)
+    for j in range(n):  # unrolls over the (static, small) matrix size
+        pivot = a[j, j] - jnp.sum(low[j, :j] ** 2)
+        ok = True if rtol is None else pivot > rtol * jnp.abs(a[j, j])
+        d = jnp.sqrt(jnp.where(ok, pivot, 1.0))
+        low = low.at[j, j].set(jnp.where(ok, d, 0.0))
+        if j + 1 < n:
+            col = (a[j + 1 :, j] - low[j + 1 :, :j] @ low[j, :j]) / d
+            low = low.at[j + 1 :, j].set(jnp.where(ok, col, 0.0))
+    return low
+
+
 def cholesky(a):
     """Lower Cholesky factor of a small symmetric matrix; NaN where it is not positive definite.
 
@@ -28,14 +43,7 @@ def cholesky(a):
     -------
     Array, shape ``(n, n)``
     """
-    n = a.shape[-1]
-    low = jnp.zeros_like(a)
-    for j in range(n):
-        d = jnp.sqrt(a[j, j] - jnp.sum(low[j, :j] ** 2))
-        low = low.at[j, j].set(d)
-        if j + 1 < n:
-            low = low.at[j + 1 :, j].set((a[j + 1 :, j] - low[j + 1 :, :j] @ low[j, :j]) / d)
-    return low
+    return _cholesky(a, None)
 
 
 def psd_sqrt(a, rtol=1e-12):
@@ -55,17 +63,7 @@ def psd_sqrt(a, rtol=1e-12):
     -------
     Array, shape ``(n, n)``
     """
-    n = a.shape[-1]
-    low = jnp.zeros_like(a)
-    for j in range(n):
-        pivot = a[j, j] - jnp.sum(low[j, :j] ** 2)
-        ok = pivot > rtol * jnp.abs(a[j, j])
-        d = jnp.sqrt(jnp.where(ok, pivot, 1.0))
-        low = low.at[j, j].set(jnp.where(ok, d, 0.0))
-        if j + 1 < n:
-            col = (a[j + 1 :, j] - low[j + 1 :, :j] @ low[j, :j]) / d
-            low = low.at[j + 1 :, j].set(jnp.where(ok, col, 0.0))
-    return low
+    return _cholesky(a, rtol)
 
 
 def expm(a, order=14):

@@ -201,34 +201,20 @@ def _check(drift, noise, n):
 
 
 # ----------------------------------------------------------------- paper-D filters (D)
-def _filter_metrics(run, infos):
-    """Per-run metrics of a filter over the second half of a paper-D run."""
-    from jaxgrav._linalg import inv_2x2
-    from jaxgrav.match.filters import STATUS_FILTER
-
-    truth = run.errors[1:, :2]  # infos[k] is the posterior at state k + 1
-    half = truth.shape[0] // 2
-    e_ins = truth[half:]
-    e_filt = e_ins - infos.x[half:, :2]
-    info = jax.vmap(inv_2x2)(infos.p_pos[half:])  # closed form: no batched LAPACK (deadlocks)
-    nees = jnp.einsum("ti,tij,tj->t", e_filt, info, e_filt)
-    status = jnp.bitwise_or.reduce(infos.status) & ~STATUS_FILTER["no_reading"]
-    return dict(
-        ins_err_m=jnp.sqrt(jnp.mean(jnp.sum(e_ins**2, -1))),
-        err_m=jnp.sqrt(jnp.mean(jnp.sum(e_filt**2, -1))),
-        status=jnp.asarray(status, jnp.int32),
-        nees=jnp.mean(nees),
-    )
-
-
 def _kalman_run(key, field, scenario, filt):
-    from jaxgrav.match.filters import filter_scenario, initial_state, run_filter, run_steps
+    from jaxgrav.match.filters import (
+        filter_scenario,
+        initial_state,
+        run_filter,
+        run_metrics,
+        run_steps,
+    )
 
     run = filter_scenario(key, field, scenario)
     dynamics, steps = run_steps(run, scenario)
     x0, p0 = initial_state(scenario)
     _, infos = run_filter(filt, field, dynamics, x0, p0, steps)
-    return _filter_metrics(run, infos)
+    return run_metrics(run, infos)
 
 
 def ukf_run(key, field, scenario):
@@ -275,7 +261,14 @@ def pmf_run(key, field, scenario):
     scenario.reading_every``); between readings the estimate is held. Returns as
     :func:`ukf_run`.
     """
-    from jaxgrav.match.filters import filter_scenario, initial_state, pmf, run_pmf, run_steps
+    from jaxgrav.match.filters import (
+        filter_scenario,
+        initial_state,
+        pmf,
+        run_metrics,
+        run_pmf,
+        run_steps,
+    )
 
     run = filter_scenario(key, field, scenario)
     _, steps = run_steps(run, scenario)
@@ -285,7 +278,7 @@ def pmf_run(key, field, scenario):
     pad = -t % every  # readings sit on steps every-1, 2 every-1, …; pad to a multiple
     steps = jax.tree.map(lambda a: jnp.concatenate([a, jnp.repeat(a[-1:], pad, 0)]), steps)
     _, infos = run_pmf(pmf(), field, scenario.dt, x0, p0, steps, every)
-    return _filter_metrics(run, jax.tree.map(lambda a: a[:t], infos))
+    return run_metrics(run, jax.tree.map(lambda a: a[:t], infos))
 
 
 _FILTER_RUNS = {

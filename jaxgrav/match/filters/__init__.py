@@ -24,6 +24,7 @@ from jaxgrav.match.filters.paper_d import (
     FilterScenario,
     filter_scenario,
     initial_state,
+    run_metrics,
     run_steps,
 )
 from jaxgrav.match.filters.pmf import PMFState, pmf, run_pmf
@@ -48,6 +49,7 @@ __all__ = [
     "pmf",
     "predict",
     "run_filter",
+    "run_metrics",
     "run_pmf",
     "run_steps",
     "sigma_weights",

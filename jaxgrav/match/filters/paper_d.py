@@ -15,10 +15,11 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from jaxgrav._linalg import inv_2x2
 from jaxgrav._pytree import static_field
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-from jaxgrav.match.filters.model import Dynamics, Step, map_anomaly
+from jaxgrav.match.filters.model import STATUS_FILTER, Dynamics, Step, map_anomaly
 from jaxgrav.sim.ins import (
     INSErrorModel,
     initial_covariance,
@@ -28,7 +29,14 @@ from jaxgrav.sim.ins import (
 )
 from jaxgrav.sim.trajectory import Track, track_from_heading
 
-__all__ = ["FilterRun", "FilterScenario", "filter_scenario", "initial_state", "run_steps"]
+__all__ = [
+    "FilterRun",
+    "FilterScenario",
+    "filter_scenario",
+    "initial_state",
+    "run_metrics",
+    "run_steps",
+]
 
 _DEFAULT_INS = INSErrorModel()
 MASS_LON = 122.918751
@@ -192,3 +200,34 @@ def run_steps(run, scenario=FilterScenario()):
     t = run.ins_lat.shape[0] - 1
     r = jnp.full(t, jnp.square(s.noise_mgal))
     return Dynamics(f, q), Step(run.ins_lat[1:], run.ins_lon[1:], run.readings[1:], r)
+
+
+def run_metrics(run, infos):
+    """Paper D's scores of one filtered run, over the second half of the run (the second hour).
+
+    Parameters
+    ----------
+    run : FilterRun
+    infos : StepInfo
+        Leading axis ``T − 1``: ``infos[k]`` is the posterior at state ``k + 1``.
+
+    Returns
+    -------
+    dict of str to Array
+        ``ins_err_m`` and ``err_m``: RMS horizontal position error of the INS and of
+        the filter (m); ``status``: OR of the steps' flags without ``no_reading``
+        (int32); ``nees``: mean position NEES (2 for honest 1-σ bounds).
+    """
+    truth = run.errors[1:, :2]
+    half = truth.shape[0] // 2
+    e_ins = truth[half:]
+    e_filt = e_ins - infos.x[half:, :2]
+    info = jax.vmap(inv_2x2)(infos.p_pos[half:])  # closed form: no batched LAPACK (deadlocks)
+    nees = jnp.einsum("ti,tij,tj->t", e_filt, info, e_filt)
+    status = jnp.bitwise_or.reduce(infos.status) & ~STATUS_FILTER["no_reading"]
+    return dict(
+        ins_err_m=jnp.sqrt(jnp.mean(jnp.sum(e_ins**2, -1))),
+        err_m=jnp.sqrt(jnp.mean(jnp.sum(e_filt**2, -1))),
+        status=jnp.asarray(status, jnp.int32),
+        nees=jnp.mean(nees),
+    )
