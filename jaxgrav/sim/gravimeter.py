@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav._linalg import expm
 from jaxgrav._pytree import static_field
 from jaxgrav._validate import check_finite, check_latitude, concrete
 from jaxgrav.constants import MGAL
@@ -119,23 +120,9 @@ def platform_discrete(platform, dt):
     b = jnp.stack([0.0 * w0, w0**2 / platform.g])
     m = jnp.zeros((4, 4), dtype=a.dtype)
     m = m.at[:2, :2].set(a).at[:2, 2].set(b).at[2, 3].set(1.0)
-    e = _expm_small(m * dt)
+    e = expm(m * dt)
     gam, lam = e[:2, 2], e[:2, 3] / dt  # ∫e^{Aτ}B dτ and ∫e^{A(dt−s)}B s/dt ds
     return e[:2, :2], gam - lam, lam
-
-
-def _expm_small(m, squarings=16, order=10):
-    """Matrix exponential of a small matrix: Taylor series of ``e^{X} − I`` after scaling
-    by ``2^−squarings``, then ``D ← 2D + D²`` (squaring ``I + D`` without losing D's
-    digits). Cheap to compile, differentiable; accurate for ``‖m‖ ≲ 10³``."""
-    x = m / 2.0**squarings
-    term, d = x, x
-    for k in range(2, order + 1):
-        term = term @ x / k
-        d = d + term
-    for _ in range(squarings):
-        d = 2.0 * d + d @ d
-    return jnp.eye(m.shape[0], dtype=m.dtype) + d
 
 
 @jax.tree_util.register_dataclass
