@@ -36,6 +36,7 @@ from jaxgrav.sim import DEG_ARC_M
 
 __all__ = [
     "BUILDERS",
+    "FILTER_METHODS",
     "METRICS",
     "MethodSpec",
     "build",
@@ -338,6 +339,9 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None):
     bits = {b: name for name, b in STATUS_FILTER.items() if b and name != "no_reading"}
     return MethodSpec(fn, (paper_d(), scen), settings, bits)
 
+
+FILTER_METHODS = tuple(_FILTER_RUNS)
+"""Names of the paper-D filters (errors are RMS over the second half of a run, with NEES)."""
 
 BUILDERS = {
     "correlation": correlation_builder,
