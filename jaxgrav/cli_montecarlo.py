@@ -25,7 +25,9 @@ def add_parsers(subparsers):
 
     m = subparsers.add_parser("montecarlo", help="Monte Carlo runs of a method on all devices")
     m.add_argument("--method", required=True, choices=sorted(BUILDERS),
-                   help="correlation: paper A dense matcher; entropy+iccp: paper B")
+                   help="correlation: paper A dense matcher; entropy+iccp: paper B; "
+                        "ukf, ekf, gsf (Gaussian-sum UKF), pmf (grid point-mass filter): "
+                        "paper D's filters over its three point masses")
     m.add_argument("--runs", type=int, required=True, help="number of simulated runs")
     m.add_argument("--chunk", type=int, default=None,
                    help="runs per compiled call (bounds memory; default 256)")
@@ -33,16 +35,19 @@ def add_parsers(subparsers):
     m.add_argument("--devices", type=int, default=None,
                    help="use this many devices (default all; on a CPU the host is split "
                         "into this many devices when JAX has not started yet)")
-    m.add_argument("--map", default="ryukyu",
-                   help="map simulated and matched: NetCDF grid or shipped map (default "
-                        "ryukyu, the 2.5' EGM2008 anomaly)")
+    m.add_argument("--map", default=None,
+                   help="matchers: map simulated and matched, a NetCDF grid or shipped map "
+                        "(default ryukyu, the 2.5' EGM2008 anomaly); the filters run on "
+                        "paper D's point masses and take no --map")
     m.add_argument("--drift", type=float, default=None,
-                   help="INS drift (degrees of arc); correlation: fixed radius (default "
-                        "0.035); entropy+iccp: offset uniform in [2/3, 1] x drift (default 0.03)")
+                   help="INS error (degrees of arc); correlation: drift radius (default "
+                        "0.035); entropy+iccp: offset uniform in [2/3, 1] x drift (default "
+                        "0.03); filters: initial position error (default 0.018 = 2 km)")
     m.add_argument("--noise", type=float, default=None,
                    help="reading noise sigma (mGal, default 1)")
     m.add_argument("--fixes", type=int, default=None,
-                   help="fixes per track (default 30 correlation, 60 entropy+iccp)")
+                   help="fixes per track (default 30 correlation, 60 entropy+iccp); "
+                        "filters: readings 10 s apart, start included (default 721 = 2 h)")
     m.add_argument("--out", required=True,
                    help="results NetCDF (one value per run); a PNG of the errors is written "
                         "next to it with suffix .png")
@@ -62,22 +67,35 @@ def add_parsers(subparsers):
 
 
 # ----------------------------------------------------------------------- montecarlo
-def summarize(results):
+FAILURE_RATIO = {"matcher": 1.0 / 3.0, "filter": 1.05}
+"""A run fails when its error exceeds this multiple of the INS error: a matcher
+must cut the error to a third (paper A's goal), a filter must do no harm (paper D's
+"at most 1.05x the INS")."""
+
+
+def summarize(results, kind="matcher"):
     """Summary of per-run errors.
 
     Parameters
     ----------
     results : dict
-        ``ins_err_m``, ``err_m`` (m) and ``status``, each of shape ``(n_runs,)``.
+        ``ins_err_m``, ``err_m`` (m) and ``status``, each of shape ``(n_runs,)``;
+        for filters also ``nees``.
+    kind : {"matcher", "filter"}
+        Picks the failure criterion, :data:`FAILURE_RATIO`.
 
     Returns
     -------
     dict
         ``runs``; ``ins_err_m``, ``err_m`` and ``ratio`` (error / INS error, per run),
-        each a dict of ``mean`` and ``p5 … p95`` over finite values; ``failure_rate``
-        (error > INS/3, or not finite), ``flagged_rate`` (status ≠ 0),
-        ``improved_rate`` (error < INS), ``nonfinite`` (count).
+        each a dict of ``mean`` and ``p5 … p95`` over finite values; ``failure_ratio``
+        and ``failure_rate`` (error > failure_ratio × INS, or not finite),
+        ``flagged_rate`` (status ≠ 0), ``improved_rate`` (error < INS), ``nonfinite``
+        (count); with ``nees`` in ``results`` also ``nees`` (its statistics).
     """
+    if kind not in FAILURE_RATIO:
+        raise ValueError(f"kind must be one of {sorted(FAILURE_RATIO)}; got {kind!r}")
+    limit = FAILURE_RATIO[kind]
     ins = np.asarray(results["ins_err_m"], float)
     err = np.asarray(results["err_m"], float)
     status = np.asarray(results["status"])
@@ -92,16 +110,20 @@ def summarize(results):
                                                      strict=True)}}
 
     finite = np.isfinite(err)
-    return dict(
+    out = dict(
         runs=int(err.size),
         ins_err_m=stats(ins),
         err_m=stats(err),
         ratio=stats(ratio),
-        failure_rate=float(np.mean(~finite | (err > ins / 3))),
+        failure_ratio=float(limit),
+        failure_rate=float(np.mean(~finite | (err > limit * ins))),
         flagged_rate=float(np.mean(status != 0)),
         improved_rate=float(np.mean(finite & (err < ins))),
         nonfinite=int((~finite).sum()),
     )
+    if "nees" in results:
+        out["nees"] = stats(np.asarray(results["nees"], float))
+    return out
 
 
 def format_summary(s):
@@ -113,13 +135,19 @@ def format_summary(s):
                             ("error (m)", "err_m", "{:>10.0f}"),
                             ("error / INS", "ratio", "{:>10.3f}")):
         rows.append(f"{label:<16}" + "".join(fmt.format(s[key][c]) for c in cols))
-    rows.append(f"failure rate (error > INS/3 or not finite): {100 * s['failure_rate']:.1f} %; "
+    if "nees" in s:
+        rows.append(f"{'position NEES':<16}" + "".join(f"{s['nees'][c]:>10.2f}" for c in cols)
+                    + "   (2 expected)")
+    limit = s["failure_ratio"]
+    bound = "INS/3" if abs(limit - 1 / 3) < 1e-12 else f"{limit:g} x INS"
+    rows.append(f"failure rate (error > {bound} or not finite): {100 * s['failure_rate']:.1f} %; "
                 f"improved on the INS: {100 * s['improved_rate']:.1f} %; "
                 f"status flagged: {100 * s['flagged_rate']:.1f} %")
     return "\n".join(rows)
 
 
-def _plot_errors(results, summary, title, path, force):
+def _plot_errors(results, summary, title, path, force, label="matched",
+                 xlabel="mean track error (m)"):
     import matplotlib.pyplot as plt
 
     from jaxgrav.plot import save_figure
@@ -131,22 +159,23 @@ def _plot_errors(results, summary, title, path, force):
     lo, hi = (pos.min(), pos.max()) if pos.size else (1.0, 10.0)
     bins = np.geomspace(max(lo, 1e-3), max(hi, lo * 1.01, 1e-3 * 1.01), 40)
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(12, 4.5))
-    for label, v in (("INS", ins), ("matched", err)):
+    for name, v in (("INS", ins), (label, err)):
         v = v[np.isfinite(v)]
-        ax0.hist(v, bins=bins, alpha=0.6, label=f"{label} (median {np.median(v):.0f} m)"
-                 if v.size else label)
-        ax1.plot(np.sort(v), np.arange(1, v.size + 1) / max(v.size, 1), label=label)
+        ax0.hist(v, bins=bins, alpha=0.6, label=f"{name} (median {np.median(v):.0f} m)"
+                 if v.size else name)
+        ax1.plot(np.sort(v), np.arange(1, v.size + 1) / max(v.size, 1), label=name)
     ax0.set_xscale("log")
-    ax0.set_xlabel("mean track error (m)")
+    ax0.set_xlabel(xlabel)
     ax0.set_ylabel("runs")
     ax0.legend()
     ax1.set_xscale("log")
-    ax1.set_xlabel("mean track error (m)")
+    ax1.set_xlabel(xlabel)
     ax1.set_ylabel("fraction of runs ≤ error")
     ax1.grid(True, which="both", alpha=0.3)
     ax1.legend(loc="lower right")
     ax0.set_title(title)
-    ax1.set_title(f"failure rate {100 * summary['failure_rate']:.1f} %, median error / INS "
+    ax1.set_title(f"error > {summary['failure_ratio']:.3g} x INS: "
+                  f"{100 * summary['failure_rate']:.1f} %, median error / INS "
                   f"{summary['ratio']['p50']:.3f}")
     save_figure(fig, path, force=force)
 
@@ -181,7 +210,7 @@ def cmd_montecarlo(args):
 
     from jaxgrav import __version__, montecarlo
     from jaxgrav.cli import _load_map
-    from jaxgrav.montecarlo_methods import METRICS, build
+    from jaxgrav.montecarlo_methods import FILTER_METHODS, METRICS, build
 
     out = Path(args.out)
     png = out.with_suffix(".png")
@@ -193,11 +222,16 @@ def cmd_montecarlo(args):
     for name, value in (("--runs", args.runs), ("--chunk", args.chunk)):
         if value is not None and value < 1:
             raise ValueError(f"{name} must be a positive number of runs; got {value}")
-    grid = _load_map(args.map, None)
+    kind = "filter" if args.method in FILTER_METHODS else "matcher"
+    if kind == "filter" and args.map is not None:
+        raise ValueError(f"--map {args.map!r} cannot be used with --method {args.method}: the "
+                         "filters run paper D's experiment on its three point masses")
+    grid = None if kind == "filter" else _load_map(args.map or "ryukyu", None)
     spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes)
     n_dev = args.devices or len(jax.devices())
     print(f"jaxgrav montecarlo: {args.method} ({spec.settings['description']}), {args.runs} "
-          f"runs on {n_dev} {jax.devices()[0].platform} device(s), map {args.map}")
+          f"runs on {n_dev} {jax.devices()[0].platform} device(s), "
+          + ("paper D's point masses" if kind == "filter" else f"map {args.map or 'ryukyu'}"))
     t0 = time.perf_counter()
     results = montecarlo.run(spec.fn, jax.random.key(args.seed), args.runs, chunk=args.chunk,
                              devices=args.devices, progress=not args.no_progress,
@@ -206,14 +240,15 @@ def cmd_montecarlo(args):
     missing = [k for k in METRICS if k not in results]
     if missing:
         raise ValueError(f"method {args.method!r} does not return {missing}")
-    summary = summarize(results)
+    summary = summarize(results, kind)
     print(format_summary(summary))
     print(f"{args.runs} runs in {seconds:.1f} s ({args.runs / seconds:.1f} runs/s, "
           "compilation included)")
     attrs = dict(
         title=f"jaxgrav montecarlo --method {args.method}", method=args.method,
         runs=args.runs, seed=args.seed, chunk=args.chunk or montecarlo.DEFAULT_CHUNK,
-        devices=n_dev, map=str(args.map), seconds=round(seconds, 3),
+        devices=n_dev, map="paper-d" if kind == "filter" else str(args.map or "ryukyu"),
+        seconds=round(seconds, 3),
         jax_version=jax.__version__, jaxgrav_version=__version__,
         command=_command(args),
         status_bits=json.dumps({str(k): v for k, v in spec.status_bits.items()}),
@@ -223,7 +258,11 @@ def cmd_montecarlo(args):
            for c, v in d.items()},
     )
     montecarlo.write_netcdf(results, out, attrs=attrs, force=args.force)
-    _plot_errors(results, summary, f"{args.method}: {args.runs} runs", png, args.force)
+    if kind == "filter":
+        _plot_errors(results, summary, f"{args.method}: {args.runs} runs", png, args.force,
+                     label="filtered", xlabel="RMS position error, second half of the run (m)")
+    else:
+        _plot_errors(results, summary, f"{args.method}: {args.runs} runs", png, args.force)
     print(f"wrote {out} and {png}")
 
 

@@ -84,6 +84,39 @@ def test_montecarlo_bad_input(tmp_path, capsys, args, match):
     assert not (tmp_path / "x.nc").exists()
 
 
+def test_montecarlo_filter_summary_uses_no_harm_bound(tmp_path, capsys):
+    out = tmp_path / "ukf.nc"
+    assert main(["montecarlo", "--method", "ekf", "--runs", "4", "--chunk", "2", "--fixes",
+                 "40", "--out", str(out), "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "paper D's point masses" in text and "position NEES" in text
+    assert "failure rate (error > 1.05 x INS or not finite)" in text
+    with xr.open_dataset(out) as ds:
+        a = ds.attrs
+        assert a["map"] == "paper-d" and a["summary_failure_ratio"] == 1.05
+        assert a["summary_nees_mean"] == pytest.approx(float(ds["nees"].mean()))
+        ratio = ds["err_m"].values / ds["ins_err_m"].values
+        assert a["summary_failure_rate"] == pytest.approx(float(np.mean(ratio > 1.05)))
+
+
+def test_montecarlo_filter_refuses_a_map(tmp_path, capsys):
+    code = main(["montecarlo", "--method", "ukf", "--runs", "4", "--map", "ryukyu", "--out",
+                 str(tmp_path / "x.nc")])
+    assert code == 2
+    assert "--map 'ryukyu' cannot be used with --method ukf" in capsys.readouterr().err
+
+
+def test_summarize_failure_bounds():
+    from jaxgrav.cli_montecarlo import summarize
+
+    res = dict(ins_err_m=np.array([300.0, 300, 300]), err_m=np.array([90.0, 150, 310]),
+               status=np.zeros(3, np.int32))
+    assert summarize(res)["failure_rate"] == pytest.approx(2 / 3)  # > INS/3: 150 and 310
+    assert summarize(res, "filter")["failure_rate"] == pytest.approx(0.0)  # none > 315
+    with pytest.raises(ValueError, match="kind must be one of"):
+        summarize(res, "smoother")
+
+
 @slow
 def test_montecarlo_entropy_iccp(tmp_path):
     out = tmp_path / "b.nc"
