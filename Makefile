@@ -29,7 +29,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 
 bench: $(STAMP)
-	for f in benchmarks/*.py; do $(BIN)/python $$f --quick || exit 1; done
+	$(BIN)/jaxgrav bench --quick --force --out bench.md
 
 clean:
 	rm -rf $(VENV) demo_output .pytest_cache .ruff_cache

@@ -15,7 +15,8 @@ Lines (JSON, ``_common.emit``):
 * ``montecarlo_compile``: the first call of the entry point (trace + compile + one
   chunk) against a second call with *new parameter values* (another noise level):
   ``compile_s`` is their difference, ``recompiled`` whether the second call compiled
-  anything (counted with ``jax.monitoring``); the full run adds ``entropy+iccp``.
+  anything (counted with ``jax.monitoring``), for ``correlation`` and ``ukf`` (the full
+  run: every method of :data:`jaxgrav.montecarlo_methods.BUILDERS`).
 * ``montecarlo_memory``: peak RSS (``ru_maxrss`` of the subprocess) for ``n`` = 4, 16
   (not with ``--quick``) and 64 chunks against the same ``n`` in one chunk (baseline;
   for 64 chunks, which would need GBs in one chunk, against the previous chunked
@@ -111,12 +112,12 @@ def main():
     if args.quick:
         n, repeats, mem_chunk = 256, 2, 16
         cases = [(1, 16, True), (1, 64, True), (2, 64, True), (8, 64, True)]
-        compile_methods = ("correlation",)
+        compile_methods = ("correlation", "ukf")
     else:
         n, repeats, mem_chunk = 2048, 2, 64
         cases = [(d, c, True) for d in (1, 2, 8) for c in (16, 64, 256)]
         cases += [(1, 64, False), (8, 64, False)]
-        compile_methods = ("correlation", "entropy+iccp")
+        compile_methods = ("correlation", "entropy+iccp", "ukf", "ekf", "gsf", "pmf")
     cmin = min(c for _, c, _ in cases)
     with tempfile.TemporaryDirectory(prefix="jaxgrav-cc-") as cache:
         base = None
