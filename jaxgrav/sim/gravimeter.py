@@ -19,6 +19,11 @@ The chain: estimate θ with the 2-state Kalman filter (state θ, θ̇; the gyro 
 :func:`tilt_correction`; correct Eötvös from the velocity (:func:`jaxgrav.eotvos`)
 or from the map (:func:`eotvos_from_map`); low-pass filter
 (:func:`jaxgrav.sim.fir.apply_fir`) to remove the swell.
+
+This module simulates the raw record (:func:`simulate_gravimeter`) and re-exports the
+chain's other pieces: the platform (:mod:`jaxgrav.sim.platform_model`), the tilt
+Kalman filter (:mod:`jaxgrav.sim.tilt_filter`) and the tilt and Eötvös corrections
+(:mod:`jaxgrav.sim.gravimeter_corrections`).
 """
 
 import dataclasses
@@ -28,11 +33,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrav._linalg import expm
 from jaxgrav._pytree import static_field
 from jaxgrav._validate import check_finite, check_latitude, concrete
 from jaxgrav.constants import MGAL
 from jaxgrav.geodesy import eotvos, normal_gravity
+from jaxgrav.sim.gravimeter_corrections import eotvos_from_map, tilt_correction
+from jaxgrav.sim.platform_model import (
+    G0,
+    PlatformModel,
+    platform_discrete,
+    platform_response,
+)
+from jaxgrav.sim.tilt_filter import TiltKF, TiltKFState, run_tilt_kf, tilt_kalman
 
 __all__ = [
     "G0",
@@ -50,79 +62,6 @@ __all__ = [
     "tilt_correction",
     "tilt_kalman",
 ]
-
-G0 = 9.80665
-"""Nominal gravity (m/s²) scaling the platform's input ``a_h / g``."""
-
-
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class PlatformModel:
-    """Stabilised platform as a damped oscillator forced by horizontal acceleration.
-
-    ``θ̈ + 2ζω₀ θ̇ + ω₀² θ = ω₀² a_h / g``: at low frequency the platform follows the
-    apparent vertical, above ``f₀`` it lags and its response falls as ``(f₀/f)²``.
-
-    Attributes
-    ----------
-    natural_freq_hz : float or Array
-        Natural frequency ``f₀ = ω₀/2π`` (Hz).
-    damping : float or Array
-        Damping ratio ζ (√2/2 minimises the tilt's constant disturbance, paper D).
-    g : float or Array
-        Gravity scaling the input (m/s²).
-    """
-
-    natural_freq_hz: float = 0.02
-    damping: float = 0.5**0.5
-    g: float = G0
-
-
-def platform_response(platform, freq_hz):
-    """Complex frequency response ``θ / (a_h/g)`` of the platform.
-
-    Parameters
-    ----------
-    platform : PlatformModel
-    freq_hz : array_like
-        Frequencies (Hz).
-
-    Returns
-    -------
-    Array (complex)
-        ``H(f) = ω₀² / (ω₀² − ω² + 2jζω₀ω)``, shape of ``freq_hz``.
-    """
-    w0 = 2 * jnp.pi * jnp.asarray(platform.natural_freq_hz)
-    w = 2 * jnp.pi * jnp.asarray(freq_hz)
-    return w0**2 / (w0**2 - w**2 + 2j * platform.damping * w0 * w)
-
-
-@jax.jit
-def platform_discrete(platform, dt):
-    """Exact discretisation of the platform with a first-order-hold input.
-
-    With ``a_h`` linear between samples,
-    ``x_{k+1} = F x_k + G0 a_h[k] + G1 a_h[k+1]`` for ``x = (θ, θ̇)``.
-
-    Parameters
-    ----------
-    platform : PlatformModel
-    dt : float or Array
-        Sample interval (s).
-
-    Returns
-    -------
-    tuple of Array
-        ``F`` (2, 2), ``G0`` (2,), ``G1`` (2,) with ``a_h`` in m/s², θ in rad.
-    """
-    w0 = 2 * jnp.pi * jnp.asarray(platform.natural_freq_hz, dtype=float)
-    a = jnp.array([[0.0, 1.0], [-(w0**2), -2 * platform.damping * w0]])
-    b = jnp.stack([0.0 * w0, w0**2 / platform.g])
-    m = jnp.zeros((4, 4), dtype=a.dtype)
-    m = m.at[:2, :2].set(a).at[:2, 2].set(b).at[2, 3].set(1.0)
-    e = expm(m * dt)
-    gam, lam = e[:2, 2], e[:2, 3] / dt  # ∫e^{Aτ}B dτ and ∫e^{A(dt−s)}B s/dt ds
-    return e[:2, :2], gam - lam, lam
 
 
 @jax.tree_util.register_dataclass
@@ -156,7 +95,7 @@ class GravimeterConfig:
     vertical_freq: tuple = (0.07, 0.12, 0.25)
     horizontal_amp: tuple = (0.1, 0.05)
     horizontal_freq: tuple = (0.09, 0.16)
-    platform: PlatformModel = PlatformModel()
+    platform: PlatformModel = PlatformModel()  # noqa: RUF009 (frozen: safe to share)
     noise_mgal: float = 1.0
     bias_mgal: float = 0.0
     accel_noise: float = 0.01
@@ -296,206 +235,3 @@ def _check_sampling(t, config):
                 f"config.{name} must stay below the Nyquist frequency {0.5 / dt:g} Hz of "
                 f"the {1 / dt:g} Hz record; got {np.max(f)!r} Hz"
             )
-
-
-def tilt_correction(theta, accel_h, g=G0):
-    """Tilt disturbance ``δg_θ = g (cos θ − 1) + a_h sin θ`` in mGal (subtract it).
-
-    Parameters
-    ----------
-    theta : array_like
-        Platform tilt (rad), e.g. the Kalman estimate.
-    accel_h : array_like
-        Horizontal acceleration (m/s²).
-    g : array_like
-        Vertical gravity (m/s²).
-
-    Returns
-    -------
-    Array
-        δg_θ (mGal), broadcast shape.
-    """
-    theta = jnp.asarray(theta)
-    return (g * (jnp.cos(theta) - 1.0) + jnp.asarray(accel_h) * jnp.sin(theta)) / MGAL
-
-
-# ------------------------------------------------------------ platform tilt filter
-class TiltKFState(NamedTuple):
-    """Posterior of the tilt Kalman filter after a sample.
-
-    Attributes
-    ----------
-    x : Array, shape ``(2,)``
-        Tilt θ (rad) and tilt rate θ̇ (rad/s).
-    P : Array, shape ``(2, 2)``
-        Covariance of ``x``.
-    u : Array, scalar
-        Last measured horizontal acceleration (m/s²), the start of the next step's
-        input ramp.
-    count : Array, int scalar
-        Samples processed; 0 means ``x``, ``P`` are the prior of the first sample.
-    """
-
-    x: jax.Array
-    P: jax.Array
-    u: jax.Array
-    count: jax.Array
-
-
-class TiltKF(NamedTuple):
-    """An ``init``/``update`` pair (optax style) for the platform tilt filter.
-
-    ``init(theta_std=1e-2, rate_std=1e-3, x0=(0, 0)) -> TiltKFState`` and
-    ``update(state, gyro, accel_h) -> TiltKFState``: predict one sample with the
-    measured horizontal accelerations (m/s²) of the previous and this sample, then
-    correct with this sample's gyro rate (rad/s).
-    """
-
-    init: callable
-    update: callable
-
-
-def tilt_kalman(platform, dt, accel_noise, gyro_noise):
-    """The 2-state linear Kalman filter of paper D for the platform tilt.
-
-    Model ``x_{k+1} = F x_k + G0 a_h[k] + G1 a_h[k+1]`` (:func:`platform_discrete`)
-    driven by the *measured* ``a_h``, whose white noise (``accel_noise``) becomes
-    process noise ``Q = σ_a² (G0 G0ᵀ + G1 G1ᵀ)``; measurement ``z = C x + v`` with
-    ``C = [0 1]`` (the gyro) and ``R = σ_g²``. θ is observable through the
-    platform's restoring term.
-
-    Parameters
-    ----------
-    platform : PlatformModel
-    dt : float or Array
-        Sample interval (s).
-    accel_noise : float or Array
-        Accelerometer noise σ_a (m/s²).
-    gyro_noise : float or Array
-        Gyro noise σ_g (rad/s).
-
-    Returns
-    -------
-    TiltKF
-    """
-    f, g0, g1 = platform_discrete(platform, dt)
-    q = accel_noise**2 * (jnp.outer(g0, g0) + jnp.outer(g1, g1))
-    r = jnp.asarray(gyro_noise, dtype=f.dtype) ** 2
-
-    def init(theta_std=1e-2, rate_std=1e-3, x0=(0.0, 0.0)):
-        return _kf_init(jnp.asarray(x0, f.dtype), jnp.asarray(theta_std, f.dtype),
-                        jnp.asarray(rate_std, f.dtype))
-
-    def update(state, gyro, accel_h):
-        return _kf_update((f, g0, g1, q, r), state, gyro, accel_h)
-
-    return TiltKF(init, update)
-
-
-@jax.jit
-def _kf_init(x0, theta_std, rate_std):
-    p = jnp.diag(jnp.stack([theta_std, rate_std]) ** 2)
-    return TiltKFState(x0, p, jnp.zeros((), x0.dtype), jnp.zeros((), jnp.int32))
-
-
-@jax.jit
-def _kf_update(model, state, gyro, accel_h):
-    f, g0, g1, q, r = model
-    first = state.count == 0
-    x = jnp.where(first, state.x, f @ state.x + g0 * state.u + g1 * accel_h)
-    p = jnp.where(first, state.P, f @ state.P @ f.T + q)
-    k = p[:, 1] / (p[1, 1] + r)
-    x = x + k * (gyro - x[1])
-    ikc = jnp.eye(2, dtype=p.dtype) - jnp.outer(k, jnp.array([0.0, 1.0], dtype=p.dtype))
-    p = ikc @ p @ ikc.T + r * jnp.outer(k, k)  # Joseph form
-    return TiltKFState(x, p, jnp.asarray(accel_h, f.dtype), state.count + 1)
-
-
-def run_tilt_kf(platform, dt, gyro, accel_h, accel_noise, gyro_noise, *, theta_std=1e-2,
-                rate_std=1e-3):
-    """Run the tilt filter over a record with ``lax.scan``.
-
-    Parameters
-    ----------
-    platform : PlatformModel
-    dt : float or Array
-        Sample interval (s).
-    gyro : array_like, shape ``(N,)``
-        Measured tilt rate (rad/s).
-    accel_h : array_like, shape ``(N,)``
-        Measured horizontal acceleration (m/s²).
-    accel_noise, gyro_noise : float or Array
-        Their noise standard deviations (m/s², rad/s).
-    theta_std, rate_std : float or Array
-        Prior standard deviations of θ (rad) and θ̇ (rad/s); prior mean zero.
-
-    Returns
-    -------
-    TiltKFState
-        Posterior at every sample: ``x`` ``(N, 2)``, ``P`` ``(N, 2, 2)``, ``u``,
-        ``count`` ``(N,)``. The tilt estimate is ``x[:, 0]``.
-    """
-    gyro, accel_h = jnp.asarray(gyro), jnp.asarray(accel_h)
-    if gyro.ndim != 1 or gyro.shape != accel_h.shape:
-        raise ValueError(
-            f"gyro and accel_h must be 1-D of equal length; got shapes {gyro.shape} and "
-            f"{accel_h.shape}"
-        )
-    check_finite(gyro, "gyro")
-    check_finite(accel_h, "accel_h")
-    return _run_tilt_kf(platform, dt, gyro, accel_h, accel_noise, gyro_noise, theta_std,
-                        rate_std)
-
-
-@jax.jit
-def _run_tilt_kf(platform, dt, gyro, accel_h, accel_noise, gyro_noise, theta_std, rate_std):
-    kf = tilt_kalman(platform, dt, accel_noise, gyro_noise)
-
-    def step(state, zu):
-        new = kf.update(state, *zu)
-        return new, new
-
-    _, states = jax.lax.scan(step, kf.init(theta_std, rate_std), (gyro, accel_h))
-    return states
-
-
-# ------------------------------------------------------------------------ Eötvös
-def eotvos_from_map(measured, map_along, valid=None):
-    """Map-based Eötvös estimate: mean of the map minus mean of the measured anomaly.
-
-    At constant speed and heading the Eötvös effect ``E`` is nearly constant, and
-    after low-pass filtering it is what remains between the measured anomaly
-    sequence and the map along the (INS-indicated) track (paper D). Any other
-    constant (gravimeter bias, the tilt's constant part) is absorbed too.
-
-    Parameters
-    ----------
-    measured : array_like, shape ``(N,)``
-        Filtered measured anomaly (mGal), e.g. ``apply_fir(...).values``.
-    map_along : array_like, shape ``(N,)``
-        Map anomaly at the indicated positions (mGal).
-    valid : array_like of bool, shape ``(N,)``, optional
-        Samples to use (e.g. the FIR ``valid`` mask); non-finite samples of either
-        input are always skipped.
-
-    Returns
-    -------
-    Array, scalar
-        Estimated ``E`` (mGal), same sign as :func:`jaxgrav.eotvos`: add it to the
-        measured anomaly. NaN if no sample is usable.
-    """
-    measured, map_along = jnp.asarray(measured), jnp.asarray(map_along)
-    if measured.ndim != 1 or measured.shape != map_along.shape:
-        raise ValueError(
-            f"measured and map_along must be 1-D of equal length; got shapes "
-            f"{measured.shape} and {map_along.shape}"
-        )
-    use = jnp.isfinite(measured) & jnp.isfinite(map_along)
-    if valid is not None:
-        valid = jnp.asarray(valid, dtype=bool)
-        if valid.shape != measured.shape:
-            raise ValueError(f"valid must have shape {measured.shape}; got {valid.shape}")
-        use = use & valid
-    diff = jnp.where(use, map_along, 0.0) - jnp.where(use, measured, 0.0)  # NaN-safe grads
-    return jnp.sum(diff) / jnp.where(jnp.any(use), jnp.sum(use), jnp.nan)
-
