@@ -32,11 +32,12 @@ import numpy as np
 from jaxgrav import interp
 from jaxgrav.constants import DEG
 
-__all__ = ["HORIZONTAL", "METHODS", "VERTICAL", "check_method"]
+__all__ = ["DEFAULT_METHOD", "HORIZONTAL", "METHODS", "VERTICAL", "check_method"]
 
 HORIZONTAL = ("bilinear", "bicubic")
 VERTICAL = ("linear", "lagrange", "harmonic")
 METHODS = tuple(f"{a}-{b}" for a in HORIZONTAL for b in VERTICAL)
+DEFAULT_METHOD = "bicubic-harmonic"  # the most accurate on paper C's trajectory
 _RADIUS = 6378136.3  # reference sphere of the layers (m), as the shipped qinling data
 
 
