@@ -14,6 +14,8 @@ import numpy as np
 
 from jaxgrav.fields.egm2008_geoid import GEOID_FILE, _require
 
+__all__ = ["APPROXIMATION"]
+
 APPROXIMATION = (
     "Spherical approximation: T = gamma(lat) * N (Bruns, WGS84 normal gravity on the "
     "ellipsoid) from the EGM2008 geoid grid, expanded on the sphere r = R with geodetic "
@@ -25,7 +27,6 @@ APPROXIMATION = (
 )
 
 
-# ---------------------------------------------------------------------- files
 def _command(region, out_dir, force):
     cmd = ["jaxgrav", "data", "egm2008", "--region", region, "--out", str(out_dir)]
     return shlex.join([*cmd, "--force"] if force else cmd)

@@ -14,6 +14,14 @@ import numpy as np
 
 from jaxgrav.constants import MGAL
 
+__all__ = [
+    "GEOID_FILE",
+    "R_REF",
+    "disturbing_potential_coefficients",
+    "geoid_path",
+    "read_geoid",
+]
+
 R_REF = 6378136.3
 """Reference radius R of the shipped coefficients (m), EGM2008's own."""
 GEOID_FILE = "EGM2008_geoid_h.nc"
@@ -22,7 +30,6 @@ GEOID_FILE = "EGM2008_geoid_h.nc"
 _INSTALL_HINT = "pip install 'jaxgrav[egm2008]'"
 
 
-# ---------------------------------------------------------------------- helpers
 def _require():
     """Import the optional dependencies or fail with an installation hint."""
     try:

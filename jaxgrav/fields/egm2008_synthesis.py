@@ -13,6 +13,8 @@ import numpy as np
 from jaxgrav.constants import ARCSEC, MGAL
 from jaxgrav.fields.egm2008_geoid import _normal_gravity_si, _require
 
+__all__ = ["anomaly_grid", "deflection_grid"]
+
 
 def _dh_lmax(lmax, spacing_arcmin):
     """Smallest DH grid degree ≥ lmax whose spacing divides ``spacing_arcmin``; and the stride."""
@@ -53,7 +55,6 @@ def _crop(values, lmax_grid, stride, region, spacing_arcmin):
     return lat, lon, out
 
 
-# ---------------------------------------------------------------------- synthesis
 def anomaly_grid(cilm, gm, radius, region, lmax, spacing_arcmin, height=0.0):
     """Gravity anomaly of the model on a region, by pyshtools DH synthesis.
 
