@@ -189,3 +189,11 @@ def test_guard_infos_passthrough_default_rule():
     out = guard_infos(info, b, GuardConfig(2.0, 2.0))  # λ < 1 < 2: everything passes
     np.testing.assert_array_equal(np.asarray(out.x), np.asarray(info.x))
     np.testing.assert_array_equal(np.asarray(out.p_pos), np.asarray(info.p_pos))
+
+
+def test_guard_infos_bad_input():
+    info, b = _infos(np.random.default_rng(4), 6)
+    with pytest.raises(ValueError, match="p_free"):
+        guard_infos(info, b[:5])
+    with pytest.raises(ValueError, match="lo"):
+        guard_infos(info, b, GuardConfig(0.7, 0.3))

@@ -247,8 +247,20 @@ def guard_infos(infos, p_free, config=None, window=30):
     StepInfo
         ``x[:, :2]``, ``sigma[:, :2]`` and ``p_pos`` replaced by the guarded values;
         the other states and fields unchanged.
+
+    Raises
+    ------
+    ValueError
+        ``p_free`` not one 2 × 2 block per step; ``config.lo > config.hi``.
     """
     config = GuardConfig() if config is None else config
+    t = infos.x.shape[0]
+    if tuple(p_free.shape) != (t, 2, 2):
+        raise ValueError(f"p_free must have shape {(t, 2, 2)} (one 2 x 2 block per step of "
+                         f"infos), got {tuple(p_free.shape)}")
+    lo, hi = config.lo, config.hi
+    if isinstance(lo, int | float) and isinstance(hi, int | float) and not lo <= hi:
+        raise ValueError(f"config.lo must be <= config.hi, got lo={lo!r}, hi={hi!r}")
     nis = windowed_nis(infos.innovation, infos.innovation_var, window)
     hold = jnp.nan_to_num(nis, nan=0.0) > config.nis_max  # never when nis_max = inf
     x, p, _, _ = jax.vmap(guard_position, in_axes=(0, 0, 0, None, None, 0))(
