@@ -12,7 +12,7 @@ so jaxgrav uses these instead inside vmapped code.
 
 import jax.numpy as jnp
 
-__all__ = ["cholesky", "expm", "inv_2x2", "psd_sqrt"]
+__all__ = ["cholesky", "expm", "inv_2x2", "modified_cholesky", "psd_sqrt"]
 
 
 def _cholesky(a, rtol):
@@ -43,6 +43,50 @@ def cholesky(a):
     Array, shape ``(n, n)``
     """
     return _cholesky(a, None)
+
+
+def modified_cholesky(a, jitter=1e-9):
+    """Cholesky factor of a nearly positive definite matrix in one pass, with a repair flag.
+
+    Column by column as :func:`cholesky`; a pivot ``d_j`` (the Schur complement's
+    diagonal entry) that is not positive but within ``ε_j = jitter · |a_jj|`` of zero
+    is clamped to ``ε_j`` (the factor is then that of ``a`` plus at most ``2 ε_j`` on
+    that diagonal entry) and ``repaired`` is set; a pivot below ``−ε_j``, or a
+    non-finite one, means ``a`` is indefinite beyond repair: ``failed`` is set and
+    the factor is zero. On a positive definite ``a`` the factor equals
+    :func:`cholesky`'s. The tolerance is relative to each state's own variance, so
+    states in very different units are treated alike.
+
+    Parameters
+    ----------
+    a : Array, shape ``(n, n)``
+        Symmetric; ``n`` static and small (the loop over columns unrolls).
+    jitter : float
+        Relative pivot clamp ``ε_j / |a_jj|``.
+
+    Returns
+    -------
+    low : Array, shape ``(n, n)``
+        Lower factor, ``low @ low.T ≈ a``; zeros if ``failed``.
+    repaired : Array, shape ``()``, bool
+        ``a`` was not numerically positive definite (a pivot was clamped, or failed).
+    failed : Array, shape ``()``, bool
+    """
+    n = a.shape[-1]
+    low = jnp.zeros_like(a)
+    repaired = failed = jnp.zeros((), bool)
+    tiny = jnp.finfo(a.dtype).tiny
+    for j in range(n):  # unrolls over the (static, small) matrix size
+        pivot = a[j, j] - jnp.sum(low[j, :j] ** 2)
+        eps = jitter * jnp.abs(a[j, j]) + tiny
+        clamp = pivot <= 0.0
+        repaired = repaired | clamp
+        failed = failed | ~jnp.isfinite(pivot) | (pivot < -eps)
+        d = jnp.sqrt(jnp.where(clamp, eps, pivot))
+        low = low.at[j, j].set(d)
+        if j + 1 < n:
+            low = low.at[j + 1 :, j].set((a[j + 1 :, j] - low[j + 1 :, :j] @ low[j, :j]) / d)
+    return jnp.where(failed, 0.0, low), repaired | failed, failed
 
 
 def psd_sqrt(a, rtol=1e-12):

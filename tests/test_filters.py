@@ -14,6 +14,7 @@ import pytest
 import scipy.linalg
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
+from jaxgrav._linalg import modified_cholesky
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
 from jaxgrav.match import filters as fl
@@ -50,6 +51,7 @@ run_batch = jax.jit(
 run_pmf_batch = jax.jit(
     jax.vmap(fl.run_pmf, in_axes=(None, None, None, 0, None, 0, None)), static_argnums=(0, 6)
 )
+run_every = jax.jit(fl.run_filter, static_argnums=(0, 6))
 update = jax.jit(
     lambda filt, state, step, field, dyn: filt.update(state, step, field, dyn), static_argnums=0
 )
@@ -318,6 +320,123 @@ def test_off_map_position_skips_the_update(filt, dynamics, prior, smooth_grid):
     new, info = update(filt, state, _one_step(10.0, 30.0, 130.0), smooth_grid, dynamics)
     assert int(info.status) == 0
     assert not np.allclose(np.asarray(new.x), np.asarray(pred.x))
+
+
+def _generic_gravity(field, x, lat, lon):
+    """The gravity measurement as an opaque callable: the UKF's generic 27-point path."""
+    return fl.gravity_measurement(field, x, lat, lon)
+
+
+UKF_GENERIC = fl.ukf(_generic_gravity)
+
+
+@pytest.mark.parametrize("map_kind", ["pointmass", "grid"])
+def test_structured_ukf_equals_the_generic_ukf(map_kind, dynamics, prior, runs, smooth_grid):
+    """MapPlusBias: the map at the 5 distinct sigma positions gives the 27-point numbers."""
+    x0, p0 = prior
+    steps = _one(runs[0], 1)
+    field = FIELD
+    if map_kind == "grid":  # the track mirrored onto the grid, starting near its east edge
+        field = smooth_grid
+        steps = steps._replace(lat=steps.lat - 24.27 + 30.0, lon=130.41 + MASS_LON - steps.lon,
+                               z=steps.z * 0.5)
+    assert isinstance(fl.gravity_measurement, fl.MapPlusBias)
+    final, infos = run_one(UKF, field, dynamics, x0, p0, steps)
+    final_g, infos_g = run_one(UKF_GENERIC, field, dynamics, x0, p0, steps)
+    sd = np.asarray(infos_g.sigma)
+    assert np.max(np.abs(np.asarray(infos.x) - np.asarray(infos_g.x)) / sd) < 1e-10
+    np.testing.assert_allclose(np.asarray(infos.sigma), sd, rtol=1e-10)
+    np.testing.assert_allclose(np.asarray(final.p), np.asarray(final_g.p), rtol=1e-9,
+                               atol=1e-12 * float(p0[0, 0]))
+    np.testing.assert_allclose(np.asarray(infos.innovation_var),
+                               np.asarray(infos_g.innovation_var), rtol=1e-10)
+    np.testing.assert_array_equal(np.asarray(infos.status), np.asarray(infos_g.status))
+    # the readings moved the filter (and, on the grid, some sigma points left the map)
+    assert float(final.p[0, 0]) < 0.8 * float(p0[0, 0])
+    if map_kind == "grid":
+        assert np.any(np.asarray(infos.status) & FLAGS["off_map"])
+
+
+def test_map_plus_bias_checks_its_layout():
+    with pytest.raises(ValueError, match="n_position"):
+        fl.MapPlusBias(fl.map_at_error, bias_index=1, n_position=2)
+
+
+GSF3 = fl.gaussian_sum(UKF, per_axis=3)
+
+
+@pytest.mark.parametrize("which", ["ukf", "ekf", "gsf"])
+@pytest.mark.parametrize("n_steps", [N_STEPS, N_STEPS - 1])
+def test_update_only_on_reading_steps_equals_every_step(which, n_steps, dynamics, prior, runs):
+    """run_filter(every=2) — predictions between readings — equals the every-step run."""
+    filt = {"ukf": UKF, "ekf": EKF, "gsf": GSF3}[which]
+    x0, p0 = prior
+    steps = jax.tree.map(lambda a: a[:n_steps], _one(runs[0], 2))  # readings on odd steps
+    final_1, infos_1 = run_every(filt, FIELD, dynamics, x0, p0, steps, 1)
+    final_2, infos_2 = run_every(filt, FIELD, dynamics, x0, p0, steps, 2)
+    _assert_trees_close(final_2, final_1, rtol=1e-9, atol=1e-9)
+    for name in ("x", "sigma", "p_pos", "status"):
+        np.testing.assert_allclose(np.asarray(getattr(infos_2, name)),
+                                   np.asarray(getattr(infos_1, name)), rtol=1e-9, atol=1e-9,
+                                   err_msg=name)
+    reading = np.isfinite(np.asarray(steps.z))
+    assert reading[1::2].all() and not reading[0::2].any()
+    np.testing.assert_allclose(np.asarray(infos_2.innovation)[reading],
+                               np.asarray(infos_1.innovation)[reading], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(infos_2.innovation_var)[reading],
+                               np.asarray(infos_1.innovation_var)[reading], rtol=1e-9)
+    # between readings: the prediction only, no innovation variance
+    assert np.all(np.isnan(np.asarray(infos_2.innovation_var)[~reading]))
+    assert np.all(np.asarray(infos_2.status)[~reading] == FLAGS["no_reading"])
+
+
+def test_every_k_is_causal_and_flags_ignored_readings(dynamics, prior, runs):
+    """Steps before a reading show the prediction; a reading off the stride is not used."""
+    x0, p0 = prior
+    steps = _one(runs[0], 0)
+    _, infos = run_every(UKF, FIELD, dynamics, x0, p0, steps, 4)
+    state = fl.FilterState(x0, p0)
+    for k in range(3):  # steps 0..2 predict only (step 1's reading is ignored), step 3 updates
+        state = fl.predict(state, dynamics.f, dynamics.q)
+        np.testing.assert_allclose(np.asarray(infos.x[k]), np.asarray(state.x), rtol=1e-12,
+                                   atol=1e-9)
+        np.testing.assert_allclose(np.asarray(infos.p_pos[k]), np.asarray(state.p[:2, :2]),
+                                   rtol=1e-12)
+    assert int(infos.status[1]) == FLAGS["no_reading"] | FLAGS["reading_ignored"]
+    assert int(infos.status[3]) == 0
+    assert not np.allclose(np.asarray(infos.x[3]), np.asarray(state.x))
+    with pytest.raises(ValueError, match="every"):
+        fl.run_filter(UKF, FIELD, dynamics, x0, p0, steps, every=0)
+
+
+def _spd(rng, n, scales):
+    a = rng.standard_normal((n, n))
+    return (a @ a.T + 0.1 * np.eye(n)) * np.outer(scales, scales)
+
+
+def test_modified_cholesky_equals_lapack_and_flags_non_pd(prior):
+    chol = jax.jit(modified_cholesky)
+    rng = np.random.default_rng(5)
+    _, p0 = prior
+    scales = np.sqrt(np.diag(np.asarray(p0)))  # metres next to rad/s: 1e3 … 1e-8
+    for a in [_spd(rng, 13, np.ones(13)), _spd(rng, 13, scales), _spd(rng, 4, [1, 2, 3, 4]),
+              np.asarray(p0)]:
+        low, repaired, failed = chol(jnp.asarray(a))
+        ref = np.linalg.cholesky(a)
+        row = np.abs(ref).max(axis=1, keepdims=True)  # rows scale with their state's units
+        np.testing.assert_allclose(np.asarray(low) / row, ref / row, rtol=1e-10, atol=1e-12)
+        assert not bool(repaired) and not bool(failed)
+    # positive semi-definite (a noise-free direction): clamped, flagged repaired, usable
+    v = rng.standard_normal((13, 12))
+    a = v @ v.T
+    low, repaired, failed = chol(jnp.asarray(a))
+    assert bool(repaired) and not bool(failed)
+    np.testing.assert_allclose(np.asarray(low @ low.T), a, atol=1e-6 * np.abs(a).max())
+    # indefinite, and NaN: failed, zero factor
+    b = _spd(rng, 13, np.ones(13)) - 50.0 * np.eye(13)
+    for bad in (b, np.where(np.eye(13) > 0, np.nan, a)):
+        low, repaired, failed = chol(jnp.asarray(bad))
+        assert bool(failed) and bool(repaired) and np.all(np.asarray(low) == 0.0)
 
 
 # --------------------------------------------------------------------------- point-mass filter

@@ -2,7 +2,8 @@
 
 All filters share the measurement of :mod:`jaxgrav.match.filters.model` and the
 INS error model of :mod:`jaxgrav.sim.ins`; each is an optax-style ``init`` /
-``update`` pair run with ``lax.scan`` (:func:`run_filter`) and vmapped over runs.
+``update`` pair run with ``lax.scan`` (:func:`run_filter`; ``every=k`` updates only on
+the reading steps of a fixed stride) and vmapped over runs.
 """
 
 from jaxgrav.match.filters.gaussian_sum import GaussianSumState, gaussian_sum, split_prior
@@ -12,10 +13,13 @@ from jaxgrav.match.filters.model import (
     Dynamics,
     Filter,
     FilterState,
+    MapPlusBias,
     Step,
     StepInfo,
     gravity_measurement,
     map_anomaly,
+    map_at_error,
+    predict_only,
     run_filter,
     status_messages_filter,
 )
@@ -37,6 +41,7 @@ __all__ = [
     "FilterScenario",
     "FilterState",
     "GaussianSumState",
+    "MapPlusBias",
     "PMFState",
     "Step",
     "StepInfo",
@@ -46,8 +51,10 @@ __all__ = [
     "gravity_measurement",
     "initial_state",
     "map_anomaly",
+    "map_at_error",
     "pmf",
     "predict",
+    "predict_only",
     "run_filter",
     "run_metrics",
     "run_pmf",

@@ -19,7 +19,13 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from jaxgrav.match.filters.model import STATUS_FILTER, Filter, FilterState, StepInfo
+from jaxgrav.match.filters.model import (
+    STATUS_FILTER,
+    Filter,
+    FilterState,
+    StepInfo,
+    predict_only,
+)
 
 __all__ = ["GaussianSumState", "gaussian_sum", "split_prior"]
 
@@ -83,12 +89,26 @@ def gaussian_sum(base, per_axis=5, spacing=0.8):
     Filter
         ``init(x0, P0) -> GaussianSumState``; ``update`` returns the mixture's
         :class:`StepInfo` (mean, σ, position covariance, weighted innovation;
-        status OR-ed over components).
+        status OR-ed over components); ``predict`` predicts every component (weights
+        unchanged) for steps without a reading.
     """
 
     def init(x0, p0):
         x, p, log_w = split_prior(jnp.asarray(x0), jnp.asarray(p0), per_axis, spacing)
         return GaussianSumState(jax.vmap(base.init)(x, p), log_w)
+
+    def mixture_info(comps, log_w, infos, step):
+        w = jnp.exp(log_w)
+        mean = w @ comps.x
+        d = comps.x - mean
+        cov = jnp.einsum("m,mi,mj->ij", w, d, d) + jnp.einsum("m,mij->ij", w, comps.p)
+        sigma = jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0, None))
+        nu = infos.innovation
+        return StepInfo(
+            mean, sigma, cov[:2, :2], w @ jnp.where(jnp.isfinite(nu), nu, 0.0) + jnp.where(
+                jnp.isfinite(step.z), 0.0, jnp.nan), w @ infos.innovation_var,
+            jnp.bitwise_or.reduce(infos.status),
+        )  # fmt: skip
 
     def update(state, step, field, dynamics):
         comps, infos = jax.vmap(base.update, in_axes=(0, None, None, None))(
@@ -101,16 +121,17 @@ def gaussian_sum(base, per_axis=5, spacing=0.8):
         loglik = jnp.where(used, -0.5 * (jnp.where(used, nu, 0.0) ** 2 / s + jnp.log(s)), 0.0)
         log_w = state.log_w + loglik
         log_w = log_w - jax.nn.logsumexp(log_w)
-        w = jnp.exp(log_w)
-        mean = w @ comps.x
-        d = comps.x - mean
-        cov = jnp.einsum("m,mi,mj->ij", w, d, d) + jnp.einsum("m,mij->ij", w, comps.p)
-        sigma = jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0, None))
-        info = StepInfo(
-            mean, sigma, cov[:2, :2], w @ jnp.where(jnp.isfinite(nu), nu, 0.0) + jnp.where(
-                jnp.isfinite(step.z), 0.0, jnp.nan), w @ s,
-            jnp.bitwise_or.reduce(infos.status),
-        )  # fmt: skip
-        return GaussianSumState(comps, log_w), info
+        return GaussianSumState(comps, log_w), mixture_info(comps, log_w, infos, step)
 
-    return Filter(init, update)
+    base_predict = predict_only(base)
+
+    def predict(state, step, field, dynamics):
+        comps, infos = jax.vmap(base_predict, in_axes=(0, None, None, None))(
+            state.components, step, field, dynamics
+        )
+        info = mixture_info(comps, state.log_w, infos, step)
+        nan = jnp.full_like(info.innovation, jnp.nan)
+        return GaussianSumState(comps, state.log_w), info._replace(innovation=nan,
+                                                                   innovation_var=nan)
+
+    return Filter(init, update, predict)

@@ -10,22 +10,34 @@ give the same numbers at 2n+1 times the cost) and differ only in the update:
 * :func:`ekf` — the Jacobian of the *same* measurement function by
   ``jax.jacfwd``: no hand-derived Jacobians (paper D's objection to the EKF).
 
+With a :class:`~jaxgrav.match.filters.model.MapPlusBias` measurement (the default
+:data:`~jaxgrav.match.filters.model.gravity_measurement`) the UKF evaluates the map
+only at the ``2m + 1`` distinct sigma-point positions (m = 2 position states): the
+other points share the mean position and differ only in the additive bias. The
+numbers are those of the generic ``2n + 1``-point evaluation.
+
 Covariance handling: ``P`` is symmetrised after every step and updated in Joseph
-form (EKF) or as ``P − K S Kᵀ`` (UKF); when its Cholesky factor fails, jitter is
-added and the ``covariance_repaired`` flag set; if that fails too the update is
-skipped (``covariance_failed``). A missing reading (NaN), a sigma point off the
-map or a gated innovation skip the update and set a flag: the state stays the
-prediction.
+form (EKF) or as ``P − K S Kᵀ`` (UKF). The UKF factors it once per update with
+:func:`~jaxgrav._linalg.modified_cholesky`: a non-positive pivot within a relative
+jitter of zero is clamped (``covariance_repaired``); a more negative or non-finite
+one skips the update (``covariance_failed``). A missing reading (NaN), a sigma
+point off the map or a gated innovation skip the update and set a flag: the state
+stays the prediction.
+
+Both filters also have a ``predict`` (:class:`~jaxgrav.match.filters.model.Filter`)
+for the steps between readings of ``run_filter(..., every=k)``: ``F x``, ``F P Fᵀ + Q``
+and the per-step info, nothing else.
 """
 
 import jax
 import jax.numpy as jnp
 
-from jaxgrav._linalg import cholesky
+from jaxgrav._linalg import modified_cholesky
 from jaxgrav.match.filters.model import (
     STATUS_FILTER,
     Filter,
     FilterState,
+    MapPlusBias,
     StepInfo,
     gravity_measurement,
 )
@@ -68,15 +80,34 @@ def sigma_weights(n, alpha, beta, kappa):
 
 
 def _robust_cholesky(p):
-    """Cholesky of ``p``, retried with relative jitter; returns (L, repaired, failed)."""
-    n = p.shape[0]
-    chol = cholesky(p)
-    bad = ~jnp.all(jnp.isfinite(chol))
-    jitter = _JITTER * (jnp.trace(p) / n + 1e-300)
-    chol_j = cholesky(p + jitter * jnp.eye(n, dtype=p.dtype))
-    chol = jnp.where(bad, chol_j, chol)
-    failed = ~jnp.all(jnp.isfinite(chol))
-    return jnp.where(failed, 0.0, chol), bad, failed
+    """One-pass modified Cholesky of ``p``; returns (L, repaired, failed)."""
+    return modified_cholesky(p, _JITTER)
+
+
+def _predict_step(state, step, field, dynamics):
+    """A step known to have no reading: the prediction and its info."""
+    del field
+    pred = predict(state, dynamics.f, dynamics.q)
+    sigma = jnp.sqrt(jnp.clip(jnp.diag(pred.p), 0.0, None))
+    nan = jnp.full_like(step.z, jnp.nan)
+    status = STATUS_FILTER["no_reading"] | jnp.where(
+        jnp.isfinite(step.z), STATUS_FILTER["reading_ignored"], 0)
+    return pred, StepInfo(pred.x, sigma, pred.p[:2, :2], nan, nan, status.astype(jnp.int32))
+
+
+def _sigma_measurements(measurement, field, step, x, delta):
+    """``h`` at the sigma points ``x``, ``x ± delta[j]`` (rows), shape ``(2n + 1,)``."""
+    n = x.shape[0]
+    if not isinstance(measurement, MapPlusBias):
+        points = jnp.concatenate([x[None], x + delta, x - delta])
+        return jax.vmap(lambda xi: measurement(field, xi, step.lat, step.lon))(points)
+    # rows j >= m of delta (columns of the lower factor) do not move the position
+    m, b = measurement.n_position, measurement.bias_index
+    pos = jnp.concatenate([x[None, :m], x[:m] + delta[:m, :m], x[:m] - delta[:m, :m]])
+    g = jax.vmap(lambda d: measurement.map_part(field, d, step.lat, step.lon))(pos)
+    rest = jnp.broadcast_to(g[0], (n - m,))
+    g = jnp.concatenate([g[:1], g[1 : m + 1], rest, g[m + 1 :], rest])
+    return g + jnp.concatenate([x[b : b + 1], x[b] + delta[:, b], x[b] - delta[:, b]])
 
 
 def _finish(pred, x_new, p_new, nu, s, flags, skip):
@@ -105,7 +136,9 @@ def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate
     Parameters
     ----------
     measurement : callable
-        ``h(field, x, lat, lon) -> ẑ`` (mGal); default :func:`gravity_measurement`.
+        ``h(field, x, lat, lon) -> ẑ`` (mGal); default :data:`gravity_measurement`.
+        A :class:`~jaxgrav.match.filters.model.MapPlusBias` is evaluated at the
+        distinct sigma-point positions only.
     alpha : float
         Sigma-point spread. The default 0.5 puts the position sigma points at
         ``α √(n+κ) σ = 1.8 σ`` from the mean for n = 13 — inside a local map and
@@ -121,7 +154,8 @@ def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate
     Returns
     -------
     Filter
-        ``init(x0, P0)``, ``update(state, step, field, dynamics) -> (state, StepInfo)``.
+        ``init(x0, P0)``, ``update(state, step, field, dynamics) -> (state, StepInfo)``,
+        ``predict`` (same signature) for steps without a reading.
     """
 
     def init(x0, p0):
@@ -134,7 +168,7 @@ def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate
         chol, repaired, failed = _robust_cholesky(pred.p)
         delta = jnp.sqrt(scale) * chol.T  # rows are the sigma offsets
         points = jnp.concatenate([pred.x[None], pred.x + delta, pred.x - delta])
-        zs = jax.vmap(lambda xi: measurement(field, xi, step.lat, step.lon))(points)
+        zs = _sigma_measurements(measurement, field, step, pred.x, delta)
         off_map = ~jnp.all(jnp.isfinite(zs))
         zs = jnp.where(jnp.isfinite(zs), zs, 0.0)  # double-where: no NaN into the algebra
         z_hat = wm @ zs
@@ -152,7 +186,7 @@ def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate
         nu_out = jnp.where(jnp.isfinite(step.z), nu, jnp.nan)
         return _finish(pred, x_new, p_new, nu_out, s, flags, skip | failed)
 
-    return Filter(init, update)
+    return Filter(init, update, _predict_step)
 
 
 def ekf(measurement=gravity_measurement, *, gate=jnp.inf):
@@ -192,4 +226,4 @@ def ekf(measurement=gravity_measurement, *, gate=jnp.inf):
         nu_out = jnp.where(jnp.isfinite(step.z), nu, jnp.nan)
         return _finish(pred, x_new, p_new, nu_out, s, flags, skip)
 
-    return Filter(init, update)
+    return Filter(init, update, _predict_step)
