@@ -18,6 +18,7 @@ from jaxgrav.match.filters.guard import (
     guard_gain,
     guard_infos,
     guard_position,
+    guard_run,
     windowed_nis,
 )
 from jaxgrav.sim import ins
@@ -197,3 +198,18 @@ def test_guard_infos_bad_input():
         guard_infos(info, b[:5])
     with pytest.raises(ValueError, match="lo"):
         guard_infos(info, b, GuardConfig(0.7, 0.3))
+
+
+def test_guard_run_uses_free_covariance():
+    model = ins.INSErrorModel()
+    dyn = Dynamics(*ins.transition(model, 24.3, 10.0))
+    p0 = ins.initial_covariance(model, 1414.2, 0.1414)
+    info, _ = _infos(np.random.default_rng(5), 12)
+    free = free_covariance(dyn, p0, 12)
+    # posterior = a fraction of the free covariance: λ = 0.1 north-ish, 0.6 east-ish
+    info = info._replace(p_pos=free * jnp.array([[0.1, 0.0], [0.0, 0.6]]))
+    got = guard_run(info, dyn, p0)  # default: λ ≤ 0.2 passes
+    ref = guard_infos(info, free)
+    np.testing.assert_array_equal(np.asarray(got.x), np.asarray(ref.x))
+    np.testing.assert_allclose(np.asarray(got.x[:, 1]), 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(got.x[:, 0]), np.asarray(info.x[:, 0]), rtol=1e-9)

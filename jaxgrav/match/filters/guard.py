@@ -44,6 +44,7 @@ __all__ = [
     "guard_gain",
     "guard_infos",
     "guard_position",
+    "guard_run",
     "windowed_nis",
 ]
 
@@ -57,15 +58,17 @@ class GuardConfig(NamedTuple):
         Variance ratio ``λ`` (posterior / free INS, per generalised eigen-direction)
         below which a direction's correction passes fully (``lo``) and above which it
         is held back fully (``hi``); ``lo == hi`` is a hard threshold. ``hi >= 1``
-        with ``lo >= 1`` passes everything.
+        with ``lo >= 1`` passes everything. The default 0.2 (correct a direction only
+        once its variance is down to a fifth of the free INS's) was chosen on a
+        selection seed of paper D's 1000-run experiment (``examples/paper_d_noharm.py``).
     nis_max : float
         Hold back the whole correction while the windowed mean NIS exceeds this
         (``inf``: never).
     """
 
-    lo: float = 0.5
-    hi: float = 0.5
-    nis_max: float = jnp.inf
+    lo: float = 0.2
+    hi: float = 0.2
+    nis_max: float = float("inf")
 
 
 def free_covariance(dynamics, p0, n_steps):
@@ -270,3 +273,27 @@ def guard_infos(infos, p_free, config=None, window=30):
     return infos._replace(
         x=infos.x.at[:, :2].set(x), sigma=infos.sigma.at[:, :2].set(sd), p_pos=p
     )
+
+
+def guard_run(infos, dynamics, p0, config=None, window=30):
+    """Guard a filter run given its dynamics and prior (computes the free covariance).
+
+    Parameters
+    ----------
+    infos : StepInfo
+        Leading axis ``T``, one entry per filter step (each after one prediction with
+        ``dynamics``).
+    dynamics : Dynamics
+        The per-step error dynamics the filter used.
+    p0 : Array, shape ``(n, n)``
+        The filter's prior covariance.
+    config : GuardConfig, optional
+    window : int
+        Readings in the NIS window (static).
+
+    Returns
+    -------
+    StepInfo
+        As :func:`guard_infos`.
+    """
+    return guard_infos(infos, free_covariance(dynamics, p0, infos.x.shape[0]), config, window)
