@@ -6,18 +6,19 @@ three-point-mass map (:func:`jaxgrav.fields.pointmass.paper_d`), the 13-state IN
 error model, a step every 2 s and a gravimeter reading every 10 s (NaN between),
 1 mGal noise and bias. 1000 runs × 3600 steps (``--quick``: 50 × 600).
 
-* ``ukf-float64``: ``jax.jit(jax.vmap(run_filter))`` of
-  :func:`~jaxgrav.match.filters.ukf` (α = 0.5, β = 2, κ = 0) over all runs at once;
-  ``ukf-float64-chunk25`` the same in chunks of 25 runs (``lax.map(batch_size=25)``, a
-  scan over vmapped chunks), which keeps each step's working set in cache (full run
-  only: at 50 runs there is nothing to chunk).
-* ``ukf-float32``: the same runs cast to float32 with ``jax_enable_x64`` off, and its
-  difference from float64.
-* ``ekf-float64``: :func:`~jaxgrav.match.filters.ekf` (``jax.jacfwd`` Jacobian), same runs.
+* ``ukf-float64``: ``jax.jit`` of :func:`~jaxgrav.match.filters.run_filter` with
+  ``every=5`` (update only on the reading steps, prediction in between) of
+  :func:`~jaxgrav.match.filters.ukf` (α = 0.5, β = 2, κ = 0; the map evaluated at the 5
+  distinct sigma positions, one modified Cholesky per update), vmapped over runs in
+  chunks of 25 (``lax.map(batch_size=25)``, a scan over vmapped chunks, which keeps each
+  step's working set in cache; ``--quick``: one vmap).
+* ``ukf-float64-every1``: the same filter updating on every step (NaN readings
+  masked), as a user without the stride would run it.
+* ``ukf-float32``: ``ukf-float64`` on the runs cast to float32 with ``jax_enable_x64``
+  off, and its difference from float64.
+* ``ekf-float64``: :func:`~jaxgrav.match.filters.ekf` (``jax.jacfwd`` Jacobian), ``every=5``.
 * ``pmf-float64``: :func:`~jaxgrav.match.filters.run_pmf` (default 61 × 61 grid, one
   update per reading), on fewer runs (``n``); runs/s is what scales.
-
-The full run's EKF, PMF and float32 cases run chunked too (case name ``-chunk25``).
 
 Baseline: filterpy's ``UnscentedKalmanFilter`` with ``MerweScaledSigmaPoints(13, α, β,
 κ)``, ``fx = F x``, the same Q and R, and ``hx`` the same point-mass measurement
@@ -29,16 +30,15 @@ an hour, so filterpy is timed on a few runs and its time per run scaled to ``n``
 ``max_diff_m`` in metres). Every line's baseline is the filterpy UKF.
 
 jaxgrav's compile time is separate (``compile_s``); timed calls are compiled already.
-``--profile`` adds lines (bench ``filters_profile``) with the cost of the parts of a
-UKF step and of prototype restructurings (not library code): updating only on the
-steps that have a reading, evaluating the map at the 5 distinct sigma-point positions
-instead of 27, and one Cholesky factorisation per update instead of two; each reports
-its largest difference from the library's estimates.
+``--profile`` adds lines (bench ``filters_profile``) with the cost per run-step of the
+parts of a filter step (prediction, factorisation, map evaluations, a whole update,
+the generic 27-point update), timed as scans over 600 steps of all runs, and XLA's
+``cost_analysis`` of one update and one prediction.
 
 Run ``python benchmarks/filters.py [--quick] [--profile]``. Absolute times on a
-shared machine are noise; compare within one run. Progress goes to stderr. (Before
-the filters factored P with plain-JAX code, batched LAPACK calls under vmap could
-deadlock XLA's CPU thread pool; the profile uses the same plain-JAX Cholesky.)
+shared machine are noise; compare within one run. Progress goes to stderr. (The
+filters factor P with plain-JAX code: batched LAPACK calls under vmap could deadlock
+XLA's CPU thread pool.)
 """
 
 import argparse
@@ -57,7 +57,7 @@ jax.config.update("jax_enable_x64", True)  # a script, not the library
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter  # noqa: E402
 
 from jaxgrav import constants as c  # noqa: E402
-from jaxgrav._linalg import cholesky as small_cholesky  # noqa: E402
+from jaxgrav._linalg import modified_cholesky  # noqa: E402
 from jaxgrav.fields.pointmass import paper_d  # noqa: E402
 from jaxgrav.geodesy import geodetic_to_ecef  # noqa: E402
 from jaxgrav.match import filters as fl  # noqa: E402
@@ -195,13 +195,13 @@ def _summary(infos):
     return infos.x[..., :2], infos.sigma[..., :2], jnp.bitwise_or.reduce(infos.status, axis=-1)
 
 
-def monte_carlo(filt, chunk=None):
+def monte_carlo(filt, chunk=None, every=1):
     """jit(vmap(run_filter)) returning position estimates, their σ and the OR of the flags."""
 
     @jax.jit
     def mc(field, dyn, x0, p0, steps):
         def one(args):
-            return _summary(fl.run_filter(filt, field, args[0], x0, p0, args[1])[1])
+            return _summary(fl.run_filter(filt, field, args[0], x0, p0, args[1], every)[1])
 
         return over_runs(one, (dyn, steps), chunk)
 
@@ -254,78 +254,17 @@ def agreement(pos, sig, ref_pos, ref_sig):
 # --------------------------------------------------------------------------- profile
 
 
-def _ukf5_update(state, step, field, dynamics, cholesky=kalman._robust_cholesky):
-    """Prototype (not library code): the library's UKF update with the map evaluated only at
-    the 5 distinct sigma-point positions.
-
-    With the position states first and a lower Cholesky factor L, only columns 0 and 1 of
-    L move the position; the other 22 sigma points sit at the mean position and differ
-    in h only through the bias state, which enters linearly: h = map(pos) + x[12].
-    """
-    pred = kalman.predict(state, dynamics.f, dynamics.q)
-    n = pred.x.shape[0]
-    scale, wm, wc = kalman.sigma_weights(n, ALPHA, BETA, KAPPA)
-    chol, repaired, failed = cholesky(pred.p)
-    delta = jnp.sqrt(scale) * chol.T
-    points = jnp.concatenate([pred.x[None], pred.x + delta, pred.x - delta])
-    pos = jnp.concatenate([pred.x[None, :2], pred.x[:2] + delta[:2, :2],
-                           pred.x[:2] - delta[:2, :2]])
-    zero = jnp.zeros(n, pred.x.dtype)
-    g5 = jax.vmap(lambda p: fl.gravity_measurement(field, zero.at[:2].set(p), step.lat,
-                                                   step.lon))(pos)
-    rest = jnp.full(n - 2, g5[0])
-    zs = jnp.concatenate([g5[:3], rest, g5[3:], rest]) + points[:, 12]
-    off_map = ~jnp.all(jnp.isfinite(zs))
-    zs = jnp.where(jnp.isfinite(zs), zs, 0.0)
-    z_hat = wm @ zs
-    dz = zs - z_hat
-    s = wc @ dz**2 + step.r
-    pxz = (wc * dz) @ (points - pred.x)
-    z = jnp.where(jnp.isfinite(step.z), step.z, z_hat)
-    nu = z - z_hat
-    k = pxz / s
-    flags_, skip = kalman._flags(step.z, s, nu, jnp.inf, off_map)
-    flags_ = flags_ | jnp.where(repaired, fl.STATUS_FILTER["covariance_repaired"], 0)
-    flags_ = flags_ | jnp.where(failed, fl.STATUS_FILTER["covariance_failed"], 0)
-    nu_out = jnp.where(jnp.isfinite(step.z), nu, jnp.nan)
-    return kalman._finish(pred, pred.x + k * nu, pred.p - s * jnp.outer(k, k), nu_out, s,
-                          flags_, skip | failed)
+def _generic_gravity(field, x, lat, lon):
+    """The gravity measurement as an opaque callable: the UKF's generic 27-point path."""
+    return fl.gravity_measurement(field, x, lat, lon)
 
 
-def _ukf5_single_cholesky_update(state, step, field, dynamics):
-    """Prototype: the 5-point update with one plain Cholesky instead of the robust pair."""
-
-    def plain(p):
-        low = small_cholesky(p)
-        failed = ~jnp.all(jnp.isfinite(low))
-        return jnp.where(failed, 0.0, low), False, failed
-
-    return _ukf5_update(state, step, field, dynamics, plain)
-
-
-def _reading_rate_run(update, field, dyn, x0, p0, steps, every):
-    """Prototype: scan over blocks of ``every`` steps, ``every − 1`` pure predictions
-    (what the library's update computes on a NaN reading) then one full update."""
-    t = steps.z.shape[0]
-    blocks = jax.tree.map(lambda a: a.reshape(t // every, every), steps)
-
-    def block(state, bs):
-        def pred_only(st, _):
-            st = kalman.predict(st, dyn.f, dyn.q)
-            return st, st.x[:2]
-
-        state, xs = jax.lax.scan(pred_only, state, None, length=every - 1)
-        state, info = update(state, jax.tree.map(lambda a: a[-1], bs), field, dyn)
-        return state, jnp.concatenate([xs, info.x[None, :2]])
-
-    state, xs = jax.lax.scan(block, fl.FilterState(x0, p0), blocks)
-    return state, xs.reshape(t, 2)
-
-
-def profile(field, dyn, steps, x0, p0, every, ref_pos, dtype, repeats):
-    """Per run-step cost of the UKF's parts and of the prototypes (runs in chunks of CHUNK)."""
+def profile(field, dyn, steps, x0, p0, every, dtype, repeats):
+    """Per run-step cost of the parts of a filter step (runs in chunks of CHUNK)."""
     r, t = steps.z.shape
     ukf = fl.ukf(alpha=ALPHA, beta=BETA, kappa=KAPPA)
+    ukf_generic = fl.ukf(_generic_gravity, alpha=ALPHA, beta=BETA, kappa=KAPPA)
+    ekf = fl.ekf()
 
     def scan_vmap(body):
         def f(field, dyn, x0, p0, steps):
@@ -333,7 +272,7 @@ def profile(field, dyn, steps, x0, p0, every, ref_pos, dtype, repeats):
                 def b(st, s1):
                     return body(st, s1, field, d)
 
-                return jax.lax.scan(b, fl.FilterState(x0, p0), s)
+                return jax.lax.scan(b, fl.FilterState(x0, p0), s)[1]
 
             return over_runs(lambda a: one(*a), (dyn, steps), CHUNK)
 
@@ -343,68 +282,55 @@ def profile(field, dyn, steps, x0, p0, every, ref_pos, dtype, repeats):
         st = kalman.predict(st, d.f, d.q)
         return st, st.x[:2] + st.p[0, :2]
 
+    def predict_info_body(st, s, field, d):
+        st, info = ukf.predict(st, s, field, d)
+        return st, info.x[:2] + info.sigma[:2]
+
     def chol_body(st, s, field, d):
         st = kalman.predict(st, d.f, d.q)
-        low = small_cholesky(st.p)
-        return st, low[:2, 0]
+        return st, modified_cholesky(st.p)[0][:2, 0]
 
-    def robust_body(st, s, field, d):
+    def map5_body(st, s, field, d):
         st = kalman.predict(st, d.f, d.q)
-        low = kalman._robust_cholesky(st.p)[0]
-        return st, low[:2, 0]
-
-    def measure_body(st, s, field, d):
-        st = kalman.predict(st, d.f, d.q)
-        pts = st.x + jnp.arange(27.0, dtype=st.x.dtype)[:, None] * jnp.ones_like(st.x)
-        zs = jax.vmap(lambda xi: fl.gravity_measurement(field, xi, s.lat, s.lon))(pts)
+        pos = st.x[:2] + jnp.arange(5.0, dtype=st.x.dtype)[:, None]
+        zs = jax.vmap(lambda p: fl.map_at_error(field, p, s.lat, s.lon))(pos)
         return st, st.x[:2] + zs.sum()
 
-    def ukf_body(st, s, field, d):
-        st, info = ukf.update(st, s, field, d)
-        return st, info.x[:2]
+    def update_body(filt):
+        def body(st, s, field, d):
+            st, info = filt.update(st, s, field, d)
+            return st, info.x[:2]
 
-    def ukf5_body(st, s, field, d):
-        st, info = _ukf5_update(st, s, field, d)
-        return st, info.x[:2]
+        return body
 
     args = (field, dyn, x0, p0, steps)
     parts = [
         ("predict x, P", scan_vmap(predict_body)),
-        ("predict + 1 cholesky", scan_vmap(chol_body)),
-        ("predict + robust cholesky (library: 2 factorisations)", scan_vmap(robust_body)),
-        ("predict + 27 map evaluations", scan_vmap(measure_body)),
-        ("ukf (library), every step", scan_vmap(ukf_body)),
-        ("prototype: 5 map evaluations", scan_vmap(ukf5_body)),
+        ("predict + step info (predict-only step)", scan_vmap(predict_info_body)),
+        ("predict + modified cholesky", scan_vmap(chol_body)),
+        ("predict + 5 map evaluations", scan_vmap(map5_body)),
+        ("ukf update, every step (5 map points, 1 cholesky)", scan_vmap(update_body(ukf))),
+        ("ukf update, every step, generic 27-point measurement",
+         scan_vmap(update_body(ukf_generic))),
+        ("ekf update, every step", scan_vmap(update_body(ekf))),
     ]
     for name, fn in parts:
         progress(f"profile {dtype}: {name}")
         _, secs, _ = time_compiled(jax.jit(fn), args, repeats)
         print_profile(name, r, t, secs, dtype)
+    for name, filt in [(f"ukf run_filter every={every}", ukf),
+                       (f"ekf run_filter every={every}", ekf)]:
+        progress(f"profile {dtype}: {name}")
+        _, secs, _ = time_compiled(monte_carlo(filt, CHUNK, every), args, repeats)
+        print_profile(name, r, t, secs, dtype)
 
-    def proto(update):
-        def f(field, dyn, x0, p0, steps):
-            return over_runs(
-                lambda a: _reading_rate_run(update, field, a[0], x0, p0, a[1], every)[1],
-                (dyn, steps), CHUNK)
-
-        return jax.jit(f)
-
-    for name, update in [("prototype: update only on readings", ukf.update),
-                         ("prototype: readings only + 5 map evaluations", _ukf5_update),
-                         ("prototype: readings only + 5 map evaluations + 1 cholesky",
-                          _ukf5_single_cholesky_update)]:
-        _, secs, pos = time_compiled(proto(update), args, repeats)
-        print_profile(name, r, t, secs, dtype,
-                      max_diff_vs_library_m=float(f"{np.max(np.abs(pos - ref_pos)):.3g}"))
-
-    # XLA's count for one update with a reading (loops are not counted by cost_analysis)
+    # XLA's count for one update with a reading and one prediction (unvmapped)
     st = fl.FilterState(x0, p0)
     s1 = jax.tree.map(lambda a: a[0, every - 1], steps)
     d1 = jax.tree.map(lambda a: a[0], dyn)
-    for name, upd in [("ukf update", ukf.update), ("prototype 5-point update", _ukf5_update),
-                      ("predict", lambda st, s, f, d: kalman.predict(st, d.f, d.q))]:
-        cost = jax.jit(lambda st, s, f, d, u=upd: u(st, s, f, d)).lower(st, s1, field, d1)
-        cost = cost.compile().cost_analysis()
+    for name, fn in [("ukf update", ukf.update), ("ukf update, generic", ukf_generic.update),
+                     ("ekf update", ekf.update), ("predict-only step", ukf.predict)]:
+        cost = jax.jit(fn).lower(st, s1, field, d1).compile().cost_analysis()
         cost = cost[0] if isinstance(cost, list) else cost
         print(json.dumps({"bench": f"{BENCH}_profile", "part": f"cost_analysis: {name}",
                           "dtype": dtype, "flops": cost.get("flops"),
@@ -452,25 +378,27 @@ def main():
              baseline_runs_per_s=round(1.0 / fp_per_run, 3), compile_s=round(compile_s, 2),
              flags=flags(status), note=note, **common, **extra)
 
-    # UKF, float64: all runs in one vmap, then in chunks --------------------------
+    # UKF, float64: updates on the reading steps, then on every step --------------
     ukf = fl.ukf(alpha=ALPHA, beta=BETA, kappa=KAPPA)
     args64 = (field, dyn, x0, p0, steps)
     # chunks pay off only for large batches (cache); --quick runs one vmap
-    big = n_runs >= 10 * CHUNK
-    chunk_best = CHUNK if big else None
-    out64 = None
-    for chunk in (None, CHUNK) if big else (None,):
-        case = cname("ukf-float64", chunk)
-        progress(case)
-        compile_s, secs, out = time_compiled(monte_carlo(ukf, chunk), args64, repeats)
-        line(case, n_runs, secs, compile_s, out, chunk=chunk,
-             **agreement(out[0][0], out[1][0], fp_pos, fp_sig))
-        out64 = out if out64 is None else out64
+    chunk_best = CHUNK if n_runs >= 10 * CHUNK else None
+    progress("ukf-float64")
+    compile_s, secs, out64 = time_compiled(monte_carlo(ukf, chunk_best, every), args64, repeats)
+    line(cname("ukf-float64", chunk_best), n_runs, secs, compile_s, out64, chunk=chunk_best,
+         every=every, **agreement(out64[0][0], out64[1][0], fp_pos, fp_sig))
+    progress("ukf-float64-every1")
+    compile_s, secs, out1 = time_compiled(monte_carlo(ukf, chunk_best, 1), args64, repeats)
+    line(cname("ukf-float64-every1", chunk_best), n_runs, secs, compile_s, out1,
+         chunk=chunk_best, every=1, **agreement(out1[0][0], out1[1][0], fp_pos, fp_sig),
+         every5_vs_every1_max_diff_m=float(f"{np.max(np.abs(out64[0] - out1[0])):.3g}"))
 
     # EKF, float64 -----------------------------------------------------------------
     progress("ekf")
-    compile_s, secs, oute = time_compiled(monte_carlo(fl.ekf(), chunk_best), args64, repeats)
+    compile_s, secs, oute = time_compiled(monte_carlo(fl.ekf(), chunk_best, every), args64,
+                                          repeats)
     line(cname("ekf-float64", chunk_best), n_runs, secs, compile_s, oute, chunk=chunk_best,
+         every=every,
          ekf_vs_ukf_max_diff_sigma=float(f"{np.max(np.abs(oute[0] - out64[0]) / out64[1]):.3g}"))
 
     # PMF, float64 -----------------------------------------------------------------
@@ -487,24 +415,24 @@ def main():
     prof_steps = jax.tree.map(lambda a: a[:, :prof_t], steps)
     prof_repeats = 3 if args.quick else 2
     if args.profile:
-        profile(field, dyn, prof_steps, x0, p0, every, out64[0][:, :prof_t], "float64",
-                prof_repeats)
+        profile(field, dyn, prof_steps, x0, p0, every, "float64", prof_repeats)
 
     # UKF, float32 -----------------------------------------------------------------
     progress("ukf float32")
     jax.config.update("jax_enable_x64", False)
     try:
         a32 = as_float32(args64)
-        compile_s, secs, out32 = time_compiled(monte_carlo(ukf, chunk_best), a32, repeats)
+        compile_s, secs, out32 = time_compiled(monte_carlo(ukf, chunk_best, every), a32,
+                                               repeats)
         diff = np.abs(out32[0] - out64[0])
         line(cname("ukf-float32", chunk_best), n_runs, secs, compile_s, out32, chunk=chunk_best,
-             **agreement(out32[0][0], out32[1][0], fp_pos, fp_sig),
+             every=every, **agreement(out32[0][0], out32[1][0], fp_pos, fp_sig),
              f32_vs_f64_max_diff_m=float(f"{diff.max():.3g}"),
              f32_vs_f64_median_max_diff_m=float(f"{np.median(diff.max(axis=(1, 2))):.3g}"),
              f32_vs_f64_max_diff_sigma=float(f"{np.max(diff / out64[1]):.3g}"))
         if args.profile:
-            profile(*as_float32((field, dyn, prof_steps, x0, p0)), every,
-                    out64[0][:, :prof_t], "float32", prof_repeats)
+            profile(*as_float32((field, dyn, prof_steps, x0, p0)), every, "float32",
+                    prof_repeats)
     finally:
         jax.config.update("jax_enable_x64", True)
 

@@ -214,7 +214,8 @@ def _kalman_run(key, field, scenario, filt):
     run = filter_scenario(key, field, scenario)
     dynamics, steps = run_steps(run, scenario)
     x0, p0 = initial_state(scenario)
-    _, infos = run_filter(filt, field, dynamics, x0, p0, steps)
+    # readings sit on steps every-1, 2 every-1, …: update only there, predict in between
+    _, infos = run_filter(filt, field, dynamics, x0, p0, steps, scenario.reading_every)
     return run_metrics(run, infos)
 
 
