@@ -3,7 +3,7 @@
 Sub-commands
 ------------
 ``demo``            the main job on the shipped data (README quick start)
-``match``           match a track CSV against a map (paper A), write JSON
+``match``           match a track CSV against a map (papers A and B), write JSON
 ``simulate``        write a track CSV (and its truth) from a matching scenario
 ``filter``          gravity/INS filtering of a track CSV: UKF, EKF, Gaussian sum, PMF (paper D)
 ``simulate-filter`` write a track CSV (and its truth) from paper D's filtering scenario
@@ -21,6 +21,9 @@ import sys
 from pathlib import Path
 
 __all__ = ["main"]
+
+ENTROPY_HALF_SIZE = 20
+"""Default ``--entropy-half-size`` (as ``examples/paper_b_entropy_iccp.py``)."""
 
 
 def _enable_x64():
@@ -70,6 +73,7 @@ def _cmd_match(args):
     from jaxgrav.sim import DEG_ARC_M
     from jaxgrav.tracks import read_track_csv
 
+    _check_match_args(args)
     grid = _load_map(args.map, args.var)
     track = read_track_csv(args.track, required=("t", "lat", "lon"))
     field = "magnetic" if "magnetic" in track else "gravity"
@@ -90,9 +94,11 @@ def _cmd_match(args):
         z = track[field]
         if has_v:
             z = z + np.asarray(eotvos(track["lat"], track["v_east"], track["v_north"]))
+        max_rotation = 90.0 if args.max_rotation is None else args.max_rotation
         result = match_track_b(grid, track["lat"], track["lon"], z, method=args.method,
                                drift_radius_m=radius_deg * DEG_ARC_M, noise=args.noise,
-                               warn=False)
+                               max_rotation_deg=max_rotation,
+                               entropy_half_size=args.entropy_half_size, warn=False)
         messages = status_messages_b(int(result.status))
     else:
         if field != "gravity":
@@ -110,13 +116,46 @@ def _cmd_match(args):
     r["status_messages"] = messages
     r.update(method=args.method, field=field, map=str(args.map), track=str(args.track),
              drift_radius_deg=radius_deg, eotvos_corrected=has_v)
+    if args.method in METHODS_B:
+        r.update(max_rotation_deg=max_rotation, entropy_half_size=args.entropy_half_size)
     with atomic_output(args.out, force=args.force) as tmp:
         tmp.write_text(json.dumps(r, indent=1))
+    unit = "nT" if field == "magnetic" else "mGal"
     print(f"wrote {args.out}: {args.method} match of {len(track['lat'])} fixes, offset "
           f"{float(result.offset_north_m):.0f} m north, {float(result.offset_east_m):.0f} m "
-          f"east, score {float(result.score):.3g} mGal^2")
+          f"east, rotation {float(result.rotation_deg):.2f} deg, score "
+          f"{float(result.score):.3g} {unit}^2")
     for msg in r["status_messages"]:
         print(f"warning: {msg}", file=sys.stderr)
+
+
+def _check_match_args(args):
+    """Numeric options of ``match``: one clear error naming the option and the value."""
+    import math
+
+    def bad(option, value, expected):
+        raise ValueError(f"{option} must be {expected}; got {value!r}")
+
+    if args.drift_radius is not None and not (math.isfinite(args.drift_radius)
+                                              and args.drift_radius > 0):
+        bad("--drift-radius", args.drift_radius, "a positive number of degrees of arc")
+    if not (math.isfinite(args.noise) and args.noise >= 0):
+        bad("--noise", args.noise, "a finite standard deviation >= 0 (mGal or nT)")
+    if args.refine < 1:
+        bad("--refine", args.refine, "an integer factor >= 1")
+    if args.max_rotation is not None:
+        if args.method not in ("iccp", "entropy+iccp"):
+            raise ValueError(f"--max-rotation bounds ICCP's rotation; it has no effect with "
+                             f"--method {args.method} (use iccp or entropy+iccp)")
+        if not (math.isfinite(args.max_rotation) and 0 <= args.max_rotation <= 180):
+            bad("--max-rotation", args.max_rotation,
+                "the INS heading-error bound in degrees, between 0 and 180")
+    if args.entropy_half_size != ENTROPY_HALF_SIZE and args.method not in ("entropy",
+                                                                       "entropy+iccp"):
+        raise ValueError(f"--entropy-half-size sizes the entropy stage; it has no effect with "
+                         f"--method {args.method} (use entropy or entropy+iccp)")
+    if not 1 <= args.entropy_half_size <= 100:
+        bad("--entropy-half-size", args.entropy_half_size, "an integer between 1 and 100")
 
 
 def _cmd_simulate(args):
@@ -179,7 +218,7 @@ def build_parser():
     d.add_argument("--force", action="store_true", help="overwrite existing outputs")
     d.set_defaults(func=_cmd_demo)
 
-    m = sub.add_parser("match", help="match a track CSV against a map (paper A)")
+    m = sub.add_parser("match", help="match a track CSV against a map (papers A and B)")
     m.add_argument("--map", required=True,
                    help="NetCDF grid with lat/lon coordinates, or a shipped map (ryukyu, "
                         "ryukyu:anomaly_0p5deg)")
@@ -200,6 +239,15 @@ def build_parser():
     m.add_argument("--bias-sigma", type=float, default=None,
                    help="prior sigma of the reading bias (mGal); default 3 with velocities, "
                         "else free")
+    m.add_argument("--max-rotation", type=float, default=None, metavar="DEG",
+                   help="iccp, entropy+iccp: largest INS heading error (degrees, 0-180), the "
+                        "bound on ICCP's rotation (library max_rotation_deg); default 90, "
+                        "i.e. no bound that matters. The README's paper B numbers use 2 with "
+                        "--drift-radius 0.035")
+    m.add_argument("--entropy-half-size", type=int, default=ENTROPY_HALF_SIZE, metavar="N",
+                   help="entropy, entropy+iccp: at most N offsets per side, (2N+1)^2 in all "
+                        f"(default {ENTROPY_HALF_SIZE}, as the README's numbers); on fine maps "
+                        "the offset spacing grows instead")
     m.add_argument("--refine", type=int, default=1,
                    help="refine the map by this factor first (chains: paper A used 100)")
     m.add_argument("--no-eotvos", action="store_true",

@@ -105,3 +105,69 @@ def test_match_paper_b_methods(track, tmp_path, method):
                  "--method", method]) == 0
     r = json.loads(out.read_text())
     assert len(r["lat"]) == 20 and r["method"] == method and r["field"] == "gravity"
+
+
+def test_match_iccp_max_rotation_bounds_the_heading_and_matches_the_library(tmp_path):
+    import jax
+
+    from jaxgrav import datasets
+    from jaxgrav.match import match_track_b
+    from jaxgrav.match.scenario_b import PaperBScenario, paper_b_scenario
+    from jaxgrav.sim import DEG_ARC_M
+
+    # paper B's experiment: INS offset 0.02-0.03 deg and rotated 1.5 deg, 1 mGal
+    grid = datasets.load("ryukyu")["anomaly_2p5min"]
+    w, e, s, n = grid.extent
+    run = paper_b_scenario(jax.random.key(1), grid, PaperBScenario(region=(s, n, w, e)))
+    cols = {"t": np.asarray(run.truth.t), "lat": np.asarray(run.ins_lat),
+            "lon": np.asarray(run.ins_lon), "gravity": np.asarray(run.readings)}
+    write_track_csv(tmp_path / "b.csv", cols)
+    cols = read_track_csv(tmp_path / "b.csv")
+    rot = {}
+    for bound in ("0", "0.5", None):
+        out = tmp_path / f"b{bound}.json"
+        extra = [] if bound is None else ["--max-rotation", bound]
+        assert main(["match", "--map", "ryukyu", "--track", str(tmp_path / "b.csv"), "--out",
+                     str(out), "--method", "iccp", "--drift-radius", "0.035", *extra]) == 0
+        r = json.loads(out.read_text())
+        rot[bound] = r["rotation_deg"]
+        assert r["max_rotation_deg"] == (90.0 if bound is None else float(bound))
+        lib = match_track_b(grid, cols["lat"], cols["lon"], cols["gravity"], method="iccp",
+                            drift_radius_m=0.035 * DEG_ARC_M,
+                            max_rotation_deg=r["max_rotation_deg"], warn=False)
+        np.testing.assert_allclose(r["lat"], np.asarray(lib.lat), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(r["rotation_deg"], float(lib.rotation_deg), atol=1e-12)
+    assert rot["0"] == 0.0
+    assert abs(rot["0.5"]) <= 0.5 + 1e-9
+    assert abs(rot[None]) > 0.5  # the bound is what held it, not the data
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--method", "iccp", "--max-rotation", "-1"], "--max-rotation must be the INS heading"),
+    (["--method", "iccp", "--max-rotation", "200"], "between 0 and 180; got 200.0"),
+    (["--method", "entropy+iccp", "--max-rotation", "nan"], "--max-rotation must be"),
+    (["--method", "dense", "--max-rotation", "2"], "no effect with --method dense"),
+    (["--method", "entropy", "--max-rotation", "2"], "no effect with --method entropy"),
+    (["--method", "iccp", "--drift-radius", "0"], "--drift-radius must be a positive"),
+    (["--method", "iccp", "--drift-radius", "-0.03"], "got -0.03"),
+    (["--method", "iccp", "--noise", "-1"], "--noise must be a finite standard deviation"),
+    (["--method", "entropy", "--entropy-half-size", "0"], "--entropy-half-size must be"),
+    (["--method", "iccp", "--entropy-half-size", "5"], "no effect with --method iccp"),
+    (["--refine", "0"], "--refine must be an integer factor >= 1; got 0"),
+])
+def test_match_bad_options_get_clear_errors(track, tmp_path, capsys, args, message):
+    code = main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"),
+                 "--out", str(tmp_path / "r.json"), *args])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert message in err and err.startswith("jaxgrav match: error: ")
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_match_help_documents_paper_b_options():
+    r = subprocess.run([sys.executable, "-m", "jaxgrav.cli", "match", "--help"],
+                       capture_output=True, text=True, check=True)
+    text = " ".join(r.stdout.split())
+    for option in ("--max-rotation DEG", "--entropy-half-size N", "--drift-radius"):
+        assert option in text
+    assert "heading error" in text
