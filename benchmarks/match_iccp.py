@@ -2,9 +2,10 @@
 
 Tracks of paper B's experiment (60 fixes a minute apart at 10 m/s, INS offset
 0.02–0.03° and rotated 1.5° about its start, 1 mGal noise) on the shipped 2.5′
-``ryukyu`` gravity map are matched by ICCP alone (window covering the drift),
-batches of 1 and 1000 tracks (256 with ``--quick``), in one ``jit(vmap(match_iccp))``
-call.
+``ryukyu`` gravity map are matched by ICCP alone (window covering the drift):
+one track by ``match_iccp``, batches of 1000 tracks (256 with ``--quick``) by the
+library's batch matcher ``match_iccp_batch`` (chunks of 100 tracks) and, for
+reference, by one ``jit(vmap(match_iccp))`` over the whole batch (case ``-vmap``).
 
 The baseline is the plain NumPy way, one track at a time: a Python loop over
 iterations (stopping early at convergence; the batched loop runs until every track
@@ -39,7 +40,7 @@ from jaxgrav.match.entropy_iccp import (  # noqa: E402
     iccp_config_for,
     paper_b_scenario,
 )
-from jaxgrav.match.iccp import match_iccp  # noqa: E402
+from jaxgrav.match.iccp import match_iccp, match_iccp_batch  # noqa: E402
 from jaxgrav.sim import DEG_ARC_M  # noqa: E402
 
 
@@ -152,17 +153,19 @@ def main():
     cases = []
     for dtype in dtypes:
         g = Grid(jnp.asarray(grid.values, dtype), grid.lat0, grid.dlat, grid.lon0, grid.dlon)
-        f = jax.jit(jax.vmap(match_iccp, in_axes=(None, 0, 0, 0, None)))
+        fv = jax.jit(jax.vmap(match_iccp, in_axes=(None, 0, 0, 0, None)))
         f1 = jax.jit(match_iccp)
         for b in batches:
             la, lo, zz = (jnp.asarray(a[:b], dtype) for a in (lat, lon, z))
             if b == 1:
-                call = lambda f1=f1, a=(g, la[0], lo[0], zz[0], cfg): f1(*a)  # noqa: E731
+                calls = {"": lambda f1=f1, a=(g, la[0], lo[0], zz[0], cfg): f1(*a)}
             else:
-                call = lambda f=f, a=(g, la, lo, zz, cfg): f(*a)  # noqa: E731
-            t0 = time.perf_counter()
-            out = jax.block_until_ready(call())
-            cases.append((dtype, b, call, out, time.perf_counter() - t0, []))
+                calls = {"": lambda a=(g, la, lo, zz, cfg): match_iccp_batch(*a),
+                         "-vmap": lambda fv=fv, a=(g, la, lo, zz, cfg): fv(*a)}
+            for suffix, call in calls.items():
+                t0 = time.perf_counter()
+                out = jax.block_until_ready(call())
+                cases.append((dtype, b, suffix, call, out, time.perf_counter() - t0, []))
 
     # timing rounds, interleaved: on a shared machine the load changes between rounds,
     # so each round times the baseline and every case back to back
@@ -175,7 +178,7 @@ def main():
             times.append(best_time(lambda call=call: jax.block_until_ready(call()), 2))
     per_track = min(base_times)
 
-    for dtype, b, _, out, compile_s, times in cases:
+    for dtype, b, suffix, _, out, compile_s, times in cases:
         t = min(times)
         m = min(b, n_base)
         rot = np.atleast_1d(np.asarray(out.rotation_deg, np.float64))[:m]
@@ -186,7 +189,7 @@ def main():
         per_round = [bt * b / jt for bt, jt in zip(base_times, times, strict=True)]
         emit(
             "match_iccp",
-            f"batch{b}-{np.dtype(dtype).name}",
+            f"batch{b}-{np.dtype(dtype).name}{suffix}",
             b,
             t,
             "numpy ICCP loop (numpy.linalg.svd Kabsch)",

@@ -18,7 +18,13 @@ from jaxgrav.match.entropy_iccp import (
     match_entropy_iccp,
     match_track_b,
 )
-from jaxgrav.match.iccp import IccpConfig, _track_frame, kabsch_2d, match_iccp
+from jaxgrav.match.iccp import (
+    IccpConfig,
+    _track_frame,
+    kabsch_2d,
+    match_iccp,
+    match_iccp_batch,
+)
 from jaxgrav.match.rigid import _solve3, refine_local, rotation_matrix
 from jaxgrav.scenarios import track_error_m
 from jaxgrav.sim import Track
@@ -195,6 +201,29 @@ def test_iccp_converges_from_small_offsets(smooth_grid, d_n, d_e, rot_deg):
     assert int(res.status) & 16
 
 
+def test_iccp_batch_in_chunks_equals_looped(smooth_grid):
+    rng = np.random.default_rng(7)
+    lat, lon = _track()
+    z0 = np.asarray(smooth_grid.sample(lat, lon, "bicubic"))
+    ins_lat, ins_lon, z = [], [], []
+    for _ in range(5):  # 5 tracks in chunks of 2: 3 equal chunks, the last one padded
+        la, lo = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), *rng.uniform(-300, 300, 2),
+                                jnp.deg2rad(rng.uniform(-1.0, 1.0)))
+        ins_lat.append(la)
+        ins_lon.append(lo)
+        z.append(z0 + 0.2 * rng.normal(size=lat.size))
+    ins_lat, ins_lon, z = (jnp.asarray(np.stack(a)) for a in (ins_lat, ins_lon, z))
+    cfg = IccpConfig(window_m=1500.0, max_step_m=500.0, max_rotation_deg=2.0, contour_tol=1.0)
+    batched = match_iccp_batch(smooth_grid, ins_lat, ins_lon, z, cfg, chunk=2)
+    assert batched.lat.shape == (5, lat.size)
+    for i in range(5):
+        one = match_iccp(smooth_grid, ins_lat[i], ins_lon[i], z[i], cfg)
+        for a, b in zip(one, batched, strict=True):
+            np.testing.assert_allclose(np.asarray(b)[i], np.asarray(a), rtol=1e-9, atol=1e-9)
+    with pytest.raises(ValueError, match="chunk"):
+        match_iccp_batch(smooth_grid, ins_lat, ins_lon, z, cfg, chunk=0)
+
+
 ENT = EntropyConfig(spacing_m=200.0, half_size=4)
 ICP = IccpConfig(window_m=600.0, max_step_m=300.0, contour_tol=2.0)
 # every combined call below shares these static settings and a 20-fix track: one compile
@@ -287,3 +316,7 @@ def test_match_track_b_validates(smooth_grid):
         EntropyConfig(kind="shannon")
     with pytest.raises(ValueError, match="noise"):
         match_track_b(smooth_grid, lat, lon, z, noise=-1.0)
+    with pytest.raises(ValueError, match=r"max_rotation_deg .* between 0 and 180; got -2"):
+        match_track_b(smooth_grid, lat, lon, z, max_rotation_deg=-2.0)
+    with pytest.raises(ValueError, match="entropy_half_size"):
+        match_track_b(smooth_grid, lat, lon, z, entropy_half_size=0)

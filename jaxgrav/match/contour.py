@@ -146,7 +146,8 @@ def value_grad_ne(field, north, east):
     c0 = jnp.minimum(jnp.floor(ix), nx - 2.0)
     ty, tx = iy - r0, ix - c0
     flat = field.coef.reshape((ny - 1) * (nx - 1), 16)
-    a = flat[(r0 * (nx - 1) + c0).astype(jnp.int32)]  # (..., 16): one gather
+    # (..., 16): one gather; r0, c0 are clipped above, so no bounds handling is needed
+    a = flat.at[(r0 * (nx - 1) + c0).astype(jnp.int32)].get(mode="promise_in_bounds")
     u, du = [], []  # Σ_j a_ij tx^j and its tx-derivative, for i = 0..3
     for i in range(4):
         a0, a1, a2, a3 = (a[..., 4 * i + j] for j in range(4))
@@ -202,9 +203,16 @@ def project_to_contours(field, y_n, y_e, z, steps, max_step_m):
     tuple of Array
         ``(x_n, x_e, f, g_n, g_e)``: contour points and the value and gradient at
         them (one evaluation after the last step), each ``(N,)``.
+
+    Notes
+    -----
+    Each evaluation's outputs pass an optimisation barrier: without it XLA fuses the
+    Horner sums into every consumer and recomputes them there (each step's ``f`` and
+    gradient were evaluated three to four times; for the ICCP loop's final step, once
+    per Kabsch sum). Values are unchanged.
     """
     x_n, x_e = y_n, y_e
-    f, g_n, g_e = value_grad_ne(field, x_n, x_e)
+    f, g_n, g_e = jax.lax.optimization_barrier(value_grad_ne(field, x_n, x_e))
     for _ in range(steps):
         g2 = g_n * g_n + g_e * g_e
         ok = jnp.isfinite(f) & (g2 > 0)
@@ -213,6 +221,6 @@ def project_to_contours(field, y_n, y_e, z, steps, max_step_m):
         length2 = d * d * g2
         d = d * jnp.where(length2 > max_step_m**2,
                           max_step_m * jax.lax.rsqrt(jnp.where(length2 > 0, length2, 1.0)), 1.0)
-        x_n, x_e = x_n + d * g_n, x_e + d * g_e
-        f, g_n, g_e = value_grad_ne(field, x_n, x_e)
+        x_n, x_e = jax.lax.optimization_barrier((x_n + d * g_n, x_e + d * g_e))
+        f, g_n, g_e = jax.lax.optimization_barrier(value_grad_ne(field, x_n, x_e))
     return x_n, x_e, f, g_n, g_e

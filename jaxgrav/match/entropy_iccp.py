@@ -193,7 +193,8 @@ def iccp_config_for(grid, drift_radius_m, *, stage="alone", noise=1.0, max_rotat
 
 
 def match_track_b(grid, lat, lon, readings, *, method="entropy+iccp", drift_radius_m=5000.0,
-                  noise=1.0, max_rotation_deg=90.0, entropy=None, iccp=None, warn=True):
+                  noise=1.0, max_rotation_deg=90.0, entropy_half_size=20, entropy=None,
+                  iccp=None, warn=True):
     """Match one track with paper B's methods, with input checks (public entry point).
 
     Parameters
@@ -211,7 +212,11 @@ def match_track_b(grid, lat, lon, readings, *, method="entropy+iccp", drift_radi
     noise : float
         Reading noise σ (map units).
     max_rotation_deg : float
-        Largest expected INS heading error (degrees); bounds ICCP's rotation.
+        Largest expected INS heading error (degrees, 0–180); bounds ICCP's rotation.
+    entropy_half_size : int
+        At most this many entropy offsets per side (``max_half_size`` of
+        :func:`~jaxgrav.match.entropy.entropy_config_for`; on fine maps the offset
+        spacing grows instead).
     entropy : EntropyConfig, optional
         Replaces the sizing from ``drift_radius_m``.
     iccp : IccpConfig, optional
@@ -227,7 +232,7 @@ def match_track_b(grid, lat, lon, readings, *, method="entropy+iccp", drift_radi
     ------
     ValueError
         Unknown method, mismatched lengths, too short a track, NaN values, a track
-        off the map, non-positive drift radius.
+        off the map, non-positive drift radius, a rotation bound outside 0–180°.
     """
     from jaxgrav.match.api import _validate
 
@@ -235,9 +240,14 @@ def match_track_b(grid, lat, lon, readings, *, method="entropy+iccp", drift_radi
         raise ValueError(f"method must be one of {METHODS_B}; got {method!r}")
     if not noise >= 0:
         raise ValueError(f"noise must be a non-negative standard deviation; got {noise!r}")
+    if not 0 <= max_rotation_deg <= 180:
+        raise ValueError(f"max_rotation_deg must be the INS heading-error bound in degrees, "
+                         f"between 0 and 180; got {max_rotation_deg!r}")
+    if not (isinstance(entropy_half_size, int) and entropy_half_size >= 1):
+        raise ValueError(f"entropy_half_size must be an integer >= 1; got {entropy_half_size!r}")
     lat, lon, readings = _validate(grid, lat, lon, readings)
     if method != "iccp" and entropy is None:
-        entropy = entropy_config_for(grid, drift_radius_m)
+        entropy = entropy_config_for(grid, drift_radius_m, max_half_size=entropy_half_size)
     if iccp is None:
         stage = "alone" if method == "iccp" else "fine"
         iccp = iccp_config_for(grid, drift_radius_m, stage=stage, noise=noise,

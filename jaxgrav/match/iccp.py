@@ -26,6 +26,7 @@ errors (see ``examples/paper_b_entropy_iccp.py``).
 """
 
 import dataclasses
+import functools
 from typing import NamedTuple
 
 import jax
@@ -53,6 +54,7 @@ __all__ = [
     "iccp_local",
     "kabsch_2d",
     "match_iccp",
+    "match_iccp_batch",
     "refine_local",
 ]
 
@@ -208,11 +210,12 @@ def iccp_local(field, p0, z, config, r0=None, t0=None):
         ok = (jnp.isfinite(f) & (jnp.abs(f - z) <= config.contour_tol)
               & ((x_n - y_n) ** 2 + (x_e - y_e) ** 2 <= window2))
         w = ok.astype(dtype)
-        n_ok = jnp.sum(w).astype(jnp.int32)
         if config.weights == "gradient":
             w = w * (g_n * g_n + g_e * g_e)
-        c_new, s_new, tn_new, te_new = kabsch_ne(p_n, p_e, jnp.where(ok, x_n, y_n),
-                                                 jnp.where(ok, x_e, y_e), w, bound)
+        # materialised once: otherwise each Kabsch sum's fusion recomputes the tests
+        w, n_ok, x_n, x_e = jax.lax.optimization_barrier(
+            (w, jnp.sum(ok, dtype=jnp.int32), jnp.where(ok, x_n, y_n), jnp.where(ok, x_e, y_e)))
+        c_new, s_new, tn_new, te_new = kabsch_ne(p_n, p_e, x_n, x_e, w, bound)
         move2 = jnp.max((c_new * p_n - s_new * p_e + tn_new - y_n) ** 2
                         + (s_new * p_n + c_new * p_e + te_new - y_e) ** 2)
         enough = n_ok >= 3
@@ -323,3 +326,46 @@ def match_iccp(grid, lat, lon, readings, config=IccpConfig()):
     """
     coef = patch_coefficients(grid.values)
     return _iccp_result(coef, grid, lat, lon, readings, config)
+
+
+@functools.partial(jax.jit, static_argnames=("chunk",))
+def match_iccp_batch(grid, lat, lon, readings, config=IccpConfig(), chunk=100):
+    """:func:`match_iccp` over a batch of tracks sharing one map, in chunks (jitted).
+
+    Equal to ``jax.vmap(match_iccp, in_axes=(None, 0, 0, 0, None))``, but the map is
+    prepared once and tracks are matched ``chunk`` at a time (vectorised within a
+    chunk, a loop over chunks): each chunk's per-point arrays stay cache-sized (the
+    gathered bicubic coefficients are 16 numbers per point), and each chunk's
+    iteration loop stops when *its* tracks have converged. On a 2-core CPU about
+    1.5× faster than one ``vmap`` over 1000 tracks (``benchmarks/match_iccp.py``).
+
+    Parameters
+    ----------
+    grid : Grid
+        Map (nT or mGal).
+    lat, lon : Array, shape ``(B, N)``
+        INS-indicated fixes of ``B`` tracks (degrees).
+    readings : Array, shape ``(B, N)``
+        Measured values (map units), bias-free.
+    config : IccpConfig
+    chunk : int
+        Most tracks per chunk (static); the batch is cut into equal chunks, the last
+        one padded with copies of the first track (results dropped).
+
+    Returns
+    -------
+    MatchResult
+        Fields with a leading batch axis ``B``.
+    """
+    if chunk < 1:
+        raise ValueError(f"chunk must be a positive number of tracks; got {chunk!r}")
+    coef = patch_coefficients(grid.values)
+    b = lat.shape[0]
+    n_chunks = -(-b // chunk)
+    size = -(-b // n_chunks)  # equal chunks: one compiled body
+    pad = n_chunks * size - b
+    xs = tuple(jnp.concatenate([a, jnp.broadcast_to(a[:1], (pad, *a.shape[1:]))])
+               if pad else a for a in (lat, lon, readings))
+    xs = tuple(a.reshape(n_chunks, size, *a.shape[1:]) for a in xs)
+    out = jax.lax.map(jax.vmap(lambda x: _iccp_result(coef, grid, *x, config)), xs)
+    return jax.tree.map(lambda a: a.reshape(n_chunks * size, *a.shape[2:])[:b], out)
