@@ -27,6 +27,7 @@ callable ``h(field, x, lat, lon)`` still works (the generic path).
 """
 
 import dataclasses
+import operator
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -298,8 +299,13 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
     infos : StepInfo
         Leading axis ``T``.
     """
-    if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+    try:
+        k = operator.index(every)
+    except TypeError:
+        k = 0
+    if isinstance(every, bool) or k < 1:
         raise ValueError(f"every must be a positive int (steps per reading); got {every!r}")
+    every = k
     state = filt.init(x0, p0)
 
     def body(state, step):
