@@ -17,8 +17,8 @@ difference score forms cancel any constant residual anyway). Batches of 1, 100 a
   it inside every call instead.
 * ``chain``: :func:`jaxgrav.match.correlation.match_chains` on the map refined ×8
   (bilinear, ≈ 578 m × 500 m nodes), half_size covering 1.2 × the drift, capacity
-  sized from the iso-point counts of the batch so that overflow is rare (the rate is
-  reported).
+  and survivor capacity sized from the iso-point and survivor counts of the batch
+  (99th percentiles) so that overflow is rare (the rate is reported).
 
 The chain path runs ``jax.jit(jax.vmap(match_chains, in_axes=(None, 0, 0, 0, None)))``;
 the grid is passed as an argument; compile time is reported separately
@@ -352,12 +352,27 @@ def chain_config(fine, tracks, quick):
     cap = int(min(s2, 32 * math.ceil(np.percentile(per_track, 99) / 32)))
     if quick:
         cap = min(cap, 96)
+
+    def n_alive(grid, a, b, c):
+        cs = candidates.iso_candidates(grid, a, b, c, half_size=h, capacity=cap, delta=d.delta,
+                                       slope_factor=d.node_allowance)
+        steps = candidates.local_offsets_m(a[1:], b[1:], a[:-1], b[:-1])
+        dy, dx = grid.spacing_m(jnp.mean(a))
+        alive = chains.eliminate(cs, steps, d.step_tol_m + d.node_allowance * jnp.hypot(dy, dx),
+                                 d.angle_tol_deg)
+        return jnp.sum(alive, axis=1)
+
+    alive = np.asarray(jax.jit(jax.vmap(n_alive, in_axes=(None, 0, 0, 0)))(fine, lat, lon, g))
+    # survivor capacity: the same rule on the survivors of elimination
+    surv = int(min(cap, 32 * math.ceil(np.percentile(alive.max(axis=1), 99) / 32)))
     stats = dict(
         iso_count_median=float(np.median(count)),
         iso_count_p99=float(np.percentile(count, 99)),
+        alive_median=float(np.median(alive)),
+        alive_p99=float(np.percentile(alive, 99)),
         window_nodes=s2,
     )
-    return ChainConfig(half_size=h, capacity=cap), stats
+    return ChainConfig(half_size=h, capacity=cap, survivor_capacity=surv), stats
 
 
 def run_chain(grid, tracks, batches, quick, profile):
@@ -375,6 +390,13 @@ def run_chain(grid, tracks, batches, quick, profile):
         out, (t, t_cpu), base, (bt, bt_cpu), compile_s = measure(fn, args, run, rounds)
         bt, bt_cpu, extrap = bt * b / n_run, bt_cpu * b / n_run, (n_run if n_run < b else None)
         hint = bt / b
+        extra = {}
+        if b == 100 and cfg.survivor_capacity:  # the same without survivor compaction
+            import dataclasses
+
+            t_full = best_of(fn, (*args[:4], dataclasses.replace(cfg, survivor_capacity=0)), 1)
+            extra = dict(no_compaction_s=round(t_full, 4),
+                         no_compaction_ratio=round(bt / t_full, 3))
         status = np.asarray(out.status)
         found = (status & 1) == 0
         err = error_m(np.asarray(out.lat), np.asarray(out.lon), tlat[:b], tlon[:b]).mean(axis=1)
@@ -386,9 +408,10 @@ def run_chain(grid, tracks, batches, quick, profile):
             cpu_ratio=round(bt_cpu / max(t_cpu, 1e-9), 2),
             baseline_extrapolated_from=extrap,
             config=dict(refine=8, half_size=cfg.half_size, capacity=cfg.capacity,
-                        k_dp=cfg.k_dp, delta=cfg.delta, score=cfg.score),
+                        survivor_capacity=cfg.survivor_capacity, k_dp=cfg.k_dp,
+                        delta=cfg.delta, score=cfg.score),
             overflow_rate=round(float(np.mean((status & 2) > 0)), 4),
-            found_rate=round(float(found.mean()), 4),
+            found_rate=round(float(found.mean()), 4), **extra,
             median_error_m=round(float(np.median(err[found])), 1) if found.any() else None,
             **stats,
             **chain_agreement(out, base, range(len(base))),

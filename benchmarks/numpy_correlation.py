@@ -488,13 +488,20 @@ def compatibility(step_north, step_east, north0, east0, north1, east1, step_tol_
     """``[j, k]``: candidate j of fix i may be followed by k of fix i+1 (as jaxgrav)."""
     sn = step_north + north1[None, :] - north0[:, None]
     se = step_east + east1[None, :] - east0[:, None]
-    ins_len = np.hypot(step_north, step_east)
-    cand_len = np.hypot(sn, se)
-    ok_len = np.abs(cand_len - ins_len) <= step_tol_m
+    ins_len = math.hypot(step_north, step_east)
     ratio = min(step_tol_m / max(ins_len, 1e-9), 1.0)
     tol = min(angle_tol_deg * DEG + math.asin(ratio), math.pi)
+    cos_tol = math.cos(tol)
+    # |len - ins_len| <= tol and s·d >= |s||d| cos(tol), compared on squares
+    len_sq = sn * sn + se * se
+    ok_len = (len_sq <= (ins_len + step_tol_m) ** 2) & (
+        len_sq >= max(ins_len - step_tol_m, 0.0) ** 2)
     dot = sn * step_north + se * step_east
-    ok_dir = dot >= cand_len * ins_len * math.cos(tol)
+    dir_sq = (ins_len * cos_tol) ** 2
+    if cos_tol < 0:
+        ok_dir = (dot >= 0) | (dot * dot <= len_sq * dir_sq)
+    else:
+        ok_dir = (dot >= 0) & (dot * dot >= len_sq * dir_sq)
     return ok_len & ok_dir
 
 

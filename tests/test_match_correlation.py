@@ -258,6 +258,70 @@ def test_jit_no_retrace_and_vmap_equals_loop(smooth_grid):
         np.testing.assert_array_equal(bc.status[i], one.status)
 
 
+def test_chain_survivor_compaction(smooth_grid):
+    """Compacting survivors changes nothing but the work; too few slots raise overflow."""
+    keys = jax.random.split(jax.random.key(9), 3)
+    data = [_scenario(k, smooth_grid, 6, 60.0, 500.0, 0.3)[1:] for k in keys]
+    lat, lon, g = (jnp.stack(x) for x in zip(*data, strict=True))
+    base = ChainConfig(half_size=4, capacity=81, delta=1.5, k_dp=8)
+    run = jax.jit(jax.vmap(match_chains, in_axes=(None, 0, 0, 0, None)))
+    full = run(smooth_grid, lat, lon, g, base)
+    alive = jax.vmap(lambda a, b, c: jnp.sum(chains.eliminate(
+        cand_mod.iso_candidates(smooth_grid, a, b, c, half_size=4, capacity=81, delta=1.5),
+        cand_mod.local_offsets_m(a[1:], b[1:], a[:-1], b[:-1]),
+        base.step_tol_m + jnp.hypot(*smooth_grid.spacing_m(jnp.mean(a))),
+        base.angle_tol_deg), axis=1))(lat, lon, g)
+    most = int(jnp.max(alive))
+    assert 3 < most < 81
+    assert not np.any(np.asarray(full.status) & 2)
+    comp = run(smooth_grid, lat, lon, g, dataclasses.replace(base, survivor_capacity=most))
+    for name in ("lat", "lon", "score", "topk_score", "topk_lat", "topk_lon", "chosen",
+                 "status", "work_constrained", "work_pairs", "n_candidates"):
+        np.testing.assert_array_equal(getattr(comp, name), getattr(full, name), err_msg=name)
+    # fewer slots than survivors (and than k_dp): flagged, still a valid result
+    tight = run(smooth_grid, lat, lon, g, dataclasses.replace(base, survivor_capacity=3))
+    over = np.asarray(jnp.max(alive, axis=1)) > 3
+    np.testing.assert_array_equal((np.asarray(tight.status) & 2) > 0, over)
+    assert np.all(np.isfinite(np.asarray(tight.topk_score)[:, 0]) | (np.asarray(tight.status) & 1))
+    with pytest.raises(ValueError, match="survivor_capacity"):
+        ChainConfig(survivor_capacity=-1)
+
+
+def test_compact_and_small_capacity_kbest(rough_grid):
+    """compact keeps survivors in slot order; the k-best programme with fewer slots than
+    k equals brute force."""
+    n = 3
+    flat = 30 + np.arange(n) * 0.06
+    flon = 130 + np.arange(n) * 0.05
+    g = np.asarray(rough_grid.sample(flat + 0.011, flon - 0.013))
+    cands = cand_mod.iso_candidates(rough_grid, flat, flon, g, half_size=2, capacity=25,
+                                    delta=2.0)
+    steps = cand_mod.local_offsets_m(flat[1:], flon[1:], flat[:-1], flon[:-1])
+    tol = (3000.0, 10.0)
+    alive = chains.eliminate(cands, steps, *tol)
+    n_alive = np.asarray(alive.sum(axis=1))
+    cap = int(n_alive.max())
+    small, lost = chains.compact(cands, alive, cap)
+    assert not np.any(lost)
+    for i in range(n):
+        keep = np.flatnonzero(np.asarray(alive[i]))
+        np.testing.assert_array_equal(np.asarray(small.value[i])[:keep.size],
+                                      np.asarray(cands.value[i])[keep])
+        np.testing.assert_array_equal(np.asarray(small.mask[i]), np.arange(cap) < keep.size)
+    np.testing.assert_array_equal(chains.eliminate(small, steps, *tol), small.mask)
+    w = decreasing_weights(n, 0.5)
+    wd = w[:-1] / jnp.sum(w[:-1])
+    brute = _brute_force(small, steps, tol, g, wd)
+    k = cap + 3  # more chains than slots per fix
+    res = chains.kbest_chains(small, small.mask, steps, *tol, jnp.zeros((n, cap)),
+                              _pair_cost(jnp.asarray(g), wd), k)
+    m = min(k, len(brute))
+    np.testing.assert_allclose(res.score[:m], [s for s, _ in brute[:m]], rtol=1e-10)
+    assert np.all(np.isinf(np.asarray(res.score[m:])))
+    _, lost = chains.compact(cands, alive, 1)
+    np.testing.assert_array_equal(lost, n_alive > 1)
+
+
 def test_no_chain_returns_ins_with_status(rough_grid):
     lat = 30 + np.arange(5) * 0.05
     lon = 130 + np.arange(5) * 0.05

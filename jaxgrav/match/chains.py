@@ -26,11 +26,13 @@ from jaxgrav.constants import DEG
 
 __all__ = [
     "ChainSearch",
+    "compact",
     "compatibility",
     "count_chains",
     "eliminate",
     "kbest_chains",
     "kmin",
+    "step_compatibility",
 ]
 
 
@@ -54,7 +56,8 @@ def kmin(x, k):
 
     Ranks in float32 (XLA's CPU top-k is many times faster in float32 than in
     float64) and returns the exact values gathered from ``x``; entries closer than
-    float32 resolution may come out in either order.
+    float32 resolution may come out in either order. (For the k = 16 of the chain
+    search a sort beats k arg-min passes, unlike the dense path's k = 5.)
     """
     _, idx = jax.lax.top_k(-x.astype(jnp.float32), k)
     return jnp.take_along_axis(x, idx, axis=-1), idx
@@ -85,15 +88,81 @@ def compatibility(step_north, step_east, north0, east0, north1, east1, step_tol_
     """
     sn = step_north + north1[None, :] - north0[:, None]
     se = step_east + east1[None, :] - east0[:, None]
+    lo, hi, dir_sq, obtuse = _step_bounds(step_north, step_east, step_tol_m, angle_tol_deg)
+    # |len - ins_len| <= tol and (angle <= tol <=> s·d >= |s||d| cos(tol)), on squares:
+    # no square root or arc function per pair
+    len_sq = sn * sn + se * se
+    ok_len = (len_sq <= hi) & (len_sq >= lo)
+    dot = sn * step_north + se * step_east
+    cross = dot * dot
+    ok_dir = jnp.where(obtuse, (dot >= 0) | (cross <= len_sq * dir_sq),
+                       (dot >= 0) & (cross >= len_sq * dir_sq))
+    return ok_len & ok_dir
+
+
+def step_compatibility(cands, steps, step_tol_m, angle_tol_deg):
+    """Compatibility of every step at once, ``(N−1, C, C)`` (for small capacities).
+
+    Computed once and shared by the elimination, the chain count and the dynamic
+    programme (which otherwise recompute it inside their scans).
+    """
+    sn, se, n0, e0, n1, e1 = _steps(cands, steps)
+    return jax.vmap(compatibility, in_axes=(0, 0, 0, 0, 0, 0, None, None))(
+        sn, se, n0, e0, n1, e1, step_tol_m, angle_tol_deg)
+
+
+def compact(cands, alive, capacity):
+    """The surviving candidates of each fix moved to the first ``capacity`` slots.
+
+    Parameters
+    ----------
+    cands : CandidateSet
+        Candidates of N fixes, capacity C.
+    alive : Array of bool, shape ``(N, C)``
+        Survivors (:func:`eliminate`).
+    capacity : int
+        Slots kept per fix (static, ≤ C).
+
+    Returns
+    -------
+    cands : CandidateSet
+        Capacity ``capacity``; slot order (best fit first) is kept, ``mask`` marks
+        the survivors, ``count`` and ``window_complete`` are unchanged.
+    overflow : Array of bool, shape ``(N,)``
+        More survivors than ``capacity`` (the best-fitting ones are kept).
+    """
+    csum = jnp.cumsum(alive, axis=1)
+    want = jnp.arange(1, capacity + 1)
+    slot = jax.vmap(lambda c: jnp.searchsorted(c, want, side="left"))(csum)
+    slot = jnp.minimum(slot, alive.shape[1] - 1)
+    take = lambda a: jnp.take_along_axis(a, slot, axis=1)  # noqa: E731
+    mask = want[None, :] <= csum[:, -1:]
+    out = cands._replace(lat=take(cands.lat), lon=take(cands.lon), north_m=take(cands.north_m),
+                         east_m=take(cands.east_m), value=take(cands.value), mask=mask)
+    return out, csum[:, -1] > capacity
+
+
+def _xs(xs, compat):
+    """Scan inputs: the step geometry, or the precomputed compatibility."""
+    return xs if compat is None else (compat,)
+
+
+def _compat_getter(compat, step_tol_m, angle_tol_deg):
+    if compat is None:
+        return lambda x: compatibility(*x[:6], step_tol_m, angle_tol_deg)
+    return lambda x: x[0]
+
+
+def _step_bounds(step_north, step_east, step_tol_m, angle_tol_deg):
+    """Per-step constants of :func:`compatibility`: bounds on the squared step length,
+    ``(|d| cos tol)²`` and whether the direction tolerance exceeds 90°."""
     ins_len = jnp.hypot(step_north, step_east)
-    cand_len = jnp.hypot(sn, se)
-    ok_len = jnp.abs(cand_len - ins_len) <= step_tol_m
-    # angle between candidate and INS steps <= tol  <=>  s·d >= |s||d| cos(tol)  (no arctan)
     ratio = jnp.minimum(step_tol_m / jnp.maximum(ins_len, 1e-9), 1.0)
     tol = jnp.minimum(angle_tol_deg * DEG + jnp.arcsin(ratio), jnp.pi)
-    dot = sn * step_north + se * step_east
-    ok_dir = dot >= cand_len * ins_len * jnp.cos(tol)
-    return ok_len & ok_dir
+    lo = jnp.maximum(ins_len - step_tol_m, 0.0)
+    hi = ins_len + step_tol_m
+    cos_tol = jnp.cos(tol)
+    return lo * lo, hi * hi, (ins_len * cos_tol) ** 2, cos_tol < 0
 
 
 def _steps(cands, steps):
@@ -102,7 +171,7 @@ def _steps(cands, steps):
     return (sn, se, cands.north_m[:-1], cands.east_m[:-1], cands.north_m[1:], cands.east_m[1:])
 
 
-def eliminate(cands, steps, step_tol_m, angle_tol_deg):
+def eliminate(cands, steps, step_tol_m, angle_tol_deg, compat=None):
     """Forward and backward elimination of candidates that lie on no complete chain.
 
     Parameters
@@ -113,6 +182,8 @@ def eliminate(cands, steps, step_tol_m, angle_tol_deg):
         ``(north, east)`` INS steps between consecutive fixes, each ``(N−1,)`` (m).
     step_tol_m, angle_tol_deg : Array
         Constraint tolerances.
+    compat : Array of bool, shape ``(N−1, C, C)``, optional
+        :func:`step_compatibility`, if already computed.
 
     Returns
     -------
@@ -120,39 +191,43 @@ def eliminate(cands, steps, step_tol_m, angle_tol_deg):
         Surviving candidates.
     """
     xs = _steps(cands, steps)
+    get = _compat_getter(compat, step_tol_m, angle_tol_deg)
 
     def fwd(alive, x):
-        compat = compatibility(*x[:6], step_tol_m, angle_tol_deg)
-        nxt = x[6] & jnp.any(alive[:, None] & compat, axis=0)
+        nxt = x[-1] & jnp.any(alive[:, None] & get(x), axis=0)
         return nxt, nxt
 
-    _, rest = jax.lax.scan(fwd, cands.mask[0], (*xs, cands.mask[1:]))
+    _, rest = jax.lax.scan(fwd, cands.mask[0], (*_xs(xs, compat), cands.mask[1:]))
     fwd_alive = jnp.concatenate([cands.mask[:1], rest], axis=0)
 
     def bwd(alive_next, x):
-        compat = compatibility(*x[:6], step_tol_m, angle_tol_deg)
-        here = x[6] & jnp.any(compat & alive_next[None, :], axis=1)
+        here = x[-1] & jnp.any(get(x) & alive_next[None, :], axis=1)
         return here, here
 
-    _, back = jax.lax.scan(bwd, fwd_alive[-1], (*xs, fwd_alive[:-1]), reverse=True)
+    _, back = jax.lax.scan(bwd, fwd_alive[-1], (*_xs(xs, compat), fwd_alive[:-1]), reverse=True)
     return jnp.concatenate([back, fwd_alive[-1:]], axis=0)
 
 
-def count_chains(cands, alive, steps, step_tol_m, angle_tol_deg):
-    """Number of complete chains through surviving candidates (float, may be huge)."""
+def count_chains(cands, alive, steps, step_tol_m, angle_tol_deg, compat=None):
+    """Number of complete chains through surviving candidates (float, may be huge).
+
+    ``compat`` is :func:`step_compatibility`, if already computed.
+    """
     xs = _steps(cands, steps)
+    get = _compat_getter(compat, step_tol_m, angle_tol_deg)
     dtype = jnp.result_type(float)
 
     def fwd(n, x):
-        compat = compatibility(*x[:6], step_tol_m, angle_tol_deg) & x[6][None, :]
-        nxt = jnp.sum(jnp.where(compat, n[:, None], 0.0), axis=0)
+        c = get(x) & x[-1][None, :]
+        nxt = jnp.sum(jnp.where(c, n[:, None], 0.0), axis=0)
         return nxt, None
 
-    n, _ = jax.lax.scan(fwd, alive[0].astype(dtype), (*xs, alive[1:]))
+    n, _ = jax.lax.scan(fwd, alive[0].astype(dtype), (*_xs(xs, compat), alive[1:]))
     return jnp.sum(n)
 
 
-def kbest_chains(cands, alive, steps, step_tol_m, angle_tol_deg, unary, pair_fn, k):
+def kbest_chains(cands, alive, steps, step_tol_m, angle_tol_deg, unary, pair_fn, k,
+                 compat=None):
     """K cheapest complete chains by k-best min-sum dynamic programming.
 
     Parameters
@@ -170,16 +245,20 @@ def kbest_chains(cands, alive, steps, step_tol_m, angle_tol_deg, unary, pair_fn,
         ``pair_fn(i, value_i (C,), value_next (C,)) -> (C, C)`` cost of each transition.
     k : int
         Number of chains (static).
+    compat : Array of bool, shape ``(N−1, C, C)``, optional
+        :func:`step_compatibility`, if already computed.
 
     Returns
     -------
     ChainSearch
     """
     n_fix, cap = alive.shape
+    k_rows = min(k, cap)
     inf = jnp.asarray(jnp.inf, dtype=unary.dtype)
     d0 = jnp.full((cap, k), inf).at[:, 0].set(jnp.where(alive[0], unary[0], inf))
+    get = _compat_getter(compat, step_tol_m, angle_tol_deg)
     xs = (
-        *_steps(cands, steps),
+        *_xs(_steps(cands, steps), compat),
         alive[1:],
         unary[1:],
         cands.value[:-1],
@@ -188,15 +267,17 @@ def kbest_chains(cands, alive, steps, step_tol_m, angle_tol_deg, unary, pair_fn,
     )
 
     def fwd(d, x):
-        compat = compatibility(*x[:6], step_tol_m, angle_tol_deg) & x[6][None, :]
-        pair = jnp.where(compat, pair_fn(x[10], x[8], x[9]), inf) + x[7][None, :]  # (C, C)
+        x, (alive_next, unary_next, v0, v1, i) = x[:-5], x[-5:]
+        ok = get(x) & alive_next[None, :]
+        pair = jnp.where(ok, pair_fn(i, v0, v1), inf) + unary_next[None, :]  # (C, C)
         # The K best partial chains ending at each next candidate come from the K
         # previous candidates with the cheapest best (head) chains, each contributing
         # its K cheapest chains: select K rows, then K of K*K (exact, no full sort).
         heads = (d[:, 0][:, None] + pair).T  # (C_next, C_prev)
-        _, rows = kmin(heads, k)  # (C_next, K)
-        sub = d[rows] + jnp.take_along_axis(pair.T, rows, axis=1)[..., None]  # (C_next, K, K)
-        vals, flat = kmin(sub.reshape(cap, k * k), k)
+        # (with fewer than K candidates per fix, all of them: still exact)
+        _, rows = kmin(heads, k_rows)  # (C_next, K')
+        sub = d[rows] + jnp.take_along_axis(pair.T, rows, axis=1)[..., None]  # (C_next, K', K)
+        vals, flat = kmin(sub.reshape(cap, k_rows * k), k)
         prev = jnp.take_along_axis(rows, flat // k, axis=1)
         return vals, prev * k + flat % k
 

@@ -25,7 +25,13 @@ import jax.numpy as jnp
 
 from jaxgrav._pytree import static_field
 from jaxgrav.match.candidates import iso_candidates, local_offsets_m
-from jaxgrav.match.chains import count_chains, eliminate, kbest_chains
+from jaxgrav.match.chains import (
+    compact,
+    count_chains,
+    eliminate,
+    kbest_chains,
+    step_compatibility,
+)
 from jaxgrav.match.result import MatchResult, nearest_to_ins
 from jaxgrav.match.scoring import SCORES, decreasing_weights, score_track
 
@@ -63,6 +69,12 @@ class ChainConfig:
         Window half-width in map nodes (static).
     capacity : int
         Candidate slots per fix (static).
+    survivor_capacity : int
+        Slots per fix after elimination (static; 0 = ``capacity``). The survivors
+        are moved into this smaller set, on which the compatibility of each step is
+        computed once and the chain count and dynamic programme run: far less work
+        than on all ``capacity`` slots. More survivors than this raise the overflow
+        flag (the best-fitting are kept; the elimination is repeated on them).
     k_dp : int
         Chains kept per candidate by the dynamic programme (static).
     k_best : int
@@ -81,6 +93,7 @@ class ChainConfig:
     weight_decay: float = 0.5
     half_size: int = static_field(8)
     capacity: int = static_field(128)
+    survivor_capacity: int = static_field(0)
     k_dp: int = static_field(16)
     k_best: int = static_field(5)
     score: str = static_field("difference")
@@ -91,6 +104,9 @@ class ChainConfig:
             raise ValueError(f"score must be one of {SCORES}; got {self.score!r}")
         if isinstance(self.selection, str) and self.selection not in ("nearest", "best"):
             raise ValueError(f"selection must be 'nearest' or 'best'; got {self.selection!r}")
+        if isinstance(self.survivor_capacity, int) and self.survivor_capacity < 0:
+            raise ValueError(f"survivor_capacity must be >= 0 (0 = capacity); "
+                             f"got {self.survivor_capacity!r}")
 
 
 def _pair_cost(readings, w_diff):
@@ -139,8 +155,15 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
     alive = eliminate(cands, steps, *tol)
     dtype = jnp.result_type(cands.value.dtype, readings.dtype)
     work_unconstrained = jnp.prod(cands.count.astype(dtype))
-    work_constrained = count_chains(cands, alive, steps, *tol)
     work_pairs = jnp.sum(jnp.sum(alive[:-1], axis=1) * jnp.sum(alive[1:], axis=1))
+    n_candidates, complete, overflow = cands.count, cands.window_complete, cands.overflow
+    compat = None
+    if 0 < config.survivor_capacity < config.capacity:
+        cands, lost = compact(cands, alive, config.survivor_capacity)
+        compat = step_compatibility(cands, steps, *tol)
+        alive = eliminate(cands, steps, *tol, compat=compat)  # unchanged unless `lost`
+        overflow = overflow | lost
+    work_constrained = count_chains(cands, alive, steps, *tol, compat=compat)
 
     w = decreasing_weights(n, config.weight_decay)
     if config.score == "absolute":
@@ -149,7 +172,7 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
     else:
         unary = jnp.zeros(cands.value.shape, dtype)
         pair = _pair_cost(readings, w[:-1] / jnp.sum(w[:-1]))
-    search = kbest_chains(cands, alive, steps, *tol, unary, pair, config.k_dp)
+    search = kbest_chains(cands, alive, steps, *tol, unary, pair, config.k_dp, compat=compat)
 
     fix = jnp.arange(n)[None, :]
     values = cands.value[fix, search.index]  # (K_dp, N)
@@ -167,8 +190,8 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
     edge = _on_window_edge(grid, cands, idx[chosen], lat, lon, config.half_size)
     status = (
         jnp.where(found, 0, 1)
-        | jnp.where(jnp.any(cands.overflow), 2, 0)
-        | jnp.where(jnp.all(cands.window_complete), 0, 4)
+        | jnp.where(jnp.any(overflow), 2, 0)
+        | jnp.where(jnp.all(complete), 0, 4)
         | jnp.where(found & edge, 8, 0)
     )
     return MatchResult(
@@ -183,7 +206,7 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
         topk_lon=topk_lon,
         topk_score=topk_score,
         chosen=chosen,
-        n_candidates=cands.count,
+        n_candidates=n_candidates,
         work_unconstrained=work_unconstrained,
         work_constrained=work_constrained,
         work_pairs=work_pairs.astype(dtype),
