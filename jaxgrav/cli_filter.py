@@ -74,6 +74,12 @@ def add_parsers(subparsers):
                         "i.e. 0.2 m/s RMS horizontal (navigation-grade INS)")
     f.add_argument("--sigma-gravity", type=float, default=1.0,
                    help="reading noise, 1-σ (mGal); default 1 (marine gravimeter)")
+    f.add_argument("--guard", type=float, nargs="?", const=0.2, default=None,
+                   metavar="RATIO",
+                   help="no-harm guard (ukf, ekf, gsf): apply the position correction only "
+                        "in directions whose variance fell below RATIO times the free INS's "
+                        "(default 0.2 when given without a value; chosen on paper D's "
+                        "experiment); elsewhere the output stays the INS with its own 1-σ")
     f.add_argument("--force", action="store_true", help="overwrite an existing output")
     f.set_defaults(func=cmd_filter)
 
@@ -173,14 +179,17 @@ def _prior_and_dynamics(lat_mean, dt, sigma_pos, sigma_vel):
                                                                                lat_mean, dt))
 
 
-def _gaussian_run(kind, field, dynamics, p0, steps):
+def _gaussian_run(kind, field, dynamics, p0, steps, guard):
+    import jax
     import jax.numpy as jnp
 
     from jaxgrav.match import filters as F
 
     filt = {"ukf": F.ukf, "ekf": F.ekf, "gsf": lambda: F.gaussian_sum(F.ukf(), 3)}[kind]()
     _, infos = F.run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps)
-    return infos
+    # guard: a traced ratio (inf = off), so one compilation serves both
+    guarded = F.guard_run(infos, dynamics, p0, F.GuardConfig(guard, guard))
+    return jax.tree.map(lambda g, a: jnp.where(jnp.isfinite(guard), g, a), guarded, infos)
 
 
 def _pmf_run(field, dt, p0, cell_m, q_pos, steps, every):
@@ -209,7 +218,7 @@ def _jitted(name):
 
 
 def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
-                 sigma_vel=0.1414, sigma_gravity=1.0, where="track"):
+                 sigma_vel=0.1414, sigma_gravity=1.0, guard=None, where="track"):
     """Filter one track; the engine of ``jaxgrav filter`` (inputs already validated).
 
     Run with x64 enabled (the CLI does): positions are in degrees.
@@ -228,6 +237,10 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     sigma_pos, sigma_vel, sigma_gravity : float
         Prior 1-σ per axis of the INS position (m) and velocity (m/s) errors; reading
         noise 1-σ (mGal).
+    guard : float, optional
+        No-harm guard ratio for ``ukf``, ``ekf``, ``gsf``
+        (:func:`~jaxgrav.match.filters.guard_run` with ``GuardConfig(guard, guard)``);
+        None: the filter's own output.
     where : str
         How error messages name the track.
 
@@ -285,7 +298,8 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
                           STATUS_FILTER["no_reading"])  # an update's flags on its row
     else:
         steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r))
-        infos = _jitted("gaussian")(method, field, dynamics, p0, steps)
+        ratio = np.inf if guard is None else float(guard)
+        infos = _jitted("gaussian")(method, field, dynamics, p0, steps, ratio)
         x, sigma, status = (np.asarray(a) for a in (infos.x, infos.sigma, infos.status))
     m = np.asarray(meridian_radius(lat))
     e = np.asarray(prime_vertical_radius(lat)) * np.cos(lat * DEG)
@@ -322,19 +336,27 @@ def cmd_filter(args):
     if not np.isfinite(g).any():
         raise ValueError(f"{where}: column 'gravity' has no readings (all {g.size} cells "
                          "empty or NaN); the filter needs at least one (mGal)")
+    if args.guard is not None:
+        if args.method == "pmf":
+            raise ValueError("--guard applies to ukf, ekf and gsf; got --method pmf")
+        if not (np.isfinite(args.guard) and args.guard > 0):
+            raise ValueError(f"--guard must be a positive variance ratio (posterior / free "
+                             f"INS, e.g. 0.2); got {args.guard!r}")
     if args.method == "pmf":
         _reading_stride(np.flatnonzero(np.isfinite(g)), where)
     field, field_name = _field(args)
     if args.map is not None:
         _check_on_map(field, lat, lon, where, args.map)
     res = filter_track(field, t, lat, lon, g, args.method, sigma_pos=args.sigma_pos,
-                       sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity, where=where)
+                       sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
+                       guard=args.guard, where=where)
     write_track_csv(args.out, {"t": t, "lat": res["lat"], "lon": res["lon"],
                                "sigma_north": res["sigma_north"],
                                "sigma_east": res["sigma_east"]},
                     force=args.force, precision=12)
     n_read = int(np.isfinite(g).sum())
     stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""
+    stride += f", no-harm guard {args.guard:g}" if args.guard is not None else ""
     print(f"wrote {args.out}: {args.method} over {t.size} rows ({n_read} readings{stride}) "
           f"on {field_name}; final 1-sigma {res['sigma_north'][-1]:.0f} m north, "
           f"{res['sigma_east'][-1]:.0f} m east")

@@ -13,7 +13,8 @@ solves one run and returns a dict of per-run metrics, at least :data:`METRICS`:
 ``err_m``      the same for the method's estimated track (m)
 ``status``     the method's status bit field (0 = clean; int32)
 
-The paper-D filters (``ukf``, ``ekf``, ``gsf``, ``pmf``) also return ``nees``, the
+The paper-D filters (``ukf``, ``ekf``, ``gsf``, ``pmf`` and the guarded ``ukf-guard``,
+``gsf-guard``) also return ``nees``, the
 mean position NEES over the second half of the run (expected value 2).
 
 ``fn`` must be a module-level function (not a fresh closure), so that repeated runs
@@ -43,9 +44,11 @@ __all__ = [
     "default_grid",
     "ekf_run",
     "filter_builder",
+    "gsf_guard_run",
     "gsf_run",
     "pmf_run",
     "register",
+    "ukf_guard_run",
     "ukf_run",
 ]
 
@@ -202,9 +205,11 @@ def _check(drift, noise, n):
 
 
 # ----------------------------------------------------------------- paper-D filters (D)
-def _kalman_run(key, field, scenario, filt):
+def _kalman_run(key, field, scenario, filt, guard=False):
     from jaxgrav.match.filters import (
+        GuardConfig,
         filter_scenario,
+        guard_run,
         initial_state,
         run_filter,
         run_metrics,
@@ -216,6 +221,8 @@ def _kalman_run(key, field, scenario, filt):
     x0, p0 = initial_state(scenario)
     # readings sit on steps every-1, 2 every-1, …: update only there, predict in between
     _, infos = run_filter(filt, field, dynamics, x0, p0, steps, scenario.reading_every)
+    if guard:
+        infos = guard_run(infos, dynamics, p0, GuardConfig())
     return run_metrics(run, infos)
 
 
@@ -256,6 +263,26 @@ def gsf_run(key, field, scenario):
     return _kalman_run(key, field, scenario, gaussian_sum(ukf(), 3))
 
 
+def ukf_guard_run(key, field, scenario):
+    """One paper-D run filtered by the UKF, its output guarded; as :func:`ukf_run`.
+
+    :func:`~jaxgrav.match.filters.guard_run` with the default
+    :class:`~jaxgrav.match.filters.GuardConfig`: position corrections only in the
+    directions whose variance fell below 0.2 of the free INS's.
+    """
+    from jaxgrav.match.filters import ukf
+
+    return _kalman_run(key, field, scenario, ukf(), guard=True)
+
+
+def gsf_guard_run(key, field, scenario):
+    """One paper-D run filtered by the Gaussian sum of 3 × 3 UKFs, output guarded; as
+    :func:`ukf_guard_run`."""
+    from jaxgrav.match.filters import gaussian_sum, ukf
+
+    return _kalman_run(key, field, scenario, gaussian_sum(ukf(), 3), guard=True)
+
+
 def pmf_run(key, field, scenario):
     """One paper-D run filtered by the grid point-mass filter (61 × 61 cells of 200 m).
 
@@ -287,6 +314,8 @@ _FILTER_RUNS = {
     "ukf": (ukf_run, "UKF (scaled sigma points, alpha 0.5)"),
     "ekf": (ekf_run, "EKF (jacfwd Jacobian)"),
     "gsf": (gsf_run, "Gaussian sum of 3 x 3 UKFs"),
+    "ukf-guard": (ukf_guard_run, "UKF, no-harm guard (corrections where variance < 0.2 of INS)"),
+    "gsf-guard": (gsf_guard_run, "Gaussian sum of 3 x 3 UKFs, no-harm guard"),
     "pmf": (pmf_run, "grid point-mass filter, 61 x 61 cells of 200 m"),
 }
 
@@ -307,7 +336,7 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None):
     grid : Grid
         Ignored: the scenario lives on paper D's point-mass field (23.9–24.6°N,
         122.6–123.3°E), which the shipped maps do not cover.
-    kind : {"ukf", "ekf", "gsf", "pmf"}
+    kind : {"ukf", "ekf", "gsf", "pmf", "ukf-guard", "gsf-guard"}
     drift_deg : float, optional
         Size of the initial INS position error (degrees of arc; default 2 km =
         0.01797°); the velocity error is 0.2 m/s.

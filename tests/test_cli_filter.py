@@ -79,6 +79,25 @@ def test_ukf_beats_the_ins_on_an_east_west_track(sim, tmp_path, capsys):
     assert err < 3 * np.hypot(res["sigma_north"][-1], res["sigma_east"][-1])
 
 
+def test_guard_holds_back_weak_directions(sim, tmp_path, capsys):
+    plain, guarded = tmp_path / "ukf.csv", tmp_path / "ukf_guard.csv"
+    assert _filter(sim / "track.csv", plain, "--method", "ukf") == 0
+    assert _filter(sim / "track.csv", guarded, "--method", "ukf", "--guard") == 0
+    assert "no-harm guard 0.2" in capsys.readouterr().out
+    res, ref = read_track_csv(guarded), read_track_csv(plain)
+    track = read_track_csv(sim / "track.csv")
+    # the guard moves the output between the filter and the INS, with a 1-σ between theirs
+    for k in ("sigma_north", "sigma_east"):
+        assert np.all(res[k] >= ref[k] - 1e-6) and np.all(res[k] <= 1414.2 * 1.5)
+    d_filter = np.hypot(ref["lat"] - track["lat"], ref["lon"] - track["lon"])
+    d_guard = np.hypot(res["lat"] - track["lat"], res["lon"] - track["lon"])
+    assert np.all(d_guard <= d_filter * (1 + 1e-9) + 1e-12)
+    # a ratio of 1 (any variance reduction passes) is the filter itself
+    one = tmp_path / "ukf_guard1.csv"
+    assert _filter(sim / "track.csv", one, "--method", "ukf", "--guard", "1") == 0
+    np.testing.assert_allclose(read_track_csv(one)["lat"], ref["lat"], rtol=0, atol=1e-12)
+
+
 def _anomaly_map(path, lat, lon):
     """Paper D's point-mass anomaly sampled on a NetCDF grid (mGal)."""
     la, lo = np.meshgrid(lat, lon, indexing="ij")
@@ -194,6 +213,8 @@ def _bad(kind, cols):
     ("ok", ("--sigma-pos", "-1"), "--sigma-pos must be a positive, finite standard deviation"),
     ("ok", ("--sigma-gravity", "nan"), "--sigma-gravity must be a positive"),
     ("ok", ("--method", "pmf", "--sigma-pos", "10"), "too fine for a 10 s prediction"),
+    ("ok", ("--method", "pmf", "--guard"), "--guard applies to ukf, ekf and gsf; got --method pmf"),
+    ("ok", ("--guard", "-0.5"), "--guard must be a positive variance ratio"),
 ])
 def test_bad_input_gets_one_clear_line(sim, tmp_path, capsys, kind, extra, message):
     cols = _bad(kind, read_track_csv(sim / "track.csv"))

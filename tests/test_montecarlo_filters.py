@@ -1,9 +1,9 @@
 """The paper-D filters in the Monte Carlo registry: tiny runs, and the ``montecarlo`` command.
 
 Each method compiles a whole simulated run (~20 s of CPU), so the quick suite runs
-``ukf`` only (through the runner and the command: one compilation); ``ekf``, ``gsf``
-and ``pmf`` run with ``JAXGRAV_SLOW=1`` (their filters are tested quickly in
-``test_cli_filter.py``).
+``ukf`` only (through the runner and the command: one compilation); ``ekf``, ``gsf``,
+``pmf`` and the guarded ``ukf-guard``, ``gsf-guard`` run with ``JAXGRAV_SLOW=1`` (their
+filters are tested quickly in ``test_cli_filter.py`` and ``test_guard.py``).
 """
 
 import os
@@ -18,7 +18,7 @@ from jaxgrav.cli import main
 from jaxgrav.fields.pointmass import PointMasses
 from jaxgrav.match.filters import FilterScenario
 
-FILTERS = ("ukf", "ekf", "gsf", "pmf")
+FILTERS = ("ukf", "ekf", "gsf", "pmf", "ukf-guard", "gsf-guard")
 slow = pytest.mark.skipif(
     os.environ.get("JAXGRAV_SLOW") != "1", reason="slow: set JAXGRAV_SLOW=1 to run"
 )
@@ -28,6 +28,7 @@ N_FIXES = 31  # 5 min at 10 s: compiles like the full 2 h run, runs in no time
 def test_filters_are_registered_with_paper_d_defaults():
     for kind in FILTERS:
         assert kind in montecarlo_methods.BUILDERS
+    assert set(montecarlo_methods.FILTER_METHODS) == set(FILTERS)
     spec = montecarlo_methods.build("ukf")
     field, scen = spec.args
     assert isinstance(field, PointMasses) and isinstance(scen, FilterScenario)
@@ -46,7 +47,7 @@ def test_filters_are_registered_with_paper_d_defaults():
 
 
 @pytest.mark.parametrize("kind", ["ukf", *(pytest.param(k, marks=slow)
-                                           for k in ("ekf", "gsf", "pmf"))])
+                                           for k in FILTERS[1:])])
 def test_every_filter_runs_in_the_monte_carlo_runner(kind):
     spec = montecarlo_methods.build(kind, n_fixes=N_FIXES)
     r = montecarlo.run(spec.fn, jax.random.key(1), 2, chunk=2, args=spec.args, progress=False)

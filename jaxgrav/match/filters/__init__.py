@@ -3,10 +3,12 @@
 All filters share the measurement of :mod:`jaxgrav.match.filters.model` and the
 INS error model of :mod:`jaxgrav.sim.ins`; each is an optax-style ``init`` /
 ``update`` pair run with ``lax.scan`` (:func:`run_filter`; ``every=k`` updates only on
-the reading steps of a fixed stride) and vmapped over runs.
+the reading steps of a fixed stride) and vmapped over runs. :func:`guard_run` holds
+back the position corrections in weakly observed directions (paper D's "no harm").
 """
 
 from jaxgrav.match.filters.gaussian_sum import GaussianSumState, gaussian_sum, split_prior
+from jaxgrav.match.filters.guard import GuardConfig, free_covariance, guard_infos, guard_run
 from jaxgrav.match.filters.kalman import ekf, predict, sigma_weights, ukf
 from jaxgrav.match.filters.model import (
     STATUS_FILTER,
@@ -41,14 +43,18 @@ __all__ = [
     "FilterScenario",
     "FilterState",
     "GaussianSumState",
+    "GuardConfig",
     "MapPlusBias",
     "PMFState",
     "Step",
     "StepInfo",
     "ekf",
     "filter_scenario",
+    "free_covariance",
     "gaussian_sum",
     "gravity_measurement",
+    "guard_infos",
+    "guard_run",
     "initial_state",
     "map_anomaly",
     "map_at_error",
