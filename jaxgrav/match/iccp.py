@@ -334,10 +334,11 @@ def match_iccp_batch(grid, lat, lon, readings, config=IccpConfig(), chunk=100):
 
     Equal to ``jax.vmap(match_iccp, in_axes=(None, 0, 0, 0, None))``, but the map is
     prepared once and tracks are matched ``chunk`` at a time (vectorised within a
-    chunk, a loop over chunks): each chunk's per-point arrays stay cache-sized (the
+    chunk, a loop over chunks): each chunk's per-point arrays stay bounded (the
     gathered bicubic coefficients are 16 numbers per point), and each chunk's
-    iteration loop stops when *its* tracks have converged. On a 2-core CPU about
-    1.5× faster than one ``vmap`` over 1000 tracks (``benchmarks/match_iccp.py``).
+    iteration loop stops when *its* tracks have converged. Measured on a 2-core CPU
+    (``benchmarks/match_iccp.py``, 1000 tracks): as fast as one ``vmap`` when the
+    machine is idle, up to ~1.5× less CPU time when it is loaded by other jobs.
 
     Parameters
     ----------
