@@ -23,7 +23,7 @@ difference score forms cancel any constant residual anyway). Batches of 1, 100 a
 The chain path runs ``jax.jit(jax.vmap(match_chains, in_axes=(None, 0, 0, 0, None)))``;
 the grid is passed as an argument; compile time is reported separately
 (``compile_s``).
-The baseline is ``numpy_correlation.py`` (the same algorithms in NumPy/SciPy, one
+The baseline is ``_numpy_correlation.py`` (the same algorithms in NumPy/SciPy, one
 track at a time, vectorised over candidates; for the dense path the separable
 evaluation of the offset lattice is FITPACK's grid mode, exactly the algorithm of
 jaxgrav's :mod:`~jaxgrav.match.lattice`) in a Python loop over the tracks; its map
@@ -50,7 +50,7 @@ from _common import best_time, emit
 jax.config.update("jax_enable_x64", True)  # a script, not the library
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import numpy_correlation as npc  # noqa: E402
+import _numpy_correlation as npc  # noqa: E402
 
 from jaxgrav import datasets, sim  # noqa: E402
 from jaxgrav.constants import KNOT  # noqa: E402
@@ -256,7 +256,7 @@ def run_dense(grid, tracks, batches, quick, profile):
         pts_t = best_time(run_pts, 1)
         err = error_m(np.asarray(out.lat), np.asarray(out.lon), tlat[:b], tlon[:b]).mean(axis=1)
         emit(
-            BENCH, "dense-float64", b, t, "numpy_correlation.match_dense_np loop", bt,
+            BENCH, "dense-float64", b, t, "_numpy_correlation.match_dense_np loop", bt,
             tracks_per_s=round(b / t, 1), baseline_tracks_per_s=round(b / bt, 1),
             compile_s=round(compile_s, 2),
             jaxgrav_cpu_s=round(t_cpu, 6), baseline_cpu_s=round(bt_cpu, 6),
@@ -311,7 +311,7 @@ def run_dense_float32(grid, tracks, batches, cfg, m, res64, quick):
             err = error_m(out.lat.astype(np.float64), out.lon.astype(np.float64), tlat[:b],
                           tlon[:b]).mean(axis=1)
             emit(
-                BENCH, "dense-float32", b, t, "numpy_correlation.match_dense_np loop (float64)",
+                BENCH, "dense-float32", b, t, "_numpy_correlation.match_dense_np loop (float64)",
                 bt, tracks_per_s=round(b / t, 1), baseline_tracks_per_s=round(b / bt, 1),
                 compile_s=round(compile_s, 2),
                 jaxgrav_cpu_s=round(t_cpu, 6), baseline_cpu_s=round(bt_cpu, 6),
@@ -401,7 +401,7 @@ def run_chain(grid, tracks, batches, quick, profile):
         found = (status & 1) == 0
         err = error_m(np.asarray(out.lat), np.asarray(out.lon), tlat[:b], tlon[:b]).mean(axis=1)
         emit(
-            BENCH, "chain-float64", b, t, "numpy_correlation.match_chains_np loop", bt,
+            BENCH, "chain-float64", b, t, "_numpy_correlation.match_chains_np loop", bt,
             tracks_per_s=round(b / t, 1), baseline_tracks_per_s=round(b / bt, 1),
             compile_s=round(compile_s, 2),
             jaxgrav_cpu_s=round(t_cpu, 6), baseline_cpu_s=round(bt_cpu, 6),

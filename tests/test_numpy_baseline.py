@@ -1,6 +1,6 @@
 """The NumPy baseline of the correlation benchmark agrees with jaxgrav (keeps it honest).
 
-``benchmarks/numpy_correlation.py`` re-implements ``match_dense`` and ``match_chains``
+``benchmarks/_numpy_correlation.py`` re-implements ``match_dense`` and ``match_chains``
 in NumPy/SciPy; ``benchmarks/match_correlation.py`` times jaxgrav against it. These
 checks run both on a few tracks over a piece of the shipped ryukyu map and require
 the same choices and numbers. One compile per path (single-track jit).
@@ -18,7 +18,7 @@ from jaxgrav.match.correlation import ChainConfig, match_chains
 from jaxgrav.match.dense import DenseConfig, match_dense
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import numpy_correlation as npc
+import _numpy_correlation as npc
 
 N_FIX = 10
 N_TRACKS = 3
