@@ -254,14 +254,13 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     Raises
     ------
     ValueError
-        For ``pmf``: readings not on a fixed row stride, or a grid too fine for the
-        prediction step.
+        For ``pmf``: readings not on a fixed row stride.
     """
     import jax.numpy as jnp
 
     from jaxgrav.constants import DEG
     from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-    from jaxgrav.match.filters import STATUS_FILTER, Step
+    from jaxgrav.match.filters import Step
 
     dt = float(np.median(np.diff(t)))
     n = t.size
@@ -273,12 +272,6 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         every = _reading_stride(rows, where)
         cell_m = 2.0 * PMF_SPAN_SIGMA * sigma_pos / (PMF_CELLS - 1)
         q_pos = PMF_Q_POS * (sigma_vel / 0.1414) ** 2
-        diffusion = q_pos * dt * every / cell_m**2
-        if diffusion > 1.0:
-            raise ValueError(
-                f"--sigma-pos {sigma_pos:g} m makes the point-mass grid's cells {cell_m:.3g} m, "
-                f"too fine for a {dt * every:g} s prediction at --sigma-vel {sigma_vel:g} "
-                f"m/s (diffusion {diffusion:.3g} > 1 cell² per update); use ukf, ekf or gsf")
         pad = (every - 1 - int(rows[0])) % every  # readings on steps every-1, 2 every-1, …
         total = pad + n + (-(pad + n) % every)
         idx = np.clip(np.arange(total) - pad, 0, n - 1)
@@ -287,15 +280,9 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         steps = Step(jnp.asarray(lat[idx]), jnp.asarray(lon[idx]), jnp.asarray(z),
                      jnp.full(total, r))
         infos = _jitted("pmf")(field, dt, p0, cell_m, q_pos, steps, every=every)
-        per_update = {k: np.asarray(a)[every - 1::every] for k, a in infos._asdict().items()}
-        # causal: row i shows the latest update at or before it, the prior before the first
-        j = (np.arange(n) + pad + 1) // every - 1
-        prior = np.sqrt(np.diag(np.asarray(p0)))
-        first = np.clip(j, 0, None)
-        x = np.where(j[:, None] >= 0, per_update["x"][first], 0.0)
-        sigma = np.where(j[:, None] >= 0, per_update["sigma"][first], prior)
-        status = np.where(np.isfinite(gravity), per_update["status"][first],
-                          STATUS_FILTER["no_reading"])  # an update's flags on its row
+        # causal: rows between readings show the prediction (run_pmf predicts every step)
+        x, sigma, status = (np.asarray(a)[pad:pad + n]
+                            for a in (infos.x, infos.sigma, infos.status))
     else:
         steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r))
         ratio = np.inf if guard is None else float(guard)

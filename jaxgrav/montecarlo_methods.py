@@ -287,7 +287,7 @@ def pmf_run(key, field, scenario):
     """One paper-D run filtered by the grid point-mass filter (61 × 61 cells of 200 m).
 
     The filter updates at every reading (``run_pmf`` with ``every =
-    scenario.reading_every``); between readings the estimate is held. Returns as
+    scenario.reading_every``); between readings the estimate is predicted. Returns as
     :func:`ukf_run`.
     """
     from jaxgrav.match.filters import (

@@ -16,7 +16,7 @@ from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from jaxgrav._linalg import modified_cholesky
 from jaxgrav.constants import DEG
-from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
+from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.match import filters as fl
 from jaxgrav.match.filters.paper_d import MASS_LON
 from jaxgrav.sim import ins
@@ -47,9 +47,6 @@ def _run_one(filt, field, dynamics, x0, p0, steps):
 run_one = jax.jit(_run_one, static_argnums=0)
 run_batch = jax.jit(
     jax.vmap(fl.run_filter, in_axes=(None, None, None, 0, None, 0)), static_argnums=0
-)
-run_pmf_batch = jax.jit(
-    jax.vmap(fl.run_pmf, in_axes=(None, None, None, 0, None, 0, None)), static_argnums=(0, 6)
 )
 run_every = jax.jit(fl.run_filter, static_argnums=(0, 6))
 update = jax.jit(
@@ -440,83 +437,16 @@ def test_modified_cholesky_equals_lapack_and_flags_non_pd(prior):
 
 
 # --------------------------------------------------------------------------- point-mass filter
-
-
-def _np_diffuse(a, v):
-    def along(x, axis):
-        x = np.moveaxis(x, axis, 0)
-        lo = np.concatenate([x[:1], x[:-1]])
-        hi = np.concatenate([x[1:], x[-1:]])
-        return np.moveaxis((1 - v) * x + 0.5 * v * (lo + hi), 0, axis)
-
-    return along(along(a, 0), 1)
-
-
-def _pmf_prior_weights(offsets, x0, p0):
-    dn, de = np.meshgrid(offsets, offsets, indexing="ij")
-    d = np.stack([dn - x0[0], de - x0[1]], -1)
-    lw = -0.5 * np.einsum("...i,ij,...j->...", d, np.linalg.inv(p0[:2, :2]), d)
-    w = np.exp(lw - lw.max())
-    return dn, de, w / w.sum()
-
-
-def test_pmf_one_update_equals_a_brute_force_bayes_grid(prior):
-    n_cells, cell, q_pos, dt = 15, PMF_CELL, PMF_Q, 40.0  # v = q_pos dt / cell² = 0.1
-    x0, p0 = (np.asarray(a) for a in prior)
-    x0 = x0.copy()
-    x0[[0, 1, 12]] = [300.0, -200.0, 0.5]
-    p0 = p0.copy()
-    p0[:2, :2] = [[800.0**2, 2.0e5], [2.0e5, 600.0**2]]
-    lat, lon, z, r = 24.2, MASS_LON + 0.02, 3.0, 0.7
-    state = init(PMF, jnp.asarray(x0), jnp.asarray(p0))
-    new, info = update(PMF, state, _one_step(z, lat, lon, r), FIELD, dt)
-
-    # brute force: Gaussian prior on the cells, diffusion, Bayes with the bias marginalised
-    offsets = (np.arange(n_cells) - (n_cells - 1) / 2) * cell
-    dn, de, w = _pmf_prior_weights(offsets, x0, p0)
-    w = _np_diffuse(w, q_pos * dt / cell**2)
-    true_lat, true_lon = _ins_position(lat, lon, -dn, -de)  # cell = INS − true
-    g = np.asarray(gravity_anomaly(FIELD, true_lat, true_lon))
-    b0, s0 = x0[12], p0[12, 12]
-    like = np.exp(-0.5 * (z - g - b0) ** 2 / (s0 + r))
-    post = w * like / np.sum(w * like)
-    mean = np.array([np.sum(post * dn), np.sum(post * de)])
-    d = np.stack([dn - mean[0], de - mean[1]], -1)
-    cov = np.einsum("ij,ija,ijb->ab", post, d, d) + np.eye(2) * cell**2 / 12
-    b_post = b0 + s0 / (s0 + r) * (z - g - b0)
-    bias = np.sum(post * b_post)
-
-    np.testing.assert_allclose(np.asarray(new.w), post, rtol=1e-9, atol=1e-15)
-    np.testing.assert_allclose(np.asarray(info.x)[[0, 1, 12]], [*mean, bias], rtol=1e-9)
-    np.testing.assert_allclose(np.asarray(info.p_pos), cov, rtol=1e-9)
-    np.testing.assert_allclose(np.asarray(info.sigma)[:2], np.sqrt(np.diag(cov)), rtol=1e-9)
-    # a ±2.8 km grid holds the prior's tails at its edges: only grid_edge may be set
-    assert int(info.status) & ~FLAGS["grid_edge"] == 0
-    assert np.abs(post - w).max() > 1e-3  # the reading was informative
-
-
-def test_pmf_nan_reading_is_the_pure_diffusion(prior):
-    x0, p0 = prior
-    state = init(PMF, x0, p0)
-    new, info = update(PMF, state, _one_step(jnp.nan), FIELD, 50.0)
-    v = PMF_Q * 50.0 / PMF_CELL**2
-    np.testing.assert_allclose(
-        np.asarray(new.w), _np_diffuse(np.asarray(state.w), v), rtol=1e-12, atol=1e-18
-    )
-    np.testing.assert_allclose(np.asarray(new.bias_mean), float(x0[12]), atol=1e-12)
-    np.testing.assert_allclose(np.asarray(new.bias_var), float(p0[12, 12]), rtol=1e-9)
-    assert int(info.status) & FLAGS["no_reading"] and np.isnan(float(info.innovation))
+# (the filter's own tests are in test_pmf.py)
 
 
 def test_pmf_off_map(prior, smooth_grid):
     x0, p0 = prior
     state = init(PMF, x0, p0)
-    # the whole grid off the map: no update, flagged
+    # the whole grid off the map: no update (the prediction, as without a reading), flagged
     new, info = update(PMF, state, _one_step(5.0, 35.0, 130.0), smooth_grid, DT)
-    v = PMF_Q * DT / PMF_CELL**2
-    np.testing.assert_allclose(
-        np.asarray(new.w), _np_diffuse(np.asarray(state.w), v), rtol=1e-12, atol=1e-18
-    )
+    pred, _ = update(PMF, state, _one_step(jnp.nan, 35.0, 130.0), smooth_grid, DT)
+    np.testing.assert_allclose(np.asarray(new.w), np.asarray(pred.w), rtol=1e-12, atol=1e-18)
     assert int(info.status) & FLAGS["off_map"]
     # partly off (INS near the east edge): flagged, off-map cells lose their weight
     new, info = update(PMF, state, _one_step(5.0, 30.0, 130.49), smooth_grid, DT)
@@ -559,29 +489,6 @@ def test_batched_equals_loop(filt, dynamics, prior, runs):
         _assert_trees_close(
             jax.tree.map(lambda a, i=i: a[i], infos_b), _stack(infos), rtol=1e-8, atol=1e-12
         )
-
-
-def test_pmf_batched_equals_loop(prior, runs):
-    steps = runs[0]
-    x0, p0 = prior
-    x0s = jnp.stack([x0.at[0].set(d) for d in (0.0, 200.0, -300.0)])
-    final_b, infos_b = run_pmf_batch(PMF, FIELD, DT, x0s, p0, steps, 2)
-    assert infos_b.x.shape == (3, N_STEPS, ins.N_STATES)
-    for i in range(3):
-        # run_pmf(every=2): one update of 2·DT per reading (steps 1, 3, …), info held
-        state, infos = init(PMF, x0s[i], p0), []
-        for k in range(1, N_STEPS, 2):
-            state, info = update(PMF, state, _one(_one(steps, i), k), FIELD, 2 * DT)
-            infos += [info, info]
-        _assert_trees_close(
-            jax.tree.map(lambda a, i=i: a[i], final_b), state, rtol=1e-8, atol=1e-12
-        )
-        _assert_trees_close(
-            jax.tree.map(lambda a, i=i: a[i], infos_b), _stack(infos), rtol=1e-8, atol=1e-12
-        )
-    # the readings sit on the odd steps here (index 0 is the first step after x0), so
-    # run_pmf with every=2 updates exactly on them
-    assert not np.any(np.asarray(infos_b.status) & FLAGS["no_reading"])
 
 
 def test_jit_does_not_retrace_on_new_values(dynamics, prior):
