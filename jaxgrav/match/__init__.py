@@ -25,7 +25,7 @@ from jaxgrav.match.entropy_iccp import (
     match_track_b,
     status_messages_b,
 )
-from jaxgrav.match.iccp import IccpConfig, kabsch_2d, match_iccp
+from jaxgrav.match.iccp import IccpConfig, kabsch_2d, match_iccp, match_iccp_batch
 from jaxgrav.match.result import STATUS, MatchResult, status_messages
 from jaxgrav.match.scoring import SCORES, bias_precision, decreasing_weights, score_track
 
@@ -53,6 +53,7 @@ __all__ = [
     "match_entropy",
     "match_entropy_iccp",
     "match_iccp",
+    "match_iccp_batch",
     "match_track",
     "match_track_b",
     "score_track",
