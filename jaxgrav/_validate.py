@@ -13,6 +13,7 @@ import numpy as np
 __all__ = [
     "check_finite",
     "check_latitude",
+    "check_points",
     "check_same_shape",
     "concrete",
 ]
@@ -66,3 +67,24 @@ def check_same_shape(**arrays):
     except ValueError:
         desc = ", ".join(f"{k} {s}" for k, s in shapes.items())
         raise ValueError(f"arrays must have matching (broadcastable) shapes; got {desc}") from None
+
+
+def check_points(lat, lon, h):
+    """Validate geodetic points: shapes broadcast, latitudes in [−90, 90]°, lon and h finite.
+
+    Parameters
+    ----------
+    lat, lon : array_like
+        Degrees.
+    h : array_like
+        Height above the ellipsoid (m).
+
+    Raises
+    ------
+    ValueError
+        Naming the first offending argument and value (concrete inputs only).
+    """
+    check_same_shape(lat=lat, lon=lon, h=h)
+    check_latitude(lat, "lat")
+    check_finite(lon, "lon")
+    check_finite(h, "h")

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import dov_interp as _k
-from jaxgrav._validate import check_finite, check_latitude, check_same_shape, concrete
+from jaxgrav._validate import check_points, concrete
 from jaxgrav.dov_interp import DEFAULT_METHOD
 from jaxgrav.dov_layers import (  # noqa: F401  (PAPER_HEIGHTS: re-exported)
     PAPER_HEIGHTS,
@@ -82,10 +82,7 @@ def _check_layers(layers):
 
 
 def _check_points(layers, lat, lon, h, strict):
-    check_same_shape(lat=lat, lon=lon, h=h)
-    check_latitude(lat, "lat")
-    check_finite(lon, "lon")
-    check_finite(h, "h")
+    check_points(lat, lon, h)
     if not strict:
         return
     pts = [concrete(x) for x in (lat, lon, h)]

@@ -52,7 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import constants as const
-from jaxgrav._validate import check_finite, check_latitude, check_same_shape, concrete
+from jaxgrav._validate import check_finite, check_latitude, check_points, concrete
 from jaxgrav.fields.harmonic_model import SphericalHarmonics
 from jaxgrav.fields.legendre import _lattice, _unscale
 from jaxgrav.geodesy import normal_gravity
@@ -225,10 +225,7 @@ def synthesize(model, lat, lon, h=0.0, *, chunk=None):
     costs about half of all five fields); called eagerly, all five are computed.
     """
     _check_model(model)
-    check_same_shape(lat=lat, lon=lon, h=h)
-    check_latitude(lat, "lat")
-    check_finite(lon, "lon")
-    check_finite(h, "h")
+    check_points(lat, lon, h)
     _check_height(model, h)
     dt = jnp.result_type(float)
     lat, lon, h = jnp.broadcast_arrays(*(jnp.asarray(x, dt) for x in (lat, lon, h)))

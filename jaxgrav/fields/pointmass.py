@@ -44,7 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import constants as c
-from jaxgrav._validate import check_finite, check_latitude, check_same_shape, concrete
+from jaxgrav._validate import check_finite, check_latitude, check_points, concrete
 from jaxgrav.geodesy import geodetic_to_ecef, normal_gravity
 
 __all__ = [
@@ -184,14 +184,6 @@ def _check_masses(masses):
         check_finite(getattr(masses, name), f"masses.{name}")
 
 
-def _check_points(lat, lon, h):
-    check_same_shape(lat=lat, lon=lon, h=h)
-    check_latitude(lat, "lat")
-    check_finite(lon, "lon")
-    check_finite(h, "h")
-
-
-
 # --- core --------------------------------------------------------------------------
 
 
@@ -255,7 +247,7 @@ def _deflection_kernel(masses, lat, lon, h):
 
 def _validate(masses, lat, lon, h):
     _check_masses(masses)
-    _check_points(lat, lon, h)
+    check_points(lat, lon, h)
 
 
 # --- public ------------------------------------------------------------------------
