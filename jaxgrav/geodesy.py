@@ -13,6 +13,7 @@ from jaxgrav._validate import check_latitude
 
 __all__ = [
     "ecef_to_geodetic",
+    "enu_basis",
     "enu_to_geodetic",
     "eotvos",
     "geodetic_to_ecef",
@@ -242,9 +243,22 @@ def ecef_to_geodetic(x, y, z, iterations=4):
     return jnp.rad2deg(phi), jnp.rad2deg(jnp.arctan2(y, x)), h
 
 
-def _enu_rotation(lat0_deg, lon0_deg):
-    s, co = _sin_cos_lat(lat0_deg)
-    lam = jnp.deg2rad(jnp.asarray(lon0_deg, dtype=s.dtype))
+def enu_basis(lat_deg, lon_deg):
+    """Unit vectors east, north and up of the local WGS84 tangent frame, in ECEF axes.
+
+    Parameters
+    ----------
+    lat_deg, lon_deg : array_like
+        Geodetic latitude and longitude (degrees), broadcastable.
+
+    Returns
+    -------
+    east, north, up : tuple of 3-tuples of Array
+        Each vector as its ``(x, y, z)`` ECEF components (dimensionless), each of the
+        broadcast shape of the inputs.
+    """
+    s, co = _sin_cos_lat(lat_deg)
+    lam = jnp.deg2rad(jnp.asarray(lon_deg, dtype=s.dtype))
     sl, cl = jnp.sin(lam), jnp.cos(lam)
     east = (-sl, cl, 0.0 * sl)
     north = (-s * cl, -s * sl, co)
@@ -274,7 +288,7 @@ def geodetic_to_enu(lat_deg, lon_deg, h_m, origin):
     x, y, z = geodetic_to_ecef(lat_deg, lon_deg, h_m)
     x0, y0, z0 = geodetic_to_ecef(lat0, lon0, h0)
     dx, dy, dz = x - x0, y - y0, z - z0
-    e, n, u = _enu_rotation(lat0, lon0)
+    e, n, u = enu_basis(lat0, lon0)
     return tuple(r[0] * dx + r[1] * dy + r[2] * dz for r in (e, n, u))
 
 
@@ -296,7 +310,7 @@ def enu_to_geodetic(east, north, up, origin):
         ``(lat_deg, lon_deg, h_m)``; longitude in (−180, 180].
     """
     lat0, lon0, h0 = origin
-    e, n, u = _enu_rotation(lat0, lon0)
+    e, n, u = enu_basis(lat0, lon0)
     x0, y0, z0 = geodetic_to_ecef(lat0, lon0, h0)
     east, north, up = (jnp.asarray(v, dtype=x0.dtype) for v in (east, north, up))
     x = x0 + e[0] * east + n[0] * north + u[0] * up

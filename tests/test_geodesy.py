@@ -1,5 +1,7 @@
 """Geodesy against boule and against identities."""
 
+import itertools
+
 import boule
 import jax
 import jax.numpy as jnp
@@ -10,6 +12,7 @@ from hypothesis import strategies as st
 
 import jaxgrav as jg
 from jaxgrav import constants as c
+from jaxgrav import geodesy
 
 
 def test_constants_match_boule_wgs84():
@@ -143,3 +146,18 @@ def test_latitude_validator_rejects_out_of_range(bad):
         jg.normal_gravity(np.array([10.0, bad]), 0.0)
     with pytest.raises(ValueError, match="lat_deg"):
         jg.eotvos(bad, 1.0, 1.0)
+
+
+def test_enu_basis_is_a_right_handed_orthonormal_frame_with_up_normal_to_the_ellipsoid():
+    lat = np.array([-89.0, -30.0, 0.0, 45.0, 89.9])
+    lon = np.array([-179.0, 10.0, 123.0, -60.0, 0.0])
+    east, north, up = (np.stack(v) for v in geodesy.enu_basis(lat, lon))
+    for a, b in itertools.combinations((east, north, up), 2):
+        np.testing.assert_allclose(np.sum(a * b, 0), 0.0, atol=1e-15)
+    for v in (east, north, up):
+        np.testing.assert_allclose(np.sum(v * v, 0), 1.0, rtol=1e-15)
+    np.testing.assert_allclose(np.cross(east, north, axis=0), up, atol=1e-15)
+    # up is the direction in which the height grows, at fixed latitude and longitude
+    lo = np.stack(geodesy.geodetic_to_ecef(lat, lon, 0.0))
+    hi = np.stack(geodesy.geodetic_to_ecef(lat, lon, 1.0))
+    np.testing.assert_allclose(hi - lo, up, atol=1e-8)

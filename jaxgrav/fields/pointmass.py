@@ -45,7 +45,7 @@ import numpy as np
 
 from jaxgrav import constants as c
 from jaxgrav._validate import check_finite, check_latitude, check_points, concrete
-from jaxgrav.geodesy import geodetic_to_ecef, normal_gravity
+from jaxgrav.geodesy import enu_basis, geodetic_to_ecef, normal_gravity
 
 __all__ = [
     "Deflection",
@@ -187,16 +187,6 @@ def _check_masses(masses):
 # --- core --------------------------------------------------------------------------
 
 
-def _enu_basis(lat, lon):
-    """Unit vectors (east, north, up) in ECEF components, each a 3-tuple of arrays."""
-    phi, lam = jnp.deg2rad(lat), jnp.deg2rad(lon)
-    sp, cp, sl, cl = jnp.sin(phi), jnp.cos(phi), jnp.sin(lam), jnp.cos(lam)
-    east = (-sl, cl, jnp.zeros_like(sl))
-    north = (-sp * cl, -sp * sl, cp)
-    up = (cp * cl, cp * sl, sp)
-    return east, north, up
-
-
 def _potential_and_gradient(masses, lat, lon, h):
     """T (m²/s²) and ∇T in ECEF components (m/s²) at broadcast points; masses summed."""
     dtype = jnp.result_type(float)
@@ -227,7 +217,7 @@ def _potential_kernel(masses, lat, lon, h):
 def _vector_kernel(masses, lat, lon, h):
     _, grad, (lat, lon, h) = _potential_and_gradient(masses, lat, lon, h)
     comps = []
-    for axis in _enu_basis(lat, lon):
+    for axis in enu_basis(lat, lon):
         comps.append((grad[0] * axis[0] + grad[1] * axis[1] + grad[2] * axis[2]) / c.MGAL)
     return Disturbance(*comps)
 

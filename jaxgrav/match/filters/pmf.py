@@ -56,8 +56,8 @@ import jax.numpy as jnp
 from jaxgrav import constants
 from jaxgrav._linalg import inv_2x2
 from jaxgrav.constants import DEG
-from jaxgrav.fields.pointmass import PointMasses, _enu_basis
-from jaxgrav.geodesy import geodetic_to_ecef, meridian_radius, prime_vertical_radius
+from jaxgrav.fields.pointmass import PointMasses
+from jaxgrav.geodesy import enu_basis, geodetic_to_ecef, meridian_radius, prime_vertical_radius
 from jaxgrav.match.filters.model import STATUS_FILTER, StepInfo, gravity_measurement
 from jaxgrav.sim.ins import GRAV, N_STATES, INSErrorModel, transition
 
@@ -182,7 +182,7 @@ def _point_mass_cells(masses, lat, lon):
     d = [a[..., None] - b for a, b in zip(xp, xm, strict=True)]
     inv_l = jax.lax.rsqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
     k = constants.G_NEWTON * jnp.asarray(masses.mass, dtype=dtype) * inv_l**3
-    _, _, up = _enu_basis(lat, lon)
+    _, _, up = enu_basis(lat, lon)
     return sum(jnp.sum(k * di, axis=-1) * u for di, u in zip(d, up, strict=True)) / constants.MGAL
 
 
