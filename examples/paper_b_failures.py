@@ -13,7 +13,8 @@ offsets and the INS track), keeping every start's fit, and reports:
 - a multi-start ambiguity test: keep the entropy track also when another start ends more
   than ``D`` m from the best fit with ``N·Δm/σ² < A``, for a few ``(D, A)``.
 
-Run ``python examples/paper_b_failures.py [--n 1000] [--seed 0] [--case gravity|magnetic]``
+Run ``python examples/paper_b_failures.py [--n 1000] [--seed 0] [--case gravity|magnetic]
+[--smoke]``
 (about 30 s per 1000 tracks on 2 cores after compilation; ``magnetic`` needs ``ppigrf``).
 """
 
@@ -86,7 +87,10 @@ def main():
     p.add_argument("--n", type=int, default=1000, help="tracks")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--case", choices=("gravity", "magnetic"), default="gravity")
+    p.add_argument("--smoke", action="store_true", help="32 tracks (a quick check)")
     args = p.parse_args()
+    if args.smoke:
+        args.n = 32
     if args.n < 1:
         p.error(f"--n must be a positive number of tracks, got {args.n}")
     if args.case == "gravity":

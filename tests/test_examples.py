@@ -1,0 +1,67 @@
+"""The example scripts run at their ``--smoke`` size and print what they promise.
+
+Each script runs in its own process (the examples enable x64 themselves, as scripts
+may). Only the examples whose smoke run takes well under a minute on 2 cores are run
+here; ``paper_a_table1`` (~2 min), ``paper_b_entropy_iccp``, ``paper_d_noharm`` and
+``paper_d_ukf`` (~40–60 s each) are exercised by their library functions' tests and
+by ``jaxgrav demo`` / ``jaxgrav montecarlo`` tests instead.
+"""
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+def run_example(name, *args):
+    proc = subprocess.run([sys.executable, str(EXAMPLES / name), "--smoke", *args],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc.stdout
+
+
+def test_paper_b_failures_smoke():
+    out = run_example("paper_b_failures.py")
+    assert "gravity, seed 0, 32 tracks" in out
+    row = r"^(significance test only|\+ rival).*?(\d+)\s+(\d+)\s+([\d.]+)%\s+([\d.]+)%$"
+    rows = re.findall(row, out, flags=re.M)
+    assert len(rows) == 6
+    median_default = int(rows[0][1])
+    entropy_median = float(re.search(r"entropy alone: median (\d+) m", out).group(1))
+    assert median_default < entropy_median / 2  # the combined matcher's median goal
+
+
+def test_paper_c_dov_smoke(tmp_path):
+    out = run_example("paper_c_dov.py", "--out", str(tmp_path / "c"))
+    table = json.loads((tmp_path / "c" / "paper_c_table.json").read_text())
+    assert table
+    assert (tmp_path / "c" / "paper_c_dov.png").stat().st_size > 10_000
+    errors = {m: float(v) for m, v in re.findall(
+        r"INS max horizontal position error, ([\w-]+): ([\d.]+) m", out)}
+    # compensation must beat the uncompensated INS by orders of magnitude
+    assert errors["uncompensated"] > 100 * errors["bilinear-linear"]
+    assert errors["bilinear-linear"] > errors["bicubic-harmonic"]
+
+
+def test_paper_d_gravimeter_smoke():
+    out = run_example("paper_d_gravimeter.py")
+    rows = re.findall(r"^\s+(\d+)\s+[\d.]+\s+([\d.]+)\s+\d+\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)",
+                      out, flags=re.M)
+    assert len(rows) >= 3
+    for _, f_ratio, _, no_tilt, tilt_kf in rows:
+        if float(f_ratio) <= 1.0:  # below the speed bound the tilt filter helps
+            assert float(tilt_kf) < float(no_tilt)
+
+
+def test_paper_d_pointmass_fit_smoke():
+    out = run_example("paper_d_pointmass_fit.py")
+    std = float(re.search(r"std ([\d.]+) mGal; fit K = 3", out).group(1))
+    rms = float(re.search(r"residual RMS ([\d.]+) mGal", out).group(1))
+    assert rms < 0.01 * std  # three masses fitted to a three-mass field
+    sweep = [float(r) for r in re.findall(r"^\s+\d+\s+\d+\s+([\d.]+)\s+[\d.]+\s+(?:True|False)",
+                                           out, flags=re.M)]
+    assert len(sweep) >= 3
+    assert sweep[-1] < 0.5 * sweep[0]  # more masses fit the real map better
