@@ -76,3 +76,51 @@ def test_read_anomaly_netcdf(tmp_path):
     replace(a, units="mGal").to_netcdf(bad)
     with pytest.raises(ValueError, match="expected nT"):
         magnetic.read_anomaly(bad)
+
+
+
+# ---------------------------------------------------------------------- matching in nT
+# A small paper-B-like map (0.5° square at 0.01°, anomaly only: no ppigrf needed), read
+# back through the NetCDF reader. tests/test_cli_magnetic.py builds the same map and
+# track and matches through the CLI with the same settings: one compile per session.
+MAG_REGION = (39.0, 39.5, 115.0, 115.5)
+MAG_NOISE_NT = 10.0  # paper B's reading noise
+MAG_DRIFT_DEG = 0.035  # largest INS offset (~0.03°) + margin, as examples/paper_b_entropy_iccp.py
+
+
+def magnetic_track(grid, d_north_m, d_east_m, rot_deg, seed):
+    """Truth: 20 fixes 600 m apart heading north-east; INS: truth shifted and turned."""
+    import jax.numpy as jnp
+
+    from jaxgrav.match.dense import shifted_tracks
+
+    k = np.arange(20)
+    lat = 39.15 + 0.00382 * k
+    lon = 115.15 + 0.00492 * k
+    ins_lat, ins_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), d_north_m, d_east_m,
+                                      np.deg2rad(rot_deg))
+    z = np.asarray(grid.sample(lat, lon, "bicubic"))
+    z = z + MAG_NOISE_NT * np.random.default_rng(seed).standard_normal(z.size)
+    return lat, lon, np.asarray(ins_lat), np.asarray(ins_lon), z
+
+
+def test_entropy_iccp_on_a_magnetic_map_beats_the_ins(tmp_path):
+    pytest.importorskip("xarray")
+    from jaxgrav.match.entropy_iccp import match_track_b
+    from jaxgrav.scenarios import track_error_m
+    from jaxgrav.sim import DEG_ARC_M, Track
+
+    magnetic.magnetic_map(MAG_REGION, 0.01, main_field=False).anomaly.to_netcdf(tmp_path / "m.nc")
+    grid = magnetic.read_anomaly(tmp_path / "m.nc")
+    assert grid.units == "nT" and grid.values.shape == (50, 50)
+    # INS offset by ~0.02-0.03° and turned by 1.5° (paper B's errors), 10 nT noise
+    for d_n, d_e, rot, seed in ((2500.0, -1500.0, 1.5, 0), (-2000.0, -2000.0, -1.5, 1)):
+        lat, lon, ins_lat, ins_lon, z = magnetic_track(grid, d_n, d_e, rot, seed)
+        res = match_track_b(grid, ins_lat, ins_lon, z, method="entropy+iccp",
+                            drift_radius_m=MAG_DRIFT_DEG * DEG_ARC_M, noise=MAG_NOISE_NT,
+                            max_rotation_deg=2.0, entropy_half_size=8, warn=False)
+        truth = Track(lat, lat, lon, lat, lat)
+        ins_err = float(track_error_m(ins_lat, ins_lon, truth))
+        assert ins_err > 2000.0
+        assert float(track_error_m(res.lat, res.lon, truth)) < 0.25 * ins_err
+        assert not int(res.status) & (1 | 32)  # finite, and the coarse stage beat the INS
