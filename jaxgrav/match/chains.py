@@ -31,8 +31,12 @@ __all__ = [
     "count_chains",
     "eliminate",
     "kbest_chains",
+    "kbest_run",
+    "kbest_step",
     "kmin",
     "step_compatibility",
+    "step_ok",
+    "step_region",
 ]
 
 
@@ -88,6 +92,16 @@ def compatibility(step_north, step_east, north0, east0, north1, east1, step_tol_
     """
     sn = step_north + north1[None, :] - north0[:, None]
     se = step_east + east1[None, :] - east0[:, None]
+    return step_ok(sn, se, step_north, step_east, step_tol_m, angle_tol_deg)
+
+
+def step_ok(sn, se, step_north, step_east, step_tol_m, angle_tol_deg):
+    """Whether steps ``(sn, se)`` (m, any broadcast shapes) keep the INS step.
+
+    The test of :func:`compatibility` on given candidate steps: length within
+    ``step_tol_m`` of the INS step's, direction within ``angle_tol_deg`` plus
+    ``asin(step_tol_m / |INS step|)``.
+    """
     lo, hi, dir_sq, obtuse = _step_bounds(step_north, step_east, step_tol_m, angle_tol_deg)
     # |len - ins_len| <= tol and (angle <= tol <=> s·d >= |s||d| cos(tol)), on squares:
     # no square root or arc function per pair
@@ -153,14 +167,26 @@ def _compat_getter(compat, step_tol_m, angle_tol_deg):
     return lambda x: x[0]
 
 
-def _step_bounds(step_north, step_east, step_tol_m, angle_tol_deg):
-    """Per-step constants of :func:`compatibility`: bounds on the squared step length,
-    ``(|d| cos tol)²`` and whether the direction tolerance exceeds 90°."""
+def step_region(step_north, step_east, step_tol_m, angle_tol_deg):
+    """The steps :func:`step_ok` accepts, as an annular sector.
+
+    Returns
+    -------
+    tuple of Array
+        ``(r_lo, r_hi, half_angle, ins_len)``: step lengths ``r_lo ≤ |s| ≤ r_hi`` (m)
+        at most ``half_angle`` (rad, ≤ π) off the INS step's direction; ``ins_len``
+        is the INS step's length (m).
+    """
     ins_len = jnp.hypot(step_north, step_east)
     ratio = jnp.minimum(step_tol_m / jnp.maximum(ins_len, 1e-9), 1.0)
-    tol = jnp.minimum(angle_tol_deg * DEG + jnp.arcsin(ratio), jnp.pi)
-    lo = jnp.maximum(ins_len - step_tol_m, 0.0)
-    hi = ins_len + step_tol_m
+    half_angle = jnp.minimum(angle_tol_deg * DEG + jnp.arcsin(ratio), jnp.pi)
+    return jnp.maximum(ins_len - step_tol_m, 0.0), ins_len + step_tol_m, half_angle, ins_len
+
+
+def _step_bounds(step_north, step_east, step_tol_m, angle_tol_deg):
+    """Per-step constants of :func:`step_ok`: bounds on the squared step length,
+    ``(|d| cos tol)²`` and whether the direction tolerance exceeds 90°."""
+    lo, hi, tol, ins_len = step_region(step_north, step_east, step_tol_m, angle_tol_deg)
     cos_tol = jnp.cos(tol)
     return lo * lo, hi * hi, (ins_len * cos_tol) ** 2, cos_tol < 0
 
@@ -242,7 +268,9 @@ def kbest_chains(cands, alive, steps, step_tol_m, angle_tol_deg, unary, pair_fn,
     unary : Array, shape ``(N, C)``
         Per-candidate cost.
     pair_fn : callable
-        ``pair_fn(i, value_i (C,), value_next (C,)) -> (C, C)`` cost of each transition.
+        ``pair_fn(i, value_i, value_next)`` → cost of the transitions from candidates
+        of value ``value_i`` at fix i to candidates of value ``value_next`` at fix
+        i+1, element-wise with broadcasting.
     k : int
         Number of chains (static).
     compat : Array of bool, shape ``(N−1, C, C)``, optional
@@ -252,10 +280,7 @@ def kbest_chains(cands, alive, steps, step_tol_m, angle_tol_deg, unary, pair_fn,
     -------
     ChainSearch
     """
-    n_fix, cap = alive.shape
-    k_rows = min(k, cap)
     inf = jnp.asarray(jnp.inf, dtype=unary.dtype)
-    d0 = jnp.full((cap, k), inf).at[:, 0].set(jnp.where(alive[0], unary[0], inf))
     get = _compat_getter(compat, step_tol_m, angle_tol_deg)
     xs = (
         *_xs(_steps(cands, steps), compat),
@@ -263,25 +288,63 @@ def kbest_chains(cands, alive, steps, step_tol_m, angle_tol_deg, unary, pair_fn,
         unary[1:],
         cands.value[:-1],
         cands.value[1:],
-        jnp.arange(n_fix - 1),
+        jnp.arange(alive.shape[0] - 1),
     )
 
     def fwd(d, x):
         x, (alive_next, unary_next, v0, v1, i) = x[:-5], x[-5:]
-        ok = get(x) & alive_next[None, :]
-        pair = jnp.where(ok, pair_fn(i, v0, v1), inf) + unary_next[None, :]  # (C, C)
-        # The K best partial chains ending at each next candidate come from the K
-        # previous candidates with the cheapest best (head) chains, each contributing
-        # its K cheapest chains: select K rows, then K of K*K (exact, no full sort).
-        heads = (d[:, 0][:, None] + pair).T  # (C_next, C_prev)
-        # (with fewer than K candidates per fix, all of them: still exact)
-        _, rows = kmin(heads, k_rows)  # (C_next, K')
-        sub = d[rows] + jnp.take_along_axis(pair.T, rows, axis=1)[..., None]  # (C_next, K', K)
-        vals, flat = kmin(sub.reshape(cap, k_rows * k), k)
-        prev = jnp.take_along_axis(rows, flat // k, axis=1)
-        return vals, prev * k + flat % k
+        ok = (get(x) & alive_next[None, :]).T  # (C_next, C_prev)
+        cost = jnp.where(ok, pair_fn(i, v0[None, :], v1[:, None]), inf) + unary_next[:, None]
+        return kbest_step(d, cost, None, k)
 
-    d_last, ptrs = jax.lax.scan(fwd, d0, xs)  # ptrs: (N-1, C, K)
+    return kbest_run(fwd, xs, alive[0], unary[0], k)
+
+
+def kbest_step(d, cost, index, k):
+    """One step of the k-best min-sum programme.
+
+    Parameters
+    ----------
+    d : Array, shape ``(C_prev, K)``
+        The K cheapest partial chains ending at each candidate of fix i, ascending.
+    cost : Array, shape ``(C_next, M)``
+        Cost of reaching each candidate of fix i+1 from each of its M possible
+        predecessors (transition plus its own unary cost; ``inf`` = not allowed).
+    index : Array of int, shape ``(C_next, M)``, or None
+        Predecessor slots in fix i; ``None`` when ``M = C_prev`` and predecessor m is
+        slot m.
+    k : int
+        Chains kept per candidate (static).
+
+    Returns
+    -------
+    tuple of Array
+        ``(d_next (C_next, K), pointer (C_next, K))``, the pointer coding the
+        predecessor slot and its chain rank as ``slot·K + rank``.
+    """
+    head = d[:, 0]
+    # The K best partial chains ending at each next candidate come from the K
+    # predecessors with the cheapest best (head) chains, each contributing its K
+    # cheapest chains: select K rows, then K of K*K (exact, no full sort; with fewer
+    # than K predecessors, all of them: still exact).
+    heads = cost + (head[None, :] if index is None else head[index])
+    _, rows = kmin(heads, min(k, cost.shape[1]))  # (C_next, K')
+    src = rows if index is None else jnp.take_along_axis(index, rows, axis=1)
+    sub = d[src] + jnp.take_along_axis(cost, rows, axis=1)[..., None]  # (C_next, K', K)
+    vals, flat = kmin(sub.reshape(cost.shape[0], -1), k)
+    prev = jnp.take_along_axis(src, flat // k, axis=1)
+    return vals, prev * k + flat % k
+
+
+def kbest_run(step_fn, xs, alive0, unary0, k):
+    """Run the k-best programme (``lax.scan`` of ``step_fn`` over ``xs``) and backtrack.
+
+    ``step_fn(d, x) -> (d_next, pointer)`` is one step (usually :func:`kbest_step`);
+    the first fix's partial chains are its alive candidates at their unary cost.
+    """
+    inf = jnp.asarray(jnp.inf, dtype=unary0.dtype)
+    d0 = jnp.full((alive0.shape[0], k), inf).at[:, 0].set(jnp.where(alive0, unary0, inf))
+    d_last, ptrs = jax.lax.scan(step_fn, d0, xs)  # ptrs: (N-1, C, K)
     total, best = kmin(d_last.reshape(-1), k)
     last_c, last_r = best // k, best % k
 

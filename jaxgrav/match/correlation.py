@@ -110,10 +110,11 @@ class ChainConfig:
 
 
 def _pair_cost(readings, w_diff):
+    """Difference-form cost of a step from value v0 at fix i to v1 at fix i+1 (broadcasts)."""
     dg = jnp.diff(readings)
 
     def pair(i, v0, v1):
-        return w_diff[i] * (dg[i] - (v1[None, :] - v0[:, None])) ** 2
+        return w_diff[i] * (dg[i] - (v1 - v0)) ** 2
 
     return pair
 
@@ -168,7 +169,7 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
     w = decreasing_weights(n, config.weight_decay)
     if config.score == "absolute":
         unary = w[:, None] * (readings[:, None] - cands.value) ** 2
-        pair = lambda i, v0, v1: jnp.zeros((v0.shape[0], v1.shape[0]), dtype)  # noqa: E731
+        pair = lambda i, v0, v1: jnp.zeros(jnp.broadcast_shapes(v0.shape, v1.shape), dtype)  # noqa: E731
     else:
         unary = jnp.zeros(cands.value.shape, dtype)
         pair = _pair_cost(readings, w[:-1] / jnp.sum(w[:-1]))
