@@ -320,3 +320,150 @@ def test_match_track_b_validates(smooth_grid):
         match_track_b(smooth_grid, lat, lon, z, max_rotation_deg=-2.0)
     with pytest.raises(ValueError, match="entropy_half_size"):
         match_track_b(smooth_grid, lat, lon, z, entropy_half_size=0)
+
+
+# ---------------------------------------------------------------------- entropy alone
+def _hcy(h):
+    """H_CY of the rows of ``h`` in plain NumPy (SPEC §B)."""
+    c = np.abs(h - h.mean(axis=-1, keepdims=True))
+    q = c / c.sum(axis=-1, keepdims=True)
+    return -np.sum(np.where(q > 0, q * np.log(np.where(q > 0, q, 1.0)), 0.0), axis=-1)
+
+
+@pytest.mark.parametrize("kind", ["difference", "information"])
+def test_match_entropy_finds_the_lattice_offset(smooth_grid, kind):
+    import warnings
+
+    lat, lon = _track()
+    # truth = INS shifted by an offset of the lattice (200 m spacing), noiseless readings
+    t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), 400.0, -600.0, 0.0)
+    z = smooth_grid.sample(t_lat, t_lon, "bicubic")
+    shift = entropy_config_for(smooth_grid, 800.0, kind=kind).shift  # > 0 for H_XX here
+    cfg = dataclasses.replace(ENT, kind=kind, shift=shift)
+    res = entropy_mod.match_entropy(smooth_grid, lat, lon, z, cfg)
+    np.testing.assert_allclose(res.lat, t_lat, atol=1e-9)
+    np.testing.assert_allclose(res.lon, t_lon, atol=1e-9)
+    assert float(res.offset_north_m) == pytest.approx(400.0, abs=0.5)
+    assert float(res.offset_east_m) == pytest.approx(-600.0, abs=0.5)
+    assert float(res.rotation_deg) == 0.0 and float(res.score) < 1e-12
+    assert int(res.status) == 0
+    # the checked entry point runs the same matcher and warns about nothing
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        via_b = match_track_b(smooth_grid, lat, lon, np.asarray(z), method="entropy", entropy=cfg)
+    np.testing.assert_allclose(via_b.lat, res.lat, atol=0)
+    np.testing.assert_allclose(via_b.lon, res.lon, atol=0)
+
+
+ENT1 = EntropyConfig(spacing_m=300.0, half_size=1)  # 9 candidates, checked by hand below
+
+
+def _candidate_values(grid, lat, lon):
+    """Map along the INS track shifted by each of ENT1's 9 offsets (north-major), NumPy."""
+    offs = [(a * 300.0, b * 300.0) for a in (-1, 0, 1) for b in (-1, 0, 1)]
+    vals = [np.asarray(grid.sample(*shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), dn, de,
+                                                   0.0), "bicubic")) for dn, de in offs]
+    return np.array(offs), np.array(vals)
+
+
+def test_entropy_acceptance_test_by_hand(smooth_grid):
+    """Paper B's acceptance test: only candidates whose RMS misfit beats the INS track's."""
+    lat, lon = _track()
+    offs, vals = _candidate_values(smooth_grid, lat, lon)
+    ins, a = vals[4], 8  # offset (0, 0) is the INS track; the truth is offset (300, 300)
+    # readings = truth + bias b: the truth's ΔH is 0 (H_CY ignores a bias) but its RMS is
+    # |b|, while the INS track's is sqrt(b² + 2bm + s) with m, s the mean and mean square
+    # of truth − INS: for b·m < −s/2 the truth fails the test and must be passed over
+    m, s = np.mean(vals[a] - ins), np.mean((vals[a] - ins) ** 2)
+    b = -np.sign(m) * (s / (2 * abs(m)) + 5.0)
+    z = vals[a] + b
+    rms = np.sqrt(np.mean((z - vals) ** 2, axis=1))
+    d_h = np.abs(_hcy(vals) - _hcy(z))
+    accepted = rms < rms[4]
+    assert not accepted[a] and d_h[a] < 1e-12 and accepted.sum() >= 2
+    want = np.flatnonzero(accepted)[np.argmin(d_h[accepted])]  # least |ΔH| among accepted
+    res = entropy_mod.match_entropy(smooth_grid, lat, lon, z, ENT1)
+    # accepted: no bit 32; bit 8 only because with one offset per side every nonzero one
+    # lies on the edge of the search region
+    assert int(res.status) == (8 if np.abs(offs[want]).max() >= 300.0 else 0)
+    assert float(res.offset_north_m) == pytest.approx(offs[want, 0], abs=0.5)
+    assert float(res.offset_east_m) == pytest.approx(offs[want, 1], abs=0.5)
+    assert float(res.score) == pytest.approx(d_h[want], rel=1e-9)
+    np.testing.assert_allclose(res.topk_score[:accepted.sum()], np.sort(d_h[accepted]), rtol=1e-9)
+    assert np.all(np.isinf(np.asarray(res.topk_score[accepted.sum():])))
+    # readings = INS track + small noise: no shifted candidate beats the INS misfit, so
+    # none is accepted: bit 32, the INS track kept, score = |ΔH| of the INS track.
+    # accept_ratio just below 1 drops the zero offset itself, whose misfit equals the INS
+    # track's (at exactly 1 rounding decides; same compiled function: it is data)
+    z = ins + 0.5 * np.random.default_rng(0).normal(size=ins.size)
+    rms = np.sqrt(np.mean((z - vals) ** 2, axis=1))
+    assert np.all(np.delete(rms, 4) > rms[4])
+    res = entropy_mod.match_entropy(smooth_grid, lat, lon, z,
+                                    dataclasses.replace(ENT1, accept_ratio=0.999))
+    assert int(res.status) == 32
+    np.testing.assert_array_equal(res.lat, lat)
+    np.testing.assert_array_equal(res.lon, lon)
+    assert float(res.offset_north_m) == 0.0 and float(res.offset_east_m) == 0.0
+    assert float(res.score) == pytest.approx(abs(_hcy(ins) - _hcy(z)), rel=1e-9)
+    assert np.all(np.isinf(np.asarray(res.topk_score)))
+
+
+# ---------------------------------------------------------------------- no retrace
+def test_match_entropy_and_iccp_numbers_do_not_retrace(smooth_grid):
+    lat, lon = _track()
+    t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), 150.0, -100.0,
+                                  jnp.deg2rad(0.5))
+    z = smooth_grid.sample(t_lat, t_lon, "bicubic")
+    arr = jnp.asarray
+    ent = dataclasses.replace(ENT, spacing_m=arr(200.0), shift=arr(0.0), accept_ratio=arr(1.0))
+    first = entropy_mod.match_entropy(smooth_grid, lat, lon, z, ent)
+    size = entropy_mod.match_entropy._cache_size()
+    # accept_ratio 0: nothing is accepted, so the new value is used, not a stale constant
+    swept = entropy_mod.match_entropy(smooth_grid, lat, lon, z, dataclasses.replace(
+        ent, spacing_m=arr(150.0), shift=arr(3.0), accept_ratio=arr(0.0)))
+    assert entropy_mod.match_entropy._cache_size() == size
+    assert not int(first.status) & 32 and int(swept.status) & 32
+    icp = IccpConfig(window_m=arr(1500.0), max_step_m=arr(500.0), contour_tol=arr(np.inf),
+                     tol_m=arr(1.0), max_rotation_deg=arr(90.0), noise=arr(0.0),
+                     accept_chi2=arr(7.81))
+    first = match_iccp(smooth_grid, lat, lon, z, icp)
+    size = match_iccp._cache_size()
+    swept = match_iccp(smooth_grid, lat, lon, z, IccpConfig(
+        window_m=arr(800.0), max_step_m=arr(300.0), contour_tol=arr(2.0), tol_m=arr(-1.0),
+        max_rotation_deg=arr(0.2), noise=arr(1.0), accept_chi2=arr(3.0)))
+    assert match_iccp._cache_size() == size
+    assert not int(first.status) & 16 and int(swept.status) & 16  # tol_m < 0: never met
+    assert abs(float(swept.rotation_deg)) <= 0.2 + 1e-9 < abs(float(first.rotation_deg))
+
+
+# ---------------------------------------------------------------------- ICCP, noisy
+def test_iccp_converges_with_noisy_readings(smooth_grid):
+    lat, lon = _track()
+    values = np.asarray(smooth_grid.values)
+    sigma = 0.005 * float(values.max() - values.min())  # 0.5 % of the field range, ~0.9 mGal
+    truth = Track(lat, lat, lon, lat, lat)
+    # the static settings of test_iccp_converges_from_small_offsets: compiled once
+    cfg = IccpConfig(window_m=1500.0, max_step_m=500.0, max_iter=200, tol_m=0.02,
+                     contour_tol=3.0 * sigma)
+    starts = [(300.0, -200.0, 1.0), (-150.0, 250.0, -1.5)]
+    err0, err, rot_ratio = [], [], []
+    for seed in range(4):
+        z = (np.asarray(smooth_grid.sample(lat, lon, "bicubic"))
+             + sigma * np.random.default_rng(seed).normal(size=lat.size))
+        fixed = []
+        for d_n, d_e, rot in starts:
+            ins_lat, ins_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), d_n, d_e,
+                                              jnp.deg2rad(rot))
+            res = match_iccp(smooth_grid, ins_lat, ins_lon, z, cfg)
+            assert int(res.status) == 0  # converged (no bit 16), enough contour points
+            err0.append(float(track_error_m(ins_lat, ins_lon, truth)))
+            err.append(float(track_error_m(res.lat, res.lon, truth)))
+            rot_ratio.append(abs(float(res.rotation_deg) + rot) / abs(rot))
+            fixed.append(np.stack([np.asarray(res.lat), np.asarray(res.lon)]))
+        # both starts reach the same fixed point (noise sets it, not the start): within 2 m
+        assert np.abs(fixed[0] - fixed[1]).max() * 111e3 < 2.0
+    err0, err = np.array(err0), np.array(err)
+    assert err0.min() > 250.0
+    assert np.all(err < 0.5 * err0)
+    assert np.median(err / err0) < 0.25
+    assert np.median(rot_ratio) < 0.5  # the heading error shrinks too
