@@ -46,6 +46,53 @@ def test_rayleigh_quantile_and_drift_statistics():
         sim.sample_drift(jax.random.key(1), 1.0, law="gauss")
 
 
+def test_drift_offsets_rotate_and_grow_linearly():
+    """The offset direction turns by rotation_rad at a constant rate, ending at
+    direction_rad; the radius grows linearly from radius/(1+growth) to radius."""
+    n = 13
+    d = sim.sample_drift(jax.random.key(5), 800.0, law="fixed", growth=0.25, rotation_deg=10.0)
+    assert 0.5 < abs(np.rad2deg(float(d.rotation_rad))) <= 10.0  # a real turn to see
+    dn, de = (np.asarray(a) for a in sim.drift_offsets(d, n))
+    angle = np.unwrap(np.arctan2(de, dn))  # clockwise from north
+    np.testing.assert_allclose(np.diff(angle), float(d.rotation_rad) / (n - 1), atol=1e-12)
+    np.testing.assert_allclose(np.cos(angle[-1] - float(d.direction_rad)), 1.0, atol=1e-12)
+    r = np.hypot(dn, de)
+    np.testing.assert_allclose(r, np.linspace(800.0 / 1.25, 800.0, n), rtol=1e-12)
+    # over many tracks: rotation uniform in ±rotation_deg, direction uniform
+    many = jax.vmap(lambda k: sim.sample_drift(k, 1.0, rotation_deg=10.0))(
+        jax.random.split(jax.random.key(6), 4000))
+    rot = np.rad2deg(np.asarray(many.rotation_rad))
+    assert np.abs(rot).max() <= 10.0
+    np.testing.assert_allclose(np.std(rot), 10.0 / np.sqrt(3.0), rtol=0.05)
+    assert abs(np.mean(np.exp(1j * np.asarray(many.direction_rad)))) < 0.05
+    # no rotation, no growth: a constant offset (parallel tracks)
+    dn0, de0 = sim.drift_offsets(sim.sample_drift(jax.random.key(5), 800.0, law="fixed"), n)
+    assert np.ptp(np.asarray(dn0)) == 0.0 and np.ptp(np.asarray(de0)) == 0.0
+
+
+def test_drift_sigma_grows_with_time_and_rayleigh_law_matches_scipy():
+    """σ = σ0 + rate·t since the last fix; radii drawn with that σ follow SciPy's
+    Rayleigh law, whose quantiles rayleigh_quantile gives (the search radius)."""
+    from scipy import stats
+
+    from jaxgrav.sim.drift import drift_sigma
+
+    t = np.array([0.0, 600.0, 1800.0, 3600.0])
+    sigma = np.asarray(drift_sigma(t, 0.5, 100.0))
+    np.testing.assert_allclose(sigma, [100.0, 400.0, 1000.0, 1900.0])  # by hand
+    assert sigma.shape == (4,) and np.asarray(drift_sigma(60.0, 1.0)) == 60.0
+    p = np.array([0.1, 0.5, 0.9, 0.99])
+    np.testing.assert_allclose(sim.rayleigh_quantile(sigma[:, None], p),
+                               stats.rayleigh.ppf(p, scale=sigma[:, None]), rtol=1e-12)
+    keys = jax.random.split(jax.random.key(7), 4000)
+    for s in sigma[1:]:
+        r = np.asarray(jax.vmap(lambda k, s=s: sim.sample_drift(k, s).radius_m)(keys))
+        assert stats.kstest(r, stats.rayleigh(scale=s).cdf).pvalue > 1e-3
+        # fraction inside each quantile radius: binomial, 4 sigma
+        inside = np.mean(r[:, None] <= np.asarray(sim.rayleigh_quantile(s, p)), axis=0)
+        assert np.all(np.abs(inside - p) <= 4 * np.sqrt(p * (1 - p) / r.size)), inside
+
+
 def test_readings_model():
     lat = np.linspace(29, 31, 21)
     lon = np.linspace(129, 131, 21)

@@ -2,9 +2,10 @@
 
 Over the few tens of minutes of a matching track the INS error is nearly a constant
 offset ("the INS track is parallel to the true track"). Its size is random with a
-Rayleigh law whose σ grows with the time since the last fix; its direction is
-uniform. To keep tracks from being exactly parallel the offset may also grow and
-rotate slowly along the track.
+Rayleigh law whose σ grows with the time since the last fix (:func:`drift_sigma`:
+linearly, ``σ = σ0 + rate·t``); its direction is uniform. The search radius is a
+Rayleigh quantile of it (:func:`rayleigh_quantile`). To keep tracks from being
+exactly parallel the offset may also grow and rotate slowly along the track.
 
 Distances are in metres on the ground; :data:`DEG_ARC_M` converts the papers'
 "degrees" of drift (degrees of arc of the mean Earth sphere) to metres.
@@ -24,6 +25,7 @@ __all__ = [
     "Drift",
     "apply_drift",
     "drift_offsets",
+    "drift_sigma",
     "rayleigh_quantile",
     "rayleigh_sigma",
     "sample_drift",
@@ -31,6 +33,32 @@ __all__ = [
 
 DEG_ARC_M = WGS84_MEAN_RADIUS * DEG
 """Metres per degree of arc on the mean Earth sphere (≈ 111 195 m)."""
+
+
+def drift_sigma(elapsed_s, sigma_rate_m_per_s, sigma0_m=0.0):
+    """Rayleigh scale σ of the drift radius after ``elapsed_s`` since the last fix.
+
+    The INS position error grows from the error of the last fix: ``σ = σ0 + rate·t``
+    (linear growth, the first-order behaviour of a velocity error; e.g. a rate of
+    0.5 m/s gives σ = 1.8 km an hour after a perfect fix). Pass the result to
+    :func:`sample_drift` (``law="rayleigh"``) or :func:`rayleigh_quantile`.
+
+    Parameters
+    ----------
+    elapsed_s : float or Array
+        Time since the last position fix (s), ≥ 0.
+    sigma_rate_m_per_s : float or Array
+        Growth rate of σ (m/s).
+    sigma0_m : float or Array
+        σ right after the fix (m).
+
+    Returns
+    -------
+    Array
+        σ (m), broadcast shape of the inputs.
+    """
+    elapsed = jnp.asarray(elapsed_s, dtype=float)
+    return sigma0_m + sigma_rate_m_per_s * elapsed
 
 
 def rayleigh_quantile(sigma, p):
