@@ -273,6 +273,111 @@ def test_ekf_jacobian_equals_finite_differences(map_kind, smooth_grid):
     assert np.all(jac[2:12] == 0.0) and jac[12] == 1.0 and np.all(jac[:2] != 0.0)
 
 
+@pytest.fixture(scope="module")
+def still():
+    """F = I, Q = 0: the predicted P is exactly the P a test gives, and "unchanged" is exact."""
+    n = ins.N_STATES
+    return fl.Dynamics(jnp.eye(n), jnp.zeros((n, n)))
+
+
+def _recover_h(state, new, info):
+    """The H an update used, from its gain: K = P Hᵀ / S and x⁺ − x = K ν  ⇒  H = S P⁻¹ K."""
+    k = (np.asarray(new.x) - np.asarray(state.x)) / float(info.innovation)
+    return float(info.innovation_var) * np.linalg.solve(np.asarray(state.p), k)
+
+
+def _correlated_p(p0, seed=7):
+    """p0's variances with random correlations (a well-conditioned correlation matrix)."""
+    a = np.random.default_rng(seed).standard_normal((ins.N_STATES, ins.N_STATES))
+    c = a @ a.T + ins.N_STATES * np.eye(ins.N_STATES)
+    d = np.sqrt(np.diag(np.asarray(p0)) / np.diag(c))
+    return jnp.asarray(c * np.outer(d, d))
+
+
+@pytest.mark.parametrize("map_kind", ["pointmass", "grid"])
+def test_ekf_update_uses_the_finite_difference_jacobian(map_kind, prior, still, smooth_grid):
+    """ekf().update's H (recovered from its gain) is the central-difference H at the mean."""
+    if map_kind == "pointmass":
+        field, lat, lon = FIELD, 24.2, MASS_LON + 0.03
+    else:
+        field, lat, lon = smooth_grid, 30.05, 130.1
+    _, p0 = prior
+    x = jnp.zeros(ins.N_STATES).at[0].set(700.0).at[1].set(-400.0).at[12].set(1.0)
+    state = fl.FilterState(x, _correlated_p(p0))
+    z = float(measure(field, x, lat, lon)) + 3.0
+    new, info = update(EKF, state, _one_step(z, lat, lon, r=2.0), field, still)
+    assert int(info.status) == 0
+    np.testing.assert_allclose(float(info.innovation), 3.0, rtol=1e-12)
+    eps = 1.0  # m (and mGal for the bias)
+    fd = np.array([(float(measure(field, x + e, lat, lon)) - float(measure(field, x - e, lat, lon)))
+                   / (2 * eps) for e in eps * np.eye(ins.N_STATES)])
+    # in mGal per 1-σ of each state (the states span metres to rad/s)
+    p = np.asarray(state.p)
+    sd = np.sqrt(np.diag(p))
+    h = _recover_h(state, new, info)
+    np.testing.assert_allclose(h * sd, fd * sd, rtol=1e-6, atol=1e-9 * np.abs(fd * sd).max())
+    assert np.all(fd[:2] != 0.0) and fd[12] == pytest.approx(1.0)
+    # ... and the same H in S and in the Joseph covariance update
+    np.testing.assert_allclose(float(info.innovation_var), fd @ p @ fd + 2.0, rtol=1e-6)
+    k = p @ fd / (fd @ p @ fd + 2.0)
+    ikh = np.eye(ins.N_STATES) - np.outer(k, fd)
+    np.testing.assert_allclose(np.asarray(new.p) / np.outer(sd, sd),
+                               (ikh @ p @ ikh.T + 2.0 * np.outer(k, k)) / np.outer(sd, sd),
+                               atol=1e-6)
+
+
+@pytest.mark.parametrize("filt", [UKF, EKF], ids=["ukf", "ekf"])
+def test_indefinite_covariance_fails_and_leaves_the_state(filt, prior, still):
+    """P with positive variances but indefinite (|corr| > 1): covariance_failed, no update."""
+    _, p0 = prior
+    p = np.asarray(p0).copy()
+    p[0, 1] = p[1, 0] = 1.5 * np.sqrt(p[0, 0] * p[1, 1])
+    assert np.linalg.eigvalsh(p).min() < 0 and np.all(np.diag(p) > 0)
+    state = fl.FilterState(jnp.zeros(ins.N_STATES).at[0].set(300.0).at[12].set(0.5),
+                           jnp.asarray(p))
+    z = float(measure(FIELD, state.x, 24.25, MASS_LON + 0.02)) + 3.0
+    new, info = update(filt, state, _one_step(z), FIELD, still)
+    assert int(info.status) == FLAGS["covariance_failed"] | FLAGS["covariance_repaired"]
+    np.testing.assert_array_equal(np.asarray(new.x), np.asarray(state.x))
+    np.testing.assert_array_equal(np.asarray(new.p), p)
+
+
+@pytest.mark.parametrize("filt", [UKF_LIN, EKF_LIN], ids=["ukf", "ekf"])
+def test_semidefinite_covariance_is_repaired_and_updates(filt, prior, still):
+    """A zero-variance state: covariance_repaired only, and the textbook Kalman update."""
+    _, p0 = prior
+    p = np.asarray(p0).copy()
+    p[2, :] = p[:, 2] = 0.0  # north velocity known exactly (the measurement depends on it)
+    x = np.zeros(ins.N_STATES)
+    x[[0, 2, 12]] = [300.0, 0.05, 0.5]
+    state = fl.FilterState(jnp.asarray(x), jnp.asarray(p))
+    z, r = LIN_A @ x + LIN_C + 4.0, 1.0
+    new, info = update(filt, state, _one_step(z, r=r), None, still)
+    assert int(info.status) == FLAGS["covariance_repaired"]
+    s = LIN_A @ p @ LIN_A + r
+    gain = p @ LIN_A / s
+    sd = np.sqrt(np.diag(np.asarray(p0)))
+    np.testing.assert_allclose((np.asarray(new.x) - (x + 4.0 * gain)) / sd, 0.0, atol=1e-9)
+    np.testing.assert_allclose((np.asarray(new.p) - (p - s * np.outer(gain, gain)))
+                               / np.outer(sd, sd), 0.0, atol=1e-9)
+    assert abs(float(new.x[2]) - x[2]) < 1e-12 and np.abs(np.asarray(new.p)[2]).max() < 1e-12
+
+
+@pytest.mark.parametrize("filt", [UKF_LIN, EKF_LIN], ids=["ukf", "ekf"])
+def test_negative_innovation_variance_fails_explicitly(filt, prior, still):
+    """S = H P Hᵀ + R < 0 (here R < 0): covariance_failed (not gated), no update, no NaN."""
+    _, p0 = prior
+    x = jnp.zeros(ins.N_STATES).at[0].set(300.0)
+    state = fl.FilterState(x, p0)
+    hph = LIN_A @ np.asarray(p0) @ LIN_A
+    z = float(LIN_A @ np.asarray(x)) + LIN_C + 4.0
+    new, info = update(filt, state, _one_step(z, r=-2.0 * hph), None, still)
+    assert int(info.status) == FLAGS["covariance_failed"]
+    np.testing.assert_allclose(float(info.innovation_var), -hph, rtol=1e-9)
+    np.testing.assert_array_equal(np.asarray(new.x), np.asarray(x))
+    np.testing.assert_array_equal(np.asarray(new.p), np.asarray(p0))
+
+
 def _assert_same_state(state, ref):
     """Equal to rounding (the jitted update may fuse the prediction's arithmetic)."""
     dx, dp = _normalised(
