@@ -393,13 +393,12 @@ def test_entropy_acceptance_test_by_hand(smooth_grid):
     assert np.all(np.isinf(np.asarray(res.topk_score[accepted.sum():])))
     # readings = INS track + small noise: no shifted candidate beats the INS misfit, so
     # none is accepted: bit 32, the INS track kept, score = |ΔH| of the INS track.
-    # accept_ratio just below 1 drops the zero offset itself, whose misfit equals the INS
-    # track's (at exactly 1 rounding decides; same compiled function: it is data)
+    # At the default accept_ratio = 1 the zero offset, whose misfit is the INS track's,
+    # must not be accepted for beating itself by a rounding error.
     z = ins + 0.5 * np.random.default_rng(0).normal(size=ins.size)
     rms = np.sqrt(np.mean((z - vals) ** 2, axis=1))
     assert np.all(np.delete(rms, 4) > rms[4])
-    res = entropy_mod.match_entropy(smooth_grid, lat, lon, z,
-                                    dataclasses.replace(ENT1, accept_ratio=0.999))
+    res = entropy_mod.match_entropy(smooth_grid, lat, lon, z, ENT1)
     assert int(res.status) == 32
     np.testing.assert_array_equal(res.lat, lat)
     np.testing.assert_array_equal(res.lon, lon)

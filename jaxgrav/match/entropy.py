@@ -281,7 +281,9 @@ def coarse_offsets(sample, lat, lon, readings, config):
     h_cand = sequence_entropy(vals, config.kind, config.shift)
     d_h = jnp.abs(h_cand - h_meas)
     rms = jnp.sqrt(jnp.mean((readings - vals) ** 2, axis=-1))
-    rms_ins = jnp.sqrt(jnp.mean((readings - sample(lat, lon)) ** 2))
+    # the INS track is the centre offset (exactly 0): the same arithmetic, so that the
+    # zero offset is never "accepted" for beating itself by a rounding error
+    rms_ins = rms[d_n.shape[0] // 2]
     finite = jnp.isfinite(d_h) & jnp.isfinite(rms)
     accepted = finite & (rms < config.accept_ratio * rms_ins)
     key = jnp.where(accepted, d_h, jnp.inf)
