@@ -1,5 +1,9 @@
 """Monte Carlo runner: equal to a vmapped loop, independent of chunking, devices and hosts.
 
+A toy function is checked exactly; two real methods of
+:data:`jaxgrav.montecarlo_methods.BUILDERS` (the dense correlation matcher and the UKF,
+short runs) are checked across chunk sizes and on 8 devices too.
+
 The multi-device checks run in subprocesses with
 ``XLA_FLAGS=--xla_force_host_platform_device_count=N`` (the flag must be set before
 JAX starts); the multi-host check starts two processes on loopback that join through
@@ -22,7 +26,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from jaxgrav import Grid, montecarlo
+from jaxgrav import Grid, montecarlo, montecarlo_methods
+from jaxgrav.sim import DEG_ARC_M
 
 N_RUNS = 11
 _LAT = np.linspace(29.0, 30.0, 21)
@@ -173,6 +178,51 @@ def test_dataset_and_netcdf_round_trip(tmp_path):
         montecarlo.to_dataset({"a": np.zeros(3), "b": np.zeros(4)})
 
 
+# ------------------------------------------------------------- real methods
+# (options, n_runs, chunk): the chunk does not divide n_runs (the last chunk is padded)
+# and is the one the CLI and filter tests compile (same shapes: one compilation a suite)
+REAL = {"correlation": (dict(drift_deg=0.03, n_fixes=20), 5, 4),
+        "ukf": (dict(n_fixes=31), 3, 2)}
+
+
+@functools.cache
+def real_runs(method, chunk):
+    """``method``'s runs (key 0) on one device in chunks of ``chunk``."""
+    opts, n, _ = REAL[method]
+    spec = montecarlo_methods.build(method, **opts)
+    return montecarlo.run(spec.fn, jax.random.key(0), n, chunk=chunk, args=spec.args,
+                          progress=False)
+
+
+def assert_same_runs(a, b, label=""):
+    """Integers equal, floats to 1e-6 relative (a millimetre in a km error), not bitwise.
+
+    A batch of one run (chunk 1, or one run a device) is another XLA program whose fused
+    arithmetic rounds differently: 1e-14 relative for the UKF; the dense matcher's
+    Levenberg-Marquardt keeps a step only if it lowers the cost, and a near tie can go
+    either way (seen: 7e-8 relative, 0.13 mm, on 8 devices)."""
+    assert a.keys() == b.keys(), label
+    for k in a:
+        assert a[k].shape == b[k].shape and a[k].dtype == b[k].dtype, (label, k)
+        if np.issubdtype(a[k].dtype, np.integer):
+            np.testing.assert_array_equal(a[k], b[k], err_msg=f"{label} {k}")
+        else:
+            np.testing.assert_allclose(a[k], b[k], rtol=1e-6, atol=1e-6, err_msg=f"{label} {k}")
+
+
+@pytest.mark.parametrize("method", REAL)
+def test_real_method_gives_the_same_runs_for_any_chunk(method):
+    opts, n, chunk = REAL[method]
+    alone, chunked = real_runs(method, 1), real_runs(method, chunk)
+    assert_same_runs(alone, chunked, f"{method} chunk 1 vs {chunk}")
+    assert len(set(np.round(chunked["err_m"], 6))) == n  # n different runs, not one repeated
+    if method == "correlation":  # fixed INS drift: every INS track is off by exactly it
+        np.testing.assert_allclose(chunked["ins_err_m"], opts["drift_deg"] * DEG_ARC_M,
+                                   rtol=1e-6)
+    else:  # 2 km initial error, 0.2 m/s: still about 2 km after 5 min
+        assert np.all((chunked["ins_err_m"] > 1500) & (chunked["ins_err_m"] < 2500))
+
+
 # ------------------------------------------------------------- other processes
 _SCRIPT = """
 import os, sys, json
@@ -184,13 +234,18 @@ if len(sys.argv) > 2:  # multi-host: process id, port; before anything starts JA
     jax.distributed.initialize(coordinator_address="127.0.0.1:" + port, num_processes=2,
                                process_id=pid, initialization_timeout=60)
 sys.path.insert(0, {tests!r})
-from test_montecarlo import toy, toy_args, N_RUNS
-from jaxgrav import montecarlo
+from test_montecarlo import toy, toy_args, N_RUNS, REAL
+from jaxgrav import montecarlo, montecarlo_methods
 cases = json.loads(sys.argv[1])
 out = {{}}
-for name, devices, chunk in cases:
-    r = montecarlo.run(toy, jax.random.key(0), N_RUNS, chunk=chunk, devices=devices,
-                       args=toy_args(), progress=False)
+for name, devices, chunk, *method in cases:  # [name, devices, chunk(, method of REAL)]
+    if method:
+        spec = montecarlo_methods.build(method[0], **REAL[method[0]][0])
+        fn, n_runs, args = spec.fn, REAL[method[0]][1], spec.args
+    else:
+        fn, n_runs, args = toy, N_RUNS, toy_args()
+    r = montecarlo.run(fn, jax.random.key(0), n_runs, chunk=chunk, devices=devices,
+                       args=args, progress=False)
     out.update({{name + "/" + k: v for k, v in r.items()}})
 if jax.process_index() == 0:
     np.savez(os.environ["MC_OUT"], n_devices=len(jax.devices()), **out)
@@ -216,16 +271,21 @@ def _split(npz, names):
 
 
 def test_eight_devices_give_the_numbers_of_one(tmp_path):
-    cases = [["all8_chunk3", None, 3], ["two_chunk5", 2, 5]]  # 2 chunks of 8; 2 of 6
+    """The toy, and the real correlation matcher and UKF (all runs in one chunk of 8,
+    one run a device, padded), on 8 devices against one device in chunks."""
+    cases = [["all8_chunk3", None, 3], ["two_chunk5", 2, 5],  # 2 chunks of 8; 2 of 6
+             *([f"{m}8", None, None, m] for m in REAL)]
     out = tmp_path / "eight.npz"
     proc = subprocess.run([sys.executable, _script(tmp_path), json.dumps(cases)],
-                          env=_env(8, out), capture_output=True, text=True, timeout=300)
+                          env=_env(8, out), capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     npz = np.load(out)
     assert int(npz["n_devices"]) == 8
-    ref = reference()
-    for name, res in _split(npz, [c[0] for c in cases]).items():
-        assert_same(res, ref, name)
+    got = _split(npz, [c[0] for c in cases])
+    for name in ("all8_chunk3", "two_chunk5"):
+        assert_same(got[name], reference(), name)
+    for m, (_, _, chunk) in REAL.items():
+        assert_same_runs(got[f"{m}8"], real_runs(m, chunk), f"{m}: 8 devices vs 1")
 
 
 def _free_port():
