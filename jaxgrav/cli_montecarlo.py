@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["add_parsers", "cmd_bench", "cmd_montecarlo", "format_summary", "summarize"]
+__all__ = ["add_parsers", "cmd_bench", "cmd_montecarlo", "default_bench_dir", "format_summary",
+           "summarize"]
 
 PERCENTILES = (5, 25, 50, 75, 95)
 
@@ -25,9 +26,12 @@ def add_parsers(subparsers):
 
     m = subparsers.add_parser("montecarlo", help="Monte Carlo runs of a method on all devices")
     m.add_argument("--method", required=True, choices=sorted(BUILDERS),
-                   help="correlation: paper A dense matcher; entropy+iccp: paper B; "
-                        "ukf, ekf, gsf (Gaussian-sum UKF), pmf (grid point-mass filter): "
-                        "paper D's filters over its three point masses")
+                   help="correlation: paper A dense matcher; chains: paper A's iso-point "
+                        "chains (map refined to 0.005 deg nodes); entropy, iccp, "
+                        "entropy+iccp: paper B's stages alone and combined; ukf, ekf, gsf "
+                        "(Gaussian-sum UKF), pmf (grid point-mass filter) and the guarded "
+                        "ukf-guard, gsf-guard: paper D's filters (over its three point "
+                        "masses, or over --map)")
     m.add_argument("--runs", type=int, required=True, help="number of simulated runs")
     m.add_argument("--chunk", type=int, default=None,
                    help="runs per compiled call (bounds memory; default 256)")
@@ -36,17 +40,20 @@ def add_parsers(subparsers):
                    help="use this many devices (default all; on a CPU the host is split "
                         "into this many devices when JAX has not started yet)")
     m.add_argument("--map", default=None,
-                   help="matchers: map simulated and matched, a NetCDF grid or shipped map "
-                        "(default ryukyu, the 2.5' EGM2008 anomaly); the filters run on "
-                        "paper D's point masses and take no --map")
+                   help="map simulated and matched or filtered, a NetCDF grid or shipped "
+                        "map (mGal); matchers: default ryukyu, the 2.5' EGM2008 anomaly; "
+                        "filters: default paper-d, paper D's three point masses; over a map "
+                        "straight tracks in random directions inside it")
     m.add_argument("--drift", type=float, default=None,
                    help="INS error (degrees of arc); correlation: drift radius (default "
-                        "0.035); entropy+iccp: offset uniform in [2/3, 1] x drift (default "
-                        "0.03); filters: initial position error (default 0.018 = 2 km)")
+                        "0.035, also chains); entropy, iccp, entropy+iccp: offset uniform in "
+                        "[2/3, 1] x drift (default 0.03); filters: initial position error "
+                        "(default 0.018 = 2 km)")
     m.add_argument("--noise", type=float, default=None,
                    help="reading noise sigma (mGal, default 1)")
     m.add_argument("--fixes", type=int, default=None,
-                   help="fixes per track (default 30 correlation, 60 entropy+iccp); "
+                   help="fixes per track (default 30 correlation and chains, 60 entropy, "
+                        "iccp and entropy+iccp); "
                         "filters: readings 10 s apart, start included (default 721 = 2 h)")
     m.add_argument("--out", required=True,
                    help="results NetCDF (one value per run); a PNG of the errors is written "
@@ -57,7 +64,9 @@ def add_parsers(subparsers):
 
     b = subparsers.add_parser("bench", help="run every benchmark script, write a Markdown table")
     b.add_argument("--quick", action="store_true", help="pass --quick to every script")
-    b.add_argument("--dir", default="benchmarks", help="folder of scripts (default benchmarks)")
+    b.add_argument("--dir", default=None,
+                   help="folder of scripts (default ./benchmarks, else the benchmarks folder "
+                        "of the repository holding the jaxgrav package)")
     b.add_argument("--out", default="bench.md", help="Markdown report (default bench.md)")
     b.add_argument("--timeout", type=float, default=3600.0,
                    help="seconds allowed per script (default 3600)")
@@ -223,15 +232,17 @@ def cmd_montecarlo(args):
         if value is not None and value < 1:
             raise ValueError(f"{name} must be a positive number of runs; got {value}")
     kind = "filter" if args.method in FILTER_METHODS else "matcher"
-    if kind == "filter" and args.map is not None:
-        raise ValueError(f"--map {args.map!r} cannot be used with --method {args.method}: the "
-                         "filters run paper D's experiment on its three point masses")
-    grid = None if kind == "filter" else _load_map(args.map or "ryukyu", None)
+    if args.map is not None:
+        map_name = str(args.map)
+    else:  # the method's default (montecarlo_methods.build)
+        map_name = "paper-d" if kind == "filter" else "ryukyu"
+    grid = (None if args.map is None or (kind == "filter" and args.map == "paper-d")
+            else _load_map(args.map, None))
     spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes)
     n_dev = args.devices or len(jax.devices())
     print(f"jaxgrav montecarlo: {args.method} ({spec.settings['description']}), {args.runs} "
           f"runs on {n_dev} {jax.devices()[0].platform} device(s), "
-          + ("paper D's point masses" if kind == "filter" else f"map {args.map or 'ryukyu'}"))
+          + ("paper D's point masses" if map_name == "paper-d" else f"map {map_name}"))
     t0 = time.perf_counter()
     results = montecarlo.run(spec.fn, jax.random.key(args.seed), args.runs, chunk=args.chunk,
                              devices=args.devices, progress=not args.no_progress,
@@ -247,7 +258,7 @@ def cmd_montecarlo(args):
     attrs = dict(
         title=f"jaxgrav montecarlo --method {args.method}", method=args.method,
         runs=args.runs, seed=args.seed, chunk=args.chunk or montecarlo.DEFAULT_CHUNK,
-        devices=n_dev, map="paper-d" if kind == "filter" else str(args.map or "ryukyu"),
+        devices=n_dev, map=map_name,
         seconds=round(seconds, 3),
         jax_version=jax.__version__, jaxgrav_version=__version__,
         command=_command(args),
@@ -304,11 +315,35 @@ def _report(command, rows, runs, failures):
     return "\n".join(lines)
 
 
+def default_bench_dir():
+    """``benchmarks`` in the working directory, else next to the installed package.
+
+    The second is ``Path(jaxgrav.__file__).resolve().parents[1] / "benchmarks"``: the
+    repository's folder for a source checkout or an editable install.
+
+    Raises
+    ------
+    FileNotFoundError
+        Neither folder exists (e.g. jaxgrav installed from a wheel); names both.
+    """
+    import jaxgrav
+
+    here = Path("benchmarks")
+    repo = Path(jaxgrav.__file__).resolve().parents[1] / "benchmarks"
+    for d in (here, repo):
+        if d.is_dir():
+            return d
+    raise FileNotFoundError(
+        f"no benchmark scripts found: neither {str(here.resolve())!r} (the working directory) "
+        f"nor {str(repo)!r} (next to the jaxgrav package) is a folder; run from a jaxgrav "
+        "checkout or pass --dir")
+
+
 def cmd_bench(args):
     """Run ``jaxgrav bench``: every ``--dir/*.py`` not starting with ``_``, as a subprocess."""
     from jaxgrav._io import atomic_output
 
-    bdir, out = Path(args.dir), Path(args.out)
+    bdir, out = (default_bench_dir() if args.dir is None else Path(args.dir)), Path(args.out)
     if not bdir.is_dir():
         raise FileNotFoundError(f"--dir {str(bdir)!r} is not a folder of benchmark scripts")
     scripts = sorted(p for p in bdir.glob("*.py") if not p.name.startswith("_"))

@@ -3,14 +3,18 @@
 import json
 import os
 import textwrap
+from pathlib import Path
 
 import jax
 import numpy as np
 import pytest
 import xarray as xr
 
-from jaxgrav import montecarlo, montecarlo_methods
+import jaxgrav
+from jaxgrav import Grid, montecarlo, montecarlo_methods
 from jaxgrav.cli import main
+from jaxgrav.cli_montecarlo import default_bench_dir
+from jaxgrav.sim import DEG_ARC_M
 
 slow = pytest.mark.skipif(
     os.environ.get("JAXGRAV_SLOW") != "1", reason="slow: set JAXGRAV_SLOW=1 to run"
@@ -77,6 +81,7 @@ def test_montecarlo_refuses_to_overwrite(mc_run, capsys):
     (["--runs", "8", "--fixes", "2"], "fixes must be at least 5 per track; got 2"),
 ])
 def test_montecarlo_bad_input(tmp_path, capsys, args, match):
+    jax.devices()  # JAX runs already (else --devices 64 would split the host into 64)
     code = main(["montecarlo", "--method", "correlation", *args, "--out",
                  str(tmp_path / "x.nc")])
     assert code == 2
@@ -99,11 +104,69 @@ def test_montecarlo_filter_summary_uses_no_harm_bound(tmp_path, capsys):
         assert a["summary_failure_rate"] == pytest.approx(float(np.mean(ratio > 1.05)))
 
 
-def test_montecarlo_filter_refuses_a_map(tmp_path, capsys):
-    code = main(["montecarlo", "--method", "ukf", "--runs", "4", "--map", "ryukyu", "--out",
-                 str(tmp_path / "x.nc")])
+def test_montecarlo_filter_on_a_map(tmp_path, capsys):
+    """--map for a filter: straight tracks in random directions inside the map."""
+    out = tmp_path / "ekf_map.nc"
+    assert main(["montecarlo", "--method", "ekf", "--runs", "2", "--chunk", "2", "--fixes",
+                 "31", "--map", "ryukyu", "--out", str(out), "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "map ryukyu" in text and "position NEES" in text
+    with xr.open_dataset(out) as ds:
+        a = ds.attrs
+        assert a["map"] == "ryukyu" and a["setting_geometry"] == "random"
+        # starts 5 m/s x 300 s + 3 x 2 km + 10 km inside the 24-36 N map (hand computed)
+        s, n = (float(v) for v in a["setting_region"].split(",")[:2])
+        assert s == pytest.approx(24 + 17.5e3 / DEG_ARC_M, abs=1e-4)
+        assert n == pytest.approx(36 - 17.5e3 / DEG_ARC_M, abs=1e-4)
+        assert np.all((ds["ins_err_m"] > 1500) & (ds["ins_err_m"] < 2500))  # 2 km, 5 min
+        assert np.all(np.isfinite(ds["err_m"])) and np.all(ds["err_m"] < 2 * ds["ins_err_m"])
+        assert np.all(np.isfinite(ds["nees"]))
+        assert not np.any(ds["status"].values & 2)  # no reading fell off the map
+
+
+def test_montecarlo_filter_map_too_small(tmp_path, capsys):
+    lat, lon = np.linspace(30.0, 30.2, 11), np.linspace(130.0, 130.2, 11)
+    small = Grid.from_arrays(lat, lon, np.add.outer(lat, lon), name="g", units="mGal")
+    small.to_netcdf(tmp_path / "small.nc")
+    code = main(["montecarlo", "--method", "ukf", "--runs", "2", "--map",
+                 str(tmp_path / "small.nc"), "--out", str(tmp_path / "x.nc")])
     assert code == 2
-    assert "--map 'ryukyu' cannot be used with --method ukf" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "(lat 30..30.2, lon 130..130.2) is too small for the filter runs" in err
+    assert "52 km inside it" in err  # default 2 h: 36 km track + 3 x 2 km + 10 km
+
+
+@pytest.mark.parametrize("method, fixes, drift", [("chains", 12, 0.02), ("entropy", 20, 0.03),
+                                                  ("iccp", 20, 0.03)])
+def test_montecarlo_more_matchers(tmp_path, capsys, method, fixes, drift):
+    """Paper A's chains and paper B's stages alone, two runs each through the command."""
+    out = tmp_path / f"{method}.nc"
+    assert main(["montecarlo", "--method", method, "--runs", "2", "--chunk", "2", "--seed",
+                 "1", "--fixes", str(fixes), "--drift", str(drift), "--out", str(out),
+                 "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    for t in ("INS error (m)", "error / INS", "failure rate (error > INS/3", f"wrote {out}"):
+        assert t in text
+    with xr.open_dataset(out) as ds:
+        a = ds.attrs
+        assert ds.sizes["run"] == 2 and a["method"] == method and a["setting_n_fixes"] == fixes
+        assert ds["status"].dtype == np.int32 and np.all(np.isfinite(ds["err_m"]))
+        ins, err = ds["ins_err_m"].values, ds["err_m"].values
+        assert a["summary_err_m_p50"] == pytest.approx(float(np.median(err)))
+        assert a["summary_ratio_mean"] == pytest.approx(float(np.mean(err / ins)))
+        d = drift * DEG_ARC_M
+        if method == "chains":  # fixed drift; the map refined 2.5' / 0.005 deg = x8
+            assert a["setting_refine_factor"] == 8 and "chains" in a["setting_description"]
+            np.testing.assert_allclose(ins, d, rtol=1e-6)
+            assert "work_constrained" in ds
+        else:  # offset in [2/3, 1] x drift; a 1.5 deg turn about the start moves the
+            # fixes of the 11.4 km track by 150 m on average
+            assert np.all((ins > 2 / 3 * d - 160) & (ins < d + 160))
+            assert "rotation_deg" in ds
+            if method == "entropy":  # the coarse stage only shifts
+                np.testing.assert_array_equal(ds["rotation_deg"], 0.0)
+            else:
+                assert np.all(np.abs(ds["rotation_deg"]) <= 90.0)
 
 
 def test_summarize_failure_bounds():
@@ -192,3 +255,25 @@ def test_bench_bad_dir(tmp_path, capsys):
     assert main(["bench", "--dir", str(tmp_path / "empty"), "--out",
                  str(tmp_path / "b.md")]) == 2
     assert "has no benchmark scripts" in capsys.readouterr().err
+
+
+def test_bench_default_dir_is_cwd_benchmarks(bench_dir, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)  # holds benchmarks/ (the fake scripts)
+    assert main(["bench", "--quick", "--out", "b.md"]) == 0
+    assert "| good.py | ok |" in (tmp_path / "b.md").read_text()
+
+
+def test_bench_default_dir_falls_back_to_the_repository(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no benchmarks/ here
+    repo = Path(__file__).resolve().parents[1] / "benchmarks"  # this checkout's
+    assert default_bench_dir().resolve() == repo and (repo / "montecarlo_scaling.py").exists()
+
+
+def test_bench_default_dir_missing_names_both(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    site = tmp_path / "site-packages"
+    monkeypatch.setattr(jaxgrav, "__file__", str(site / "jaxgrav" / "__init__.py"))
+    assert main(["bench", "--quick", "--out", str(tmp_path / "b.md")]) == 2
+    err = capsys.readouterr().err
+    assert str(tmp_path / "benchmarks") in err and str(site / "benchmarks") in err
+    assert "pass --dir" in err and not (tmp_path / "b.md").exists()

@@ -76,3 +76,19 @@ def test_montecarlo_command_with_a_filter(tmp_path, capsys):
         lib = montecarlo.run(spec.fn, jax.random.key(1), 2, chunk=2, args=spec.args,
                              progress=False)
         np.testing.assert_array_equal(ds["err_m"].values, lib["err_m"])
+
+
+def test_filters_on_a_map_start_far_enough_inside():
+    """With a map: straight random tracks (as ``paper_d_ukf.py --map ryukyu``) whose
+    starts leave room for the 36 km track, 3 x the 2 km initial error and 10 km."""
+    grid = montecarlo_methods.default_grid()  # 24-36 N, 124-136 E
+    spec = montecarlo_methods.build("pmf", grid)
+    field, scen = spec.args
+    assert field is grid and scen.geometry == "random" and scen.n_steps == 721
+    margin = 5.0 * 10.0 * 720 + 3 * 2000.0 + 10e3
+    dlat = margin / montecarlo_methods.DEG_ARC_M
+    dlon = dlat / np.cos(np.radians(36.0))  # narrowest degree of longitude on the map
+    np.testing.assert_allclose(scen.region, (24 + dlat, 36 - dlat, 124 + dlon, 136 - dlon),
+                               atol=1e-9)
+    assert spec.settings["field"] == "grid gravity_anomaly"
+    assert "over the map gravity_anomaly" in spec.settings["description"]
