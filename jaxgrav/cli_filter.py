@@ -16,6 +16,11 @@ The prior is the INS error at one step before the first row (zero mean, the
 ``--sigma-*`` standard deviations); every row's reading updates the estimate, and
 row ``k`` of the output is the causal posterior after row ``k``.
 
+The map is a NetCDF grid (``--map``), paper D's three masses (``--point-masses
+paper-d``) or a fitted point-mass model file (``--point-masses MODEL.json``, see
+:func:`~jaxgrav.fields.pointmass_fit.save_point_masses`; its offset is taken off the
+readings).
+
 ``simulate-filter`` writes such a track from paper D's scenario
 (:func:`~jaxgrav.match.filters.filter_scenario`) over its three point masses.
 """
@@ -42,7 +47,8 @@ _WARN = {
     "off_map": "the estimate or its sigma points left the map, update skipped (pmf: grid "
                "cells off the map, left out of the update)",
     "covariance_repaired": "the covariance was not positive definite; jitter added",
-    "covariance_failed": "the covariance could not be repaired; update skipped",
+    "covariance_failed": "the covariance could not be repaired, or the innovation variance "
+                         "was not positive; update skipped",
     "gated": "innovation outside the gate; update skipped",
     "grid_edge": "posterior mass at the edge of the point-mass grid; raise --sigma-pos",
 }
@@ -54,8 +60,11 @@ def add_parsers(subparsers):
     f.add_argument("--map", default=None,
                    help="anomaly map: NetCDF grid with lat/lon coordinates (mGal) or a "
                         "shipped map (ryukyu); give --map or --point-masses")
-    f.add_argument("--point-masses", default=None, choices=("paper-d",),
-                   help="use a point-mass anomaly model: paper-d (paper D's three masses)")
+    f.add_argument("--point-masses", default=None, metavar="paper-d|MODEL.json",
+                   help="use a point-mass anomaly model: paper-d (paper D's three masses) "
+                        "or a fitted model file written by "
+                        "jaxgrav.fields.pointmass_fit.save_point_masses (e.g. by "
+                        "examples/paper_d_pointmass_fit.py --out-model)")
     f.add_argument("--var", default=None, help="variable to read when the file has several")
     f.add_argument("--track", required=True,
                    help="CSV: t (s, uniform step), lat, lon (INS, degrees), gravity "
@@ -149,13 +158,20 @@ def _check_sigma(name, value):
 
 
 def _field(args):
-    if args.point_masses is not None:
+    """The map, its name for messages, and the model's constant offset (mGal)."""
+    if args.point_masses == "paper-d":
         from jaxgrav.fields.pointmass import paper_d
 
-        return paper_d(), f"point masses {args.point_masses}"
+        return paper_d(), "point masses paper-d", 0.0
+    if args.point_masses is not None:
+        from jaxgrav.fields.pointmass_fit import load_point_masses
+
+        masses, offset = load_point_masses(args.point_masses)
+        return (masses, f"point masses {args.point_masses} (K = {masses.size}, offset "
+                f"{offset:+.3f} mGal)", offset)
     from jaxgrav.cli import _load_map
 
-    return _load_map(args.map, args.var), f"map {args.map}"
+    return _load_map(args.map, args.var), f"map {args.map}", 0.0
 
 
 def _check_on_map(grid, lat, lon, where, name):
@@ -304,8 +320,8 @@ def cmd_filter(args):
 
     if (args.map is None) == (args.point_masses is None):
         given = "both" if args.map is not None else "neither"
-        raise ValueError(f"give exactly one of --map MAP.nc and --point-masses paper-d; got "
-                         f"{given}")
+        raise ValueError(f"give exactly one of --map MAP.nc and --point-masses "
+                         f"paper-d|MODEL.json; got {given}")
     if Path(args.out).exists() and not args.force:
         raise FileExistsError(f"--out {str(args.out)!r} exists; pass --force to overwrite it")
     for name, value in (("--sigma-pos", args.sigma_pos), ("--sigma-vel", args.sigma_vel),
@@ -331,10 +347,11 @@ def cmd_filter(args):
                              f"INS, e.g. 0.2); got {args.guard!r}")
     if args.method == "pmf":
         _reading_stride(np.flatnonzero(np.isfinite(g)), where)
-    field, field_name = _field(args)
+    field, field_name, offset = _field(args)
     if args.map is not None:
         _check_on_map(field, lat, lon, where, args.map)
-    res = filter_track(field, t, lat, lon, g, args.method, sigma_pos=args.sigma_pos,
+    # the model is masses + offset: z − (masses + offset + bias) = (z − offset) − (masses + bias)
+    res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
                        guard=args.guard, where=where)
     write_track_csv(args.out, {"t": t, "lat": res["lat"], "lon": res["lon"],

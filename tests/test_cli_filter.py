@@ -98,6 +98,37 @@ def test_guard_holds_back_weak_directions(sim, tmp_path, capsys):
     np.testing.assert_allclose(read_track_csv(one)["lat"], ref["lat"], rtol=0, atol=1e-12)
 
 
+def test_point_mass_model_file(sim, tmp_path, capsys):
+    """--point-masses MODEL.json (save_point_masses): paper D's masses with a +5 mGal offset
+    on readings carrying that offset give the paper-d run on the original readings."""
+    from jaxgrav.fields.pointmass_fit import save_point_masses
+
+    model = tmp_path / "model.json"
+    save_point_masses(model, paper_d(), offset=5.0)
+    cols = read_track_csv(sim / "track.csv")
+    cols["gravity"] = cols["gravity"] + 5.0
+    write_track_csv(tmp_path / "shifted.csv", cols, precision=15)
+    ref, out = tmp_path / "ref.csv", tmp_path / "model.csv"
+    assert _filter(sim / "track.csv", ref) == 0
+    assert _filter(tmp_path / "shifted.csv", out, source=("--point-masses", str(model))) == 0
+    cap = capsys.readouterr()
+    assert f"on point masses {model} (K = 3, offset +5.000 mGal)" in cap.out and cap.err == ""
+    a, b = read_track_csv(out), read_track_csv(ref)
+    for k in OUT_COLUMNS:
+        np.testing.assert_allclose(a[k], b[k], rtol=1e-9, atol=1e-9, err_msg=k)
+    # a bad model file: one clear line, no output
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "grid"}')
+    for path, message in ((bad, f"point-mass model {str(bad)!r}: format must be"),
+                          (tmp_path / "none.json", "none.json': no such file")):
+        code = _filter(sim / "track.csv", tmp_path / "o.csv",
+                       source=("--point-masses", str(path)))
+        err = capsys.readouterr().err
+        assert code == 2 and err.startswith("jaxgrav filter: error: ") and err.count("\n") == 1
+        assert message in err, err
+        assert not (tmp_path / "o.csv").exists()
+
+
 def _anomaly_map(path, lat, lon):
     """Paper D's point-mass anomaly sampled on a NetCDF grid (mGal)."""
     la, lo = np.meshgrid(lat, lon, indexing="ij")
@@ -217,7 +248,7 @@ def _bad(kind, cols):
     ("stride", ("--method", "pmf"), "--method pmf needs gravity readings at a fixed row stride"),
     ("ok", ("--map", "ryukyu"), "121 of 121 positions are off the map --map ryukyu"),
     ("ok", ("--map", "ryukyu", "--point-masses", "paper-d"),
-     "give exactly one of --map MAP.nc and --point-masses paper-d; got both"),
+     "give exactly one of --map MAP.nc and --point-masses paper-d|MODEL.json; got both"),
     ("ok", ("--sigma-pos", "-1"), "--sigma-pos must be a positive, finite standard deviation"),
     ("ok", ("--sigma-gravity", "nan"), "--sigma-gravity must be a positive"),
     ("ok", ("--method", "pmf", "--guard"), "--guard applies to ukf, ekf and gsf; got --method pmf"),
@@ -239,5 +270,5 @@ def test_bad_input_gets_one_clear_line(sim, tmp_path, capsys, kind, extra, messa
 def test_neither_map_nor_point_masses(sim, tmp_path, capsys):
     code = main(["filter", "--track", str(sim / "track.csv"), "--out", str(tmp_path / "o.csv")])
     assert code == 2
-    assert "give exactly one of --map MAP.nc and --point-masses paper-d; got neither" in (
-        capsys.readouterr().err)
+    assert ("give exactly one of --map MAP.nc and --point-masses paper-d|MODEL.json; got "
+            "neither") in capsys.readouterr().err

@@ -23,14 +23,22 @@ The result's ``masses`` is an ordinary :class:`~jaxgrav.fields.pointmass.PointMa
 so ``gravity_anomaly(fit.masses, lat, lon, h) + fit.offset`` (or
 :meth:`PointMassFit.anomaly`) is a smooth, differentiable, analytic map function for
 the filters and matchers (paper D uses exactly this as its map ``Δg_M``).
+
+:func:`save_point_masses` writes a fit (or any :class:`PointMasses` and an offset) to
+a small JSON file, atomically; :func:`load_point_masses` reads it back exactly, and
+``jaxgrav filter --point-masses FILE.json`` uses it as its map.
 """
 
+import json
+import math
+from pathlib import Path
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav._io import atomic_output
 from jaxgrav.fields.pointmass import PointMasses, gravity_anomaly
 from jaxgrav.fields.pointmass_fit_inputs import _check_int, _is_int, _problem
 from jaxgrav.fields.pointmass_fit_model import (  # noqa: F401  (re-exported for tests)
@@ -43,11 +51,19 @@ from jaxgrav.fields.pointmass_fit_model import (  # noqa: F401  (re-exported for
 from jaxgrav.fields.pointmass_fit_solver import _fit_batch, _initial_positions
 
 __all__ = [
+    "MODEL_FORMAT",
     "PointMassFit",
     "PointMassSweep",
     "fit_point_masses",
+    "load_point_masses",
+    "save_point_masses",
     "sweep_point_masses",
 ]
+
+MODEL_FORMAT = "jaxgrav.point_masses"
+"""The ``format`` tag of a point-mass model file (:func:`save_point_masses`)."""
+_MODEL_VERSION = 1
+_MODEL_FIELDS = ("lat", "lon", "depth", "mass")
 
 
 class PointMassFit(NamedTuple):
@@ -277,3 +293,119 @@ def sweep_point_masses(data, k_values=range(1, 11), **kwargs):
     return PointMassSweep(
         k=np.asarray(ks, dtype=int), rms=np.asarray([f.rms for f in fits]), fits=fits
     )
+
+
+# --- model files ---------------------------------------------------------------------
+
+
+def save_point_masses(path, model, *, offset=None, force=False):
+    """Write a point-mass model to a JSON file, atomically (temp file + rename).
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file (``.json`` by convention).
+    model : PointMassFit or PointMasses
+        A fit (its masses, offset and residual RMS are written) or bare masses.
+    offset : float, optional
+        Constant added to the masses' anomaly (mGal); default the fit's offset, or 0
+        for bare masses.
+    force : bool
+        Replace an existing file.
+
+    Notes
+    -----
+    The file holds ``format`` (:data:`MODEL_FORMAT`), ``version``, the per-mass lists
+    ``lat``, ``lon`` (degrees), ``depth`` (m), ``mass`` (kg), ``offset`` (mGal) and,
+    for a fit, ``rms`` (mGal). Floats are written in their shortest exact form, so
+    :func:`load_point_masses` returns the same numbers.
+
+    Raises
+    ------
+    FileExistsError
+        If ``path`` exists and ``force`` is false.
+    ValueError
+        If the offset is not finite.
+    """
+    rms = None
+    if isinstance(model, PointMassFit):
+        rms = float(model.rms)
+        offset = model.offset if offset is None else offset
+        model = model.masses
+    if not isinstance(model, PointMasses):
+        raise TypeError(f"model must be a PointMassFit or PointMasses; got {type(model).__name__}")
+    offset = 0.0 if offset is None else float(offset)
+    if not math.isfinite(offset):
+        raise ValueError(f"offset must be a finite number of mGal; got {offset!r}")
+    doc = {"format": MODEL_FORMAT, "version": _MODEL_VERSION,
+           "units": {"lat": "degree", "lon": "degree", "depth": "m", "mass": "kg",
+                     "offset": "mGal"}}
+    for name in _MODEL_FIELDS:
+        doc[name] = [float(v) for v in np.asarray(getattr(model, name), dtype=float)]
+    doc["offset"] = offset
+    if rms is not None:
+        doc["rms"] = rms
+    with atomic_output(path, force=force) as tmp:
+        tmp.write_text(json.dumps(doc, indent=1) + "\n")
+
+
+def load_point_masses(path):
+    """Read a point-mass model written by :func:`save_point_masses`.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    masses : PointMasses
+        The ``K`` masses (validated as :meth:`PointMasses.create`).
+    offset : float
+        Constant (mGal) the model adds to the masses' anomaly; the map is
+        ``gravity_anomaly(masses, lat, lon, h) + offset``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no such file.
+    ValueError
+        If the file is not a JSON point-mass model (wrong format tag or version, a
+        field missing or of the wrong type, non-finite values, unequal lengths, a
+        latitude out of range); the message names the file and the problem.
+    """
+    path = Path(path)
+    where = f"point-mass model {str(path)!r}"
+    if not path.exists():
+        raise FileNotFoundError(f"{where}: no such file")
+    if not path.is_file():
+        raise ValueError(f"{where} is not a file")
+    try:
+        doc = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise ValueError(f"{where} is not JSON ({err}); expected a file written by "
+                         "save_point_masses") from None
+    if not isinstance(doc, dict) or doc.get("format") != MODEL_FORMAT:
+        got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+        raise ValueError(f"{where}: format must be {MODEL_FORMAT!r}; got {got!r}")
+    if doc.get("version") != _MODEL_VERSION:
+        raise ValueError(f"{where}: version must be {_MODEL_VERSION}; got "
+                         f"{doc.get('version')!r}")
+    missing = [k for k in (*_MODEL_FIELDS, "offset") if k not in doc]
+    if missing:
+        raise ValueError(f"{where} lacks field(s) {missing}")
+    values = {}
+    for name in _MODEL_FIELDS:
+        v = doc[name]
+        if not (isinstance(v, list) and all(isinstance(a, int | float) and not isinstance(a, bool)
+                                            for a in v)):
+            raise ValueError(f"{where}: {name} must be a list of numbers; got {v!r}")
+        values[name] = v
+    offset = doc["offset"]
+    if isinstance(offset, bool) or not isinstance(offset, int | float) or not math.isfinite(
+            offset):
+        raise ValueError(f"{where}: offset must be a finite number of mGal; got {offset!r}")
+    try:
+        masses = PointMasses.create(**values)
+    except ValueError as err:
+        raise ValueError(f"{where}: {err}") from None
+    return masses, float(offset)
