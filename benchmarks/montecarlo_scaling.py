@@ -14,9 +14,12 @@ Lines (JSON, ``_common.emit``):
   ``runs_per_s``.
 * ``montecarlo_compile``: the first call of the entry point (trace + compile + one
   chunk) against a second call with *new parameter values* (another noise level):
-  ``compile_s`` is their difference, ``recompiled`` whether the second call compiled
-  anything (counted with ``jax.monitoring``), for ``correlation`` and ``ukf`` (the full
-  run: every method of :data:`jaxgrav.montecarlo_methods.BUILDERS`).
+  ``compile_s`` is their difference, ``recompiled`` whether the second call traced or
+  compiled anything (``jax.monitoring`` trace and compile events, counted in
+  ``traces_second_call`` and ``compiles_second_call``: a retrace shows as a trace event
+  even when the persistent cache below would supply its executable), for
+  ``correlation`` and ``ukf`` (the full run: every method of
+  :data:`jaxgrav.montecarlo_methods.BUILDERS`; the filters over paper D's point masses).
 * ``montecarlo_memory``: peak RSS (``ru_maxrss`` of the subprocess) for ``n`` = 4, 16
   (not with ``--quick``) and 64 chunks against the same ``n`` in one chunk (baseline;
   for 64 chunks, which would need GBs in one chunk, against the previous chunked
@@ -44,6 +47,11 @@ import tempfile
 import time
 
 BENCH = "montecarlo_scaling"
+TRACE_EVENT = "/jax/core/compile/jaxpr_trace_duration"
+"""``jax.monitoring`` duration event of every trace of a jitted function (any cache aside)."""
+COMPILE_EVENT = "/jax/core/compile/backend_compile_duration"
+"""Duration event of XLA compilation; in JAX 0.10 it wraps ``compile_or_get_cached``, so a
+load from the persistent cache records it too."""
 
 
 # ------------------------------------------------------------------ child process
@@ -53,16 +61,19 @@ def child(spec):
     jax.config.update("jax_enable_x64", spec.get("x64", True))  # a script, not the library
     jax.config.update("jax_compilation_cache_dir", spec["cache"])
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    compiles = []
+    events = []  # (event, function) of every trace and every compile-or-cache-load
     jax.monitoring.register_event_duration_secs_listener(
-        lambda name, secs, **kw: compiles.append(secs) if "backend_compile" in name else None)
+        lambda name, secs, fun_name="", **kw: events.append((name, fun_name))
+        if name in (TRACE_EVENT, COMPILE_EVENT) else None)
     from jaxgrav import montecarlo, montecarlo_methods
 
     def maxrss_mb():
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
-    grid = montecarlo_methods.default_grid()
     method, chunk, n = spec["method"], spec["chunk"], spec["n"]
+    # the matchers' default map; the filters' default is paper D's point masses (None)
+    grid = None if method in montecarlo_methods.FILTER_METHODS else \
+        montecarlo_methods.default_grid()
     m = montecarlo_methods.build(method, grid)
     key = jax.random.key(0)
     out = {"devices": len(jax.devices())}
@@ -76,9 +87,13 @@ def child(spec):
     out["maxrss_one_chunk_mb"] = maxrss_mb()
     if spec.get("compile"):
         other = montecarlo_methods.build(method, grid, noise=1.5)  # new parameter values
-        before = len(compiles)
+        before = len(events)
         out["second_s"] = go(chunk, chunk, other)
-        out["recompiled"] = len(compiles) > before
+        new = events[before:]
+        out["traces_second_call"] = sum(e == TRACE_EVENT for e, _ in new)
+        out["compiles_second_call"] = sum(e == COMPILE_EVENT for e, _ in new)
+        out["traced_second_call"] = sorted({f for e, f in new if e == TRACE_EVENT})
+        out["recompiled"] = bool(new)
     if n:
         jax.random.split(key, n).block_until_ready()  # run() splits once: compiled per n
         out["run_s"] = min(go(n, chunk) for _ in range(spec.get("repeats", 1)))
@@ -99,6 +114,13 @@ def spawn(devices, **spec):
 
 
 # ------------------------------------------------------------------------ parent
+def montecarlo_methods_names():
+    """Every registered method, ``correlation`` first (its compile case is the scaling one)."""
+    from jaxgrav.montecarlo_methods import BUILDERS
+
+    return ["correlation", *(m for m in BUILDERS if m != "correlation")]
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="CI-sized run")
@@ -117,7 +139,7 @@ def main():
         n, repeats, mem_chunk = 2048, 2, 64
         cases = [(d, c, True) for d in (1, 2, 8) for c in (16, 64, 256)]
         cases += [(1, 64, False), (8, 64, False)]
-        compile_methods = ("correlation", "entropy+iccp", "ukf", "ekf", "gsf", "pmf")
+        compile_methods = tuple(montecarlo_methods_names())
     cmin = min(c for _, c, _ in cases)
     with tempfile.TemporaryDirectory(prefix="jaxgrav-cc-") as cache:
         base = None
@@ -131,7 +153,8 @@ def main():
                 emit("montecarlo_compile", f"correlation devices=1 chunk={c}", c,
                      r["second_s"], "first call (trace + compile + run)", r["first_s"],
                      compile_s=round(r["first_s"] - r["second_s"], 3),
-                     recompiled=r["recompiled"], dtype=dtype)
+                     recompiled=r["recompiled"], traces_second_call=r["traces_second_call"],
+                     compiles_second_call=r["compiles_second_call"], dtype=dtype)
             emit(BENCH, f"correlation devices={devices} chunk={c} {dtype}", n, r["run_s"],
                  f"devices=1 chunk={cmin} float64", base["run_s"],
                  runs_per_s=round(n / r["run_s"], 1),
@@ -141,7 +164,8 @@ def main():
             emit("montecarlo_compile", f"{method} devices=1 chunk={cmin}", cmin,
                  r["second_s"], "first call (trace + compile + run)", r["first_s"],
                  compile_s=round(r["first_s"] - r["second_s"], 3),
-                 recompiled=r["recompiled"], dtype="float64")
+                 recompiled=r["recompiled"], traces_second_call=r["traces_second_call"],
+                 compiles_second_call=r["compiles_second_call"], dtype="float64")
         runs = {}
         ks = (4, 64) if args.quick else (4, 16, 64)  # quick: 4 chunks of 16 = a cached shape
         for i, k in enumerate(ks):
