@@ -26,6 +26,11 @@ from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_trac
 RNG = np.random.default_rng(0)
 LAT = np.linspace(29, 31, 41)
 LON = np.linspace(129, 131, 41)
+SHORT_STEP_BUG = (
+    "chains.compatibility documents 'any direction when the step is shorter than "
+    "step_tol_m' but caps the direction tolerance at 90° + angle_tol: when two consecutive "
+    "true positions share their nearest node the true step is ~0 m with a random "
+    "centimetre-rounding direction, and it is rejected about half the time")
 
 
 @pytest.fixture(scope="module")
@@ -114,6 +119,110 @@ def test_kmin_and_overflow_reported(rough_grid):
     assert bool(c.overflow[0]) and int(c.count[0]) == 49 and int(c.mask.sum()) == 4
 
 
+def _iso_brute_force(grid, lat, lon, g, k, delta, slope_factor):
+    """NumPy iso-value rule: per fix, {window node : |g − M| ≤ δ + ¾·f·spread}, where the
+    window is the (2k+1)² nodes about the nearest node (shifted inside the map) and
+    spread is the largest |change| to a neighbouring node inside the window. Returns
+    per fix a dict node (row, col) -> misfit ratio, and the smallest distance of any
+    node's |g − M| to its tolerance (to keep float ties out of the comparison)."""
+    v = np.asarray(grid.values)
+    ny, nx = v.shape
+    s = 2 * k + 1
+    sets, closest = [], np.inf
+    for la, lo, gi in zip(lat, lon, g, strict=True):
+        r0 = int(np.clip(np.round((la - float(grid.lat0)) / float(grid.dlat)) - k, 0, ny - s))
+        c0 = int(np.clip(np.round((lo - float(grid.lon0)) / float(grid.dlon)) - k, 0, nx - s))
+        w = v[r0:r0 + s, c0:c0 + s]
+        found = {}
+        for a in range(s):
+            for b in range(s):
+                spread = max(abs(w[a + da, b + db] - w[a, b])
+                             for da in (-1, 0, 1) for db in (-1, 0, 1)
+                             if 0 <= a + da < s and 0 <= b + db < s)
+                tol = delta + 0.75 * slope_factor * spread
+                closest = min(closest, abs(abs(gi - w[a, b]) - tol))
+                if abs(gi - w[a, b]) <= tol:
+                    found[(r0 + a, c0 + b)] = abs(gi - w[a, b]) / tol
+        sets.append(found)
+    return sets, closest
+
+
+@pytest.mark.parametrize(("slope_factor", "delta", "small_cap"), [(0.0, 6.0, 9), (1.0, 1.0, 20)])
+def test_iso_masks_equal_the_rule_by_brute_force(smooth_grid, slope_factor, delta, small_cap):
+    """Candidates are exactly the window nodes within δ (+ the node allowance); with too
+    small a capacity the count and overflow are still right and the best fits are kept."""
+    grid, k = smooth_grid, 3
+    # fixes inside the map and two near its corners (windows shifted inside)
+    lat = np.array([30.013, 29.9, 30.21, 29.503, 30.49])
+    lon = np.array([130.021, 130.3, 129.77, 129.52, 130.49])
+    rng = np.random.default_rng(0)
+    g = np.asarray(grid.sample(lat + 0.004, lon - 0.006)) + rng.normal(size=5)
+    brute, closest = _iso_brute_force(grid, lat, lon, g, k, delta, slope_factor)
+    assert closest > 1e-9  # no node within float rounding of its tolerance
+    counts = np.array([len(b) for b in brute])
+    assert counts.min() < small_cap < counts.max()  # some windows overflow, some do not
+
+    def nodes(c, i):
+        m = np.asarray(c.mask[i])
+        rows = np.round((np.asarray(c.lat[i])[m] - float(grid.lat0)) / float(grid.dlat))
+        cols = np.round((np.asarray(c.lon[i])[m] - float(grid.lon0)) / float(grid.dlon))
+        return [(int(r), int(q)) for r, q in zip(rows, cols, strict=True)]
+
+    v = np.asarray(grid.values)
+    for cap in (49, small_cap):
+        c = cand_mod.iso_candidates(grid, lat, lon, g, half_size=k, capacity=cap, delta=delta,
+                                    slope_factor=slope_factor)
+        np.testing.assert_array_equal(c.count, counts)
+        np.testing.assert_array_equal(c.overflow, counts > cap)
+        np.testing.assert_array_equal(np.asarray(c.mask).sum(axis=1), np.minimum(counts, cap))
+        np.testing.assert_array_equal(c.window_complete, [True, True, True, False, False])
+        for i in range(5):
+            got = nodes(c, i)
+            assert len(set(got)) == len(got)
+            np.testing.assert_allclose(np.asarray(c.value[i])[np.asarray(c.mask[i])],
+                                       [v[n] for n in got])
+            if cap == 49:
+                assert set(got) == set(brute[i])
+            else:  # the `cap` best-fitting nodes (ranked in float32: allow its resolution)
+                assert set(got) <= set(brute[i])
+                rest = [brute[i][n] for n in brute[i] if n not in got]
+                if rest:
+                    assert max(brute[i][n] for n in got) <= min(rest) * (1 + 1e-6)
+
+
+def _angle_between(an, ae, bn, be):
+    return np.abs(np.arctan2(an * be - ae * bn, an * bn + ae * be))
+
+
+@pytest.mark.parametrize("short_step", [
+    False,
+    pytest.param(True, marks=pytest.mark.xfail(strict=True, reason=SHORT_STEP_BUG)),
+])
+def test_compatibility_against_sqrt_and_arctan2(short_step):
+    """Step constraints by their definition: | |s| − |d| | ≤ tol and the angle between
+    s and the INS step d ≤ angle_tol + asin(tol/|d|) (any angle when |d| ≤ tol)."""
+    rng = np.random.default_rng(1)
+    tol, ang = 300.0, 3.0
+    checked = 0
+    for _ in range(6):
+        d_len = rng.uniform(50.0, 280.0) if short_step else rng.uniform(400.0, 2000.0)
+        heading = rng.uniform(0, 2 * np.pi)
+        dn, de = d_len * np.cos(heading), d_len * np.sin(heading)
+        n0, e0, n1, e1 = rng.uniform(-2 * tol, 2 * tol, size=(4, 40))
+        got = np.asarray(chains.compatibility(dn, de, n0, e0, n1, e1, tol, ang))
+        sn = dn + n1[None, :] - n0[:, None]
+        se = de + e1[None, :] - e0[:, None]
+        length_err = np.abs(np.sqrt(sn**2 + se**2) - d_len) - tol
+        turn = _angle_between(sn, se, dn, de)
+        max_turn = np.pi if d_len <= tol else np.deg2rad(ang) + np.arcsin(tol / d_len)
+        want = (length_err <= 0) & (turn <= max_turn)
+        clear = (np.abs(length_err) > 1e-6) & (np.abs(turn - max_turn) > 1e-9)
+        assert want[clear].any() and (~want[clear]).any()
+        np.testing.assert_array_equal(got[clear], want[clear])
+        checked += int(clear.sum())
+    assert checked > 0.99 * 6 * 40 * 40
+
+
 def _scenario(key, grid, n, dt, drift_m, noise, method="bilinear"):
     k1, k2, k3 = jax.random.split(key, 3)
     w, e, s, nn = grid.extent
@@ -125,31 +234,63 @@ def _scenario(key, grid, n, dt, drift_m, noise, method="bilinear"):
     return tr, ilat, ilon, g
 
 
-def test_elimination_never_removes_true_chain_noiseless(smooth_grid):
-    """With exact readings the nodes nearest the truth always survive (node allowance)."""
+def _library_tolerances(grid, ilat, cfg):
+    """Step tolerances exactly as :func:`match_chains` derives them from a ChainConfig."""
+    dy, dx = grid.spacing_m(jnp.mean(ilat))
+    return (cfg.step_tol_m + cfg.node_allowance * jnp.hypot(dy, dx), cfg.angle_tol_deg)
+
+
+@pytest.mark.parametrize(("strict", "dt"), [
+    (False, 300.0), (True, 300.0),
+    pytest.param(False, 60.0, marks=pytest.mark.xfail(strict=True, raises=AssertionError,
+                                                      reason=SHORT_STEP_BUG)),
+])
+def test_elimination_never_removes_true_chain_noiseless(smooth_grid, strict, dt):
+    """Exact readings at off-node positions: the true chain (node nearest the truth at
+    every fix) is a complete chain under the library's tolerances and survives.
+
+    ``strict=False`` uses ChainConfig's defaults; ``strict=True`` leaves only the node
+    allowance (δ ≈ 0, 1 m step tolerance for the local-metre geometry, no angle
+    tolerance), so it is that allowance alone that keeps the truth. ``dt=300`` gives
+    INS steps (2.2 km) longer than the step tolerance (the paper's regime), ``dt=60``
+    shorter ones (0.44 km, less than the 1.5 km node diagonal): see SHORT_STEP_BUG."""
     fine = smooth_grid
-    cfg = ChainConfig(delta=0.05, half_size=8, capacity=289)
+    cfg = ChainConfig(half_size=8, capacity=17 * 17)  # capacity = window: no overflow
+    if strict:
+        cfg = dataclasses.replace(cfg, delta=1e-9, step_tol_m=1.0, angle_tol_deg=0.0)
 
     def one(key):
-        tr, ilat, ilon, g = _scenario(key, fine, 8, 60.0, 700.0, 0.0)
+        tr, ilat, ilon, g = _scenario(key, fine, 8, dt, 700.0, 0.0)
         cands = cand_mod.iso_candidates(fine, ilat, ilon, g, half_size=cfg.half_size,
                                         capacity=cfg.capacity, delta=cfg.delta,
                                         slope_factor=cfg.node_allowance)
         steps = cand_mod.local_offsets_m(ilat[1:], ilon[1:], ilat[:-1], ilon[:-1])
-        dy = jg.meridian_radius(30.0) * fine.dlat * jg.constants.DEG
-        tol = (cfg.step_tol_m + dy * np.sqrt(2), cfg.angle_tol_deg)
+        tol = _library_tolerances(fine, ilat, cfg)
         alive = chains.eliminate(cands, steps, *tol)
-        # node nearest to each true position
+        compat = chains.step_compatibility(cands, steps, *tol)
+        # node nearest each true position, and its slot in the candidate set
         r = jnp.round((tr.lat - fine.lat0) / fine.dlat)
         c = jnp.round((tr.lon - fine.lon0) / fine.dlon)
-        hit = (jnp.abs(cands.lat - (fine.lat0 + r[:, None] * fine.dlat)) < 1e-9) & (
+        hit = cands.mask & (jnp.abs(cands.lat - (fine.lat0 + r[:, None] * fine.dlat)) < 1e-9) & (
             jnp.abs(cands.lon - (fine.lon0 + c[:, None] * fine.dlon)) < 1e-9)
-        return jnp.all(jnp.any(hit & alive, axis=1)), jnp.any(cands.overflow)
+        slot = jnp.argmax(hit, axis=1)
+        i = jnp.arange(8)
+        off_node = jnp.hypot(*cand_mod.local_offsets_m(
+            tr.lat, tr.lon, fine.lat0 + r * fine.dlat, fine.lon0 + c * fine.dlon))
+        return dict(is_iso=jnp.any(hit, axis=1), alive=alive[i, slot],
+                    compatible=compat[i[:-1], slot[:-1], slot[1:]],
+                    overflow=jnp.any(cands.overflow), complete=jnp.all(cands.window_complete),
+                    off_node_m=jnp.max(off_node), ins_step_m=jnp.min(jnp.hypot(*steps)),
+                    tol_m=tol[0])
 
     keys = jax.random.split(jax.random.key(3), 24)
-    kept, overflow = jax.jit(jax.vmap(one))(keys)
-    assert not np.any(overflow)
-    assert np.all(kept)
+    out = {k: np.asarray(v) for k, v in jax.jit(jax.vmap(one))(keys).items()}
+    assert not out["overflow"].any() and out["complete"].all()
+    assert np.median(out["off_node_m"]) > 200.0  # the truth is really off the nodes
+    assert np.all(out["ins_step_m"] > out["tol_m"]) == (dt == 300.0)
+    assert out["is_iso"].all()  # every true node passes its iso-value mask
+    assert out["compatible"].all()  # every true step passes the constraints
+    assert out["alive"].all()  # and elimination keeps the whole chain
 
 
 def test_match_chains_recovers_a_node_track_and_reports_work(smooth_grid):
@@ -256,6 +397,33 @@ def test_jit_no_retrace_and_vmap_equals_loop(smooth_grid):
         one = match_chains(smooth_grid, lat[i], lon[i], g[i], cc)
         np.testing.assert_array_equal(bc.lat[i], one.lat)
         np.testing.assert_array_equal(bc.status[i], one.status)
+
+
+def test_match_chains_no_retrace_when_tolerances_change(smooth_grid):
+    """δ, the node allowance, step/angle tolerances and the weight decay are pytree
+    leaves: new values (and a new track) reuse the compiled matcher."""
+    traces = []
+
+    def f(grid, lat, lon, g, cfg):
+        traces.append(1)
+        return match_chains(grid, lat, lon, g, cfg)
+
+    f = jax.jit(f)
+    a = jnp.asarray
+    data = [_scenario(k, smooth_grid, 8, 120.0, 600.0, 0.3)[1:]
+            for k in jax.random.split(jax.random.key(4), 2)]
+    cfg1 = ChainConfig(delta=a(1.0), node_allowance=a(1.0), step_tol_m=a(100.0),
+                       angle_tol_deg=a(2.0), weight_decay=a(0.5), half_size=4, capacity=81)
+    cfg2 = ChainConfig(delta=a(3.0), node_allowance=a(0.5), step_tol_m=a(250.0),
+                       angle_tol_deg=a(5.0), weight_decay=a(0.0), half_size=4, capacity=81)
+    r1 = f(smooth_grid, *data[0], cfg1)
+    r2 = f(smooth_grid, *data[0], cfg2)
+    r3 = f(smooth_grid, *data[1], cfg1)
+    assert len(traces) == 1
+    # the new numbers did take effect (they were not baked in as constants)
+    assert not np.array_equal(r2.n_candidates, r1.n_candidates)
+    assert float(r2.work_constrained) != float(r1.work_constrained)
+    assert int(r1.status) & 1 == 0 and int(r3.status) & 1 == 0
 
 
 def test_chain_survivor_compaction(smooth_grid):
