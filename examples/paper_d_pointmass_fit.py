@@ -18,10 +18,19 @@ in one vmapped, jit-compiled call. This script
    and with a fit restricted to paper D's form (no offset, all masses at 40 km)
    (skipped with ``--smoke``).
 
+With ``--out-model FILE.json`` the K = 3 fit of step 1 is written with
+:func:`~jaxgrav.fields.pointmass_fit.save_point_masses` (``jaxgrav filter
+--point-masses FILE.json`` reads it). With ``--filter-runs N`` the UKF runs on N runs
+of paper D's scenario (``FilterScenario``, a reading every 10 s) with each fitted model
+as its map, next to the map the readings came from: step 1's fit against paper D's
+masses, and (without ``--smoke``) step 3's fits against the EGM2008 grid itself.
+
 Run::
 
     .venv/bin/python examples/paper_d_pointmass_fit.py            # ≈ 6 min on 2 busy cores
     .venv/bin/python examples/paper_d_pointmass_fit.py --smoke    # K = 1…3, small
+    .venv/bin/python examples/paper_d_pointmass_fit.py --smoke --out-model fit.json \
+        --filter-runs 8 --filter-minutes 20
 
 The fits run in float32 (JAX's default); only the spherical-harmonic synthesis of
 step 3 uses float64, inside ``jax.enable_x64``.
@@ -29,13 +38,14 @@ step 3 uses float64, inside ``jax.enable_x64``.
 
 import argparse
 import time
+from pathlib import Path
 
 import jax
 import numpy as np
 
 from jaxgrav import datasets
 from jaxgrav.fields import harmonics, pointmass
-from jaxgrav.fields.pointmass_fit import fit_point_masses, sweep_point_masses
+from jaxgrav.fields.pointmass_fit import fit_point_masses, save_point_masses, sweep_point_masses
 from jaxgrav.grid import Grid
 
 PAPER_AREA = ((23.9, 24.6), (122.6, 123.3))  # lat, lon ranges (degrees)
@@ -78,11 +88,74 @@ def _grid_on(area, step, values_fn):
     return lat, lon, values_fn(lat, lon)
 
 
+def _as_float64(field):
+    """A PointMasses or Grid rebuilt in float64 (call inside ``jax.enable_x64``)."""
+    if isinstance(field, pointmass.PointMasses):
+        return pointmass.PointMasses.create(
+            *(np.asarray(getattr(field, f), dtype=float) for f in ("lat", "lon", "depth", "mass")))
+    return Grid.from_arrays(np.asarray(field.lat, float), np.asarray(field.lon, float),
+                            np.asarray(field.values, float), units="mGal")
+
+
+def filter_with_maps(title, truth, maps, runs, minutes, seed=0):
+    """UKF on paper D's scenario: readings from ``truth``, filtered with each of ``maps``.
+
+    ``maps`` is ``{name: (field, offset_mgal)}``; a model's map is field + offset, so the
+    offset is taken off the readings. Prints mean / median / worst ratio of the filter's
+    RMS position error over the second half of the run to the free INS's, and the NEES.
+    """
+    from jaxgrav.match.filters import (
+        FilterScenario,
+        filter_scenario,
+        initial_state,
+        run_filter,
+        run_metrics,
+        run_steps,
+        ukf,
+    )
+
+    with jax.enable_x64(True):
+        scen = FilterScenario(dt=10.0, reading_every=1, n_steps=round(minutes * 6) + 1)
+
+        def sim(key, field):
+            run = filter_scenario(key, field, scen)
+            return (run, *run_steps(run, scen))
+
+        def filt(run, dynamics, steps, field, offset):
+            x0, p0 = initial_state(scen)
+            _, info = run_filter(ukf(), field, dynamics, x0, p0,
+                                 steps._replace(z=steps.z - offset))
+            m = run_metrics(run, info)
+            return m["err_m"] / m["ins_err_m"], m["nees"]
+
+        t = time.perf_counter()
+        keys = jax.random.split(jax.random.key(seed), runs)
+        sims = jax.jit(jax.vmap(sim, in_axes=(0, None)))(keys, _as_float64(truth))
+        fn = jax.jit(jax.vmap(filt, in_axes=(0, 0, 0, None, None)))
+        print(f"\n{title}: UKF on {runs} runs of {minutes:g} min (paper D's scenario, seed "
+              f"{seed}); ratio = filter / free-INS RMS position error over the second half")
+        print("   map                                        mean  median   worst   NEES")
+        for name, (field, offset) in maps.items():
+            ratio, nees = (np.asarray(a) for a in fn(*sims, _as_float64(field), float(offset)))
+            print(f"   {name:40s} {np.mean(ratio):6.3f}  {np.median(ratio):6.3f}  "
+                  f"{np.max(ratio):6.3f}  {np.mean(nees):5.2f}")
+        print(f"   ({time.perf_counter() - t:.1f} s)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--smoke", action="store_true", help="K = 1..3, few restarts (fast)")
     ap.add_argument("--restarts", type=int, default=None, help="random restarts per K")
+    ap.add_argument("--out-model", default=None, metavar="FILE.json",
+                    help="write step 1's K = 3 fit here (for jaxgrav filter --point-masses)")
+    ap.add_argument("--force", action="store_true", help="overwrite --out-model")
+    ap.add_argument("--filter-runs", type=int, default=0,
+                    help="also run the UKF with the fitted models as maps on this many runs")
+    ap.add_argument("--filter-minutes", type=float, default=120.0,
+                    help="length of those runs (default 120)")
     args = ap.parse_args(argv)
+    if args.out_model and Path(args.out_model).exists() and not args.force:
+        ap.error(f"--out-model {args.out_model!r} exists; pass --force to overwrite it")
     smoke = args.smoke
     restarts = args.restarts or (4 if smoke else 16)
     kw = dict(n_restarts=restarts, steps=100 if smoke else 300,
@@ -107,6 +180,14 @@ def main(argv=None):
     print(f"   residual RMS {fit.rms:.4f} mGal, offset {fit.offset:+.4f} mGal, "
           f"converged {fit.converged}, {_near_best(fit)} restarts reached it")
     _print_masses("   fitted vs paper_d():", fit.masses, truth)
+    if args.out_model:
+        save_point_masses(args.out_model, fit, force=args.force)
+        print(f"   wrote {args.out_model} (jaxgrav filter --point-masses {args.out_model} ...)")
+    if args.filter_runs:
+        filter_with_maps("1b. Step 1's fit as the filter map", truth,
+                         {"paper_d() (the truth)": (truth, 0.0),
+                          "fitted K = 3 + offset": (fit.masses, fit.offset)},
+                         args.filter_runs, args.filter_minutes)
 
     # 2. K sweep on the shipped 2.5' EGM2008 map
     g = datasets.load("ryukyu")["anomaly_2p5min"]
@@ -141,7 +222,7 @@ def main(argv=None):
             PAPER_AREA, 0.025,
             lambda la, lo: np.asarray(harmonics.synthesize_grid(model, la, lo, 0.0).anomaly),
         )
-    fit = fit_point_masses(Grid.from_arrays(lat, lon, v, units="mGal"), 3, **kw)
+    fit = fit_free = fit_point_masses(Grid.from_arrays(lat, lon, v, units="mGal"), 3, **kw)
     model_pd = synth(lat, lon)
     print(f"\n3. Paper D's area {PAPER_AREA[0]}°N × {PAPER_AREA[1]}°E, EGM2008 anomaly to "
           f"degree 360 ({lat.size}×{lon.size} nodes): {v.min():.1f} … {v.max():.1f} mGal, "
@@ -156,6 +237,14 @@ def main(argv=None):
     print(f"   paper D's form (no offset, depth 40 ± 0.1 km): RMS {fit.rms:.3f} mGal; paper D's "
           f"own masses: RMS {np.sqrt(np.mean((v - model_pd) ** 2)):.3f} mGal")
     _print_masses("   fitted in paper D's form (Δ against paper D):", fit.masses, truth)
+    if args.filter_runs:
+        filter_with_maps(
+            "3b. EGM2008 (degree 360) as the truth", Grid.from_arrays(lat, lon, v, units="mGal"),
+            {"the EGM2008 grid itself (bicubic)": (Grid.from_arrays(lat, lon, v), 0.0),
+             "fitted K = 3 + offset": (fit_free.masses, fit_free.offset),
+             "fitted in paper D's form": (fit.masses, 0.0),
+             "paper D's masses + best offset": (truth, float(np.mean(v - model_pd)))},
+            args.filter_runs, args.filter_minutes)
 
 
 if __name__ == "__main__":

@@ -62,3 +62,20 @@ def test_paper_d_noharm_smoke():
     # the rule: among the seed-1 means <= 0.6, the fewest seed-1 runs above 1.05
     ok = [r for r in rows if float(r[7]) <= 0.6]
     assert ok and int(chosen[0][6]) == min(int(r[6]) for r in ok)
+
+
+def test_paper_d_pointmass_fit_writes_and_filters_with_its_model(tmp_path):
+    """--out-model writes a loadable model; --filter-runs: the fitted map is about as good
+    as paper D's masses the readings came from."""
+    from jaxgrav.fields.pointmass_fit import load_point_masses
+
+    model = tmp_path / "fit.json"
+    out = run_example("paper_d_pointmass_fit.py", "--out-model", str(model),
+                      "--filter-runs", "8", "--filter-minutes", "20")
+    masses, offset = load_point_masses(model)
+    assert masses.size == 3 and np.isfinite(offset)
+    rows = dict(re.findall(rf"^   (paper_d\(\) \(the truth\)|fitted K = 3 \+ offset)\s+{NUM}",
+                           out, flags=re.M))
+    assert len(rows) == 2, out
+    truth, fitted = float(rows["paper_d() (the truth)"]), float(rows["fitted K = 3 + offset"])
+    assert truth < 0.9 and abs(fitted - truth) < 0.05
