@@ -52,7 +52,7 @@ def _plot(grid, out, path, force):
     save_figure(fig, path, force=force)
 
 
-def run_demo(out_dir, *, force=False, runs=200, seed=0):
+def run_demo(out_dir, *, force=False, runs=200, seed=0, smoke=False):
     """Run the demo and write ``table1.md``, ``summary.json`` and ``tracks.png`` to ``out_dir``.
 
     Parameters
@@ -66,6 +66,10 @@ def run_demo(out_dir, *, force=False, runs=200, seed=0):
         (at least 8) per group.
     seed : int
         PRNG seed.
+    smoke : bool
+        The same steps at toy sizes, for tests (numbers meaningless): the 0.5° map
+        refined ×10 instead of ×100, 6 fixes per track in the table and 10 in the
+        Monte Carlo, and at least 2 (not 8) tracks per group.
     """
     out_dir = Path(out_dir)
     if runs < 5:
@@ -78,23 +82,25 @@ def run_demo(out_dir, *, force=False, runs=200, seed=0):
     maps = datasets.load("ryukyu")
     coarse, fine_map = maps["anomaly_0p5deg"], maps["anomaly_2p5min"]
 
-    print("jaxgrav demo: paper A, correlation-extremum gravity matching on EGM2008 (ryukyu)")
-    refined = coarse.refine(100)
-    paper = MatchingScenario(n_fixes=16, noise_mgal=0.0, truth_method="bilinear")
+    print("jaxgrav demo: paper A, correlation-extremum gravity matching on EGM2008 (ryukyu)"
+          + (" (smoke run: toy sizes, numbers meaningless)" if smoke else ""))
+    factor, n_table, n_real, min_group = (10, 6, 10, 2) if smoke else (100, 16, 30, 8)
+    refined = coarse.refine(factor)
+    paper = MatchingScenario(n_fixes=n_table, noise_mgal=0.0, truth_method="bilinear")
     rows = experiments.table1(jax.random.fold_in(key, 1), refined, refined, method="chains",
-                              runs_per_group=max(runs // 5, 8), base=paper)
+                              runs_per_group=max(runs // 5, min_group), base=paper)
     table = experiments.format_table(
-        rows, "Paper setting: 0.5° map refined ×100, readings from the same map, no noise, "
-              "16 fixes, chain search (difference score, nearest of the 5 best)")
+        rows, f"Paper setting: 0.5° map refined ×{factor}, readings from the same map, no "
+              f"noise, {n_table} fixes, chain search (difference score, nearest of the 5 best)")
     print(table)
 
-    real = MatchingScenario(n_fixes=30, noise_mgal=1.0)
+    real = MatchingScenario(n_fixes=n_real, noise_mgal=1.0)
     cfg = config_for("dense", fine_map, 1.2 * real.drift_deg * DEG_ARC_M, noise_mgal=1.0,
                      bias_sigma_mgal=3.0)
     keys = jax.random.split(jax.random.fold_in(key, 2), runs)
     mc = experiments.run_batch(keys, fine_map, fine_map, real, "dense", cfg)
     summary = experiments.summarize(mc)
-    print(f"\nRealistic setting: 2.5' map, 1 mGal noise, 30 fixes, drift 0.035°, {runs} "
+    print(f"\nRealistic setting: 2.5' map, 1 mGal noise, {n_real} fixes, drift 0.035°, {runs} "
           f"random tracks, dense-offset matcher:")
     print(f"  median INS error {summary['ins_error_m_median']:.0f} m, median matched error "
           f"{summary['error_m_median']:.0f} m (ratio {summary['median_ratio']:.2f}); "
@@ -109,7 +115,7 @@ def run_demo(out_dir, *, force=False, runs=200, seed=0):
             paper_setting=rows, realistic_setting=summary,
             realistic_config={k: (v if isinstance(v, str | int) else float(v))
                               for k, v in dataclasses.asdict(cfg).items()},
-            seed=seed, seconds=round(time.perf_counter() - t0, 1)), indent=1))
+            seed=seed, smoke=smoke, seconds=round(time.perf_counter() - t0, 1)), indent=1))
     _plot(fine_map, mc, out_dir / "tracks.png", force)
     print(f"\nwrote {out_dir / 'table1.md'}, {out_dir / 'summary.json'} and "
           f"{out_dir / 'tracks.png'} ({time.perf_counter() - t0:.0f} s)")
