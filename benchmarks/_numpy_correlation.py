@@ -498,7 +498,9 @@ def compatibility(step_north, step_east, north0, east0, north1, east1, step_tol_
         len_sq >= max(ins_len - step_tol_m, 0.0) ** 2)
     dot = sn * step_north + se * step_east
     dir_sq = (ins_len * cos_tol) ** 2
-    if cos_tol < 0:
+    if ins_len <= step_tol_m:  # any direction
+        ok_dir = np.ones(len_sq.shape, bool)
+    elif cos_tol < 0:
         ok_dir = (dot >= 0) | (dot * dot <= len_sq * dir_sq)
     else:
         ok_dir = (dot >= 0) & (dot * dot >= len_sq * dir_sq)

@@ -13,7 +13,7 @@ from jaxgrav import sim
 from jaxgrav.constants import KNOT
 from jaxgrav.match import candidates as cand_mod
 from jaxgrav.match import chains
-from jaxgrav.match.correlation import ChainConfig, _pair_cost, match_chains
+from jaxgrav.match.correlation import ChainConfig, _pair_cost, chain_tolerances, match_chains
 from jaxgrav.match.dense import (
     DenseConfig,
     match_dense,
@@ -26,12 +26,6 @@ from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_trac
 RNG = np.random.default_rng(0)
 LAT = np.linspace(29, 31, 41)
 LON = np.linspace(129, 131, 41)
-SHORT_STEP_BUG = (
-    "chains.compatibility documents 'any direction when the step is shorter than "
-    "step_tol_m' but caps the direction tolerance at 90° + angle_tol: when two consecutive "
-    "true positions share their nearest node the true step is ~0 m with a random "
-    "centimetre-rounding direction, and it is rejected about half the time")
-
 
 @pytest.fixture(scope="module")
 def rough_grid():
@@ -194,10 +188,7 @@ def _angle_between(an, ae, bn, be):
     return np.abs(np.arctan2(an * be - ae * bn, an * bn + ae * be))
 
 
-@pytest.mark.parametrize("short_step", [
-    False,
-    pytest.param(True, marks=pytest.mark.xfail(strict=True, reason=SHORT_STEP_BUG)),
-])
+@pytest.mark.parametrize("short_step", [False, True])
 def test_compatibility_against_sqrt_and_arctan2(short_step):
     """Step constraints by their definition: | |s| − |d| | ≤ tol and the angle between
     s and the INS step d ≤ angle_tol + asin(tol/|d|) (any angle when |d| ≤ tol)."""
@@ -234,17 +225,7 @@ def _scenario(key, grid, n, dt, drift_m, noise, method="bilinear"):
     return tr, ilat, ilon, g
 
 
-def _library_tolerances(grid, ilat, cfg):
-    """Step tolerances exactly as :func:`match_chains` derives them from a ChainConfig."""
-    dy, dx = grid.spacing_m(jnp.mean(ilat))
-    return (cfg.step_tol_m + cfg.node_allowance * jnp.hypot(dy, dx), cfg.angle_tol_deg)
-
-
-@pytest.mark.parametrize(("strict", "dt"), [
-    (False, 300.0), (True, 300.0),
-    pytest.param(False, 60.0, marks=pytest.mark.xfail(strict=True, raises=AssertionError,
-                                                      reason=SHORT_STEP_BUG)),
-])
+@pytest.mark.parametrize(("strict", "dt"), [(False, 300.0), (True, 300.0), (False, 60.0)])
 def test_elimination_never_removes_true_chain_noiseless(smooth_grid, strict, dt):
     """Exact readings at off-node positions: the true chain (node nearest the truth at
     every fix) is a complete chain under the library's tolerances and survives.
@@ -253,7 +234,8 @@ def test_elimination_never_removes_true_chain_noiseless(smooth_grid, strict, dt)
     allowance (δ ≈ 0, 1 m step tolerance for the local-metre geometry, no angle
     tolerance), so it is that allowance alone that keeps the truth. ``dt=300`` gives
     INS steps (2.2 km) longer than the step tolerance (the paper's regime), ``dt=60``
-    shorter ones (0.44 km, less than the 1.5 km node diagonal): see SHORT_STEP_BUG."""
+    shorter ones (0.44 km, less than the 1.5 km node diagonal), where every direction
+    must be accepted."""
     fine = smooth_grid
     cfg = ChainConfig(half_size=8, capacity=17 * 17)  # capacity = window: no overflow
     if strict:
@@ -265,7 +247,7 @@ def test_elimination_never_removes_true_chain_noiseless(smooth_grid, strict, dt)
                                         capacity=cfg.capacity, delta=cfg.delta,
                                         slope_factor=cfg.node_allowance)
         steps = cand_mod.local_offsets_m(ilat[1:], ilon[1:], ilat[:-1], ilon[:-1])
-        tol = _library_tolerances(fine, ilat, cfg)
+        tol = chain_tolerances(fine, ilat, cfg)
         alive = chains.eliminate(cands, steps, *tol)
         compat = chains.step_compatibility(cands, steps, *tol)
         # node nearest each true position, and its slot in the candidate set

@@ -102,7 +102,8 @@ def step_ok(sn, se, step_north, step_east, step_tol_m, angle_tol_deg):
     ``step_tol_m`` of the INS step's, direction within ``angle_tol_deg`` plus
     ``asin(step_tol_m / |INS step|)``.
     """
-    lo, hi, dir_sq, obtuse = _step_bounds(step_north, step_east, step_tol_m, angle_tol_deg)
+    lo, hi, dir_sq, obtuse, any_dir = _step_bounds(step_north, step_east, step_tol_m,
+                                                   angle_tol_deg)
     # |len - ins_len| <= tol and (angle <= tol <=> s·d >= |s||d| cos(tol)), on squares:
     # no square root or arc function per pair
     len_sq = sn * sn + se * se
@@ -111,7 +112,7 @@ def step_ok(sn, se, step_north, step_east, step_tol_m, angle_tol_deg):
     cross = dot * dot
     ok_dir = jnp.where(obtuse, (dot >= 0) | (cross <= len_sq * dir_sq),
                        (dot >= 0) & (cross >= len_sq * dir_sq))
-    return ok_len & ok_dir
+    return ok_len & (ok_dir | any_dir)
 
 
 def step_compatibility(cands, steps, step_tol_m, angle_tol_deg):
@@ -180,15 +181,18 @@ def step_region(step_north, step_east, step_tol_m, angle_tol_deg):
     ins_len = jnp.hypot(step_north, step_east)
     ratio = jnp.minimum(step_tol_m / jnp.maximum(ins_len, 1e-9), 1.0)
     half_angle = jnp.minimum(angle_tol_deg * DEG + jnp.arcsin(ratio), jnp.pi)
+    # a displacement of step_tol_m can turn an INS step no longer than it any way
+    half_angle = jnp.where(ins_len <= step_tol_m, jnp.pi, half_angle)
     return jnp.maximum(ins_len - step_tol_m, 0.0), ins_len + step_tol_m, half_angle, ins_len
 
 
 def _step_bounds(step_north, step_east, step_tol_m, angle_tol_deg):
     """Per-step constants of :func:`step_ok`: bounds on the squared step length,
-    ``(|d| cos tol)²`` and whether the direction tolerance exceeds 90°."""
+    ``(|d| cos tol)²``, whether the direction tolerance exceeds 90° and whether it
+    admits every direction."""
     lo, hi, tol, ins_len = step_region(step_north, step_east, step_tol_m, angle_tol_deg)
     cos_tol = jnp.cos(tol)
-    return lo * lo, hi * hi, (ins_len * cos_tol) ** 2, cos_tol < 0
+    return lo * lo, hi * hi, (ins_len * cos_tol) ** 2, cos_tol < 0, tol >= jnp.pi
 
 
 def _steps(cands, steps):
@@ -333,7 +337,7 @@ def kbest_step(d, cost, index, k):
     sub = d[src] + jnp.take_along_axis(cost, rows, axis=1)[..., None]  # (C_next, K', K)
     vals, flat = kmin(sub.reshape(cost.shape[0], -1), k)
     prev = jnp.take_along_axis(src, flat // k, axis=1)
-    return vals, prev * k + flat % k
+    return vals, (prev * k + flat % k).astype(jnp.int32)
 
 
 def kbest_run(step_fn, xs, alive0, unary0, k):
