@@ -215,12 +215,13 @@ def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
     factor = max(1, round(min(grid.dlat, grid.dlon) / CHAIN_NODE_DEG))
     refined = grid.refine(factor) if factor > 1 else grid
     scen = MatchingScenario(region=_region(grid), drift_deg=drift, noise_mgal=noise, n_fixes=n)
-    cfg = config_for("chains", refined, 1.2 * drift * DEG_ARC_M, noise_mgal=max(noise, 0.1))
+    cfg = config_for("chains", refined, 1.2 * drift * DEG_ARC_M, noise_mgal=max(noise, 0.1),
+                     step_m=scen.step_m)
     settings = dict(description=f"paper A: iso-point chains on the map refined x{factor}, "
                                 "fixed INS drift",
                     drift_deg=drift, noise_mgal=noise, n_fixes=n, dt_s=scen.dt,
                     refine_factor=factor, search_half_size=cfg.half_size,
-                    capacity=cfg.capacity)
+                    stencil_size=cfg.stencil_size)
     return MethodSpec(chains_run, (grid, refined, scen, cfg), settings, dict(STATUS))
 
 

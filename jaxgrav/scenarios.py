@@ -11,6 +11,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrav import sim
 from jaxgrav._pytree import static_field
@@ -64,6 +65,11 @@ class MatchingScenario:
     drift_law: str = static_field("fixed")
     eotvos: str = static_field("full")
     truth_method: str = static_field("bicubic")
+
+    @property
+    def step_m(self):
+        """Distance between consecutive fixes (m)."""
+        return float(np.hypot(self.v_east, self.v_north) * self.dt)
 
 
 class MatchingRun(NamedTuple):

@@ -7,6 +7,7 @@ to the INS drift, applies the velocity-based Eötvös correction when velocities
 given, runs the matcher and turns its status flags into warnings.
 """
 
+import dataclasses
 import math
 import warnings
 
@@ -15,8 +16,9 @@ import numpy as np
 
 from jaxgrav._validate import check_latitude
 from jaxgrav.geodesy import eotvos
-from jaxgrav.match.correlation import ChainConfig, match_chains
+from jaxgrav.match.correlation import ChainConfig, chain_tolerances, match_chains
 from jaxgrav.match.dense import DenseConfig, match_dense
+from jaxgrav.match.lattice_chains import stencil_size_for, stencil_size_for_step
 from jaxgrav.match.result import status_messages
 
 __all__ = ["METHODS", "MIN_FIXES", "config_for", "match_track"]
@@ -30,7 +32,7 @@ MIN_FIXES = 5
 
 
 def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=math.inf,
-               n_rotations=1, score=None):
+               n_rotations=1, score=None, step_m=None):
     """A matcher configuration whose search region covers the drift.
 
     Parameters
@@ -48,6 +50,11 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         Heading errors tried by the dense path (1 = none).
     score : str, optional
         Score form; default ``"bias"`` (dense) or ``"difference"`` (chains, the paper's).
+    step_m : float, optional
+        ``chains``: the distance between consecutive fixes (m). When given, the
+        chain search uses the displacement stencil
+        (:attr:`~jaxgrav.match.correlation.ChainConfig.stencil_size`) sized for such
+        steps in any direction; otherwise the pairwise search on ``capacity`` slots.
 
     Returns
     -------
@@ -72,8 +79,16 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         raise ValueError(
             f"drift_radius_m={drift_radius_m!r} needs a search window of {2 * half + 1} nodes, "
             f"larger than the {grid.ny}x{grid.nx} map")
-    return ChainConfig(half_size=half, capacity=min((2 * half + 1) ** 2, 384),
-                       delta=2.0 * noise_mgal, score=score or "difference")
+    config = ChainConfig(half_size=half, capacity=min((2 * half + 1) ** 2, 384),
+                         delta=2.0 * noise_mgal, score=score or "difference")
+    if step_m is None:
+        return config
+    if not step_m >= 0:
+        raise ValueError(f"step_m must be a distance >= 0 (m); got {step_m!r}")
+    lat_c = grid.lat0 + 0.5 * grid.dlat * (grid.ny - 1)
+    step_tol, angle_tol = (float(v) for v in chain_tolerances(grid, lat_c, config))
+    size = stencil_size_for_step(grid, float(step_m), step_tol, angle_tol)
+    return dataclasses.replace(config, stencil_size=size)
 
 
 def _validate(grid, lat, lon, readings):
@@ -156,6 +171,10 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
     if config is None:
         config = config_for(method, grid, drift_radius_m, noise_mgal=noise_mgal,
                             bias_sigma_mgal=bias_sigma_mgal)
+        if method == "chains":  # the displacement stencil, sized for this track
+            tol = (float(v) for v in chain_tolerances(grid, lat, config))
+            config = dataclasses.replace(config,
+                                         stencil_size=stencil_size_for(grid, lat, lon, *tol))
     fn = match_dense if method == "dense" else match_chains
     result = fn(grid, jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(readings), config)
     if warn:

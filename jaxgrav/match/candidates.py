@@ -25,7 +25,7 @@ from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.match.chains import kmin
 
-__all__ = ["CandidateSet", "iso_candidates", "local_offsets_m"]
+__all__ = ["CandidateSet", "iso_candidates", "lattice_candidates", "local_offsets_m"]
 
 
 class CandidateSet(NamedTuple):
@@ -105,19 +105,9 @@ def iso_candidates(grid, lat, lon, readings, *, half_size, capacity, delta, slop
     -------
     CandidateSet
     """
-    win = grid.window(lat, lon, half_size)
+    win, node_lat, node_lon, misfit = _window_misfit(grid, lat, lon, readings, half_size, delta,
+                                                     slope_factor)
     s = 2 * half_size + 1
-    rows = win.row0[:, None] + jnp.arange(s)  # (N, s)
-    cols = win.col0[:, None] + jnp.arange(s)
-    node_lat = grid.lat0 + grid.dlat * rows
-    node_lon = grid.lon0 + grid.dlon * cols
-    # largest change to any of the 8 neighbours of each window node (edge-padded)
-    v = win.values
-    pad = jnp.pad(v, ((0, 0), (1, 1), (1, 1)), mode="edge")
-    shifts = [pad[:, 1 + a : 1 + a + s, 1 + b : 1 + b + s] for a in (-1, 0, 1) for b in (-1, 0, 1)]
-    spread = jnp.max(jnp.abs(jnp.stack(shifts) - v[None]), axis=0)
-    tol = jnp.asarray(delta)[..., None, None] + 0.75 * slope_factor * spread
-    misfit = jnp.abs(jnp.asarray(readings)[:, None, None] - win.values) / tol  # (N, s, s)
     iso = misfit <= 1.0
     count = jnp.sum(iso, axis=(-2, -1))
     flat_fit = jnp.where(iso, misfit, jnp.inf).reshape(misfit.shape[0], s * s)
@@ -135,3 +125,56 @@ def iso_candidates(grid, lat, lon, readings, *, half_size, capacity, delta, slop
     return CandidateSet(
         c_lat, c_lon, north, east, value, mask, count, count > capacity, win.complete
     )
+
+
+def lattice_candidates(grid, lat, lon, readings, *, half_size, delta, slope_factor=1.0):
+    """Iso-value points of each fix on its window's node lattice (every node a slot).
+
+    The same iso-value test as :func:`iso_candidates`, with the window's ``(2k+1)²``
+    nodes as the slots in row-major order (``slot = row·(2k+1) + col``) and the
+    iso-mask as validity: no capacity, so no overflow, and the neighbours of a node
+    are found by index arithmetic (:mod:`~jaxgrav.match.lattice_chains`).
+
+    Parameters
+    ----------
+    grid, lat, lon, readings, half_size, delta, slope_factor
+        As :func:`iso_candidates`.
+
+    Returns
+    -------
+    cands : CandidateSet
+        Capacity ``(2k+1)²``; ``overflow`` is all false.
+    origin : tuple of Array of int
+        ``(row0, col0)``, each ``(N,)``: the grid indices of each window's first node.
+    """
+    win, node_lat, node_lon, misfit = _window_misfit(grid, lat, lon, readings, half_size, delta,
+                                                     slope_factor)
+    n, s = misfit.shape[0], 2 * half_size + 1
+    iso = misfit <= 1.0
+    c_lat = jnp.broadcast_to(node_lat[:, :, None], (n, s, s)).reshape(n, s * s)
+    c_lon = jnp.broadcast_to(node_lon[:, None, :], (n, s, s)).reshape(n, s * s)
+    north, east = local_offsets_m(
+        c_lat, c_lon, jnp.asarray(lat)[:, None], jnp.asarray(lon)[:, None]
+    )
+    count = jnp.sum(iso, axis=(-2, -1))
+    cands = CandidateSet(c_lat, c_lon, north, east, win.values.reshape(n, s * s),
+                         iso.reshape(n, s * s), count, jnp.zeros(n, bool), win.complete)
+    return cands, (win.row0, win.col0)
+
+
+def _window_misfit(grid, lat, lon, readings, half_size, delta, slope_factor):
+    """Window, node coordinates ``(N, s)`` and ``|g − M| / tolerance`` ``(N, s, s)``."""
+    win = grid.window(lat, lon, half_size)
+    s = 2 * half_size + 1
+    rows = win.row0[:, None] + jnp.arange(s)  # (N, s)
+    cols = win.col0[:, None] + jnp.arange(s)
+    node_lat = grid.lat0 + grid.dlat * rows
+    node_lon = grid.lon0 + grid.dlon * cols
+    # largest change to any of the 8 neighbours of each window node (edge-padded)
+    v = win.values
+    pad = jnp.pad(v, ((0, 0), (1, 1), (1, 1)), mode="edge")
+    shifts = [pad[:, 1 + a : 1 + a + s, 1 + b : 1 + b + s] for a in (-1, 0, 1) for b in (-1, 0, 1)]
+    spread = jnp.max(jnp.abs(jnp.stack(shifts) - v[None]), axis=0)
+    tol = jnp.asarray(delta)[..., None, None] + 0.75 * slope_factor * spread
+    misfit = jnp.abs(jnp.asarray(readings)[:, None, None] - win.values) / tol  # (N, s, s)
+    return win, node_lat, node_lon, misfit

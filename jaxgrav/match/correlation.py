@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._pytree import static_field
-from jaxgrav.match.candidates import iso_candidates, local_offsets_m
+from jaxgrav.match.candidates import iso_candidates, lattice_candidates, local_offsets_m
 from jaxgrav.match.chains import (
     compact,
     count_chains,
@@ -32,10 +32,16 @@ from jaxgrav.match.chains import (
     kbest_chains,
     step_compatibility,
 )
+from jaxgrav.match.lattice_chains import (
+    count_chains_lattice,
+    eliminate_lattice,
+    kbest_chains_lattice,
+    lattice_steps,
+)
 from jaxgrav.match.result import MatchResult, nearest_to_ins
 from jaxgrav.match.scoring import SCORES, decreasing_weights, score_track
 
-__all__ = ["ChainConfig", "match_chains"]
+__all__ = ["ChainConfig", "chain_tolerances", "match_chains"]
 
 
 
@@ -75,6 +81,16 @@ class ChainConfig:
         computed once and the chain count and dynamic programme run: far less work
         than on all ``capacity`` slots. More survivors than this raise the overflow
         flag (the best-fitting are kept; the elimination is repeated on them).
+    stencil_size : int
+        Side in nodes of the displacement stencil (static; 0 = off). When set, every
+        window node is a candidate slot (no capacity, no candidate overflow) and each
+        node's possible predecessors are the nodes of a ``stencil_size²`` box of
+        displacements around the INS step (:mod:`~jaxgrav.match.lattice_chains`):
+        the same chains as the pairwise search over all window nodes, for
+        O(C·stencil_size²) instead of O(C²) work per step. A step whose accepted
+        displacements do not fit raises status bit 256
+        (:func:`~jaxgrav.match.lattice_chains.stencil_size_for` sizes it).
+        ``capacity`` and ``survivor_capacity`` apply only when it is 0.
     k_dp : int
         Chains kept per candidate by the dynamic programme (static).
     k_best : int
@@ -94,6 +110,7 @@ class ChainConfig:
     half_size: int = static_field(8)
     capacity: int = static_field(128)
     survivor_capacity: int = static_field(0)
+    stencil_size: int = static_field(0)
     k_dp: int = static_field(16)
     k_best: int = static_field(5)
     score: str = static_field("difference")
@@ -104,6 +121,9 @@ class ChainConfig:
             raise ValueError(f"score must be one of {SCORES}; got {self.score!r}")
         if isinstance(self.selection, str) and self.selection not in ("nearest", "best"):
             raise ValueError(f"selection must be 'nearest' or 'best'; got {self.selection!r}")
+        if isinstance(self.stencil_size, int) and self.stencil_size < 0:
+            raise ValueError(f"stencil_size must be >= 0 (0 = pairwise search); "
+                             f"got {self.stencil_size!r}")
         if isinstance(self.survivor_capacity, int) and self.survivor_capacity < 0:
             raise ValueError(f"survivor_capacity must be >= 0 (0 = capacity); "
                              f"got {self.survivor_capacity!r}")
@@ -140,40 +160,26 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
     """
     lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
     n = lat.shape[0]
-    cands = iso_candidates(
-        grid,
-        lat,
-        lon,
-        readings,
-        half_size=config.half_size,
-        capacity=config.capacity,
-        delta=config.delta,
-        slope_factor=config.node_allowance,
-    )
     steps = local_offsets_m(lat[1:], lon[1:], lat[:-1], lon[:-1])
-    dy, dx = grid.spacing_m(jnp.mean(lat))
-    tol = (config.step_tol_m + config.node_allowance * jnp.hypot(dy, dx), config.angle_tol_deg)
-    alive = eliminate(cands, steps, *tol)
-    dtype = jnp.result_type(cands.value.dtype, readings.dtype)
+    tol = chain_tolerances(grid, lat, config)
+    w = decreasing_weights(n, config.weight_decay)
+    dtype = jnp.result_type(grid.values.dtype, readings.dtype)
+    if config.score == "absolute":
+        unary_fn = lambda value: w[:, None] * (readings[:, None] - value) ** 2  # noqa: E731
+        pair = lambda i, v0, v1: jnp.zeros(jnp.broadcast_shapes(v0.shape, v1.shape),  # noqa: E731
+                                           dtype)
+    else:
+        unary_fn = lambda value: jnp.zeros(value.shape, dtype)  # noqa: E731
+        pair = _pair_cost(readings, w[:-1] / jnp.sum(w[:-1]))
+    search_args = (grid, lat, lon, readings, steps, tol, unary_fn, pair, config)
+    if config.stencil_size > 0:
+        cands, alive, work_constrained, search, stencil_overflow = _lattice_search(*search_args)
+    else:
+        cands, alive, work_constrained, search = _pairwise_search(*search_args)
+        stencil_overflow = jnp.zeros((), bool)
     work_unconstrained = jnp.prod(cands.count.astype(dtype))
     work_pairs = jnp.sum(jnp.sum(alive[:-1], axis=1) * jnp.sum(alive[1:], axis=1))
     n_candidates, complete, overflow = cands.count, cands.window_complete, cands.overflow
-    compat = None
-    if 0 < config.survivor_capacity < config.capacity:
-        cands, lost = compact(cands, alive, config.survivor_capacity)
-        compat = step_compatibility(cands, steps, *tol)
-        alive = eliminate(cands, steps, *tol, compat=compat)  # unchanged unless `lost`
-        overflow = overflow | lost
-    work_constrained = count_chains(cands, alive, steps, *tol, compat=compat)
-
-    w = decreasing_weights(n, config.weight_decay)
-    if config.score == "absolute":
-        unary = w[:, None] * (readings[:, None] - cands.value) ** 2
-        pair = lambda i, v0, v1: jnp.zeros(jnp.broadcast_shapes(v0.shape, v1.shape), dtype)  # noqa: E731
-    else:
-        unary = jnp.zeros(cands.value.shape, dtype)
-        pair = _pair_cost(readings, w[:-1] / jnp.sum(w[:-1]))
-    search = kbest_chains(cands, alive, steps, *tol, unary, pair, config.k_dp, compat=compat)
 
     fix = jnp.arange(n)[None, :]
     values = cands.value[fix, search.index]  # (K_dp, N)
@@ -194,6 +200,7 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
         | jnp.where(jnp.any(overflow), 2, 0)
         | jnp.where(jnp.all(complete), 0, 4)
         | jnp.where(found & edge, 8, 0)
+        | jnp.where(stencil_overflow, 256, 0)
     )
     return MatchResult(
         lat=jnp.where(found, topk_lat[chosen], lat),
@@ -213,6 +220,50 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
         work_pairs=work_pairs.astype(dtype),
         status=status,
     )
+
+
+def chain_tolerances(grid, lat, config):
+    """The step tolerances the chain search applies: ``(step_tol_m, angle_tol_deg)``.
+
+    The step-length tolerance is ``config.step_tol_m`` plus ``node_allowance`` cell
+    diagonals at the track's mean latitude (two nodes, each up to half a diagonal from
+    the true positions).
+    """
+    dy, dx = grid.spacing_m(jnp.mean(jnp.asarray(lat)))
+    return config.step_tol_m + config.node_allowance * jnp.hypot(dy, dx), config.angle_tol_deg
+
+
+def _candidates_args(config):
+    return dict(half_size=config.half_size, delta=config.delta,
+                slope_factor=config.node_allowance)
+
+
+def _pairwise_search(grid, lat, lon, readings, steps, tol, unary_fn, pair, config):
+    """Steps 2–5 on padded candidate sets, every pair of consecutive candidates tested."""
+    cands = iso_candidates(grid, lat, lon, readings, capacity=config.capacity,
+                           **_candidates_args(config))
+    alive = eliminate(cands, steps, *tol)
+    compat = None
+    if 0 < config.survivor_capacity < config.capacity:
+        cands, lost = compact(cands, alive, config.survivor_capacity)  # count kept
+        compat = step_compatibility(cands, steps, *tol)
+        alive = eliminate(cands, steps, *tol, compat=compat)  # unchanged unless `lost`
+        cands = cands._replace(overflow=cands.overflow | lost)
+    work = count_chains(cands, alive, steps, *tol, compat=compat)
+    search = kbest_chains(cands, alive, steps, *tol, unary_fn(cands.value), pair, config.k_dp,
+                          compat=compat)
+    return cands, alive, work, search
+
+
+def _lattice_search(grid, lat, lon, readings, steps, tol, unary_fn, pair, config):
+    """Steps 2–5 on the window lattices with the displacement stencil."""
+    cands, origin = lattice_candidates(grid, lat, lon, readings, **_candidates_args(config))
+    geo = lattice_steps(grid, cands, origin, lat, steps, *tol, config.stencil_size)
+    alive = eliminate_lattice(cands, geo, *tol)
+    work = count_chains_lattice(cands, alive, geo, *tol)
+    search = kbest_chains_lattice(cands, alive, geo, *tol, unary_fn(cands.value), pair,
+                                  config.k_dp)
+    return cands, alive, work, search, jnp.any(geo.overflow)
 
 
 def _on_window_edge(grid, cands, idx, lat, lon, half_size):

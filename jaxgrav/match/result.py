@@ -12,6 +12,8 @@ STATUS = {
     2: "candidate capacity overflowed in some window (best-fitting points kept)",
     4: "a search window met the map edge and was shifted inside",
     8: "the best candidate lies on the edge of the search region (drift may exceed it)",
+    256: "a step's accepted displacements exceed the chain stencil (pairs outside it not "
+         "considered; raise stencil_size)",
 }
 """Bit flags of :attr:`MatchResult.status`."""
 

@@ -1,0 +1,330 @@
+"""Chain search on the node lattice: paper A's step constraints as a displacement stencil.
+
+With every window node a candidate slot
+(:func:`~jaxgrav.match.candidates.lattice_candidates`), the nodes of fix i that can
+precede a node of fix i+1 are those whose displacement to it is a step the constraints
+accept (:func:`~jaxgrav.match.chains.step_ok`): an annular sector around the INS step
+that spans only a few nodes. So every node gets a padded neighbour list (jax-md
+style) of the ``S × S`` node displacements of the sector's bounding box, with a mask
+(inside the window, and the exact constraint on the pair) and an overflow flag when
+the box is wider than ``S`` nodes. Elimination, chain count and the k-best programme
+then cost O(C·S²) per step instead of the O(C²) of :mod:`~jaxgrav.match.chains`, with
+the same result as :mod:`~jaxgrav.match.chains` on all window nodes: pairs outside the
+box cannot satisfy the constraints.
+
+Offsets are separable: a node's north offset from its INS fix depends on its row only
+and its east offset on its column only, so the step of every (node, displacement) pair
+is an outer sum of two ``(s, S)`` tables.
+"""
+
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrav.match.chains import kbest_run, kbest_step, step_ok, step_region
+
+__all__ = [
+    "LatticeSteps",
+    "count_chains_lattice",
+    "displacement_box",
+    "eliminate_lattice",
+    "kbest_chains_lattice",
+    "lattice_steps",
+    "stencil_size_for",
+    "stencil_size_for_step",
+]
+
+
+class LatticeSteps(NamedTuple):
+    """Geometry of the N−1 steps between consecutive windows (:func:`lattice_steps`).
+
+    Attributes
+    ----------
+    step_north, step_east : Array, shape ``(N−1,)``
+        INS steps (m).
+    north0, east0 : Array, shape ``(N−1, s)``
+        North offset of each window row and east offset of each window column from
+        INS fix i (m).
+    north1, east1 : Array, shape ``(N−1, s)``
+        The same for fix i+1.
+    row_base, col_base : Array of int, shape ``(N−1,)``
+        A node at window row ``r'`` of fix i+1 and stencil row ``a`` is preceded by
+        window row ``r' + row_base − a`` of fix i (columns alike).
+    overflow : Array of bool, shape ``(N−1,)``
+        The accepted steps span more than ``size`` nodes along an axis: pairs outside
+        the stencil were not considered.
+    size : int
+        Stencil side ``S`` in nodes (static).
+    """
+
+    step_north: jax.Array
+    step_east: jax.Array
+    north0: jax.Array
+    east0: jax.Array
+    north1: jax.Array
+    east1: jax.Array
+    row_base: jax.Array
+    col_base: jax.Array
+    overflow: jax.Array
+    size: int
+
+
+def displacement_box(step_north, step_east, step_tol_m, angle_tol_deg):
+    """Bounding box (m) of the steps :func:`~jaxgrav.match.chains.step_ok` accepts.
+
+    The accepted steps form an annular sector (:func:`~jaxgrav.match.chains.step_region`);
+    its box is spanned by the sector's four corners and the points of its outer arc
+    due north, east, south and west, where those directions lie inside it.
+
+    Returns
+    -------
+    tuple of Array
+        ``(north_min, north_max, east_min, east_max)``, broadcast with the inputs.
+    """
+    r_lo, r_hi, half, ins_len = step_region(step_north, step_east, step_tol_m, angle_tol_deg)
+    half = jnp.where(ins_len > 0, half, jnp.pi)  # a zero INS step accepts any direction
+    bearing = jnp.arctan2(step_east, step_north)
+    angles = [bearing - half, bearing + half]
+    north, east = [], []
+    for a in angles:
+        for r in (r_lo, r_hi):
+            north.append(r * jnp.cos(a))
+            east.append(r * jnp.sin(a))
+    for axis in (0.0, 0.5 * jnp.pi, jnp.pi, -0.5 * jnp.pi):
+        off = jnp.abs(jnp.mod(axis - bearing + jnp.pi, 2 * jnp.pi) - jnp.pi)
+        inside = off <= half
+        north.append(jnp.where(inside, r_hi * math.cos(axis), north[0]))
+        east.append(jnp.where(inside, r_hi * math.sin(axis), east[0]))
+    north, east = jnp.stack(north), jnp.stack(east)
+    return north.min(0), north.max(0), east.min(0), east.max(0)
+
+
+def _node_span(grid, lat, north_next_max, east_next_max, steps, step_tol_m, angle_tol_deg):
+    """First node displacement and width (nodes) of each step's box, rows and columns.
+
+    A node pair ``D`` rows apart makes the step ``D·dy_i + e`` with ``|e|`` at most the
+    next fix's largest offset times the relative change of the metres per node between
+    the two fixes; the box is widened by that and by 1e-6 of its size.
+    """
+    sn, se = steps
+    n_lo, n_hi, e_lo, e_hi = displacement_box(sn, se, step_tol_m, angle_tol_deg)
+    dy, dx = grid.spacing_m(lat)
+    eps_n = north_next_max * jnp.abs(1.0 - dy[:-1] / dy[1:]) + 1e-6 * (n_hi - n_lo + 1.0)
+    eps_e = east_next_max * jnp.abs(1.0 - dx[:-1] / dx[1:]) + 1e-6 * (e_hi - e_lo + 1.0)
+    r_lo = jnp.floor((n_lo - eps_n) / dy[:-1]).astype(int)
+    r_hi = jnp.ceil((n_hi + eps_n) / dy[:-1]).astype(int)
+    c_lo = jnp.floor((e_lo - eps_e) / dx[:-1]).astype(int)
+    c_hi = jnp.ceil((e_hi + eps_e) / dx[:-1]).astype(int)
+    return r_lo, r_hi - r_lo + 1, c_lo, c_hi - c_lo + 1
+
+
+def lattice_steps(grid, cands, origin, lat, steps, step_tol_m, angle_tol_deg, size):
+    """Per-step geometry of the stencil search.
+
+    Parameters
+    ----------
+    grid : Grid
+        The map the candidates come from.
+    cands : CandidateSet
+        :func:`~jaxgrav.match.candidates.lattice_candidates` of N fixes, windows of
+        ``s × s`` nodes.
+    origin : tuple of Array of int
+        ``(row0, col0)`` of each window, each ``(N,)`` (same function).
+    lat : Array, shape ``(N,)``
+        INS fixes (degrees).
+    steps : tuple of Array
+        INS steps ``(north, east)``, each ``(N−1,)`` (m), from fix i's local frame.
+    step_tol_m, angle_tol_deg : Array
+        Constraint tolerances (:func:`~jaxgrav.match.chains.compatibility`).
+    size : int
+        Stencil side ``S`` in nodes (static).
+
+    Returns
+    -------
+    LatticeSteps
+    """
+    n, c = cands.north_m.shape
+    s = math.isqrt(c)
+    north = cands.north_m.reshape(n, s, s)[:, :, 0]
+    east = cands.east_m.reshape(n, s, s)[:, 0, :]
+    r_lo, r_width, c_lo, c_width = _node_span(
+        grid, jnp.asarray(lat), jnp.max(jnp.abs(north[1:]), axis=1),
+        jnp.max(jnp.abs(east[1:]), axis=1), steps, step_tol_m, angle_tol_deg)
+    row0, col0 = origin
+    return LatticeSteps(
+        steps[0], steps[1], north[:-1], east[:-1], north[1:], east[1:],
+        jnp.diff(row0) - r_lo, jnp.diff(col0) - c_lo,
+        (r_width > size) | (c_width > size), size,
+    )
+
+
+def stencil_size_for(grid, lat, lon, step_tol_m, angle_tol_deg):
+    """Smallest stencil side (nodes) that holds every accepted step of a track.
+
+    For sizing :class:`~jaxgrav.match.correlation.ChainConfig` outside jit.
+
+    Parameters
+    ----------
+    grid : Grid
+    lat, lon : array_like, shape ``(N,)`` or ``(B, N)``
+        INS fixes (degrees), one track or a batch.
+    step_tol_m, angle_tol_deg : float
+        Constraint tolerances, as :func:`~jaxgrav.match.correlation.match_chains`
+        applies them (its step tolerance includes the node allowance).
+
+    Returns
+    -------
+    int
+    """
+    from jaxgrav.match.candidates import local_offsets_m
+
+    lat, lon = np.atleast_2d(np.asarray(lat, float)), np.atleast_2d(np.asarray(lon, float))
+    steps = local_offsets_m(lat[:, 1:], lon[:, 1:], lat[:, :-1], lon[:, :-1])
+    # offsets of up to a whole window; 1 km per node is a generous bound for the margin
+    far = 1e3 * max(grid.ny, grid.nx) * np.ones(lat.shape[1] - 1)
+    spans = jax.vmap(lambda la, sn, se: _node_span(grid, la, far, far, (sn, se), step_tol_m,
+                                                   angle_tol_deg))(lat, *steps)
+    return int(max(np.max(spans[1]), np.max(spans[3])))
+
+
+def stencil_size_for_step(grid, step_m, step_tol_m, angle_tol_deg):
+    """Stencil side (nodes) that holds every accepted step of length ``step_m`` (m), for
+    any heading, anywhere on ``grid`` (at its northern and southern rows).
+
+    For sizing :class:`~jaxgrav.match.correlation.ChainConfig` from a scenario rather
+    than from a track (:func:`stencil_size_for`).
+    """
+    bearing = np.deg2rad(np.arange(0.0, 360.0, 0.5))
+    box = displacement_box(step_m * np.cos(bearing), step_m * np.sin(bearing), step_tol_m,
+                           angle_tol_deg)
+    n_lo, n_hi, e_lo, e_hi = (np.asarray(v) for v in box)
+    size = 0
+    for lat in (grid.lat0, grid.lat0 + grid.dlat * (grid.ny - 1)):
+        dy, dx = (float(v) for v in grid.spacing_m(lat))
+        rows = np.ceil(n_hi / dy + 1e-3) - np.floor(n_lo / dy - 1e-3) + 1
+        cols = np.ceil(e_hi / dx + 1e-3) - np.floor(e_lo / dx - 1e-3) + 1
+        size = max(size, int(rows.max()), int(cols.max()))
+    return size
+
+
+def _xs(geo):
+    """Scan inputs of each step (everything but the static size and the overflow)."""
+    return (geo.step_north, geo.step_east, geo.north0, geo.east0, geo.north1, geo.east1,
+            geo.row_base, geo.col_base)
+
+
+def _links(x, s, size, step_tol_m, angle_tol_deg, backward):
+    """Neighbour list of one step: ``(index (s², S²), ok (s², S²))``.
+
+    Forward: for each node of fix i+1, the nodes of fix i that may precede it;
+    backward: for each node of fix i, the nodes of fix i+1 that may follow it.
+    ``ok`` is the exact constraint on the pair and false outside the window.
+    """
+    sn0, se0, n0, e0, n1, e1, row_base, col_base = x
+    p, a = jnp.arange(s)[:, None], jnp.arange(size)[None, :]
+    if backward:
+        qr, qc = p - row_base + a, p - col_base + a
+    else:
+        qr, qc = p + row_base - a, p + col_base - a
+    vr, vc = (qr >= 0) & (qr < s), (qc >= 0) & (qc < s)
+    qr, qc = jnp.clip(qr, 0, s - 1), jnp.clip(qc, 0, s - 1)
+    if backward:
+        sn, se = sn0 + n1[qr] - n0[:, None], se0 + e1[qc] - e0[:, None]
+    else:
+        sn, se = sn0 + n1[:, None] - n0[qr], se0 + e1[:, None] - e0[qc]
+    ok = step_ok(sn[:, None, :, None], se[None, :, None, :], sn0, se0, step_tol_m, angle_tol_deg)
+    ok = ok & vr[:, None, :, None] & vc[None, :, None, :]
+    index = qr[:, None, :, None] * s + qc[None, :, None, :]
+    return index.reshape(s * s, size * size), ok.reshape(s * s, size * size)
+
+
+def _side(cands):
+    return math.isqrt(cands.mask.shape[1])
+
+
+def eliminate_lattice(cands, geo, step_tol_m, angle_tol_deg):
+    """Forward and backward elimination on the lattice (as :func:`~jaxgrav.match.chains.eliminate`).
+
+    Parameters
+    ----------
+    cands : CandidateSet
+        :func:`~jaxgrav.match.candidates.lattice_candidates`.
+    geo : LatticeSteps
+    step_tol_m, angle_tol_deg : Array
+        Constraint tolerances.
+
+    Returns
+    -------
+    Array of bool, shape ``(N, s²)``
+        Candidates on at least one complete chain.
+    """
+    s, size = _side(cands), geo.size
+
+    def fwd(alive, x):
+        index, ok = _links(x[:-1], s, size, step_tol_m, angle_tol_deg, backward=False)
+        nxt = x[-1] & jnp.any(ok & alive[index], axis=1)
+        return nxt, nxt
+
+    _, rest = jax.lax.scan(fwd, cands.mask[0], (*_xs(geo), cands.mask[1:]))
+    fwd_alive = jnp.concatenate([cands.mask[:1], rest], axis=0)
+
+    def bwd(alive_next, x):
+        index, ok = _links(x[:-1], s, size, step_tol_m, angle_tol_deg, backward=True)
+        here = x[-1] & jnp.any(ok & alive_next[index], axis=1)
+        return here, here
+
+    _, back = jax.lax.scan(bwd, fwd_alive[-1], (*_xs(geo), fwd_alive[:-1]), reverse=True)
+    return jnp.concatenate([back, fwd_alive[-1:]], axis=0)
+
+
+def count_chains_lattice(cands, alive, geo, step_tol_m, angle_tol_deg):
+    """Number of complete chains through the surviving nodes (float, may be huge)."""
+    s, size = _side(cands), geo.size
+    dtype = jnp.result_type(float)
+
+    def fwd(n, x):
+        index, ok = _links(x[:-1], s, size, step_tol_m, angle_tol_deg, backward=False)
+        nxt = jnp.where(x[-1], jnp.sum(jnp.where(ok, n[index], 0.0), axis=1), 0.0)
+        return nxt, None
+
+    n, _ = jax.lax.scan(fwd, alive[0].astype(dtype), (*_xs(geo), alive[1:]))
+    return jnp.sum(n)
+
+
+def kbest_chains_lattice(cands, alive, geo, step_tol_m, angle_tol_deg, unary, pair_fn, k):
+    """K cheapest complete chains on the lattice (as :func:`~jaxgrav.match.chains.kbest_chains`).
+
+    Parameters
+    ----------
+    cands : CandidateSet
+        :func:`~jaxgrav.match.candidates.lattice_candidates`.
+    alive : Array of bool, shape ``(N, s²)``
+        :func:`eliminate_lattice`.
+    geo : LatticeSteps
+    step_tol_m, angle_tol_deg : Array
+    unary : Array, shape ``(N, s²)``
+    pair_fn : callable
+        Element-wise transition cost ``pair_fn(i, value_i, value_next)``.
+    k : int
+        Number of chains (static).
+
+    Returns
+    -------
+    ChainSearch
+        ``index`` holds lattice slots.
+    """
+    s, size = _side(cands), geo.size
+    inf = jnp.asarray(jnp.inf, dtype=unary.dtype)
+    xs = (*_xs(geo), alive[1:], unary[1:], cands.value[:-1], cands.value[1:],
+          jnp.arange(alive.shape[0] - 1))
+
+    def fwd(d, x):
+        x, (alive_next, unary_next, v0, v1, i) = x[:-5], x[-5:]
+        index, ok = _links(x, s, size, step_tol_m, angle_tol_deg, backward=False)
+        cost = jnp.where(ok & alive_next[:, None], pair_fn(i, v0[index], v1[:, None]), inf)
+        return kbest_step(d, cost + unary_next[:, None], index, k)
+
+    return kbest_run(fwd, xs, alive[0], unary[0], k)
