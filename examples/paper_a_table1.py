@@ -78,19 +78,22 @@ def main():
     radius = 1.2 * real.drift_deg * DEG_ARC_M
     print(f"\nRealistic setting: 2.5' map, 1 mGal noise, 30 fixes, drift 0.035°, {runs} tracks")
     noiseless = dataclasses.replace(real, noise_mgal=0.0)
+    biased = dataclasses.replace(real, bias_mgal=2.0)
     results["realistic"] = {}
     fine8 = fine.refine(8)
-    for name, method, mmap, cfg in (
+    for name, method, mmap, cfg, scen in (
         ("dense (default)", "dense", fine,
-         config_for("dense", fine, radius, noise_mgal=1.0, bias_sigma_mgal=3.0)),
-        ("dense, bias free", "dense", fine, config_for("dense", fine, radius, noise_mgal=1.0)),
+         config_for("dense", fine, radius, noise_mgal=1.0, bias_sigma_mgal=3.0), real),
+        ("dense, bias free", "dense", fine, config_for("dense", fine, radius, noise_mgal=1.0),
+         real),
+        ("dense (default), 2 mGal bias", "dense", fine,
+         config_for("dense", fine, radius, noise_mgal=1.0, bias_sigma_mgal=3.0), biased),
         ("chains on the map refined x8", "chains", fine8,
-         config_for("chains", fine8, radius, noise_mgal=1.0)),
+         config_for("chains", fine8, radius, noise_mgal=1.0, step_m=real.step_m), real),
         ("dense, noiseless readings", "dense", fine,
-         config_for("dense", fine, radius, noise_mgal=1.0, bias_sigma_mgal=3.0)),
+         config_for("dense", fine, radius, noise_mgal=1.0, bias_sigma_mgal=3.0), noiseless),
     ):
         keys = jax.random.split(jax.random.fold_in(key, 3), runs)
-        scen = noiseless if "noiseless" in name else real
         s = experiments.summarize(experiments.run_batch(keys, fine, mmap, scen, method, cfg))
         results["realistic"][name] = s
         print(f"  {name:30s} median error {s['error_m_median']:6.0f} m of INS "

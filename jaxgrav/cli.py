@@ -203,7 +203,7 @@ def _cmd_data_egm2008(args):
 def _cmd_demo(args):
     from jaxgrav.demo import run_demo
 
-    run_demo(Path(args.out), force=args.force, runs=args.runs, seed=args.seed)
+    run_demo(Path(args.out), force=args.force, runs=args.runs, seed=args.seed, smoke=args.smoke)
 
 
 def build_parser():
@@ -216,6 +216,8 @@ def build_parser():
     d.add_argument("--runs", type=int, default=200, help="Monte Carlo runs (default 200)")
     d.add_argument("--seed", type=int, default=0, help="PRNG seed")
     d.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    d.add_argument("--smoke", action="store_true",
+                   help="the same steps at toy sizes (about a minute; numbers meaningless)")
     d.set_defaults(func=_cmd_demo)
 
     m = sub.add_parser("match", help="match a track CSV against a map (papers A and B)")
