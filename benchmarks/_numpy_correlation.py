@@ -649,7 +649,8 @@ def match_chains_np(m, lat, lon, readings, config):
         def pair_cost(i, a, b):
             return wd[i] * (dg[i] - (value[i + 1, b][None, :] - value[i, a][:, None])) ** 2
 
-    total, index = kbest_chains(alive, compat, unary, pair_cost, config.k_dp)
+    k_dp = config.k_dp if config.score == "bias" else config.k_best  # as jaxgrav
+    total, index = kbest_chains(alive, compat, unary, pair_cost, k_dp)
 
     fix = np.arange(n)[None, :]
     values = value[fix, index]  # (K_dp, N)

@@ -92,7 +92,11 @@ class ChainConfig:
         (:func:`~jaxgrav.match.lattice_chains.stencil_size_for` sizes it).
         ``capacity`` and ``survivor_capacity`` apply only when it is 0.
     k_dp : int
-        Chains kept per candidate by the dynamic programme (static).
+        Chains kept per candidate by the dynamic programme (static), for the bias
+        form, which re-scores the programme's ``k_dp`` best chains (ranked by the
+        difference form). The difference and absolute forms rank the chains as the
+        programme does, so it keeps only ``k_best`` (the same ``k_best`` chains:
+        the programme is exact for any k).
     k_best : int
         Chains among which the final one is selected (static; paper: 5).
     score : {"difference", "bias", "absolute"}
@@ -233,6 +237,11 @@ def chain_tolerances(grid, lat, config):
     return config.step_tol_m + config.node_allowance * jnp.hypot(dy, dx), config.angle_tol_deg
 
 
+def _k_dp(config):
+    """Chains the programme keeps: re-scoring (bias form) needs more than it returns."""
+    return config.k_dp if config.score == "bias" else config.k_best
+
+
 def _candidates_args(config):
     return dict(half_size=config.half_size, delta=config.delta,
                 slope_factor=config.node_allowance)
@@ -250,7 +259,7 @@ def _pairwise_search(grid, lat, lon, readings, steps, tol, unary_fn, pair, confi
         alive = eliminate(cands, steps, *tol, compat=compat)  # unchanged unless `lost`
         cands = cands._replace(overflow=cands.overflow | lost)
     work = count_chains(cands, alive, steps, *tol, compat=compat)
-    search = kbest_chains(cands, alive, steps, *tol, unary_fn(cands.value), pair, config.k_dp,
+    search = kbest_chains(cands, alive, steps, *tol, unary_fn(cands.value), pair, _k_dp(config),
                           compat=compat)
     return cands, alive, work, search
 
@@ -262,7 +271,7 @@ def _lattice_search(grid, lat, lon, readings, steps, tol, unary_fn, pair, config
     alive = eliminate_lattice(cands, geo, *tol)
     work = count_chains_lattice(cands, alive, geo, *tol)
     search = kbest_chains_lattice(cands, alive, geo, *tol, unary_fn(cands.value), pair,
-                                  config.k_dp)
+                                  _k_dp(config))
     return cands, alive, work, search, jnp.any(geo.overflow)
 
 
