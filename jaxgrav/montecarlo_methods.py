@@ -117,19 +117,30 @@ def correlation_run(key, grid, scenario, config):
     """
     from jaxgrav.geodesy import eotvos
     from jaxgrav.match.dense import match_dense
-    from jaxgrav.scenarios import matching_scenario, track_error_m
+    from jaxgrav.scenarios import matching_scenario
 
     run = matching_scenario(key, grid, scenario)
     g = run.readings + eotvos(run.ins_lat, run.truth.v_east, run.truth.v_north)
     r = match_dense(grid, run.ins_lat, run.ins_lon, g, config)
+    return _matcher_record(run, r, **_offset(r))
+
+
+def _matcher_record(run, r, **extra):
+    """The per-run record of a matcher: mean-track errors of the INS and of the match
+    (m), status, score, and ``extra``; paper A's matchers add the offset."""
+    from jaxgrav.scenarios import track_error_m
+
     return dict(
         ins_err_m=track_error_m(run.ins_lat, run.ins_lon, run.truth),
         err_m=track_error_m(r.lat, r.lon, run.truth),
         status=jnp.asarray(r.status, jnp.int32),
         score=r.score,
-        offset_north_m=r.offset_north_m,
-        offset_east_m=r.offset_east_m,
+        **extra,
     )
+
+
+def _offset(r):
+    return dict(offset_north_m=r.offset_north_m, offset_east_m=r.offset_east_m)
 
 
 def correlation_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
@@ -178,20 +189,12 @@ def chains_run(key, grid, refined, scenario, config):
     """
     from jaxgrav.geodesy import eotvos
     from jaxgrav.match.correlation import match_chains
-    from jaxgrav.scenarios import matching_scenario, track_error_m
+    from jaxgrav.scenarios import matching_scenario
 
     run = matching_scenario(key, grid, scenario)
     g = run.readings + eotvos(run.ins_lat, run.truth.v_east, run.truth.v_north)
     r = match_chains(refined, run.ins_lat, run.ins_lon, g, config)
-    return dict(
-        ins_err_m=track_error_m(run.ins_lat, run.ins_lon, run.truth),
-        err_m=track_error_m(r.lat, r.lon, run.truth),
-        status=jnp.asarray(r.status, jnp.int32),
-        score=r.score,
-        offset_north_m=r.offset_north_m,
-        offset_east_m=r.offset_east_m,
-        work_constrained=r.work_constrained,
-    )
+    return _matcher_record(run, r, **_offset(r), work_constrained=r.work_constrained)
 
 
 def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
@@ -262,15 +265,7 @@ def iccp_run(key, grid, scenario, iccp):
 
 
 def _b_metrics(run, r):
-    from jaxgrav.scenarios import track_error_m
-
-    return dict(
-        ins_err_m=track_error_m(run.ins_lat, run.ins_lon, run.truth),
-        err_m=track_error_m(r.lat, r.lon, run.truth),
-        status=jnp.asarray(r.status, jnp.int32),
-        score=r.score,
-        rotation_deg=r.rotation_deg,
-    )
+    return _matcher_record(run, r, rotation_deg=r.rotation_deg)
 
 
 _B_RUNS = {

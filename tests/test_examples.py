@@ -3,25 +3,15 @@
 Each script runs in its own process (the examples enable x64 themselves, as scripts
 may). Only the examples whose smoke run takes under about a minute on 2 cores are run
 here (``paper_b_entropy_iccp``: 2 × 32 tracks, 50–66 s wall / 32 s CPU on a loaded 2-core
-machine, most of it compiling); ``paper_a_table1`` (~2 min), ``paper_d_noharm`` and
-``paper_d_ukf`` (~40–60 s each) are exercised by their library functions' tests and
-by ``jaxgrav demo`` / ``jaxgrav montecarlo`` tests instead.
+machine, most of it compiling); ``paper_d_noharm`` and ``paper_d_ukf`` in
+``test_examples_paper_d.py``; ``paper_a_table1`` (~2 min) is exercised by the
+``jaxgrav demo`` smoke test and its library functions' tests instead.
 """
 
 import json
 import re
-import subprocess
-import sys
-from pathlib import Path
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-
-
-def run_example(name, *args):
-    proc = subprocess.run([sys.executable, str(EXAMPLES / name), "--smoke", *args],
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return proc.stdout
+from _examples import run_example
 
 
 def test_paper_b_failures_smoke():

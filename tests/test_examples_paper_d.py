@@ -7,21 +7,11 @@ EKF and UKF on 8 runs of 20 min, ``paper_d_noharm`` with the UKF on 16 runs of
 """
 
 import re
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
+from _examples import run_example
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 NUM = r"(-?[\d.]+|nan|inf)"
-
-
-def run_example(name, *args):
-    proc = subprocess.run([sys.executable, str(EXAMPLES / name), "--smoke", *args],
-                          capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return proc.stdout
 
 
 def test_paper_d_ukf_smoke():
