@@ -100,9 +100,11 @@ def _as_float64(field):
 def filter_with_maps(title, truth, maps, runs, minutes, seed=0):
     """UKF on paper D's scenario: readings from ``truth``, filtered with each of ``maps``.
 
-    ``maps`` is ``{name: (field, offset_mgal)}``; a model's map is field + offset, so the
-    offset is taken off the readings. Prints mean / median / worst ratio of the filter's
-    RMS position error over the second half of the run to the free INS's, and the NEES.
+    ``maps`` is ``{name: (field, offset_mgal[, model_sigma_mgal])}``; a model's map is
+    field + offset, so the offset is taken off the readings, and a model error σ (e.g.
+    the fit's RMS residual) is added to the reading noise variance. Prints mean / median /
+    worst ratio of the filter's RMS position error over the second half of the run to the
+    free INS's, and the NEES.
     """
     from jaxgrav.match.filters import (
         FilterScenario,
@@ -121,22 +123,24 @@ def filter_with_maps(title, truth, maps, runs, minutes, seed=0):
             run = filter_scenario(key, field, scen)
             return (run, *run_steps(run, scen))
 
-        def filt(run, dynamics, steps, field, offset):
+        def filt(run, dynamics, steps, field, offset, model_sigma):
             x0, p0 = initial_state(scen)
             _, info = run_filter(ukf(), field, dynamics, x0, p0,
-                                 steps._replace(z=steps.z - offset))
+                                 steps._replace(z=steps.z - offset,
+                                                r=steps.r + model_sigma**2))
             m = run_metrics(run, info)
             return m["err_m"] / m["ins_err_m"], m["nees"]
 
         t = time.perf_counter()
         keys = jax.random.split(jax.random.key(seed), runs)
         sims = jax.jit(jax.vmap(sim, in_axes=(0, None)))(keys, _as_float64(truth))
-        fn = jax.jit(jax.vmap(filt, in_axes=(0, 0, 0, None, None)))
+        fn = jax.jit(jax.vmap(filt, in_axes=(0, 0, 0, None, None, None)))
         print(f"\n{title}: UKF on {runs} runs of {minutes:g} min (paper D's scenario, seed "
               f"{seed}); ratio = filter / free-INS RMS position error over the second half")
         print("   map                                        mean  median   worst   NEES")
-        for name, (field, offset) in maps.items():
-            ratio, nees = (np.asarray(a) for a in fn(*sims, _as_float64(field), float(offset)))
+        for name, (field, offset, *sigma) in maps.items():
+            ratio, nees = (np.asarray(a) for a in fn(*sims, _as_float64(field), float(offset),
+                                                     float(sigma[0]) if sigma else 0.0))
             print(f"   {name:40s} {np.mean(ratio):6.3f}  {np.median(ratio):6.3f}  "
                   f"{np.max(ratio):6.3f}  {np.mean(nees):5.2f}")
         print(f"   ({time.perf_counter() - t:.1f} s)")
@@ -242,6 +246,7 @@ def main(argv=None):
             "3b. EGM2008 (degree 360) as the truth", Grid.from_arrays(lat, lon, v, units="mGal"),
             {"the EGM2008 grid itself (bicubic)": (Grid.from_arrays(lat, lon, v), 0.0),
              "fitted K = 3 + offset": (fit_free.masses, fit_free.offset),
+             "  the same, noise + fit RMS": (fit_free.masses, fit_free.offset, fit_free.rms),
              "fitted in paper D's form": (fit.masses, 0.0),
              "paper D's masses + best offset": (truth, float(np.mean(v - model_pd)))},
             args.filter_runs, args.filter_minutes)
