@@ -381,8 +381,8 @@ def chain_config(fine, tracks, quick):
         window_nodes=s2,
     )
     pairwise = ChainConfig(half_size=h, capacity=cap, survivor_capacity=surv)
-    step_tol, angle_tol = (float(v) for v in chain_tolerances(fine, np.mean(lat), d))
-    stats["stencil_size"] = stencil_size_for(fine, lat, lon, step_tol, angle_tol)
+    tol = jax.vmap(lambda a: chain_tolerances(fine, a, d)[0])(jnp.asarray(lat))  # per track
+    stats["stencil_size"] = stencil_size_for(fine, lat, lon, np.asarray(tol), d.angle_tol_deg)
     return pairwise, stats
 
 

@@ -85,8 +85,9 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         return config
     if not step_m >= 0:
         raise ValueError(f"step_m must be a distance >= 0 (m); got {step_m!r}")
-    lat_c = grid.lat0 + 0.5 * grid.dlat * (grid.ny - 1)
-    step_tol, angle_tol = (float(v) for v in chain_tolerances(grid, lat_c, config))
+    # the largest tolerance on the map: the node allowance grows with the cell diagonal
+    tols = [chain_tolerances(grid, la, config) for la in (grid.lat0, grid.extent[3])]
+    step_tol, angle_tol = max(float(t[0]) for t in tols), float(tols[0][1])
     size = stencil_size_for_step(grid, float(step_m), step_tol, angle_tol)
     return dataclasses.replace(config, stencil_size=size)
 

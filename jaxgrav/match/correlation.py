@@ -96,7 +96,8 @@ class ChainConfig:
         form, which re-scores the programme's ``k_dp`` best chains (ranked by the
         difference form). The difference and absolute forms rank the chains as the
         programme does, so it keeps only ``k_best`` (the same ``k_best`` chains:
-        the programme is exact for any k).
+        the programme is exact for any k, up to chains whose scores agree to float32
+        resolution, which it ranks in float32).
     k_best : int
         Chains among which the final one is selected (static; paper: 5).
     score : {"difference", "bias", "absolute"}

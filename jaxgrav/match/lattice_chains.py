@@ -84,8 +84,7 @@ def displacement_box(step_north, step_east, step_tol_m, angle_tol_deg):
     tuple of Array
         ``(north_min, north_max, east_min, east_max)``, broadcast with the inputs.
     """
-    r_lo, r_hi, half, ins_len = step_region(step_north, step_east, step_tol_m, angle_tol_deg)
-    half = jnp.where(ins_len > 0, half, jnp.pi)  # a zero INS step accepts any direction
+    r_lo, r_hi, half, _ = step_region(step_north, step_east, step_tol_m, angle_tol_deg)
     bearing = jnp.arctan2(step_east, step_north)
     angles = [bearing - half, bearing + half]
     north, east = [], []
@@ -102,23 +101,33 @@ def displacement_box(step_north, step_east, step_tol_m, angle_tol_deg):
     return north.min(0), north.max(0), east.min(0), east.max(0)
 
 
+ROUNDING_MARGIN = 0.01
+"""Nodes added to each side of a step's box against rounding of the offsets (float32
+positions in degrees carry ~0.1–0.5 m; 1 % of a node is 5 m on 500 m nodes)."""
+
+
+def _node_range(lo_m, hi_m, node_m, eps_m):
+    """Node displacements D with ``D·node_m`` in ``[lo_m − eps_m, hi_m + eps_m]``:
+    ``(first, width)``."""
+    eps_m = eps_m + ROUNDING_MARGIN * node_m
+    first = jnp.ceil((lo_m - eps_m) / node_m).astype(int)
+    last = jnp.floor((hi_m + eps_m) / node_m).astype(int)
+    return first, last - first + 1
+
+
 def _node_span(grid, lat, north_next_max, east_next_max, steps, step_tol_m, angle_tol_deg):
     """First node displacement and width (nodes) of each step's box, rows and columns.
 
     A node pair ``D`` rows apart makes the step ``D·dy_i + e`` with ``|e|`` at most the
     next fix's largest offset times the relative change of the metres per node between
-    the two fixes; the box is widened by that and by 1e-6 of its size.
+    the two fixes; the box is widened by that and by :data:`ROUNDING_MARGIN`.
     """
     sn, se = steps
     n_lo, n_hi, e_lo, e_hi = displacement_box(sn, se, step_tol_m, angle_tol_deg)
     dy, dx = grid.spacing_m(lat)
-    eps_n = north_next_max * jnp.abs(1.0 - dy[:-1] / dy[1:]) + 1e-6 * (n_hi - n_lo + 1.0)
-    eps_e = east_next_max * jnp.abs(1.0 - dx[:-1] / dx[1:]) + 1e-6 * (e_hi - e_lo + 1.0)
-    r_lo = jnp.floor((n_lo - eps_n) / dy[:-1]).astype(int)
-    r_hi = jnp.ceil((n_hi + eps_n) / dy[:-1]).astype(int)
-    c_lo = jnp.floor((e_lo - eps_e) / dx[:-1]).astype(int)
-    c_hi = jnp.ceil((e_hi + eps_e) / dx[:-1]).astype(int)
-    return r_lo, r_hi - r_lo + 1, c_lo, c_hi - c_lo + 1
+    r_lo, r_width = _node_range(n_lo, n_hi, dy[:-1], north_next_max * jnp.abs(1 - dy[:-1] / dy[1:]))
+    c_lo, c_width = _node_range(e_lo, e_hi, dx[:-1], east_next_max * jnp.abs(1 - dx[:-1] / dx[1:]))
+    return r_lo, r_width, c_lo, c_width
 
 
 def lattice_steps(grid, cands, origin, lat, steps, step_tol_m, angle_tol_deg, size):
@@ -154,10 +163,13 @@ def lattice_steps(grid, cands, origin, lat, steps, step_tol_m, angle_tol_deg, si
         grid, jnp.asarray(lat), jnp.max(jnp.abs(north[1:]), axis=1),
         jnp.max(jnp.abs(east[1:]), axis=1), steps, step_tol_m, angle_tol_deg)
     row0, col0 = origin
+    row_base, col_base = jnp.diff(row0) - r_lo, jnp.diff(col0) - c_lo
+    # a window jump that the INS step does not explain (the seam of a global map, where
+    # the windows' column indices wrap) leaves no links at all: flag it too
+    jump = (jnp.abs(row_base) >= s + size) | (jnp.abs(col_base) >= s + size)
     return LatticeSteps(
-        steps[0], steps[1], north[:-1], east[:-1], north[1:], east[1:],
-        jnp.diff(row0) - r_lo, jnp.diff(col0) - c_lo,
-        (r_width > size) | (c_width > size), size,
+        steps[0], steps[1], north[:-1], east[:-1], north[1:], east[1:], row_base, col_base,
+        (r_width > size) | (c_width > size) | jump, size,
     )
 
 
@@ -171,9 +183,11 @@ def stencil_size_for(grid, lat, lon, step_tol_m, angle_tol_deg):
     grid : Grid
     lat, lon : array_like, shape ``(N,)`` or ``(B, N)``
         INS fixes (degrees), one track or a batch.
-    step_tol_m, angle_tol_deg : float
+    step_tol_m, angle_tol_deg : float or array_like, shape ``(B,)``
         Constraint tolerances, as :func:`~jaxgrav.match.correlation.match_chains`
-        applies them (its step tolerance includes the node allowance).
+        applies them to each track
+        (:func:`~jaxgrav.match.correlation.chain_tolerances`: the step tolerance
+        includes the node allowance at the track's mean latitude).
 
     Returns
     -------
@@ -183,10 +197,13 @@ def stencil_size_for(grid, lat, lon, step_tol_m, angle_tol_deg):
 
     lat, lon = np.atleast_2d(np.asarray(lat, float)), np.atleast_2d(np.asarray(lon, float))
     steps = local_offsets_m(lat[:, 1:], lon[:, 1:], lat[:, :-1], lon[:, :-1])
-    # offsets of up to a whole window; 1 km per node is a generous bound for the margin
-    far = 1e3 * max(grid.ny, grid.nx) * np.ones(lat.shape[1] - 1)
-    spans = jax.vmap(lambda la, sn, se: _node_span(grid, la, far, far, (sn, se), step_tol_m,
-                                                   angle_tol_deg))(lat, *steps)
+    # no offset from a fix exceeds the map's extent
+    dy, dx = grid.spacing_m()
+    far = max(grid.ny * dy, grid.nx * dx) * np.ones(lat.shape[1] - 1)
+    tol = np.broadcast_to(np.asarray(step_tol_m, float), lat.shape[:1])
+    ang = np.broadcast_to(np.asarray(angle_tol_deg, float), lat.shape[:1])
+    spans = jax.vmap(lambda la, sn, se, t, a: _node_span(grid, la, far, far, (sn, se), t, a))(
+        lat, *steps, tol, ang)
     return int(max(np.max(spans[1]), np.max(spans[3])))
 
 
@@ -195,7 +212,8 @@ def stencil_size_for_step(grid, step_m, step_tol_m, angle_tol_deg):
     any heading, anywhere on ``grid`` (at its northern and southern rows).
 
     For sizing :class:`~jaxgrav.match.correlation.ChainConfig` from a scenario rather
-    than from a track (:func:`stencil_size_for`).
+    than from a track (:func:`stencil_size_for`); pass the largest step tolerance that
+    occurs on the grid.
     """
     bearing = np.deg2rad(np.arange(0.0, 360.0, 0.5))
     box = displacement_box(step_m * np.cos(bearing), step_m * np.sin(bearing), step_tol_m,
@@ -204,13 +222,14 @@ def stencil_size_for_step(grid, step_m, step_tol_m, angle_tol_deg):
     size = 0
     for lat in (grid.lat0, grid.lat0 + grid.dlat * (grid.ny - 1)):
         dy, dx = (float(v) for v in grid.spacing_m(lat))
-        rows = np.ceil(n_hi / dy + 1e-3) - np.floor(n_lo / dy - 1e-3) + 1
-        cols = np.ceil(e_hi / dx + 1e-3) - np.floor(e_lo / dx - 1e-3) + 1
-        size = max(size, int(rows.max()), int(cols.max()))
+        # the radii change between fixes: 1 % of a node more (ample for any real step)
+        rows = _node_range(n_lo, n_hi, dy, ROUNDING_MARGIN * dy)[1]
+        cols = _node_range(e_lo, e_hi, dx, ROUNDING_MARGIN * dx)[1]
+        size = max(size, int(np.max(rows)), int(np.max(cols)))
     return size
 
 
-def _xs(geo):
+def _scan_inputs(geo):
     """Scan inputs of each step (everything but the static size and the overflow)."""
     return (geo.step_north, geo.step_east, geo.north0, geo.east0, geo.north1, geo.east1,
             geo.row_base, geo.col_base)
@@ -268,7 +287,7 @@ def eliminate_lattice(cands, geo, step_tol_m, angle_tol_deg):
         nxt = x[-1] & jnp.any(ok & alive[index], axis=1)
         return nxt, nxt
 
-    _, rest = jax.lax.scan(fwd, cands.mask[0], (*_xs(geo), cands.mask[1:]))
+    _, rest = jax.lax.scan(fwd, cands.mask[0], (*_scan_inputs(geo), cands.mask[1:]))
     fwd_alive = jnp.concatenate([cands.mask[:1], rest], axis=0)
 
     def bwd(alive_next, x):
@@ -276,7 +295,7 @@ def eliminate_lattice(cands, geo, step_tol_m, angle_tol_deg):
         here = x[-1] & jnp.any(ok & alive_next[index], axis=1)
         return here, here
 
-    _, back = jax.lax.scan(bwd, fwd_alive[-1], (*_xs(geo), fwd_alive[:-1]), reverse=True)
+    _, back = jax.lax.scan(bwd, fwd_alive[-1], (*_scan_inputs(geo), fwd_alive[:-1]), reverse=True)
     return jnp.concatenate([back, fwd_alive[-1:]], axis=0)
 
 
@@ -290,7 +309,7 @@ def count_chains_lattice(cands, alive, geo, step_tol_m, angle_tol_deg):
         nxt = jnp.where(x[-1], jnp.sum(jnp.where(ok, n[index], 0.0), axis=1), 0.0)
         return nxt, None
 
-    n, _ = jax.lax.scan(fwd, alive[0].astype(dtype), (*_xs(geo), alive[1:]))
+    n, _ = jax.lax.scan(fwd, alive[0].astype(dtype), (*_scan_inputs(geo), alive[1:]))
     return jnp.sum(n)
 
 
@@ -318,7 +337,7 @@ def kbest_chains_lattice(cands, alive, geo, step_tol_m, angle_tol_deg, unary, pa
     """
     s, size = _side(cands), geo.size
     inf = jnp.asarray(jnp.inf, dtype=unary.dtype)
-    xs = (*_xs(geo), alive[1:], unary[1:], cands.value[:-1], cands.value[1:],
+    xs = (*_scan_inputs(geo), alive[1:], unary[1:], cands.value[:-1], cands.value[1:],
           jnp.arange(alive.shape[0] - 1))
 
     def fwd(d, x):
