@@ -55,13 +55,21 @@ def test_paper_d_noharm_smoke():
 
 
 def test_paper_d_pointmass_fit_writes_and_filters_with_its_model(tmp_path):
-    """--out-model writes a loadable model; --filter-runs: the fitted map is about as good
+    """The fit recovers a three-mass field and improves with K on the real map;
+    --out-model writes a loadable model; --filter-runs: the fitted map is about as good
     as paper D's masses the readings came from."""
     from jaxgrav.fields.pointmass_fit import load_point_masses
 
     model = tmp_path / "fit.json"
     out = run_example("paper_d_pointmass_fit.py", "--out-model", str(model),
                       "--filter-runs", "8", "--filter-minutes", "20")
+    std = float(re.search(r"std ([\d.]+) mGal; fit K = 3", out).group(1))
+    rms = float(re.search(r"residual RMS ([\d.]+) mGal", out).group(1))
+    assert rms < 0.01 * std  # three masses fitted to a three-mass field
+    sweep = [float(r) for r in re.findall(r"^\s+\d+\s+\d+\s+([\d.]+)\s+[\d.]+\s+(?:True|False)",
+                                           out, flags=re.M)]
+    assert len(sweep) >= 3
+    assert sweep[-1] < 0.5 * sweep[0]  # more masses fit the real map better
     masses, offset = load_point_masses(model)
     assert masses.size == 3 and np.isfinite(offset)
     rows = dict(re.findall(rf"^   (paper_d\(\) \(the truth\)|fitted K = 3 \+ offset)\s+{NUM}",
