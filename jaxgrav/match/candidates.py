@@ -151,11 +151,15 @@ def lattice_candidates(grid, lat, lon, readings, *, half_size, delta, slope_fact
                                                      slope_factor)
     n, s = misfit.shape[0], 2 * half_size + 1
     iso = misfit <= 1.0
-    c_lat = jnp.broadcast_to(node_lat[:, :, None], (n, s, s)).reshape(n, s * s)
-    c_lon = jnp.broadcast_to(node_lon[:, None, :], (n, s, s)).reshape(n, s * s)
-    north, east = local_offsets_m(
-        c_lat, c_lon, jnp.asarray(lat)[:, None], jnp.asarray(lon)[:, None]
+    # a node's north offset depends on its row only, its east offset on its column only:
+    # 2s evaluations per fix instead of s², then broadcast (the same numbers)
+    north_row, east_col = local_offsets_m(
+        node_lat, node_lon, jnp.asarray(lat)[:, None], jnp.asarray(lon)[:, None]
     )
+    by_row = lambda a: jnp.broadcast_to(a[:, :, None], (n, s, s)).reshape(n, s * s)  # noqa: E731
+    by_col = lambda a: jnp.broadcast_to(a[:, None, :], (n, s, s)).reshape(n, s * s)  # noqa: E731
+    c_lat, north = by_row(node_lat), by_row(north_row)
+    c_lon, east = by_col(node_lon), by_col(east_col)
     count = jnp.sum(iso, axis=(-2, -1))
     cands = CandidateSet(c_lat, c_lon, north, east, win.values.reshape(n, s * s),
                          iso.reshape(n, s * s), count, jnp.zeros(n, bool), win.complete)
