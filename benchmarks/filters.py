@@ -1,14 +1,14 @@
 """How many Monte Carlo runs per second do the paper D filters handle, against filterpy?
 
-Paper D's filtering experiment (:func:`jaxgrav.match.filters.filter_scenario`, the
-defaults of :class:`~jaxgrav.match.filters.FilterScenario`): 2 h at 5 m/s over the
+Paper D's filtering experiment (:func:`jaxgrav.scenarios.filter_scenario`, the
+defaults of :class:`~jaxgrav.scenarios.FilterScenario`): 2 h at 5 m/s over the
 three-point-mass map (:func:`jaxgrav.fields.pointmass.paper_d`), the 13-state INS
 error model, a step every 2 s and a gravimeter reading every 10 s (NaN between),
 1 mGal noise and bias. 1000 runs × 3600 steps (``--quick``: 50 × 600).
 
-* ``ukf-float64``: ``jax.jit`` of :func:`~jaxgrav.match.filters.run_filter` with
+* ``ukf-float64``: ``jax.jit`` of :func:`~jaxgrav.filters.run_filter` with
   ``every=5`` (update only on the reading steps, prediction in between) of
-  :func:`~jaxgrav.match.filters.ukf` (α = 0.5, β = 2, κ = 0; the map evaluated at the 5
+  :func:`~jaxgrav.filters.ukf` (α = 0.5, β = 2, κ = 0; the map evaluated at the 5
   distinct sigma positions, one modified Cholesky per update), vmapped over runs in
   chunks of 25 (``lax.map(batch_size=25)``, a scan over vmapped chunks, which keeps each
   step's working set in cache; ``--quick``: one vmap).
@@ -16,8 +16,8 @@ error model, a step every 2 s and a gravimeter reading every 10 s (NaN between),
   masked), as a user without the stride would run it.
 * ``ukf-float32``: ``ukf-float64`` on the runs cast to float32 with ``jax_enable_x64``
   off, and its difference from float64.
-* ``ekf-float64``: :func:`~jaxgrav.match.filters.ekf` (``jax.jacfwd`` Jacobian), ``every=5``.
-* ``pmf-float64``: :func:`~jaxgrav.match.filters.run_pmf` (default 61 × 61 grid, one
+* ``ekf-float64``: :func:`~jaxgrav.filters.ekf` (``jax.jacfwd`` Jacobian), ``every=5``.
+* ``pmf-float64``: :func:`~jaxgrav.filters.run_pmf` (default 61 × 61 grid, one
   update per reading), on fewer runs (``n``); runs/s is what scales.
 
 Baseline: filterpy's ``UnscentedKalmanFilter`` with ``MerweScaledSigmaPoints(13, α, β,
@@ -57,11 +57,12 @@ jax.config.update("jax_enable_x64", True)  # a script, not the library
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter  # noqa: E402
 
 from jaxgrav import constants as c  # noqa: E402
+from jaxgrav import filters as fl  # noqa: E402
+from jaxgrav import scenarios as sc  # noqa: E402
 from jaxgrav._linalg import modified_cholesky  # noqa: E402
 from jaxgrav.fields.pointmass import paper_d  # noqa: E402
+from jaxgrav.filters import kalman  # noqa: E402
 from jaxgrav.geodesy import geodetic_to_ecef  # noqa: E402
-from jaxgrav.match import filters as fl  # noqa: E402
-from jaxgrav.match.filters import kalman  # noqa: E402
 
 BENCH = "filters"
 CHUNK = 25  # runs per vmapped chunk (divides 1000: no remainder program to compile)
@@ -92,7 +93,7 @@ def simulate(field, scenario, n_runs, seed=0):
     @jax.jit
     def sim(keys):
         def one(key):
-            return fl.run_steps(fl.filter_scenario(key, field, scenario), scenario)
+            return sc.run_steps(sc.filter_scenario(key, field, scenario), scenario)
 
         return jax.vmap(one)(keys)
 
@@ -113,7 +114,7 @@ def first(tree, n=1):
 class NumpyPointMassH:
     """filterpy's ``hx(x, lat, lon)``: map anomaly at the INS position minus the error + bias.
 
-    The library's measurement (:func:`jaxgrav.match.filters.gravity_measurement` on
+    The library's measurement (:func:`jaxgrav.filters.gravity_measurement` on
     :class:`~jaxgrav.fields.pointmass.PointMasses`) in NumPy: exact ECEF positions, the
     downward component of ∇T in the local frame, in mGal.
     """
@@ -358,10 +359,10 @@ def main():
     n_fp = 2 if args.quick else 3
     n_pmf = 10 if args.quick else 100
     repeats = 2 if args.quick else 1
-    scenario = fl.FilterScenario(n_steps=n_steps + 1)
+    scenario = sc.FilterScenario(n_steps=n_steps + 1)
     dt, every = float(scenario.dt), scenario.reading_every
     field = paper_d()
-    x0, p0 = fl.initial_state(scenario)
+    x0, p0 = sc.initial_state(scenario)
     progress(f"simulating {n_runs} runs × {n_steps} steps")
     dyn, steps = simulate(field, scenario, n_runs)
     progress(f"filterpy on {n_fp} runs")

@@ -1,7 +1,7 @@
 """How does the Monte Carlo runner scale with devices and chunk size, and is memory bounded?
 
 Method ``correlation`` (paper A's dense matcher on the shipped 2.5′ ``ryukyu`` map,
-30 fixes, 0.035° drift; :mod:`jaxgrav.montecarlo_methods`) run by
+30 fixes, 0.035° drift; :mod:`jaxgrav.montecarlo.methods`) run by
 :func:`jaxgrav.montecarlo.run` in float64. Every case is a fresh subprocess with
 ``XLA_FLAGS=--xla_force_host_platform_device_count=D`` (the flag must be set before
 JAX starts). Virtual CPU devices share the machine's cores: more devices than cores
@@ -19,7 +19,7 @@ Lines (JSON, ``_common.emit``):
   ``traces_second_call`` and ``compiles_second_call``: a retrace shows as a trace event
   even when the persistent cache below would supply its executable), for
   ``correlation`` and ``ukf`` (the full run: every method of
-  :data:`jaxgrav.montecarlo_methods.BUILDERS`; the filters over paper D's point masses).
+  :data:`jaxgrav.montecarlo.methods.BUILDERS`; the filters over paper D's point masses).
 * ``montecarlo_memory``: peak RSS (``ru_maxrss`` of the subprocess) for ``n`` = 4, 16
   (not with ``--quick``) and 64 chunks against the same ``n`` in one chunk (baseline;
   for 64 chunks, which would need GBs in one chunk, against the previous chunked
@@ -65,7 +65,8 @@ def child(spec):
     jax.monitoring.register_event_duration_secs_listener(
         lambda name, secs, fun_name="", **kw: events.append((name, fun_name))
         if name in (TRACE_EVENT, COMPILE_EVENT) else None)
-    from jaxgrav import montecarlo, montecarlo_methods
+    from jaxgrav import montecarlo
+    from jaxgrav.montecarlo import methods as montecarlo_methods
 
     def maxrss_mb():
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
@@ -116,7 +117,7 @@ def spawn(devices, **spec):
 # ------------------------------------------------------------------------ parent
 def montecarlo_methods_names():
     """Every registered method, ``correlation`` first (its compile case is the scaling one)."""
-    from jaxgrav.montecarlo_methods import BUILDERS
+    from jaxgrav.montecarlo.methods import BUILDERS
 
     return ["correlation", *(m for m in BUILDERS if m != "correlation")]
 

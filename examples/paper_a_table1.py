@@ -26,8 +26,9 @@ import jax
 
 jax.config.update("jax_enable_x64", True)  # an example script may; the library never does
 
-from jaxgrav import datasets, experiments  # noqa: E402
+from jaxgrav import datasets  # noqa: E402
 from jaxgrav.match.api import config_for  # noqa: E402
+from jaxgrav.montecarlo import paper_a_table1  # noqa: E402
 from jaxgrav.scenarios import MatchingScenario  # noqa: E402
 from jaxgrav.sim import DEG_ARC_M  # noqa: E402
 
@@ -49,10 +50,10 @@ def main():
 
     paper = MatchingScenario(n_fixes=16, noise_mgal=0.0, truth_method="bilinear")
     per_group = max(runs // 5, 2)
-    rows = experiments.table1(jax.random.fold_in(key, 1), refined, refined, method="chains",
+    rows = paper_a_table1.table1(jax.random.fold_in(key, 1), refined, refined, method="chains",
                               runs_per_group=per_group, base=paper)
     results["paper_table1"] = rows
-    print(experiments.format_table(rows, "Paper setting, chain search as in the paper"))
+    print(paper_a_table1.format_table(rows, "Paper setting, chain search as in the paper"))
 
     print("\nWhat limits the chain search in the paper setting (drift 0.035°):")
     variations = {
@@ -64,7 +65,7 @@ def main():
     results["paper_variations"] = {}
     for name, v in variations.items():
         scen = v.get("scenario", paper)
-        rows_v = experiments.table1(jax.random.fold_in(key, 2), refined, refined,
+        rows_v = paper_a_table1.table1(jax.random.fold_in(key, 2), refined, refined,
                                     method="chains", runs_per_group=per_group, base=scen,
                                     drifts_deg=(0.035,), score=v.get("score"),
                                     selection=v.get("selection"))
@@ -94,7 +95,7 @@ def main():
          config_for("dense", fine, radius, noise_mgal=1.0, bias_sigma_mgal=3.0), noiseless),
     ):
         keys = jax.random.split(jax.random.fold_in(key, 3), runs)
-        s = experiments.summarize(experiments.run_batch(keys, fine, mmap, scen, method, cfg))
+        s = paper_a_table1.summarize(paper_a_table1.run_batch(keys, fine, mmap, scen, method, cfg))
         results["realistic"][name] = s
         print(f"  {name:30s} median error {s['error_m_median']:6.0f} m of INS "
               f"{s['ins_error_m_median']:.0f} m (ratio {s['median_ratio']:.2f}), improved "

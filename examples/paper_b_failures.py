@@ -28,8 +28,8 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)  # a script, not the library
 
 from jaxgrav import datasets  # noqa: E402
+from jaxgrav.geodesy import local_offsets_m  # noqa: E402
 from jaxgrav.grid import make_sampler  # noqa: E402
-from jaxgrav.match.candidates import local_offsets_m  # noqa: E402
 from jaxgrav.match.contour import patch_coefficients  # noqa: E402
 from jaxgrav.match.entropy import coarse_offsets, entropy_config_for  # noqa: E402
 from jaxgrav.match.entropy_iccp import (  # noqa: E402
@@ -38,8 +38,10 @@ from jaxgrav.match.entropy_iccp import (  # noqa: E402
     paper_b_scenario,
 )
 from jaxgrav.match.iccp import _iccp_result  # noqa: E402
-from jaxgrav.scenarios import track_error_m  # noqa: E402
-from jaxgrav.sim import DEG_ARC_M  # noqa: E402
+from jaxgrav.sim import (  # noqa: E402
+    DEG_ARC_M,
+    track_error_m,
+)
 
 CHUNK = 250
 OFFSETS_DEG = (0.02, 0.03)

@@ -18,9 +18,10 @@ jax.config.update("jax_enable_x64", True)  # a script, not the library
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from jaxgrav import datasets, dov, sensitivity  # noqa: E402
-from jaxgrav.dov_track import paper_c_trajectory  # noqa: E402
+from jaxgrav import datasets, dov  # noqa: E402
+from jaxgrav.dov import sensitivity  # noqa: E402
 from jaxgrav.fields.harmonics import deflection  # noqa: E402
+from jaxgrav.scenarios.paper_c import paper_c_trajectory  # noqa: E402
 
 
 def rms(e):

@@ -5,7 +5,7 @@ hour be at most 1.05× the free INS's. The UKF and the Gaussian-sum UKF of
 ``examples/paper_d_ukf.py`` miss this in about 2 % of runs. This script runs those
 filters on the same experiment (same seeds, same scenario), computes the free INS
 covariance of each run (predict-only, same model and prior) and applies the guard
-of :mod:`jaxgrav.match.filters.guard` after the fact — the guard is a per-step,
+of :mod:`jaxgrav.filters.guard` after the fact — the guard is a per-step,
 causal function of the filter output, so it needs no second filter run — for a
 grid of thresholds fixed before looking at any result:
 
@@ -42,17 +42,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav.fields.pointmass import paper_d
-from jaxgrav.match.filters import (
-    FilterScenario,
-    StepInfo,
-    filter_scenario,
-    gaussian_sum,
-    initial_state,
-    run_filter,
-    run_steps,
-    ukf,
-)
-from jaxgrav.match.filters.guard import GuardConfig, free_covariance, guard_infos
+from jaxgrav.filters import StepInfo, gaussian_sum, run_filter, ukf
+from jaxgrav.filters.guard import GuardConfig, free_covariance, guard_infos
+from jaxgrav.scenarios import FilterScenario, filter_scenario, initial_state, run_steps
 
 WINDOW = 30  # readings in the NIS window (5 min at one reading per 10 s)
 

@@ -106,14 +106,13 @@ def filter_with_maps(title, truth, maps, runs, minutes, seed=0):
     worst ratio of the filter's RMS position error over the second half of the run to the
     free INS's, and the NEES.
     """
-    from jaxgrav.match.filters import (
+    from jaxgrav.filters import run_filter, ukf
+    from jaxgrav.scenarios import (
         FilterScenario,
         filter_scenario,
         initial_state,
-        run_filter,
         run_metrics,
         run_steps,
-        ukf,
     )
 
     with jax.enable_x64(True):

@@ -39,19 +39,8 @@ import numpy as np
 
 from jaxgrav import datasets
 from jaxgrav.fields.pointmass import paper_d
-from jaxgrav.match.filters import (
-    FilterScenario,
-    ekf,
-    filter_scenario,
-    gaussian_sum,
-    initial_state,
-    pmf,
-    run_filter,
-    run_metrics,
-    run_pmf,
-    run_steps,
-    ukf,
-)
+from jaxgrav.filters import ekf, gaussian_sum, pmf, run_filter, run_pmf, ukf
+from jaxgrav.scenarios import FilterScenario, filter_scenario, initial_state, run_metrics, run_steps
 
 
 def make_simulate(scenario):

@@ -1,18 +1,24 @@
 """jaxgrav: geophysical map-matching aided inertial navigation in JAX.
 
-The public API is re-exported here; see the README for a tour.
+The public API is re-exported here; see the README for a tour. Packages, bottom to
+top: ``constants``, ``geodesy``, ``interp``, ``grid`` → ``fields``, ``sim``,
+``datasets`` → ``match``, ``filters``, ``dov`` → ``scenarios`` → ``montecarlo`` →
+``cli`` (the command, not imported here).
 """
+
+import importlib
 
 from jaxgrav import (
     constants,
     datasets,
     dov,
     fields,
+    filters,
     geodesy,
     interp,
     match,
     montecarlo,
-    sensitivity,
+    scenarios,
     sim,
 )
 from jaxgrav.dov import LayeredGrid
@@ -42,6 +48,7 @@ __all__ = [
     "enu_to_geodetic",
     "eotvos",
     "fields",
+    "filters",
     "geodesy",
     "geodetic_to_ecef",
     "geodetic_to_enu",
@@ -52,6 +59,13 @@ __all__ = [
     "normal_gravity",
     "prime_vertical_radius",
     "sample",
-    "sensitivity",
+    "scenarios",
     "sim",
 ]
+
+
+def __getattr__(name):
+    # deprecated module paths, kept for one release
+    if name == "sensitivity":
+        return importlib.import_module("jaxgrav.sensitivity")
+    raise AttributeError(f"module 'jaxgrav' has no attribute {name!r}")

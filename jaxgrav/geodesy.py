@@ -18,6 +18,7 @@ __all__ = [
     "eotvos",
     "geodetic_to_ecef",
     "geodetic_to_enu",
+    "local_offsets_m",
     "meridian_radius",
     "normal_gravity",
     "prime_vertical_radius",
@@ -317,3 +318,24 @@ def enu_to_geodetic(east, north, up, origin):
     y = y0 + e[1] * east + n[1] * north + u[1] * up
     z = z0 + e[2] * east + n[2] * north + u[2] * up
     return ecef_to_geodetic(x, y, z)
+
+
+def local_offsets_m(lat, lon, lat_ref, lon_ref):
+    """North/east offsets (m) of points from reference points, with the reference's radii.
+
+    Parameters
+    ----------
+    lat, lon : Array
+        Points (degrees).
+    lat_ref, lon_ref : Array
+        Reference points (degrees), broadcast with the points.
+
+    Returns
+    -------
+    tuple of Array
+        ``(north, east)`` in metres.
+    """
+    north = (lat - lat_ref) * c.DEG * meridian_radius(lat_ref)
+    dlon = jnp.mod(lon - lon_ref + 180.0, 360.0) - 180.0
+    east = dlon * c.DEG * prime_vertical_radius(lat_ref) * jnp.cos(lat_ref * c.DEG)
+    return north, east

@@ -12,7 +12,7 @@ import numpy as np
 
 from jaxgrav._io import atomic_output
 
-__all__ = ["read_track_csv", "write_track_csv"]
+__all__ = ["csv_line", "read_track_csv", "write_track_csv"]
 
 
 def read_track_csv(path, required=(), optional=(), *, allow_nan=()):
@@ -105,3 +105,8 @@ def write_track_csv(path, columns, *, force=False, precision=9):
         w.writerow(list(arrays))
         for row in zip(*arrays.values(), strict=True):
             w.writerow(["" if not np.isfinite(v) else f"{v:.{precision}g}" for v in row])
+
+
+def csv_line(i):
+    """The file line number of data row ``i`` of a track CSV (the header is line 1)."""
+    return int(i) + 2

@@ -30,7 +30,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["available", "load", "path", "provenance"]
+import netCDF4
+import numpy as np
+import xarray as xr
+
+from jaxgrav.fields.harmonics import SphericalHarmonics
+from jaxgrav.grid import Grid
+
+__all__ = ["available", "load", "load_map", "path", "provenance"]
 
 _HERE = Path(__file__).resolve().parent
 
@@ -121,15 +128,11 @@ def load(name):
     ValueError
         Unknown name.
     """
-    import numpy as np
-    import xarray as xr
 
-    from jaxgrav.grid import Grid
 
     paths = path(name)
     if name == "ryukyu":
         return {key: Grid.from_netcdf(p, var="gravity_anomaly") for key, p in paths.items()}
-    from jaxgrav.fields.harmonics import SphericalHarmonics
 
     with xr.open_dataset(paths["dov"]) as ds:
         height = np.asarray(ds["height"].values, dtype=float)
@@ -168,10 +171,44 @@ def provenance(name):
     ValueError
         Unknown name.
     """
-    import netCDF4
 
     out = {}
     for key, p in path(name).items():
         with netCDF4.Dataset(p) as ds:
             out[key] = {k: _plain(ds.getncattr(k)) for k in ds.ncattrs()}
     return out
+
+
+def load_map(path, var=None, dataset_default="anomaly_2p5min"):
+    """A map by name or path: a shipped dataset (``ryukyu``, ``ryukyu:KEY``) or a NetCDF file.
+
+    The loader behind every ``--map`` option of the ``jaxgrav`` command.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A NetCDF grid with lat/lon coordinates, or a shipped dataset name from
+        :func:`available`, optionally ``NAME:KEY`` for one of its maps. An existing
+        file of that name wins over the dataset.
+    var : str, optional
+        The variable to read from a NetCDF file with several.
+    dataset_default : str
+        The dataset's map when no ``KEY`` is given (default the 2.5′ anomaly).
+
+    Returns
+    -------
+    Grid
+
+    Raises
+    ------
+    ValueError
+        The dataset has no map ``KEY``; and the errors of :meth:`Grid.from_netcdf`.
+    """
+    name, _, key = str(path).partition(":")
+    if name in available() and not Path(path).exists():
+        maps = load(name)
+        key = key or dataset_default
+        if key not in maps:
+            raise ValueError(f"dataset {name!r} has no map {key!r}; it has {sorted(maps)}")
+        return maps[key]
+    return Grid.from_netcdf(path, var=var)

@@ -21,11 +21,10 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from jaxgrav.constants import DEG
-from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.chains import kmin
 
-__all__ = ["CandidateSet", "iso_candidates", "lattice_candidates", "local_offsets_m"]
+__all__ = ["CandidateSet", "iso_candidates", "lattice_candidates"]
 
 
 class CandidateSet(NamedTuple):
@@ -58,27 +57,6 @@ class CandidateSet(NamedTuple):
     count: jax.Array
     overflow: jax.Array
     window_complete: jax.Array
-
-
-def local_offsets_m(lat, lon, lat_ref, lon_ref):
-    """North/east offsets (m) of points from reference points, with the reference's radii.
-
-    Parameters
-    ----------
-    lat, lon : Array
-        Points (degrees).
-    lat_ref, lon_ref : Array
-        Reference points (degrees), broadcast with the points.
-
-    Returns
-    -------
-    tuple of Array
-        ``(north, east)`` in metres.
-    """
-    north = (lat - lat_ref) * DEG * meridian_radius(lat_ref)
-    dlon = jnp.mod(lon - lon_ref + 180.0, 360.0) - 180.0
-    east = dlon * DEG * prime_vertical_radius(lat_ref) * jnp.cos(lat_ref * DEG)
-    return north, east
 
 
 def iso_candidates(grid, lat, lon, readings, *, half_size, capacity, delta, slope_factor=1.0):

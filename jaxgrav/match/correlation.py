@@ -24,7 +24,8 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._pytree import static_field
-from jaxgrav.match.candidates import iso_candidates, lattice_candidates, local_offsets_m
+from jaxgrav.geodesy import local_offsets_m
+from jaxgrav.match.candidates import iso_candidates, lattice_candidates
 from jaxgrav.match.chains import (
     compact,
     count_chains,

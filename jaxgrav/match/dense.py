@@ -35,8 +35,7 @@ import jax.numpy as jnp
 from jaxgrav import interp
 from jaxgrav._pytree import static_field
 from jaxgrav.constants import DEG
-from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-from jaxgrav.match.candidates import local_offsets_m
+from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
 from jaxgrav.match.lattice import interleave, patch_values
 from jaxgrav.match.offsets import means, offset_scores, track_frame
 from jaxgrav.match.refine import gauss_newton, residual_function

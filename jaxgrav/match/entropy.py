@@ -36,8 +36,8 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._pytree import static_field
+from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.grid import make_sampler
-from jaxgrav.match.candidates import local_offsets_m
 from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.result import MatchResult
 

@@ -21,8 +21,8 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav.constants import DEG
+from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.grid import make_sampler
-from jaxgrav.match.candidates import local_offsets_m
 from jaxgrav.match.contour import patch_coefficients, value_grad
 from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.entropy import (
@@ -41,8 +41,8 @@ from jaxgrav.match.iccp import (
     match_iccp,
 )
 from jaxgrav.match.result import STATUS, MatchResult
-from jaxgrav.match.scenario_b import PaperBScenario, paper_b_scenario
-from jaxgrav.scenarios import track_error_m
+from jaxgrav.scenarios.paper_b import PaperBScenario, paper_b_scenario
+from jaxgrav.sim import track_error_m
 
 __all__ = [
     "COMBINED_STATUS",

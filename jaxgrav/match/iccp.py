@@ -34,8 +34,7 @@ import jax.numpy as jnp
 
 from jaxgrav._pytree import static_field
 from jaxgrav.constants import DEG
-from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-from jaxgrav.match.candidates import local_offsets_m
+from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
 from jaxgrav.match.contour import (
     local_field,
     patch_coefficients,

@@ -193,7 +193,7 @@ def stencil_size_for(grid, lat, lon, step_tol_m, angle_tol_deg):
     -------
     int
     """
-    from jaxgrav.match.candidates import local_offsets_m
+    from jaxgrav.geodesy import local_offsets_m
 
     lat, lon = np.atleast_2d(np.asarray(lat, float)), np.atleast_2d(np.asarray(lon, float))
     steps = local_offsets_m(lat[:, 1:], lon[:, 1:], lat[:, :-1], lon[:, :-1])

@@ -15,6 +15,7 @@ from jaxgrav.sim.trajectory import (
     Track,
     random_start,
     straight_track,
+    track_error_m,
     track_from_heading,
     turning_track,
 )
@@ -33,6 +34,7 @@ __all__ = [
     "rayleigh_sigma",
     "sample_drift",
     "straight_track",
+    "track_error_m",
     "track_from_heading",
     "turning_track",
 ]

@@ -1,7 +1,7 @@
 """INS error model: Schuler-coupled error states, exact discretisation, simulation.
 
 One linear error model serves both the simulator and the filters of paper D
-(:mod:`jaxgrav.match.filters`). The state is the psi-angle error model of a
+(:mod:`jaxgrav.filters`). The state is the psi-angle error model of a
 local-level (north–east–down) strapdown INS, linearised about a slow vehicle
 (transport-rate terms of the vehicle speed are dropped: at 5 m/s they are 1e-6
 rad/s against Ω = 7.3e-5 rad/s), plus Gauss–Markov sensor errors and the

@@ -12,9 +12,16 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav.constants import DEG
-from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
 
-__all__ = ["Track", "random_start", "straight_track", "track_from_heading", "turning_track"]
+__all__ = [
+    "Track",
+    "random_start",
+    "straight_track",
+    "track_error_m",
+    "track_from_heading",
+    "turning_track",
+]
 
 
 class Track(NamedTuple):
@@ -148,3 +155,8 @@ def random_start(key, region, margin_deg=0.0):
     m = jnp.broadcast_to(jnp.asarray(margin_deg, dtype=float), (4,))
     u = jax.random.uniform(key, (2,))
     return s + m[0] + u[0] * (n - s - m[0] - m[1]), w + m[2] + u[1] * (e - w - m[2] - m[3])
+
+
+def track_error_m(lat, lon, truth):
+    """Mean horizontal distance (m) between positions and the true track."""
+    return jnp.mean(jnp.hypot(*local_offsets_m(lat, lon, truth.lat, truth.lon)))

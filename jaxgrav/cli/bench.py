@@ -1,0 +1,146 @@
+"""``jaxgrav bench``: every benchmark script as a subprocess, one Markdown table of ratios.
+
+Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
+"""
+
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jaxgrav
+from jaxgrav._io import atomic_output
+
+__all__ = ["add_parser", "cmd_bench", "default_bench_dir"]
+
+
+def add_parser(subparsers):
+    """Add the ``bench`` sub-command to an ``argparse`` sub-parser set."""
+    b = subparsers.add_parser("bench", help="run every benchmark script, write a Markdown table")
+    b.add_argument("--quick", action="store_true", help="pass --quick to every script")
+    b.add_argument("--dir", default=None,
+                   help="folder of scripts (default ./benchmarks, else the benchmarks folder "
+                        "of the repository holding the jaxgrav package)")
+    b.add_argument("--out", default="bench.md", help="Markdown report (default bench.md)")
+    b.add_argument("--timeout", type=float, default=3600.0,
+                   help="seconds allowed per script (default 3600)")
+    b.add_argument("--force", action="store_true", help="overwrite an existing report")
+    b.set_defaults(func=cmd_bench)
+    return b
+
+
+_COLS = ("bench", "case", "n", "jaxgrav_s", "baseline", "baseline_s", "ratio")
+
+
+def _fmt(v):
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return "" if v is None else str(v).replace("|", "\\|")
+
+
+def _report(command, rows, runs, failures):
+    lines = [
+        "# jaxgrav benchmarks", "",
+        f"Command: `{command}` on {platform.machine()}, {os.cpu_count()} cores, "
+        f"{time.strftime('%Y-%m-%d %H:%M')}. `ratio` = baseline_s / jaxgrav_s "
+        "(> 1: jaxgrav is faster). Times on a shared machine are noisy; ratios are "
+        "measured within one run.", "",
+        "| script | " + " | ".join(_COLS) + " | other fields |", "|" + "---|" * (len(_COLS) + 2),
+    ]
+    for script, row in rows:
+        other = ", ".join(f"{k}={_fmt(v)}" for k, v in row.items()
+                          if k not in _COLS and k != "machine")
+        other = other if len(other) <= 160 else other[:157] + "..."  # all in the JSON below
+        lines.append(f"| {script} | " + " | ".join(_fmt(row.get(c)) for c in _COLS)
+                     + f" | {other} |")
+    lines += ["", "## Scripts", "", "| script | status | seconds | JSON lines |",
+              "|---|---|---|---|"]
+    lines += [f"| {s} | {st} | {sec:.1f} | {n} |" for s, st, sec, n in runs]
+    if failures:
+        lines += ["", "## Failed scripts", ""]
+        for script, why, tail in failures:
+            lines += [f"### {script}: {why}", "", "```", tail, "```", ""]
+    lines += ["", "## Raw JSON lines", "", "```jsonl"]
+    lines += [json.dumps(row) for _, row in rows]
+    lines += ["```", ""]
+    return "\n".join(lines)
+
+
+def default_bench_dir():
+    """``benchmarks`` in the working directory, else next to the installed package.
+
+    The second is ``Path(jaxgrav.__file__).resolve().parents[1] / "benchmarks"``: the
+    repository's folder for a source checkout or an editable install.
+
+    Raises
+    ------
+    FileNotFoundError
+        Neither folder exists (e.g. jaxgrav installed from a wheel); names both.
+    """
+    here = Path("benchmarks")
+    repo = Path(jaxgrav.__file__).resolve().parents[1] / "benchmarks"
+    for d in (here, repo):
+        if d.is_dir():
+            return d
+    raise FileNotFoundError(
+        f"no benchmark scripts found: neither {str(here.resolve())!r} (the working directory) "
+        f"nor {str(repo)!r} (next to the jaxgrav package) is a folder; run from a jaxgrav "
+        "checkout or pass --dir")
+
+
+def cmd_bench(args):
+    """Run ``jaxgrav bench``: every ``--dir/*.py`` not starting with ``_``, as a subprocess."""
+    bdir, out = (default_bench_dir() if args.dir is None else Path(args.dir)), Path(args.out)
+    if not bdir.is_dir():
+        raise FileNotFoundError(f"--dir {str(bdir)!r} is not a folder of benchmark scripts")
+    scripts = sorted(p for p in bdir.glob("*.py") if not p.name.startswith("_"))
+    if not scripts:
+        raise ValueError(f"--dir {str(bdir)!r} has no benchmark scripts (*.py not starting "
+                         "with _)")
+    if out.exists() and not args.force:
+        raise FileExistsError(f"{str(out)!r} exists; pass --force to overwrite it")
+    rows, runs, failures = [], [], []
+    for i, script in enumerate(scripts, 1):
+        cmd = [sys.executable, str(script), *(["--quick"] if args.quick else [])]
+        print(f"[{i}/{len(scripts)}] {' '.join(cmd[1:])} ...", end=" ", flush=True)
+        t0 = time.perf_counter()
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=args.timeout)
+            stdout, stderr, code = proc.stdout, proc.stderr, proc.returncode
+        except subprocess.TimeoutExpired as err:
+            stdout = err.stdout.decode() if isinstance(err.stdout, bytes) else err.stdout or ""
+            stderr = err.stderr.decode() if isinstance(err.stderr, bytes) else err.stderr or ""
+            code = f"timeout after {args.timeout:g} s"
+        sec = time.perf_counter() - t0
+        found = []
+        for line in stdout.splitlines():
+            line = line.strip()
+            if line.startswith("{"):
+                try:
+                    row = json.loads(line)
+                except json.JSONDecodeError:
+                    continue
+                if isinstance(row, dict) and "bench" in row:
+                    found.append((script.name, row))
+        rows += found
+        if code != 0:
+            why = code if isinstance(code, str) else f"exit code {code}"
+            tail = "\n".join((stderr or stdout).strip().splitlines()[-15:])
+            failures.append((script.name, why, tail))
+            runs.append((script.name, f"FAILED ({why})", sec, len(found)))
+            print(f"FAILED ({why}, {sec:.0f} s)")
+        else:
+            runs.append((script.name, "ok", sec, len(found)))
+            print(f"ok ({len(found)} lines, {sec:.0f} s)")
+    command = "jaxgrav bench" + (" --quick" if args.quick else "")
+    with atomic_output(out, force=args.force) as tmp:
+        tmp.write_text(_report(command, rows, runs, failures))
+    print(f"wrote {out}: {len(rows)} results from {len(scripts) - len(failures)} of "
+          f"{len(scripts)} scripts")
+    if failures:
+        for script, why, tail in failures:
+            print(f"jaxgrav bench: {script} failed ({why}):\n{tail}", file=sys.stderr)
+        raise SystemExit(1)

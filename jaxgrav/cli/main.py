@@ -1,0 +1,74 @@
+"""The ``jaxgrav`` command.
+
+Sub-commands
+------------
+``demo``            the main job on the shipped data (README quick start)
+``match``           match a track CSV against a map (papers A and B), write JSON
+``simulate``        write a track CSV (and its truth) from a matching scenario
+``filter``          gravity/INS filtering of a track CSV: UKF, EKF, Gaussian sum, PMF (paper D)
+``simulate-filter`` write a track CSV (and its truth) from paper D's filtering scenario
+``sample``          sample a map along a track CSV
+``dov``             deflection of the vertical along a track (paper C)
+``montecarlo``      Monte Carlo runs of a method over all devices; NetCDF, summary, PNG
+``bench``           run every benchmark script; Markdown table of ratios
+``data egm2008``    rebuild the shipped EGM2008 regional files (extra ``egm2008``)
+
+Errors in user input are reported as one line on stderr with exit code 2.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+import jax
+
+from jaxgrav.cli import bench, demo, dov, match, montecarlo
+from jaxgrav.cli import filter as filtering
+from jaxgrav.fields import egm2008
+
+__all__ = ["build_parser", "main"]
+
+
+def _enable_x64():
+    jax.config.update("jax_enable_x64", True)  # the CLI may, at start (DESIGN.md, Precision)
+
+
+def _cmd_data_egm2008(args):
+    paths = egm2008.build(args.region, Path(args.out), force=args.force)
+    for p in paths:
+        print(f"wrote {p}")
+
+
+def build_parser():
+    """The argument parser of the ``jaxgrav`` command."""
+    p = argparse.ArgumentParser(prog="jaxgrav", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    demo.add_parser(sub)
+    match.add_parsers(sub)
+    dov.add_parser(sub)
+    filtering.add_parsers(sub)
+    montecarlo.add_parser(sub)
+    bench.add_parser(sub)
+
+    data = sub.add_parser("data", help="build shipped data sets")
+    dsub = data.add_subparsers(dest="source", required=True)
+    e = dsub.add_parser("egm2008", help="EGM2008 regional grids (needs jaxgrav[egm2008])")
+    e.add_argument("--region", default="all", help="ryukyu, qinling or all")
+    e.add_argument("--out", required=True, help="output folder")
+    e.add_argument("--force", action="store_true", help="overwrite existing files")
+    e.set_defaults(func=_cmd_data_egm2008)
+    return p
+
+
+def main(argv=None):
+    """Entry point of the ``jaxgrav`` command; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    _enable_x64()
+    try:
+        args.func(args)
+    except (ValueError, FileExistsError, FileNotFoundError, ImportError) as err:
+        print(f"jaxgrav {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    return 0
+

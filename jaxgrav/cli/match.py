@@ -1,0 +1,222 @@
+"""``jaxgrav match``, ``jaxgrav simulate`` and ``jaxgrav sample``: one track against a map.
+
+Wire into :mod:`jaxgrav.cli` with ``add_parsers(sub)``.
+"""
+
+import json
+import math
+import sys
+
+import jax
+import numpy as np
+
+from jaxgrav._io import atomic_output
+from jaxgrav.constants import KNOT
+from jaxgrav.datasets import load_map
+from jaxgrav.geodesy import eotvos
+from jaxgrav.match import METHODS_B, match_track, match_track_b, status_messages, status_messages_b
+from jaxgrav.scenarios import MatchingScenario, matching_scenario
+from jaxgrav.sim import DEG_ARC_M, rayleigh_quantile
+from jaxgrav.tracks import read_track_csv, write_track_csv
+
+__all__ = ["ENTROPY_HALF_SIZE", "add_parsers"]
+
+ENTROPY_HALF_SIZE = 20
+"""Default ``--entropy-half-size`` (as ``examples/paper_b_entropy_iccp.py``)."""
+
+
+def add_parsers(sub):
+    """Add the ``match``, ``simulate`` and ``sample`` sub-commands to an ``argparse`` set."""
+    m = sub.add_parser("match", help="match a track CSV against a map (papers A and B)")
+    m.add_argument("--map", required=True,
+                   help="NetCDF grid with lat/lon coordinates, or a shipped map (ryukyu, "
+                        "ryukyu:anomaly_0p5deg)")
+    m.add_argument("--var", default=None, help="variable to read when the file has several")
+    m.add_argument("--track", required=True,
+                   help="CSV: t (s), lat, lon (INS, degrees), gravity (mGal) or magnetic "
+                        "(nT); optional v_east, v_north (m/s), drift_radius (degrees)")
+    m.add_argument("--out", required=True, help="result JSON")
+    m.add_argument("--method", choices=("dense", "chains", "entropy", "iccp", "entropy+iccp"),
+                   default="dense",
+                   help="dense (default, most accurate), chains (paper A's constrained "
+                        "iso-point chains), or paper B's entropy, iccp, entropy+iccp")
+    m.add_argument("--drift-radius", type=float, default=None,
+                   help="largest INS drift (degrees of arc); default: the track's "
+                        "drift_radius column, else 0.05")
+    m.add_argument("--noise", type=float, default=1.0,
+                   help="reading noise sigma (mGal, or nT for a magnetic track)")
+    m.add_argument("--bias-sigma", type=float, default=None,
+                   help="prior sigma of the reading bias (mGal); default 3 with velocities, "
+                        "else free")
+    m.add_argument("--max-rotation", type=float, default=None, metavar="DEG",
+                   help="iccp, entropy+iccp: largest INS heading error (degrees, 0-180), the "
+                        "bound on ICCP's rotation (library max_rotation_deg); default 90, "
+                        "i.e. no bound that matters. The README's paper B numbers use 2 with "
+                        "--drift-radius 0.035")
+    m.add_argument("--entropy-half-size", type=int, default=ENTROPY_HALF_SIZE, metavar="N",
+                   help="entropy, entropy+iccp: at most N offsets per side, (2N+1)^2 in all "
+                        f"(default {ENTROPY_HALF_SIZE}, as the README's numbers); on fine maps "
+                        "the offset spacing grows instead")
+    m.add_argument("--refine", type=int, default=1,
+                   help="refine the map by this factor first (chains: paper A used 100)")
+    m.add_argument("--no-eotvos", action="store_true",
+                   help="do not Eötvös-correct the readings even if velocities are given")
+    m.add_argument("--force", action="store_true", help="overwrite an existing output")
+    m.set_defaults(func=_cmd_match)
+
+    sim_p = sub.add_parser("simulate", help="write a track CSV from a matching scenario")
+    sim_p.add_argument("--map", default="ryukyu",
+                       help="truth map: NetCDF grid or shipped map (default ryukyu, 2.5')")
+    sim_p.add_argument("--var", default=None)
+    sim_p.add_argument("--out", required=True, help="track CSV (INS fixes and readings)")
+    sim_p.add_argument("--truth", default=None, help="also write the true track here")
+    sim_p.add_argument("--n", type=int, default=30, help="fixes (default 30)")
+    sim_p.add_argument("--dt", type=float, default=120.0, help="interval (s, default 120)")
+    sim_p.add_argument("--v-east", type=float, default=10.0, help="knots (default 10)")
+    sim_p.add_argument("--v-north", type=float, default=10.0, help="knots (default 10)")
+    sim_p.add_argument("--drift", type=float, default=0.035,
+                       help="INS drift (degrees of arc, default 0.035)")
+    sim_p.add_argument("--drift-law", choices=("fixed", "rayleigh"), default="fixed",
+                       help="fixed: the drift is --drift; rayleigh: --drift is the Rayleigh "
+                            "scale and the search radius its --probability quantile")
+    sim_p.add_argument("--probability", type=float, default=0.99,
+                       help="Rayleigh quantile written as drift_radius (default 0.99)")
+    sim_p.add_argument("--noise", type=float, default=1.0, help="reading noise (mGal)")
+    sim_p.add_argument("--bias", type=float, default=0.0, help="gravimeter bias (mGal)")
+    sim_p.add_argument("--seed", type=int, default=0)
+    sim_p.add_argument("--force", action="store_true")
+    sim_p.set_defaults(func=_cmd_simulate)
+
+    s = sub.add_parser("sample", help="sample a map along a track CSV")
+    s.add_argument("--map", required=True, help="NetCDF grid with lat/lon coordinates")
+    s.add_argument("--var", default=None, help="variable to read when the file has several")
+    s.add_argument("--track", required=True, help="CSV with lat, lon columns (degrees)")
+    s.add_argument("--out", required=True, help="output CSV (track columns + sampled column)")
+    s.add_argument("--method", choices=("bilinear", "bicubic"), default="bicubic")
+    s.add_argument("--column", default="map", help="name of the added column (default map)")
+    s.add_argument("--force", action="store_true", help="overwrite an existing output")
+    s.set_defaults(func=_cmd_sample)
+
+
+def _cmd_sample(args):
+
+    grid = load_map(args.map, args.var)
+    track = read_track_csv(args.track, required=("lat", "lon"))
+    values = np.asarray(grid.sample(track["lat"], track["lon"], args.method, strict=True))
+    cols = dict(track)
+    cols[args.column] = values
+    write_track_csv(args.out, cols, force=args.force)
+    print(f"wrote {args.out}: {values.size} samples of {grid.name or 'map'} ({args.method})")
+
+
+def _cmd_match(args):
+
+
+    _check_match_args(args)
+    grid = load_map(args.map, args.var)
+    track = read_track_csv(args.track, required=("t", "lat", "lon"))
+    field = "magnetic" if "magnetic" in track else "gravity"
+    if field not in track:
+        raise ValueError(f"track file {str(args.track)!r} needs a 'gravity' (mGal) or "
+                         f"'magnetic' (nT) column; it has {sorted(track)}")
+    if args.drift_radius is not None:
+        radius_deg = args.drift_radius
+    elif "drift_radius" in track and np.isfinite(track["drift_radius"]).any():
+        radius_deg = float(np.nanmax(track["drift_radius"]))
+    else:
+        radius_deg = 0.05
+    if args.refine > 1:
+        grid = grid.refine(args.refine)
+    has_v = (field == "gravity" and "v_east" in track and "v_north" in track
+             and not args.no_eotvos)
+    if args.method in METHODS_B:
+        z = track[field]
+        if has_v:
+            z = z + np.asarray(eotvos(track["lat"], track["v_east"], track["v_north"]))
+        max_rotation = 90.0 if args.max_rotation is None else args.max_rotation
+        result = match_track_b(grid, track["lat"], track["lon"], z, method=args.method,
+                               drift_radius_m=radius_deg * DEG_ARC_M, noise=args.noise,
+                               max_rotation_deg=max_rotation,
+                               entropy_half_size=args.entropy_half_size, warn=False)
+        messages = status_messages_b(int(result.status))
+    else:
+        if field != "gravity":
+            raise ValueError(f"--method {args.method} matches gravity; use entropy, iccp or "
+                             "entropy+iccp for a magnetic track")
+        result = match_track(
+            grid, track["lat"], track["lon"], track["gravity"], method=args.method,
+            drift_radius_m=radius_deg * DEG_ARC_M, noise_mgal=args.noise,
+            v_east=track["v_east"] if has_v else None,
+            v_north=track["v_north"] if has_v else None,
+            bias_sigma_mgal=args.bias_sigma, warn=False,
+        )
+        messages = status_messages(int(result.status))
+    r = {k: np.asarray(v).tolist() for k, v in result._asdict().items()}
+    r["status_messages"] = messages
+    r.update(method=args.method, field=field, map=str(args.map), track=str(args.track),
+             drift_radius_deg=radius_deg, eotvos_corrected=has_v)
+    if args.method in METHODS_B:
+        r.update(max_rotation_deg=max_rotation, entropy_half_size=args.entropy_half_size)
+    with atomic_output(args.out, force=args.force) as tmp:
+        tmp.write_text(json.dumps(r, indent=1))
+    unit = "nT" if field == "magnetic" else "mGal"
+    print(f"wrote {args.out}: {args.method} match of {len(track['lat'])} fixes, offset "
+          f"{float(result.offset_north_m):.0f} m north, {float(result.offset_east_m):.0f} m "
+          f"east, rotation {float(result.rotation_deg):.2f} deg, score "
+          f"{float(result.score):.3g} {unit}^2")
+    for msg in r["status_messages"]:
+        print(f"warning: {msg}", file=sys.stderr)
+
+
+def _check_match_args(args):
+    """Numeric options of ``match``: one clear error naming the option and the value."""
+    def bad(option, value, expected):
+        raise ValueError(f"{option} must be {expected}; got {value!r}")
+
+    if args.drift_radius is not None and not (math.isfinite(args.drift_radius)
+                                              and args.drift_radius > 0):
+        bad("--drift-radius", args.drift_radius, "a positive number of degrees of arc")
+    if not (math.isfinite(args.noise) and args.noise >= 0):
+        bad("--noise", args.noise, "a finite standard deviation >= 0 (mGal or nT)")
+    if args.refine < 1:
+        bad("--refine", args.refine, "an integer factor >= 1")
+    if args.max_rotation is not None:
+        if args.method not in ("iccp", "entropy+iccp"):
+            raise ValueError(f"--max-rotation bounds ICCP's rotation; it has no effect with "
+                             f"--method {args.method} (use iccp or entropy+iccp)")
+        if not (math.isfinite(args.max_rotation) and 0 <= args.max_rotation <= 180):
+            bad("--max-rotation", args.max_rotation,
+                "the INS heading-error bound in degrees, between 0 and 180")
+    if args.entropy_half_size != ENTROPY_HALF_SIZE and args.method not in ("entropy",
+                                                                       "entropy+iccp"):
+        raise ValueError(f"--entropy-half-size sizes the entropy stage; it has no effect with "
+                         f"--method {args.method} (use entropy or entropy+iccp)")
+    if not 1 <= args.entropy_half_size <= 100:
+        bad("--entropy-half-size", args.entropy_half_size, "an integer between 1 and 100")
+
+
+def _cmd_simulate(args):
+
+    grid = load_map(args.map, args.var)
+    w, e, s, n = grid.extent
+    scen = MatchingScenario(
+        region=(s, n, w, e), v_east=args.v_east * KNOT, v_north=args.v_north * KNOT,
+        dt=args.dt, drift_deg=args.drift, noise_mgal=args.noise, bias_mgal=args.bias,
+        n_fixes=args.n, drift_law=args.drift_law,
+    )
+    if args.n < 2:
+        raise ValueError(f"--n must be at least 2; got {args.n}")
+    run = matching_scenario(jax.random.key(args.seed), grid, scen)
+    truth = run.truth
+    write_track_csv(args.out, {
+        "t": truth.t, "lat": run.ins_lat, "lon": run.ins_lon, "gravity": run.readings,
+        "v_east": truth.v_east, "v_north": truth.v_north,
+        "drift_radius": np.full(args.n, 1.2 * args.drift if args.drift_law == "fixed"
+                                else float(rayleigh_quantile(args.drift, args.probability))),
+    }, force=args.force)
+    if args.truth:
+        write_track_csv(args.truth, {"t": truth.t, "lat": truth.lat, "lon": truth.lon},
+                        force=args.force)
+    drift_m = float(np.hypot(run.drift_north_m, run.drift_east_m).mean())
+    also = f" and {args.truth}" if args.truth else ""
+    print(f"wrote {args.out}{also}: {args.n} fixes, INS drift {drift_m:.0f} m")

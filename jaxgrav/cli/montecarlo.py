@@ -1,0 +1,256 @@
+"""``jaxgrav montecarlo``: Monte Carlo runs of a named method on every device.
+
+Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``; the command function is
+:func:`cmd_montecarlo`.
+"""
+
+import json
+import os
+import time
+from pathlib import Path
+
+import jax
+import matplotlib.pyplot as plt
+import numpy as np
+
+from jaxgrav import __version__, montecarlo
+from jaxgrav.datasets import load_map
+from jaxgrav.montecarlo.methods import BUILDERS, FILTER_METHODS, METRICS, build
+from jaxgrav.plot import save_figure
+
+__all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize"]
+
+PERCENTILES = (5, 25, 50, 75, 95)
+
+
+def add_parser(subparsers):
+    """Add the ``montecarlo`` sub-command to an ``argparse`` sub-parser set."""
+    m = subparsers.add_parser("montecarlo", help="Monte Carlo runs of a method on all devices")
+    m.add_argument("--method", required=True, choices=sorted(BUILDERS),
+                   help="correlation: paper A dense matcher; chains: paper A's iso-point "
+                        "chains (map refined to 0.005 deg nodes); entropy, iccp, "
+                        "entropy+iccp: paper B's stages alone and combined; ukf, ekf, gsf "
+                        "(Gaussian-sum UKF), pmf (grid point-mass filter) and the guarded "
+                        "ukf-guard, gsf-guard: paper D's filters (over its three point "
+                        "masses, or over --map)")
+    m.add_argument("--runs", type=int, required=True, help="number of simulated runs")
+    m.add_argument("--chunk", type=int, default=None,
+                   help="runs per compiled call (bounds memory; default 256)")
+    m.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
+    m.add_argument("--devices", type=int, default=None,
+                   help="use this many devices (default all; on a CPU the host is split "
+                        "into this many devices when JAX has not started yet)")
+    m.add_argument("--map", default=None,
+                   help="map simulated and matched or filtered, a NetCDF grid or shipped "
+                        "map (mGal); matchers: default ryukyu, the 2.5' EGM2008 anomaly; "
+                        "filters: default paper-d, paper D's three point masses; over a map "
+                        "straight tracks in random directions inside it")
+    m.add_argument("--drift", type=float, default=None,
+                   help="INS error (degrees of arc); correlation: drift radius (default "
+                        "0.035, also chains); entropy, iccp, entropy+iccp: offset uniform in "
+                        "[2/3, 1] x drift (default 0.03); filters: initial position error "
+                        "(default 0.018 = 2 km)")
+    m.add_argument("--noise", type=float, default=None,
+                   help="reading noise sigma (mGal, default 1)")
+    m.add_argument("--fixes", type=int, default=None,
+                   help="fixes per track (default 30 correlation and chains, 60 entropy, "
+                        "iccp and entropy+iccp); "
+                        "filters: readings 10 s apart, start included (default 721 = 2 h)")
+    m.add_argument("--out", required=True,
+                   help="results NetCDF (one value per run); a PNG of the errors is written "
+                        "next to it with suffix .png")
+    m.add_argument("--no-progress", action="store_true", help="no progress bar")
+    m.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    m.set_defaults(func=cmd_montecarlo)
+
+    return m
+
+
+# ----------------------------------------------------------------------- montecarlo
+FAILURE_RATIO = {"matcher": 1.0 / 3.0, "filter": 1.05}
+"""A run fails when its error exceeds this multiple of the INS error: a matcher
+must cut the error to a third (paper A's goal), a filter must do no harm (paper D's
+"at most 1.05x the INS")."""
+
+
+def summarize(results, kind="matcher"):
+    """Summary of per-run errors.
+
+    Parameters
+    ----------
+    results : dict
+        ``ins_err_m``, ``err_m`` (m) and ``status``, each of shape ``(n_runs,)``;
+        for filters also ``nees``.
+    kind : {"matcher", "filter"}
+        Picks the failure criterion, :data:`FAILURE_RATIO`.
+
+    Returns
+    -------
+    dict
+        ``runs``; ``ins_err_m``, ``err_m`` and ``ratio`` (error / INS error, per run),
+        each a dict of ``mean`` and ``p5 … p95`` over finite values; ``failure_ratio``
+        and ``failure_rate`` (error > failure_ratio × INS, or not finite),
+        ``flagged_rate`` (status ≠ 0), ``improved_rate`` (error < INS), ``nonfinite``
+        (count); with ``nees`` in ``results`` also ``nees`` (its statistics).
+    """
+    if kind not in FAILURE_RATIO:
+        raise ValueError(f"kind must be one of {sorted(FAILURE_RATIO)}; got {kind!r}")
+    limit = FAILURE_RATIO[kind]
+    ins = np.asarray(results["ins_err_m"], float)
+    err = np.asarray(results["err_m"], float)
+    status = np.asarray(results["status"])
+    ratio = err / np.where(ins > 0, ins, np.nan)
+
+    def stats(v):
+        v = v[np.isfinite(v)]
+        if not v.size:
+            return {"mean": float("nan"), **{f"p{p}": float("nan") for p in PERCENTILES}}
+        return {"mean": float(v.mean()),
+                **{f"p{p}": float(q) for p, q in zip(PERCENTILES, np.percentile(v, PERCENTILES),
+                                                     strict=True)}}
+
+    finite = np.isfinite(err)
+    out = dict(
+        runs=int(err.size),
+        ins_err_m=stats(ins),
+        err_m=stats(err),
+        ratio=stats(ratio),
+        failure_ratio=float(limit),
+        failure_rate=float(np.mean(~finite | (err > limit * ins))),
+        flagged_rate=float(np.mean(status != 0)),
+        improved_rate=float(np.mean(finite & (err < ins))),
+        nonfinite=int((~finite).sum()),
+    )
+    if "nees" in results:
+        out["nees"] = stats(np.asarray(results["nees"], float))
+    return out
+
+
+def format_summary(s):
+    """A fixed-width table of :func:`summarize`'s output."""
+    cols = ["mean", *[f"p{p}" for p in PERCENTILES]]
+    head = f"{'':<16}" + "".join(f"{'median' if c == 'p50' else c:>10}" for c in cols)
+    rows = [head]
+    for label, key, fmt in (("INS error (m)", "ins_err_m", "{:>10.0f}"),
+                            ("error (m)", "err_m", "{:>10.0f}"),
+                            ("error / INS", "ratio", "{:>10.3f}")):
+        rows.append(f"{label:<16}" + "".join(fmt.format(s[key][c]) for c in cols))
+    if "nees" in s:
+        rows.append(f"{'position NEES':<16}" + "".join(f"{s['nees'][c]:>10.2f}" for c in cols)
+                    + "   (2 expected)")
+    limit = s["failure_ratio"]
+    bound = "INS/3" if abs(limit - 1 / 3) < 1e-12 else f"{limit:g} x INS"
+    rows.append(f"failure rate (error > {bound} or not finite): {100 * s['failure_rate']:.1f} %; "
+                f"improved on the INS: {100 * s['improved_rate']:.1f} %; "
+                f"status flagged: {100 * s['flagged_rate']:.1f} %")
+    return "\n".join(rows)
+
+
+def _plot_errors(results, summary, title, path, force, label="matched",
+                 xlabel="mean track error (m)"):
+    ins = np.asarray(results["ins_err_m"], float)
+    err = np.asarray(results["err_m"], float)
+    pos = np.concatenate([ins, err])
+    pos = pos[np.isfinite(pos) & (pos > 0)]
+    lo, hi = (pos.min(), pos.max()) if pos.size else (1.0, 10.0)
+    bins = np.geomspace(max(lo, 1e-3), max(hi, lo * 1.01, 1e-3 * 1.01), 40)
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(12, 4.5))
+    for name, v in (("INS", ins), (label, err)):
+        v = v[np.isfinite(v)]
+        ax0.hist(v, bins=bins, alpha=0.6, label=f"{name} (median {np.median(v):.0f} m)"
+                 if v.size else name)
+        ax1.plot(np.sort(v), np.arange(1, v.size + 1) / max(v.size, 1), label=name)
+    ax0.set_xscale("log")
+    ax0.set_xlabel(xlabel)
+    ax0.set_ylabel("runs")
+    ax0.legend()
+    ax1.set_xscale("log")
+    ax1.set_xlabel(xlabel)
+    ax1.set_ylabel("fraction of runs ≤ error")
+    ax1.grid(True, which="both", alpha=0.3)
+    ax1.legend(loc="lower right")
+    ax0.set_title(title)
+    ax1.set_title(f"error > {summary['failure_ratio']:.3g} x INS: "
+                  f"{100 * summary['failure_rate']:.1f} %, median error / INS "
+                  f"{summary['ratio']['p50']:.3f}")
+    save_figure(fig, path, force=force)
+
+
+def _split_cpu(n):
+    """Ask for ``n`` CPU devices if JAX has not started its backend yet (else no-op)."""
+    if "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", ""):
+        return
+    try:
+        if n > 1:
+            jax.config.update("jax_num_cpu_devices", n)
+    except RuntimeError:  # the backend already runs (e.g. called from Python); keep it
+        pass
+
+
+def _command(args):
+    opts = [("--method", args.method), ("--runs", args.runs), ("--chunk", args.chunk),
+            ("--seed", args.seed), ("--devices", args.devices), ("--map", args.map),
+            ("--drift", args.drift), ("--noise", args.noise), ("--fixes", args.fixes)]
+    return "jaxgrav montecarlo " + " ".join(f"{k} {v}" for k, v in opts if v is not None)
+
+
+def cmd_montecarlo(args):
+    """Run ``jaxgrav montecarlo`` (x64 is enabled by the CLI entry point)."""
+    if args.devices is not None:
+        if args.devices < 1:
+            raise ValueError(f"--devices must be at least 1; got {args.devices}")
+        _split_cpu(args.devices)
+    out = Path(args.out)
+    png = out.with_suffix(".png")
+    if out.suffix == ".png":
+        raise ValueError(f"--out must be a NetCDF file (the PNG goes next to it); got {out}")
+    existing = [str(p) for p in (out, png) if p.exists()]
+    if existing and not args.force:
+        raise FileExistsError(f"{existing} exist; pass --force to overwrite")
+    for name, value in (("--runs", args.runs), ("--chunk", args.chunk)):
+        if value is not None and value < 1:
+            raise ValueError(f"{name} must be a positive number of runs; got {value}")
+    kind = "filter" if args.method in FILTER_METHODS else "matcher"
+    if args.map is not None:
+        map_name = str(args.map)
+    else:  # the method's default (jaxgrav.montecarlo.build)
+        map_name = "paper-d" if kind == "filter" else "ryukyu"
+    grid = (None if args.map is None or (kind == "filter" and args.map == "paper-d")
+            else load_map(args.map, None))
+    spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes)
+    n_dev = args.devices or len(jax.devices())
+    print(f"jaxgrav montecarlo: {args.method} ({spec.settings['description']}), {args.runs} "
+          f"runs on {n_dev} {jax.devices()[0].platform} device(s), "
+          + ("paper D's point masses" if map_name == "paper-d" else f"map {map_name}"))
+    t0 = time.perf_counter()
+    results = montecarlo.run(spec.fn, jax.random.key(args.seed), args.runs, chunk=args.chunk,
+                             devices=args.devices, progress=not args.no_progress,
+                             args=spec.args)
+    seconds = time.perf_counter() - t0
+    missing = [k for k in METRICS if k not in results]
+    if missing:
+        raise ValueError(f"method {args.method!r} does not return {missing}")
+    summary = summarize(results, kind)
+    print(format_summary(summary))
+    print(f"{args.runs} runs in {seconds:.1f} s ({args.runs / seconds:.1f} runs/s, "
+          "compilation included)")
+    attrs = dict(
+        title=f"jaxgrav montecarlo --method {args.method}", method=args.method,
+        runs=args.runs, seed=args.seed, chunk=args.chunk or montecarlo.DEFAULT_CHUNK,
+        devices=n_dev, map=map_name,
+        seconds=round(seconds, 3),
+        jax_version=jax.__version__, jaxgrav_version=__version__,
+        command=_command(args),
+        status_bits=json.dumps({str(k): v for k, v in spec.status_bits.items()}),
+        **{f"setting_{k}": v for k, v in spec.settings.items()},
+        **{f"summary_{k}": v for k, v in summary.items() if not isinstance(v, dict)},
+        **{f"summary_{k}_{c}": v for k, d in summary.items() if isinstance(d, dict)
+           for c, v in d.items()},
+    )
+    montecarlo.write_netcdf(results, out, attrs=attrs, force=args.force)
+    if kind == "filter":
+        _plot_errors(results, summary, f"{args.method}: {args.runs} runs", png, args.force,
+                     label="filtered", xlabel="RMS position error, second half of the run (m)")
+    else:
+        _plot_errors(results, summary, f"{args.method}: {args.runs} runs", png, args.force)
+    print(f"wrote {out} and {png}")

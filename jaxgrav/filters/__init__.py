@@ -1,0 +1,61 @@
+"""Gravity/INS filtering: UKF, EKF, Gaussian sum and a grid point-mass filter.
+
+All filters share the measurement of :mod:`jaxgrav.filters.model` and the
+INS error model of :mod:`jaxgrav.sim.ins`; each is an optax-style ``init`` /
+``update`` pair run with ``lax.scan`` (:func:`run_filter`; ``every=k`` updates only on
+the reading steps of a fixed stride) and vmapped over runs. :func:`guard_run` holds
+back the position corrections in weakly observed directions (paper D's "no harm").
+"""
+
+from jaxgrav.filters.api import FILTER_METHODS, filter_track
+from jaxgrav.filters.gaussian_sum import GaussianSumState, gaussian_sum, split_prior
+from jaxgrav.filters.guard import GuardConfig, free_covariance, guard_infos, guard_run
+from jaxgrav.filters.kalman import ekf, predict, sigma_weights, ukf
+from jaxgrav.filters.model import (
+    STATUS_FILTER,
+    Dynamics,
+    Filter,
+    FilterState,
+    MapPlusBias,
+    Step,
+    StepInfo,
+    gravity_measurement,
+    map_anomaly,
+    map_at_error,
+    predict_only,
+    run_filter,
+    status_messages_filter,
+)
+from jaxgrav.filters.pmf import PMFState, pmf, run_pmf
+
+__all__ = [
+    "FILTER_METHODS",
+    "STATUS_FILTER",
+    "Dynamics",
+    "Filter",
+    "FilterState",
+    "GaussianSumState",
+    "GuardConfig",
+    "MapPlusBias",
+    "PMFState",
+    "Step",
+    "StepInfo",
+    "ekf",
+    "filter_track",
+    "free_covariance",
+    "gaussian_sum",
+    "gravity_measurement",
+    "guard_infos",
+    "guard_run",
+    "map_anomaly",
+    "map_at_error",
+    "pmf",
+    "predict",
+    "predict_only",
+    "run_filter",
+    "run_pmf",
+    "sigma_weights",
+    "split_prior",
+    "status_messages_filter",
+    "ukf",
+]

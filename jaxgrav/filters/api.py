@@ -1,0 +1,158 @@
+"""Validated single-track filtering: :func:`filter_track`, the engine of ``jaxgrav filter``.
+
+As :mod:`jaxgrav.match.api` is for matching: the entry point takes one track in
+degrees, builds the INS error model's prior and dynamics, runs a filter of this
+package (UKF, EKF, Gaussian sum or point-mass) once jitted, and returns the
+corrected positions with their 1-σ and per-row status.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrav.constants import DEG
+from jaxgrav.filters.gaussian_sum import gaussian_sum
+from jaxgrav.filters.guard import GuardConfig, guard_run
+from jaxgrav.filters.kalman import ekf, ukf
+from jaxgrav.filters.model import Dynamics, Step, run_filter
+from jaxgrav.filters.pmf import pmf, run_pmf
+from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.sim.ins import INSErrorModel, initial_covariance, transition
+from jaxgrav.tracks import csv_line
+
+__all__ = ["FILTER_METHODS", "PMF_CELLS", "PMF_Q_POS", "PMF_SPAN_SIGMA", "filter_track",
+           "reading_stride"]
+
+FILTER_METHODS = ("ukf", "ekf", "gsf", "pmf")
+"""The filters :func:`filter_track` runs."""
+PMF_CELLS = 61
+"""Cells per axis of the point-mass filter's grid."""
+PMF_SPAN_SIGMA = 4.0
+"""The grid spans ±this many ``--sigma-pos``: at ±3σ the boundary cells would already
+hold 0.2 % of the prior (the ``grid_edge`` flag's threshold is 0.1 %)."""
+PMF_Q_POS = 4.0
+"""The point-mass filter's random-walk density (m²/s) at ``sigma_vel = 0.2/√2 m/s``;
+it scales with ``sigma_vel²``."""
+
+
+def reading_stride(rows, where):
+    """Rows between readings for the point-mass filter (1 for a single reading)."""
+    if rows.size < 2:
+        return 1
+    gaps = np.diff(rows)
+    every = int(gaps[0])
+    bad = np.flatnonzero(gaps != every)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{where}: --method pmf needs gravity readings at a fixed row stride; readings on "
+            f"lines {csv_line(rows[0])} and {csv_line(rows[1])} set a stride of {every} rows, but "
+            f"the next reading after line {csv_line(rows[i])} is on line {csv_line(rows[i + 1])} "
+            "(use ukf, ekf or gsf for irregular readings)")
+    return every
+
+
+
+def _prior_and_dynamics(lat_mean, dt, sigma_pos, sigma_vel):
+    model = INSErrorModel()
+    return initial_covariance(model, sigma_pos, sigma_vel), Dynamics(*transition(model,
+                                                                               lat_mean, dt))
+
+
+def _gaussian_run(kind, field, dynamics, p0, steps, guard):
+    filt = {"ukf": ukf, "ekf": ekf, "gsf": lambda: gaussian_sum(ukf(), 3)}[kind]()
+    _, infos = run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps)
+    # guard: a traced ratio (inf = off), so one compilation serves both
+    guarded = guard_run(infos, dynamics, p0, GuardConfig(guard, guard))
+    return jax.tree.map(lambda g, a: jnp.where(jnp.isfinite(guard), g, a), guarded, infos)
+
+
+def _pmf_run(field, dt, p0, cell_m, q_pos, steps, every):
+    filt = pmf(PMF_CELLS, cell_m, q_pos=q_pos)
+    _, infos = run_pmf(filt, field, dt, jnp.zeros(p0.shape[0]), p0, steps, every)
+    return infos
+
+
+_JITTED = {}
+
+
+def _jitted(name):
+    """Module-level jitted runners (one compilation per process and shapes)."""
+    if name not in _JITTED:
+        fn, static = {"prior": (_prior_and_dynamics, ()),
+                      "gaussian": (_gaussian_run, ("kind",)),
+                      "pmf": (_pmf_run, ("every",))}[name]
+        _JITTED[name] = jax.jit(fn, static_argnames=static)
+    return _JITTED[name]
+
+
+def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
+                 sigma_vel=0.1414, sigma_gravity=1.0, guard=None, where="track"):
+    """Filter one track; the engine of ``jaxgrav filter`` (inputs already validated).
+
+    Run with x64 enabled (the CLI does): positions are in degrees.
+
+    Parameters
+    ----------
+    field : Grid or PointMasses
+        Anomaly map (mGal).
+    t : numpy.ndarray, shape ``(T,)``
+        Times (s), uniform step.
+    lat, lon : numpy.ndarray, shape ``(T,)``
+        INS-indicated position (degrees).
+    gravity : numpy.ndarray, shape ``(T,)``
+        Eötvös-corrected anomaly readings (mGal), NaN where none.
+    method : {"ukf", "ekf", "gsf", "pmf"}
+    sigma_pos, sigma_vel, sigma_gravity : float
+        Prior 1-σ per axis of the INS position (m) and velocity (m/s) errors; reading
+        noise 1-σ (mGal).
+    guard : float, optional
+        No-harm guard ratio for ``ukf``, ``ekf``, ``gsf``
+        (:func:`~jaxgrav.filters.guard_run` with ``GuardConfig(guard, guard)``);
+        None: the filter's own output.
+    where : str
+        How error messages name the track.
+
+    Returns
+    -------
+    dict
+        ``lat``, ``lon`` (filtered, degrees), ``sigma_north``, ``sigma_east`` (m),
+        ``status`` (int32 flags of :data:`~jaxgrav.filters.STATUS_FILTER` per row),
+        all shape ``(T,)``, and ``pmf_every`` (the point-mass filter's update stride).
+
+    Raises
+    ------
+    ValueError
+        For ``pmf``: readings not on a fixed row stride.
+    """
+    dt = float(np.median(np.diff(t)))
+    n = t.size
+    r = float(sigma_gravity) ** 2
+    p0, dynamics = _jitted("prior")(float(np.mean(lat)), dt, sigma_pos, sigma_vel)
+    every = None
+    if method == "pmf":
+        rows = np.flatnonzero(np.isfinite(gravity))
+        every = reading_stride(rows, where)
+        cell_m = 2.0 * PMF_SPAN_SIGMA * sigma_pos / (PMF_CELLS - 1)
+        q_pos = PMF_Q_POS * (sigma_vel / 0.1414) ** 2
+        pad = (every - 1 - int(rows[0])) % every  # readings on steps every-1, 2 every-1, …
+        total = pad + n + (-(pad + n) % every)
+        idx = np.clip(np.arange(total) - pad, 0, n - 1)
+        z = np.where((np.arange(total) >= pad) & (np.arange(total) < pad + n), gravity[idx],
+                     np.nan)
+        steps = Step(jnp.asarray(lat[idx]), jnp.asarray(lon[idx]), jnp.asarray(z),
+                     jnp.full(total, r))
+        infos = _jitted("pmf")(field, dt, p0, cell_m, q_pos, steps, every=every)
+        # causal: rows between readings show the prediction (run_pmf predicts every step)
+        x, sigma, status = (np.asarray(a)[pad:pad + n]
+                            for a in (infos.x, infos.sigma, infos.status))
+    else:
+        steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r))
+        ratio = np.inf if guard is None else float(guard)
+        infos = _jitted("gaussian")(method, field, dynamics, p0, steps, ratio)
+        x, sigma, status = (np.asarray(a) for a in (infos.x, infos.sigma, infos.status))
+    m = np.asarray(meridian_radius(lat))
+    e = np.asarray(prime_vertical_radius(lat)) * np.cos(lat * DEG)
+    return dict(lat=lat - x[:, 0] / m / DEG, lon=lon - x[:, 1] / e / DEG,
+                sigma_north=sigma[:, 0], sigma_east=sigma[:, 1],
+                status=status.astype(np.int32), pmf_every=every)

@@ -1,0 +1,427 @@
+"""Grid point-mass filter over the INS position error, with the other error states marginalised.
+
+The standard terrain-navigation baseline (Bergman 1999), with the INS error model
+in it. The posterior of the horizontal position error ``(d_n, d_e)`` lives on a
+``G × G`` grid of cells; everything else is Gaussian:
+
+* each cell carries a Gaussian for the gravimeter bias δg_a (a one-state Kalman
+  filter per cell, Rao–Blackwellised), so an unknown bias is not gridded;
+* the velocity, attitude and sensor-bias errors are one Gaussian conditional on
+  the position, ``x_o | d ~ N(m_o + K (d − d̄), C)``: a linear regression on the
+  position shared by all cells (one ``13 × 13`` mean and covariance in the state,
+  whose position block is the grid's mean and covariance).
+
+Prediction over a step (:func:`pmf`'s ``predict``), from the linear error model
+``x ← F x + w``:
+
+1. **Drift**: the grid is translated by the mean drift the error model predicts,
+   ``s = (F x̄ − x̄)_pos`` (the INS error's Schuler-coupled drift from the estimated
+   velocity and attitude errors). The grid's origin is a continuous state, so the
+   translation is exact and adds no numerical diffusion.
+2. **Diffusion**: each cell's mass spreads by the growth of the position
+   variance the error model predicts, ``D = diag(F P Fᵀ + Q − P)_pos`` (clipped at
+   0) ``+ q_pos Δt`` — the conditional noise ``F_po C F_poᵀ + Q_pp`` plus the
+   coherent growth from the velocity error, which the exact model would apply as a
+   shear ``Δt·K (d − d̄)`` of the grid, here matched in variance as a blur; the
+   north–east correlation of ``D`` is dropped. The spread is the exact solution of the diffusion
+   equation on the cell grid, ``w ← A_n w A_eᵀ`` with ``A = exp(v/2 · L)``, ``L``
+   the second-difference matrix and ``v = D/cell²`` the variance in cells²: a
+   non-negative, mass-conserving kernel of variance exactly ``v`` (away from the
+   edges) for any ``v``, computed in closed form from the cosine basis that
+   diagonalises ``L``. **Boundary**: ``L`` has zero-flux (Neumann, reflecting)
+   edges — mass that would diffuse past an edge is reflected back into the edge
+   cells, never lost; ``status`` flags ``grid_edge`` when more than 1e-3 of the
+   mass sits in the outermost cells, and the estimate is then unreliable.
+3. **Re-centring**: when the posterior mean is a cell or more from the grid's
+   centre, the weights are shifted by whole cells to re-centre it, provided the
+   cells pushed off the far edge hold less than 1e-5 of the mass.
+
+The Gaussian part is predicted with the Kalman equations, and the per-cell bias
+moments are mixed through the same kernel (moment matching). The update
+multiplies each cell by the likelihood of the reading given the cell's map value
+and bias, ``N(z − Δg_M(cell) − b_c; 0, s_c + r)``; then the Gaussian states move
+by the regression, ``m_o ← m_o + K (d̄⁺ − d̄⁻)``, ``C`` unchanged. A missing
+reading skips the update; cells off a Grid map get zero likelihood (the update is
+skipped if the whole grid is off the map).
+
+The estimate is the posterior mean; its position covariance is the grid's (plus
+the cell's own variance ``cell²/12``), so NEES can be computed.
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from jaxgrav import constants
+from jaxgrav._linalg import inv_2x2
+from jaxgrav.constants import DEG
+from jaxgrav.fields.pointmass import PointMasses
+from jaxgrav.filters.model import STATUS_FILTER, StepInfo, gravity_measurement
+from jaxgrav.geodesy import enu_basis, geodetic_to_ecef, meridian_radius, prime_vertical_radius
+from jaxgrav.sim.ins import GRAV, N_STATES, INSErrorModel, transition
+
+__all__ = ["PMFDynamics", "PMFFilter", "PMFState", "diffusion_kernel", "pmf", "run_pmf"]
+
+EDGE_MASS = 1e-3
+"""``grid_edge`` is flagged when the outermost cells hold more than this mass."""
+RECENTRE_LOSS = 1e-5
+"""Re-centring may push at most this mass off the grid."""
+_DEFAULT_INS = INSErrorModel()
+_TINY = 1e-13  # cells below this fraction of the peak weight take the global bias moments
+
+
+class PMFState(NamedTuple):
+    """Point-mass filter state.
+
+    Attributes
+    ----------
+    w : Array, shape ``(G, G)``
+        Normalised cell weights (north index first).
+    bias_mean, bias_var : Array, shape ``(G, G)``
+        Per-cell Gaussian of the gravimeter bias (mGal, mGal²).
+    centre : Array, shape ``(2,)``
+        Position error (m, north, east) of the grid's centre cell.
+    x : Array, shape ``(13,)``
+        Mean of the whole error state; its position block is the grid's mean.
+    p : Array, shape ``(13, 13)``
+        Its covariance; the position block is the grid's covariance.
+    """
+
+    w: jax.Array
+    bias_mean: jax.Array
+    bias_var: jax.Array
+    centre: jax.Array
+    x: jax.Array
+    p: jax.Array
+
+
+class PMFDynamics(NamedTuple):
+    """One prediction step: length ``dt`` (s) and the linear error model ``F``, ``Q`` (13 × 13)."""
+
+    dt: jax.Array
+    f: jax.Array
+    q: jax.Array
+
+
+class PMFFilter(NamedTuple):
+    """The point-mass filter's pure functions.
+
+    ``init(x0, P0) -> PMFState``; ``update(state, step, field, dynamics) -> (state,
+    StepInfo)`` (predict, then the reading); ``predict(state, dynamics) -> (state,
+    StepInfo)`` (no reading, no map evaluation); ``dynamics(lat, dt) ->
+    PMFDynamics`` (the error model over a step at a latitude). ``dynamics`` may
+    also be a scalar ``dt``: a pure random walk of density ``q_pos``, no error model.
+    """
+
+    init: object
+    update: object
+    predict: object
+    dynamics: object
+
+
+def _neumann_basis(n):
+    """Orthonormal cosine basis and eigenvalues of the zero-flux second difference on n cells."""
+    i = jnp.arange(n)[:, None] + 0.5
+    k = jnp.arange(n)[None, :]
+    v = jnp.cos(jnp.pi * k * i / n) * jnp.where(k == 0, jnp.sqrt(1.0 / n), jnp.sqrt(2.0 / n))
+    lam = -4.0 * jnp.sin(jnp.pi * jnp.arange(n) / (2 * n)) ** 2
+    return v, lam
+
+
+def diffusion_kernel(n, v):
+    """Diffusion kernel ``exp(v/2 · L)`` on ``n`` cells with zero-flux edges.
+
+    Parameters
+    ----------
+    n : int
+        Cells (static).
+    v : Array, shape ``()``
+        Variance of the spread in cells² (any ``v ≥ 0``).
+
+    Returns
+    -------
+    Array, shape ``(n, n)``
+        ``A[i, j]``: share of cell ``j``'s mass that moves to cell ``i``. Entries
+        are ``≥ 0`` (round-off negatives clipped) and each column sums to 1.
+    """
+    basis, lam = _neumann_basis(n)
+    a = (basis * jnp.exp(0.5 * jnp.maximum(v, 0.0) * lam)) @ basis.T
+    a = jnp.maximum(a, 0.0)
+    return a / a.sum(0, keepdims=True)
+
+
+def _moments(w, dn, de, cell_m):
+    mean = jnp.array([jnp.sum(w * dn), jnp.sum(w * de)])
+    cn, ce = dn - mean[0], de - mean[1]
+    cne = jnp.sum(w * cn * ce)
+    cov = jnp.array([[jnp.sum(w * cn * cn), cne], [cne, jnp.sum(w * ce * ce)]])
+    return mean, cov + jnp.eye(2) * cell_m**2 / 12.0
+
+
+def _shift_axis(a, k, fill, axis):
+    """``a`` shifted by ``k`` cells along ``axis`` (``out[i] = a[i + k]``), ``fill`` outside."""
+    n = a.shape[axis]
+    idx = jnp.arange(n) + k
+    ok = (idx >= 0) & (idx < n)
+    out = jnp.take(a, jnp.clip(idx, 0, n - 1), axis=axis)
+    ok = ok[:, None] if axis == 0 else ok[None, :]
+    return jnp.where(ok, out, fill)
+
+
+def _point_mass_cells(masses, lat, lon):
+    """Anomaly (mGal) of point masses on the separable cell grid ``lat (G, 1) × lon (1, G)``.
+
+    The same physics as :func:`~jaxgrav.fields.pointmass.gravity_anomaly`, with the
+    trigonometry of the cells' latitudes and longitudes done per row and per column
+    (``2G`` instead of ``G²`` evaluations).
+    """
+    dtype = jnp.result_type(float)
+    xp = geodetic_to_ecef(lat, lon, 0.0)
+    xm = geodetic_to_ecef(masses.lat, masses.lon, -jnp.asarray(masses.depth, dtype=dtype))
+    d = [a[..., None] - b for a, b in zip(xp, xm, strict=True)]
+    inv_l = jax.lax.rsqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+    k = constants.G_NEWTON * jnp.asarray(masses.mass, dtype=dtype) * inv_l**3
+    _, _, up = enu_basis(lat, lon)
+    return sum(jnp.sum(k * di, axis=-1) * u for di, u in zip(d, up, strict=True)) / constants.MGAL
+
+
+def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
+        measurement=gravity_measurement):
+    """Grid point-mass filter with the INS error model's drift.
+
+    Parameters
+    ----------
+    n_cells : int
+        Cells per axis ``G`` (static, odd so that the centre is a cell centre).
+    cell_m : float
+        Cell size (m). The grid spans ``±(G−1)/2 · cell`` about its centre
+        (default ±6 km, 3σ of a 2 km error).
+    q_pos : float
+        Extra random-walk density of the position error (m²/s) on top of the
+        error model's own spread (model mismatch, grid discretisation); the only
+        diffusion when ``ins`` is None or ``dynamics`` is a scalar.
+    ins : INSErrorModel or None
+        Error model of :func:`dynamics` (used by :func:`run_pmf`); None: position
+        random walk only (no drift), the classic PMF.
+    measurement : callable
+        ``h(field, x, lat, lon)``, evaluated with ``x`` holding a cell's offset and
+        zero bias.
+
+    Returns
+    -------
+    PMFFilter
+        ``init(x0, P0)`` takes the Gaussian prior of the 13-state error model; the
+        grid starts centred on zero error.
+    """
+    if n_cells % 2 != 1 or n_cells < 3:
+        raise ValueError(f"n_cells must be an odd integer >= 3; got {n_cells!r}")
+    half = (n_cells - 1) / 2
+    base = (jnp.arange(n_cells) - half) * cell_m
+
+    def cells(centre):
+        return jnp.meshgrid(centre[0] + base, centre[1] + base, indexing="ij")
+
+    def init(x0, p0):
+        x0, p0 = jnp.asarray(x0, float), jnp.asarray(p0, float)
+        centre = jnp.zeros(2, x0.dtype)
+        dn, de = cells(centre)
+        d = jnp.stack([dn - x0[0], de - x0[1]], -1)
+        logw = -0.5 * jnp.einsum("...i,ij,...j->...", d, inv_2x2(p0[:2, :2]), d)
+        w = jnp.exp(logw - logw.max())
+        w = w / w.sum()
+        shape = (n_cells, n_cells)
+        state = PMFState(w, jnp.full(shape, x0[GRAV]), jnp.full(shape, p0[GRAV, GRAV]), centre,
+                         x0, p0)
+        return _sync(state, *_moments(w, dn, de, cell_m))
+
+    def dynamics(lat, dt):
+        if ins is None:
+            return _random_walk(dt)
+        f, q = transition(ins, lat, dt)
+        return PMFDynamics(jnp.asarray(dt, f.dtype), f, q)
+
+    def _random_walk(dt):
+        dt = jnp.asarray(dt, float)
+        return PMFDynamics(dt, jnp.eye(N_STATES, dtype=dt.dtype), jnp.zeros((N_STATES,) * 2,
+                                                                          dt.dtype))
+
+    def _recentre(state):
+        mean = state.x[:2]
+        k = jnp.round((mean - state.centre) / cell_m).astype(jnp.int32)
+        k = jnp.clip(k, -(n_cells - 1), n_cells - 1)
+        gm = jnp.sum(state.w * state.bias_mean)
+        gv = jnp.sum(state.w * (state.bias_var + (state.bias_mean - gm) ** 2))
+        arrays = (state.w, state.bias_mean, state.bias_var)
+        fills = (0.0, gm, gv)
+        for axis in (0, 1):
+            arrays = tuple(_shift_axis(a, k[axis], fill, axis)
+                           for a, fill in zip(arrays, fills, strict=True))
+        kept = arrays[0].sum()
+        ok = kept > 1.0 - RECENTRE_LOSS
+        w, m, s = (jnp.where(ok, a, b) for a, b in zip(arrays, (state.w, state.bias_mean,
+                                                                   state.bias_var), strict=True))
+        w = jnp.where(ok, w / kept, w)
+        centre = jnp.where(ok, state.centre + k * cell_m, state.centre)
+        return state._replace(w=w, bias_mean=m, bias_var=s, centre=centre)
+
+    def _predict(state, dyn):
+        if not isinstance(dyn, PMFDynamics):
+            dyn = _random_walk(dyn)
+        state = _recentre(state)
+        x, p, f, q = state.x, state.p, dyn.f, dyn.q
+        x_new = f @ x
+        p_new = f @ p @ f.T + q
+        # the grid spreads by the growth of the position variance that the error model
+        # predicts (conditional noise plus the coherent growth from the velocity error)
+        spread = jnp.maximum(jnp.diagonal(p_new[:2, :2] - p[:2, :2]), 0.0) + q_pos * dyn.dt
+        centre = state.centre + (x_new[:2] - x[:2])
+        a_n = diffusion_kernel(n_cells, spread[0] / cell_m**2)
+        a_e = diffusion_kernel(n_cells, spread[1] / cell_m**2)
+        w0, m0, s0 = state.w, state.bias_mean, state.bias_var
+        # per-cell bias: its own (scalar) error model, then moment matching through the kernel
+        fb, qb = f[GRAV, GRAV], q[GRAV, GRAV]
+        m0, s0 = fb * m0, fb**2 * s0 + qb
+        stack = jnp.stack([w0, w0 * m0, w0 * (s0 + m0**2)])
+        w, wm, wm2 = jnp.einsum("ij,cjk,lk->cil", a_n, stack, a_e)
+        gm = jnp.sum(w0 * m0)
+        gv = jnp.sum(w0 * (s0 + (m0 - gm) ** 2))
+        tiny = w <= _TINY * w.max()
+        safe = jnp.where(tiny, 1.0, w)
+        m = jnp.where(tiny, gm, wm / safe)
+        s = jnp.where(tiny, gv, jnp.clip(wm2 / safe - m**2, 1e-12, None))
+        w = w / w.sum()
+        return PMFState(w, m, s, centre, x_new, 0.5 * (p_new + p_new.T))
+
+    def _sync(state, mean, cov, prior_mean=None):
+        """Gaussian position block := the grid's moments; the rest moves by regression."""
+        x, p = state.x, state.p
+        prior_mean = x[:2] if prior_mean is None else prior_mean
+        k = p[2:, :2] @ inv_2x2(p[:2, :2])
+        x = x.at[2:].add(k @ (mean - prior_mean)).at[:2].set(mean)
+        p_oo = p[2:, 2:] - k @ p[2:, :2].T + k @ cov @ k.T
+        p_op = k @ cov
+        p = jnp.block([[cov, p_op.T], [p_op, p_oo]])
+        return state._replace(x=x, p=0.5 * (p + p.T))
+
+    def _info(state, mean, cov, innovation, innovation_var, flags):
+        bias = jnp.sum(state.w * state.bias_mean)
+        bias_var = jnp.sum(state.w * (state.bias_var + (state.bias_mean - bias) ** 2))
+        x = state.x.at[GRAV].set(bias)
+        sigma = jnp.sqrt(jnp.maximum(jnp.diagonal(state.p), 0.0)).at[GRAV].set(jnp.sqrt(bias_var))
+        w = state.w
+        edge = (w[0].sum() + w[-1].sum() + w[1:-1, 0].sum() + w[1:-1, -1].sum()) > EDGE_MASS
+        flags = flags | jnp.where(edge, STATUS_FILTER["grid_edge"], 0)
+        return StepInfo(x, sigma, cov, innovation, innovation_var, flags.astype(jnp.int32))
+
+    def predict(state, dynamics):
+        state = _predict(state, dynamics)
+        dn, de = cells(state.centre)
+        mean, cov = _moments(state.w, dn, de, cell_m)
+        state = _sync(state, mean, cov, mean)  # the grid's own edge effects move no velocity
+        nan = jnp.full((), jnp.nan, state.x.dtype)
+        return state, _info(state, mean, cov, nan, nan, jnp.int32(STATUS_FILTER["no_reading"]))
+
+    def _cell_values(field, step, dn, de):
+        if measurement is gravity_measurement and isinstance(field, PointMasses):
+            # the cells' true latitudes depend on the row only, longitudes on the column only
+            lat = step.lat - dn[:, :1] / meridian_radius(step.lat) / DEG
+            east = prime_vertical_radius(step.lat) * jnp.cos(step.lat * DEG)
+            return _point_mass_cells(field, lat, step.lon - de[:1, :] / east / DEG)
+        x = jnp.zeros(N_STATES, dn.dtype)
+
+        def one(a, b):
+            return measurement(field, x.at[0].set(a).at[1].set(b), step.lat, step.lon)
+
+        return jax.vmap(jax.vmap(one))(dn, de)
+
+    def update(state, step, field, dynamics):
+        state = _predict(state, dynamics)
+        w, m, s = state.w, state.bias_mean, state.bias_var
+        dn, de = cells(state.centre)
+        prior_mean, _ = _moments(w, dn, de, cell_m)
+
+        has = jnp.isfinite(step.z)
+        g = _cell_values(field, step, dn, de)
+        on_map = jnp.isfinite(g)
+        nu = jnp.where(has & on_map, step.z - g - m, 0.0)
+        var = s + step.r
+        loglik = jnp.where(on_map, -0.5 * (nu**2 / var + jnp.log(var)), -jnp.inf)
+        any_on = jnp.any(on_map)
+        loglik = loglik - jnp.max(jnp.where(on_map, loglik, -jnp.inf))
+        do = has & any_on
+        w_new = jnp.where(do, w * jnp.exp(loglik), w)
+        total = w_new.sum()
+        do = do & (total > 0)
+        w_new = jnp.where(do, w_new / jnp.where(total > 0, total, 1.0), w)
+        gain = s / var
+        m_new = jnp.where(do, m + gain * nu, m)
+        s_new = jnp.where(do, s - gain * s, s)
+        state = state._replace(w=w_new, bias_mean=m_new, bias_var=s_new)
+        mean, cov = _moments(w_new, dn, de, cell_m)
+        state = _sync(state, mean, cov, prior_mean)
+
+        g_safe = jnp.where(on_map, g, 0.0)
+        z_hat = jnp.sum(w * (g_safe + m))
+        z_var = jnp.sum(w * (var + (g_safe + m - z_hat) ** 2))
+        flags = (
+            jnp.where(~has, STATUS_FILTER["no_reading"], 0)
+            | jnp.where(has & ~jnp.all(on_map), STATUS_FILTER["off_map"], 0)
+        )
+        return state, _info(state, mean, cov, jnp.where(has, step.z - z_hat, jnp.nan),
+                            jnp.where(has, z_var, jnp.nan), flags)
+
+    return PMFFilter(init, update, predict, dynamics)
+
+
+def run_pmf(filt, field, dt, x0, p0, steps, every=1):
+    """Run a point-mass filter, predicting every step and updating on every ``every``-th.
+
+    The grid update is the costly part (``G²`` map values), so readings are taken
+    only on steps ``every−1, 2·every−1, …`` (index into ``steps``), as in
+    :func:`~jaxgrav.scenarios.paper_d.filter_scenario`; readings on other steps
+    are ignored. Every step is predicted with the error model over ``dt``, so the
+    output is causal: step ``k`` shows the prediction from the readings up to
+    step ``k``, never a later one.
+
+    Parameters
+    ----------
+    filt : PMFFilter
+        From :func:`pmf`.
+    field : Grid, PointMasses or callable
+    dt : float
+        Step length (s).
+    x0, p0 : Array
+        Gaussian prior of the 13-state model.
+    steps : Step
+        Leading axis ``T``, a multiple of ``every``. The error model is taken at
+        the mean INS latitude.
+    every : int
+        Steps per update (static).
+
+    Returns
+    -------
+    final : PMFState
+    infos : StepInfo
+        Leading axis ``T``: the prediction on steps without an update (flag
+        ``no_reading``), the posterior on update steps.
+    """
+    t = steps.z.shape[0]
+    if not isinstance(every, int) or every < 1 or t % every:
+        raise ValueError(f"every must be a positive int dividing the {t} steps; got {every!r}")
+    dyn = filt.dynamics(jnp.mean(steps.lat), dt)
+    blocks = jax.tree.map(lambda a: a.reshape((t // every, every, *a.shape[1:])), steps)
+
+    def block(state, b):
+        if every > 1:
+            state, head = jax.lax.scan(lambda s, _: filt.predict(s, dyn), state, None,
+                                       length=every - 1)
+        state, info = filt.update(state, jax.tree.map(lambda a: a[-1], b), field, dyn)
+        if every > 1:
+            info = jax.tree.map(lambda h, i: jnp.concatenate([h, i[None]]), head, info)
+        else:
+            info = jax.tree.map(lambda i: i[None], info)
+        return state, info
+
+    final, infos = jax.lax.scan(block, filt.init(x0, p0), blocks)
+    return final, jax.tree.map(lambda a: a.reshape((t, *a.shape[2:])), infos)

@@ -1,0 +1,244 @@
+"""Matchers as Monte Carlo methods: paper A's dense and chain matchers, paper B's stages.
+
+Each ``*_run(key, ...)`` simulates one run and matches it; each builder returns the
+:class:`~jaxgrav.montecarlo.spec.MethodSpec` that :mod:`jaxgrav.montecarlo.methods`
+registers by name.
+"""
+
+import functools
+
+import jax.numpy as jnp
+
+from jaxgrav.geodesy import eotvos
+from jaxgrav.match.api import config_for
+from jaxgrav.match.correlation import match_chains
+from jaxgrav.match.dense import match_dense
+from jaxgrav.match.entropy import entropy_config_for, match_entropy
+from jaxgrav.match.entropy_iccp import (
+    ALL_STATUS_B,
+    PaperBScenario,
+    iccp_config_for,
+    match_entropy_iccp,
+    paper_b_scenario,
+)
+from jaxgrav.match.iccp import match_iccp
+from jaxgrav.match.result import STATUS
+
+__all__ = [
+    "CHAIN_NODE_DEG",
+    "chains_builder",
+    "chains_run",
+    "correlation_builder",
+    "correlation_run",
+    "entropy_iccp_builder",
+    "entropy_iccp_run",
+    "entropy_run",
+    "iccp_run",
+    "paper_b_builder",
+]
+
+from jaxgrav.montecarlo.spec import MethodSpec, check_settings, default_grid, region_of
+from jaxgrav.scenarios import (
+    MatchingScenario,
+    matching_scenario,
+)
+from jaxgrav.sim import DEG_ARC_M, track_error_m
+
+
+# ------------------------------------------------------------------- correlation (A)
+def correlation_run(key, grid, scenario, config):
+    """One paper-A run: simulate (:func:`~jaxgrav.scenarios.matching_scenario`), match dense.
+
+    Readings are Eötvös-corrected with the true velocity (as a user with an INS
+    velocity would) and matched by :func:`~jaxgrav.match.dense.match_dense`.
+
+    Returns
+    -------
+    dict
+        ``ins_err_m``, ``err_m`` (m), ``status`` (int32), ``score`` (the matcher's),
+        ``offset_north_m``, ``offset_east_m`` (estimated correction, m).
+    """
+    run = matching_scenario(key, grid, scenario)
+    g = run.readings + eotvos(run.ins_lat, run.truth.v_east, run.truth.v_north)
+    r = match_dense(grid, run.ins_lat, run.ins_lon, g, config)
+    return _matcher_record(run, r, **_offset(r))
+
+
+def _matcher_record(run, r, **extra):
+    """The per-run record of a matcher: mean-track errors of the INS and of the match
+    (m), status, score, and ``extra``; paper A's matchers add the offset."""
+    return dict(
+        ins_err_m=track_error_m(run.ins_lat, run.ins_lon, run.truth),
+        err_m=track_error_m(r.lat, r.lon, run.truth),
+        status=jnp.asarray(r.status, jnp.int32),
+        score=r.score,
+        **extra,
+    )
+
+
+def _offset(r):
+    return dict(offset_north_m=r.offset_north_m, offset_east_m=r.offset_east_m)
+
+
+def correlation_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
+    """Paper A, dense correlation matcher (the ``jaxgrav demo`` realistic setting).
+
+    Defaults: INS drift 0.035° (fixed radius, random direction), 1 mGal noise, 30
+    fixes 2 min apart at 10 kn east + 10 kn north; search radius 1.2 × the drift,
+    bias prior σ 3 mGal.
+    """
+    grid = default_grid() if grid is None else grid
+    drift = 0.035 if drift_deg is None else float(drift_deg)
+    noise = 1.0 if noise is None else float(noise)
+    n = 30 if n_fixes is None else int(n_fixes)
+    check_settings(drift, noise, n)
+    scen = MatchingScenario(region=region_of(grid), drift_deg=drift, noise_mgal=noise, n_fixes=n)
+    cfg = config_for("dense", grid, 1.2 * drift * DEG_ARC_M, noise_mgal=max(noise, 0.1),
+                     bias_sigma_mgal=3.0)
+    settings = dict(description="paper A: dense correlation matcher, fixed INS drift",
+                    drift_deg=drift, noise_mgal=noise, n_fixes=n, dt_s=scen.dt,
+                    search_half_size=cfg.half_size, search_spacing_m=cfg.spacing_m)
+    return MethodSpec(correlation_run, (grid, scen, cfg), settings, dict(STATUS))
+
+
+# ------------------------------------------------------------------------ chains (A)
+CHAIN_NODE_DEG = 0.005
+"""Node spacing the chain matcher's map is refined to (degrees): paper A's 0.005°
+(its 0.5° map refined ×100; the 2.5′ map refined ×8, as ``examples/paper_a_table1.py``)."""
+
+
+def chains_run(key, grid, refined, scenario, config):
+    """One paper-A run: simulate on ``grid``, match by iso-point chains on ``refined``.
+
+    Readings are Eötvös-corrected with the true velocity and matched by
+    :func:`~jaxgrav.match.correlation.match_chains`.
+
+    Returns
+    -------
+    dict
+        ``ins_err_m``, ``err_m`` (m), ``status`` (int32), ``score`` (the matcher's),
+        ``offset_north_m``, ``offset_east_m`` (m), ``work_constrained`` (chains left
+        after constraint elimination).
+    """
+    run = matching_scenario(key, grid, scenario)
+    g = run.readings + eotvos(run.ins_lat, run.truth.v_east, run.truth.v_north)
+    r = match_chains(refined, run.ins_lat, run.ins_lon, g, config)
+    return _matcher_record(run, r, **_offset(r), work_constrained=r.work_constrained)
+
+
+def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
+    """Paper A's pipeline: iso-point chains with constraint elimination.
+
+    The readings come from ``grid``; the matcher searches ``grid`` refined (bilinear)
+    to :data:`CHAIN_NODE_DEG` nodes (factor ``round(dlat / 0.005°)``, at least 1:
+    ×8 for the 2.5′ map). Scenario as :func:`correlation_builder` (drift 0.035°,
+    1 mGal, 30 fixes 2 min apart); search window and tolerances from
+    :func:`~jaxgrav.match.api.config_for` ``("chains", ...)`` for 1.2 × the drift.
+    """
+    grid = default_grid() if grid is None else grid
+    drift = 0.035 if drift_deg is None else float(drift_deg)
+    noise = 1.0 if noise is None else float(noise)
+    n = 30 if n_fixes is None else int(n_fixes)
+    check_settings(drift, noise, n)
+    factor = max(1, round(min(grid.dlat, grid.dlon) / CHAIN_NODE_DEG))
+    refined = grid.refine(factor) if factor > 1 else grid
+    scen = MatchingScenario(region=region_of(grid), drift_deg=drift, noise_mgal=noise, n_fixes=n)
+    cfg = config_for("chains", refined, 1.2 * drift * DEG_ARC_M, noise_mgal=max(noise, 0.1),
+                     step_m=scen.step_m)
+    settings = dict(description=f"paper A: iso-point chains on the map refined x{factor}, "
+                                "fixed INS drift",
+                    drift_deg=drift, noise_mgal=noise, n_fixes=n, dt_s=scen.dt,
+                    refine_factor=factor, search_half_size=cfg.half_size,
+                    stencil_size=cfg.stencil_size)
+    return MethodSpec(chains_run, (grid, refined, scen, cfg), settings, dict(STATUS))
+
+
+# ----------------------------------------------------------------- entropy, ICCP (B)
+def entropy_iccp_run(key, grid, scenario, entropy, iccp):
+    """One paper-B run: simulate (:func:`~jaxgrav.match.entropy_iccp.paper_b_scenario`), match.
+
+    Returns
+    -------
+    dict
+        ``ins_err_m``, ``err_m`` (m), ``status`` (int32), ``score`` (mean squared
+        misfit), ``rotation_deg`` (estimated heading correction).
+    """
+    run = paper_b_scenario(key, grid, scenario)
+    r = match_entropy_iccp(grid, run.ins_lat, run.ins_lon, run.readings, entropy, iccp)
+    return _b_metrics(run, r)
+
+
+def entropy_run(key, grid, scenario, entropy):
+    """One paper-B run matched by the entropy coarse stage alone; as :func:`entropy_iccp_run`
+    (``rotation_deg`` is 0: the stage only shifts the track)."""
+    run = paper_b_scenario(key, grid, scenario)
+    return _b_metrics(run, match_entropy(grid, run.ins_lat, run.ins_lon, run.readings, entropy))
+
+
+def iccp_run(key, grid, scenario, iccp):
+    """One paper-B run matched by ICCP alone from the INS track; as :func:`entropy_iccp_run`."""
+    run = paper_b_scenario(key, grid, scenario)
+    return _b_metrics(run, match_iccp(grid, run.ins_lat, run.ins_lon, run.readings, iccp))
+
+
+def _b_metrics(run, r):
+    return _matcher_record(run, r, rotation_deg=r.rotation_deg)
+
+
+_B_RUNS = {
+    "entropy+iccp": (entropy_iccp_run, "entropy coarse + ICCP fine matching"),
+    "entropy": (entropy_run, "entropy coarse matching alone"),
+    "iccp": (iccp_run, "ICCP alone (from the INS track)"),
+}
+
+
+def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n_fixes=None):
+    """Paper B: entropy coarse matching, ICCP, or both (``stage``).
+
+    Defaults (SPEC §B, the example's ``gravity`` case): INS offset uniform in
+    [⅔·drift, drift] with drift 0.03°, rotated ±1.5° about the start, 1 mGal noise,
+    60 fixes a minute apart at 10 m/s in a random direction. The matchers are sized
+    to the drift + 0.005° as ``examples/paper_b_entropy_iccp.py``: entropy offsets
+    by :func:`~jaxgrav.match.entropy.entropy_config_for` (at most 20 a side), ICCP
+    by :func:`~jaxgrav.match.entropy_iccp.iccp_config_for` with ``stage="alone"``
+    (window over the whole error) or ``"fine"`` (after the entropy stage).
+
+    Parameters
+    ----------
+    grid : Grid or None
+        Map (mGal); None: :func:`default_grid`.
+    stage : {"entropy+iccp", "entropy", "iccp"}
+    drift_deg, noise, n_fixes : optional
+        Offset bound (degrees of arc), reading noise σ (map units), fixes per track.
+
+    Returns
+    -------
+    MethodSpec
+    """
+    fn, label = _B_RUNS[stage]
+    grid = default_grid() if grid is None else grid
+    drift = 0.03 if drift_deg is None else float(drift_deg)
+    noise = 1.0 if noise is None else float(noise)
+    n = 60 if n_fixes is None else int(n_fixes)
+    check_settings(drift, noise, n)
+    scen = PaperBScenario(region=region_of(grid), offset_min_deg=2.0 * drift / 3.0,
+                          offset_max_deg=drift, noise=noise, n_fixes=n)
+    reach_m = (drift + 0.005) * DEG_ARC_M
+    settings = dict(description=f"paper B: {label}; offset and rotated INS track",
+                    drift_deg=drift, offset_min_deg=scen.offset_min_deg, noise_mgal=noise,
+                    n_fixes=n, dt_s=scen.dt, rotation_deg=scen.rotation_deg)
+    args = (grid, scen)
+    if stage != "iccp":
+        ent = entropy_config_for(grid, reach_m, max_half_size=20)
+        settings["entropy_half_size"] = ent.half_size
+        args += (ent,)
+    if stage != "entropy":
+        icp = iccp_config_for(grid, reach_m, stage="alone" if stage == "iccp" else "fine",
+                              noise=max(noise, 0.1))
+        settings["iccp_window_m"] = float(icp.window_m)
+        args += (icp,)
+    return MethodSpec(fn, args, settings, dict(ALL_STATUS_B))
+
+
+entropy_iccp_builder = functools.partial(paper_b_builder, stage="entropy+iccp")
+"""Paper B, entropy coarse + ICCP fine matching (:func:`paper_b_builder`)."""

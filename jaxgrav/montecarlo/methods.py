@@ -1,0 +1,124 @@
+"""Methods the Monte Carlo runner knows by name: scenario + matcher/filter + errors per run.
+
+Each entry of :data:`BUILDERS` maps a method name to a *builder*::
+
+    builder(grid, *, drift_deg=None, noise=None, n_fixes=None) -> MethodSpec
+
+``None`` means the method's own default; for ``grid`` that is the shipped ``ryukyu``
+2.5′ map for the matchers and paper D's three point masses for the filters. The
+spec's ``fn(key, *args)`` simulates and solves one run and returns a dict of per-run
+metrics, at least :data:`METRICS`:
+
+``ins_err_m``  horizontal error of the INS-indicated track (m): the mean distance from
+               the truth for the matchers; the RMS over the second half of the run
+               for the filters
+``err_m``      the same for the method's estimated track (m)
+``status``     the method's status bit field (0 = clean; int32)
+
+Matchers: ``correlation`` (paper A, dense offsets), ``chains`` (paper A's iso-point
+chains on the map refined to 0.005° nodes), ``entropy``, ``iccp`` and
+``entropy+iccp`` (paper B, each stage alone and combined).
+
+The paper-D filters (``ukf``, ``ekf``, ``gsf``, ``pmf`` and the guarded ``ukf-guard``,
+``gsf-guard``) also return ``nees``, the mean position NEES over the second half of the
+run (expected value 2); they run over paper D's point masses, or over a map (straight
+tracks in random directions).
+
+``fn`` must be a module-level function (not a fresh closure), so that repeated runs
+reuse the compiled code; everything a user may sweep goes into ``args``.
+
+Adding a method
+---------------
+One entry, ``BUILDERS["name"] = builder`` or ``register("name", builder)``;
+``jaxgrav montecarlo --method`` lists the keys of :data:`BUILDERS`.
+"""
+
+import functools
+
+from jaxgrav.montecarlo.filter_runs import (
+    FILTER_METHODS,
+    ekf_run,
+    filter_builder,
+    gsf_guard_run,
+    gsf_run,
+    pmf_run,
+    ukf_guard_run,
+    ukf_run,
+)
+from jaxgrav.montecarlo.matcher_runs import (
+    chains_builder,
+    chains_run,
+    correlation_builder,
+    correlation_run,
+    entropy_iccp_builder,
+    entropy_iccp_run,
+    entropy_run,
+    iccp_run,
+    paper_b_builder,
+)
+from jaxgrav.montecarlo.spec import METRICS, MethodSpec, default_grid
+
+__all__ = [
+    "BUILDERS",
+    "FILTER_METHODS",
+    "METRICS",
+    "MethodSpec",
+    "build",
+    "chains_run",
+    "correlation_run",
+    "default_grid",
+    "ekf_run",
+    "entropy_iccp_run",
+    "entropy_run",
+    "filter_builder",
+    "gsf_guard_run",
+    "gsf_run",
+    "iccp_run",
+    "pmf_run",
+    "register",
+    "ukf_guard_run",
+    "ukf_run",
+]
+
+
+"""Names of the paper-D filters (errors are RMS over the second half of a run, with NEES)."""
+
+BUILDERS = {
+    "correlation": correlation_builder,
+    "chains": chains_builder,
+    "entropy": functools.partial(paper_b_builder, stage="entropy"),
+    "iccp": functools.partial(paper_b_builder, stage="iccp"),
+    "entropy+iccp": entropy_iccp_builder,
+    **{k: functools.partial(filter_builder, kind=k) for k in FILTER_METHODS},
+}
+"""Method name -> builder."""
+
+
+def register(name, builder, *, replace=False):
+    """Add a method builder under ``name`` (see the module docstring for the contract)."""
+    if name in BUILDERS and not replace:
+        raise ValueError(f"method {name!r} is already registered; pass replace=True")
+    BUILDERS[name] = builder
+
+
+def build(method, grid=None, **options):
+    """The :class:`MethodSpec` of a registered method.
+
+    Parameters
+    ----------
+    method : str
+        A key of :data:`BUILDERS`.
+    grid : Grid, optional
+        Map simulated and matched (or filtered) against; None: the method's default
+        (:func:`default_grid` for the matchers, paper D's point masses for the filters).
+    **options
+        ``drift_deg`` (degrees of arc), ``noise`` (map units), ``n_fixes``; None
+        keeps the method's default.
+
+    Returns
+    -------
+    MethodSpec
+    """
+    if method not in BUILDERS:
+        raise ValueError(f"method must be one of {sorted(BUILDERS)}; got {method!r}")
+    return BUILDERS[method](grid, **options)

@@ -1,0 +1,280 @@
+"""``jaxgrav montecarlo`` and ``jaxgrav bench``, in-process through ``jaxgrav.cli.main``."""
+
+import json
+import os
+import textwrap
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+import xarray as xr
+
+import jaxgrav
+from jaxgrav import Grid, montecarlo
+from jaxgrav.cli import main
+from jaxgrav.cli.bench import default_bench_dir
+from jaxgrav.montecarlo import methods as montecarlo_methods
+from jaxgrav.sim import DEG_ARC_M
+
+slow = pytest.mark.skipif(
+    os.environ.get("JAXGRAV_SLOW") != "1", reason="slow: set JAXGRAV_SLOW=1 to run"
+)
+
+
+@pytest.fixture(scope="module")
+def mc_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("mc") / "corr.nc"
+    code = main(["montecarlo", "--method", "correlation", "--runs", "8", "--chunk", "4",
+                 "--seed", "3", "--fixes", "20", "--drift", "0.03", "--out", str(out),
+                 "--no-progress"])
+    return code, out
+
+
+def test_montecarlo_writes_netcdf_png_and_summary(mc_run, capsys):
+    code, out = mc_run
+    assert code == 0
+    assert out.with_suffix(".png").stat().st_size > 10_000
+    with xr.open_dataset(out) as ds:
+        assert ds.sizes["run"] == 8
+        for k in montecarlo_methods.METRICS:
+            assert ds[k].dims == ("run",)
+        assert ds["status"].dtype == np.int32
+        assert np.all(ds["ins_err_m"] > 0) and np.all(np.isfinite(ds["err_m"]))
+        a = ds.attrs
+        assert (a["method"], a["runs"], a["seed"], a["chunk"]) == ("correlation", 8, 3, 4)
+        assert a["setting_n_fixes"] == 20 and a["setting_drift_deg"] == 0.03
+        assert 0 <= a["summary_failure_rate"] <= 1
+        assert a["summary_err_m_p50"] == pytest.approx(float(np.median(ds["err_m"])))
+        assert "--runs 8 --chunk 4" in a["command"]
+        assert json.loads(a["status_bits"])["8"].startswith("the best candidate")
+        # the same keys through the library give the same numbers
+        spec = montecarlo_methods.build("correlation", drift_deg=0.03, n_fixes=20)
+        lib = montecarlo.run(spec.fn, jax.random.key(3), 8, chunk=4, args=spec.args,
+                             progress=False)
+        np.testing.assert_array_equal(ds["err_m"].values, lib["err_m"])
+
+
+def test_montecarlo_prints_summary_table(tmp_path, capsys):
+    out = tmp_path / "again.nc"  # compiled already: same shapes as mc_run
+    assert main(["montecarlo", "--method", "correlation", "--runs", "8", "--chunk", "4",
+                 "--seed", "3", "--fixes", "20", "--drift", "0.03", "--out", str(out)]) == 0
+    cap = capsys.readouterr()
+    assert "8/8" in cap.err and "runs/s" in cap.err  # the progress bar
+    for text in ("INS error (m)", "error / INS", "median", "p95", "failure rate",
+                 "runs/s", f"wrote {out}"):
+        assert text in cap.out
+
+
+def test_montecarlo_refuses_to_overwrite(mc_run, capsys):
+    _, out = mc_run
+    args = ["montecarlo", "--method", "correlation", "--runs", "8", "--out", str(out)]
+    assert main(args) == 2
+    assert "exist; pass --force" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--runs", "0"], "--runs must be a positive number of runs; got 0"),
+    (["--runs", "8", "--chunk", "0"], "--chunk must be a positive number of runs; got 0"),
+    (["--runs", "8", "--devices", "64"], "devices=64 but JAX sees 1 device"),
+    (["--runs", "8", "--noise", "-1"], "noise must be a non-negative standard deviation"),
+    (["--runs", "8", "--drift", "0"], "drift must be a positive angle"),
+    (["--runs", "8", "--fixes", "2"], "fixes must be at least 5 per track; got 2"),
+])
+def test_montecarlo_bad_input(tmp_path, capsys, args, match):
+    jax.devices()  # JAX runs already (else --devices 64 would split the host into 64)
+    code = main(["montecarlo", "--method", "correlation", *args, "--out",
+                 str(tmp_path / "x.nc")])
+    assert code == 2
+    assert match in capsys.readouterr().err
+    assert not (tmp_path / "x.nc").exists()
+
+
+def test_montecarlo_filter_summary_uses_no_harm_bound(tmp_path, capsys):
+    out = tmp_path / "ukf.nc"
+    assert main(["montecarlo", "--method", "ekf", "--runs", "4", "--chunk", "2", "--fixes",
+                 "40", "--out", str(out), "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "paper D's point masses" in text and "position NEES" in text
+    assert "failure rate (error > 1.05 x INS or not finite)" in text
+    with xr.open_dataset(out) as ds:
+        a = ds.attrs
+        assert a["map"] == "paper-d" and a["summary_failure_ratio"] == 1.05
+        assert a["summary_nees_mean"] == pytest.approx(float(ds["nees"].mean()))
+        ratio = ds["err_m"].values / ds["ins_err_m"].values
+        assert a["summary_failure_rate"] == pytest.approx(float(np.mean(ratio > 1.05)))
+
+
+def test_montecarlo_filter_on_a_map(tmp_path, capsys):
+    """--map for a filter: straight tracks in random directions inside the map."""
+    out = tmp_path / "ekf_map.nc"
+    assert main(["montecarlo", "--method", "ekf", "--runs", "2", "--chunk", "2", "--fixes",
+                 "31", "--map", "ryukyu", "--out", str(out), "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "map ryukyu" in text and "position NEES" in text
+    with xr.open_dataset(out) as ds:
+        a = ds.attrs
+        assert a["map"] == "ryukyu" and a["setting_geometry"] == "random"
+        # starts 5 m/s x 300 s + 3 x 2 km + 10 km inside the 24-36 N map (hand computed)
+        s, n = (float(v) for v in a["setting_region"].split(",")[:2])
+        assert s == pytest.approx(24 + 17.5e3 / DEG_ARC_M, abs=1e-4)
+        assert n == pytest.approx(36 - 17.5e3 / DEG_ARC_M, abs=1e-4)
+        assert np.all((ds["ins_err_m"] > 1500) & (ds["ins_err_m"] < 2500))  # 2 km, 5 min
+        assert np.all(np.isfinite(ds["err_m"])) and np.all(ds["err_m"] < 2 * ds["ins_err_m"])
+        assert np.all(np.isfinite(ds["nees"]))
+        assert not np.any(ds["status"].values & 2)  # no reading fell off the map
+
+
+def test_montecarlo_filter_map_too_small(tmp_path, capsys):
+    lat, lon = np.linspace(30.0, 30.2, 11), np.linspace(130.0, 130.2, 11)
+    small = Grid.from_arrays(lat, lon, np.add.outer(lat, lon), name="g", units="mGal")
+    small.to_netcdf(tmp_path / "small.nc")
+    code = main(["montecarlo", "--method", "ukf", "--runs", "2", "--map",
+                 str(tmp_path / "small.nc"), "--out", str(tmp_path / "x.nc")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "(lat 30..30.2, lon 130..130.2) is too small for the filter runs" in err
+    assert "52 km inside it" in err  # default 2 h: 36 km track + 3 x 2 km + 10 km
+
+
+@pytest.mark.parametrize("method, fixes, drift", [("chains", 12, 0.02), ("entropy", 20, 0.03),
+                                                  ("iccp", 20, 0.03)])
+def test_montecarlo_more_matchers(tmp_path, capsys, method, fixes, drift):
+    """Paper A's chains and paper B's stages alone, two runs each through the command."""
+    out = tmp_path / f"{method}.nc"
+    assert main(["montecarlo", "--method", method, "--runs", "2", "--chunk", "2", "--seed",
+                 "1", "--fixes", str(fixes), "--drift", str(drift), "--out", str(out),
+                 "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    for t in ("INS error (m)", "error / INS", "failure rate (error > INS/3", f"wrote {out}"):
+        assert t in text
+    with xr.open_dataset(out) as ds:
+        a = ds.attrs
+        assert ds.sizes["run"] == 2 and a["method"] == method and a["setting_n_fixes"] == fixes
+        assert ds["status"].dtype == np.int32 and np.all(np.isfinite(ds["err_m"]))
+        ins, err = ds["ins_err_m"].values, ds["err_m"].values
+        assert a["summary_err_m_p50"] == pytest.approx(float(np.median(err)))
+        assert a["summary_ratio_mean"] == pytest.approx(float(np.mean(err / ins)))
+        d = drift * DEG_ARC_M
+        if method == "chains":  # fixed drift; the map refined 2.5' / 0.005 deg = x8
+            assert a["setting_refine_factor"] == 8 and "chains" in a["setting_description"]
+            np.testing.assert_allclose(ins, d, rtol=1e-6)
+            assert "work_constrained" in ds
+        else:  # offset in [2/3, 1] x drift; a 1.5 deg turn about the start moves the
+            # fixes of the 11.4 km track by 150 m on average
+            assert np.all((ins > 2 / 3 * d - 160) & (ins < d + 160))
+            assert "rotation_deg" in ds
+            if method == "entropy":  # the coarse stage only shifts
+                np.testing.assert_array_equal(ds["rotation_deg"], 0.0)
+            else:
+                assert np.all(np.abs(ds["rotation_deg"]) <= 90.0)
+
+
+def test_summarize_failure_bounds():
+    from jaxgrav.cli.montecarlo import summarize
+
+    res = dict(ins_err_m=np.array([300.0, 300, 300]), err_m=np.array([90.0, 150, 310]),
+               status=np.zeros(3, np.int32))
+    assert summarize(res)["failure_rate"] == pytest.approx(2 / 3)  # > INS/3: 150 and 310
+    assert summarize(res, "filter")["failure_rate"] == pytest.approx(0.0)  # none > 315
+    with pytest.raises(ValueError, match="kind must be one of"):
+        summarize(res, "smoother")
+
+
+@slow
+def test_montecarlo_entropy_iccp(tmp_path):
+    out = tmp_path / "b.nc"
+    assert main(["montecarlo", "--method", "entropy+iccp", "--runs", "6", "--chunk", "3",
+                 "--out", str(out), "--no-progress"]) == 0
+    with xr.open_dataset(out) as ds:
+        assert ds.sizes["run"] == 6 and "rotation_deg" in ds
+        assert np.median(ds["err_m"]) < np.median(ds["ins_err_m"])
+
+
+# --------------------------------------------------------------------------- bench
+_GOOD = """
+import json, sys
+quick = "--quick" in sys.argv
+print("warming up")
+for n in (10, 100):
+    print(json.dumps({"bench": "fake", "case": "quick" if quick else "full", "n": n,
+                      "jaxgrav_s": 0.5, "baseline": "numpy", "baseline_s": 2.0, "ratio": 4.0,
+                      "machine": "x", "note": "a|b"}))
+"""
+_BAD = """
+import sys
+print('{"bench": "half", "case": "before the crash", "n": 1, "jaxgrav_s": 1, '
+      '"baseline": "b", "baseline_s": 1, "ratio": 1.0}')
+print("Traceback: something broke", file=sys.stderr)
+sys.exit(3)
+"""
+
+
+@pytest.fixture
+def bench_dir(tmp_path):
+    d = tmp_path / "benchmarks"
+    d.mkdir()
+    (d / "good.py").write_text(textwrap.dedent(_GOOD))
+    (d / "_common.py").write_text("raise SystemExit('helpers are not benchmarks')\n")
+    return d
+
+
+def test_bench_quick_writes_table(bench_dir, tmp_path, capsys):
+    out = tmp_path / "bench.md"
+    assert main(["bench", "--quick", "--dir", str(bench_dir), "--out", str(out)]) == 0
+    md = out.read_text()
+    assert "Command: `jaxgrav bench --quick`" in md
+    assert "| good.py | fake | quick | 10 | 0.5 | numpy | 2 | 4 | note=a\\|b |" in md
+    assert "| good.py | ok |" in md and "_common" not in md
+    raw = md.split("```jsonl\n")[1].split("```")[0].splitlines()
+    assert [json.loads(r)["n"] for r in raw] == [10, 100]
+    assert "wrote" in capsys.readouterr().out
+    assert main(["bench", "--dir", str(bench_dir), "--out", str(out)]) == 2  # no --force
+    assert main(["bench", "--dir", str(bench_dir), "--out", str(out), "--force"]) == 0
+    assert "| fake | full |" in out.read_text()
+
+
+def test_bench_reports_failed_scripts(bench_dir, tmp_path, capsys):
+    (bench_dir / "bad.py").write_text(textwrap.dedent(_BAD))
+    out = tmp_path / "bench.md"
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "--quick", "--dir", str(bench_dir), "--out", str(out)])
+    assert exc.value.code == 1
+    md = out.read_text()
+    assert "| bad.py | FAILED (exit code 3) |" in md
+    assert "### bad.py: exit code 3" in md and "Traceback: something broke" in md
+    assert "| bad.py | half | before the crash |" in md  # its lines are kept
+    assert "| good.py | fake | quick | 100 |" in md
+    err = capsys.readouterr().err
+    assert "bad.py failed (exit code 3)" in err and "something broke" in err
+
+
+def test_bench_bad_dir(tmp_path, capsys):
+    assert main(["bench", "--dir", str(tmp_path / "nope"), "--out", str(tmp_path / "b.md")]) == 2
+    assert "is not a folder of benchmark scripts" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    assert main(["bench", "--dir", str(tmp_path / "empty"), "--out",
+                 str(tmp_path / "b.md")]) == 2
+    assert "has no benchmark scripts" in capsys.readouterr().err
+
+
+def test_bench_default_dir_is_cwd_benchmarks(bench_dir, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)  # holds benchmarks/ (the fake scripts)
+    assert main(["bench", "--quick", "--out", "b.md"]) == 0
+    assert "| good.py | ok |" in (tmp_path / "b.md").read_text()
+
+
+def test_bench_default_dir_falls_back_to_the_repository(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no benchmarks/ here
+    repo = Path(__file__).resolve().parents[2] / "benchmarks"  # this checkout's
+    assert default_bench_dir().resolve() == repo and (repo / "montecarlo_scaling.py").exists()
+
+
+def test_bench_default_dir_missing_names_both(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    site = tmp_path / "site-packages"
+    monkeypatch.setattr(jaxgrav, "__file__", str(site / "jaxgrav" / "__init__.py"))
+    assert main(["bench", "--quick", "--out", str(tmp_path / "b.md")]) == 2
+    err = capsys.readouterr().err
+    assert str(tmp_path / "benchmarks") in err and str(site / "benchmarks") in err
+    assert "pass --dir" in err and not (tmp_path / "b.md").exists()

@@ -1,0 +1,289 @@
+"""Tests of the grid point-mass filter (jaxgrav.filters.pmf).
+
+References: the diffusion kernel against a brute-force NumPy convolution with the
+exact lattice heat kernel (Skellam, e^{−v} I_n(v), reflected at the edges) and
+SciPy's matrix exponential; the prediction and the Bayes update against NumPy
+on a small grid; causality of ``run_pmf(every > 1)``; vmap against a Python loop.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.linalg
+import scipy.special
+
+from jaxgrav import filters as fl
+from jaxgrav.constants import DEG
+from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
+from jaxgrav.filters.pmf import PMFDynamics, diffusion_kernel
+from jaxgrav.scenarios.paper_d import MASS_LON
+from jaxgrav.sim import ins
+
+FLAGS = fl.STATUS_FILTER
+FIELD = paper_d()
+G, CELL, Q_POS, DT = 15, 400.0, 50.0, 10.0
+PMF = fl.pmf(n_cells=G, cell_m=CELL, q_pos=Q_POS)
+PMF_RW = fl.pmf(n_cells=G, cell_m=CELL, q_pos=Q_POS, ins=None)
+LAT = 24.25
+
+init = jax.jit(lambda filt, x0, p0: filt.init(x0, p0), static_argnums=0)
+predict = jax.jit(lambda filt, s, dyn: filt.predict(s, dyn), static_argnums=0)
+update = jax.jit(lambda filt, s, step, field, dyn: filt.update(s, step, field, dyn),
+                 static_argnums=0)
+run = jax.jit(fl.run_pmf, static_argnums=(0, 6))
+run_batch = jax.jit(jax.vmap(fl.run_pmf, in_axes=(None, None, None, None, None, 0, None)),
+                    static_argnums=(0, 6))
+
+
+def _radii(lat):
+    a, e2 = 6378137.0, 6.69437999014e-3
+    s2 = np.sin(lat * DEG) ** 2
+    return a * (1 - e2) / (1 - e2 * s2) ** 1.5, a / np.sqrt(1 - e2 * s2)
+
+
+def _step(z, lat=LAT, lon=MASS_LON + 0.02, r=1.0):
+    return fl.Step(*(jnp.asarray(v, dtype=jnp.float64) for v in (lat, lon, z, r)))
+
+
+@pytest.fixture(scope="module")
+def dyn():
+    return PMF.dynamics(LAT, DT)
+
+
+@pytest.fixture(scope="module")
+def prior():
+    """A prior with a velocity error (so the model drifts) and a correlated position block."""
+    p0 = np.array(ins.initial_covariance(ins.INSErrorModel(), 1000.0, 0.15))
+    p0[:2, :2] = [[900.0**2, 1.5e5], [1.5e5, 700.0**2]]
+    x0 = np.zeros(ins.N_STATES)
+    x0[[0, 1, 2, 3, 12]] = [150.0, -100.0, 0.3, -0.2, 0.5]
+    return jnp.asarray(x0), jnp.asarray(p0)
+
+
+def _steps(n, every, seed=0, n_runs=None):
+    """An eastward track over the masses, readings (map + noise) on steps every−1, 2·every−1, …"""
+    rng = np.random.default_rng(seed)
+    shape = (n,) if n_runs is None else (n_runs, n)
+    lat = np.full(shape, LAT) + (0 if n_runs is None else rng.uniform(-0.1, 0.1, (n_runs, 1)))
+    lon = MASS_LON - 0.05 + 100.0 * np.arange(1, n + 1) / (111320.0 * np.cos(LAT * DEG))
+    lon = np.broadcast_to(lon, shape)
+    z = np.asarray(gravity_anomaly(FIELD, lat - 0.004, lon + 0.003)) + rng.standard_normal(shape)
+    z[..., (np.arange(n) % every) != every - 1] = np.nan
+    return fl.Step(*(jnp.asarray(a) for a in (lat, lon, z)), jnp.ones(shape))
+
+
+# ----------------------------------------------------------------- diffusion kernel
+
+
+def _np_kernel(n, v, images=50):
+    """Continuous-time random walk of variance v (Skellam pmf e^{−v} I_k(v)), reflected at
+    the cell-grid edges by the method of images: a brute-force convolution."""
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a = np.zeros((n, n))
+    for m in range(-images, images + 1):
+        for d in (i - j + 2 * n * m, i + j + 1 + 2 * n * m):
+            a += scipy.special.ive(np.abs(d), v)
+    return a
+
+
+@pytest.mark.parametrize("v", [0.05, 0.9, 3.0, 40.0, 2000.0])
+def test_diffusion_kernel_is_the_brute_force_convolution(v):
+    a = np.asarray(diffusion_kernel(G, jnp.asarray(v)))
+    np.testing.assert_allclose(a, _np_kernel(G, v), rtol=1e-9, atol=1e-14)
+    lap = np.diag(np.full(G, -2.0)) + np.diag(np.ones(G - 1), 1) + np.diag(np.ones(G - 1), -1)
+    lap[0, 0] = lap[-1, -1] = -1.0
+    np.testing.assert_allclose(a, scipy.linalg.expm(0.5 * v * lap), rtol=1e-9, atol=1e-14)
+    assert a.min() >= 0.0  # non-negative for any v (the 3-point stencil is not for v > 1)
+    np.testing.assert_allclose(a.sum(0), 1.0, rtol=1e-14)  # mass conserving at the edges
+
+
+def test_diffusion_kernel_has_the_variance_v_inside():
+    a = np.asarray(diffusion_kernel(61, jnp.asarray(7.3)))
+    col, x = a[:, 30], np.arange(61) - 30.0
+    np.testing.assert_allclose(np.sum(col * x), 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.sum(col * x**2), 7.3, rtol=1e-9)
+
+
+# ----------------------------------------------------------------- prediction, update
+
+
+def _np_predict(state, dyn, q_pos):
+    """The prediction in NumPy: Gaussian moments, drift of the origin, conditional spread."""
+    x, p, f, q = (np.asarray(a) for a in (state.x, state.p, dyn.f, dyn.q))
+    p_new = f @ p @ f.T + q
+    spread = np.maximum(np.diag(p_new[:2, :2] - p[:2, :2]), 0.0) + q_pos * float(dyn.dt)
+    a_n, a_e = (_np_kernel(G, s / CELL**2) for s in spread)
+    fb, qb = f[12, 12], q[12, 12]
+    w, m, s = (np.asarray(a) for a in (state.w, state.bias_mean, state.bias_var))
+    m, s = fb * m, fb**2 * s + qb
+    w_new = a_n @ w @ a_e.T
+    m_new = a_n @ (w * m) @ a_e.T / w_new
+    s_new = a_n @ (w * (s + m**2)) @ a_e.T / w_new - m_new**2
+    centre = np.asarray(state.centre) + (f @ x - x)[:2]
+    return w_new, m_new, s_new, centre, f @ x, p_new
+
+
+def test_prediction_translates_by_the_model_drift_and_spreads_by_its_variance_growth(
+        prior, dyn):
+    x0, p0 = prior
+    state = init(PMF, x0, p0)
+    assert float(state.w.sum()) == pytest.approx(1.0, abs=1e-14)
+    new, info = predict(PMF, state, dyn)
+    w, m, s, centre, x, _ = _np_predict(state, dyn, Q_POS)
+    np.testing.assert_allclose(np.asarray(new.centre), centre, rtol=1e-12)
+    assert abs(centre[0] - 3.0) < 0.1 and abs(centre[1] + 2.0) < 0.1  # 10 s at (0.3, −0.2) m/s
+    np.testing.assert_allclose(np.asarray(new.w), w, rtol=1e-8, atol=1e-15)
+    big = w > 1e-10
+    np.testing.assert_allclose(np.asarray(new.bias_mean)[big], m[big], rtol=1e-8)
+    np.testing.assert_allclose(np.asarray(new.bias_var)[big], s[big], rtol=1e-7)
+    np.testing.assert_allclose(np.asarray(new.x)[2:12], x[2:12], rtol=1e-9, atol=1e-14)
+    # 15 cells: the edges hold mass
+    assert int(info.status) & ~FLAGS["grid_edge"] == FLAGS["no_reading"]
+    assert np.isnan(float(info.innovation))
+    # the grid's mean is the origin's shift plus the weights' own mean
+    dn = np.asarray(new.centre)[0] + (np.arange(G) - (G - 1) / 2) * CELL
+    np.testing.assert_allclose(float(info.x[0]), np.sum(w * dn[:, None]), rtol=1e-9)
+
+
+@pytest.mark.parametrize("dt", [10.0, 5000.0])
+def test_random_walk_prediction_any_v(prior, dt):
+    """No error model: pure diffusion of variance q dt, exact also for v = q dt / cell² ≫ 1."""
+    x0, p0 = prior
+    state = init(PMF_RW, x0, p0)
+    new, _ = predict(PMF_RW, state, PMF_RW.dynamics(LAT, dt))
+    v = Q_POS * dt / CELL**2
+    a = _np_kernel(G, v)
+    w = np.asarray(new.w)
+    np.testing.assert_allclose(w, a @ np.asarray(state.w) @ a.T, rtol=1e-8, atol=1e-15)
+    assert w.min() >= 0.0 and w.sum() == pytest.approx(1.0, abs=1e-13)
+    np.testing.assert_allclose(np.asarray(new.centre), 0.0)
+
+
+def test_update_is_the_brute_force_bayes_grid(prior, dyn):
+    x0, p0 = prior
+    state = init(PMF, x0, p0)
+    lat, lon, z, r = LAT, MASS_LON + 0.02, 4.0, 0.7
+    new, info = update(PMF, state, _step(z, lat, lon, r), FIELD, dyn)
+    pred, _ = predict(PMF, state, dyn)
+
+    w, m, s = (np.asarray(a) for a in (pred.w, pred.bias_mean, pred.bias_var))
+    offsets = (np.arange(G) - (G - 1) / 2) * CELL
+    dn, de = np.meshgrid(pred.centre[0] + offsets, pred.centre[1] + offsets, indexing="ij")
+    mr, nr = _radii(lat)
+    g = np.asarray(gravity_anomaly(FIELD, lat - dn / mr / DEG,
+                                   lon - de / (nr * np.cos(lat * DEG)) / DEG))
+    like = np.exp(-0.5 * (z - g - m) ** 2 / (s + r)) / np.sqrt(s + r)
+    post = w * like / np.sum(w * like)
+    mean = np.array([np.sum(post * dn), np.sum(post * de)])
+    prior_mean = np.array([np.sum(w * dn), np.sum(w * de)])
+    d = np.stack([dn - mean[0], de - mean[1]], -1)
+    cov = np.einsum("ij,ija,ijb->ab", post, d, d) + np.eye(2) * CELL**2 / 12
+    b_cell = m + s / (s + r) * (z - g - m)
+
+    np.testing.assert_allclose(np.asarray(new.w), post, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(np.asarray(new.bias_mean), b_cell, rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(info.x)[[0, 1, 12]],
+                               [*mean, np.sum(post * b_cell)], rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(info.p_pos), cov, rtol=1e-9)
+    # the velocity (and the other Gaussian states) move by their regression on the position
+    xp, pp = np.asarray(pred.x), np.asarray(pred.p)
+    k = pp[2:12, :2] @ np.linalg.inv(pp[:2, :2])
+    np.testing.assert_allclose(np.asarray(new.x)[2:12], xp[2:12] + k @ (mean - prior_mean),
+                               rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(np.asarray(new.p)[2:12, :2], k @ cov, rtol=1e-9, atol=1e-18)
+    assert np.abs(post - w).max() > 1e-3  # the reading was informative
+    assert int(info.status) & ~FLAGS["grid_edge"] == 0
+
+
+def test_nan_reading_leaves_the_prediction(prior, dyn):
+    x0, p0 = prior
+    state = init(PMF, x0, p0)
+    new, info = update(PMF, state, _step(jnp.nan), FIELD, dyn)
+    pred, pinfo = predict(PMF, state, dyn)
+    for a, b in zip(jax.tree.leaves(new), jax.tree.leaves(pred), strict=True):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-15)
+    assert int(info.status) & FLAGS["no_reading"] and np.isnan(float(info.innovation))
+    np.testing.assert_allclose(np.asarray(info.x), np.asarray(pinfo.x), rtol=1e-12, atol=1e-15)
+
+
+def test_recentres_on_the_posterior_mean():
+    x0 = jnp.zeros(ins.N_STATES).at[0].set(1300.0).at[1].set(-900.0)
+    p0 = jnp.asarray(ins.initial_covariance(ins.INSErrorModel(), 150.0, 0.01))
+    state = init(PMF_RW, x0, p0)
+    new, info = predict(PMF_RW, state, PMF_RW.dynamics(LAT, 1.0))
+    np.testing.assert_allclose(np.asarray(new.centre), [1200.0, -800.0])  # whole cells
+    np.testing.assert_allclose(np.asarray(info.x)[:2], np.asarray(state.x)[:2], atol=1e-6)
+    assert abs(float(info.x[0]) - 1300.0) < 100.0  # σ = 150 m on 400 m cells
+    assert float(new.w.sum()) == pytest.approx(1.0, abs=1e-13)
+    # a wide posterior is not re-centred: the far edge would lose mass
+    wide = init(PMF_RW, x0, jnp.asarray(ins.initial_covariance(ins.INSErrorModel(), 2000.0)))
+    new, _ = predict(PMF_RW, wide, PMF_RW.dynamics(LAT, 1.0))
+    np.testing.assert_allclose(np.asarray(new.centre), 0.0)
+
+
+# ----------------------------------------------------------------- runs
+
+
+def test_every_is_causal_and_predicts_between_readings(prior):
+    x0, p0 = prior
+    every, n = 4, 16
+    steps = _steps(n, every)
+    _, infos = run(PMF, FIELD, DT, x0, p0, steps, every)
+    assert infos.x.shape == (n, ins.N_STATES)
+    # a different later reading (step 11) changes nothing before it
+    z = np.asarray(steps.z).copy()
+    z[11] += 5.0
+    _, other = run(PMF, FIELD, DT, x0, p0, steps._replace(z=jnp.asarray(z)), every)
+    for a, b in zip(jax.tree.leaves(infos), jax.tree.leaves(other), strict=True):
+        np.testing.assert_array_equal(np.asarray(a)[:11], np.asarray(b)[:11])
+    assert not np.allclose(np.asarray(infos.x)[11], np.asarray(other.x)[11])
+    # steps between readings are predictions, not repeats
+    status = np.asarray(infos.status)
+    assert np.all(status[[0, 1, 2, 4, 5, 6]] & FLAGS["no_reading"])
+    assert not np.any(status[[3, 7, 11, 15]] & FLAGS["no_reading"])
+    x = np.asarray(infos.x)
+    assert np.all(np.abs(np.diff(x[4:8, :2], axis=0)) > 1.0)  # drifting at ~0.3 m/s
+    # ... and they are the loop of predict / update
+    dyn = PMF.dynamics(jnp.mean(steps.lat), DT)
+    state = init(PMF, x0, p0)
+    for k in range(n):
+        one = jax.tree.map(lambda a, k=k: a[k], steps)
+        if k % every == every - 1:
+            state, info = update(PMF, state, one, FIELD, dyn)
+        else:
+            state, info = predict(PMF, state, dyn)
+        np.testing.assert_allclose(np.asarray(info.x), x[k], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(np.asarray(info.p_pos), np.asarray(infos.p_pos)[k],
+                                   rtol=1e-9)
+
+
+def test_vmap_equals_loop(prior):
+    x0, p0 = prior
+    steps = _steps(8, 2, seed=3, n_runs=3)
+    final_b, infos_b = run_batch(PMF, FIELD, DT, x0, p0, steps, 2)
+    assert infos_b.x.shape == (3, 8, ins.N_STATES)
+    for i in range(3):
+        final, infos = run(PMF, FIELD, DT, x0, p0, jax.tree.map(lambda a, i=i: a[i], steps), 2)
+        for a, b in zip(jax.tree.leaves((final, infos)),
+                        jax.tree.leaves(jax.tree.map(lambda a, i=i: a[i], (final_b, infos_b))),
+                        strict=True):
+            np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-9, atol=1e-12)
+
+
+def test_bad_arguments(prior):
+    x0, p0 = prior
+    with pytest.raises(ValueError, match="every must be a positive int dividing the 16 steps"):
+        fl.run_pmf(PMF, FIELD, DT, x0, p0, _steps(16, 5), 5)
+    with pytest.raises(ValueError, match="n_cells must be an odd integer"):
+        fl.pmf(n_cells=60)
+
+
+def test_dynamics_arguments():
+    d = PMF.dynamics(LAT, DT)
+    f, q = ins.transition(ins.INSErrorModel(), LAT, DT)
+    assert isinstance(d, PMFDynamics)
+    np.testing.assert_allclose(np.asarray(d.f), np.asarray(f))
+    np.testing.assert_allclose(np.asarray(d.q), np.asarray(q))
+    rw = PMF_RW.dynamics(LAT, DT)
+    np.testing.assert_array_equal(np.asarray(rw.f), np.eye(ins.N_STATES))
