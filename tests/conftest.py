@@ -1,8 +1,26 @@
-"""Test configuration: the suite runs in float64 (DESIGN.md, Precision); shared fixtures."""
+"""Test configuration: the suite runs in float64 (x64 on, as the library's precision
+notes say); XLA executables are cached on disk between runs; shared fixtures."""
+
+import os
+from pathlib import Path
 
 import jax
 import numpy as np
 import pytest
+
+# Persistent compilation cache: a second run of the suite (and of the example scripts
+# the tests start as subprocesses, through the environment) loads compiled programs
+# instead of compiling them again. JAXGRAV_TEST_CACHE=off disables it; any other value
+# is the folder (default: the user's cache folder).
+_CACHE = os.environ.get("JAXGRAV_TEST_CACHE",
+                        str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+                            / "jaxgrav" / "xla-tests"))
+if _CACHE != "off":
+    os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", _CACHE)
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
+    jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+    jax.config.update("jax_persistent_cache_min_compile_time_secs",
+                      float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]))
 
 jax.config.update("jax_enable_x64", True)
 
