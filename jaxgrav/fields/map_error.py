@@ -1,21 +1,13 @@
 """Map-error models: the field the sensors see when the map is not the truth.
 
-A navigation map differs from the field a sensor measures: a marine gravity map
-built from a global model or satellite altimetry is off by a few mGal RMS, with
-errors correlated over ~10 km, and a coarse map misses the short wavelengths. Two
-models describe the truth:
+* :class:`CorrelatedMapError` (:func:`map_error`): truth = map + a stationary Gaussian
+  error of standard deviation σ (map units) and correlation length L (m), covariance
+  ``C(r) = σ² (1 + r/L) e^{−r/L}`` (``"markov2"``, the default) or ``σ² e^{−r/L}``
+  (``"markov1"``, exponential);
+* :class:`TruthGrid` (:func:`truth_grid`): an explicit truth grid (e.g. a finer field).
 
-* :class:`CorrelatedMapError` (build it with :func:`map_error`): truth = map + a
-  stationary Gaussian error field of standard deviation σ (map units) and
-  correlation length L (m), covariance ``C(r) = σ² (1 + r/L) e^{−r/L}``
-  (``family="markov2"``, second-order Gauss–Markov, the default) or
-  ``C(r) = σ² e^{−r/L}`` (``family="markov1"``, first-order, exponential);
-* :class:`TruthGrid` (build it with :func:`truth_grid`): an explicit truth grid,
-  e.g. a finer field than the map, on any geometry that covers the map.
-
-:func:`truth_field` draws the truth for one run from a PRNG key;
-:func:`along_track_covariance` gives the covariance of the map error between the
-fixes of a track, for generalised least-squares matching and filtering.
+:func:`truth_field` draws a run's truth from a PRNG key; :func:`along_track_covariance`
+gives the map error's covariance between the fixes of a track (for GLS matching).
 """
 
 import dataclasses
@@ -31,16 +23,8 @@ from jaxgrav.fields.random import markov_spectrum
 from jaxgrav.grid import Grid
 
 __all__ = [
-    "FAMILIES",
-    "CorrelatedMapError",
-    "TruthGrid",
-    "along_track_covariance",
-    "check_covers",
-    "error_field",
-    "map_error",
-    "map_error_key",
-    "truth_field",
-    "truth_grid",
+    "FAMILIES", "MAP_ERROR_STREAM", "CorrelatedMapError", "TruthGrid", "along_track_covariance",
+    "check_covers", "error_field", "map_error", "map_error_key", "truth_field", "truth_grid",
 ]
 
 FAMILIES = {"markov1": 1, "markov2": 2}
@@ -53,21 +37,17 @@ MAP_ERROR_STREAM = 0x6D6170  # fold-in constant of :func:`map_error_key` ("map")
 class CorrelatedMapError:
     """Truth = map + a stationary, isotropic Gaussian error field.
 
-    Build one with :func:`map_error`, which validates. ``sigma`` and ``length_m``
-    are pytree data (traced under ``jit``: sweeping them never recompiles);
-    ``family`` is static.
+    Build one with :func:`map_error` (validates). ``sigma`` and ``length_m`` are
+    pytree data (sweeping them never recompiles); ``family`` is static.
 
     Attributes
     ----------
     sigma : Array, scalar
-        Standard deviation of the map error (map units, e.g. mGal), ≥ 0; 0 is a
-        perfect map.
+        Standard deviation of the map error (map units, e.g. mGal), ≥ 0 (0: perfect map).
     length_m : Array, scalar
-        Correlation length L (m), > 0. For ``markov2`` the correlation is 2/e ≈ 0.74
-        at r = L and falls to one half at r ≈ 1.68 L; for ``markov1`` it is 1/e at L.
+        Correlation length L (m), > 0 (``markov2``: correlation 2/e at L, 1/2 at 1.68 L).
     family : {"markov2", "markov1"}
-        Covariance family (static): ``markov2`` ``C = σ² (1 + r/L) e^{−r/L}``,
-        ``markov1`` ``C = σ² e^{−r/L}``.
+        ``C = σ² (1 + r/L) e^{−r/L}`` or ``C = σ² e^{−r/L}`` (static).
     """
 
     sigma: jax.Array
@@ -87,18 +67,14 @@ class CorrelatedMapError:
 
 @pytree_dataclass
 class TruthGrid:
-    """Truth = an explicit grid (e.g. a finer field than the map).
-
-    Build one with :func:`truth_grid`. The grid may have any geometry that covers
-    the map's area; the sensors sample it wherever the track goes.
+    """Truth = an explicit grid (e.g. a finer field than the map); see :func:`truth_grid`.
 
     Attributes
     ----------
     grid : Grid
         The field the sensors see (map units).
     error : CorrelatedMapError or None
-        Optional statistical description of ``truth − map`` (σ, L), used by
-        :func:`along_track_covariance`; None when unknown.
+        Statistical description of ``truth − map`` (σ, L) if known.
     """
 
     grid: Grid
@@ -126,26 +102,20 @@ def map_error(sigma, length_m, *, family="markov2"):
     Parameters
     ----------
     sigma : float or array_like
-        Standard deviation of the map error (map units, e.g. mGal), finite and ≥ 0
-        (0 = perfect map). A scalar for :func:`truth_field`; an array of models may
-        be built to ``vmap`` over.
+        Standard deviation of the map error (map units, e.g. mGal), finite, ≥ 0
+        (0 = perfect map). Scalar for :func:`truth_field` (arrays: to ``vmap`` over).
     length_m : float or array_like
-        Correlation length L (m), finite and > 0.
+        Correlation length L (m), finite, > 0.
     family : {"markov2", "markov1"}, default "markov2"
-        ``markov2``: ``C = σ² (1 + r/L) e^{−r/L}`` (second-order Gauss–Markov);
-        ``markov1``: ``C = σ² e^{−r/L}`` (first-order, exponential).
+        Second-order Gauss–Markov ``σ² (1 + r/L) e^{−r/L}`` or exponential ``σ² e^{−r/L}``.
 
     Returns
     -------
     CorrelatedMapError
 
-    Raises
-    ------
-    TypeError
-        If ``sigma`` or ``length_m`` is not a real number (e.g. a string, a bool, None).
-    ValueError
-        If ``sigma`` < 0, ``length_m`` ≤ 0, either is NaN or infinite, or ``family``
-        is unknown (concrete values only; traced values pass unchecked).
+    Raises TypeError if ``sigma`` or ``length_m`` is not a real number (a string, a
+    bool, None), ValueError if ``sigma`` < 0, ``length_m`` ≤ 0, either is NaN or inf,
+    or ``family`` is unknown (concrete values only; traced values pass unchecked).
     """
     if not isinstance(family, str) or family not in FAMILIES:
         raise ValueError(f"family must be one of {sorted(FAMILIES)}; got {family!r}")
@@ -159,28 +129,21 @@ def map_error(sigma, length_m, *, family="markov2"):
 
 
 def truth_grid(grid, *, error=None, map_grid=None):
-    """An explicit truth grid, optionally checked against the map it must cover.
+    """An explicit truth grid (TypeError unless ``grid`` is a Grid).
 
     Parameters
     ----------
     grid : Grid
-        The field the sensors see, 2-D values ``(ny, nx)`` (map units).
+        The field the sensors see (map units).
     error : CorrelatedMapError, optional
         Statistical description of ``truth − map`` for :func:`along_track_covariance`.
     map_grid : Grid, optional
-        The navigation map; if given, ``grid`` must cover its area (checked now
-        rather than in :func:`truth_field`).
+        The map; if given, ``grid`` must cover it (ValueError), else
+        :func:`truth_field` checks.
 
     Returns
     -------
     TruthGrid
-
-    Raises
-    ------
-    TypeError
-        If ``grid`` is not a Grid or ``error`` not a CorrelatedMapError.
-    ValueError
-        If ``map_grid`` is given and ``grid`` does not cover it.
     """
     if not isinstance(grid, Grid):
         raise TypeError(f"grid must be a jaxgrav Grid (the truth field); got {type(grid).__name__}")
@@ -195,16 +158,9 @@ def truth_grid(grid, *, error=None, map_grid=None):
 
 
 def check_covers(truth, grid, name="truth"):
-    """Raise ``ValueError`` unless grid ``truth`` covers the area of grid ``grid``.
+    """Raise ``ValueError`` (naming ``name``) unless Grid ``truth`` covers Grid ``grid``.
 
-    Longitudes may use different conventions (0–360 or ±180) in the two grids.
-
-    Parameters
-    ----------
-    truth, grid : Grid
-        The truth grid and the map (degrees; geometry only).
-    name : str
-        Name of the truth argument, for the message.
+    The two may use different longitude conventions (0–360 or ±180).
     """
     lon_min, lon_max, lat_min, lat_max = grid.extent
     t_lon_min, t_lon_max, t_lat_min, t_lat_max = truth.extent
@@ -225,19 +181,9 @@ def check_covers(truth, grid, name="truth"):
 def map_error_key(key):
     """The key of a run's map-error draw, independent of the run's other draws.
 
-    ``jax.random.fold_in(key, MAP_ERROR_STREAM)``: a scenario that draws its map
-    error from this key leaves its other random numbers (start, drift, noise, all
-    split from ``key`` as before) unchanged, so runs with and without map error
-    differ only by the map error.
-
-    Parameters
-    ----------
-    key : PRNG key
-        The run's key.
-
-    Returns
-    -------
-    PRNG key
+    ``jax.random.fold_in(key, MAP_ERROR_STREAM)``: a scenario drawing its map error
+    from it keeps its other draws (split from ``key`` as before) unchanged, so runs
+    with and without map error differ only by the map error. ``key``: the run's key.
     """
     return jax.random.fold_in(key, MAP_ERROR_STREAM)
 
@@ -245,46 +191,40 @@ def map_error_key(key):
 def error_field(key, model, shape, spacing):
     """Draw a map-error field on a regular grid with the model's exact node covariance.
 
-    Circulant embedding on the grid's torus: the covariance of the nodes is
-    ``C(r)`` at the periodic (wrapped) distance ``r``, its 2-D FFT gives the variance
-    of every Fourier mode, and white noise coloured by their square roots has
-    exactly that covariance, for both families and at every lag up to half the grid
-    (a spectral synthesis from ``S(|k|)`` instead would truncate the wavenumbers
-    beyond the grid's Nyquist: for ``markov1`` at L = 3 cells the correlation at one
-    cell would come out 0.77 instead of 0.69). Negative mode variances (the wrapped
-    covariance is not always positive definite when L is not small against the grid)
-    are set to zero and the level restored, so each node's variance is exactly σ².
+    Circulant embedding on the grid's torus: the nodes' covariance ``C(r)`` at the
+    wrapped distance ``r`` is FFT'd into the variance of every Fourier mode, and white
+    noise coloured by their square roots has exactly that covariance, for both
+    families, at every lag up to half the grid. (A synthesis from the spectrum
+    ``S(|k|)`` truncates it at the grid's Nyquist: for ``markov1`` at L ≈ 2.7 cells the
+    correlation at one cell comes out 0.77 instead of 0.69.) Negative mode variances
+    (possible when L is not small against the grid) are zeroed and the level
+    restored: each node's variance is exactly σ². The map mean is not removed.
 
     Parameters
     ----------
     key : PRNG key
     model : CorrelatedMapError
-        σ and L scalars (may be traced).
-    shape : tuple of int
-        ``(ny, nx)`` (static).
-    spacing : tuple of float
-        ``(dy, dx)`` node spacing in metres (static).
+        Scalar σ and L (may be traced).
+    shape, spacing : tuple
+        ``(ny, nx)`` nodes and ``(dy, dx)`` node spacing (m), static.
 
     Returns
     -------
     Array, shape (ny, nx)
         The error (map units), rows south to north.
     """
-    ny, nx = (int(v) for v in shape)
-    dy, dx = (float(v) for v in spacing)
-    return _error_field(key, model.sigma, model.length_m, shape=(ny, nx), spacing=(dy, dx),
-                        order=model.order)
+    shape, spacing = tuple(int(v) for v in shape), tuple(float(v) for v in spacing)
+    return _error_field(key, model, shape=shape, spacing=spacing)
 
 
-@functools.partial(jax.jit, static_argnames=("shape", "spacing", "order"))
-def _error_field(key, sigma, length_m, *, shape, spacing, order):
+@functools.partial(jax.jit, static_argnames=("shape", "spacing"))
+def _error_field(key, model, *, shape, spacing):
     ny, nx = shape
     dtype = jnp.result_type(float)
     iy = np.minimum(np.arange(ny), ny - np.arange(ny)) * spacing[0]  # wrapped distances (m)
     ix = np.minimum(np.arange(nx), nx - np.arange(nx)) * spacing[1]
     r = jnp.asarray(np.hypot(iy[:, None], ix[None, :]), dtype)
-    unit = CorrelatedMapError(jnp.asarray(1.0, dtype), jnp.asarray(length_m, dtype),
-                              family="markov1" if order == 1 else "markov2")
+    unit = dataclasses.replace(model, sigma=jnp.asarray(1.0, dtype))
     lam = jnp.fft.rfft2(unit.covariance(r)).real  # mode variances × N, rfft half-plane
     pos = lam > 0
     lam_pos = jnp.where(pos, lam, 0.0)
@@ -296,17 +236,15 @@ def _error_field(key, sigma, length_m, *, shape, spacing, order):
     level = (ny * nx) / jnp.sum(lam_pos * weight)  # Σ λ = N·C(0) = N before clipping
     amp = jnp.where(pos, jnp.sqrt(jnp.where(pos, lam * level, 1.0)), 0.0)  # finite grads
     noise = jax.random.normal(key, shape, dtype=dtype)
-    return sigma * jnp.fft.irfft2(jnp.fft.rfft2(noise) * amp, s=shape)
+    return model.sigma * jnp.fft.irfft2(jnp.fft.rfft2(noise) * amp, s=shape)
 
 
 def truth_field(key, grid, model):
     """The field the sensors see: the map plus a drawn error, or an explicit truth.
 
-    For :class:`CorrelatedMapError` the error is a Gaussian random field drawn
-    from ``key`` on the map's own nodes by :func:`error_field` (FFT synthesis whose
-    node covariance is exactly ``C(r)``: every node's standard deviation is σ, σ = 0
-    included) and added to the map: same geometry, sampled exactly like the map
-    (so between nodes the error is interpolated as the map is).
+    For :class:`CorrelatedMapError` an error drawn from ``key`` by :func:`error_field`
+    on the map's own nodes (node covariance exactly ``C(r)``, σ = 0 included) is
+    added to the map: same geometry, sampled (interpolated) exactly like the map.
 
     * Metric spacing: one node spacing ``(dlat·M(φm), dlon·N(φm)·cos φm)`` in metres
       at the grid's middle latitude φm (M, N the WGS84 meridian and prime-vertical
@@ -319,11 +257,10 @@ def truth_field(key, grid, model):
       opposite edges are correlated as if they were neighbours. Harmless when L is a
       small fraction of the map's size.
 
-    One field per run: ``jax.vmap(lambda k: truth_field(k, grid, model))(keys)``
-    (or inside a vmapped run, with :func:`map_error_key` of the run's key). One
-    field per batch: draw it once, ``truth_field(key, grid, model)``, and give the
-    same truth to every run. The function is jit-able (``sigma`` and ``length_m``
-    traced: no recompilation when they change) and differentiable in them.
+    One field per run: ``jax.vmap(lambda k: truth_field(k, grid, model))(keys)``, or
+    inside a vmapped run from :func:`map_error_key` of the run's key. One field per
+    batch: draw it once with one key and give that truth to every run. jit-able with
+    σ and L traced (no recompilation when they change), differentiable in both.
 
     Parameters
     ----------
@@ -337,17 +274,11 @@ def truth_field(key, grid, model):
     Returns
     -------
     Grid
-        The truth: for CorrelatedMapError the map's geometry with values
-        ``map + error`` ``(ny, nx)`` (the map's floating dtype); for TruthGrid its
-        grid; for None or a concrete σ = 0 the map itself.
+        CorrelatedMapError: the map's geometry, values ``map + error`` ``(ny, nx)``
+        (map's float dtype); TruthGrid: its grid; None or concrete σ = 0: the map.
 
-    Raises
-    ------
-    TypeError
-        If ``grid`` is not a Grid or ``model`` is not a model.
-    ValueError
-        If a TruthGrid does not cover the map, a CorrelatedMapError's σ or L is not a
-        scalar, or the map's values are not 2-D.
+    Raises TypeError for a wrong ``grid`` or ``model`` type, ValueError if a TruthGrid
+    does not cover the map, σ or L is not a scalar or the map's values are not 2-D.
     """
     if not isinstance(grid, Grid):
         raise TypeError(f"grid must be a jaxgrav Grid (the map); got {type(grid).__name__}")
@@ -362,11 +293,9 @@ def truth_field(key, grid, model):
             f" or None; got {type(model).__name__}"
         )
     if np.ndim(model.sigma) != 0 or np.ndim(model.length_m) != 0:
-        raise ValueError(
-            "model.sigma and model.length_m must be scalars for truth_field (vmap over "
-            f"models to sweep them); got shapes {np.shape(model.sigma)} and "
-            f"{np.shape(model.length_m)}"
-        )
+        raise ValueError("model.sigma and model.length_m must be scalars (vmap over models to "
+                         f"sweep them); got shapes {np.shape(model.sigma)}, "
+                         f"{np.shape(model.length_m)}")
     sigma = concrete(model.sigma)
     if sigma is not None and sigma == 0:
         return grid
@@ -385,16 +314,14 @@ def truth_field(key, grid, model):
 def along_track_covariance(model, north_m, east_m):
     """Covariance of the map error between fixes at local north/east positions.
 
-    ``C[i, j] = C_map(|p_i − p_j|)``, the map error's covariance at the horizontal
-    distance between fixes i and j (their reading noise ``σ_n² I`` is not included:
-    add it for a generalised least-squares score).
+    ``C[i, j] = C_map(|p_i − p_j|)`` at the horizontal distance between fixes i and j;
+    the reading noise ``σ_n² I`` is not included (add it for a GLS score).
 
     Parameters
     ----------
     model : CorrelatedMapError, TruthGrid or None
-        The map-error model. A TruthGrid needs its ``error`` description (σ, L):
-        the covariance of an arbitrary truth grid is unknown, so one without it is
-        refused. None (perfect map) gives zeros.
+        A TruthGrid needs its ``error`` description (σ, L): an arbitrary truth grid's
+        covariance is unknown, so one without it is refused. None gives zeros.
     north_m, east_m : array_like, shape (..., N)
         Fix positions (m) in a local frame (e.g. from
         :func:`jaxgrav.geodesy.local_offsets_m`), broadcast together.
@@ -404,13 +331,8 @@ def along_track_covariance(model, north_m, east_m):
     Array, shape (..., N, N)
         Symmetric positive semi-definite covariance (map units²).
 
-    Raises
-    ------
-    TypeError
-        If ``model`` is not a model.
-    ValueError
-        If a TruthGrid has no ``error`` description, the positions are scalars, or
-        concrete positions hold NaN or infinity.
+    Raises TypeError for a wrong ``model`` type, ValueError for a TruthGrid without
+    ``error``, scalar positions or NaN/inf positions.
     """
     if isinstance(model, TruthGrid):
         if model.error is None:
@@ -430,10 +352,15 @@ def along_track_covariance(model, north_m, east_m):
     north, east = jnp.broadcast_arrays(jnp.asarray(north_m, float), jnp.asarray(east_m, float))
     if north.ndim < 1:
         raise ValueError(f"north_m and east_m must have shape (..., N); got shape {north.shape}")
+    if model is None:
+        return jnp.zeros(north.shape + north.shape[-1:], north.dtype)
+    return _pairwise_covariance(model, north, east)
+
+
+@jax.jit
+def _pairwise_covariance(model, north, east):
     dn = north[..., :, None] - north[..., None, :]
     de = east[..., :, None] - east[..., None, :]
-    if model is None:
-        return jnp.zeros_like(dn)
     r2 = dn**2 + de**2
     pos = r2 > 0
     r = jnp.where(pos, jnp.sqrt(jnp.where(pos, r2, 1.0)), 0.0)  # finite gradients at r = 0
