@@ -12,7 +12,18 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrav.fields import map_error as me
+# names imported from the module itself: a package-level export of the function map_error
+# would shadow the module attribute jaxgrav.fields.map_error
+from jaxgrav.fields.map_error import (
+    FAMILIES,
+    CorrelatedMapError,
+    along_track_covariance,
+    check_covers,
+    map_error,
+    map_error_key,
+    truth_field,
+    truth_grid,
+)
 from jaxgrav.grid import Grid
 
 SIGMA = 2.0  # mGal
@@ -37,9 +48,9 @@ def errors():
     """32 error draws per family on STATS_MAP: truth − map, shape (32, 128, 128)."""
     keys = jax.random.split(jax.random.key(0), 32)
     out = {}
-    for family in me.FAMILIES:
-        model = me.map_error(SIGMA, LENGTH, family=family)
-        truth = jax.vmap(lambda k, m=model: me.truth_field(k, STATS_MAP, m).values)(keys)
+    for family in FAMILIES:
+        model = map_error(SIGMA, LENGTH, family=family)
+        truth = jax.vmap(lambda k, m=model: truth_field(k, STATS_MAP, m).values)(keys)
         out[family] = np.asarray(truth) - np.asarray(STATS_MAP.values)
     return out
 
@@ -50,7 +61,7 @@ def _within_5_se(per_draw, expected):
     assert abs(per_draw.mean() - expected) < 5.0 * se, (per_draw.mean(), expected, se)
 
 
-@pytest.mark.parametrize("family", sorted(me.FAMILIES))
+@pytest.mark.parametrize("family", sorted(FAMILIES))
 def test_error_level_is_sigma(errors, family):
     err = errors[family]
     _within_5_se((err**2).mean(axis=(1, 2)), SIGMA**2)  # E[mean(f²)] = σ² exactly
@@ -64,10 +75,10 @@ def test_error_level_is_sigma(errors, family):
     _within_5_se(err.mean(axis=(1, 2)) ** 2, SIGMA**2 * rho.sum() / (ny * nx))
 
 
-@pytest.mark.parametrize("family", sorted(me.FAMILIES))
+@pytest.mark.parametrize("family", sorted(FAMILIES))
 def test_covariance_at_lags_matches_model(errors, family):
     err = errors[family]
-    model = me.map_error(SIGMA, LENGTH, family=family)
+    model = map_error(SIGMA, LENGTH, family=family)
     dy, dx = STATS_MAP.spacing_m()
     var = (err**2).mean(axis=(1, 2))
     for axis, step in ((1, dy), (2, dx)):
@@ -80,8 +91,8 @@ def test_covariance_at_lags_matches_model(errors, family):
 
 
 def test_families_differ_at_the_measured_lags(errors):
-    m1 = me.map_error(SIGMA, LENGTH, family="markov1")
-    m2 = me.map_error(SIGMA, LENGTH, family="markov2")
+    m1 = map_error(SIGMA, LENGTH, family="markov1")
+    m2 = map_error(SIGMA, LENGTH, family="markov2")
     dy, _ = STATS_MAP.spacing_m()
     for family, other in (("markov1", m2), ("markov2", m1)):
         err = errors[family]
@@ -90,7 +101,7 @@ def test_families_differ_at_the_measured_lags(errors):
 
 
 def test_truth_has_the_maps_geometry():
-    truth = me.truth_field(jax.random.key(1), SMALL_MAP, me.map_error(SIGMA, 5000.0))
+    truth = truth_field(jax.random.key(1), SMALL_MAP, map_error(SIGMA, 5000.0))
     assert isinstance(truth, Grid)
     for name in ("lat0", "dlat", "lon0", "dlon", "name", "units"):
         assert getattr(truth, name) == getattr(SMALL_MAP, name)
@@ -98,7 +109,7 @@ def test_truth_has_the_maps_geometry():
     assert truth.values.dtype == SMALL_MAP.values.dtype
     assert not np.allclose(truth.values, SMALL_MAP.values)
     single = dataclasses.replace(SMALL_MAP, values=SMALL_MAP.values.astype(np.float32))
-    truth32 = me.truth_field(jax.random.key(1), single, me.map_error(SIGMA, 5000.0))
+    truth32 = truth_field(jax.random.key(1), single, map_error(SIGMA, 5000.0))
     assert truth32.values.dtype == np.float32
     np.testing.assert_allclose(truth32.values, truth.values, rtol=1e-6, atol=1e-4)
 
@@ -109,66 +120,66 @@ TRACES = []
 @jax.jit
 def _draw_jit(key, model):
     TRACES.append(1)
-    return me.truth_field(key, SMALL_MAP, model).values
+    return truth_field(key, SMALL_MAP, model).values
 
 
 def test_perfect_map_is_the_map():
     key = jax.random.key(2)
-    assert me.truth_field(key, SMALL_MAP, None) is SMALL_MAP
-    assert me.truth_field(key, SMALL_MAP, me.map_error(0.0, 5000.0)) is SMALL_MAP
-    traced = _draw_jit(key, me.map_error(0.0, 5000.0))  # σ traced: added error is exactly 0
+    assert truth_field(key, SMALL_MAP, None) is SMALL_MAP
+    assert truth_field(key, SMALL_MAP, map_error(0.0, 5000.0)) is SMALL_MAP
+    traced = _draw_jit(key, map_error(0.0, 5000.0))  # σ traced: added error is exactly 0
     np.testing.assert_array_equal(traced, SMALL_MAP.values)
 
 
 def test_truth_grid_is_returned_when_it_covers_the_map():
     finer = _grid(161, 0.005, lat0=29.9, lon0=129.9)  # covers SMALL_MAP (30..30.62)
-    truth = me.truth_field(jax.random.key(3), SMALL_MAP, me.truth_grid(finer, map_grid=SMALL_MAP))
+    truth = truth_field(jax.random.key(3), SMALL_MAP, truth_grid(finer, map_grid=SMALL_MAP))
     assert truth is finer
-    same = me.truth_field(None, SMALL_MAP, me.truth_grid(SMALL_MAP))  # edges exactly equal
+    same = truth_field(None, SMALL_MAP, truth_grid(SMALL_MAP))  # edges exactly equal
     assert same is SMALL_MAP
     # another longitude convention: map in ±180, truth in 0–360
     west = _grid(8, 0.1, lat0=10.0, lon0=-170.0)
     wide = _grid(20, 0.1, lat0=9.5, lon0=189.5)
-    assert me.truth_field(None, west, me.truth_grid(wide)) is wide
+    assert truth_field(None, west, truth_grid(wide)) is wide
 
 
 def test_truth_grid_that_does_not_cover_the_map_is_refused():
     small = _grid(10, 0.02, lat0=30.1, lon0=130.1)
     with pytest.raises(ValueError, match=r"model\.grid .*must cover the map's area.*lat 30\.1"):
-        me.truth_field(None, SMALL_MAP, me.truth_grid(small))
+        truth_field(None, SMALL_MAP, truth_grid(small))
     with pytest.raises(ValueError, match=r"^grid must cover the map's area \(lat 30\.\.30\.62"):
-        me.truth_grid(small, map_grid=SMALL_MAP)
+        truth_grid(small, map_grid=SMALL_MAP)
     shifted = _grid(32, 0.02, lat0=30.0, lon0=130.05)  # same size, 0.05° east
     with pytest.raises(ValueError, match="must cover"):
-        me.check_covers(shifted, SMALL_MAP)
+        check_covers(shifted, SMALL_MAP)
     with pytest.raises(TypeError, match="grid must be a jaxgrav Grid"):
-        me.truth_grid(np.zeros((3, 3)))
+        truth_grid(np.zeros((3, 3)))
     with pytest.raises(TypeError, match="error must be a CorrelatedMapError"):
-        me.truth_grid(SMALL_MAP, error=(1.0, 2.0))
+        truth_grid(SMALL_MAP, error=(1.0, 2.0))
 
 
 def test_vmap_over_keys_equals_the_loop():
-    model = me.map_error(SIGMA, 5000.0)
+    model = map_error(SIGMA, 5000.0)
     keys = jax.random.split(jax.random.key(4), 3)
-    batched = jax.vmap(lambda k: me.truth_field(k, SMALL_MAP, model).values)(keys)
-    loop = np.stack([me.truth_field(k, SMALL_MAP, model).values for k in keys])
+    batched = jax.vmap(lambda k: truth_field(k, SMALL_MAP, model).values)(keys)
+    loop = np.stack([truth_field(k, SMALL_MAP, model).values for k in keys])
     np.testing.assert_allclose(batched, loop, rtol=0, atol=1e-12)
     assert not np.allclose(batched[0], batched[1])  # one field per run
     # a batch-level draw: the same key gives the same field
-    again = me.truth_field(keys[0], SMALL_MAP, model).values
+    again = truth_field(keys[0], SMALL_MAP, model).values
     np.testing.assert_array_equal(again, loop[0])
 
 
 def test_jit_does_not_retrace_when_sigma_or_length_change():
     key = jax.random.key(5)
-    a = _draw_jit(key, me.map_error(1.0, 5000.0))
+    a = _draw_jit(key, map_error(1.0, 5000.0))
     n_traces = len(TRACES)  # 1, or 0 new if test_perfect_map_is_the_map traced it already
-    b = _draw_jit(key, me.map_error(2.5, 5000.0))
-    c = _draw_jit(key, me.map_error(1.0, 9000.0))
+    b = _draw_jit(key, map_error(2.5, 5000.0))
+    c = _draw_jit(key, map_error(1.0, 9000.0))
     assert len(TRACES) == n_traces == 1
     np.testing.assert_allclose(b - SMALL_MAP.values, 2.5 * (a - SMALL_MAP.values), atol=1e-10)
     assert not np.allclose(c, a)
-    eager = me.truth_field(key, SMALL_MAP, me.map_error(1.0, 9000.0)).values
+    eager = truth_field(key, SMALL_MAP, map_error(1.0, 9000.0)).values
     np.testing.assert_allclose(c, eager, atol=1e-10)
 
 
@@ -177,8 +188,8 @@ def test_grad_of_a_sampled_truth_value_matches_finite_differences():
     lat, lon = 30.313, 130.271
 
     def value(sigma, length):
-        model = me.CorrelatedMapError(sigma=sigma, length_m=length)
-        return me.truth_field(key, SMALL_MAP, model).sample(lat, lon)
+        model = CorrelatedMapError(sigma=sigma, length_m=length)
+        return truth_field(key, SMALL_MAP, model).sample(lat, lon)
 
     both = jax.jit(jax.value_and_grad(value, argnums=(0, 1)))  # one compilation for all
     s, ell = 1.7, 6000.0
@@ -202,87 +213,87 @@ def _numpy_covariance(sigma, length, family, north, east):
     return out
 
 
-@pytest.mark.parametrize("family", sorted(me.FAMILIES))
+@pytest.mark.parametrize("family", sorted(FAMILIES))
 def test_along_track_covariance_equals_brute_force(family):
     t = np.arange(30) * 120.0  # 30 fixes 2 min apart, 10 kn N + 10 kn E
     north, east = 5.144 * t, 5.144 * t + 300.0 * np.sin(t / 900.0)
-    model = me.map_error(3.0, 10_000.0, family=family)
-    cov = np.asarray(me.along_track_covariance(model, north, east))
+    model = map_error(3.0, 10_000.0, family=family)
+    cov = np.asarray(along_track_covariance(model, north, east))
     assert cov.shape == (30, 30)
     np.testing.assert_allclose(cov, _numpy_covariance(3.0, 10_000.0, family, north, east),
                                rtol=1e-12, atol=0)
     np.testing.assert_array_equal(cov, cov.T)
     assert np.linalg.eigvalsh(cov).min() > -1e-9 * 9.0
     # batched tracks, perfect map, explicit truth with a stated error
-    both = me.along_track_covariance(model, np.stack([north, north + 50.0]), east)
+    both = along_track_covariance(model, np.stack([north, north + 50.0]), east)
     assert both.shape == (2, 30, 30)
     np.testing.assert_allclose(both[1], cov, rtol=1e-12)
-    np.testing.assert_array_equal(me.along_track_covariance(None, north, east), 0.0)
-    stated = me.truth_grid(SMALL_MAP, error=model)
-    np.testing.assert_array_equal(me.along_track_covariance(stated, north, east), cov)
+    np.testing.assert_array_equal(along_track_covariance(None, north, east), 0.0)
+    stated = truth_grid(SMALL_MAP, error=model)
+    np.testing.assert_array_equal(along_track_covariance(stated, north, east), cov)
 
 
 def test_along_track_covariance_has_finite_gradients_at_zero_distance():
-    model = me.map_error(3.0, 10_000.0, family="markov1")
-    g = jax.grad(lambda n: me.along_track_covariance(model, n, jnp.zeros(3)).sum())(
+    model = map_error(3.0, 10_000.0, family="markov1")
+    g = jax.grad(lambda n: along_track_covariance(model, n, jnp.zeros(3)).sum())(
         jnp.array([0.0, 0.0, 500.0]))
     assert np.all(np.isfinite(g))
 
 
 def test_along_track_covariance_of_an_unknown_truth_is_refused():
     with pytest.raises(ValueError, match="TruthGrid without an error description"):
-        me.along_track_covariance(me.truth_grid(SMALL_MAP), [0.0, 1.0], [0.0, 0.0])
+        along_track_covariance(truth_grid(SMALL_MAP), [0.0, 1.0], [0.0, 0.0])
     with pytest.raises(TypeError, match="model must be"):
-        me.along_track_covariance("3 mGal", [0.0, 1.0], [0.0, 0.0])
+        along_track_covariance("3 mGal", [0.0, 1.0], [0.0, 0.0])
     with pytest.raises(ValueError, match=r"north_m must be finite; found .*nan"):
-        me.along_track_covariance(me.map_error(1.0, 1.0), [0.0, np.nan], [0.0, 0.0])
+        along_track_covariance(map_error(1.0, 1.0), [0.0, np.nan], [0.0, 0.0])
     with pytest.raises(ValueError, match=r"shape \(\.\.\., N\)"):
-        me.along_track_covariance(me.map_error(1.0, 1.0), 0.0, 0.0)
+        along_track_covariance(map_error(1.0, 1.0), 0.0, 0.0)
 
 
 @pytest.mark.parametrize("sigma", [-1.0, np.nan, np.inf, -np.inf])
 def test_bad_sigma_is_refused(sigma):
     expected = rf"sigma must be finite and >= 0 \(map units\); got {sigma}"
     with pytest.raises(ValueError, match=expected):
-        me.map_error(sigma, LENGTH)
+        map_error(sigma, LENGTH)
 
 
 @pytest.mark.parametrize("length", [0.0, -5.0, np.nan, np.inf])
 def test_bad_length_is_refused(length):
     with pytest.raises(ValueError, match=rf"length_m must be finite and > 0 \(m\); got {length}"):
-        me.map_error(SIGMA, length)
+        map_error(SIGMA, length)
 
 
 @pytest.mark.parametrize("bad", ["3", None, True, 1 + 2j, [1.0, "a"]])
 def test_wrong_types_are_refused(bad):
     with pytest.raises(TypeError, match="sigma must be a real number"):
-        me.map_error(bad, LENGTH)
+        map_error(bad, LENGTH)
     with pytest.raises(TypeError, match="length_m must be a real number"):
-        me.map_error(SIGMA, bad)
+        map_error(SIGMA, bad)
 
 
 def test_bad_family_model_and_grid_are_refused():
     expected = r"family must be one of \['markov1', 'markov2'\]; got 'gauss'"
     with pytest.raises(ValueError, match=expected):
-        me.map_error(SIGMA, LENGTH, family="gauss")
+        map_error(SIGMA, LENGTH, family="gauss")
     key = jax.random.key(7)
     with pytest.raises(TypeError, match="model must be a CorrelatedMapError"):
-        me.truth_field(key, SMALL_MAP, 3.0)
+        truth_field(key, SMALL_MAP, 3.0)
     with pytest.raises(TypeError, match="grid must be a jaxgrav Grid"):
-        me.truth_field(key, SMALL_MAP.values, me.map_error(SIGMA, LENGTH))
+        truth_field(key, SMALL_MAP.values, map_error(SIGMA, LENGTH))
     with pytest.raises(ValueError, match="must be scalars"):
-        me.truth_field(key, SMALL_MAP, me.map_error([1.0, 2.0], LENGTH))
+        truth_field(key, SMALL_MAP, map_error([1.0, 2.0], LENGTH))
     layered = dataclasses.replace(SMALL_MAP, values=jnp.stack([SMALL_MAP.values] * 2))
     expected = r"grid.values must be 2-D \(ny, nx\); got shape \(2, 32, 32\)"
     with pytest.raises(ValueError, match=expected):
-        me.truth_field(key, layered, me.map_error(SIGMA, LENGTH))
+        truth_field(key, layered, map_error(SIGMA, LENGTH))
 
 
 def test_map_error_key_is_a_separate_stream():
     key = jax.random.key(8)
-    k = me.map_error_key(key)
+    k = map_error_key(key)
     assert not np.array_equal(jax.random.key_data(k), jax.random.key_data(key))
-    again = me.map_error_key(key)
+    again = map_error_key(key)
     np.testing.assert_array_equal(jax.random.key_data(again), jax.random.key_data(k))
     for sub in jax.random.split(key, 3):  # not one of the run's usual subkeys
         assert not np.array_equal(jax.random.key_data(k), jax.random.key_data(sub))
