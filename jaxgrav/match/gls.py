@@ -1,13 +1,10 @@
 """Generalised least-squares scores for readings whose error is correlated along the track.
 
-When the map is not the truth, the readings minus the map along the true track are
-white reading noise plus the map's own error, a field correlated over distance. Along
-one track of N fixes that error has covariance ``Σ = σ_n² I + C_map(‖x_i − x_j‖)``
-(:func:`track_covariance`). Every candidate of the dense matcher is the same track
-shifted (and turned), so the distances between its fixes, ``Σ``, its Cholesky factor
-``L`` and the whitening ``z = L⁻¹ r`` are shared by all candidates: the factor is
-prepared once per track (:func:`gls_whitener`) and each candidate's residuals are
-whitened by one matrix product (:func:`whiten`).
+Readings minus a map that is not the truth carry white reading noise plus the map's
+own error, correlated over distance: ``Σ = σ_n² I + C_map(‖x_i − x_j‖)`` along a track
+(:func:`track_covariance`). Candidates that are the same track shifted (and turned)
+share the distances, ``Σ`` and its Cholesky factor ``L``: the factor is prepared once
+per track (:func:`gls_whitener`), each candidate whitened by one product (:func:`whiten`).
 
 The score (:func:`gls_score`) is the GLS misfit with a common reading bias ``b``
 marginalised, in χ² units (dimensionless), for residuals ``r = g − m``:
@@ -34,6 +31,7 @@ from jax.scipy.linalg import solve_triangular
 
 from jaxgrav._validate import concrete
 from jaxgrav.fields.random import MarkovSpectrum
+from jaxgrav.match.refine import solve_spd
 from jaxgrav.match.scoring import k_smallest
 
 __all__ = [
@@ -161,17 +159,15 @@ def gls_whitener(cov):
 
 
 def whiten(whitener, v, solve=False):
-    """Whitened values ``L⁻¹ v`` of one or many candidates.
+    """Whitened values ``L⁻¹ v`` of one or many candidates (of one :class:`GlsWhitener`).
 
     Parameters
     ----------
-    whitener : GlsWhitener
     v : Array, shape ``(N,)`` or ``(..., N)``
         Residuals (map units), fixes along the last axis; leading axes are candidates.
     solve : bool
-        Static. False (default): one product with ``inv_chol`` (on CPU a batched
-        product is tens of times faster than a batched triangular solve). True: a
-        triangular solve with ``chol`` (same values to rounding).
+        Static. False: one product with ``inv_chol`` (on CPU far faster than a
+        batched triangular solve); True: a triangular solve with ``chol``.
 
     Returns
     -------
@@ -222,22 +218,12 @@ def gls_score(whitener, residuals, bias_prior_sigma=float("inf")):
 def gls_log_normaliser(whitener, bias_prior_sigma=float("inf")):
     """The term that makes ``J`` a negative log-likelihood: ``−2 log p(r) = J + c``.
 
-    Needed only to compare scores of different tracks, covariances or noise levels;
-    within one track it is a constant. Gaussian prior: ``c = N log 2π + log det Σ +
-    log(1 + σ_b² 1ᵀΣ⁻¹1)`` (``log det`` of the marginal covariance ``Σ + σ_b² 11ᵀ``).
-    Flat prior: the restricted (bias-free) likelihood, ``c = (N − 1) log 2π +
-    log det Σ + log 1ᵀΣ⁻¹1``.
-
-    Parameters
-    ----------
-    whitener : GlsWhitener
-    bias_prior_sigma : float or Array
-        As for :func:`gls_score`.
-
-    Returns
-    -------
-    Array
-        ``c`` (dimensionless; Σ in map units²).
+    A constant within one track; needed to compare tracks, covariances or noise
+    levels. Gaussian prior: ``c = N log 2π + log det(Σ + σ_b² 11ᵀ)``, with
+    ``log det(Σ + σ_b² 11ᵀ) = log det Σ + log(1 + σ_b² 1ᵀΣ⁻¹1)``. Flat prior
+    (``bias_prior_sigma`` inf): the restricted (bias-free) likelihood,
+    ``c = (N − 1) log 2π + log det Σ + log 1ᵀΣ⁻¹1``. Returns ``c`` (dimensionless,
+    Σ in map units²), for a :class:`GlsWhitener` and σ_b as for :func:`gls_score`.
     """
     n = whitener.ones.shape[-1]
     var_b = jnp.asarray(bias_prior_sigma, whitener.log_det.dtype) ** 2
@@ -275,8 +261,9 @@ class OffsetPosterior(NamedTuple):
         ``1 / Σ p²`` of the normalised weights p: offsets sharing the posterior mass.
     second_mode_ratio : Array
         ``exp(−(J₂ − J_best)/2)``, J₂ the least score outside the mode's
-        neighbourhood: near 1 for a second mode nearly as likely, 0 when nothing is
-        outside; 1 when ``valid`` is false.
+        neighbourhood: near 1 for a second mode nearly as likely, at most
+        ``exp(−exclusion_chi2/2)`` for a quadratic score, 0 when nothing is outside;
+        1 when ``valid`` is false.
     curvature_covariance_m2 : Array, shape ``(2, 2)``
         ``2 H⁻¹`` from a quadratic fit of the score at the 9 valid offsets nearest the
         best (H its Hessian, 1/m²): the Laplace covariance of the mode (no
@@ -319,7 +306,7 @@ def _curvature(j, d, ok, best):
     design = jnp.stack([jnp.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)
     design = jnp.where(used[:, None], design, 0.0)
     rhs = jnp.where(used, j[near] - j[best], 0.0)
-    q = jnp.linalg.solve(design.T @ design, design.T @ rhs)
+    q = solve_spd(design.T @ design, design.T @ rhs)
     h = jnp.stack([jnp.stack([2 * q[3], q[4]]), jnp.stack([q[4], 2 * q[5]])]) / s**2
     det = h[0, 0] * h[1, 1] - h[0, 1] ** 2
     fine = (jnp.sum(used) >= 6) & jnp.all(jnp.isfinite(q)) & (h[0, 0] > 0) & (det > 0)
@@ -328,8 +315,8 @@ def _curvature(j, d, ok, best):
     return jnp.where(fine, cov, jnp.diag(jnp.array([jnp.inf, jnp.inf], cov.dtype))), fine
 
 
-def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=None, *, dof=1,
-                     exclusion_m=None, exclusion_chi2=9.0):
+def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof=1,
+                     exclusion_m=0.0, exclusion_chi2=9.0):
     """Posterior of the offset over a lattice, weights ``∝ exp(−score/2)``.
 
     Parameters
@@ -340,12 +327,12 @@ def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=None, *, do
         or NaN marks an invalid offset (zero weight, counted).
     offsets_north_m, offsets_east_m : Array, shape of ``scores``
         The offsets (m).
-    cell_m : float or Array, scalar or ``(2,)``, optional
-        Lattice spacing (m; north, east): adds ``cell²/12`` per axis.
+    cell_m : float or Array, scalar or ``(2,)``
+        Lattice spacing (m; north, east): adds ``cell²/12`` per axis (0: none).
     dof : int or Array
         Degrees of freedom of a score (:func:`gls_dof`), for ``chi2_per_dof``.
-    exclusion_m : float or Array, optional
-        Radius (m) of the mode's neighbourhood for ``second_mode_ratio``. By default
+    exclusion_m : float or Array
+        Radius (m) of the mode's neighbourhood for ``second_mode_ratio``; 0 (default):
         the neighbourhood is ``dᵀ K⁻¹ d ≤ exclusion_chi2`` about the best offset, K the
         curvature covariance (or, when its fit fails, the posterior covariance).
     exclusion_chi2 : float or Array
@@ -373,25 +360,23 @@ def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=None, *, do
     mean = p @ d
     e = d - mean
     cov = (p[:, None] * e).T @ e
-    if cell_m is not None:
-        cov = cov + jnp.diag(jnp.broadcast_to(jnp.asarray(cell_m, dtype) ** 2 / 12.0, (2,)))
-    inf2 = jnp.diag(jnp.array([jnp.inf, jnp.inf], dtype))
+    cov = cov + jnp.diag(jnp.broadcast_to(jnp.asarray(cell_m, dtype) ** 2 / 12.0, (2,)))
     curv, curv_ok = _curvature(j, d, ok, best)
-    if exclusion_m is None:
-        metric = jnp.where(curv_ok, curv, cov)
-        det = metric[0, 0] * metric[1, 1] - metric[0, 1] ** 2
-        maha = (metric[1, 1] * d[:, 0] ** 2 - 2 * metric[0, 1] * d[:, 0] * d[:, 1]
-                + metric[0, 0] * d[:, 1] ** 2) / jnp.where(det > 0, det, 1.0)
-        outside = jnp.where(det > 0, maha > exclusion_chi2, jnp.sum(d * d, -1) > 0)
-    else:
-        outside = jnp.sum(d * d, axis=-1) > jnp.asarray(exclusion_m, dtype) ** 2
+    metric = jnp.where(curv_ok, curv, cov)
+    det = metric[0, 0] * metric[1, 1] - metric[0, 1] ** 2
+    maha = (metric[1, 1] * d[:, 0] ** 2 - 2 * metric[0, 1] * d[:, 0] * d[:, 1]
+            + metric[0, 0] * d[:, 1] ** 2) / jnp.where(det > 0, det, 1.0)
+    radius = jnp.asarray(exclusion_m, dtype)
+    dist2 = jnp.sum(d * d, axis=-1)
+    outside = jnp.where(radius > 0, dist2 > radius**2,
+                        jnp.where(det > 0, maha > exclusion_chi2, dist2 > 0))
     j2 = jnp.min(jnp.where(ok & outside, j, jnp.inf))
     ratio = jnp.exp(-0.5 * (j2 - j_best))
     mean = mean + d0[best]
     return OffsetPosterior(
         mean_north_m=jnp.where(valid, mean[0], 0.0),
         mean_east_m=jnp.where(valid, mean[1], 0.0),
-        covariance_m2=jnp.where(valid, cov, inf2),
+        covariance_m2=jnp.where(valid, cov, curv),  # curv has an inf diagonal then
         best_index=best,
         best_score=jnp.where(valid, j_best, jnp.inf),
         chi2_per_dof=jnp.where(valid, j_best, jnp.inf) / jnp.asarray(dof, dtype),

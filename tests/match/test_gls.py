@@ -20,7 +20,16 @@ from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_trac
 cov_j = jax.jit(track_covariance, static_argnames="order")
 whitener_j = jax.jit(gls_whitener)
 score_j = jax.jit(gls_score)
-posterior_j = jax.jit(offset_posterior)
+_posterior_j = jax.jit(offset_posterior)
+
+
+def posterior_j(scores, on, oe, cell=0.0, dof=1.0, exclusion_m=0.0):
+    """One compiled posterior per shape: every argument passed, as floats."""
+    return _posterior_j(scores, on, oe, float(cell), dof=float(dof),
+                        exclusion_m=float(exclusion_m))
+
+
+score_track_j = jax.jit(score_track, static_argnames=("kind", "axis"))
 RNG = np.random.default_rng(15)
 N, C = 30, 17
 
@@ -102,7 +111,7 @@ def test_white_map_equals_scoring_bias_form(decay, sigma_b):
     g = RNG.normal(0.0, 20.0, N)
     m = g - RNG.normal(1.0, sn, (C, N))
     m[3, 5] = np.nan  # off the map
-    ref, ref_bias = score_track(g, m, mu, "bias", bias_precision(mu, sn, sigma_b))
+    ref, ref_bias = score_track_j(g, m, mu, "bias", bias_precision(mu, sn, sigma_b))
     score, bias = score_j(whitener_j(cov), g - m, sigma_b)
     scale = sn**2 * np.sum(np.asarray(mu) ** 2)  # score_track = σ_n² Σμ² · J
     assert np.isinf(score[3]) and np.isinf(ref[3])
