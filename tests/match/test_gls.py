@@ -31,6 +31,7 @@ def posterior_j(scores, on, oe, cell=0.0, dof=1.0, exclusion_m=0.0):
 
 score_track_j = jax.jit(score_track, static_argnames=("kind", "axis"))
 RNG = np.random.default_rng(15)
+SEED = 2015
 N, C = 30, 17
 
 
@@ -278,35 +279,39 @@ def test_invalid_offsets_are_ignored_and_all_invalid_is_flagged():
 
 def test_posterior_covers_the_truth_under_a_correlated_map_error():
     """Monte Carlo: map error drawn from the model along the true track, readings matched
-    on an offset lattice. The GLS posterior's 95 % ellipse covers the true offset on about
-    95 % of tracks; the white-noise score (map error ignored) is overconfident."""
+    on an offset lattice fine enough to resolve the posterior (a smooth map, ~10 offsets
+    share the mass). The GLS posterior's 95 % ellipse covers the true offset on about
+    95 % of tracks (0.94–0.98 over seeds); the white-noise score (map error ignored) is
+    overconfident (about 35 %)."""
+    rng = np.random.default_rng(SEED)  # its own draws: the same whatever runs first
     n, tracks, h, cell = 30, 200, 10, 500.0
-    kw = RNG.uniform(2 * np.pi / 40e3, 2 * np.pi / 10e3, 12)
-    ang, phase = RNG.uniform(0, 2 * np.pi, 12), RNG.uniform(0, 2 * np.pi, 12)
-    kn, ke = kw * np.cos(ang), kw * np.sin(ang)
+    kw = rng.uniform(2 * np.pi / 80e3, 2 * np.pi / 20e3, (tracks, 12))  # a map per track
+    ang, phase = rng.uniform(0, 2 * np.pi, (2, tracks, 12))
+    waves = np.stack([kw * np.cos(ang), kw * np.sin(ang), phase], 1)  # (tracks, 3, 12)
     d1 = (np.arange(-h, h + 1)) * cell
     on, oe = (jnp.asarray(a.reshape(-1)) for a in np.meshgrid(d1, d1, indexing="ij"))
     north = east = np.arange(n) * 617.0  # 2 min at 10 kn north and 10 kn east
-    offsets = np.clip(RNG.normal(0.0, 1500.0, (tracks, 2)), -4000.0, 4000.0)
-    starts = RNG.uniform(-50e3, 50e3, (tracks, 2))
-    keys = jnp.asarray(RNG.normal(size=(tracks, n)))
+    offsets = np.clip(rng.normal(0.0, 1500.0, (tracks, 2)), -4000.0, 4000.0)
+    starts = rng.uniform(-50e3, 50e3, (tracks, 2))
+    keys = jnp.asarray(rng.normal(size=(tracks, n)))
 
-    def field(pn, pe):  # analytic map (mGal), 20 mGal rms
+    def field(wave, pn, pe):  # analytic map (mGal), 20 mGal rms
+        kn, ke, phase = wave
         return 8.2 * jnp.sum(jnp.cos(pn[..., None] * kn + pe[..., None] * ke + phase), -1)
 
     @jax.jit
-    def run(start, off, xi, map_sigma):
+    def run(wave, start, off, xi, map_sigma):
         tn, te = start[0] + north, start[1] + east  # the true track
         cov_true = track_covariance(north, east, 1.0, 3.0, 10e3)
-        g = field(tn, te) + jnp.linalg.cholesky(cov_true) @ xi
+        g = field(wave, tn, te) + jnp.linalg.cholesky(cov_true) @ xi
         # INS track = truth + off; candidate k = INS track + lattice offset k
-        r = g - field(tn + off[0] + on[:, None], te + off[1] + oe[:, None])
+        r = g - field(wave, tn + off[0] + on[:, None], te + off[1] + oe[:, None])
         w = gls_whitener(track_covariance(north, east, 1.0, map_sigma, 10e3))
         p = offset_posterior(gls_score(w, r)[0], on, oe, cell, dof=gls_dof(n))
         e = jnp.stack([p.mean_north_m, p.mean_east_m]) + off
         return e @ jnp.linalg.solve(p.covariance_m2, e)
 
-    for map_sigma, lo, hi in [(3.0, 0.91, 0.99), (0.0, 0.0, 0.8)]:
-        q = jax.vmap(run, in_axes=(0, 0, 0, None))(starts, offsets, keys, map_sigma)
+    for map_sigma, lo, hi in [(3.0, 0.92, 0.995), (0.0, 0.0, 0.6)]:
+        q = jax.vmap(run, in_axes=(0, 0, 0, 0, None))(waves, starts, offsets, keys, map_sigma)
         coverage = np.mean(np.asarray(q) < 5.991)
         assert lo <= coverage <= hi, (map_sigma, coverage)
