@@ -272,6 +272,9 @@ class OffsetPosterior(NamedTuple):
         The fit was determined and its Hessian positive definite.
     log_evidence : Array
         ``log Σ exp(−J/2)`` over the valid offsets.
+    edge_mass : Array
+        Posterior mass on the outermost offsets (least or greatest north or east):
+        more than a little means the truth may lie beyond the searched region.
     n_valid, n_invalid : Array of int
         Offsets with a finite score, and with ``inf`` or NaN (zero weight).
     valid : Array of bool
@@ -289,6 +292,7 @@ class OffsetPosterior(NamedTuple):
     curvature_covariance_m2: jax.Array
     curvature_ok: jax.Array
     log_evidence: jax.Array
+    edge_mass: jax.Array
     n_valid: jax.Array
     n_invalid: jax.Array
     valid: jax.Array
@@ -373,6 +377,7 @@ def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof
     j2 = jnp.min(jnp.where(ok & outside, j, jnp.inf))
     ratio = jnp.exp(-0.5 * (j2 - j_best))
     mean = mean + d0[best]
+    edge = jnp.any((d0 == jnp.min(d0, axis=0)) | (d0 == jnp.max(d0, axis=0)), axis=-1)
     return OffsetPosterior(
         mean_north_m=jnp.where(valid, mean[0], 0.0),
         mean_east_m=jnp.where(valid, mean[1], 0.0),
@@ -386,6 +391,7 @@ def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof
         curvature_ok=curv_ok & valid,
         log_evidence=jnp.where(valid, jnp.log(jnp.where(valid, z, 1.0)) - 0.5 * j_best,
                                -jnp.inf),
+        edge_mass=jnp.sum(jnp.where(edge, p, 0.0)),
         n_valid=n_valid,
         n_invalid=j.shape[0] - n_valid,
         valid=valid,

@@ -226,6 +226,9 @@ def test_posterior_of_a_gaussian_likelihood():
                                rtol=1e-6)
     np.testing.assert_allclose(post.chi2_per_dof, np.min(j) / 25, rtol=1e-12)
     assert post.second_mode_ratio < np.exp(-4.0)  # unimodal: nothing outside 3 σ is likely
+    assert post.edge_mass < 1e-12
+    near_edge = posterior_j(_quad(on, oe, np.array([2900.0, 0.0]), K), on, oe)
+    assert 0.1 < near_edge.edge_mass < 0.5  # the lattice ends at 3000 m north
     cell = posterior_j(j, on, oe, 100.0)
     np.testing.assert_allclose(cell.covariance_m2, K + np.eye(2) * 100.0**2 / 12, rtol=1e-6)
     ref = np.log(np.sum(np.exp(-0.5 * j)))
