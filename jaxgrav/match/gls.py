@@ -84,13 +84,8 @@ def track_covariance(north_m, east_m, noise_sigma, map_sigma, map_length_m, orde
     Returns
     -------
     Array, shape ``(N, N)``
-        Σ in map units².
-
-    Raises
-    ------
-    ValueError
-        For a concrete σ_n not positive and finite, σ_m or L negative, NaN or
-        infinite, or ``order`` not 1 or 2.
+        Σ in map units². A concrete σ_n not positive and finite, σ_m or L negative,
+        NaN or infinite, or ``order`` not 1 or 2 raise ``ValueError``.
     """
     if order not in (1, 2):
         raise ValueError(f"order must be 1 or 2; got {order!r}")
@@ -139,17 +134,7 @@ class GlsWhitener(NamedTuple):
 
 
 def gls_whitener(cov):
-    """Factorise one track's covariance (:func:`track_covariance`) for :func:`gls_score`.
-
-    Parameters
-    ----------
-    cov : Array, shape ``(N, N)``
-        Symmetric positive definite Σ (map units²).
-
-    Returns
-    -------
-    GlsWhitener
-    """
+    """:class:`GlsWhitener` of one track's SPD covariance ``cov`` ``(N, N)`` (map units²)."""
     cov = jnp.asarray(cov)
     chol = jnp.linalg.cholesky(cov)
     inv_chol = solve_triangular(chol, jnp.eye(cov.shape[-1], dtype=chol.dtype), lower=True)
@@ -248,13 +233,10 @@ class OffsetPosterior(NamedTuple):
     mean_north_m, mean_east_m : Array
         Posterior mean offset (m); 0 when ``valid`` is false.
     covariance_m2 : Array, shape ``(2, 2)``
-        Posterior covariance (m², north/east), plus the lattice quantisation
-        ``cell²/12`` per axis when a spacing is given; ``inf`` on the diagonal when
-        ``valid`` is false.
-    best_index : Array of int
-        Index (into the flattened scores) of the least score.
-    best_score : Array
-        The least score (``inf`` when none is valid).
+        Posterior covariance (m², north/east) plus ``cell²/12`` per axis; ``inf`` on
+        the diagonal when ``valid`` is false.
+    best_index, best_score : Array
+        Index (into the flattened scores) and value of the least score (``inf`` if none).
     chi2_per_dof : Array
         ``best_score / dof``: about 1 when the error model is right.
     n_effective : Array
@@ -275,10 +257,8 @@ class OffsetPosterior(NamedTuple):
     edge_mass : Array
         Posterior mass on the outermost offsets (least or greatest north or east):
         more than a little means the truth may lie beyond the searched region.
-    n_valid, n_invalid : Array of int
-        Offsets with a finite score, and with ``inf`` or NaN (zero weight).
-    valid : Array of bool
-        At least one valid offset.
+    n_valid, n_invalid, valid : Array
+        Offsets with a finite score, with ``inf`` or NaN (zero weight); any valid.
     """
 
     mean_north_m: jax.Array
@@ -345,6 +325,7 @@ def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof
     Returns
     -------
     OffsetPosterior
+        Of one track; ``jax.vmap`` it over tracks.
     """
     j = jnp.asarray(scores).reshape(-1)
     dtype = jnp.result_type(j.dtype, float)
