@@ -1,0 +1,379 @@
+"""Generalised least-squares scores for readings whose error is correlated along the track.
+
+Readings minus a map that is not the truth carry white reading noise plus the map's
+own error, correlated over distance: ``Σ = σ_n² I + C_map(‖x_i − x_j‖)`` along a track
+(:func:`track_covariance`). Candidates that are the same track shifted (and turned)
+share the distances, ``Σ`` and its Cholesky factor ``L``: the factor is prepared once
+per track (:func:`gls_whitener`), each candidate whitened by one product (:func:`whiten`).
+
+The score (:func:`gls_score`) is the GLS misfit with a common reading bias ``b``
+marginalised, in χ² units (dimensionless), for residuals ``r = g − m``:
+``J = min_b (r − b1)ᵀ Σ⁻¹ (r − b1) + b²/σ_b²`` = ``rᵀ (Σ + σ_b² 11ᵀ)⁻¹ r``
+(σ_b = ∞: flat prior, ``J = rᵀΣ⁻¹r − (1ᵀΣ⁻¹r)²/1ᵀΣ⁻¹1``). The likelihood of a
+candidate is ``∝ exp(−J/2)``; ``J + gls_log_normaliser(...)`` is ``−2 log p(r)``,
+comparable across tracks and noise levels. With no map error and the fixes' noise
+variances ``σ_n² Σμ²/μ_i`` (normalised weights μ; σ_n² for equal weights), ``J``
+times ``σ_n² Σμ²`` is exactly the ``bias`` score of
+:func:`~jaxgrav.match.scoring.score_track` with the prior
+:func:`~jaxgrav.match.scoring.bias_precision`, and the bias estimates are equal.
+
+:func:`offset_posterior` turns the scores over a lattice of offsets into the
+likelihood-weighted posterior of the offset: its mean and 2 × 2 covariance, and the
+diagnostics an integrity decision needs.
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.scipy.linalg import solve_triangular
+
+from jaxgrav._validate import concrete
+from jaxgrav.fields.random import MarkovSpectrum
+from jaxgrav.match.refine import solve_spd
+from jaxgrav.match.scoring import k_smallest
+
+__all__ = [
+    "GlsWhitener",
+    "OffsetPosterior",
+    "gls_dof",
+    "gls_log_normaliser",
+    "gls_score",
+    "gls_whitener",
+    "offset_posterior",
+    "track_covariance",
+    "whiten",
+]
+
+
+def _check(x, name, zero_ok):
+    arr = concrete(x)
+    if arr is None:
+        return
+    ok = np.isfinite(arr) & ((arr >= 0) if zero_ok else (arr > 0))
+    if not np.all(ok):
+        want = "non-negative" if zero_ok else "positive"
+        raise ValueError(f"{name} must be {want} and finite; got {arr}")
+
+
+def track_covariance(north_m, east_m, noise_sigma, map_sigma, map_length_m, order=2,
+                     weights=None):
+    """Covariance of readings minus map along one track: white noise plus map error.
+
+    Parameters
+    ----------
+    north_m, east_m : Array, shape ``(N,)``
+        Fixes in local metres (any common origin; only distances matter).
+    noise_sigma : float or Array, scalar or ``(N,)``
+        Reading noise σ_n (map units, e.g. mGal), > 0.
+    map_sigma : float or Array
+        Map-error standard deviation σ_m (map units), ≥ 0; 0 gives ``σ_n² I``.
+    map_length_m : float or Array
+        Map-error correlation length L (m), ≥ 0; 0 makes the map error white (it
+        adds σ_m² to every fix's variance).
+    order : {1, 2}
+        Markov covariance (static): 1: ``σ_m² e^{−d/L}``; 2 (default):
+        ``σ_m² (1 + d/L) e^{−d/L}``, as :class:`~jaxgrav.fields.random.MarkovSpectrum`.
+    weights : Array, shape ``(N,)``, optional
+        Score weights μ_i (e.g. :func:`~jaxgrav.match.scoring.decreasing_weights`):
+        the noise variance of fix i becomes ``σ_n² Σμ²/μ_i`` (μ normalised), the
+        variance under which the weighted score of :mod:`~jaxgrav.match.scoring` is a
+        likelihood.
+
+    Returns
+    -------
+    Array, shape ``(N, N)``
+        Σ in map units². A concrete σ_n not positive and finite, σ_m or L negative,
+        NaN or infinite, or ``order`` not 1 or 2 raise ``ValueError``.
+    """
+    if order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2; got {order!r}")
+    _check(noise_sigma, "noise_sigma", zero_ok=False)
+    _check(map_sigma, "map_sigma", zero_ok=True)
+    _check(map_length_m, "map_length_m", zero_ok=True)
+    north, east = jnp.asarray(north_m), jnp.asarray(east_m)
+    dtype = jnp.result_type(north.dtype, east.dtype, float)
+    d2 = (north[:, None] - north[None, :]) ** 2 + (east[:, None] - east[None, :]) ** 2
+    same = d2 == 0
+    d = jnp.where(same, 0.0, jnp.sqrt(jnp.where(same, 1.0, d2)))  # finite gradients at 0
+    length = jnp.asarray(map_length_m, dtype)
+    corr = length > 0
+    c = MarkovSpectrum(jnp.asarray(map_sigma, dtype), jnp.where(corr, length, 1.0),
+                       order).covariance(d)
+    c = jnp.where(corr, c, jnp.where(same, jnp.asarray(map_sigma, dtype) ** 2, 0.0))
+    var = jnp.broadcast_to(jnp.asarray(noise_sigma, dtype) ** 2, north.shape)
+    if weights is not None:
+        mu = jnp.asarray(weights, dtype) / jnp.sum(weights)
+        var = var * jnp.sum(mu**2) / mu
+    return c + jnp.diag(var)
+
+
+class GlsWhitener(NamedTuple):
+    """The factorised covariance of one track, shared by all its candidates.
+
+    Attributes
+    ----------
+    chol : Array, shape ``(N, N)``
+        Lower Cholesky factor L of Σ (map units).
+    inv_chol : Array, shape ``(N, N)``
+        L⁻¹ (lower triangular, 1/map units): whitening is one matrix product.
+    ones : Array, shape ``(N,)``
+        The whitened ones-vector ``u = L⁻¹ 1``.
+    ones_norm2 : Array
+        ``uᵀu = 1ᵀ Σ⁻¹ 1`` (1/map units²), the bias's data precision.
+    log_det : Array
+        ``log det Σ`` (Σ in map units²).
+    """
+
+    chol: jax.Array
+    inv_chol: jax.Array
+    ones: jax.Array
+    ones_norm2: jax.Array
+    log_det: jax.Array
+
+
+def gls_whitener(cov):
+    """:class:`GlsWhitener` of one track's SPD covariance ``cov`` ``(N, N)`` (map units²)."""
+    cov = jnp.asarray(cov)
+    chol = jnp.linalg.cholesky(cov)
+    inv_chol = solve_triangular(chol, jnp.eye(cov.shape[-1], dtype=chol.dtype), lower=True)
+    ones = jnp.sum(inv_chol, axis=-1)  # L⁻¹ 1
+    return GlsWhitener(chol, inv_chol, ones, jnp.sum(ones**2),
+                       2.0 * jnp.sum(jnp.log(jnp.diagonal(chol))))
+
+
+def whiten(whitener, v, solve=False):
+    """Whitened values ``L⁻¹ v`` of one or many candidates (of one :class:`GlsWhitener`).
+
+    Parameters
+    ----------
+    v : Array, shape ``(N,)`` or ``(..., N)``
+        Residuals (map units), fixes along the last axis; leading axes are candidates.
+    solve : bool
+        Static. False: one product with ``inv_chol`` (on CPU far faster than a
+        batched triangular solve); True: a triangular solve with ``chol``.
+
+    Returns
+    -------
+    Array, shape of ``v``
+        Dimensionless: white, unit variance when ``v`` has covariance Σ.
+    """
+    v = jnp.asarray(v)
+    if not solve:
+        return v @ whitener.inv_chol.T
+    n = v.shape[-1]
+    z = solve_triangular(whitener.chol, v.reshape(-1, n).T, lower=True)
+    return z.T.reshape(v.shape)
+
+
+def gls_score(whitener, residuals, bias_prior_sigma=float("inf")):
+    """GLS misfit of candidates with the common reading bias marginalised.
+
+    Parameters
+    ----------
+    whitener : GlsWhitener
+        Of the track (:func:`gls_whitener`).
+    residuals : Array, shape ``(N,)`` or ``(C, N)``
+        Readings minus map along each candidate (map units); NaN (off the map) gives
+        an infinite score.
+    bias_prior_sigma : float or Array
+        σ_b of a zero-mean Gaussian prior on the bias (map units); ``inf`` (default)
+        is a flat prior, 0 no bias.
+
+    Returns
+    -------
+    score : Array, shape ``(C,)`` (or scalar)
+        ``J = min_b ‖L⁻¹(r − b1)‖² + b²/σ_b²`` (χ², dimensionless).
+    bias : Array, shape ``(C,)`` (or scalar)
+        The minimising (posterior mean) bias (map units).
+    """
+    r = jnp.asarray(residuals)
+    bad = jnp.any(jnp.isnan(r), axis=-1)
+    z = whiten(whitener, jnp.where(jnp.isnan(r), 0.0, r))
+    u, uu = whitener.ones, whitener.ones_norm2
+    s1 = z @ u
+    shrink = 1.0 / (1.0 + jnp.asarray(bias_prior_sigma, z.dtype) ** 2 * uu)  # 1: no bias
+    bias = (1.0 - shrink) * s1 / uu
+    e = z - bias[..., None] * u
+    score = jnp.sum(e * e, axis=-1) + shrink * s1 * bias  # prior term b²/σ_b²
+    return jnp.where(bad, jnp.inf, score), bias
+
+
+def gls_log_normaliser(whitener, bias_prior_sigma=float("inf")):
+    """The term that makes ``J`` a negative log-likelihood: ``−2 log p(r) = J + c``.
+
+    A constant within one track; needed to compare tracks, covariances or noise
+    levels. Gaussian prior: ``c = N log 2π + log det(Σ + σ_b² 11ᵀ)``, with
+    ``log det(Σ + σ_b² 11ᵀ) = log det Σ + log(1 + σ_b² 1ᵀΣ⁻¹1)``. Flat prior
+    (``bias_prior_sigma`` inf): the restricted (bias-free) likelihood,
+    ``c = (N − 1) log 2π + log det Σ + log 1ᵀΣ⁻¹1``. Returns ``c`` (dimensionless,
+    Σ in map units²), for a :class:`GlsWhitener` and σ_b as for :func:`gls_score`.
+    """
+    n = whitener.ones.shape[-1]
+    var_b = jnp.asarray(bias_prior_sigma, whitener.log_det.dtype) ** 2
+    uu = whitener.ones_norm2
+    flat = (n - 1) * jnp.log(2 * jnp.pi) + whitener.log_det + jnp.log(uu)
+    finite = jnp.isfinite(var_b)
+    gauss = (n * jnp.log(2 * jnp.pi) + whitener.log_det
+             + jnp.log1p(jnp.where(finite, var_b, 0.0) * uu))
+    return jnp.where(finite, gauss, flat)
+
+
+def gls_dof(n, bias_prior_sigma=float("inf")):
+    """Expected score of the truth: ``N − 1`` with a flat bias prior, ``N`` otherwise."""
+    return jnp.where(jnp.isinf(jnp.asarray(bias_prior_sigma)), n - 1, n)
+
+
+class OffsetPosterior(NamedTuple):
+    """Likelihood-weighted posterior of a track's offset over a set of offsets.
+
+    Attributes
+    ----------
+    mean_north_m, mean_east_m : Array
+        Posterior mean offset (m); 0 when ``valid`` is false.
+    covariance_m2 : Array, shape ``(2, 2)``
+        Posterior covariance (m², north/east) plus ``cell²/12`` per axis; ``inf`` on
+        the diagonal when ``valid`` is false.
+    best_index, best_score : Array
+        Index (into the flattened scores) and value of the least score (``inf`` if none).
+    chi2_per_dof : Array
+        ``best_score / dof``: about 1 when the error model is right.
+    n_effective : Array
+        ``1 / Σ p²`` of the normalised weights p: offsets sharing the posterior mass.
+    second_mode_ratio : Array
+        ``exp(−(J₂ − J_best)/2)``, J₂ the least score outside the mode's
+        neighbourhood: near 1 for a second mode nearly as likely, at most
+        ``exp(−exclusion_chi2/2)`` for a quadratic score, 0 when nothing is outside;
+        1 when ``valid`` is false.
+    curvature_covariance_m2 : Array, shape ``(2, 2)``
+        ``2 H⁻¹`` from a quadratic fit of the score at the 9 valid offsets nearest the
+        best (H its Hessian, 1/m²): the Laplace covariance of the mode (no
+        quantisation term); ``inf`` diagonal when ``curvature_ok`` is false.
+    curvature_ok : Array of bool
+        The fit was determined and its Hessian positive definite.
+    log_evidence : Array
+        ``log Σ exp(−J/2)`` over the valid offsets.
+    edge_mass : Array
+        Posterior mass on the outermost offsets (least or greatest north or east):
+        more than a little means the truth may lie beyond the searched region.
+    n_valid, n_invalid, valid : Array
+        Offsets with a finite score, with ``inf`` or NaN (zero weight); any valid.
+    """
+
+    mean_north_m: jax.Array
+    mean_east_m: jax.Array
+    covariance_m2: jax.Array
+    best_index: jax.Array
+    best_score: jax.Array
+    chi2_per_dof: jax.Array
+    n_effective: jax.Array
+    second_mode_ratio: jax.Array
+    curvature_covariance_m2: jax.Array
+    curvature_ok: jax.Array
+    log_evidence: jax.Array
+    edge_mass: jax.Array
+    n_valid: jax.Array
+    n_invalid: jax.Array
+    valid: jax.Array
+
+
+def _curvature(j, d, ok, best):
+    """Laplace covariance ``2 H⁻¹`` (m²) from a quadratic fit near the best offset."""
+    k = min(9, j.shape[0])
+    dist2 = jnp.where(ok, jnp.sum(d * d, axis=-1), jnp.inf)
+    near = k_smallest(dist2, k)
+    used = ok[near]
+    dn, de = d[near, 0], d[near, 1]
+    s = jnp.sqrt(jnp.max(jnp.where(used, dist2[near], 0.0))) + 1e-30
+    x, y = dn / s, de / s
+    design = jnp.stack([jnp.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)
+    design = jnp.where(used[:, None], design, 0.0)
+    rhs = jnp.where(used, j[near] - j[best], 0.0)
+    q = solve_spd(design.T @ design, design.T @ rhs)
+    h = jnp.stack([jnp.stack([2 * q[3], q[4]]), jnp.stack([q[4], 2 * q[5]])]) / s**2
+    det = h[0, 0] * h[1, 1] - h[0, 1] ** 2
+    fine = (jnp.sum(used) >= 6) & jnp.all(jnp.isfinite(q)) & (h[0, 0] > 0) & (det > 0)
+    inv = jnp.stack([jnp.stack([h[1, 1], -h[0, 1]]), jnp.stack([-h[0, 1], h[0, 0]])])
+    cov = 2.0 * inv / jnp.where(fine, det, 1.0)
+    return jnp.where(fine, cov, jnp.diag(jnp.array([jnp.inf, jnp.inf], cov.dtype))), fine
+
+
+def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof=1,
+                     exclusion_m=0.0, exclusion_chi2=9.0):
+    """Posterior of the offset over a lattice, weights ``∝ exp(−score/2)``.
+
+    Parameters
+    ----------
+    scores : Array, shape ``(C,)`` (or any shape, flattened)
+        χ² scores of the offsets (:func:`gls_score`; a white-noise
+        :func:`~jaxgrav.match.scoring.score_track` divided by ``σ_n² Σμ²``). ``inf``
+        or NaN marks an invalid offset (zero weight, counted).
+    offsets_north_m, offsets_east_m : Array, shape of ``scores``
+        The offsets (m).
+    cell_m : float or Array, scalar or ``(2,)``
+        Lattice spacing (m; north, east): adds ``cell²/12`` per axis (0: none).
+    dof : int or Array
+        Degrees of freedom of a score (:func:`gls_dof`), for ``chi2_per_dof``.
+    exclusion_m : float or Array
+        Radius (m) of the mode's neighbourhood for ``second_mode_ratio``; 0 (default):
+        the neighbourhood is ``dᵀ K⁻¹ d ≤ exclusion_chi2`` about the best offset, K the
+        curvature covariance (or, when its fit fails, the posterior covariance).
+    exclusion_chi2 : float or Array
+        Squared Mahalanobis radius of the default neighbourhood (9: 3 σ).
+
+    Returns
+    -------
+    OffsetPosterior
+        Of one track; ``jax.vmap`` it over tracks.
+    """
+    j = jnp.asarray(scores).reshape(-1)
+    dtype = jnp.result_type(j.dtype, float)
+    j = j.astype(dtype)
+    d0 = jnp.stack([jnp.asarray(offsets_north_m, dtype).reshape(-1),
+                    jnp.asarray(offsets_east_m, dtype).reshape(-1)], axis=-1)
+    ok = jnp.isfinite(j)
+    n_valid = jnp.sum(ok)
+    valid = n_valid > 0
+    j = jnp.where(ok, j, jnp.inf)
+    best = jnp.argmin(j)
+    j_best = jnp.where(valid, j[best], 0.0)
+    d = d0 - d0[best]  # about the best offset: accurate in float32
+    p = jnp.where(ok, jnp.exp(-0.5 * (jnp.where(ok, j, j_best) - j_best)), 0.0)
+    z = jnp.sum(p)
+    p = p / jnp.where(valid, z, 1.0)
+    mean = p @ d
+    e = d - mean
+    cov = (p[:, None] * e).T @ e
+    cov = cov + jnp.diag(jnp.broadcast_to(jnp.asarray(cell_m, dtype) ** 2 / 12.0, (2,)))
+    curv, curv_ok = _curvature(j, d, ok, best)
+    metric = jnp.where(curv_ok, curv, cov)
+    det = metric[0, 0] * metric[1, 1] - metric[0, 1] ** 2
+    maha = (metric[1, 1] * d[:, 0] ** 2 - 2 * metric[0, 1] * d[:, 0] * d[:, 1]
+            + metric[0, 0] * d[:, 1] ** 2) / jnp.where(det > 0, det, 1.0)
+    radius = jnp.asarray(exclusion_m, dtype)
+    dist2 = jnp.sum(d * d, axis=-1)
+    outside = jnp.where(radius > 0, dist2 > radius**2,
+                        jnp.where(det > 0, maha > exclusion_chi2, dist2 > 0))
+    j2 = jnp.min(jnp.where(ok & outside, j, jnp.inf))
+    ratio = jnp.exp(-0.5 * (j2 - j_best))
+    mean = mean + d0[best]
+    edge = jnp.any((d0 == jnp.min(d0, axis=0)) | (d0 == jnp.max(d0, axis=0)), axis=-1)
+    return OffsetPosterior(
+        mean_north_m=jnp.where(valid, mean[0], 0.0),
+        mean_east_m=jnp.where(valid, mean[1], 0.0),
+        covariance_m2=jnp.where(valid, cov, curv),  # curv has an inf diagonal then
+        best_index=best,
+        best_score=jnp.where(valid, j_best, jnp.inf),
+        chi2_per_dof=jnp.where(valid, j_best, jnp.inf) / jnp.asarray(dof, dtype),
+        n_effective=jnp.where(valid, 1.0 / jnp.sum(p * p), 0.0),
+        second_mode_ratio=jnp.where(valid, ratio, 1.0),
+        curvature_covariance_m2=curv,
+        curvature_ok=curv_ok & valid,
+        log_evidence=jnp.where(valid, jnp.log(jnp.where(valid, z, 1.0)) - 0.5 * j_best,
+                               -jnp.inf),
+        edge_mass=jnp.sum(jnp.where(edge, p, 0.0)),
+        n_valid=n_valid,
+        n_invalid=j.shape[0] - n_valid,
+        valid=valid,
+    )
