@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav._validate import concrete
-from jaxgrav.fields.spectral import _check_shape, _spacing_pair, wavenumbers
+from jaxgrav.fields.spectral import check_shape, spacing_pair, wavenumbers
 
 __all__ = [
     "MarkovSpectrum",
@@ -243,7 +243,7 @@ def gaussian_random_field(key, shape, spacing, power_spectrum, rms=None, *, zero
         or the spectrum evaluated on the grid is negative, non-finite or all zero
         (when it can be inspected, i.e. outside ``jit``).
     """
-    ny, nx = _check_shape(shape)
+    ny, nx = check_shape(shape)
     if not callable(power_spectrum):
         raise TypeError(
             "power_spectrum must be a callable S(k) of the wavenumber in rad/m (e.g. "
@@ -251,7 +251,7 @@ def gaussian_random_field(key, shape, spacing, power_spectrum, rms=None, *, zero
         )
     if rms is not None:
         _check_positive(rms, "rms")
-    dy, dx = _spacing_pair(spacing)
+    dy, dx = spacing_pair(spacing)
     leaves = jax.tree.leaves(power_spectrum)
     if len(leaves) == 1 and leaves[0] is power_spectrum:
         # not a pytree (a plain function): make it static, hashed by identity

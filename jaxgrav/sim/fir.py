@@ -287,11 +287,12 @@ def apply_fir(record, fir):
             f"{taps.shape[0]} taps; need at least {taps.shape[0]}"
         )
     check_finite(record, "record")
-    return _apply(record, taps)
+    return apply_fir_compiled(record, taps)
 
 
 @jax.jit
-def _apply(record, taps):
+def apply_fir_compiled(record, taps):
+    """The compiled core of :func:`apply_fir` (no validation; package-internal)."""
     n, m = record.shape[0], taps.shape[0]
     d = (m - 1) // 2
     dtype = jnp.result_type(record.dtype, taps.dtype, float)

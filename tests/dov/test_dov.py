@@ -8,6 +8,7 @@ from scipy.interpolate import RegularGridInterpolator
 
 from jaxgrav import dov
 from jaxgrav.dov import LayeredGrid
+from jaxgrav.dov.interpolate import interpolate_compiled
 
 LAT = np.linspace(30.0, 31.1, 12)
 LON = np.linspace(100.0, 101.3, 14)
@@ -113,11 +114,11 @@ def test_jit_no_retrace_and_vmap_equals_loop():
     layers = _layers(_smooth)
     lat, lon, h = _points(16, seed=3)
     dov.interpolate(layers, lat, lon, h, "bicubic-lagrange")
-    size = dov._interpolate._cache_size()
+    size = interpolate_compiled._cache_size()
     lat2, lon2, h2 = _points(16, seed=4)
     lay2 = dataclass_replace(layers, heights=layers.heights + 1.0)
     dov.interpolate(lay2, lat2, lon2, h2 + 10.0, "bicubic-lagrange")
-    assert dov._interpolate._cache_size() == size
+    assert interpolate_compiled._cache_size() == size
     f = jax.jit(dov.make_interpolator(layers, "bicubic-lagrange"))
     batched = jax.vmap(f)(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(h))[0]
     loop = np.stack([np.asarray(f(a, b, c)[0]) for a, b, c in zip(lat, lon, h, strict=True)])

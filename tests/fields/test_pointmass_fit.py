@@ -13,6 +13,9 @@ from jax.flatten_util import ravel_pytree
 from jaxgrav import constants as c
 from jaxgrav.fields import pointmass as pm
 from jaxgrav.fields import pointmass_fit as pf
+from jaxgrav.fields import pointmass_fit_inputs as pfi
+from jaxgrav.fields import pointmass_fit_model as pfm
+from jaxgrav.fields import pointmass_fit_solver as pfs
 from jaxgrav.grid import Grid
 
 ONE = dict(n_restarts=4, steps=60, polish_steps=30, key=0)
@@ -34,9 +37,9 @@ def _one_mass(mass=3.0e16, lat=24.37, lon=122.93, depth=30.0e3):
     return pm.PointMasses.create(lat=lat, lon=lon, depth=depth, mass=mass)
 
 
-def _problem(k=2, fit_offset=True, h=0.0, dtype=None):
+def _make_problem(k=2, fit_offset=True, h=0.0, dtype=None):
     g = _grid1(_one_mass())
-    p, centre, scale = pf._problem(g, None, None, h, (5e3, 100e3), 0.0, fit_offset, k)
+    p, centre, scale = pfi.build_problem(g, None, None, h, (5e3, 100e3), 0.0, fit_offset, k)
     if dtype is not None:
         p = jax.tree_util.tree_map(lambda x: x.astype(dtype), p)
     return g, p, centre, scale
@@ -44,12 +47,12 @@ def _problem(k=2, fit_offset=True, h=0.0, dtype=None):
 
 def _raw(k, seed=0, dtype=jnp.float64):
     rng = np.random.default_rng(seed)
-    return pf._Raw(*(jnp.asarray(rng.normal(size=k), dtype) for _ in range(4)),
+    return pfm.RawParams(*(jnp.asarray(rng.normal(size=k), dtype) for _ in range(4)),
                    jnp.asarray(rng.normal(), dtype))
 
 
 def _unit(raw, p):
-    return pf._unit_anomalies(*pf._positions(raw, p), p)
+    return pfm.unit_anomalies(*pfm.mass_positions(raw, p), p)
 
 
 def _check_recovered(fit, truth, pos_km, rel_mass):
@@ -71,9 +74,9 @@ def _check_recovered(fit, truth, pos_km, rel_mass):
 
 def test_forward_model_equals_gravity_anomaly():
     h = np.linspace(-50.0, 800.0, 13 * 13).reshape(13, 13)  # ellipsoidal heights (m)
-    g, p, _, scale = _problem(k=3, h=h)
+    g, p, _, scale = _make_problem(k=3, h=h)
     raw = _raw(3, seed=1)
-    dlat, dlon, depth = (np.asarray(v) for v in pf._positions(raw, p))
+    dlat, dlon, depth = (np.asarray(v) for v in pfm.mass_positions(raw, p))
     length = float(p.length)
     masses = pm.PointMasses.create(
         lat=float(p.lat0) + dlat, lon=float(p.lon0) + dlon, depth=depth,
@@ -90,8 +93,8 @@ def test_forward_model_equals_gravity_anomaly():
 
 
 def test_float32_forward_is_well_conditioned():
-    _, p64, _, _ = _problem(k=3)
-    _, p32, _, _ = _problem(k=3, dtype=jnp.float32)
+    _, p64, _, _ = _make_problem(k=3)
+    _, p32, _, _ = _make_problem(k=3, dtype=jnp.float32)
     raw = _raw(3, seed=2)
     raw32 = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), raw)
     a64 = np.asarray(jax.jit(_unit)(raw, p64))
@@ -101,12 +104,12 @@ def test_float32_forward_is_well_conditioned():
 
 
 def test_loss_gradient_matches_finite_differences():
-    _, p, _, _ = _problem(k=2)
+    _, p, _, _ = _make_problem(k=2)
     raw = _raw(2, seed=3)
     flat, unravel = ravel_pytree(raw)
 
     def loss(x):
-        return pf._loss(unravel(x), p, True)
+        return pfm.misfit_loss(unravel(x), p, True)
 
     g = np.asarray(jax.jit(jax.grad(loss))(flat))
     eps = 1e-6
@@ -238,35 +241,35 @@ def test_fitted_model_as_a_filter_map():
 
 def test_jit_no_retrace_on_new_data_and_sweep():
     pf.fit_point_masses(_grid1(_one_mass()), 1, **ONE)
-    size = pf._fit_batch._cache_size()
+    size = pfs.fit_batch._cache_size()
     truth = _one_mass(mass=-1.5e16, lat=24.12, lon=123.2, depth=18e3)
     fit = pf.fit_point_masses(_grid1(truth), 1, learning_rate=0.03, rtol=1e-3, **ONE)
-    assert pf._fit_batch._cache_size() == size
+    assert pfs.fit_batch._cache_size() == size
     _check_recovered(fit, truth, pos_km=0.01, rel_mass=1e-4)
     sweep = pf.sweep_point_masses(_grid1(truth), [1], **ONE)
-    assert pf._fit_batch._cache_size() == size
+    assert pfs.fit_batch._cache_size() == size
     assert sweep.k.tolist() == [1] and sweep.rms[0] == sweep.fits[0].rms
 
 
 def test_vmap_over_restarts_equals_loop():
     # Restart i alone (replicated into every slot, so the compiled program of the
     # other tests is reused) gives what restart i gives inside the batch.
-    _, p, _, _ = _problem(k=1)
+    _, p, _, _ = _make_problem(k=1)
     n = ONE["n_restarts"]
-    raw = pf._initial_positions(jax.random.PRNGKey(5), n, 1, jnp.float64)
+    raw = pfs.initial_positions(jax.random.PRNGKey(5), n, 1, jnp.float64)
     args = (p, jnp.asarray(0.05, jnp.float64), jnp.asarray(1e-4, jnp.float64))
     kw = dict(fit_offset=True, steps=ONE["steps"], polish_steps=ONE["polish_steps"])
-    batched = pf._fit_batch(raw, *args, **kw)
-    size = pf._fit_batch._cache_size()
+    batched = pfs.fit_batch(raw, *args, **kw)
+    size = pfs.fit_batch._cache_size()
     assert batched[1].shape == (n,) and batched[0].mass.shape == (n, 1)
     assert len({float(v) for v in np.round(np.asarray(batched[1]), 12)}) > 1  # distinct runs
     for i in range(n):
-        alone = pf._fit_batch(jnp.repeat(raw[i : i + 1], n, axis=0), *args, **kw)
+        alone = pfs.fit_batch(jnp.repeat(raw[i : i + 1], n, axis=0), *args, **kw)
         for b, a in zip(jax.tree_util.tree_leaves(batched), jax.tree_util.tree_leaves(alone),
                         strict=True):
             np.testing.assert_allclose(np.asarray(b[i]), np.asarray(a[0]), rtol=1e-9,
                                        atol=1e-12)
-    assert pf._fit_batch._cache_size() == size
+    assert pfs.fit_batch._cache_size() == size
 
 
 # --- model files ---------------------------------------------------------------------
