@@ -35,7 +35,8 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav.constants import DEG
-from jaxgrav.fields.pointmass import PointMasses, anomaly_kernel
+from jaxgrav.fields.pointmass import PointMasses
+from jaxgrav.fields.pointmass import anomaly_kernel as _anomaly_kernel
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.grid import Grid
 from jaxgrav.sim.ins import GRAV
@@ -173,7 +174,7 @@ def map_anomaly(field, lat, lon):
     if isinstance(field, Grid):
         return field.sample(lat, lon, "bicubic")
     if isinstance(field, PointMasses):
-        return anomaly_kernel(field, lat, lon, 0.0)
+        return _anomaly_kernel(field, lat, lon, 0.0)
     return field(lat, lon)
 
 
