@@ -23,6 +23,7 @@ import numpy as np
 
 from jaxgrav import interp
 from jaxgrav._io import atomic_output
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import check_finite, check_latitude, check_same_shape, concrete
 from jaxgrav.constants import DEG
 
@@ -108,8 +109,7 @@ class GeographicAxes:
         )
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class Grid(GeographicAxes):
     """Values on a regular geographic grid.
 
@@ -128,12 +128,12 @@ class Grid(GeographicAxes):
     """
 
     values: jax.Array
-    lat0: float = dataclasses.field(metadata=dict(static=True))
-    dlat: float = dataclasses.field(metadata=dict(static=True))
-    lon0: float = dataclasses.field(metadata=dict(static=True))
-    dlon: float = dataclasses.field(metadata=dict(static=True))
-    name: str = dataclasses.field(default="", metadata=dict(static=True))
-    units: str = dataclasses.field(default="", metadata=dict(static=True))
+    lat0: float = static_field()
+    dlat: float = static_field()
+    lon0: float = static_field()
+    dlon: float = static_field()
+    name: str = static_field("")
+    units: str = static_field("")
 
     # ------------------------------------------------------------------ building
     @classmethod

@@ -14,14 +14,13 @@ import numpy as np
 
 from jaxgrav import constants as const
 from jaxgrav._io import atomic_output
-from jaxgrav._pytree import static_field
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import check_finite, concrete
 
 __all__ = ["SphericalHarmonics"]
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class SphericalHarmonics:
     """A disturbing-potential model as 4π-normalised spherical-harmonic coefficients.
 

@@ -36,7 +36,6 @@ float32 the ECEF differences lose about 0.5 m (≈1e-5 relative at 40 km), which
 still below 0.01 mGal for paper D's model.
 """
 
-import dataclasses
 from typing import NamedTuple
 
 import jax
@@ -44,6 +43,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import constants as c
+from jaxgrav._pytree import pytree_dataclass
 from jaxgrav._validate import check_finite, check_latitude, check_points, concrete
 from jaxgrav.geodesy import enu_basis, geodetic_to_ecef, normal_gravity
 
@@ -61,8 +61,7 @@ __all__ = [
 ]
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class PointMasses:
     """A set of ``K`` point masses buried below the WGS84 ellipsoid.
 

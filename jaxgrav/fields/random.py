@@ -29,13 +29,13 @@ truncates high wavenumbers, a small domain the low ones). ``E|FFT(f)_k|² = N A(
 i.e. the periodogram ``|FFT(f)|²·Δy·Δx / N`` estimates ``S``.
 """
 
-import dataclasses
 import functools
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import concrete
 from jaxgrav.fields.spectral import check_shape, spacing_pair, wavenumbers
 
@@ -54,8 +54,7 @@ def _check_positive(x, name):
         raise ValueError(f"{name} must be positive and finite; got {arr}")
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class MarkovSpectrum:
     """Isotropic Markov (Matérn half-integer) spectrum, as a callable of |k|.
 
@@ -82,7 +81,7 @@ class MarkovSpectrum:
 
     rms: jax.Array
     correlation_length: jax.Array
-    order: int = dataclasses.field(default=2, metadata={"static": True})
+    order: int = static_field(2)
 
     def __call__(self, k):
         """Power spectral density at wavenumber ``k`` (rad/m), in rms-unit²·m²."""
@@ -99,8 +98,7 @@ class MarkovSpectrum:
         return self.rms**2 * poly * jnp.exp(-x)
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class PowerLawSpectrum:
     """Power-law spectrum ``S(k) = amplitude · (k / k0)^(−exponent)`` for k > 0, 0 at k = 0.
 
