@@ -20,7 +20,8 @@ from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import check_finite
 from jaxgrav.fields.harmonics import synthesize_grid
 from jaxgrav.fields.pointmass import deflection
-from jaxgrav.grid import GeographicAxes, Grid
+from jaxgrav.grid import Grid
+from jaxgrav.grid_axes import GeographicAxes
 
 __all__ = ["PAPER_HEIGHTS", "LayeredGrid", "paper_c_layers"]
 
@@ -224,10 +225,6 @@ class LayeredGrid(GeographicAxes):
         c = self.channels.index(channel) if isinstance(channel, str) else channel
         return Grid(self.values[index, c], self.lat0, self.dlat, self.lon0, self.dlon,
                     self.channels[c], self.units)
-
-    def fractional_index(self, lat, lon):
-        """Fractional (row, column) of points; see :meth:`Grid.fractional_index`."""
-        return self.layer(0).fractional_index(lat, lon)
 
     def nbytes(self):
         """Storage of values and heights (bytes)."""
