@@ -11,6 +11,7 @@ from scipy.interpolate import RegularGridInterpolator
 from scipy.sparse.linalg import spsolve
 
 import jaxgrav as jg
+from jaxgrav.fields import pointmass
 
 LAT = np.linspace(24.0, 36.0, 25)
 LON = np.linspace(124.0, 136.0, 25)
@@ -276,8 +277,6 @@ def test_sample_rejects_mismatched_lengths(n, m):
 
 
 def test_upward_continue_wrapper_matches_point_mass_field():
-    from jaxgrav.fields import pointmass
-
     masses = pointmass.PointMasses.create(30.0, 130.0, 3000.0, 5e12)
     lat = np.linspace(29.7, 30.3, 61)
     lon = np.linspace(129.65, 130.35, 61)

@@ -11,6 +11,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 import numpy as np
+import xarray as xr
 
 from jaxgrav import constants as const
 from jaxgrav._io import atomic_output
@@ -119,8 +120,6 @@ class SphericalHarmonics:
             If variables, dims or attributes are missing, or the file declares a
             different normalisation or phase convention.
         """
-        import xarray as xr
-
         with xr.open_dataset(path) as ds:
             for var in ("c", "s"):
                 if var not in ds.variables or ds[var].dims != ("degree", "order"):
@@ -153,8 +152,6 @@ class SphericalHarmonics:
         attributes ``gm``, ``radius``, ``normalization='4pi'``, ``csphase=1`` and
         ``quantity='disturbing potential'``.
         """
-        import xarray as xr
-
         deg = np.arange(self.nmax + 1)
         ds = xr.Dataset(
             {

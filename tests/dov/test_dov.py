@@ -1,5 +1,7 @@
 """Tests of jaxgrav.dov: layered DOV grids and their interpolation."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -9,6 +11,7 @@ from scipy.interpolate import RegularGridInterpolator
 from jaxgrav import dov
 from jaxgrav.dov import LayeredGrid
 from jaxgrav.dov.interpolate import interpolate_compiled
+from jaxgrav.fields.pointmass import PointMasses, deflection
 
 LAT = np.linspace(30.0, 31.1, 12)
 LON = np.linspace(100.0, 101.3, 14)
@@ -63,8 +66,6 @@ def test_exact_on_polynomials_of_the_method_order(method, deg_h, deg_v):
 
 
 def test_harmonic_vertical_beats_linear_on_a_harmonic_model():
-    from jaxgrav.fields.pointmass import PointMasses, deflection
-
     masses = PointMasses.create(lat=[33.4, 33.7], lon=[108.3, 108.6], depth=[40e3, 60e3],
                                 mass=[2e15, -3e15])
     lat = np.linspace(33.0, 34.0, 41)
@@ -126,8 +127,6 @@ def test_jit_no_retrace_and_vmap_equals_loop():
 
 
 def dataclass_replace(obj, **kw):
-    import dataclasses
-
     return dataclasses.replace(obj, **kw)
 
 
@@ -208,8 +207,6 @@ def test_paper_layers_and_builders():
     assert small.values.shape == (2, 2, 10, 10)
     with pytest.raises(ValueError, match="spacing_arcmin"):
         dov.paper_c_layers([0.0, 5000.0], spacing_arcmin=7.0)
-    from jaxgrav.fields.pointmass import PointMasses, deflection
-
     masses = PointMasses.create(lat=[30.5], lon=[100.6], depth=[5e3], mass=[1e14])
     pm = LayeredGrid.from_point_masses(masses, LAT[:5], LON[:6], [0.0, 1000.0])
     ref = deflection(masses, LAT[2], LON[3], 1000.0)

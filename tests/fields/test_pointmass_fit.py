@@ -4,19 +4,24 @@ Every fit in this module uses one of two configurations (K = 1 on a 13×13 map,
 K = 3 on a 15×15 map) so that the fitting program compiles only a few times.
 """
 
+import json
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy.linalg
 from jax.flatten_util import ravel_pytree
 
 from jaxgrav import constants as c
+from jaxgrav import filters as fl
 from jaxgrav.fields import pointmass as pm
 from jaxgrav.fields import pointmass_fit as pf
 from jaxgrav.fields import pointmass_fit_inputs as pfi
 from jaxgrav.fields import pointmass_fit_model as pfm
 from jaxgrav.fields import pointmass_fit_solver as pfs
 from jaxgrav.grid import Grid
+from jaxgrav.sim import ins
 
 ONE = dict(n_restarts=4, steps=60, polish_steps=30, key=0)
 THREE = dict(n_restarts=8, steps=150, polish_steps=100, key=0)
@@ -163,11 +168,6 @@ def _filter_runs(n_runs, n_steps=120, dt=10.0, seed=0):
     """Paper D-like runs built in NumPy (no simulation program to compile): eastward tracks
     at 5 m/s across the masses, INS error from a 2 km / 0.2 m/s start propagated with F, Q
     by SciPy's Van Loan, a reading every step (map + 1 mGal bias + 1 mGal noise)."""
-    import scipy.linalg
-
-    from jaxgrav import filters as fl
-    from jaxgrav.sim import ins
-
     model, lat_ref, n = ins.INSErrorModel(), 24.27, ins.N_STATES
     a, qc = (np.asarray(m) for m in ins.continuous_model(model, lat_ref))
     e = scipy.linalg.expm(np.block([[-a, qc], [np.zeros((n, n)), a.T]]) * dt)
@@ -204,8 +204,6 @@ def _map_points(masses, lat, lon):
 def test_fitted_model_as_a_filter_map():
     """The UKF on paper D-like runs with a fitted model as its map (masses + offset, fitted
     to a noisy map window) does about as well as with the true masses."""
-    from jaxgrav import filters as fl
-
     lat = np.linspace(23.9, 24.6, 15)
     lon = np.linspace(122.6, 123.3, 15)
     noisy = (_map(pm.paper_d(), lat, lon) + PAPER_D_OFFSET
@@ -276,8 +274,6 @@ def test_vmap_over_restarts_equals_loop():
 
 
 def test_save_and_load_round_trip(paper_d_fit, tmp_path):
-    import json
-
     _, fit = paper_d_fit
     path = tmp_path / "model.json"
     pf.save_point_masses(path, fit)
@@ -318,8 +314,6 @@ def _model_doc(**change):
     (_model_doc(mass=[1e16, float("inf")]), r"finite"),
 ])
 def test_load_rejects_bad_model_files(tmp_path, text, match):
-    import json
-
     path = tmp_path / "bad.json"
     path.write_text(text if isinstance(text, str) else json.dumps(text))
     with pytest.raises(ValueError, match=match) as err:
