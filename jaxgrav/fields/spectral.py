@@ -11,7 +11,7 @@ FFT assumes the grid is periodic, so the grid is first padded (by default by
 repeating its edge values) and the padding is tapered with a cosine ramp towards the
 mean of the grid's border samples, which keeps the periodic wrap-around continuous and
 confines edge effects to a band near the borders. On a synthetic point-mass test
-(tests/test_spectral.py) edge padding with the taper had the smallest error of the
+(tests/fields/test_spectral.py) edge padding with the taper had the smallest error of the
 modes offered; reflect/symmetric padding was 2–4 times worse.
 """
 

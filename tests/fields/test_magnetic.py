@@ -81,7 +81,7 @@ def test_read_anomaly_netcdf(tmp_path):
 
 # ---------------------------------------------------------------------- matching in nT
 # A small paper-B-like map (0.5° square at 0.01°, anomaly only: no ppigrf needed), read
-# back through the NetCDF reader. tests/test_cli_magnetic.py builds the same map and
+# back through the NetCDF reader. tests/cli/test_cli_magnetic.py builds the same map and
 # track and matches through the CLI with the same settings: one compile per session.
 MAG_REGION = (39.0, 39.5, 115.0, 115.5)
 MAG_NOISE_NT = 10.0  # paper B's reading noise
