@@ -106,14 +106,16 @@ def test_readings_model():
 def test_scenario_keeps_track_in_region_and_vmaps():
     grid = datasets.load("ryukyu")["anomaly_2p5min"]
     scen = MatchingScenario(n_fixes=20, drift_deg=0.05)
-    runs = jax.vmap(lambda k: matching_scenario(k, grid, scen))(
-        jax.random.split(jax.random.key(0), 64))
+    # the map is an argument, not a constant closed over: XLA would fold its spline
+    # coefficients at compile time (seconds for a 289 x 289 grid)
+    runs = jax.jit(jax.vmap(matching_scenario, in_axes=(0, None, None)))(
+        jax.random.split(jax.random.key(0), 64), grid, scen)
     assert runs.readings.shape == (64, 20)
     assert np.all(np.isfinite(runs.readings))
     assert np.all(np.asarray(grid.contains(runs.ins_lat, runs.ins_lon)))
     np.testing.assert_allclose(np.hypot(runs.drift_north_m, runs.drift_east_m),
                                0.05 * sim.DEG_ARC_M, rtol=1e-9)
-    one = matching_scenario(jax.random.split(jax.random.key(0), 64)[3], grid, scen)
+    one = jax.jit(matching_scenario)(jax.random.split(jax.random.key(0), 64)[3], grid, scen)
     np.testing.assert_allclose(one.readings, runs.readings[3], atol=1e-9)
 
 
