@@ -152,14 +152,14 @@ def paper_d_fit():
     """K = 3 fitted to paper D's masses on a 15×15 map of their area (+ an offset)."""
     lat = np.linspace(23.9, 24.6, 15)
     lon = np.linspace(122.6, 123.3, 15)
-    values = _map(pm.paper_d(), lat, lon) + PAPER_D_OFFSET
+    values = _map(pm.three_mass_model(), lat, lon) + PAPER_D_OFFSET
     # arrays with 1-D axes instead of a Grid
     return values, pf.fit_point_masses(values, 3, lat=lat, lon=lon, **THREE)
 
 
 def test_recovers_paper_d_three_masses(paper_d_fit):
     values, fit = paper_d_fit
-    _check_recovered(fit, pm.paper_d(), pos_km=1.0, rel_mass=0.03)
+    _check_recovered(fit, pm.three_mass_model(), pos_km=1.0, rel_mass=0.03)
     assert fit.rms < 0.01 * np.std(values)
     assert fit.offset == pytest.approx(PAPER_D_OFFSET, abs=0.05)
 
@@ -190,7 +190,7 @@ def _filter_runs(n_runs, n_steps=120, dt=10.0, seed=0):
               c.WGS84_A / np.sqrt(1 - c.WGS84_E2 * np.sin(np.deg2rad(lat)) ** 2))
     ins_lat = lat + np.rad2deg(err[..., 0] / rm)
     ins_lon = lon + np.rad2deg(err[..., 1] / (rn * np.cos(np.deg2rad(lat))))
-    z = _map_points(pm.paper_d(), lat, lon) + err[..., 12] + rng.standard_normal(lat.shape)
+    z = _map_points(pm.three_mass_model(), lat, lon) + err[..., 12] + rng.standard_normal(lat.shape)
     steps = fl.Step(*(jnp.asarray(v[:, 1:]) for v in (ins_lat, ins_lon, z)),
                     jnp.ones((n_runs, n_steps)))
     p0 = ins.initial_covariance(model, 2000.0 / np.sqrt(2.0), 0.2 / np.sqrt(2.0))
@@ -206,7 +206,7 @@ def test_fitted_model_as_a_filter_map():
     to a noisy map window) does about as well as with the true masses."""
     lat = np.linspace(23.9, 24.6, 15)
     lon = np.linspace(122.6, 123.3, 15)
-    noisy = (_map(pm.paper_d(), lat, lon) + PAPER_D_OFFSET
+    noisy = (_map(pm.three_mass_model(), lat, lon) + PAPER_D_OFFSET
              + 0.1 * np.random.default_rng(4).standard_normal((15, 15)))
     fit = pf.fit_point_masses(noisy, 3, lat=lat, lon=lon, **THREE)
     assert 0.05 < fit.rms < 0.15  # the noise, not an exact copy of the truth
@@ -227,7 +227,7 @@ def test_fitted_model_as_a_filter_map():
         rms = np.sqrt(np.mean(np.sum((err - x)[:, half:] ** 2, -1), -1))
         return rms / np.sqrt(np.mean(np.sum(err[:, half:] ** 2, -1), -1))
 
-    ratio_true = score(pm.paper_d(), 0.0)
+    ratio_true = score(pm.three_mass_model(), 0.0)
     ratio_fit = score(fit.masses, fit.offset - PAPER_D_OFFSET)
     assert np.mean(ratio_true) < 0.8  # the map is informative on these runs
     assert not np.allclose(ratio_fit, ratio_true, rtol=0, atol=1e-4)  # a different map ...
@@ -287,11 +287,11 @@ def test_save_and_load_round_trip(paper_d_fit, tmp_path):
                                       np.asarray(getattr(fit.masses, name)), err_msg=name)
     # no overwrite without force; bare masses get offset 0 unless given
     with pytest.raises(FileExistsError, match="exists"):
-        pf.save_point_masses(path, pm.paper_d())
-    pf.save_point_masses(path, pm.paper_d(), offset=-2.5, force=True)
+        pf.save_point_masses(path, pm.three_mass_model())
+    pf.save_point_masses(path, pm.three_mass_model(), offset=-2.5, force=True)
     masses, offset = pf.load_point_masses(path)
     assert offset == -2.5 and "rms" not in json.loads(path.read_text())
-    np.testing.assert_array_equal(np.asarray(masses.mass), np.asarray(pm.paper_d().mass))
+    np.testing.assert_array_equal(np.asarray(masses.mass), np.asarray(pm.three_mass_model().mass))
 
 
 def _model_doc(**change):
