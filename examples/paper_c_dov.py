@@ -12,15 +12,20 @@ import json
 from pathlib import Path
 
 import jax
+import matplotlib
 
 jax.config.update("jax_enable_x64", True)  # a script, not the library
+matplotlib.use("Agg")
 
 import jax.numpy as jnp  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from jaxgrav import datasets, dov  # noqa: E402
+from jaxgrav._io import atomic_output  # noqa: E402
 from jaxgrav.dov import sensitivity  # noqa: E402
 from jaxgrav.fields.harmonics import deflection  # noqa: E402
+from jaxgrav.plot import save_figure  # noqa: E402
 from jaxgrav.scenarios.paper_c import paper_c_trajectory  # noqa: E402
 
 
@@ -93,13 +98,6 @@ def main(argv=None):
         ins[name] = float(jnp.max(jnp.hypot(r.north, r.east)))
         print(f"INS max horizontal position error, {name}: {ins[name]:.3f} m")
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from jaxgrav.plot import save_figure
-
     fig, ax = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
     ax[0].plot(tr.t, xi, label="ξ")
     ax[0].plot(tr.t, eta, label="η")
@@ -115,8 +113,6 @@ def main(argv=None):
     ax[1].legend(fontsize=8)
     out.mkdir(parents=True, exist_ok=True)
     save_figure(fig, out / "paper_c_dov.png", force=a.force)
-    from jaxgrav._io import atomic_output
-
     with atomic_output(out / "paper_c_table.json", force=a.force) as tmp:
         tmp.write_text(json.dumps(dict(table=table, improvement=base / best, optax=opt,
                                        ins_max_m=ins), indent=1))

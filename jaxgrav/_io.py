@@ -1,4 +1,10 @@
-"""Atomic, no-clobber output files (DESIGN.md, Files)."""
+"""Atomic, no-clobber output files.
+
+Every file jaxgrav writes goes through :func:`atomic_output`: the data are written to a
+temporary file in the target's directory and renamed into place only when writing
+succeeded, so a crash never leaves a half-written file, and an existing file is
+replaced only when the caller passes ``force=True``.
+"""
 
 import contextlib
 import os

@@ -2,8 +2,8 @@
 
 Each check runs only on concrete inputs (NumPy arrays, Python numbers, committed
 JAX arrays); under ``jit``/``vmap`` tracing there is nothing to inspect, and the
-traced code reports problems through NaN results and validity masks instead
-(DESIGN.md, Errors). Messages name the argument, the offending value and what was
+traced code reports problems through NaN results and validity masks instead.
+Messages name the argument, the offending value and what was
 expected.
 """
 

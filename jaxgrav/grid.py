@@ -10,106 +10,32 @@ Latitudes are stored ascending (south to north) and longitudes ascending; input 
 either order is accepted and flipped once. Longitudes may be given in the 0–360
 or the ±180 convention, for the grid and for the sample points independently:
 points are wrapped into the grid's own range. Grids are not periodic in longitude.
+
+The node geometry lives in :mod:`jaxgrav.grid_axes`, NetCDF reading and writing in
+:mod:`jaxgrav.grid_files`, node windows and cell subdivision in
+:mod:`jaxgrav.grid_windows`; :class:`Grid`'s methods are the interface to them.
 """
 
 import dataclasses
 import functools
-from pathlib import Path
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import interp
-from jaxgrav._io import atomic_output
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import check_finite, check_latitude, check_same_shape, concrete
 from jaxgrav.constants import DEG
+from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.grid_axes import GeographicAxes, regular_axis
+from jaxgrav.grid_files import read_netcdf, write_netcdf
+from jaxgrav.grid_windows import Window, node_windows, refined
 
 __all__ = ["Grid", "Window", "make_sampler", "sample"]
 
-_LAT_NAMES = ("lat", "latitude", "y")
-_LON_NAMES = ("lon", "longitude", "x")
 
-
-def _regular_axis(coord, name):
-    """Return (first, step, flipped) of a 1-D regular coordinate, or raise."""
-    coord = np.asarray(coord, dtype=float)
-    if coord.ndim != 1 or coord.size < 2:
-        raise ValueError(f"{name} must be a 1-D array of at least 2 nodes; got shape {coord.shape}")
-    check_finite(coord, name)
-    flipped = coord[1] < coord[0]
-    if flipped:
-        coord = coord[::-1]
-    step = np.diff(coord)
-    mean = (coord[-1] - coord[0]) / (coord.size - 1)
-    if mean <= 0 or np.max(np.abs(step - mean)) > 1e-6 * abs(mean) + 1e-9:
-        raise ValueError(
-            f"{name} must be strictly monotonic and regularly spaced; steps range from "
-            f"{step.min()!r} to {step.max()!r}"
-        )
-    return float(coord[0]), float(mean), bool(flipped)
-
-
-class Window(NamedTuple):
-    """Fixed-size windows of grid nodes around points (see :meth:`Grid.window`).
-
-    Attributes
-    ----------
-    values : Array, shape ``(..., *P, 2k+1, 2k+1)``
-        Node values of each window (rows south to north, columns west to east).
-    row0, col0 : Array of int32, shape ``P``
-        Grid indices of each window's south-west node.
-    complete : Array of bool, shape ``P``
-        False where the window did not fit inside the grid and was shifted to fit.
-    """
-
-    values: jax.Array
-    row0: jax.Array
-    col0: jax.Array
-    complete: jax.Array
-
-
-class GeographicAxes:
-    """Node geometry shared by :class:`Grid` and :class:`jaxgrav.dov.LayeredGrid`.
-
-    Needs ``values`` (last two axes rows × columns) and static ``lat0``, ``dlat``,
-    ``lon0``, ``dlon``.
-    """
-
-    @property
-    def ny(self):
-        """Number of latitude rows."""
-        return self.values.shape[-2]
-
-    @property
-    def nx(self):
-        """Number of longitude columns."""
-        return self.values.shape[-1]
-
-    @property
-    def lat(self):
-        """Node latitudes (degrees, ascending), NumPy ``(ny,)``."""
-        return self.lat0 + self.dlat * np.arange(self.ny)
-
-    @property
-    def lon(self):
-        """Node longitudes (degrees, ascending), NumPy ``(nx,)``."""
-        return self.lon0 + self.dlon * np.arange(self.nx)
-
-    @property
-    def extent(self):
-        """``(lon_min, lon_max, lat_min, lat_max)`` in degrees (matplotlib order)."""
-        return (
-            self.lon0,
-            self.lon0 + self.dlon * (self.nx - 1),
-            self.lat0,
-            self.lat0 + self.dlat * (self.ny - 1),
-        )
-
-
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class Grid(GeographicAxes):
     """Values on a regular geographic grid.
 
@@ -128,12 +54,12 @@ class Grid(GeographicAxes):
     """
 
     values: jax.Array
-    lat0: float = dataclasses.field(metadata=dict(static=True))
-    dlat: float = dataclasses.field(metadata=dict(static=True))
-    lon0: float = dataclasses.field(metadata=dict(static=True))
-    dlon: float = dataclasses.field(metadata=dict(static=True))
-    name: str = dataclasses.field(default="", metadata=dict(static=True))
-    units: str = dataclasses.field(default="", metadata=dict(static=True))
+    lat0: float = static_field()
+    dlat: float = static_field()
+    lon0: float = static_field()
+    dlon: float = static_field()
+    name: str = static_field("")
+    units: str = static_field("")
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -159,8 +85,8 @@ class Grid(GeographicAxes):
             mismatch, or NaN/inf in ``values``.
         """
         check_latitude(lat, "lat")
-        lat0, dlat, flip_y = _regular_axis(lat, "lat")
-        lon0, dlon, flip_x = _regular_axis(lon, "lon")
+        lat0, dlat, flip_y = regular_axis(lat, "lat")
+        lon0, dlon, flip_x = regular_axis(lon, "lon")
         values = jnp.asarray(values)
         ny, nx = np.size(lat), np.size(lon)
         if values.ndim < 2 or values.shape[-2:] != (ny, nx):
@@ -200,39 +126,8 @@ class Grid(GeographicAxes):
         -------
         Grid
         """
-        import xarray as xr
-
-        path = Path(path)
-        if not path.exists():
-            raise FileNotFoundError(f"path {str(path)!r} does not exist")
-        with xr.open_dataset(path) as ds:
-            lat_name = next((n for n in _LAT_NAMES if n in ds.coords or n in ds.dims), None)
-            lon_name = next((n for n in _LON_NAMES if n in ds.coords or n in ds.dims), None)
-            if lat_name is None or lon_name is None:
-                raise ValueError(
-                    f"{str(path)!r} needs latitude and longitude coordinates named one of "
-                    f"{_LAT_NAMES} and {_LON_NAMES}; found {sorted(ds.coords)}"
-                )
-            candidates = [v for v in ds.data_vars if {lat_name, lon_name} <= set(ds[v].dims)]
-            if var is None:
-                if len(candidates) != 1:
-                    raise ValueError(
-                        f"{str(path)!r} holds {len(candidates)} gridded variables {candidates}; "
-                        "pass var= to choose one"
-                    )
-                var = candidates[0]
-            elif var not in candidates:
-                raise ValueError(
-                    f"var {var!r} is not a gridded variable of {str(path)!r}: {candidates}"
-                )
-            da = ds[var].transpose(..., lat_name, lon_name).load()
-            return cls.from_arrays(
-                da[lat_name].values,
-                da[lon_name].values,
-                da.values,
-                name=str(var),
-                units=str(da.attrs.get("units", "")),
-            )
+        lat, lon, values, name, units = read_netcdf(path, var)
+        return cls.from_arrays(lat, lon, values, name=name, units=units)
 
     def to_netcdf(self, path, *, attrs=None, force=False):
         """Write the grid to NetCDF (CF ``lat``/``lon`` coordinates), atomically.
@@ -246,71 +141,7 @@ class Grid(GeographicAxes):
         force : bool
             Overwrite an existing file.
         """
-        import xarray as xr
-
-        lead = [f"dim_{i}" for i in range(self.values.ndim - 2)]
-        da = xr.DataArray(
-            np.asarray(self.values),
-            dims=[*lead, "lat", "lon"],
-            coords={
-                "lat": ("lat", self.lat, {"units": "degrees_north", "standard_name": "latitude"}),
-                "lon": ("lon", self.lon, {"units": "degrees_east", "standard_name": "longitude"}),
-            },
-            attrs={"units": self.units} if self.units else {},
-        )
-        ds = da.to_dataset(name=self.name or "z")
-        ds.attrs.update(attrs or {})
-        with atomic_output(path, force=force) as tmp:
-            ds.to_netcdf(tmp)
-
-    # ------------------------------------------------------------------ geometry
-    def spacing_m(self, lat=None):
-        """Node spacing ``(dy, dx)`` in metres on the WGS84 ellipsoid.
-
-        Parameters
-        ----------
-        lat : float or Array, optional
-            Latitude (degrees) at which to measure; the grid's central latitude by
-            default, in which case Python floats are returned.
-
-        Returns
-        -------
-        tuple
-            North–south and east–west node spacing (m).
-        """
-        from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-
-        if lat is None:
-            lat_c = self.lat0 + 0.5 * self.dlat * (self.ny - 1)
-            return tuple(float(v) for v in self.spacing_m(lat_c))
-        dy = meridian_radius(lat) * self.dlat * DEG
-        dx = prime_vertical_radius(lat) * jnp.cos(jnp.asarray(lat) * DEG) * self.dlon * DEG
-        return dy, dx
-
-    def fractional_index(self, lat, lon):
-        """Fractional (row, column) indices of points; longitudes wrapped into the grid's range.
-
-        Parameters
-        ----------
-        lat, lon : array_like
-            Points (degrees), broadcast together.
-
-        Returns
-        -------
-        tuple of Array
-            ``(iy, ix)``; inside the grid when ``0 ≤ iy ≤ ny−1`` and ``0 ≤ ix ≤ nx−1``.
-        """
-        lat = jnp.asarray(lat)
-        lon = jnp.asarray(lon)
-        dtype = jnp.result_type(lat.dtype, lon.dtype, float)
-        lon_w = self.lon0 + jnp.mod(lon.astype(dtype) - self.lon0, 360.0)
-        return (lat.astype(dtype) - self.lat0) / self.dlat, (lon_w - self.lon0) / self.dlon
-
-    def contains(self, lat, lon):
-        """Boolean mask of points inside the grid (edges included), points' broadcast shape."""
-        iy, ix = self.fractional_index(lat, lon)
-        eps = interp._edge_eps(iy.dtype, max(self.ny, self.nx))
-        return (iy >= -eps) & (iy <= self.ny - 1 + eps) & (ix >= -eps) & (ix <= self.nx - 1 + eps)
+        write_netcdf(self, path, attrs=attrs, force=force)
 
     # ------------------------------------------------------------------ sampling
     def sample(self, lat, lon, method="bilinear", *, strict=False):
@@ -332,19 +163,7 @@ class Grid(GeographicAxes):
         Grid
             ``((ny−1)·factor + 1, (nx−1)·factor + 1)`` nodes over the same extent.
         """
-        if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
-            raise ValueError(f"factor must be an integer >= 1; got {factor!r}")
-        interp._check_method(method)
-        factor = int(factor)
-        wy = interp.interpolation_matrix(
-            self.ny, np.arange((self.ny - 1) * factor + 1) / factor, method
-        )
-        wx = interp.interpolation_matrix(
-            self.nx, np.arange((self.nx - 1) * factor + 1) / factor, method
-        )
-        dtype = jnp.result_type(self.values.dtype, float)
-        v = jnp.asarray(wy, dtype) @ self.values.astype(dtype) @ jnp.asarray(wx.T, dtype)
-        return dataclasses.replace(self, values=v, dlat=self.dlat / factor, dlon=self.dlon / factor)
+        return refined(self, factor, method)
 
     def window(self, lat, lon, half_size):
         """Fixed-size square windows of nodes centred on the node nearest each point.
@@ -367,28 +186,7 @@ class Grid(GeographicAxes):
         ValueError
             If the window is larger than the grid.
         """
-        k = int(half_size)
-        if k < 0 or 2 * k + 1 > min(self.ny, self.nx):
-            raise ValueError(
-                f"half_size must be in [0, {(min(self.ny, self.nx) - 1) // 2}] for a "
-                f"{self.ny}x{self.nx} grid; got {half_size!r}"
-            )
-        iy, ix = self.fractional_index(lat, lon)
-        r = jnp.round(iy).astype(jnp.int32) - k
-        col = jnp.round(ix).astype(jnp.int32) - k
-        size = 2 * k + 1
-        r_in = jnp.clip(r, 0, self.ny - size)
-        c_in = jnp.clip(col, 0, self.nx - size)
-        complete = (r == r_in) & (col == c_in) & jnp.isfinite(iy) & jnp.isfinite(ix)
-        lead = self.values.shape[:-2]
-
-        def one(r0, c0):
-            start = (0,) * len(lead) + (r0, c0)
-            return jax.lax.dynamic_slice(self.values, start, (*lead, size, size))
-
-        flat = jax.vmap(one)(r_in.reshape(-1), c_in.reshape(-1))  # (M, *lead, s, s)
-        vals = jnp.moveaxis(flat, 0, len(lead)).reshape(*lead, *r.shape, size, size)
-        return Window(vals, r_in, c_in, complete)
+        return node_windows(self, lat, lon, half_size)
 
     # ------------------------------------------------------------------ derived maps
     def gradient(self):
@@ -402,8 +200,6 @@ class Grid(GeographicAxes):
         tuple of Grid
             ``(d_north, d_east)``, same geometry, units ``units + "/m"``.
         """
-        from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-
         v = jnp.asarray(self.values, dtype=jnp.result_type(self.values.dtype, float))
         lat = jnp.asarray(self.lat)
         dy = meridian_radius(lat) * self.dlat * DEG
@@ -431,6 +227,8 @@ class Grid(GeographicAxes):
         -------
         Grid
         """
+        # fields builds Grids and so sits above grid; this one method reaches up, and
+        # importing it here keeps the grid -> fields arrow out of module import time
         from jaxgrav.fields.spectral import upward_continuation
 
         v = upward_continuation(self.values, self.spacing_m(), height)

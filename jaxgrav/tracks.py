@@ -1,4 +1,4 @@
-"""Track files: CSV with a header row, one fix per line (DESIGN.md, Files).
+"""Track files: CSV with a header row, one fix per line, written atomically.
 
 A track is a ``dict`` of equal-length 1-D NumPy arrays keyed by column name,
 e.g. ``t`` (s), ``lat``, ``lon`` (degrees), ``gravity`` (mGal). Empty cells read

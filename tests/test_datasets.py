@@ -14,7 +14,7 @@ import xarray as xr
 from scipy.ndimage import gaussian_filter
 
 from jaxgrav import datasets
-from jaxgrav.fields import egm2008
+from jaxgrav.fields import egm2008, egm2008_synthesis
 from jaxgrav.grid import Grid
 
 slow = pytest.mark.skipif(
@@ -220,9 +220,9 @@ def test_builder_missing_dependency_message(monkeypatch):
 
 
 def test_dh_grid_choice():
-    assert egm2008._dh_lmax(359, 30.0) == (359, 2)  # 0.25° grid, every second node
-    assert egm2008._dh_lmax(2159, 2.5) == (2159, 1)  # exactly 2.5′
-    assert egm2008._dh_lmax(360, 3.0) == (1799, 1)  # exactly 3′
+    assert egm2008_synthesis.dh_lmax(359, 30.0) == (359, 2)  # 0.25° grid, every second node
+    assert egm2008_synthesis.dh_lmax(2159, 2.5) == (2159, 1)  # exactly 2.5′
+    assert egm2008_synthesis.dh_lmax(360, 3.0) == (1799, 1)  # exactly 3′
 
 
 def test_regions_are_node_aligned():

@@ -11,6 +11,7 @@ from scipy.interpolate import RegularGridInterpolator
 from scipy.sparse.linalg import spsolve
 
 import jaxgrav as jg
+from jaxgrav.fields import pointmass
 
 LAT = np.linspace(24.0, 36.0, 25)
 LON = np.linspace(124.0, 136.0, 25)
@@ -142,7 +143,9 @@ def test_jit_no_retrace_vmap_equals_loop(grid, points, method):
 def test_grad_in_points_and_values(grid, method):
     lat0, lon0 = 30.123, 131.377  # inside a cell, away from nodes
     f = lambda la, lo: grid.sample(la, lo, method)  # noqa: E731
-    g_rev = jax.grad(f, argnums=(0, 1))(lat0, lon0)
+    # one reverse-mode program for the points and the values (the grid is an argument)
+    grad = jax.grad(lambda g, la, lo: g.sample(la, lo, method), argnums=(0, 1, 2))
+    g_grid, *g_rev = grad(grid, lat0, lon0)
     g_fwd = jax.jacfwd(f, argnums=(0, 1))(lat0, lon0)
     eps = 1e-6
     fd = (
@@ -153,12 +156,10 @@ def test_grad_in_points_and_values(grid, method):
         np.testing.assert_allclose(r, fw, rtol=1e-10)
         np.testing.assert_allclose(r, d, rtol=1e-5)
     # in the values: sampling is linear in them, so the gradient is the weight vector
-    gv = jax.grad(lambda v: jg.Grid(v, 24.0, 0.5, 124.0, 0.5).sample(lat0, lon0, method))(
-        grid.values
-    )
-    np.testing.assert_allclose(jnp.sum(gv), 1.0, atol=1e-10)  # weights sum to one
+    assert (grid.lat0, grid.dlat, grid.lon0, grid.dlon) == (24.0, 0.5, 124.0, 0.5)
+    np.testing.assert_allclose(jnp.sum(g_grid.values), 1.0, atol=1e-10)  # weights sum to one
     # finite gradient even for an off-grid point (NaN value, zero gradient)
-    assert np.all(np.isfinite(jax.grad(f)(40.0, 130.0)))
+    assert np.all(np.isfinite(grad(grid, 40.0, 130.0)[1]))
 
 
 def test_refine_paper_a_factor_100():
@@ -276,8 +277,6 @@ def test_sample_rejects_mismatched_lengths(n, m):
 
 
 def test_upward_continue_wrapper_matches_point_mass_field():
-    from jaxgrav.fields import pointmass
-
     masses = pointmass.PointMasses.create(30.0, 130.0, 3000.0, 5e12)
     lat = np.linspace(29.7, 30.3, 61)
     lon = np.linspace(129.65, 130.35, 61)

@@ -130,11 +130,12 @@ def interpolate(layers, lat, lon, h, method=DEFAULT_METHOD, *, strict=False):
         ``layers.values`` and in ``layers.heights``.
     """
     lat, lon, h = _checked_points(layers, lat, lon, h, method, strict)
-    return _interpolate(layers, lat, lon, h, method)
+    return interpolate_compiled(layers, lat, lon, h, method)
 
 
 @functools.partial(jax.jit, static_argnames="method")
-def _interpolate(layers, lat, lon, h, method):
+def interpolate_compiled(layers, lat, lon, h, method):
+    """The compiled core of :func:`interpolate` (no validation; package-internal)."""
     return Interpolated(*make_interpolator(layers, method)(lat, lon, h))
 
 

@@ -7,7 +7,6 @@ NetCDF file, and written back to NetCDF. :func:`paper_c_layers` gives the paper'
 layers on the shipped ``qinling`` data. Interpolation is :func:`jaxgrav.dov.interpolate`.
 """
 
-import dataclasses
 from pathlib import Path
 
 import jax
@@ -17,18 +16,19 @@ import xarray as xr
 
 from jaxgrav import datasets
 from jaxgrav._io import atomic_output
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import check_finite
 from jaxgrav.fields.harmonics import synthesize_grid
 from jaxgrav.fields.pointmass import deflection
-from jaxgrav.grid import GeographicAxes, Grid
+from jaxgrav.grid import Grid
+from jaxgrav.grid_axes import GeographicAxes
 
 __all__ = ["PAPER_HEIGHTS", "LayeredGrid", "paper_c_layers"]
 
 PAPER_HEIGHTS = (0.0, 10_000.0, 20_000.0)
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class LayeredGrid(GeographicAxes):
     """Channels on a regular lat/lon grid at several heights.
 
@@ -51,12 +51,12 @@ class LayeredGrid(GeographicAxes):
 
     values: jax.Array
     heights: jax.Array
-    lat0: float = dataclasses.field(metadata=dict(static=True))
-    dlat: float = dataclasses.field(metadata=dict(static=True))
-    lon0: float = dataclasses.field(metadata=dict(static=True))
-    dlon: float = dataclasses.field(metadata=dict(static=True))
-    channels: tuple = dataclasses.field(default=("xi", "eta"), metadata=dict(static=True))
-    units: str = dataclasses.field(default="arcsec", metadata=dict(static=True))
+    lat0: float = static_field()
+    dlat: float = static_field()
+    lon0: float = static_field()
+    dlon: float = static_field()
+    channels: tuple = static_field(("xi", "eta"))
+    units: str = static_field("arcsec")
 
     # ---------------------------------------------------------------- building
     @classmethod
@@ -225,10 +225,6 @@ class LayeredGrid(GeographicAxes):
         c = self.channels.index(channel) if isinstance(channel, str) else channel
         return Grid(self.values[index, c], self.lat0, self.dlat, self.lon0, self.dlon,
                     self.channels[c], self.units)
-
-    def fractional_index(self, lat, lon):
-        """Fractional (row, column) of points; see :meth:`Grid.fractional_index`."""
-        return self.layer(0).fractional_index(lat, lon)
 
     def nbytes(self):
         """Storage of values and heights (bytes)."""

@@ -16,6 +16,7 @@
 """
 
 import dataclasses
+import functools
 from typing import NamedTuple
 
 import jax
@@ -34,6 +35,7 @@ __all__ = [
     "HeightStudy",
     "SchulerError",
     "harmonic_layers",
+    "height_loss_and_grad",
     "optimise_heights",
     "rms_error",
     "schuler_error",
@@ -139,32 +141,62 @@ def optimise_heights(build, heights, lat, lon, h, truth, *, free, method="biline
         Interpolation method.
     steps : int
         Adam iterations (Python loop outside jit; each step is one jitted call).
+        ``steps=0`` evaluates the RMS and its gradient at ``heights`` only.
     learning_rate : float
         Adam step (m).
 
     Returns
     -------
     HeightStudy
+
+    Notes
+    -----
+    The loss and gradient program is compiled once per ``build`` object, ``method``
+    and array shapes: further calls with the same ``build`` (other start heights,
+    tracks of the same length) reuse it.
     """
     free = jnp.asarray(free, bool)
     lat, lon, h, truth = (jnp.asarray(x, jnp.float64) for x in (lat, lon, h, truth))
-
-    @jax.jit
-    def loss_and_grad(hs):
-        return jax.value_and_grad(lambda x: rms_error(build(x), lat, lon, h, truth, method))(hs)
 
     opt = optax.adam(learning_rate)
     x = jnp.asarray(heights, jnp.float64)
     state = opt.init(x)
     hist, losses, g0 = [], [], None
     for _ in range(int(steps) + 1):
-        loss, g = loss_and_grad(x)
+        loss, g = height_loss_and_grad(x, lat, lon, h, truth, build=build, method=method)
         hist.append(np.asarray(x))
         losses.append(float(loss))
         g0 = np.asarray(g) if g0 is None else g0
         upd, state = opt.update(jnp.where(free, g, 0.0), state, x)
         x = x + jnp.where(free, upd, 0.0)
     return HeightStudy(np.stack(hist), np.asarray(losses), g0)
+
+
+@functools.partial(jax.jit, static_argnames=("build", "method"))
+def height_loss_and_grad(heights, lat, lon, h, truth, *, build, method="bilinear-linear"):
+    """RMS error of ``build(heights)`` along a track and its gradient in the heights.
+
+    Parameters
+    ----------
+    heights : Array, shape (L,)
+        Layer heights (m).
+    lat, lon, h : Array, shape (T,)
+        Track (degrees, degrees, m).
+    truth : Array, shape (C, T)
+        Exact values at the track (arcsec).
+    build : callable
+        ``heights -> LayeredGrid`` (static: one compilation per ``build`` object).
+    method : str
+        Interpolation method (static).
+
+    Returns
+    -------
+    rms : Array, scalar
+        As :func:`rms_error` (arcsec).
+    grad : Array, shape (L,)
+        d rms / d heights (arcsec/m).
+    """
+    return jax.value_and_grad(lambda x: rms_error(build(x), lat, lon, h, truth, method))(heights)
 
 
 class SchulerError(NamedTuple):

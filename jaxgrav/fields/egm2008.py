@@ -72,27 +72,23 @@ import numpy as np
 
 from jaxgrav.fields.egm2008_files import (  # noqa: F401  (APPROXIMATION: re-exported)
     APPROXIMATION,
-    _anomaly_dataset,
-    _coefficients_dataset,
-    _command,
-    _dov_dataset,
-    _provenance,
-    _write_atomic,
+    anomaly_dataset,
+    build_command,
+    coefficients_dataset,
+    dov_dataset,
+    provenance_attrs,
+    write_atomic,
 )
 from jaxgrav.fields.egm2008_geoid import (
     GEOID_FILE,
     R_REF,
-    _expand,
-    _require,
     disturbing_potential_coefficients,
+    expand_geoid,
     geoid_path,
     read_geoid,
+    require_extras,
 )
-from jaxgrav.fields.egm2008_synthesis import (  # noqa: F401  (_dh_lmax: re-exported for tests)
-    _dh_lmax,
-    anomaly_grid,
-    deflection_grid,
-)
+from jaxgrav.fields.egm2008_synthesis import anomaly_grid, deflection_grid
 
 __all__ = [
     "GEOID_FILE",
@@ -225,13 +221,13 @@ def build(region, out_dir, *, force=False):
     existing = [str(t) for t in targets if t.exists()]
     if existing and not force:
         raise FileExistsError(f"outputs exist: {existing}; pass force=True (--force) to overwrite")
-    _require()
+    require_extras()
     out_dir.mkdir(parents=True, exist_ok=True)
-    command = _command(region, out_dir, force)
+    command = build_command(region, out_dir, force)
     date = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
 
     t0 = time.perf_counter()
-    cilm, gm, radius, geoid_attrs = _expand(None)
+    cilm, gm, radius, geoid_attrs = expand_geoid(None)
     _log.info("expanded T = gamma N to degree %d in %.1f s", cilm.shape[1] - 1,
               time.perf_counter() - t0)
 
@@ -239,25 +235,25 @@ def build(region, out_dir, *, force=False):
     for reg in regions:
         for prod in reg.products:
             t1 = time.perf_counter()
-            attrs = _provenance(reg, prod, gm, radius, geoid_attrs, command, date)
+            attrs = provenance_attrs(reg, prod, gm, radius, geoid_attrs, command, date)
             if prod.kind == "anomaly":
                 (height,) = prod.heights  # anomaly files hold one height (h = 0)
                 lat, lon, values = anomaly_grid(cilm, gm, radius, reg, prod.lmax,
                                                 prod.spacing_arcmin, height)
-                ds, enc = _anomaly_dataset(lat, lon, values, prod, attrs)
+                ds, enc = anomaly_dataset(lat, lon, values, prod, attrs)
             elif prod.kind == "dov":
                 layers = [deflection_grid(cilm, gm, radius, reg, prod.lmax, prod.spacing_arcmin, h)
                           for h in prod.heights]
                 lat, lon = layers[0][0], layers[0][1]
                 xi = np.stack([layer[2] for layer in layers])
                 eta = np.stack([layer[3] for layer in layers])
-                ds, enc = _dov_dataset(lat, lon, xi, eta, prod, attrs)
+                ds, enc = dov_dataset(lat, lon, xi, eta, prod, attrs)
             elif prod.kind == "coefficients":
-                ds, enc = _coefficients_dataset(cilm, prod, attrs)
+                ds, enc = coefficients_dataset(cilm, prod, attrs)
             else:
                 raise ValueError(f"unknown product kind {prod.kind!r}")
             path = out_dir / prod.filename
-            _write_atomic(ds, enc, path, force)
+            write_atomic(ds, enc, path, force)
             written.append(path)
             _log.info("wrote %s in %.1f s", path, time.perf_counter() - t1)
     _log.info("built %s in %.1f s", region, time.perf_counter() - t0)

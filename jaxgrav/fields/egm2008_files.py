@@ -1,9 +1,12 @@
 """NetCDF files of the EGM2008 regional products: provenance, layout, atomic writes.
 
 What :func:`jaxgrav.fields.egm2008.build` writes: CF attributes with the model,
-approximation and command that produced each file (:func:`_provenance`), one dataset
+approximation and command that produced each file (:func:`provenance_attrs`), one dataset
 layout per product kind (anomaly, DOV layers, coefficients), compressed float32 grids
 and float64 coefficients, written through a temporary file and renamed.
+
+Besides :data:`APPROXIMATION`, the functions here are package-internal (used by
+:func:`jaxgrav.fields.egm2008.build`, not part of the API).
 """
 
 import importlib.metadata
@@ -11,8 +14,11 @@ import os
 import shlex
 
 import numpy as np
+import xarray as xr
 
-from jaxgrav.fields.egm2008_geoid import GEOID_FILE, _require
+import jaxgrav
+from jaxgrav._io import atomic_output
+from jaxgrav.fields.egm2008_geoid import GEOID_FILE, require_extras
 
 __all__ = ["APPROXIMATION"]
 
@@ -27,15 +33,31 @@ APPROXIMATION = (
 )
 
 
-def _command(region, out_dir, force):
+def build_command(region, out_dir, force):
+    """The ``jaxgrav data egm2008`` command line that rebuilds ``region`` into ``out_dir``."""
     cmd = ["jaxgrav", "data", "egm2008", "--region", region, "--out", str(out_dir)]
     return shlex.join([*cmd, "--force"] if force else cmd)
 
 
-def _provenance(region, product, gm, radius, geoid_attrs, command, date):
-    import jaxgrav
+def provenance_attrs(region, product, gm, radius, geoid_attrs, command, date):
+    """CF global attributes of one product file: model, approximation, region, software.
 
-    sh = _require()
+    Parameters
+    ----------
+    region : Region
+    product : Product
+    gm, radius : float
+        GM (m³/s²) and reference radius R (m) of the coefficients.
+    geoid_attrs : dict
+        Global attributes of the input geoid file.
+    command, date : str
+        The build command line and the ISO build date.
+
+    Returns
+    -------
+    dict
+    """
+    sh = require_extras()
     return {
         "title": f"{region.description} ({product.filename})",
         "Conventions": "CF-1.8",
@@ -81,9 +103,8 @@ def _encoding(names, dtype, coords=("lat", "lon", "height")):
     return enc
 
 
-def _anomaly_dataset(lat, lon, values, product, attrs):
-    import xarray as xr
-
+def anomaly_dataset(lat, lon, values, product, attrs):
+    """Dataset and encoding of a gravity-anomaly product; ``values`` (ny, nx) in mGal."""
     ds = xr.Dataset(
         {"gravity_anomaly": (("lat", "lon"), values.astype(np.float32), {
             "units": "mGal",
@@ -97,9 +118,8 @@ def _anomaly_dataset(lat, lon, values, product, attrs):
     return ds, _encoding(["gravity_anomaly"], "float32")
 
 
-def _dov_dataset(lat, lon, xi, eta, product, attrs):
-    import xarray as xr
-
+def dov_dataset(lat, lon, xi, eta, product, attrs):
+    """Dataset and encoding of a DOV product; ``xi``, ``eta`` (heights, ny, nx) in arcsec."""
     dims = ("height", "lat", "lon")
     ds = xr.Dataset(
         {
@@ -129,9 +149,8 @@ def _dov_dataset(lat, lon, xi, eta, product, attrs):
     return ds, _encoding(["xi", "eta"], "float32")
 
 
-def _coefficients_dataset(cilm, product, attrs):
-    import xarray as xr
-
+def coefficients_dataset(cilm, product, attrs):
+    """Dataset and encoding of the coefficients ``cilm`` (2, L+1, L+1), 4π-normalised."""
     lmax = product.lmax
     c = np.ascontiguousarray(cilm[0, : lmax + 1, : lmax + 1], dtype=np.float64)
     s = np.ascontiguousarray(cilm[1, : lmax + 1, : lmax + 1], dtype=np.float64)
@@ -157,9 +176,8 @@ def _coefficients_dataset(cilm, product, attrs):
     return ds, _encoding(["c", "s"], "float64", coords=())
 
 
-def _write_atomic(ds, encoding, path, force):
-    from jaxgrav._io import atomic_output
-
+def write_atomic(ds, encoding, path, force):
+    """Write ``ds`` to NetCDF4 at ``path`` through a temporary file (mode 0644)."""
     encoding = {k: v for k, v in encoding.items() if k in ds.variables}
     with atomic_output(path, force=force) as tmp:
         ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)

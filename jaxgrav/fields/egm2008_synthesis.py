@@ -3,20 +3,20 @@
 Step 4 of :mod:`jaxgrav.fields.egm2008`: :func:`anomaly_grid` and
 :func:`deflection_grid` synthesise the model defined by the expanded coefficients on a
 global Driscoll–Healy grid whose spacing is the product's (or a divisor of it,
-:func:`_dh_lmax`) and crop it to the region (:func:`_crop`). pyshtools' deflection
+:func:`dh_lmax`) and crop it to the region (:func:`_crop`). pyshtools' deflection
 component signs are checked against finite differences of its potential on every call
-(:func:`_check_signs`).
+(:func:`_check_signs`). :func:`dh_lmax` is package-internal.
 """
 
 import numpy as np
 
 from jaxgrav.constants import ARCSEC, MGAL
-from jaxgrav.fields.egm2008_geoid import _normal_gravity_si, _require
+from jaxgrav.fields.egm2008_geoid import normal_gravity_si, require_extras
 
 __all__ = ["anomaly_grid", "deflection_grid"]
 
 
-def _dh_lmax(lmax, spacing_arcmin):
+def dh_lmax(lmax, spacing_arcmin):
     """Smallest DH grid degree ≥ lmax whose spacing divides ``spacing_arcmin``; and the stride."""
     for lmax_grid in range(lmax, 20 * lmax + 200):
         stride = spacing_arcmin * (lmax_grid + 1) / 5400.0  # DH spacing is 5400′/(L + 1)
@@ -81,12 +81,12 @@ def anomaly_grid(cilm, gm, radius, region, lmax, spacing_arcmin, height=0.0):
     values : ndarray, shape (ny, nx)
         Gravity anomaly (mGal).
     """
-    sh = _require()
+    sh = require_extras()
     r = radius + height
     n = np.arange(lmax + 1, dtype=float)
     scale = (n - 1.0) * gm / r**2 * (radius / r) ** n / MGAL
     c = cilm[:, : lmax + 1, : lmax + 1] * scale[None, :, None]
-    lmax_grid, stride = _dh_lmax(lmax, spacing_arcmin)
+    lmax_grid, stride = dh_lmax(lmax, spacing_arcmin)
     grid = sh.expand.MakeGridDH(c, lmax=lmax_grid, lmax_calc=lmax, norm=1, sampling=2, csphase=1)
     return _crop(grid, lmax_grid, stride, region, spacing_arcmin)
 
@@ -131,8 +131,8 @@ def deflection_grid(cilm, gm, radius, region, lmax, spacing_arcmin, height=0.0):
     xi, eta : ndarray, shape (ny, nx)
         Deflection components (arcsec).
     """
-    sh = _require()
-    lmax_grid, stride = _dh_lmax(lmax, spacing_arcmin)
+    sh = require_extras()
+    lmax_grid, stride = dh_lmax(lmax, spacing_arcmin)
     r = radius + height
     _, theta, phi, _, pot = sh.gravmag.MakeGravGridDH(
         np.ascontiguousarray(cilm[:, : lmax + 1, : lmax + 1]), gm, radius, a=r, f=0.0,
@@ -142,5 +142,5 @@ def deflection_grid(cilm, gm, radius, region, lmax, spacing_arcmin, height=0.0):
     del theta, phi, pot
     g_theta, g_phi, v = parts
     _check_signs(g_theta, g_phi, v, lat, r, np.deg2rad(spacing_arcmin / 60.0))
-    gamma = _normal_gravity_si(lat, height)[:, None]
+    gamma = normal_gravity_si(lat, height)[:, None]
     return lat, lon, g_theta / gamma / ARCSEC, -g_phi / gamma / ARCSEC

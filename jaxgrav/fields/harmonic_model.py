@@ -11,17 +11,17 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 import numpy as np
+import xarray as xr
 
 from jaxgrav import constants as const
 from jaxgrav._io import atomic_output
-from jaxgrav._pytree import static_field
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import check_finite, concrete
 
 __all__ = ["SphericalHarmonics"]
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class SphericalHarmonics:
     """A disturbing-potential model as 4π-normalised spherical-harmonic coefficients.
 
@@ -120,8 +120,6 @@ class SphericalHarmonics:
             If variables, dims or attributes are missing, or the file declares a
             different normalisation or phase convention.
         """
-        import xarray as xr
-
         with xr.open_dataset(path) as ds:
             for var in ("c", "s"):
                 if var not in ds.variables or ds[var].dims != ("degree", "order"):
@@ -154,8 +152,6 @@ class SphericalHarmonics:
         attributes ``gm``, ``radius``, ``normalization='4pi'``, ``csphase=1`` and
         ``quantity='disturbing potential'``.
         """
-        import xarray as xr
-
         deg = np.arange(self.nmax + 1)
         ds = xr.Dataset(
             {

@@ -54,7 +54,7 @@ import numpy as np
 from jaxgrav import constants as const
 from jaxgrav._validate import check_finite, check_latitude, check_points, concrete
 from jaxgrav.fields.harmonic_model import SphericalHarmonics
-from jaxgrav.fields.legendre import _lattice, _unscale
+from jaxgrav.fields.legendre import order_sums, unscale_factors
 from jaxgrav.geodesy import normal_gravity
 
 __all__ = [
@@ -142,8 +142,8 @@ def _synthesize_points(model, lat, lon, h, chunk):
     def one_chunk(x):
         la, lo, hh = x
         t, u, q = _trig_lat(la, hh, model.radius)
-        ac, as_, bc, bs, dc, ds = _lattice(c, s, t, q)
-        f0, f1 = _unscale(u, width)
+        ac, as_, bc, bs, dc, ds = order_sums(c, s, t, q)
+        f0, f1 = unscale_factors(u, width)
         ml = jnp.deg2rad(lo)[:, None] * m
         cm, sm = jnp.cos(ml), jnp.sin(ml)
         terms = (f0 * (ac * cm + as_ * sm), f0 * (bc * cm + bs * sm),
@@ -270,8 +270,8 @@ def _synthesize_grid(model, lat, lon, h, chunk):
     def rows(la):
         t, u, q = _trig_lat(la, h, model.radius)
         q = jnp.broadcast_to(q, la.shape)
-        ac, as_, bc, bs, dc, ds = _lattice(c, s, t, q)
-        f0, f1 = _unscale(u, width)
+        ac, as_, bc, bs, dc, ds = order_sums(c, s, t, q)
+        f0, f1 = unscale_factors(u, width)
         m = jnp.arange(width, dtype=jnp.float64)
         return (jnp.stack([f0 * ac, f0 * bc, f1 * dc, -f1 * m * ac]),
                 jnp.stack([f0 * as_, f0 * bs, f1 * ds, f1 * m * as_]))  # fmt: skip

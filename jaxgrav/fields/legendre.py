@@ -1,10 +1,10 @@
 """Scaled recursion of fully normalised Legendre functions, summed against coefficients.
 
-:func:`_lattice` runs the forward-column recursion of Holmes & Featherstone (2002,
+:func:`order_sums` runs the forward-column recursion of Holmes & Featherstone (2002,
 J. Geodesy 76:279) for the fully normalised P̄nm on the scaled values
 ``X̄nm = 10⁻²⁸⁰ P̄nm / cos^m φ`` (the sectorals X̄mm are constants, :func:`_sectorals`),
 over degree n for all orders at once, and accumulates the per-order sums that
-:mod:`jaxgrav.fields.harmonics` turns into fields; :func:`_unscale` gives the factors
+:mod:`jaxgrav.fields.harmonics` turns into fields; :func:`unscale_factors` gives the factors
 ``10²⁸⁰ cos^m φ`` applied to each order's sum at the end. The heights enter the
 recursion, ``(R/r)^n`` being folded into it. The scaled recursion is valid at every
 latitude up to degree ≈2700 (H&F; beyond it X̄nm overflows near the poles); terms that
@@ -17,6 +17,9 @@ only the orders ``m < n_block_end`` (≈⅜ less work at high degree), two degre
 loop iteration for N ≥ 128. Each block is one more compiled loop. Reverse-mode
 gradients recompute each block (``jax.checkpoint``), so their memory grows with
 ``N²/blocks`` per value.
+
+Package-internal: :func:`order_sums` and :func:`unscale_factors` serve
+:mod:`jaxgrav.fields.harmonics`, which is the public interface.
 """
 
 import itertools
@@ -56,7 +59,7 @@ def _sectorals(nmax):
     return 1e-280 * np.cumprod(ratio)[: nmax + 1]
 
 
-def _lattice(c, s, t, q):
+def order_sums(c, s, t, q):
     """Per-order sums for a batch of (φ, r) values.
 
     Parameters
@@ -72,7 +75,7 @@ def _lattice(c, s, t, q):
         ``Σ_n (R/r)^n X̄nm c[n, m]`` and the same with ``s`` (potential), the same
         weighted by ``n + 1`` (radial derivative), and ``Σ_n (R/r)^n c[n, m] ∂P̄nm/∂φ``
         divided by ``1e280 cos^|m−1| φ`` (latitude derivative); X̄nm = 1e-280 P̄nm /
-        cos^m φ. :func:`_unscale` gives the factors that undo the scaling.
+        cos^m φ. :func:`unscale_factors` gives the factors that undo the scaling.
 
     Notes
     -----
@@ -148,7 +151,7 @@ def _madd(acc, coefs, vals):
     return acc
 
 
-def _unscale(u, width):
+def unscale_factors(u, width):
     """Factors 1e280·cos^m φ and 1e280·cos^|m−1| φ, each shape (P, W)."""
     m = jnp.arange(width, dtype=u.dtype)
     logu = jnp.log(jnp.maximum(u, 1e-300))[:, None]  # u ≥ 6e-17 for |lat| ≤ 90°

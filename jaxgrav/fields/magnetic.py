@@ -26,6 +26,7 @@ import datetime
 from typing import NamedTuple
 
 import numpy as np
+from numpy.polynomial import legendre
 
 from jaxgrav.grid import Grid
 
@@ -154,8 +155,6 @@ def polynomial_anomaly(lat, lon, *, seed=0, degree=12, decay=1.0, value_range=PA
     Grid
         ``(ny, nx)`` anomaly in nT whose node minimum and maximum equal ``value_range``.
     """
-    from numpy.polynomial import legendre
-
     if int(degree) != degree or degree < 1:
         raise ValueError(f"degree must be an integer >= 1; got {degree!r}")
     if not decay >= 0:

@@ -1,7 +1,7 @@
 """Gravity field of buried point masses, exact in ECEF, expressed in local ENU frames.
 
 A set of point masses (:class:`PointMasses`) is the simplest anomaly model of a
-matching area (paper D fits three of them, see :func:`paper_d`). Each mass sits at a
+matching area (paper D fits three of them, see :func:`three_mass_model`). Each mass sits at a
 geodetic latitude/longitude and a depth below the WGS84 ellipsoid, measured along the
 ellipsoidal normal. Its anomalous potential at an observation point P is
 
@@ -36,7 +36,6 @@ float32 the ECEF differences lose about 0.5 m (≈1e-5 relative at 40 km), which
 still below 0.01 mGal for paper D's model.
 """
 
-import dataclasses
 from typing import NamedTuple
 
 import jax
@@ -44,6 +43,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import constants as c
+from jaxgrav._pytree import pytree_dataclass
 from jaxgrav._validate import check_finite, check_latitude, check_points, concrete
 from jaxgrav.geodesy import enu_basis, geodetic_to_ecef, normal_gravity
 
@@ -51,16 +51,17 @@ __all__ = [
     "Deflection",
     "Disturbance",
     "PointMasses",
+    "anomaly_kernel",
     "deflection",
     "disturbance_vector",
     "gravitational_potential",
     "gravity_anomaly",
     "paper_d",
+    "three_mass_model",
 ]
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class PointMasses:
     """A set of ``K`` point masses buried below the WGS84 ellipsoid.
 
@@ -223,7 +224,12 @@ def _vector_kernel(masses, lat, lon, h):
 
 
 @jax.jit
-def _anomaly_kernel(masses, lat, lon, h):
+def anomaly_kernel(masses, lat, lon, h):
+    """:func:`gravity_anomaly` without input validation (mGal), for use inside ``jit``/``scan``.
+
+    Same arguments and result as :func:`gravity_anomaly` (``h`` required); nothing is
+    checked, so invalid input gives NaN or garbage instead of an error.
+    """
     return -_vector_kernel(masses, lat, lon, h).up
 
 
@@ -313,7 +319,7 @@ def gravity_anomaly(masses, lat, lon, h=0.0):
     This is the *gravity disturbance*; the classical (free-air) gravity anomaly
     differs from it by the term ``(∂γ/∂h)/γ · T ≈ −2T/r`` (spherical approximation),
     i.e. ``Δg = δg − 2T/r``. For buried masses that term is a smooth long-wavelength
-    offset (−0.04 … +0.42 mGal over paper D's area with :func:`paper_d`, whose masses
+    offset (−0.04 … +0.42 mGal over paper D's area with :func:`three_mass_model`, whose masses
     nearly cancel, against a −25…+51 mGal signal); like paper D, the anomaly map is
     identified with ``δg``. Compute ``δg − 2T/r`` from :func:`gravitational_potential`
     if you need the classical anomaly.
@@ -339,7 +345,7 @@ def gravity_anomaly(masses, lat, lon, h=0.0):
         If concrete inputs are out of range, non-finite or do not broadcast.
     """
     _validate(masses, lat, lon, h)
-    return _anomaly_kernel(masses, lat, lon, h)
+    return anomaly_kernel(masses, lat, lon, h)
 
 
 def deflection(masses, lat, lon, h=0.0):
@@ -377,8 +383,8 @@ def deflection(masses, lat, lon, h=0.0):
     return _deflection_kernel(masses, lat, lon, h)
 
 
-def paper_d():
-    """Paper D's three-mass anomaly model of the match area (Ji et al.).
+def three_mass_model():
+    """Three point masses east of Taiwan: paper D's anomaly model of its match area (Ji et al.).
 
     All masses at longitude 122.918751°E and depth 40 km, at latitudes 24.142241,
     24.275575 and 24.408908°N, with masses −2.4774, +2.4836 and +0.4568 × 10¹⁶ kg.
@@ -398,3 +404,7 @@ def paper_d():
         depth=[40.0e3, 40.0e3, 40.0e3],
         mass=[-2.4774e16, 2.4836e16, 0.4568e16],
     )
+
+
+paper_d = three_mass_model
+"""Alias of :func:`three_mass_model` under paper D's name (scenarios and examples use it)."""

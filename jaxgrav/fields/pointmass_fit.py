@@ -40,15 +40,9 @@ import numpy as np
 
 from jaxgrav._io import atomic_output
 from jaxgrav.fields.pointmass import PointMasses, gravity_anomaly
-from jaxgrav.fields.pointmass_fit_inputs import _check_int, _is_int, _problem
-from jaxgrav.fields.pointmass_fit_model import (  # noqa: F401  (re-exported for tests)
-    _loss,
-    _positions,
-    _Raw,
-    _to_masses,
-    _unit_anomalies,
-)
-from jaxgrav.fields.pointmass_fit_solver import _fit_batch, _initial_positions
+from jaxgrav.fields.pointmass_fit_inputs import build_problem, check_int, is_int
+from jaxgrav.fields.pointmass_fit_model import to_masses
+from jaxgrav.fields.pointmass_fit_solver import fit_batch, initial_positions
 
 __all__ = [
     "MODEL_FORMAT",
@@ -218,10 +212,10 @@ def fit_point_masses(
     model. Cost per iteration is ``O(N·K·n_restarts)``. The returned RMS is that of
     the fitted model evaluated in the fitting dtype.
     """
-    k = _check_int(k, "k", 1)
-    n_restarts = _check_int(n_restarts, "n_restarts", 1)
-    steps = _check_int(steps, "steps", 0)
-    polish_steps = _check_int(polish_steps, "polish_steps", 0)
+    k = check_int(k, "k", 1)
+    n_restarts = check_int(n_restarts, "n_restarts", 1)
+    steps = check_int(steps, "steps", 0)
+    polish_steps = check_int(polish_steps, "polish_steps", 0)
     if steps + polish_steps < 1:
         raise ValueError(
             f"steps + polish_steps must be >= 1; got steps={steps}, polish_steps={polish_steps}"
@@ -230,12 +224,12 @@ def fit_point_masses(
         if not (np.ndim(v) == 0 and np.isfinite(v) and v > 0):
             raise ValueError(f"{name} must be a finite number > 0; got {v!r}")
     fit_offset = bool(fit_offset)
-    p, centre, scale = _problem(data, lat, lon, h, depth_bounds, margin, fit_offset, k)
-    if _is_int(key):
+    p, centre, scale = build_problem(data, lat, lon, h, depth_bounds, margin, fit_offset, k)
+    if is_int(key):
         key = jax.random.PRNGKey(int(key))
     dt = p.target.dtype
-    raw_pos = _initial_positions(key, n_restarts, k, dt)
-    raws, losses, converged = _fit_batch(
+    raw_pos = initial_positions(key, n_restarts, k, dt)
+    raws, losses, converged = fit_batch(
         raw_pos,
         p,
         jnp.asarray(learning_rate, dt),
@@ -251,7 +245,7 @@ def fit_point_masses(
         raise FloatingPointError("every restart of the point-mass fit diverged (non-finite loss)")
     raw = jax.tree_util.tree_map(lambda x: x[best], raws)
     return PointMassFit(
-        masses=_to_masses(raw, p, scale),
+        masses=to_masses(raw, p, scale),
         offset=centre + float(raw.offset) * scale,
         rms=float(restart_rms[best]),
         restart_rms=restart_rms,
@@ -288,7 +282,7 @@ def sweep_point_masses(data, k_values=range(1, 11), **kwargs):
     if not ks:
         raise ValueError(f"k_values must hold at least one K >= 1; got {k_values!r}")
     for kk in ks:
-        _check_int(kk, "k_values element", 1)
+        check_int(kk, "k_values element", 1)
     fits = tuple(fit_point_masses(data, kk, **kwargs) for kk in ks)
     return PointMassSweep(
         k=np.asarray(ks, dtype=int), rms=np.asarray([f.rms for f in fits]), fits=fits

@@ -1,9 +1,10 @@
 """Input checks of the point-mass fit and the dimensionless problem built from the data.
 
-:func:`_problem` validates a map (a :class:`~jaxgrav.grid.Grid` or values with
+:func:`build_problem` validates a map (a :class:`~jaxgrav.grid.Grid` or values with
 coordinates), the depth bounds and the margin, and builds the
-:class:`~jaxgrav.fields.pointmass_fit_model._Problem` of
-:mod:`jaxgrav.fields.pointmass_fit_model` in host float64 arithmetic.
+:class:`~jaxgrav.fields.pointmass_fit_model.Problem` of
+:mod:`jaxgrav.fields.pointmass_fit_model` in host float64 arithmetic. Everything here is
+package-internal: the public entry point is :func:`jaxgrav.fields.fit_point_masses`.
 """
 
 import numbers
@@ -12,16 +13,18 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import constants as c
-from jaxgrav.fields.pointmass_fit_model import _Problem
+from jaxgrav.fields.pointmass_fit_model import Problem
 from jaxgrav.grid import Grid
 
 
-def _is_int(v):
+def is_int(v):
+    """True for a Python or NumPy integer that is not a bool."""
     return isinstance(v, numbers.Integral) and not isinstance(v, bool)
 
 
-def _check_int(value, name, minimum):
-    if not _is_int(value) or value < minimum:
+def check_int(value, name, minimum):
+    """Return ``value`` as an ``int`` ≥ ``minimum``, or raise ``ValueError`` naming ``name``."""
+    if not is_int(value) or value < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
     return int(value)
 
@@ -78,8 +81,8 @@ def _ecef_np(lat, lon, h):
     )
 
 
-def _problem(data, lat, lon, h, depth_bounds, margin, fit_offset, k):
-    """Validate the inputs and build the dimensionless :class:`_Problem` (host side)."""
+def build_problem(data, lat, lon, h, depth_bounds, margin, fit_offset, k):
+    """Validate the inputs and build the dimensionless :class:`Problem` (host side)."""
     lat_p, lon_p, values, shape = _points(data, lat, lon)
     _check_finite(values, "data")
     _check_finite(lat_p, "lat")
@@ -141,7 +144,7 @@ def _problem(data, lat, lon, h, depth_bounds, margin, fit_offset, k):
     scale = float(np.std(values)) if fit_offset else float(np.sqrt(np.mean(values**2)))
     scale = scale if scale > 0 else 1.0
     dt = jnp.result_type(float)
-    p = _Problem(
+    p = Problem(
         obs=jnp.asarray(obs, dt),
         up=jnp.asarray(up, dt),
         target=jnp.asarray((values - centre) / scale, dt),

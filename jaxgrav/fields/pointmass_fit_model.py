@@ -18,9 +18,10 @@ distances in units of ``L``, and the ECEF offsets from the centre are evaluated 
 difference formulas (no subtraction of two ~6 400 km numbers), so float32 keeps about
 1 cm of position resolution and the loss ``mean(((model − data)/s)²)`` is O(1).
 
-The problem (:class:`_Problem`) is built from the data by
-:func:`jaxgrav.fields.pointmass_fit_inputs._problem`; the optimiser is
-:mod:`jaxgrav.fields.pointmass_fit_solver`.
+The problem (:class:`Problem`) is built from the data by
+:func:`jaxgrav.fields.pointmass_fit_inputs.build_problem`; the optimiser is
+:mod:`jaxgrav.fields.pointmass_fit_solver`. Everything here is package-internal: the
+public entry point is :func:`jaxgrav.fields.fit_point_masses`.
 """
 
 from typing import NamedTuple
@@ -35,7 +36,9 @@ from jaxgrav.fields.pointmass import PointMasses
 # --- the problem (all arrays, so new data of the same shape never retraces) ---------
 
 
-class _Problem(NamedTuple):
+class Problem(NamedTuple):
+    """The fit's data in dimensionless form (built by ``build_problem``)."""
+
     obs: jax.Array  # (3, N) observation ECEF minus origin ECEF, in units of length
     up: jax.Array  # (3, N) ellipsoidal normal at each observation point
     target: jax.Array  # (N,) (values − centre) / scale
@@ -51,7 +54,9 @@ class _Problem(NamedTuple):
     length: jax.Array  # () length unit L (m)
 
 
-class _Raw(NamedTuple):
+class RawParams(NamedTuple):
+    """Unconstrained raw parameters of ``K`` masses and the offset (see the module notes)."""
+
     lat: jax.Array  # (K,)
     lon: jax.Array  # (K,)
     depth: jax.Array  # (K,)
@@ -92,7 +97,7 @@ def _ecef_offset(dlat, dlon, h, p):
     )
 
 
-def _positions(raw, p):
+def mass_positions(raw, p):
     """Offsets from the origin (degrees) and depths (m) of the masses, shape (K,)."""
     dlat = p.lat_lo + p.lat_span * jax.nn.sigmoid(raw.lat)
     dlon = p.lon_lo + p.lon_span * jax.nn.sigmoid(raw.lon)
@@ -100,7 +105,7 @@ def _positions(raw, p):
     return dlat, dlon, depth
 
 
-def _unit_anomalies(dlat, dlon, depth, p):
+def unit_anomalies(dlat, dlon, depth, p):
     """(N, K) anomaly of each mass at each point for ``u_mass = 1``, in units of scale.
 
     A mass ``M = scale·L²/G`` gives ``G M (d·û)/ℓ³ = scale · (d'·û)/ℓ'³`` with
@@ -113,22 +118,22 @@ def _unit_anomalies(dlat, dlon, depth, p):
     return proj * inv**3
 
 
-def _predict(raw, p, fit_offset):
+def predict_scaled(raw, p, fit_offset):
     """Modelled anomaly at the data points, in units of scale about the centre, (N,)."""
-    a = _unit_anomalies(*_positions(raw, p), p)
+    a = unit_anomalies(*mass_positions(raw, p), p)
     out = a @ raw.mass
     return out + raw.offset if fit_offset else out
 
 
-def _loss(raw, p, fit_offset):
+def misfit_loss(raw, p, fit_offset):
     """Mean squared normalised misfit (dimensionless); RMS (mGal) is sqrt(loss)·scale."""
-    r = _predict(raw, p, fit_offset) - p.target
+    r = predict_scaled(raw, p, fit_offset) - p.target
     return jnp.mean(r**2)
 
 
-def _to_masses(raw, p, scale):
+def to_masses(raw, p, scale):
     """Physical PointMasses (float64 host arithmetic) from raw parameters of one fit."""
-    dlat, dlon, depth = (np.asarray(v, dtype=float) for v in _positions(raw, p))
+    dlat, dlon, depth = (np.asarray(v, dtype=float) for v in mass_positions(raw, p))
     length = float(p.length)
     mass = np.asarray(raw.mass, dtype=float) * scale * c.MGAL * length**2 / c.G_NEWTON
     order = np.argsort(-np.abs(mass), kind="stable")

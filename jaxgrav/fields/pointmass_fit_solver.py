@@ -1,15 +1,16 @@
 """Optimiser of the point-mass fit: linear start, Adam, Levenberg–Marquardt, restarts.
 
 For each of ``n_restarts`` random starts (positions uniform in the inner 90 % of the
-box, depths uniform in the inner 80 % of the bounds, :func:`_initial_positions`), the
+box, depths uniform in the inner 80 % of the bounds, :func:`initial_positions`), the
 masses and offset are first solved by ridge-regularised linear least squares (the
 model is linear in them, :func:`_linear_solve`), then ``steps`` Adam iterations
 (optax, cosine-decayed learning rate) update all parameters, then ``polish_steps``
 Levenberg–Marquardt (damped Gauss–Newton, :func:`_lm_step`) steps finish the descent.
 The restarts are ``jax.vmap``-ed and the iterations are ``lax.scan``-ned
-(:func:`_fit_batch`): one compiled call runs them all (one compilation per ``K``,
+(:func:`fit_batch`): one compiled call runs them all (one compilation per ``K``,
 window size and iteration counts). Parameters and loss are those of
-:mod:`jaxgrav.fields.pointmass_fit_model`.
+:mod:`jaxgrav.fields.pointmass_fit_model`. Package-internal: :func:`fit_batch` and
+:func:`initial_positions` serve :func:`jaxgrav.fields.fit_point_masses`.
 """
 
 import functools
@@ -21,17 +22,17 @@ import optax
 from jax.flatten_util import ravel_pytree
 
 from jaxgrav.fields.pointmass_fit_model import (
-    _loss,
-    _positions,
-    _predict,
-    _Raw,
-    _unit_anomalies,
+    RawParams,
+    mass_positions,
+    misfit_loss,
+    predict_scaled,
+    unit_anomalies,
 )
 
 
 def _linear_solve(raw_lat, raw_lon, raw_depth, p, fit_offset):
     """Masses (and offset) minimising the misfit at fixed positions (ridge 1e-3)."""
-    a = _unit_anomalies(*_positions(_Raw(raw_lat, raw_lon, raw_depth, None, None), p), p)
+    a = unit_anomalies(*mass_positions(RawParams(raw_lat, raw_lon, raw_depth, None, None), p), p)
     if fit_offset:
         a = jnp.concatenate([a, jnp.ones_like(a[:, :1])], axis=1)
     ata = a.T @ a
@@ -73,14 +74,17 @@ def _lm_step(x, mu, nu, loss, resid):
 
 
 def _fit_one(raw_pos, p, learning_rate, rtol, *, fit_offset, steps, polish_steps):
-    """Fit from one start; raw_pos (3, K) raw lat/lon/depth. Returns (_Raw, loss, converged)."""
+    """Fit from one start; raw_pos (3, K) raw lat/lon/depth.
+
+    Returns (RawParams, loss, converged).
+    """
     mass, offset = _linear_solve(raw_pos[0], raw_pos[1], raw_pos[2], p, fit_offset)
-    raw = _Raw(raw_pos[0], raw_pos[1], raw_pos[2], mass, offset)
+    raw = RawParams(raw_pos[0], raw_pos[1], raw_pos[2], mass, offset)
     history = []
     if steps > 0:
         schedule = optax.cosine_decay_schedule(learning_rate, steps, alpha=0.02)
         opt = optax.adam(schedule)
-        value_and_grad = jax.value_and_grad(_loss)
+        value_and_grad = jax.value_and_grad(misfit_loss)
 
         def adam_step(carry, _):
             raw, state = carry
@@ -94,7 +98,7 @@ def _fit_one(raw_pos, p, learning_rate, rtol, *, fit_offset, steps, polish_steps
     n = p.target.shape[0]
 
     def resid(x):
-        return (_predict(unravel(x), p, fit_offset) - p.target) / math.sqrt(n)
+        return (predict_scaled(unravel(x), p, fit_offset) - p.target) / math.sqrt(n)
 
     loss = loss_start = jnp.sum(resid(flat) ** 2)
     if polish_steps > 0:
@@ -117,7 +121,7 @@ def _fit_one(raw_pos, p, learning_rate, rtol, *, fit_offset, steps, polish_steps
 
 
 @functools.partial(jax.jit, static_argnames=("fit_offset", "steps", "polish_steps"))
-def _fit_batch(raw_pos, p, learning_rate, rtol, *, fit_offset, steps, polish_steps):
+def fit_batch(raw_pos, p, learning_rate, rtol, *, fit_offset, steps, polish_steps):
     """vmap of :func:`_fit_one` over restarts; raw_pos (R, 3, K)."""
     one = functools.partial(
         _fit_one, fit_offset=fit_offset, steps=steps, polish_steps=polish_steps
@@ -125,7 +129,7 @@ def _fit_batch(raw_pos, p, learning_rate, rtol, *, fit_offset, steps, polish_ste
     return jax.vmap(one, in_axes=(0, None, None, None))(raw_pos, p, learning_rate, rtol)
 
 
-def _initial_positions(key, n_restarts, k, dtype):
+def initial_positions(key, n_restarts, k, dtype):
     """Raw (R, 3, K) starts: positions in the inner 90 %, depths in the inner 80 %."""
     u = jax.random.uniform(key, (n_restarts, 3, k), dtype=dtype)
     lo = jnp.asarray([0.05, 0.05, 0.1], dtype)[None, :, None]

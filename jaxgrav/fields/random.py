@@ -29,15 +29,15 @@ truncates high wavenumbers, a small domain the low ones). ``E|FFT(f)_k|² = N A(
 i.e. the periodogram ``|FFT(f)|²·Δy·Δx / N`` estimates ``S``.
 """
 
-import dataclasses
 import functools
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import concrete
-from jaxgrav.fields.spectral import _check_shape, _spacing_pair, wavenumbers
+from jaxgrav.fields.spectral import check_shape, spacing_pair, wavenumbers
 
 __all__ = [
     "MarkovSpectrum",
@@ -54,8 +54,7 @@ def _check_positive(x, name):
         raise ValueError(f"{name} must be positive and finite; got {arr}")
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class MarkovSpectrum:
     """Isotropic Markov (Matérn half-integer) spectrum, as a callable of |k|.
 
@@ -82,7 +81,7 @@ class MarkovSpectrum:
 
     rms: jax.Array
     correlation_length: jax.Array
-    order: int = dataclasses.field(default=2, metadata={"static": True})
+    order: int = static_field(2)
 
     def __call__(self, k):
         """Power spectral density at wavenumber ``k`` (rad/m), in rms-unit²·m²."""
@@ -99,8 +98,7 @@ class MarkovSpectrum:
         return self.rms**2 * poly * jnp.exp(-x)
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class PowerLawSpectrum:
     """Power-law spectrum ``S(k) = amplitude · (k / k0)^(−exponent)`` for k > 0, 0 at k = 0.
 
@@ -243,7 +241,7 @@ def gaussian_random_field(key, shape, spacing, power_spectrum, rms=None, *, zero
         or the spectrum evaluated on the grid is negative, non-finite or all zero
         (when it can be inspected, i.e. outside ``jit``).
     """
-    ny, nx = _check_shape(shape)
+    ny, nx = check_shape(shape)
     if not callable(power_spectrum):
         raise TypeError(
             "power_spectrum must be a callable S(k) of the wavenumber in rad/m (e.g. "
@@ -251,7 +249,7 @@ def gaussian_random_field(key, shape, spacing, power_spectrum, rms=None, *, zero
         )
     if rms is not None:
         _check_positive(rms, "rms")
-    dy, dx = _spacing_pair(spacing)
+    dy, dx = spacing_pair(spacing)
     leaves = jax.tree.leaves(power_spectrum)
     if len(leaves) == 1 and leaves[0] is power_spectrum:
         # not a pytree (a plain function): make it static, hashed by identity

@@ -11,7 +11,7 @@ FFT assumes the grid is periodic, so the grid is first padded (by default by
 repeating its edge values) and the padding is tapered with a cosine ramp towards the
 mean of the grid's border samples, which keeps the periodic wrap-around continuous and
 confines edge effects to a band near the borders. On a synthetic point-mass test
-(tests/test_spectral.py) edge padding with the taper had the smallest error of the
+(tests/fields/test_spectral.py) edge padding with the taper had the smallest error of the
 modes offered; reflect/symmetric padding was 2–4 times worse.
 """
 
@@ -45,7 +45,11 @@ class Wavenumbers(NamedTuple):
     k: jax.Array
 
 
-def _check_shape(shape, name="shape"):
+def check_shape(shape, name="shape"):
+    """Return a grid shape as two positive ints ``(ny, nx)`` or raise ``ValueError``.
+
+    Package-internal (shared with :mod:`jaxgrav.fields.random`), as :func:`spacing_pair`.
+    """
     try:
         dims = tuple(int(n) for n in shape)
         ok = len(dims) == 2 and all(int(n) == n for n in shape)
@@ -56,7 +60,7 @@ def _check_shape(shape, name="shape"):
     return dims
 
 
-def _spacing_pair(spacing, name="spacing"):
+def spacing_pair(spacing, name="spacing"):
     """Return ``(dy, dx)`` as float arrays; check they are positive and finite when concrete."""
     dtype = jnp.result_type(float)
     if isinstance(spacing, (list, tuple)):
@@ -104,8 +108,8 @@ def wavenumbers(shape, spacing, *, real=False):
     ValueError
         If ``shape`` is not two positive integers or the spacing is not positive.
     """
-    ny, nx = _check_shape(shape)
-    dy, dx = _spacing_pair(spacing)
+    ny, nx = check_shape(shape)
+    dy, dx = spacing_pair(spacing)
     fy = jnp.asarray(np.fft.fftfreq(ny), dtype=dy.dtype)
     fx = jnp.asarray(np.fft.rfftfreq(nx) if real else np.fft.fftfreq(nx), dtype=dx.dtype)
     ky, kx = jnp.meshgrid(2.0 * jnp.pi * fy / dy, 2.0 * jnp.pi * fx / dx, indexing="ij")
@@ -201,7 +205,7 @@ def upward_continuation(values, spacing, height, *, pad="edge", pad_width=None, 
         raise ValueError(f"values must have shape (..., ny, nx); got shape {values.shape}")
     check_finite(values, "values")
     ny, nx = values.shape[-2:]
-    dy, dx = _spacing_pair(spacing)
+    dy, dx = spacing_pair(spacing)
     height = jnp.asarray(height, dtype=values.dtype)
     h = concrete(height)
     if h is not None:

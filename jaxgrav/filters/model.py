@@ -35,7 +35,8 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav.constants import DEG
-from jaxgrav.fields.pointmass import PointMasses, _anomaly_kernel
+from jaxgrav.fields.pointmass import PointMasses
+from jaxgrav.fields.pointmass import anomaly_kernel as _anomaly_kernel
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.grid import Grid
 from jaxgrav.sim.ins import GRAV

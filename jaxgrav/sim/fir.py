@@ -23,7 +23,6 @@ transients, returned as NaN with ``valid = False`` (never zero-padded garbage). 
 real time the aligned estimate for epoch ``n`` becomes available at epoch ``n + d``.
 """
 
-import dataclasses
 import math
 import warnings
 from typing import NamedTuple
@@ -33,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.signal
 
-from jaxgrav._pytree import static_field
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import check_finite
 from jaxgrav.sim.speed_bound import max_speed, min_map_spacing, signal_frequency
 
@@ -55,8 +54,7 @@ PAPER_CUTOFF_RANGE = (0.025, 0.05)
 _N_FREQ = 1 << 16  # frequency grid for checking a design (points on [0, 0.5))
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class LowpassFIR:
     """A designed linear-phase (type I, odd length) low-pass FIR filter.
 
@@ -287,11 +285,12 @@ def apply_fir(record, fir):
             f"{taps.shape[0]} taps; need at least {taps.shape[0]}"
         )
     check_finite(record, "record")
-    return _apply(record, taps)
+    return apply_fir_compiled(record, taps)
 
 
 @jax.jit
-def _apply(record, taps):
+def apply_fir_compiled(record, taps):
+    """The compiled core of :func:`apply_fir` (no validation; package-internal)."""
     n, m = record.shape[0], taps.shape[0]
     d = (m - 1) // 2
     dtype = jnp.result_type(record.dtype, taps.dtype, float)

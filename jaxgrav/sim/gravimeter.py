@@ -26,14 +26,13 @@ Kalman filter (:mod:`jaxgrav.sim.tilt_filter`) and the tilt and Eötvös correct
 (:mod:`jaxgrav.sim.gravimeter_corrections`).
 """
 
-import dataclasses
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrav._pytree import static_field
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import check_finite, check_latitude, concrete
 from jaxgrav.constants import MGAL
 from jaxgrav.geodesy import eotvos, normal_gravity
@@ -64,8 +63,7 @@ __all__ = [
 ]
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class GravimeterConfig:
     """Disturbance and sensor settings of :func:`simulate_gravimeter` (all sweepable).
 
@@ -95,7 +93,7 @@ class GravimeterConfig:
     vertical_freq: tuple = (0.07, 0.12, 0.25)
     horizontal_amp: tuple = (0.1, 0.05)
     horizontal_freq: tuple = (0.09, 0.16)
-    platform: PlatformModel = PlatformModel()  # noqa: RUF009 (frozen: safe to share)
+    platform: PlatformModel = PlatformModel()
     noise_mgal: float = 1.0
     bias_mgal: float = 0.0
     accel_noise: float = 0.01
@@ -153,7 +151,7 @@ def _sinusoids(t, amp, freq, phase):
     return amp, freq, 2 * jnp.pi * freq * t[:, None] + phase  # (N, K) arguments
 
 
-def simulate_gravimeter(key, track, anomaly, config=GravimeterConfig()):
+def simulate_gravimeter(key, track, anomaly, config=GravimeterConfig()):  # noqa: B008 (frozen)
     """Simulate the raw gravimeter record along a track (sampled at the track's epochs).
 
     Parameters

@@ -7,12 +7,12 @@ first-order-hold input (:func:`platform_discrete`), used to simulate the tilt
 (:mod:`jaxgrav.sim.tilt_filter`).
 """
 
-import dataclasses
 
 import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import expm
+from jaxgrav._pytree import pytree_dataclass
 
 __all__ = ["G0", "PlatformModel", "platform_discrete", "platform_response"]
 
@@ -20,8 +20,7 @@ G0 = 9.80665
 """Nominal gravity (m/s²) scaling the platform's input ``a_h / g``."""
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class PlatformModel:
     """Stabilised platform as a damped oscillator forced by horizontal acceleration.
 

@@ -1,5 +1,7 @@
 """Tests of jaxgrav.dov: layered DOV grids and their interpolation."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -8,6 +10,8 @@ from scipy.interpolate import RegularGridInterpolator
 
 from jaxgrav import dov
 from jaxgrav.dov import LayeredGrid
+from jaxgrav.dov.interpolate import interpolate_compiled
+from jaxgrav.fields.pointmass import PointMasses, deflection
 
 LAT = np.linspace(30.0, 31.1, 12)
 LON = np.linspace(100.0, 101.3, 14)
@@ -62,8 +66,6 @@ def test_exact_on_polynomials_of_the_method_order(method, deg_h, deg_v):
 
 
 def test_harmonic_vertical_beats_linear_on_a_harmonic_model():
-    from jaxgrav.fields.pointmass import PointMasses, deflection
-
     masses = PointMasses.create(lat=[33.4, 33.7], lon=[108.3, 108.6], depth=[40e3, 60e3],
                                 mass=[2e15, -3e15])
     lat = np.linspace(33.0, 34.0, 41)
@@ -82,17 +84,23 @@ def test_harmonic_vertical_beats_linear_on_a_harmonic_model():
 def test_grad_forward_reverse_finite_differences():
     layers = _layers(_smooth)
 
-    @jax.jit
-    def f(p, values, heights):
+    def f0(p, values, heights):
         lay = LayeredGrid(values, heights, layers.lat0, layers.dlat, layers.lon0, layers.dlon)
         out = dov.make_interpolator(lay, "bicubic-harmonic")(p[0], p[1], p[2])[0]
         return out[0] + 0.5 * out[1]
 
+    # two compiled programs: reverse mode in all three arguments (its value also gives
+    # the finite differences) and forward mode
+    value_and_grad = jax.jit(jax.value_and_grad(f0, argnums=(0, 1, 2)))
+
+    def f(*a):
+        return value_and_grad(*a)[0]
+
     p = jnp.array([30.47, 100.61, 7300.0])
     args = (p, layers.values, layers.heights)
-    revs = jax.jit(jax.grad(f, argnums=(0, 2)))(*args)
-    fwds = jax.jit(jax.jacfwd(f, argnums=(0, 2)))(*args)
-    for argnum, rev, fwd in zip((0, 2), revs, fwds, strict=True):
+    rev_p, gv, rev_h = value_and_grad(*args)[1]
+    fwds = jax.jit(jax.jacfwd(f0, argnums=(0, 2)))(*args)
+    for argnum, rev, fwd in zip((0, 2), (rev_p, rev_h), fwds, strict=True):
         np.testing.assert_allclose(rev, fwd, rtol=1e-9, atol=1e-14)
         x = args[argnum]
         for i in range(x.shape[0]):
@@ -103,7 +111,7 @@ def test_grad_forward_reverse_finite_differences():
             a_p[argnum], a_m[argnum] = xp, xm
             fd = (f(*a_p) - f(*a_m)) / (2 * step)
             np.testing.assert_allclose(rev[i], fd, rtol=1e-5, atol=1e-9)
-    gv = jax.grad(f, argnums=1)(*args)  # linear in values: FD exact up to rounding
+    # linear in values: FD exact up to rounding
     dv = jnp.zeros_like(layers.values).at[1, 0, 5, 6].set(1.0)
     fd = (f(p, layers.values + dv, layers.heights) - f(p, layers.values - dv, layers.heights)) / 2
     np.testing.assert_allclose(jnp.sum(gv * dv), fd, rtol=1e-9)
@@ -113,11 +121,11 @@ def test_jit_no_retrace_and_vmap_equals_loop():
     layers = _layers(_smooth)
     lat, lon, h = _points(16, seed=3)
     dov.interpolate(layers, lat, lon, h, "bicubic-lagrange")
-    size = dov._interpolate._cache_size()
+    size = interpolate_compiled._cache_size()
     lat2, lon2, h2 = _points(16, seed=4)
     lay2 = dataclass_replace(layers, heights=layers.heights + 1.0)
     dov.interpolate(lay2, lat2, lon2, h2 + 10.0, "bicubic-lagrange")
-    assert dov._interpolate._cache_size() == size
+    assert interpolate_compiled._cache_size() == size
     f = jax.jit(dov.make_interpolator(layers, "bicubic-lagrange"))
     batched = jax.vmap(f)(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(h))[0]
     loop = np.stack([np.asarray(f(a, b, c)[0]) for a, b, c in zip(lat, lon, h, strict=True)])
@@ -125,8 +133,6 @@ def test_jit_no_retrace_and_vmap_equals_loop():
 
 
 def dataclass_replace(obj, **kw):
-    import dataclasses
-
     return dataclasses.replace(obj, **kw)
 
 
@@ -207,8 +213,6 @@ def test_paper_layers_and_builders():
     assert small.values.shape == (2, 2, 10, 10)
     with pytest.raises(ValueError, match="spacing_arcmin"):
         dov.paper_c_layers([0.0, 5000.0], spacing_arcmin=7.0)
-    from jaxgrav.fields.pointmass import PointMasses, deflection
-
     masses = PointMasses.create(lat=[30.5], lon=[100.6], depth=[5e3], mass=[1e14])
     pm = LayeredGrid.from_point_masses(masses, LAT[:5], LON[:6], [0.0, 1000.0])
     ref = deflection(masses, LAT[2], LON[3], 1000.0)

@@ -2,7 +2,9 @@
 
 import datetime
 import sys
+from dataclasses import replace
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -71,8 +73,6 @@ def test_read_anomaly_netcdf(tmp_path):
     back = magnetic.read_anomaly(path)
     np.testing.assert_allclose(np.asarray(back.values), np.asarray(a.values))
     bad = tmp_path / "mgal.nc"
-    from dataclasses import replace
-
     replace(a, units="mGal").to_netcdf(bad)
     with pytest.raises(ValueError, match="expected nT"):
         magnetic.read_anomaly(bad)
@@ -81,7 +81,7 @@ def test_read_anomaly_netcdf(tmp_path):
 
 # ---------------------------------------------------------------------- matching in nT
 # A small paper-B-like map (0.5° square at 0.01°, anomaly only: no ppigrf needed), read
-# back through the NetCDF reader. tests/test_cli_magnetic.py builds the same map and
+# back through the NetCDF reader. tests/cli/test_cli_magnetic.py builds the same map and
 # track and matches through the CLI with the same settings: one compile per session.
 MAG_REGION = (39.0, 39.5, 115.0, 115.5)
 MAG_NOISE_NT = 10.0  # paper B's reading noise
@@ -90,8 +90,6 @@ MAG_DRIFT_DEG = 0.035  # largest INS offset (~0.03°) + margin, as examples/pape
 
 def magnetic_track(grid, d_north_m, d_east_m, rot_deg, seed):
     """Truth: 20 fixes 600 m apart heading north-east; INS: truth shifted and turned."""
-    import jax.numpy as jnp
-
     from jaxgrav.match.dense import shifted_tracks
 
     k = np.arange(20)

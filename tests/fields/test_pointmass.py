@@ -149,7 +149,8 @@ def test_signs_mass_below_north_and_east():
 
 
 def test_paper_d_preset_and_its_anomaly_range():
-    m = pm.paper_d()
+    m = pm.three_mass_model()
+    assert pm.paper_d is pm.three_mass_model  # the preset under paper D's name
     assert m.size == 3
     np.testing.assert_allclose(m.lat, [24.142241, 24.275575, 24.408908])
     np.testing.assert_allclose(m.lon, 122.918751)
@@ -159,7 +160,7 @@ def test_paper_d_preset_and_its_anomaly_range():
     lon = np.linspace(122.6, 123.3, 141)[None, :]
     g = np.asarray(pm.gravity_anomaly(m, lat, lon))
     assert g.shape == (141, 141)
-    # measured with these published parameters (see the docstring of paper_d)
+    # measured with these published parameters (see the docstring of three_mass_model)
     assert -26.0 < g.min() < -25.0
     assert 50.0 < g.max() < 51.5
 

@@ -4,16 +4,24 @@ Every fit in this module uses one of two configurations (K = 1 on a 13×13 map,
 K = 3 on a 15×15 map) so that the fitting program compiles only a few times.
 """
 
+import json
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy.linalg
 from jax.flatten_util import ravel_pytree
 
 from jaxgrav import constants as c
+from jaxgrav import filters as fl
 from jaxgrav.fields import pointmass as pm
 from jaxgrav.fields import pointmass_fit as pf
+from jaxgrav.fields import pointmass_fit_inputs as pfi
+from jaxgrav.fields import pointmass_fit_model as pfm
+from jaxgrav.fields import pointmass_fit_solver as pfs
 from jaxgrav.grid import Grid
+from jaxgrav.sim import ins
 
 ONE = dict(n_restarts=4, steps=60, polish_steps=30, key=0)
 THREE = dict(n_restarts=8, steps=150, polish_steps=100, key=0)
@@ -34,9 +42,9 @@ def _one_mass(mass=3.0e16, lat=24.37, lon=122.93, depth=30.0e3):
     return pm.PointMasses.create(lat=lat, lon=lon, depth=depth, mass=mass)
 
 
-def _problem(k=2, fit_offset=True, h=0.0, dtype=None):
+def _make_problem(k=2, fit_offset=True, h=0.0, dtype=None):
     g = _grid1(_one_mass())
-    p, centre, scale = pf._problem(g, None, None, h, (5e3, 100e3), 0.0, fit_offset, k)
+    p, centre, scale = pfi.build_problem(g, None, None, h, (5e3, 100e3), 0.0, fit_offset, k)
     if dtype is not None:
         p = jax.tree_util.tree_map(lambda x: x.astype(dtype), p)
     return g, p, centre, scale
@@ -44,12 +52,12 @@ def _problem(k=2, fit_offset=True, h=0.0, dtype=None):
 
 def _raw(k, seed=0, dtype=jnp.float64):
     rng = np.random.default_rng(seed)
-    return pf._Raw(*(jnp.asarray(rng.normal(size=k), dtype) for _ in range(4)),
+    return pfm.RawParams(*(jnp.asarray(rng.normal(size=k), dtype) for _ in range(4)),
                    jnp.asarray(rng.normal(), dtype))
 
 
 def _unit(raw, p):
-    return pf._unit_anomalies(*pf._positions(raw, p), p)
+    return pfm.unit_anomalies(*pfm.mass_positions(raw, p), p)
 
 
 def _check_recovered(fit, truth, pos_km, rel_mass):
@@ -71,9 +79,9 @@ def _check_recovered(fit, truth, pos_km, rel_mass):
 
 def test_forward_model_equals_gravity_anomaly():
     h = np.linspace(-50.0, 800.0, 13 * 13).reshape(13, 13)  # ellipsoidal heights (m)
-    g, p, _, scale = _problem(k=3, h=h)
+    g, p, _, scale = _make_problem(k=3, h=h)
     raw = _raw(3, seed=1)
-    dlat, dlon, depth = (np.asarray(v) for v in pf._positions(raw, p))
+    dlat, dlon, depth = (np.asarray(v) for v in pfm.mass_positions(raw, p))
     length = float(p.length)
     masses = pm.PointMasses.create(
         lat=float(p.lat0) + dlat, lon=float(p.lon0) + dlon, depth=depth,
@@ -90,8 +98,8 @@ def test_forward_model_equals_gravity_anomaly():
 
 
 def test_float32_forward_is_well_conditioned():
-    _, p64, _, _ = _problem(k=3)
-    _, p32, _, _ = _problem(k=3, dtype=jnp.float32)
+    _, p64, _, _ = _make_problem(k=3)
+    _, p32, _, _ = _make_problem(k=3, dtype=jnp.float32)
     raw = _raw(3, seed=2)
     raw32 = jax.tree_util.tree_map(lambda x: x.astype(jnp.float32), raw)
     a64 = np.asarray(jax.jit(_unit)(raw, p64))
@@ -101,12 +109,12 @@ def test_float32_forward_is_well_conditioned():
 
 
 def test_loss_gradient_matches_finite_differences():
-    _, p, _, _ = _problem(k=2)
+    _, p, _, _ = _make_problem(k=2)
     raw = _raw(2, seed=3)
     flat, unravel = ravel_pytree(raw)
 
     def loss(x):
-        return pf._loss(unravel(x), p, True)
+        return pfm.misfit_loss(unravel(x), p, True)
 
     g = np.asarray(jax.jit(jax.grad(loss))(flat))
     eps = 1e-6
@@ -144,14 +152,14 @@ def paper_d_fit():
     """K = 3 fitted to paper D's masses on a 15×15 map of their area (+ an offset)."""
     lat = np.linspace(23.9, 24.6, 15)
     lon = np.linspace(122.6, 123.3, 15)
-    values = _map(pm.paper_d(), lat, lon) + PAPER_D_OFFSET
+    values = _map(pm.three_mass_model(), lat, lon) + PAPER_D_OFFSET
     # arrays with 1-D axes instead of a Grid
     return values, pf.fit_point_masses(values, 3, lat=lat, lon=lon, **THREE)
 
 
 def test_recovers_paper_d_three_masses(paper_d_fit):
     values, fit = paper_d_fit
-    _check_recovered(fit, pm.paper_d(), pos_km=1.0, rel_mass=0.03)
+    _check_recovered(fit, pm.three_mass_model(), pos_km=1.0, rel_mass=0.03)
     assert fit.rms < 0.01 * np.std(values)
     assert fit.offset == pytest.approx(PAPER_D_OFFSET, abs=0.05)
 
@@ -160,11 +168,6 @@ def _filter_runs(n_runs, n_steps=120, dt=10.0, seed=0):
     """Paper D-like runs built in NumPy (no simulation program to compile): eastward tracks
     at 5 m/s across the masses, INS error from a 2 km / 0.2 m/s start propagated with F, Q
     by SciPy's Van Loan, a reading every step (map + 1 mGal bias + 1 mGal noise)."""
-    import scipy.linalg
-
-    from jaxgrav import filters as fl
-    from jaxgrav.sim import ins
-
     model, lat_ref, n = ins.INSErrorModel(), 24.27, ins.N_STATES
     a, qc = (np.asarray(m) for m in ins.continuous_model(model, lat_ref))
     e = scipy.linalg.expm(np.block([[-a, qc], [np.zeros((n, n)), a.T]]) * dt)
@@ -187,7 +190,7 @@ def _filter_runs(n_runs, n_steps=120, dt=10.0, seed=0):
               c.WGS84_A / np.sqrt(1 - c.WGS84_E2 * np.sin(np.deg2rad(lat)) ** 2))
     ins_lat = lat + np.rad2deg(err[..., 0] / rm)
     ins_lon = lon + np.rad2deg(err[..., 1] / (rn * np.cos(np.deg2rad(lat))))
-    z = _map_points(pm.paper_d(), lat, lon) + err[..., 12] + rng.standard_normal(lat.shape)
+    z = _map_points(pm.three_mass_model(), lat, lon) + err[..., 12] + rng.standard_normal(lat.shape)
     steps = fl.Step(*(jnp.asarray(v[:, 1:]) for v in (ins_lat, ins_lon, z)),
                     jnp.ones((n_runs, n_steps)))
     p0 = ins.initial_covariance(model, 2000.0 / np.sqrt(2.0), 0.2 / np.sqrt(2.0))
@@ -201,11 +204,9 @@ def _map_points(masses, lat, lon):
 def test_fitted_model_as_a_filter_map():
     """The UKF on paper D-like runs with a fitted model as its map (masses + offset, fitted
     to a noisy map window) does about as well as with the true masses."""
-    from jaxgrav import filters as fl
-
     lat = np.linspace(23.9, 24.6, 15)
     lon = np.linspace(122.6, 123.3, 15)
-    noisy = (_map(pm.paper_d(), lat, lon) + PAPER_D_OFFSET
+    noisy = (_map(pm.three_mass_model(), lat, lon) + PAPER_D_OFFSET
              + 0.1 * np.random.default_rng(4).standard_normal((15, 15)))
     fit = pf.fit_point_masses(noisy, 3, lat=lat, lon=lon, **THREE)
     assert 0.05 < fit.rms < 0.15  # the noise, not an exact copy of the truth
@@ -226,7 +227,7 @@ def test_fitted_model_as_a_filter_map():
         rms = np.sqrt(np.mean(np.sum((err - x)[:, half:] ** 2, -1), -1))
         return rms / np.sqrt(np.mean(np.sum(err[:, half:] ** 2, -1), -1))
 
-    ratio_true = score(pm.paper_d(), 0.0)
+    ratio_true = score(pm.three_mass_model(), 0.0)
     ratio_fit = score(fit.masses, fit.offset - PAPER_D_OFFSET)
     assert np.mean(ratio_true) < 0.8  # the map is informative on these runs
     assert not np.allclose(ratio_fit, ratio_true, rtol=0, atol=1e-4)  # a different map ...
@@ -238,43 +239,41 @@ def test_fitted_model_as_a_filter_map():
 
 def test_jit_no_retrace_on_new_data_and_sweep():
     pf.fit_point_masses(_grid1(_one_mass()), 1, **ONE)
-    size = pf._fit_batch._cache_size()
+    size = pfs.fit_batch._cache_size()
     truth = _one_mass(mass=-1.5e16, lat=24.12, lon=123.2, depth=18e3)
     fit = pf.fit_point_masses(_grid1(truth), 1, learning_rate=0.03, rtol=1e-3, **ONE)
-    assert pf._fit_batch._cache_size() == size
+    assert pfs.fit_batch._cache_size() == size
     _check_recovered(fit, truth, pos_km=0.01, rel_mass=1e-4)
     sweep = pf.sweep_point_masses(_grid1(truth), [1], **ONE)
-    assert pf._fit_batch._cache_size() == size
+    assert pfs.fit_batch._cache_size() == size
     assert sweep.k.tolist() == [1] and sweep.rms[0] == sweep.fits[0].rms
 
 
 def test_vmap_over_restarts_equals_loop():
     # Restart i alone (replicated into every slot, so the compiled program of the
     # other tests is reused) gives what restart i gives inside the batch.
-    _, p, _, _ = _problem(k=1)
+    _, p, _, _ = _make_problem(k=1)
     n = ONE["n_restarts"]
-    raw = pf._initial_positions(jax.random.PRNGKey(5), n, 1, jnp.float64)
+    raw = pfs.initial_positions(jax.random.PRNGKey(5), n, 1, jnp.float64)
     args = (p, jnp.asarray(0.05, jnp.float64), jnp.asarray(1e-4, jnp.float64))
     kw = dict(fit_offset=True, steps=ONE["steps"], polish_steps=ONE["polish_steps"])
-    batched = pf._fit_batch(raw, *args, **kw)
-    size = pf._fit_batch._cache_size()
+    batched = pfs.fit_batch(raw, *args, **kw)
+    size = pfs.fit_batch._cache_size()
     assert batched[1].shape == (n,) and batched[0].mass.shape == (n, 1)
     assert len({float(v) for v in np.round(np.asarray(batched[1]), 12)}) > 1  # distinct runs
     for i in range(n):
-        alone = pf._fit_batch(jnp.repeat(raw[i : i + 1], n, axis=0), *args, **kw)
+        alone = pfs.fit_batch(jnp.repeat(raw[i : i + 1], n, axis=0), *args, **kw)
         for b, a in zip(jax.tree_util.tree_leaves(batched), jax.tree_util.tree_leaves(alone),
                         strict=True):
             np.testing.assert_allclose(np.asarray(b[i]), np.asarray(a[0]), rtol=1e-9,
                                        atol=1e-12)
-    assert pf._fit_batch._cache_size() == size
+    assert pfs.fit_batch._cache_size() == size
 
 
 # --- model files ---------------------------------------------------------------------
 
 
 def test_save_and_load_round_trip(paper_d_fit, tmp_path):
-    import json
-
     _, fit = paper_d_fit
     path = tmp_path / "model.json"
     pf.save_point_masses(path, fit)
@@ -288,11 +287,11 @@ def test_save_and_load_round_trip(paper_d_fit, tmp_path):
                                       np.asarray(getattr(fit.masses, name)), err_msg=name)
     # no overwrite without force; bare masses get offset 0 unless given
     with pytest.raises(FileExistsError, match="exists"):
-        pf.save_point_masses(path, pm.paper_d())
-    pf.save_point_masses(path, pm.paper_d(), offset=-2.5, force=True)
+        pf.save_point_masses(path, pm.three_mass_model())
+    pf.save_point_masses(path, pm.three_mass_model(), offset=-2.5, force=True)
     masses, offset = pf.load_point_masses(path)
     assert offset == -2.5 and "rms" not in json.loads(path.read_text())
-    np.testing.assert_array_equal(np.asarray(masses.mass), np.asarray(pm.paper_d().mass))
+    np.testing.assert_array_equal(np.asarray(masses.mass), np.asarray(pm.three_mass_model().mass))
 
 
 def _model_doc(**change):
@@ -315,8 +314,6 @@ def _model_doc(**change):
     (_model_doc(mass=[1e16, float("inf")]), r"finite"),
 ])
 def test_load_rejects_bad_model_files(tmp_path, text, match):
-    import json
-
     path = tmp_path / "bad.json"
     path.write_text(text if isinstance(text, str) else json.dumps(text))
     with pytest.raises(ValueError, match=match) as err:

@@ -82,9 +82,9 @@ def test_vmap_equals_loop_and_jit_no_retrace(lp):
         one = fir_mod.apply_fir(xs[i], lp)
         np.testing.assert_array_equal(batched.values[i], one.values)
         np.testing.assert_array_equal(batched.valid[i], one.valid)
-    size = fir_mod._apply._cache_size()
+    size = fir_mod.apply_fir_compiled._cache_size()
     fir_mod.apply_fir(xs[0] * 3.0, lp)
-    assert fir_mod._apply._cache_size() == size
+    assert fir_mod.apply_fir_compiled._cache_size() == size
     f = jax.jit(fir_mod.apply_fir)
     np.testing.assert_array_equal(f(xs[0], lp).values, fir_mod.apply_fir(xs[0], lp).values)
 

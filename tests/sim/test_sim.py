@@ -3,11 +3,13 @@
 import jax
 import numpy as np
 import pytest
+from scipy import stats
 
 import jaxgrav as jg
-from jaxgrav import sim
+from jaxgrav import datasets, sim
 from jaxgrav.constants import KNOT
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
+from jaxgrav.sim.drift import drift_sigma
 from jaxgrav.tracks import read_track_csv, write_track_csv
 
 
@@ -73,10 +75,6 @@ def test_drift_offsets_rotate_and_grow_linearly():
 def test_drift_sigma_grows_with_time_and_rayleigh_law_matches_scipy():
     """σ = σ0 + rate·t since the last fix; radii drawn with that σ follow SciPy's
     Rayleigh law, whose quantiles rayleigh_quantile gives (the search radius)."""
-    from scipy import stats
-
-    from jaxgrav.sim.drift import drift_sigma
-
     t = np.array([0.0, 600.0, 1800.0, 3600.0])
     sigma = np.asarray(drift_sigma(t, 0.5, 100.0))
     np.testing.assert_allclose(sigma, [100.0, 400.0, 1000.0, 1900.0])  # by hand
@@ -106,18 +104,18 @@ def test_readings_model():
 
 
 def test_scenario_keeps_track_in_region_and_vmaps():
-    from jaxgrav import datasets
-
     grid = datasets.load("ryukyu")["anomaly_2p5min"]
     scen = MatchingScenario(n_fixes=20, drift_deg=0.05)
-    runs = jax.vmap(lambda k: matching_scenario(k, grid, scen))(
-        jax.random.split(jax.random.key(0), 64))
+    # the map is an argument, not a constant closed over: XLA would fold its spline
+    # coefficients at compile time (seconds for a 289 x 289 grid)
+    runs = jax.jit(jax.vmap(matching_scenario, in_axes=(0, None, None)))(
+        jax.random.split(jax.random.key(0), 64), grid, scen)
     assert runs.readings.shape == (64, 20)
     assert np.all(np.isfinite(runs.readings))
     assert np.all(np.asarray(grid.contains(runs.ins_lat, runs.ins_lon)))
     np.testing.assert_allclose(np.hypot(runs.drift_north_m, runs.drift_east_m),
                                0.05 * sim.DEG_ARC_M, rtol=1e-9)
-    one = matching_scenario(jax.random.split(jax.random.key(0), 64)[3], grid, scen)
+    one = jax.jit(matching_scenario)(jax.random.split(jax.random.key(0), 64)[3], grid, scen)
     np.testing.assert_allclose(one.readings, runs.readings[3], atol=1e-9)
 
 
