@@ -14,6 +14,7 @@ import jaxgrav
 from jaxgrav import Grid, montecarlo
 from jaxgrav.cli import main
 from jaxgrav.cli.bench import default_bench_dir
+from jaxgrav.cli.montecarlo import summarize
 from jaxgrav.montecarlo import methods as montecarlo_methods
 from jaxgrav.sim import DEG_ARC_M
 
@@ -193,8 +194,6 @@ def test_montecarlo_more_matchers(tmp_path, capsys, method, fixes, drift):
 
 
 def test_summarize_failure_bounds():
-    from jaxgrav.cli.montecarlo import summarize
-
     res = dict(ins_err_m=np.array([300.0, 300, 300]), err_m=np.array([90.0, 150, 310]),
                status=np.zeros(3, np.int32))
     assert summarize(res)["failure_rate"] == pytest.approx(2 / 3)  # > INS/3: 150 and 310
