@@ -102,7 +102,9 @@ def run_batch(key, n_runs, truth_field, match_map, scenario, method, config, *, 
     method : {"dense", "chains"}
     config : DenseConfig or ChainConfig
     chunk : int, optional
-        Tracks per compiled call (:func:`jaxgrav.montecarlo.run`'s default if None).
+        Tracks per compiled call; None: all ``n_runs`` in one call, the batch the
+        README's Table-1 numbers were computed with. A smaller chunk bounds memory;
+        floats may then differ in the last digits (another XLA programme).
     progress : bool
         Show the runner's progress bar.
 
@@ -116,7 +118,8 @@ def run_batch(key, n_runs, truth_field, match_map, scenario, method, config, *, 
     if method not in TABLE_RUNS:
         raise ValueError(f"method must be one of {sorted(TABLE_RUNS)}; got {method!r}")
     slope_n, slope_e = match_map.gradient()
-    return run(TABLE_RUNS[method], key, n_runs, chunk=chunk, progress=progress,
+    return run(TABLE_RUNS[method], key, n_runs, chunk=n_runs if chunk is None else chunk,
+               progress=progress,
                args=(truth_field, match_map, slope_n, slope_e, scenario, config))
 
 
