@@ -1,6 +1,6 @@
 """How does the Monte Carlo runner scale with devices and chunk size, and is memory bounded?
 
-Method ``correlation`` (paper A's dense matcher on the shipped 2.5′ ``ryukyu`` map,
+Method ``dense`` (paper A's dense-offset matcher on the shipped 2.5′ ``ryukyu`` map,
 30 fixes, 0.035° drift; :mod:`jaxgrav.montecarlo.methods`) run by
 :func:`jaxgrav.montecarlo.run` in float64. Every case is a fresh subprocess with
 ``XLA_FLAGS=--xla_force_host_platform_device_count=D`` (the flag must be set before
@@ -18,7 +18,7 @@ Lines (JSON, ``_common.emit``):
   compiled anything (``jax.monitoring`` trace and compile events, counted in
   ``traces_second_call`` and ``compiles_second_call``: a retrace shows as a trace event
   even when the persistent cache below would supply its executable), for
-  ``correlation`` and ``ukf`` (the full run: every method of
+  ``dense`` and ``ukf`` (the full run: every method of
   :data:`jaxgrav.montecarlo.methods.BUILDERS`; the filters over paper D's point masses).
 * ``montecarlo_memory``: peak RSS (``ru_maxrss`` of the subprocess) for ``n`` = 4, 16
   (not with ``--quick``) and 64 chunks against the same ``n`` in one chunk (baseline;
@@ -116,10 +116,10 @@ def spawn(devices, **spec):
 
 # ------------------------------------------------------------------------ parent
 def montecarlo_methods_names():
-    """Every registered method, ``correlation`` first (its compile case is the scaling one)."""
+    """Every registered method, ``dense`` first (its compile case is the scaling one)."""
     from jaxgrav.montecarlo.methods import BUILDERS
 
-    return ["correlation", *(m for m in BUILDERS if m != "correlation")]
+    return ["dense", *(m for m in BUILDERS if m != "dense")]
 
 
 def main():
@@ -135,7 +135,7 @@ def main():
     if args.quick:
         n, repeats, mem_chunk = 256, 2, 16
         cases = [(1, 16, True), (1, 64, True), (2, 64, True), (8, 64, True)]
-        compile_methods = ("correlation", "ukf")
+        compile_methods = ("dense", "ukf")
     else:
         n, repeats, mem_chunk = 2048, 2, 64
         cases = [(d, c, True) for d in (1, 2, 8) for c in (16, 64, 256)]
@@ -147,16 +147,16 @@ def main():
         for devices, c, x64 in cases:
             first = base is None
             dtype = "float64" if x64 else "float32"
-            r = spawn(devices, method="correlation", chunk=c, n=n, repeats=repeats,
+            r = spawn(devices, method="dense", chunk=c, n=n, repeats=repeats,
                       compile=first, cache=cache, x64=x64)
             if first:
                 base = r
-                emit("montecarlo_compile", f"correlation devices=1 chunk={c}", c,
+                emit("montecarlo_compile", f"dense devices=1 chunk={c}", c,
                      r["second_s"], "first call (trace + compile + run)", r["first_s"],
                      compile_s=round(r["first_s"] - r["second_s"], 3),
                      recompiled=r["recompiled"], traces_second_call=r["traces_second_call"],
                      compiles_second_call=r["compiles_second_call"], dtype=dtype)
-            emit(BENCH, f"correlation devices={devices} chunk={c} {dtype}", n, r["run_s"],
+            emit(BENCH, f"dense devices={devices} chunk={c} {dtype}", n, r["run_s"],
                  f"devices=1 chunk={cmin} float64", base["run_s"],
                  runs_per_s=round(n / r["run_s"], 1),
                  compile_and_first_chunk_s=round(r["first_s"], 3), dtype=dtype)
@@ -171,9 +171,9 @@ def main():
         ks = (4, 64) if args.quick else (4, 16, 64)  # quick: 4 chunks of 16 = a cached shape
         for i, k in enumerate(ks):
             nn = k * mem_chunk
-            r = runs[k] = spawn(1, method="correlation", chunk=mem_chunk, n=nn, cache=cache)
+            r = runs[k] = spawn(1, method="dense", chunk=mem_chunk, n=nn, cache=cache)
             if k < 64:  # baseline: the same runs in one chunk
-                b, label = spawn(1, method="correlation", chunk=nn, n=nn, cache=cache), \
+                b, label = spawn(1, method="dense", chunk=nn, n=nn, cache=cache), \
                     f"n={nn} in one chunk"
             else:  # one chunk of 64·chunk runs would need GBs: compare with fewer chunks
                 b, label = runs[ks[i - 1]], f"n={ks[i - 1] * mem_chunk} chunk={mem_chunk}"

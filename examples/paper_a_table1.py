@@ -94,8 +94,8 @@ def main():
         ("dense, noiseless readings", "dense", fine,
          config_for("dense", fine, radius, noise_mgal=1.0, bias_sigma_mgal=3.0), noiseless),
     ):
-        keys = jax.random.split(jax.random.fold_in(key, 3), runs)
-        s = paper_a_table1.summarize(paper_a_table1.run_batch(keys, fine, mmap, scen, method, cfg))
+        s = paper_a_table1.summarize(paper_a_table1.run_batch(
+            jax.random.fold_in(key, 3), runs, fine, mmap, scen, method, cfg))
         results["realistic"][name] = s
         print(f"  {name:30s} median error {s['error_m_median']:6.0f} m of INS "
               f"{s['ins_error_m_median']:.0f} m (ratio {s['median_ratio']:.2f}), improved "

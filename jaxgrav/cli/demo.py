@@ -96,8 +96,8 @@ def run_demo(out_dir, *, force=False, runs=200, seed=0, smoke=False):
     real = MatchingScenario(n_fixes=n_real, noise_mgal=1.0)
     cfg = config_for("dense", fine_map, 1.2 * real.drift_deg * DEG_ARC_M, noise_mgal=1.0,
                      bias_sigma_mgal=3.0)
-    keys = jax.random.split(jax.random.fold_in(key, 2), runs)
-    mc = paper_a_table1.run_batch(keys, fine_map, fine_map, real, "dense", cfg)
+    mc = paper_a_table1.run_batch(jax.random.fold_in(key, 2), runs, fine_map, fine_map, real,
+                                  "dense", cfg)
     summary = paper_a_table1.summarize(mc)
     print(f"\nRealistic setting: 2.5' map, 1 mGal noise, {n_real} fixes, drift 0.035°, {runs} "
           f"random tracks, dense-offset matcher:")

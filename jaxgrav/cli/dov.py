@@ -1,6 +1,6 @@
 """``jaxgrav dov``: layered DOV interpolation along a track CSV (paper C).
 
-Wire into :mod:`jaxgrav.cli` with ``cli_dov.add_parser(sub)``; the command
+Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``; the command
 function is :func:`cmd_dov`.
 """
 

@@ -30,7 +30,7 @@ __all__ = ["build_parser", "main"]
 
 
 def _enable_x64():
-    jax.config.update("jax_enable_x64", True)  # the CLI may, at start (DESIGN.md, Precision)
+    jax.config.update("jax_enable_x64", True)  # geodesy in float64; only the CLI flips it
 
 
 def _cmd_data_egm2008(args):

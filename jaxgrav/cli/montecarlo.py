@@ -6,6 +6,7 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``; the command function is
 
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -15,7 +16,14 @@ import numpy as np
 
 from jaxgrav import __version__, montecarlo
 from jaxgrav.datasets import load_map
-from jaxgrav.montecarlo.methods import BUILDERS, FILTER_METHODS, METRICS, build
+from jaxgrav.montecarlo.methods import (
+    BUILDERS,
+    DEPRECATED_METHODS,
+    FILTER_METHODS,
+    METRICS,
+    build,
+    resolve_method,
+)
 from jaxgrav.plot import save_figure
 
 __all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize"]
@@ -26,8 +34,10 @@ PERCENTILES = (5, 25, 50, 75, 95)
 def add_parser(subparsers):
     """Add the ``montecarlo`` sub-command to an ``argparse`` sub-parser set."""
     m = subparsers.add_parser("montecarlo", help="Monte Carlo runs of a method on all devices")
-    m.add_argument("--method", required=True, choices=sorted(BUILDERS),
-                   help="correlation: paper A dense matcher; chains: paper A's iso-point "
+    m.add_argument("--method", required=True, choices=[*sorted(BUILDERS), *DEPRECATED_METHODS],
+                   metavar="{" + ",".join(sorted(BUILDERS)) + "}",
+                   help="dense: paper A's dense-offset matcher (formerly 'correlation', "
+                        "still accepted); chains: paper A's iso-point "
                         "chains (map refined to 0.005 deg nodes); entropy, iccp, "
                         "entropy+iccp: paper B's stages alone and combined; ukf, ekf, gsf "
                         "(Gaussian-sum UKF), pmf (grid point-mass filter) and the guarded "
@@ -46,14 +56,14 @@ def add_parser(subparsers):
                         "filters: default paper-d, paper D's three point masses; over a map "
                         "straight tracks in random directions inside it")
     m.add_argument("--drift", type=float, default=None,
-                   help="INS error (degrees of arc); correlation: drift radius (default "
+                   help="INS error (degrees of arc); dense: drift radius (default "
                         "0.035, also chains); entropy, iccp, entropy+iccp: offset uniform in "
                         "[2/3, 1] x drift (default 0.03); filters: initial position error "
                         "(default 0.018 = 2 km)")
     m.add_argument("--noise", type=float, default=None,
                    help="reading noise sigma (mGal, default 1)")
     m.add_argument("--fixes", type=int, default=None,
-                   help="fixes per track (default 30 correlation and chains, 60 entropy, "
+                   help="fixes per track (default 30 dense and chains, 60 entropy, "
                         "iccp and entropy+iccp); "
                         "filters: readings 10 s apart, start included (default 721 = 2 h)")
     m.add_argument("--out", required=True,
@@ -196,6 +206,10 @@ def _command(args):
 
 def cmd_montecarlo(args):
     """Run ``jaxgrav montecarlo`` (x64 is enabled by the CLI entry point)."""
+    if args.method in DEPRECATED_METHODS:
+        print(f"jaxgrav montecarlo: --method {args.method} is deprecated; use --method "
+              f"{DEPRECATED_METHODS[args.method]}", file=sys.stderr)
+        args.method = resolve_method(args.method)
     if args.devices is not None:
         if args.devices < 1:
             raise ValueError(f"--devices must be at least 1; got {args.devices}")

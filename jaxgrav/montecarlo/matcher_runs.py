@@ -2,10 +2,13 @@
 
 Each ``*_run(key, ...)`` simulates one run and matches it; each builder returns the
 :class:`~jaxgrav.montecarlo.spec.MethodSpec` that :mod:`jaxgrav.montecarlo.methods`
-registers by name.
+registers by name. :func:`paper_a_match` and :func:`matcher_record` are the one
+definition of a paper-A run and of the per-run metrics, shared with
+:mod:`jaxgrav.montecarlo.paper_a_table1`.
 """
 
 import functools
+import warnings
 
 import jax.numpy as jnp
 
@@ -23,52 +26,61 @@ from jaxgrav.match.entropy_iccp import (
 )
 from jaxgrav.match.iccp import match_iccp
 from jaxgrav.match.result import STATUS
+from jaxgrav.montecarlo.spec import MethodSpec, check_settings, default_grid, region_of
+from jaxgrav.scenarios import MatchingScenario, matching_scenario
+from jaxgrav.sim import DEG_ARC_M, track_error_m
 
 __all__ = [
     "CHAIN_NODE_DEG",
+    "DEPRECATED_NAMES",
     "chains_builder",
     "chains_run",
-    "correlation_builder",
-    "correlation_run",
+    "dense_builder",
+    "dense_run",
     "entropy_iccp_builder",
     "entropy_iccp_run",
     "entropy_run",
     "iccp_run",
+    "ins_error_m",
+    "matcher_record",
+    "paper_a_match",
     "paper_b_builder",
 ]
 
-from jaxgrav.montecarlo.spec import MethodSpec, check_settings, default_grid, region_of
-from jaxgrav.scenarios import (
-    MatchingScenario,
-    matching_scenario,
-)
-from jaxgrav.sim import DEG_ARC_M, track_error_m
+
+# ------------------------------------------------------------ metrics of every matcher
+def ins_error_m(run):
+    """Mean horizontal INS error of a run (m, scalar): the mean length of the scenario's
+    north/east INS offsets at the fixes (``run.drift_north_m``, ``run.drift_east_m``,
+    shape ``(n_fixes,)``).
+
+    For paper A's fixed drift this is exactly the drift radius on the mean sphere
+    (``drift_deg · DEG_ARC_M``); for paper B the offsets are measured from the true
+    track, so it equals ``track_error_m(ins_lat, ins_lon, truth)``."""
+    return jnp.mean(jnp.hypot(run.drift_north_m, run.drift_east_m))
 
 
-# ------------------------------------------------------------------- correlation (A)
-def correlation_run(key, grid, scenario, config):
-    """One paper-A run: simulate (:func:`~jaxgrav.scenarios.matching_scenario`), match dense.
+def matcher_record(run, r, **extra):
+    """The per-run record of a matcher.
 
-    Readings are Eötvös-corrected with the true velocity (as a user with an INS
-    velocity would) and matched by :func:`~jaxgrav.match.dense.match_dense`.
+    Parameters
+    ----------
+    run : MatchingRun
+        The simulated run (truth, INS track, INS offsets).
+    r : MatchResult
+        The matcher's result for it.
+    **extra
+        More per-run values to include.
 
     Returns
     -------
     dict
-        ``ins_err_m``, ``err_m`` (m), ``status`` (int32), ``score`` (the matcher's),
-        ``offset_north_m``, ``offset_east_m`` (estimated correction, m).
+        ``ins_err_m`` (:func:`ins_error_m`, m), ``err_m`` (mean distance of the
+        matched track from the truth, m), ``status`` (int32), ``score`` (the
+        matcher's), and ``extra``.
     """
-    run = matching_scenario(key, grid, scenario)
-    g = run.readings + eotvos(run.ins_lat, run.truth.v_east, run.truth.v_north)
-    r = match_dense(grid, run.ins_lat, run.ins_lon, g, config)
-    return _matcher_record(run, r, **_offset(r))
-
-
-def _matcher_record(run, r, **extra):
-    """The per-run record of a matcher: mean-track errors of the INS and of the match
-    (m), status, score, and ``extra``; paper A's matchers add the offset."""
     return dict(
-        ins_err_m=track_error_m(run.ins_lat, run.ins_lon, run.truth),
+        ins_err_m=ins_error_m(run),
         err_m=track_error_m(r.lat, r.lon, run.truth),
         status=jnp.asarray(r.status, jnp.int32),
         score=r.score,
@@ -80,8 +92,56 @@ def _offset(r):
     return dict(offset_north_m=r.offset_north_m, offset_east_m=r.offset_east_m)
 
 
-def correlation_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
-    """Paper A, dense correlation matcher (the ``jaxgrav demo`` realistic setting).
+# -------------------------------------------------------------------------- paper A
+def paper_a_match(matcher, key, truth_field, match_map, scenario, config):
+    """One paper-A run: simulate on ``truth_field``, correct Eötvös, match on ``match_map``.
+
+    Parameters
+    ----------
+    matcher : callable
+        :func:`~jaxgrav.match.dense.match_dense` or
+        :func:`~jaxgrav.match.correlation.match_chains`.
+    key : PRNG key
+    truth_field : Grid
+        Field the gravimeter senses (mGal).
+    match_map : Grid
+        Map matched against (mGal).
+    scenario : MatchingScenario
+    config : DenseConfig or ChainConfig
+        ``matcher``'s settings.
+
+    Returns
+    -------
+    run : MatchingRun
+        :func:`~jaxgrav.scenarios.matching_scenario`'s run.
+    readings : Array, shape ``(n_fixes,)``
+        The readings corrected for the Eötvös effect with the true velocity (mGal), as a
+        user with an INS velocity would.
+    result : MatchResult
+    """
+    run = matching_scenario(key, truth_field, scenario)
+    g = run.readings + eotvos(run.ins_lat, run.truth.v_east, run.truth.v_north)
+    return run, g, matcher(match_map, run.ins_lat, run.ins_lon, g, config)
+
+
+# ------------------------------------------------------------------------- dense (A)
+def dense_run(key, grid, scenario, config):
+    """One paper-A run on ``grid`` matched by :func:`~jaxgrav.match.dense.match_dense`.
+
+    As :func:`paper_a_match` with ``grid`` both the truth and the map.
+
+    Returns
+    -------
+    dict
+        :func:`matcher_record` (``ins_err_m``, ``err_m``, ``status``, ``score``) and
+        ``offset_north_m``, ``offset_east_m`` (estimated correction, m).
+    """
+    run, _, r = paper_a_match(match_dense, key, grid, grid, scenario, config)
+    return matcher_record(run, r, **_offset(r))
+
+
+def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
+    """Paper A, dense-offset matcher (the ``jaxgrav demo`` realistic setting).
 
     Defaults: INS drift 0.035° (fixed radius, random direction), 1 mGal noise, 30
     fixes 2 min apart at 10 kn east + 10 kn north; search radius 1.2 × the drift,
@@ -95,10 +155,10 @@ def correlation_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
     scen = MatchingScenario(region=region_of(grid), drift_deg=drift, noise_mgal=noise, n_fixes=n)
     cfg = config_for("dense", grid, 1.2 * drift * DEG_ARC_M, noise_mgal=max(noise, 0.1),
                      bias_sigma_mgal=3.0)
-    settings = dict(description="paper A: dense correlation matcher, fixed INS drift",
+    settings = dict(description="paper A: dense-offset matcher, fixed INS drift",
                     drift_deg=drift, noise_mgal=noise, n_fixes=n, dt_s=scen.dt,
                     search_half_size=cfg.half_size, search_spacing_m=cfg.spacing_m)
-    return MethodSpec(correlation_run, (grid, scen, cfg), settings, dict(STATUS))
+    return MethodSpec(dense_run, (grid, scen, cfg), settings, dict(STATUS))
 
 
 # ------------------------------------------------------------------------ chains (A)
@@ -110,20 +170,18 @@ CHAIN_NODE_DEG = 0.005
 def chains_run(key, grid, refined, scenario, config):
     """One paper-A run: simulate on ``grid``, match by iso-point chains on ``refined``.
 
-    Readings are Eötvös-corrected with the true velocity and matched by
+    As :func:`paper_a_match` with
     :func:`~jaxgrav.match.correlation.match_chains`.
 
     Returns
     -------
     dict
-        ``ins_err_m``, ``err_m`` (m), ``status`` (int32), ``score`` (the matcher's),
+        :func:`matcher_record` (``ins_err_m``, ``err_m``, ``status``, ``score``),
         ``offset_north_m``, ``offset_east_m`` (m), ``work_constrained`` (chains left
         after constraint elimination).
     """
-    run = matching_scenario(key, grid, scenario)
-    g = run.readings + eotvos(run.ins_lat, run.truth.v_east, run.truth.v_north)
-    r = match_chains(refined, run.ins_lat, run.ins_lon, g, config)
-    return _matcher_record(run, r, **_offset(r), work_constrained=r.work_constrained)
+    run, _, r = paper_a_match(match_chains, key, grid, refined, scenario, config)
+    return matcher_record(run, r, **_offset(r), work_constrained=r.work_constrained)
 
 
 def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
@@ -131,7 +189,7 @@ def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
 
     The readings come from ``grid``; the matcher searches ``grid`` refined (bilinear)
     to :data:`CHAIN_NODE_DEG` nodes (factor ``round(dlat / 0.005°)``, at least 1:
-    ×8 for the 2.5′ map). Scenario as :func:`correlation_builder` (drift 0.035°,
+    ×8 for the 2.5′ map). Scenario as :func:`dense_builder` (drift 0.035°,
     1 mGal, 30 fixes 2 min apart); search window and tolerances from
     :func:`~jaxgrav.match.api.config_for` ``("chains", ...)`` for 1.2 × the drift.
     """
@@ -182,7 +240,7 @@ def iccp_run(key, grid, scenario, iccp):
 
 
 def _b_metrics(run, r):
-    return _matcher_record(run, r, rotation_deg=r.rotation_deg)
+    return matcher_record(run, r, rotation_deg=r.rotation_deg)
 
 
 _B_RUNS = {
@@ -195,12 +253,12 @@ _B_RUNS = {
 def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n_fixes=None):
     """Paper B: entropy coarse matching, ICCP, or both (``stage``).
 
-    Defaults (SPEC §B, the example's ``gravity`` case): INS offset uniform in
-    [⅔·drift, drift] with drift 0.03°, rotated ±1.5° about the start, 1 mGal noise,
-    60 fixes a minute apart at 10 m/s in a random direction. The matchers are sized
-    to the drift + 0.005° as ``examples/paper_b_entropy_iccp.py``: entropy offsets
-    by :func:`~jaxgrav.match.entropy.entropy_config_for` (at most 20 a side), ICCP
-    by :func:`~jaxgrav.match.entropy_iccp.iccp_config_for` with ``stage="alone"``
+    Defaults (paper B's gravity case, as ``examples/paper_b_entropy_iccp.py``): INS
+    offset uniform in [⅔·drift, drift] with drift 0.03°, rotated ±1.5° about the
+    start, 1 mGal noise, 60 fixes a minute apart at 10 m/s in a random direction. The
+    matchers are sized to the drift + 0.005° as the example: entropy offsets by
+    :func:`~jaxgrav.match.entropy.entropy_config_for` (at most 20 a side), ICCP by
+    :func:`~jaxgrav.match.entropy_iccp.iccp_config_for` with ``stage="alone"``
     (window over the whole error) or ``"fine"`` (after the entropy stage).
 
     Parameters
@@ -242,3 +300,18 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
 
 entropy_iccp_builder = functools.partial(paper_b_builder, stage="entropy+iccp")
 """Paper B, entropy coarse + ICCP fine matching (:func:`paper_b_builder`)."""
+
+
+
+DEPRECATED_NAMES = {"correlation_run": "dense_run", "correlation_builder": "dense_builder"}
+"""Old name -> new name of the paper-A dense matcher's functions (kept for one release)."""
+
+
+def __getattr__(name):
+    if name in DEPRECATED_NAMES:
+        new = DEPRECATED_NAMES[name]
+        warnings.warn(f"jaxgrav.montecarlo.matcher_runs.{name} is deprecated; use {new} (the "
+                      "registry method 'correlation' is now 'dense')", DeprecationWarning,
+                      stacklevel=2)
+        return globals()[new]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -15,7 +15,8 @@ metrics, at least :data:`METRICS`:
 ``err_m``      the same for the method's estimated track (m)
 ``status``     the method's status bit field (0 = clean; int32)
 
-Matchers: ``correlation`` (paper A, dense offsets), ``chains`` (paper A's iso-point
+Matchers: ``dense`` (paper A, dense offsets; ``correlation`` is its deprecated name,
+still accepted with a :class:`DeprecationWarning`), ``chains`` (paper A's iso-point
 chains on the map refined to 0.005° nodes), ``entropy``, ``iccp`` and
 ``entropy+iccp`` (paper B, each stage alone and combined).
 
@@ -34,6 +35,7 @@ One entry, ``BUILDERS["name"] = builder`` or ``register("name", builder)``;
 """
 
 import functools
+import warnings
 
 from jaxgrav.montecarlo.filter_runs import (
     FILTER_METHODS,
@@ -48,8 +50,8 @@ from jaxgrav.montecarlo.filter_runs import (
 from jaxgrav.montecarlo.matcher_runs import (
     chains_builder,
     chains_run,
-    correlation_builder,
-    correlation_run,
+    dense_builder,
+    dense_run,
     entropy_iccp_builder,
     entropy_iccp_run,
     entropy_run,
@@ -60,13 +62,14 @@ from jaxgrav.montecarlo.spec import METRICS, MethodSpec, default_grid
 
 __all__ = [
     "BUILDERS",
+    "DEPRECATED_METHODS",
     "FILTER_METHODS",
     "METRICS",
     "MethodSpec",
     "build",
     "chains_run",
-    "correlation_run",
     "default_grid",
+    "dense_run",
     "ekf_run",
     "entropy_iccp_run",
     "entropy_run",
@@ -76,15 +79,13 @@ __all__ = [
     "iccp_run",
     "pmf_run",
     "register",
+    "resolve_method",
     "ukf_guard_run",
     "ukf_run",
 ]
 
-
-"""Names of the paper-D filters (errors are RMS over the second half of a run, with NEES)."""
-
 BUILDERS = {
-    "correlation": correlation_builder,
+    "dense": dense_builder,
     "chains": chains_builder,
     "entropy": functools.partial(paper_b_builder, stage="entropy"),
     "iccp": functools.partial(paper_b_builder, stage="iccp"),
@@ -92,6 +93,35 @@ BUILDERS = {
     **{k: functools.partial(filter_builder, kind=k) for k in FILTER_METHODS},
 }
 """Method name -> builder."""
+
+DEPRECATED_METHODS = {"correlation": "dense"}
+"""Old method name -> registered name; accepted for one release with a DeprecationWarning."""
+
+WARNED_ALIASES = set()
+"""Deprecated names already warned about in this process (each warns once)."""
+
+
+def resolve_method(method):
+    """The registered name of ``method``: itself, or the new name of a deprecated one.
+
+    A name of :data:`DEPRECATED_METHODS` warns (:class:`DeprecationWarning`) the first
+    time it is resolved in a process.
+
+    Raises
+    ------
+    ValueError
+        ``method`` is neither registered nor a deprecated name.
+    """
+    if method in DEPRECATED_METHODS:
+        new = DEPRECATED_METHODS[method]
+        if method not in WARNED_ALIASES:
+            WARNED_ALIASES.add(method)
+            warnings.warn(f"Monte Carlo method {method!r} is deprecated; use {new!r}",
+                          DeprecationWarning, stacklevel=3)
+        method = new
+    if method not in BUILDERS:
+        raise ValueError(f"method must be one of {sorted(BUILDERS)}; got {method!r}")
+    return method
 
 
 def register(name, builder, *, replace=False):
@@ -107,7 +137,7 @@ def build(method, grid=None, **options):
     Parameters
     ----------
     method : str
-        A key of :data:`BUILDERS`.
+        A key of :data:`BUILDERS` (or a deprecated name, :func:`resolve_method`).
     grid : Grid, optional
         Map simulated and matched (or filtered) against; None: the method's default
         (:func:`default_grid` for the matchers, paper D's point masses for the filters).
@@ -119,6 +149,17 @@ def build(method, grid=None, **options):
     -------
     MethodSpec
     """
-    if method not in BUILDERS:
-        raise ValueError(f"method must be one of {sorted(BUILDERS)}; got {method!r}")
-    return BUILDERS[method](grid, **options)
+    return BUILDERS[resolve_method(method)](grid, **options)
+
+
+DEPRECATED_NAMES = {"correlation_run": "dense_run"}
+"""Old function name -> new name (kept for one release)."""
+
+
+def __getattr__(name):
+    if name in DEPRECATED_NAMES:
+        new = DEPRECATED_NAMES[name]
+        warnings.warn(f"jaxgrav.montecarlo.methods.{name} is deprecated; use {new}",
+                      DeprecationWarning, stacklevel=2)
+        return globals()[new]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,9 +1,11 @@
 """Paper A's experiments as functions: Table 1 groups and Monte Carlo summaries.
 
 Shared by ``jaxgrav demo`` (small sizes) and ``examples/paper_a_table1.py`` (≥ 1000
-tracks). Each function simulates a batch of tracks with
-:func:`jaxgrav.scenarios.matching_scenario`, matches them in one jitted, vmapped
-call and returns plain NumPy summaries.
+tracks). :func:`run_batch` runs :func:`dense_table_run` or :func:`chains_table_run`
+(one simulated and matched track, :func:`~jaxgrav.montecarlo.matcher_runs.paper_a_match`)
+over many keys with the Monte Carlo runner :func:`jaxgrav.montecarlo.run`, so repeated
+batches of the same shapes reuse the compiled code; :func:`summarize` and
+:func:`table1` turn the runs into plain summaries.
 """
 
 import dataclasses
@@ -13,27 +15,85 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrav.geodesy import eotvos
 from jaxgrav.match.api import config_for
 from jaxgrav.match.correlation import match_chains
 from jaxgrav.match.dense import match_dense
 from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_track
-from jaxgrav.scenarios.paper_a import MatchingScenario, matching_scenario
-from jaxgrav.sim import DEG_ARC_M, track_error_m
+from jaxgrav.montecarlo.matcher_runs import matcher_record, paper_a_match
+from jaxgrav.montecarlo.runner import run
+from jaxgrav.scenarios import MatchingScenario
+from jaxgrav.sim import DEG_ARC_M
 
-__all__ = ["TABLE1_DRIFTS_DEG", "format_table", "run_batch", "summarize", "table1"]
+__all__ = ["TABLE1_DRIFTS_DEG", "TABLE_RUNS", "chains_table_run", "dense_table_run",
+           "format_table", "run_batch", "summarize", "table1"]
 
 TABLE1_DRIFTS_DEG = (0.005, 0.0125, 0.02, 0.0275, 0.035)
 """INS drift of the five groups (degrees of arc), spanning paper A's Table 1."""
 
 
-def run_batch(key, truth_field, match_map, scenario, method, config, *, eotvos_correct=True):
-    """Simulate and match ``n`` tracks in one jitted, vmapped call.
+def _table_record(run, r, slope_n, slope_e, true_score):
+    slope = jnp.hypot(slope_n.sample(run.truth.lat, run.truth.lon),
+                      slope_e.sample(run.truth.lat, run.truth.lon))
+    return matcher_record(
+        run, r, true_score=true_score, slope_mgal_km=1e3 * jnp.mean(slope),
+        work_unconstrained=r.work_unconstrained, work_constrained=r.work_constrained,
+        true_lat=run.truth.lat, true_lon=run.truth.lon,
+        ins_lat=run.ins_lat, ins_lon=run.ins_lon, lat=r.lat, lon=r.lon)
+
+
+def dense_table_run(key, truth_field, match_map, slope_n, slope_e, scenario, config):
+    """One track of a Table-1 batch matched by :func:`~jaxgrav.match.dense.match_dense`.
 
     Parameters
     ----------
-    key : PRNG key array, shape ``(n,)``
-        One key per track.
+    key : PRNG key
+    truth_field, match_map : Grid
+        Field the gravimeter senses and map matched against (mGal).
+    slope_n, slope_e : Grid
+        ``match_map.gradient()`` (mGal/m), for the mean map slope along the track.
+    scenario : MatchingScenario
+    config : DenseConfig
+
+    Returns
+    -------
+    dict
+        :func:`~jaxgrav.montecarlo.matcher_runs.matcher_record` (``ins_err_m``,
+        ``err_m`` in m, ``status``, ``score``) and ``true_score`` (the score the
+        matcher gives the true track), ``slope_mgal_km`` (mean map slope along the true
+        track, mGal/km), ``work_unconstrained``, ``work_constrained``, and the tracks
+        ``true_lat``, ``true_lon``, ``ins_lat``, ``ins_lon``, ``lat``, ``lon``
+        (degrees, shape ``(n_fixes,)``).
+    """
+    run, g, r = paper_a_match(match_dense, key, truth_field, match_map, scenario, config)
+    w = decreasing_weights(g.shape[0], config.weight_decay)
+    prior = bias_precision(w, config.noise_mgal, config.bias_sigma_mgal)
+    m = match_map.sample(run.truth.lat, run.truth.lon, config.method)
+    true_score = score_track(g, m, w, config.score, prior)[0]
+    return _table_record(run, r, slope_n, slope_e, true_score)
+
+
+def chains_table_run(key, truth_field, match_map, slope_n, slope_e, scenario, config):
+    """One track of a Table-1 batch matched by
+    :func:`~jaxgrav.match.correlation.match_chains` (``config`` a ChainConfig); as
+    :func:`dense_table_run`, with ``true_score`` NaN."""
+    run, _, r = paper_a_match(match_chains, key, truth_field, match_map, scenario, config)
+    return _table_record(run, r, slope_n, slope_e, jnp.nan)
+
+
+TABLE_RUNS = {"dense": dense_table_run, "chains": chains_table_run}
+"""Matcher name -> per-track function of :func:`run_batch`."""
+
+
+def run_batch(key, n_runs, truth_field, match_map, scenario, method, config, *, chunk=None,
+              progress=False):
+    """Simulate and match ``n_runs`` tracks with the Monte Carlo runner.
+
+    Parameters
+    ----------
+    key : PRNG key
+        One key; track ``i`` gets ``jax.random.split(key, n_runs)[i]``.
+    n_runs : int
+        Number of tracks.
     truth_field : Grid
         Field the gravimeter senses.
     match_map : Grid
@@ -41,50 +101,26 @@ def run_batch(key, truth_field, match_map, scenario, method, config, *, eotvos_c
     scenario : MatchingScenario
     method : {"dense", "chains"}
     config : DenseConfig or ChainConfig
-    eotvos_correct : bool
-        Correct readings with the (true) velocity before matching, as a user with
-        an INS velocity would.
+    chunk : int, optional
+        Tracks per compiled call; None: all ``n_runs`` in one call, the batch the
+        README's Table-1 numbers were computed with. A smaller chunk bounds memory;
+        floats may then differ in the last digits (another XLA programme).
+    progress : bool
+        Show the runner's progress bar.
 
     Returns
     -------
     dict of str to numpy.ndarray
-        Per track: ``ins_err_m``, ``err_m``, ``status``, ``work_unconstrained``,
-        ``work_constrained``, and the last run's tracks for plotting.
+        :func:`dense_table_run`'s values, each with a leading axis of ``n_runs``.
+        Readings are Eötvös-corrected with the true velocity before matching, as a
+        user with an INS velocity would.
     """
-    fn = match_dense if method == "dense" else match_chains
+    if method not in TABLE_RUNS:
+        raise ValueError(f"method must be one of {sorted(TABLE_RUNS)}; got {method!r}")
     slope_n, slope_e = match_map.gradient()
-
-    def one(truth_field, match_map, key, scenario, config):
-        run = matching_scenario(key, truth_field, scenario)
-        g = run.readings
-        if eotvos_correct:
-            g = g + eotvos(run.ins_lat, run.truth.v_east, run.truth.v_north)
-        r = fn(match_map, run.ins_lat, run.ins_lon, g, config)
-        slope = jnp.hypot(slope_n.sample(run.truth.lat, run.truth.lon),
-                          slope_e.sample(run.truth.lat, run.truth.lon))
-        if method == "dense":  # the score the matcher would give the true track
-            w = decreasing_weights(g.shape[0], config.weight_decay)
-            prior = bias_precision(w, config.noise_mgal, config.bias_sigma_mgal)
-            m = match_map.sample(run.truth.lat, run.truth.lon, config.method)
-            true_score = score_track(g, m, w, config.score, prior)[0]
-        else:
-            true_score = jnp.nan
-        return dict(
-            ins_err_m=jnp.mean(jnp.hypot(run.drift_north_m, run.drift_east_m)),
-            err_m=track_error_m(r.lat, r.lon, run.truth),
-            score=r.score,
-            true_score=true_score,
-            slope_mgal_km=1e3 * jnp.mean(slope),
-            status=r.status,
-            work_unconstrained=r.work_unconstrained,
-            work_constrained=r.work_constrained,
-            true_lat=run.truth.lat, true_lon=run.truth.lon,
-            ins_lat=run.ins_lat, ins_lon=run.ins_lon, lat=r.lat, lon=r.lon,
-        )
-
-    batched = jax.jit(jax.vmap(one, in_axes=(None, None, 0, None, None)))
-    out = batched(truth_field, match_map, key, scenario, config)
-    return {k: np.asarray(v) for k, v in out.items()}
+    return run(TABLE_RUNS[method], key, n_runs, chunk=n_runs if chunk is None else chunk,
+               progress=progress,
+               args=(truth_field, match_map, slope_n, slope_e, scenario, config))
 
 
 def summarize(out, success_deg=0.01):
@@ -147,9 +183,9 @@ def table1(key, truth_field, match_map, *, method, runs_per_group, base=None,
                          step_m=scen.step_m)
         if selection is not None:
             cfg = dataclasses.replace(cfg, selection=selection)
-        keys = jax.random.split(jax.random.fold_in(key, i), runs_per_group)
-        rows.append(dict(drift_deg=drift, **summarize(run_batch(keys, truth_field, match_map,
-                                                                 scen, method, cfg))))
+        out = run_batch(jax.random.fold_in(key, i), runs_per_group, truth_field, match_map,
+                        scen, method, cfg)
+        rows.append(dict(drift_deg=drift, **summarize(out)))
     return rows
 
 

@@ -29,7 +29,7 @@ run) and each feeds only its own devices' slice of every chunk
 ``jax.process_index()`` for ``jax.make_array_from_process_local_data``). Each chunk's
 results are gathered to every process (``multihost_utils.process_allgather``), so
 every process returns the full arrays; write files from ``jax.process_index() == 0``
-only. Tested with two local processes on loopback (``tests/test_montecarlo.py``).
+only. Tested with two local processes on loopback (``tests/montecarlo/test_montecarlo.py``).
 
 Memory
 ------

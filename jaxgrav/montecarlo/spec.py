@@ -1,9 +1,9 @@
 """What a Monte Carlo method is: :class:`MethodSpec`, the metrics of every run, checks."""
 
-import dataclasses
 from collections.abc import Callable
 
 from jaxgrav import datasets
+from jaxgrav._pytree import pytree_dataclass, static_field
 
 __all__ = ["METRICS", "MethodSpec", "check_settings", "default_grid", "region_of"]
 
@@ -11,9 +11,11 @@ METRICS = ("ins_err_m", "err_m", "status")
 """Metrics every method returns per run."""
 
 
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class MethodSpec:
     """A method ready for :func:`jaxgrav.montecarlo.run`.
+
+    A pytree whose only data field is ``args`` (the rest is static).
 
     Attributes
     ----------
@@ -27,10 +29,10 @@ class MethodSpec:
         Meaning of the ``status`` bits.
     """
 
-    fn: Callable
+    fn: Callable = static_field()
     args: tuple
-    settings: dict
-    status_bits: dict
+    settings: dict = static_field()
+    status_bits: dict = static_field()
 
 
 def default_grid():

@@ -14,6 +14,7 @@ import jaxgrav
 from jaxgrav import Grid, montecarlo
 from jaxgrav.cli import main
 from jaxgrav.cli.bench import default_bench_dir
+from jaxgrav.cli.montecarlo import summarize
 from jaxgrav.montecarlo import methods as montecarlo_methods
 from jaxgrav.sim import DEG_ARC_M
 
@@ -25,7 +26,7 @@ slow = pytest.mark.skipif(
 @pytest.fixture(scope="module")
 def mc_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("mc") / "corr.nc"
-    code = main(["montecarlo", "--method", "correlation", "--runs", "8", "--chunk", "4",
+    code = main(["montecarlo", "--method", "dense", "--runs", "8", "--chunk", "4",
                  "--seed", "3", "--fixes", "20", "--drift", "0.03", "--out", str(out),
                  "--no-progress"])
     return code, out
@@ -42,14 +43,14 @@ def test_montecarlo_writes_netcdf_png_and_summary(mc_run, capsys):
         assert ds["status"].dtype == np.int32
         assert np.all(ds["ins_err_m"] > 0) and np.all(np.isfinite(ds["err_m"]))
         a = ds.attrs
-        assert (a["method"], a["runs"], a["seed"], a["chunk"]) == ("correlation", 8, 3, 4)
+        assert (a["method"], a["runs"], a["seed"], a["chunk"]) == ("dense", 8, 3, 4)
         assert a["setting_n_fixes"] == 20 and a["setting_drift_deg"] == 0.03
         assert 0 <= a["summary_failure_rate"] <= 1
         assert a["summary_err_m_p50"] == pytest.approx(float(np.median(ds["err_m"])))
         assert "--runs 8 --chunk 4" in a["command"]
         assert json.loads(a["status_bits"])["8"].startswith("the best candidate")
         # the same keys through the library give the same numbers
-        spec = montecarlo_methods.build("correlation", drift_deg=0.03, n_fixes=20)
+        spec = montecarlo_methods.build("dense", drift_deg=0.03, n_fixes=20)
         lib = montecarlo.run(spec.fn, jax.random.key(3), 8, chunk=4, args=spec.args,
                              progress=False)
         np.testing.assert_array_equal(ds["err_m"].values, lib["err_m"])
@@ -57,7 +58,7 @@ def test_montecarlo_writes_netcdf_png_and_summary(mc_run, capsys):
 
 def test_montecarlo_prints_summary_table(tmp_path, capsys):
     out = tmp_path / "again.nc"  # compiled already: same shapes as mc_run
-    assert main(["montecarlo", "--method", "correlation", "--runs", "8", "--chunk", "4",
+    assert main(["montecarlo", "--method", "dense", "--runs", "8", "--chunk", "4",
                  "--seed", "3", "--fixes", "20", "--drift", "0.03", "--out", str(out)]) == 0
     cap = capsys.readouterr()
     assert "8/8" in cap.err and "runs/s" in cap.err  # the progress bar
@@ -66,9 +67,31 @@ def test_montecarlo_prints_summary_table(tmp_path, capsys):
         assert text in cap.out
 
 
+def test_montecarlo_method_correlation_is_dense(mc_run, tmp_path, capsys, monkeypatch):
+    """The deprecated name still runs (same shapes as mc_run: compiled already), notes
+    the new name on stderr and records it."""
+    monkeypatch.setattr(montecarlo_methods, "WARNED_ALIASES", set())
+    out = tmp_path / "old.nc"
+    with pytest.warns(DeprecationWarning, match="'correlation' is deprecated"):
+        assert main(["montecarlo", "--method", "correlation", "--runs", "8", "--chunk", "4",
+                     "--seed", "3", "--fixes", "20", "--drift", "0.03", "--out", str(out),
+                     "--no-progress"]) == 0
+    assert "--method correlation is deprecated; use --method dense" in capsys.readouterr().err
+    with xr.open_dataset(out) as ds, xr.open_dataset(mc_run[1]) as ref:
+        assert ds.attrs["method"] == "dense" and "--method dense" in ds.attrs["command"]
+        np.testing.assert_array_equal(ds["err_m"].values, ref["err_m"].values)
+
+
+def test_montecarlo_help_lists_the_methods_without_the_old_name(capsys):
+    with pytest.raises(SystemExit):
+        main(["montecarlo", "--help"])
+    text = capsys.readouterr().out
+    assert "{chains,dense,ekf," in text and "correlation," not in text
+
+
 def test_montecarlo_refuses_to_overwrite(mc_run, capsys):
     _, out = mc_run
-    args = ["montecarlo", "--method", "correlation", "--runs", "8", "--out", str(out)]
+    args = ["montecarlo", "--method", "dense", "--runs", "8", "--out", str(out)]
     assert main(args) == 2
     assert "exist; pass --force" in capsys.readouterr().err
 
@@ -83,7 +106,7 @@ def test_montecarlo_refuses_to_overwrite(mc_run, capsys):
 ])
 def test_montecarlo_bad_input(tmp_path, capsys, args, match):
     jax.devices()  # JAX runs already (else --devices 64 would split the host into 64)
-    code = main(["montecarlo", "--method", "correlation", *args, "--out",
+    code = main(["montecarlo", "--method", "dense", *args, "--out",
                  str(tmp_path / "x.nc")])
     assert code == 2
     assert match in capsys.readouterr().err
@@ -171,8 +194,6 @@ def test_montecarlo_more_matchers(tmp_path, capsys, method, fixes, drift):
 
 
 def test_summarize_failure_bounds():
-    from jaxgrav.cli.montecarlo import summarize
-
     res = dict(ins_err_m=np.array([300.0, 300, 300]), err_m=np.array([90.0, 150, 310]),
                status=np.zeros(3, np.int32))
     assert summarize(res)["failure_rate"] == pytest.approx(2 / 3)  # > INS/3: 150 and 310

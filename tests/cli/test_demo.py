@@ -3,6 +3,8 @@
 import json
 import math
 
+import jax
+import matplotlib.image
 import numpy as np
 import pytest
 
@@ -11,12 +13,33 @@ from jaxgrav.cli.demo import OUTPUTS, run_demo
 from jaxgrav.montecarlo.paper_a_table1 import TABLE1_DRIFTS_DEG
 from jaxgrav.sim import DEG_ARC_M
 
+TRACE_EVENT = "/jax/core/compile/jaxpr_trace_duration"
+TRACED = []  # functions traced while the demo ran
+_RECORDING = [False]
+
+
+def _record_trace(name, secs, fun_name="", **kw):
+    if _RECORDING[0] and name == TRACE_EVENT:
+        TRACED.append(fun_name)
+
 
 @pytest.fixture(scope="module")
 def demo_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo") / "out"
-    run_demo(out, runs=5, seed=0, smoke=True)
+    jax.monitoring.register_event_duration_secs_listener(_record_trace)
+    _RECORDING[0] = True
+    try:
+        run_demo(out, runs=5, seed=0, smoke=True)
+    finally:
+        _RECORDING[0] = False
     return out
+
+
+def test_demo_batches_reuse_the_compiled_code(demo_dir):
+    """Six batches (five table groups, one Monte Carlo) through the runner's one jitted
+    chunk function: traced once per distinct shape, here the chain search's two window
+    sizes (the four smaller drifts share one) and the dense matcher."""
+    assert 1 <= TRACED.count("chunk_fn") <= 3  # fewer if a test compiled them already
 
 
 def test_demo_table_has_the_five_drift_groups(demo_dir):
@@ -54,8 +77,6 @@ def test_demo_summary_json(demo_dir):
 
 
 def test_demo_png(demo_dir):
-    import matplotlib.image
-
     path = demo_dir / "tracks.png"
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     img = matplotlib.image.imread(path)

@@ -1,7 +1,7 @@
 """Monte Carlo runner: equal to a vmapped loop, independent of chunking, devices and hosts.
 
 A toy function is checked exactly; two real methods of
-:data:`jaxgrav.montecarlo.methods.BUILDERS` (the dense correlation matcher and the UKF,
+:data:`jaxgrav.montecarlo.methods.BUILDERS` (the dense-offset matcher and the UKF,
 short runs) are checked across chunk sizes and on 8 devices too.
 
 The multi-device checks run in subprocesses with
@@ -17,6 +17,7 @@ import socket
 import subprocess
 import sys
 import textwrap
+import warnings
 from pathlib import Path
 from typing import NamedTuple
 
@@ -27,6 +28,7 @@ import pytest
 import xarray as xr
 
 from jaxgrav import Grid, montecarlo
+from jaxgrav.montecarlo import matcher_runs
 from jaxgrav.montecarlo import methods as montecarlo_methods
 from jaxgrav.sim import DEG_ARC_M
 
@@ -182,7 +184,7 @@ def test_dataset_and_netcdf_round_trip(tmp_path):
 # ------------------------------------------------------------- real methods
 # (options, n_runs, chunk): the chunk does not divide n_runs (the last chunk is padded)
 # and is the one the CLI and filter tests compile (same shapes: one compilation a suite)
-REAL = {"correlation": (dict(drift_deg=0.03, n_fixes=20), 5, 4),
+REAL = {"dense": (dict(drift_deg=0.03, n_fixes=20), 5, 4),
         "ukf": (dict(n_fixes=31), 3, 2)}
 
 
@@ -217,11 +219,35 @@ def test_real_method_gives_the_same_runs_for_any_chunk(method):
     alone, chunked = real_runs(method, 1), real_runs(method, chunk)
     assert_same_runs(alone, chunked, f"{method} chunk 1 vs {chunk}")
     assert len(set(np.round(chunked["err_m"], 6))) == n  # n different runs, not one repeated
-    if method == "correlation":  # fixed INS drift: every INS track is off by exactly it
+    if method == "dense":  # fixed INS drift: every INS track is off by exactly it
         np.testing.assert_allclose(chunked["ins_err_m"], opts["drift_deg"] * DEG_ARC_M,
                                    rtol=1e-6)
     else:  # 2 km initial error, 0.2 m/s: still about 2 km after 5 min
         assert np.all((chunked["ins_err_m"] > 1500) & (chunked["ins_err_m"] < 2500))
+
+
+def test_correlation_is_a_deprecated_name_of_dense(monkeypatch):
+    """``correlation`` builds ``dense`` and warns once a process; the old function names
+    warn on every access and are the new functions."""
+    monkeypatch.setattr(montecarlo_methods, "WARNED_ALIASES", set())
+    assert "correlation" not in montecarlo_methods.BUILDERS
+    opts = REAL["dense"][0]
+    new = montecarlo_methods.build("dense", **opts)
+    with pytest.warns(DeprecationWarning, match="'correlation' is deprecated; use 'dense'"):
+        old = montecarlo_methods.build("correlation", **opts)
+    assert old.fn is new.fn is matcher_runs.dense_run and old.settings == new.settings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the second time: no warning
+        assert montecarlo_methods.build("correlation", **opts).fn is matcher_runs.dense_run
+    for module, name, value in ((montecarlo_methods, "correlation_run", matcher_runs.dense_run),
+                                (matcher_runs, "correlation_run", matcher_runs.dense_run),
+                                (matcher_runs, "correlation_builder", matcher_runs.dense_builder)):
+        with pytest.warns(DeprecationWarning, match=f"{name} is deprecated"):
+            assert getattr(module, name) is value
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        montecarlo_methods.nope  # noqa: B018
+    with pytest.raises(ValueError, match=r"method must be one of \['chains', 'dense'"):
+        montecarlo_methods.build("corr")
 
 
 # ------------------------------------------------------------- other processes
@@ -273,7 +299,7 @@ def _split(npz, names):
 
 
 def test_eight_devices_give_the_numbers_of_one(tmp_path):
-    """The toy, and the real correlation matcher and UKF (all runs in one chunk of 8,
+    """The toy, and the real dense matcher and UKF (all runs in one chunk of 8,
     one run a device, padded), on 8 devices against one device in chunks."""
     cases = [["all8_chunk3", None, 3], ["two_chunk5", 2, 5],  # 2 chunks of 8; 2 of 6
              *([f"{m}8", None, None, m] for m in REAL)]
