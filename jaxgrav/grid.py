@@ -18,6 +18,7 @@ The node geometry lives in :mod:`jaxgrav.grid_axes`, NetCDF reading and writing 
 
 import dataclasses
 import functools
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -213,10 +214,11 @@ class Grid(GeographicAxes):
         )
 
     def upward_continue(self, height):
-        """Upward-continue the field by ``height`` metres with the FFT (flat-Earth, padded).
+        """Deprecated: use :func:`jaxgrav.fields.spectral.upward_continue_grid`.
 
-        Uses :func:`jaxgrav.fields.spectral.upward_continuation` with the node
-        spacing in metres at the grid's central latitude (:meth:`spacing_m`).
+        Upward-continues the field by ``height`` metres with the FFT (flat-Earth,
+        padded); kept for one release with a :class:`DeprecationWarning` (the FFT
+        continuation belongs to :mod:`jaxgrav.fields`, a layer above the grid).
 
         Parameters
         ----------
@@ -227,12 +229,13 @@ class Grid(GeographicAxes):
         -------
         Grid
         """
-        # fields builds Grids and so sits above grid; this one method reaches up, and
-        # importing it here keeps the grid -> fields arrow out of module import time
-        from jaxgrav.fields.spectral import upward_continuation
+        warnings.warn("Grid.upward_continue is deprecated: use "
+                      "jaxgrav.fields.spectral.upward_continue_grid(grid, height)",
+                      DeprecationWarning, stacklevel=2)
+        # deprecation shim: the one import from a higher layer, at call time only
+        from jaxgrav.fields.spectral import upward_continue_grid
 
-        v = upward_continuation(self.values, self.spacing_m(), height)
-        return dataclasses.replace(self, values=v)
+        return upward_continue_grid(self, height)
 
     def __repr__(self):
         w, e, s, n = self.extent

@@ -7,6 +7,7 @@ metres, the fractional node index of points and the inside mask; it is the base 
 validates a coordinate axis (package-internal).
 """
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -103,7 +104,8 @@ class GeographicAxes:
         """
         if lat is None:
             lat_c = self.lat0 + 0.5 * self.dlat * (self.ny - 1)
-            return tuple(float(v) for v in self.spacing_m(lat_c))
+            with jax.ensure_compile_time_eval():  # static geometry: floats even under jit
+                return tuple(float(v) for v in self.spacing_m(lat_c))
         dy = meridian_radius(lat) * self.dlat * DEG
         dx = prime_vertical_radius(lat) * jnp.cos(jnp.asarray(lat) * DEG) * self.dlon * DEG
         return dy, dx

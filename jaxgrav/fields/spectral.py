@@ -15,6 +15,7 @@ confines edge effects to a band near the borders. On a synthetic point-mass test
 modes offered; reflect/symmetric padding was 2–4 times worse.
 """
 
+import dataclasses
 import functools
 from typing import NamedTuple
 
@@ -24,7 +25,13 @@ import numpy as np
 
 from jaxgrav._validate import check_finite, concrete
 
-__all__ = ["PAD_MODES", "Wavenumbers", "upward_continuation", "wavenumbers"]
+__all__ = [
+    "PAD_MODES",
+    "Wavenumbers",
+    "upward_continuation",
+    "upward_continue_grid",
+    "wavenumbers",
+]
 
 PAD_MODES = ("edge", "reflect", "symmetric", "wrap", "constant")
 """Accepted ``pad`` modes of :func:`upward_continuation` (as in ``numpy.pad``;
@@ -258,3 +265,26 @@ def _continue(values, dy, dx, height, *, pad, widths, taper):
     kernel = jnp.exp(-k * height[..., None, None])
     out = jnp.fft.irfft2(spectrum * kernel, s=(big_ny, big_nx), axes=(-2, -1))
     return out[..., py : py + ny, px : px + nx]
+
+
+def upward_continue_grid(grid, height):
+    """Upward-continue a :class:`~jaxgrav.grid.Grid` by ``height`` metres (FFT, flat Earth).
+
+    :func:`upward_continuation` of the grid's values with its node spacing in metres at
+    the grid's central latitude (:meth:`~jaxgrav.grid.Grid.spacing_m`), edge padding
+    and taper (the defaults).
+
+    Parameters
+    ----------
+    grid : Grid
+        Field at the reference level (e.g. mGal), shape ``(ny, nx)``.
+    height : float or Array
+        Continuation height Δz ≥ 0 (m); an array, so sweeping it does not recompile.
+
+    Returns
+    -------
+    Grid
+        Same geometry, continued values.
+    """
+    v = upward_continuation(grid.values, grid.spacing_m(), height)
+    return dataclasses.replace(grid, values=v)
