@@ -22,11 +22,12 @@ from jaxgrav.filters.model import (
     gravity_measurement,
     map_anomaly,
     map_at_error,
+    pad_to_stride,
     predict_only,
     run_filter,
     status_messages_filter,
 )
-from jaxgrav.filters.pmf import PMFState, pmf, run_pmf
+from jaxgrav.filters.pmf import PMFFilter, PMFState, pmf, run_pmf
 
 __all__ = [
     "FILTER_METHODS",
@@ -37,6 +38,7 @@ __all__ = [
     "GaussianSumState",
     "GuardConfig",
     "MapPlusBias",
+    "PMFFilter",
     "PMFState",
     "Step",
     "StepInfo",
@@ -49,6 +51,7 @@ __all__ = [
     "guard_run",
     "map_anomaly",
     "map_at_error",
+    "pad_to_stride",
     "pmf",
     "predict",
     "predict_only",

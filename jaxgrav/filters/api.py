@@ -14,8 +14,8 @@ from jaxgrav.constants import DEG
 from jaxgrav.filters.gaussian_sum import gaussian_sum
 from jaxgrav.filters.guard import GuardConfig, guard_run
 from jaxgrav.filters.kalman import ekf, ukf
-from jaxgrav.filters.model import Dynamics, Step, run_filter
-from jaxgrav.filters.pmf import pmf, run_pmf
+from jaxgrav.filters.model import Dynamics, Step, pad_to_stride, run_filter
+from jaxgrav.filters.pmf import pmf
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance, transition
 from jaxgrav.tracks import csv_line
@@ -69,7 +69,8 @@ def _gaussian_run(kind, field, dynamics, p0, steps, guard):
 
 def _pmf_run(field, dt, p0, cell_m, q_pos, steps, every):
     filt = pmf(PMF_CELLS, cell_m, q_pos=q_pos)
-    _, infos = run_pmf(filt, field, dt, jnp.zeros(p0.shape[0]), p0, steps, every)
+    dynamics = filt.dynamics(jnp.mean(steps.lat), dt)
+    _, infos = run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps, every)
     return infos
 
 
@@ -130,24 +131,18 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     r = float(sigma_gravity) ** 2
     p0, dynamics = _jitted("prior")(float(np.mean(lat)), dt, sigma_pos, sigma_vel)
     every = None
+    steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r))
     if method == "pmf":
         rows = np.flatnonzero(np.isfinite(gravity))
         every = reading_stride(rows, where)
         cell_m = 2.0 * PMF_SPAN_SIGMA * sigma_pos / (PMF_CELLS - 1)
         q_pos = PMF_Q_POS * (sigma_vel / 0.1414) ** 2
-        pad = (every - 1 - int(rows[0])) % every  # readings on steps every-1, 2 every-1, …
-        total = pad + n + (-(pad + n) % every)
-        idx = np.clip(np.arange(total) - pad, 0, n - 1)
-        z = np.where((np.arange(total) >= pad) & (np.arange(total) < pad + n), gravity[idx],
-                     np.nan)
-        steps = Step(jnp.asarray(lat[idx]), jnp.asarray(lon[idx]), jnp.asarray(z),
-                     jnp.full(total, r))
-        infos = _jitted("pmf")(field, dt, p0, cell_m, q_pos, steps, every=every)
-        # causal: rows between readings show the prediction (run_pmf predicts every step)
-        x, sigma, status = (np.asarray(a)[pad:pad + n]
+        padded, start = pad_to_stride(steps, every, rows[0])
+        infos = _jitted("pmf")(field, dt, p0, cell_m, q_pos, padded, every=every)
+        # causal: rows between readings show the prediction
+        x, sigma, status = (np.asarray(a)[start:start + n]
                             for a in (infos.x, infos.sigma, infos.status))
     else:
-        steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r))
         ratio = np.inf if guard is None else float(guard)
         infos = _jitted("gaussian")(method, field, dynamics, p0, steps, ratio)
         x, sigma, status = (np.asarray(a) for a in (infos.x, infos.sigma, infos.status))

@@ -191,7 +191,8 @@ def run_steps(run, scenario=FilterScenario()):
     Returns
     -------
     dynamics : Dynamics
-        The INS error model at the run's mean INS latitude.
+        The INS error model over ``scenario.dt`` at the run's mean INS latitude, with
+        ``dt`` filled in.
     steps : Step
         Leading axis ``T − 1``.
     """
@@ -199,7 +200,8 @@ def run_steps(run, scenario=FilterScenario()):
     f, q = transition(s.ins, jnp.mean(run.ins_lat), s.dt)
     t = run.ins_lat.shape[0] - 1
     r = jnp.full(t, jnp.square(s.noise_mgal))
-    return Dynamics(f, q), Step(run.ins_lat[1:], run.ins_lon[1:], run.readings[1:], r)
+    dyn = Dynamics(f, q, jnp.asarray(s.dt, f.dtype))
+    return dyn, Step(run.ins_lat[1:], run.ins_lon[1:], run.readings[1:], r)
 
 
 def run_metrics(run, infos):

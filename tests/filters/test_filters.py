@@ -664,3 +664,25 @@ def test_split_prior_preserves_mean_and_covariance(per_axis, spacing, prior):
         cov / np.outer(sd, sd), np.asarray(p0) / np.outer(sd, sd), atol=1e-10
     )
     assert np.all(np.linalg.eigvalsh(p[:, :2, :2]) > 0)
+
+
+def test_pad_to_stride_puts_the_readings_on_the_update_steps():
+    """Readings every 3rd step from step 0: shifted by 2 steps, padded to whole strides."""
+    t, every = 7, 3
+    z = np.full(t, np.nan)
+    z[[0, 3, 6]] = [1.0, 2.0, 3.0]
+    steps = fl.Step(np.arange(t) + 20.0, np.arange(t) + 120.0, z, np.arange(t) + 1.0)
+    padded, start = fl.pad_to_stride(steps, every, first=0)
+    assert start == 2 and padded.z.shape == (9,)
+    for name in ("lat", "lon", "r"):  # the ends repeat the first and last step
+        np.testing.assert_array_equal(np.asarray(getattr(padded, name)),
+                                      np.asarray(getattr(steps, name))[[0, 0, *range(t)]])
+    zp = np.asarray(padded.z)
+    np.testing.assert_array_equal(zp[start:start + t], z)
+    assert np.isnan(zp[:start]).all()
+    assert np.all(np.flatnonzero(np.isfinite(zp)) % every == every - 1)
+    # already on the stride: only the end is padded
+    padded, start = fl.pad_to_stride(jax.tree.map(lambda a: a[1:6], steps), every)
+    zp = np.asarray(padded.z)
+    assert start == 0 and zp.shape == (6,) and np.isnan(zp[5])
+    np.testing.assert_array_equal(np.flatnonzero(np.isfinite(zp)), [2])
