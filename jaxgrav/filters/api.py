@@ -3,8 +3,11 @@
 As :mod:`jaxgrav.match.api` is for matching: the entry point takes one track in
 degrees, builds the INS error model's prior and dynamics, runs a filter of this
 package (UKF, EKF, Gaussian sum or point-mass) once jitted, and returns the
-corrected positions with their 1-σ and per-row status.
+corrected positions with their 1-σ and per-row status. The jitted runners are module
+functions: one compilation per process, filter and track shape.
 """
+
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -36,7 +39,25 @@ it scales with ``sigma_vel²``."""
 
 
 def reading_stride(rows, where):
-    """Rows between readings for the point-mass filter (1 for a single reading)."""
+    """Rows between readings for the point-mass filter.
+
+    Parameters
+    ----------
+    rows : numpy.ndarray of int, shape ``(R,)``
+        Rows with a reading, ascending.
+    where : str
+        How error messages name the track.
+
+    Returns
+    -------
+    int
+        The fixed stride (1 for a single reading).
+
+    Raises
+    ------
+    ValueError
+        The readings are not on a fixed stride (the message names the CSV lines).
+    """
     if rows.size < 2:
         return 1
     gaps = np.diff(rows)
@@ -52,13 +73,14 @@ def reading_stride(rows, where):
     return every
 
 
-
+@jax.jit
 def _prior_and_dynamics(lat_mean, dt, sigma_pos, sigma_vel):
     model = INSErrorModel()
     return initial_covariance(model, sigma_pos, sigma_vel), Dynamics(*transition(model,
                                                                                lat_mean, dt))
 
 
+@functools.partial(jax.jit, static_argnames=("kind",))
 def _gaussian_run(kind, field, dynamics, p0, steps, guard):
     filt = {"ukf": ukf, "ekf": ekf, "gsf": lambda: gaussian_sum(ukf(), 3)}[kind]()
     _, infos = run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps)
@@ -67,24 +89,12 @@ def _gaussian_run(kind, field, dynamics, p0, steps, guard):
     return jax.tree.map(lambda g, a: jnp.where(jnp.isfinite(guard), g, a), guarded, infos)
 
 
+@functools.partial(jax.jit, static_argnames=("every",))
 def _pmf_run(field, dt, p0, cell_m, q_pos, steps, every):
     filt = pmf(PMF_CELLS, cell_m, q_pos=q_pos)
     dynamics = filt.dynamics(jnp.mean(steps.lat), dt)
     _, infos = run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps, every)
     return infos
-
-
-_JITTED = {}
-
-
-def _jitted(name):
-    """Module-level jitted runners (one compilation per process and shapes)."""
-    if name not in _JITTED:
-        fn, static = {"prior": (_prior_and_dynamics, ()),
-                      "gaussian": (_gaussian_run, ("kind",)),
-                      "pmf": (_pmf_run, ("every",))}[name]
-        _JITTED[name] = jax.jit(fn, static_argnames=static)
-    return _JITTED[name]
 
 
 def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
@@ -129,7 +139,7 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     dt = float(np.median(np.diff(t)))
     n = t.size
     r = float(sigma_gravity) ** 2
-    p0, dynamics = _jitted("prior")(float(np.mean(lat)), dt, sigma_pos, sigma_vel)
+    p0, dynamics = _prior_and_dynamics(float(np.mean(lat)), dt, sigma_pos, sigma_vel)
     every = None
     steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r))
     if method == "pmf":
@@ -138,13 +148,13 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         cell_m = 2.0 * PMF_SPAN_SIGMA * sigma_pos / (PMF_CELLS - 1)
         q_pos = PMF_Q_POS * (sigma_vel / 0.1414) ** 2
         padded, start = pad_to_stride(steps, every, rows[0])
-        infos = _jitted("pmf")(field, dt, p0, cell_m, q_pos, padded, every=every)
+        infos = _pmf_run(field, dt, p0, cell_m, q_pos, padded, every=every)
         # causal: rows between readings show the prediction
         x, sigma, status = (np.asarray(a)[start:start + n]
                             for a in (infos.x, infos.sigma, infos.status))
     else:
         ratio = np.inf if guard is None else float(guard)
-        infos = _jitted("gaussian")(method, field, dynamics, p0, steps, ratio)
+        infos = _gaussian_run(method, field, dynamics, p0, steps, ratio)
         x, sigma, status = (np.asarray(a) for a in (infos.x, infos.sigma, infos.status))
     m = np.asarray(meridian_radius(lat))
     e = np.asarray(prime_vertical_radius(lat)) * np.cos(lat * DEG)
