@@ -24,6 +24,7 @@ from jaxgrav.filters.model import (
     map_at_error,
     pad_to_stride,
     predict_only,
+    prepare_map,
     run_filter,
     status_messages_filter,
 )
@@ -55,6 +56,7 @@ __all__ = [
     "pmf",
     "predict",
     "predict_only",
+    "prepare_map",
     "run_filter",
     "run_pmf",
     "sigma_weights",

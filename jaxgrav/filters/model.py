@@ -38,7 +38,7 @@ import numpy as np
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import PointMasses, _anomaly_kernel
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-from jaxgrav.grid import Grid
+from jaxgrav.grid import Grid, make_sampler
 from jaxgrav.sim.ins import GRAV
 
 __all__ = [
@@ -54,6 +54,7 @@ __all__ = [
     "map_at_error",
     "pad_to_stride",
     "predict_only",
+    "prepare_map",
     "run_filter",
     "status_messages_filter",
 ]
@@ -161,6 +162,29 @@ class Filter(NamedTuple):
     init: Callable
     update: Callable
     predict: Callable | None = None
+
+
+def prepare_map(field):
+    """A map made ready to be evaluated many times: a Grid's bicubic coefficients, once.
+
+    :func:`run_filter` calls it before its scan, so the spline solve over the whole
+    map is not part of the step (XLA would usually hoist it out of the loop; this
+    does not rely on that).
+
+    Parameters
+    ----------
+    field : Grid, PointMasses or callable
+
+    Returns
+    -------
+    PointMasses or callable
+        For a Grid, ``f(lat, lon) -> mGal`` with the coefficients computed here
+        (:func:`jaxgrav.grid.make_sampler`, bicubic, NaN off the grid; no
+        validation); anything else unchanged.
+    """
+    if isinstance(field, Grid):
+        return make_sampler(field, "bicubic")
+    return field
 
 
 def map_anomaly(field, lat, lon):
@@ -320,7 +344,8 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
     filt : Filter
     field : Grid, PointMasses or callable
         Map; pass it here (a traced argument), not closed over, so large grids are
-        not baked into the compiled code.
+        not baked into the compiled code. Prepared once (:func:`prepare_map`) for
+        all steps.
     dynamics : Dynamics
         Error dynamics per step.
     x0 : Array, shape ``(n,)``
@@ -352,6 +377,7 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
     if isinstance(every, bool) or k < 1:
         raise ValueError(f"every must be a positive int (steps per reading); got {every!r}")
     every = k
+    field = prepare_map(field)
     state = filt.init(x0, p0)
 
     def body(state, step):

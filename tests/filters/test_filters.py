@@ -8,6 +8,7 @@ compiles few programs.
 """
 
 import jax
+import jax.extend
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -457,6 +458,28 @@ def test_structured_ukf_equals_the_generic_ukf(map_kind, dynamics, prior, runs, 
     assert float(final.p[0, 0]) < 0.8 * float(p0[0, 0])
     if map_kind == "grid":
         assert np.any(np.asarray(infos.status) & FLAGS["off_map"])
+
+
+def _dots(jaxpr, shape):
+    """dot_general equations with this output shape in a jaxpr and its sub-jaxprs."""
+    n = 0
+    for eqn in jaxpr.eqns:
+        n += eqn.primitive.name == "dot_general" and eqn.outvars[0].aval.shape == shape
+        for sub in jax.extend.core.jaxprs_in_params(eqn.params):
+            n += _dots(sub, shape)
+    return n
+
+
+@pytest.mark.parametrize("filt", [UKF, EKF], ids=["ukf", "ekf"])
+def test_a_grid_is_prepared_once_outside_the_scan(filt, dynamics, prior, runs, smooth_grid):
+    """run_filter computes the bicubic coefficients (a spline solve over the whole map,
+    ny × nx dots) before its scan, not in the step (traced only, nothing compiled)."""
+    x0, p0 = prior
+    jaxpr = jax.make_jaxpr(lambda g: fl.run_filter(filt, g, dynamics, x0, p0, _one(runs[0], 0)))(
+        smooth_grid).jaxpr
+    shape = tuple(smooth_grid.values.shape)
+    (scan,) = [e for e in jaxpr.eqns if e.primitive.name == "scan"]
+    assert _dots(jaxpr, shape) == 3 and _dots(scan.params["jaxpr"].jaxpr, shape) == 0
 
 
 def test_map_plus_bias_checks_its_layout():
