@@ -26,7 +26,6 @@ an additive bias state — which the UKF recognises to evaluate the map at the
 callable ``h(field, x, lat, lon)`` still works (the generic path).
 """
 
-import dataclasses
 import operator
 from collections.abc import Callable
 from typing import NamedTuple
@@ -35,6 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import PointMasses, _anomaly_kernel
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
@@ -229,7 +229,7 @@ def map_at_error(field, d, lat, lon):
     return map_anomaly(field, true_lat, true_lon)
 
 
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class MapPlusBias:
     """A measurement ``h(x) = map_part(field, x[:n_position], lat, lon) + x[bias_index]``.
 
@@ -250,11 +250,13 @@ class MapPlusBias:
         Index of the additive bias state (``≥ n_position``).
     n_position : int
         Number of leading states the map part depends on.
+
+    All fields are static (a pytree without leaves): they decide the code, not data.
     """
 
-    map_part: Callable
-    bias_index: int = GRAV
-    n_position: int = 2
+    map_part: Callable = static_field()
+    bias_index: int = static_field(GRAV)
+    n_position: int = static_field(2)
 
     def __post_init__(self):
         if not 0 < self.n_position <= self.bias_index:
