@@ -2,12 +2,15 @@
 
 All filters share the measurement of :mod:`jaxgrav.filters.model` and the
 INS error model of :mod:`jaxgrav.sim.ins`; each is an optax-style ``init`` /
-``update`` pair run with ``lax.scan`` (:func:`run_filter`; ``every=k`` updates only on
-the reading steps of a fixed stride) and vmapped over runs. :func:`guard_run` holds
+``update`` / ``predict`` triple (:class:`Filter`) run by the one runner
+:func:`run_filter` with ``lax.scan`` (``every=k`` updates only on the reading steps of
+a fixed stride; :func:`pad_to_stride` puts a run's readings there) and vmapped over
+runs. The map is prepared once per run (:func:`prepare_map`). :func:`guard_run` holds
 back the position corrections in weakly observed directions (paper D's "no harm").
+:func:`filter_track` is the validated single-track entry point.
 """
 
-from jaxgrav.filters.api import FILTER_METHODS, filter_track
+from jaxgrav.filters.api import FILTER_METHODS, filter_track, pad_to_stride
 from jaxgrav.filters.gaussian_sum import GaussianSumState, gaussian_sum, split_prior
 from jaxgrav.filters.guard import GuardConfig, free_covariance, guard_infos, guard_run
 from jaxgrav.filters.kalman import ekf, predict, sigma_weights, ukf
@@ -22,7 +25,6 @@ from jaxgrav.filters.model import (
     gravity_measurement,
     map_anomaly,
     map_at_error,
-    pad_to_stride,
     predict_only,
     prepare_map,
     run_filter,

@@ -17,14 +17,14 @@ from jaxgrav.constants import DEG
 from jaxgrav.filters.gaussian_sum import gaussian_sum
 from jaxgrav.filters.guard import GuardConfig, guard_run
 from jaxgrav.filters.kalman import ekf, ukf
-from jaxgrav.filters.model import Dynamics, Step, pad_to_stride, run_filter
+from jaxgrav.filters.model import Dynamics, Step, run_filter
 from jaxgrav.filters.pmf import pmf
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance, transition
 from jaxgrav.tracks import csv_line
 
 __all__ = ["FILTER_METHODS", "PMF_CELLS", "PMF_Q_POS", "PMF_SPAN_SIGMA", "filter_track",
-           "reading_stride"]
+           "pad_to_stride", "reading_stride"]
 
 FILTER_METHODS = ("ukf", "ekf", "gsf", "pmf")
 """The filters :func:`filter_track` runs."""
@@ -36,6 +36,44 @@ hold 0.2 % of the prior (the ``grid_edge`` flag's threshold is 0.1 %)."""
 PMF_Q_POS = 4.0
 """The point-mass filter's random-walk density (m²/s) at ``sigma_vel = 0.2/√2 m/s``;
 it scales with ``sigma_vel²``."""
+
+
+def pad_to_stride(steps, every, first=None):
+    """Pad a run at both ends so that its readings fall on ``run_filter(..., every=k)``'s updates.
+
+    :func:`~jaxgrav.filters.model.run_filter` with ``every=k`` updates on steps
+    ``k − 1, 2k − 1, …``. A run whose readings sit on a stride of ``k`` steps from step
+    ``first`` is shifted by ``(k − 1 − first) mod k`` prediction-only steps in front
+    and padded behind to a whole number of blocks of ``k`` steps. The padding repeats
+    the first (or last) step's position and noise variance, with no reading.
+
+    Parameters
+    ----------
+    steps : Step
+        Leading axis ``T`` (concrete or traced arrays).
+    every : int
+        Steps per reading ``k`` (static).
+    first : int, optional
+        Index of a reading step (e.g. the first reading; static). Default ``k − 1``:
+        the readings already sit on the update steps, and only the end is padded.
+
+    Returns
+    -------
+    padded : Step
+        Leading axis a multiple of ``k``.
+    start : int
+        ``padded[start : start + T]`` are the given steps; the rows of a run's
+        :class:`~jaxgrav.filters.model.StepInfo` there are the causal output for them.
+    """
+    t = steps.z.shape[0]
+    first = every - 1 if first is None else int(first)
+    start = (every - 1 - first) % every
+    total = start + t + (-(start + t) % every)
+    idx = np.clip(np.arange(total) - start, 0, t - 1)
+    inside = (np.arange(total) >= start) & (np.arange(total) < start + t)
+    z = jnp.where(inside, jnp.asarray(steps.z)[idx], jnp.nan)
+    return Step(jnp.asarray(steps.lat)[idx], jnp.asarray(steps.lon)[idx], z,
+                jnp.asarray(steps.r)[idx]), start
 
 
 def reading_stride(rows, where):

@@ -32,7 +32,6 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import DEG
@@ -52,7 +51,6 @@ __all__ = [
     "gravity_measurement",
     "map_anomaly",
     "map_at_error",
-    "pad_to_stride",
     "predict_only",
     "prepare_map",
     "run_filter",
@@ -279,44 +277,6 @@ north/east, m) plus the gravimeter's systematic error δg_a (``x[12]``, mGal). A
 """
 
 
-def pad_to_stride(steps, every, first=None):
-    """Pad a run at both ends so that its readings fall on ``run_filter(..., every=k)``'s updates.
-
-    :func:`run_filter` with ``every=k`` updates on steps ``k − 1, 2k − 1, …``. A run
-    whose readings sit on a stride of ``k`` steps from step ``first`` is shifted by
-    ``(k − 1 − first) mod k`` prediction-only steps in front and padded behind to a
-    whole number of blocks of ``k`` steps. The padding repeats the first (or last)
-    step's position and noise variance, with no reading.
-
-    Parameters
-    ----------
-    steps : Step
-        Leading axis ``T`` (concrete or traced arrays).
-    every : int
-        Steps per reading ``k`` (static).
-    first : int, optional
-        Index of a reading step (e.g. the first reading; static). Default ``k − 1``:
-        the readings already sit on the update steps, and only the end is padded.
-
-    Returns
-    -------
-    padded : Step
-        Leading axis a multiple of ``k``.
-    start : int
-        ``padded[start : start + T]`` are the given steps; the rows of a run's
-        :class:`StepInfo` there are the causal output for them.
-    """
-    t = steps.z.shape[0]
-    first = every - 1 if first is None else int(first)
-    start = (every - 1 - first) % every
-    total = start + t + (-(start + t) % every)
-    idx = np.clip(np.arange(total) - start, 0, t - 1)
-    inside = (np.arange(total) >= start) & (np.arange(total) < start + t)
-    z = jnp.where(inside, jnp.asarray(steps.z)[idx], jnp.nan)
-    return Step(jnp.asarray(steps.lat)[idx], jnp.asarray(steps.lon)[idx], z,
-                jnp.asarray(steps.r)[idx]), start
-
-
 def predict_only(filt):
     """A filter's prediction-only step: ``filt.predict``, or ``update`` with no reading.
 
@@ -357,8 +317,9 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
     every : int
         Readings sit on a fixed stride (static): only steps ``every − 1, 2·every − 1,
         …`` (indices into ``steps``) may carry one, as in
-        :func:`~jaxgrav.scenarios.paper_d.filter_scenario` (:func:`pad_to_stride`
-        shifts other runs onto that stride). Those steps run
+        :func:`~jaxgrav.scenarios.paper_d.filter_scenario`
+        (:func:`~jaxgrav.filters.api.pad_to_stride` shifts other runs onto that
+        stride). Those steps run
         ``update`` (a NaN reading there is still a masked update); the others run the
         filter's ``predict`` only — no sigma points, no factorisation — and a finite
         reading on them is not used (flag ``reading_ignored``). Every step still

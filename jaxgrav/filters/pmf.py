@@ -396,7 +396,7 @@ def run_pmf(filt, field, dt, x0, p0, steps, every=1):
     ``run_pmf(filt, field, dt, x0, p0, steps, every)`` is
     ``run_filter(filt, field, filt.dynamics(mean(steps.lat), dt), x0, p0, steps, every)``
     (the error model at the mean INS latitude) for ``T`` a multiple of ``every``; pad
-    other runs with :func:`~jaxgrav.filters.model.pad_to_stride`. Kept for one release.
+    other runs with :func:`~jaxgrav.filters.api.pad_to_stride`. Kept for one release.
 
     Raises
     ------

@@ -16,6 +16,7 @@ import jaxgrav as jg
 from jaxgrav.cli import main
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
+from jaxgrav.fields.pointmass_fit import save_point_masses
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.tracks import read_track_csv, write_track_csv
 
@@ -103,8 +104,6 @@ def test_guard_holds_back_weak_directions(sim, tmp_path, capsys):
 def test_point_mass_model_file(sim, tmp_path, capsys):
     """--point-masses MODEL.json (save_point_masses): paper D's masses with a +5 mGal offset
     on readings carrying that offset give the paper-d run on the original readings."""
-    from jaxgrav.fields.pointmass_fit import save_point_masses
-
     model = tmp_path / "model.json"
     save_point_masses(model, paper_d(), offset=5.0)
     cols = read_track_csv(sim / "track.csv")
