@@ -497,7 +497,7 @@ def test_update_only_on_reading_steps_equals_every_step(which, n_steps, dynamics
     filt = {"ukf": UKF, "ekf": EKF, "gsf": GSF3}[which]
     x0, p0 = prior
     steps = jax.tree.map(lambda a: a[:n_steps], _one(runs[0], 2))  # readings on odd steps
-    final_1, infos_1 = run_every(filt, FIELD, dynamics, x0, p0, steps, 1)
+    final_1, infos_1 = run_one(filt, FIELD, dynamics, x0, p0, steps)  # every=1, shared
     final_2, infos_2 = run_every(filt, FIELD, dynamics, x0, p0, steps, 2)
     _assert_trees_close(final_2, final_1, rtol=1e-9, atol=1e-9)
     for name in ("x", "sigma", "p_pos", "status"):
