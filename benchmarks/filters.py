@@ -17,8 +17,9 @@ error model, a step every 2 s and a gravimeter reading every 10 s (NaN between),
 * ``ukf-float32``: ``ukf-float64`` on the runs cast to float32 with ``jax_enable_x64``
   off, and its difference from float64.
 * ``ekf-float64``: :func:`~jaxgrav.filters.ekf` (``jax.jacfwd`` Jacobian), ``every=5``.
-* ``pmf-float64``: :func:`~jaxgrav.filters.run_pmf` (default 61 × 61 grid, one
-  update per reading), on fewer runs (``n``); runs/s is what scales.
+* ``pmf-float64``: :func:`~jaxgrav.filters.run_filter` of :func:`~jaxgrav.filters.pmf`
+  (default 61 × 61 grid, its error model at each run's mean latitude, one update per
+  reading), on fewer runs (``n``); runs/s is what scales.
 
 Baseline: filterpy's ``UnscentedKalmanFilter`` with ``MerweScaledSigmaPoints(13, α, β,
 κ)``, ``fx = F x``, the same Q and R, and ``hx`` the same point-mass measurement
@@ -213,7 +214,8 @@ def monte_carlo_pmf(filt, dt, every, chunk=None):
     @jax.jit
     def mc(field, x0, p0, steps):
         def one(s):
-            return _summary(fl.run_pmf(filt, field, dt, x0, p0, s, every)[1])
+            dyn = filt.dynamics(jnp.mean(s.lat), dt)
+            return _summary(fl.run_filter(filt, field, dyn, x0, p0, s, every)[1])
 
         return over_runs(one, steps, chunk)
 

@@ -134,7 +134,8 @@ def evaluate(data, config):
         ratio, nees = _scores_raw(e, x, p)
     else:
         n = e.shape[0]
-        cfg = GuardConfig(*(jnp.full(n, float(c)) for c in config))
+        cfg = GuardConfig(*(jnp.full(n, float(c)) for c in (config.lo, config.hi,
+                                                              config.nis_max)))
         ratio, nees = _scores(e, x, p, *(jnp.asarray(data[k]) for k in ("nu", "s", "p_free")),
                               cfg)
     return np.asarray(ratio), np.asarray(nees)

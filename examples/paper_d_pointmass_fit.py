@@ -46,7 +46,9 @@ import numpy as np
 from jaxgrav import datasets
 from jaxgrav.fields import harmonics, pointmass
 from jaxgrav.fields.pointmass_fit import fit_point_masses, save_point_masses, sweep_point_masses
+from jaxgrav.filters import run_filter, ukf
 from jaxgrav.grid import Grid
+from jaxgrav.scenarios import FilterScenario, filter_scenario, initial_state, run_metrics, run_steps
 
 PAPER_AREA = ((23.9, 24.6), (122.6, 123.3))  # lat, lon ranges (degrees)
 WINDOW = ((24.0, 25.0), (124.0, 125.0))  # nearest ±0.5° window on the shipped map
@@ -106,15 +108,6 @@ def filter_with_maps(title, truth, maps, runs, minutes, seed=0):
     worst ratio of the filter's RMS position error over the second half of the run to the
     free INS's, and the NEES.
     """
-    from jaxgrav.filters import run_filter, ukf
-    from jaxgrav.scenarios import (
-        FilterScenario,
-        filter_scenario,
-        initial_state,
-        run_metrics,
-        run_steps,
-    )
-
     with jax.enable_x64(True):
         scen = FilterScenario(dt=10.0, reading_every=1, n_steps=round(minutes * 6) + 1)
 

@@ -39,7 +39,7 @@ import numpy as np
 
 from jaxgrav import datasets
 from jaxgrav.fields.pointmass import paper_d
-from jaxgrav.filters import ekf, gaussian_sum, pmf, run_filter, run_pmf, ukf
+from jaxgrav.filters import ekf, gaussian_sum, pmf, run_filter, ukf
 from jaxgrav.scenarios import FilterScenario, filter_scenario, initial_state, run_metrics, run_steps
 
 
@@ -60,10 +60,11 @@ def make_one(method, scenario):
     def one(run, dynamics, steps, field):
         x0, p0 = initial_state(scenario)
         if method == "pmf":
-            _, info = run_pmf(pmf(), field, scenario.dt, x0, p0, steps, 1)
+            filt = pmf()  # its own error model (with the step length) at the mean latitude
+            dynamics = filt.dynamics(jnp.mean(steps.lat), scenario.dt)
         else:
             filt = {"ekf": ekf(), "ukf": ukf(), "gsf-ukf": gaussian_sum(ukf(), 3, 1.0)}[method]
-            _, info = run_filter(filt, field, dynamics, x0, p0, steps)
+        _, info = run_filter(filt, field, dynamics, x0, p0, steps)
         m = run_metrics(run, info)
         turned = jnp.abs(run.truth.lat[-1] - run.truth.lat[0]) > 0.05
         return m["ins_err_m"], m["err_m"], m["nees"], turned

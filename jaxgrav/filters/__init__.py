@@ -2,12 +2,15 @@
 
 All filters share the measurement of :mod:`jaxgrav.filters.model` and the
 INS error model of :mod:`jaxgrav.sim.ins`; each is an optax-style ``init`` /
-``update`` pair run with ``lax.scan`` (:func:`run_filter`; ``every=k`` updates only on
-the reading steps of a fixed stride) and vmapped over runs. :func:`guard_run` holds
+``update`` / ``predict`` triple (:class:`Filter`) run by the one runner
+:func:`run_filter` with ``lax.scan`` (``every=k`` updates only on the reading steps of
+a fixed stride; :func:`pad_to_stride` puts a run's readings there) and vmapped over
+runs. The map is prepared once per run (:func:`prepare_map`). :func:`guard_run` holds
 back the position corrections in weakly observed directions (paper D's "no harm").
+:func:`filter_track` is the validated single-track entry point.
 """
 
-from jaxgrav.filters.api import FILTER_METHODS, filter_track
+from jaxgrav.filters.api import FILTER_METHODS, filter_track, pad_to_stride
 from jaxgrav.filters.gaussian_sum import GaussianSumState, gaussian_sum, split_prior
 from jaxgrav.filters.guard import GuardConfig, free_covariance, guard_infos, guard_run
 from jaxgrav.filters.kalman import ekf, predict, sigma_weights, ukf
@@ -23,10 +26,11 @@ from jaxgrav.filters.model import (
     map_anomaly,
     map_at_error,
     predict_only,
+    prepare_map,
     run_filter,
     status_messages_filter,
 )
-from jaxgrav.filters.pmf import PMFState, pmf, run_pmf
+from jaxgrav.filters.pmf import PMFFilter, PMFState, pmf, run_pmf
 
 __all__ = [
     "FILTER_METHODS",
@@ -37,6 +41,7 @@ __all__ = [
     "GaussianSumState",
     "GuardConfig",
     "MapPlusBias",
+    "PMFFilter",
     "PMFState",
     "Step",
     "StepInfo",
@@ -49,9 +54,11 @@ __all__ = [
     "guard_run",
     "map_anomaly",
     "map_at_error",
+    "pad_to_stride",
     "pmf",
     "predict",
     "predict_only",
+    "prepare_map",
     "run_filter",
     "run_pmf",
     "sigma_weights",

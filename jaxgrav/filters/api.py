@@ -3,8 +3,11 @@
 As :mod:`jaxgrav.match.api` is for matching: the entry point takes one track in
 degrees, builds the INS error model's prior and dynamics, runs a filter of this
 package (UKF, EKF, Gaussian sum or point-mass) once jitted, and returns the
-corrected positions with their 1-σ and per-row status.
+corrected positions with their 1-σ and per-row status. The jitted runners are module
+functions: one compilation per process, filter and track shape.
 """
+
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -15,13 +18,13 @@ from jaxgrav.filters.gaussian_sum import gaussian_sum
 from jaxgrav.filters.guard import GuardConfig, guard_run
 from jaxgrav.filters.kalman import ekf, ukf
 from jaxgrav.filters.model import Dynamics, Step, run_filter
-from jaxgrav.filters.pmf import pmf, run_pmf
+from jaxgrav.filters.pmf import pmf
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance, transition
 from jaxgrav.tracks import csv_line
 
 __all__ = ["FILTER_METHODS", "PMF_CELLS", "PMF_Q_POS", "PMF_SPAN_SIGMA", "filter_track",
-           "reading_stride"]
+           "pad_to_stride", "reading_stride"]
 
 FILTER_METHODS = ("ukf", "ekf", "gsf", "pmf")
 """The filters :func:`filter_track` runs."""
@@ -35,8 +38,64 @@ PMF_Q_POS = 4.0
 it scales with ``sigma_vel²``."""
 
 
+def pad_to_stride(steps, every, first=None):
+    """Pad a run at both ends so that its readings fall on ``run_filter(..., every=k)``'s updates.
+
+    :func:`~jaxgrav.filters.model.run_filter` with ``every=k`` updates on steps
+    ``k − 1, 2k − 1, …``. A run whose readings sit on a stride of ``k`` steps from step
+    ``first`` is shifted by ``(k − 1 − first) mod k`` prediction-only steps in front
+    and padded behind to a whole number of blocks of ``k`` steps. The padding repeats
+    the first (or last) step's position and noise variance, with no reading.
+
+    Parameters
+    ----------
+    steps : Step
+        Leading axis ``T`` (concrete or traced arrays).
+    every : int
+        Steps per reading ``k`` (static).
+    first : int, optional
+        Index of a reading step (e.g. the first reading; static). Default ``k − 1``:
+        the readings already sit on the update steps, and only the end is padded.
+
+    Returns
+    -------
+    padded : Step
+        Leading axis a multiple of ``k``.
+    start : int
+        ``padded[start : start + T]`` are the given steps; the rows of a run's
+        :class:`~jaxgrav.filters.model.StepInfo` there are the causal output for them.
+    """
+    t = steps.z.shape[0]
+    first = every - 1 if first is None else int(first)
+    start = (every - 1 - first) % every
+    total = start + t + (-(start + t) % every)
+    idx = np.clip(np.arange(total) - start, 0, t - 1)
+    inside = (np.arange(total) >= start) & (np.arange(total) < start + t)
+    z = jnp.where(inside, jnp.asarray(steps.z)[idx], jnp.nan)
+    return Step(jnp.asarray(steps.lat)[idx], jnp.asarray(steps.lon)[idx], z,
+                jnp.asarray(steps.r)[idx]), start
+
+
 def reading_stride(rows, where):
-    """Rows between readings for the point-mass filter (1 for a single reading)."""
+    """Rows between readings for the point-mass filter.
+
+    Parameters
+    ----------
+    rows : numpy.ndarray of int, shape ``(R,)``
+        Rows with a reading, ascending.
+    where : str
+        How error messages name the track.
+
+    Returns
+    -------
+    int
+        The fixed stride (1 for a single reading).
+
+    Raises
+    ------
+    ValueError
+        The readings are not on a fixed stride (the message names the CSV lines).
+    """
     if rows.size < 2:
         return 1
     gaps = np.diff(rows)
@@ -52,13 +111,14 @@ def reading_stride(rows, where):
     return every
 
 
-
+@jax.jit
 def _prior_and_dynamics(lat_mean, dt, sigma_pos, sigma_vel):
     model = INSErrorModel()
     return initial_covariance(model, sigma_pos, sigma_vel), Dynamics(*transition(model,
                                                                                lat_mean, dt))
 
 
+@functools.partial(jax.jit, static_argnames=("kind",))
 def _gaussian_run(kind, field, dynamics, p0, steps, guard):
     filt = {"ukf": ukf, "ekf": ekf, "gsf": lambda: gaussian_sum(ukf(), 3)}[kind]()
     _, infos = run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps)
@@ -67,23 +127,12 @@ def _gaussian_run(kind, field, dynamics, p0, steps, guard):
     return jax.tree.map(lambda g, a: jnp.where(jnp.isfinite(guard), g, a), guarded, infos)
 
 
+@functools.partial(jax.jit, static_argnames=("every",))
 def _pmf_run(field, dt, p0, cell_m, q_pos, steps, every):
     filt = pmf(PMF_CELLS, cell_m, q_pos=q_pos)
-    _, infos = run_pmf(filt, field, dt, jnp.zeros(p0.shape[0]), p0, steps, every)
+    dynamics = filt.dynamics(jnp.mean(steps.lat), dt)
+    _, infos = run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps, every)
     return infos
-
-
-_JITTED = {}
-
-
-def _jitted(name):
-    """Module-level jitted runners (one compilation per process and shapes)."""
-    if name not in _JITTED:
-        fn, static = {"prior": (_prior_and_dynamics, ()),
-                      "gaussian": (_gaussian_run, ("kind",)),
-                      "pmf": (_pmf_run, ("every",))}[name]
-        _JITTED[name] = jax.jit(fn, static_argnames=static)
-    return _JITTED[name]
 
 
 def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
@@ -128,28 +177,22 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     dt = float(np.median(np.diff(t)))
     n = t.size
     r = float(sigma_gravity) ** 2
-    p0, dynamics = _jitted("prior")(float(np.mean(lat)), dt, sigma_pos, sigma_vel)
+    p0, dynamics = _prior_and_dynamics(float(np.mean(lat)), dt, sigma_pos, sigma_vel)
     every = None
+    steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r))
     if method == "pmf":
         rows = np.flatnonzero(np.isfinite(gravity))
         every = reading_stride(rows, where)
         cell_m = 2.0 * PMF_SPAN_SIGMA * sigma_pos / (PMF_CELLS - 1)
         q_pos = PMF_Q_POS * (sigma_vel / 0.1414) ** 2
-        pad = (every - 1 - int(rows[0])) % every  # readings on steps every-1, 2 every-1, …
-        total = pad + n + (-(pad + n) % every)
-        idx = np.clip(np.arange(total) - pad, 0, n - 1)
-        z = np.where((np.arange(total) >= pad) & (np.arange(total) < pad + n), gravity[idx],
-                     np.nan)
-        steps = Step(jnp.asarray(lat[idx]), jnp.asarray(lon[idx]), jnp.asarray(z),
-                     jnp.full(total, r))
-        infos = _jitted("pmf")(field, dt, p0, cell_m, q_pos, steps, every=every)
-        # causal: rows between readings show the prediction (run_pmf predicts every step)
-        x, sigma, status = (np.asarray(a)[pad:pad + n]
+        padded, start = pad_to_stride(steps, every, rows[0])
+        infos = _pmf_run(field, dt, p0, cell_m, q_pos, padded, every=every)
+        # causal: rows between readings show the prediction
+        x, sigma, status = (np.asarray(a)[start:start + n]
                             for a in (infos.x, infos.sigma, infos.status))
     else:
-        steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r))
         ratio = np.inf if guard is None else float(guard)
-        infos = _jitted("gaussian")(method, field, dynamics, p0, steps, ratio)
+        infos = _gaussian_run(method, field, dynamics, p0, steps, ratio)
         x, sigma, status = (np.asarray(a) for a in (infos.x, infos.sigma, infos.status))
     m = np.asarray(meridian_radius(lat))
     e = np.asarray(prime_vertical_radius(lat)) * np.cos(lat * DEG)

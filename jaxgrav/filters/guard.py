@@ -29,11 +29,10 @@ deadlocks jaxlib's CPU pool, see :mod:`jaxgrav._linalg`), per step, and vmaps ov
 steps and runs.
 """
 
-from typing import NamedTuple
-
 import jax
 import jax.numpy as jnp
 
+from jaxgrav._pytree import pytree_dataclass
 from jaxgrav.filters.kalman import predict
 from jaxgrav.filters.model import FilterState
 
@@ -49,8 +48,9 @@ __all__ = [
 ]
 
 
-class GuardConfig(NamedTuple):
-    """Thresholds of the guard (floats; sweepable).
+@pytree_dataclass
+class GuardConfig:
+    """Thresholds of the guard (floats or arrays: pytree leaves, traced and sweepable).
 
     Attributes
     ----------
@@ -64,6 +64,9 @@ class GuardConfig(NamedTuple):
     nis_max : float
         Hold back the whole correction while the windowed mean NIS exceeds this
         (``inf``: never).
+
+    All three are data fields, so ``GuardConfig(ratio, ratio)`` with a traced
+    ``ratio`` works inside ``jit``, and a batch of configurations maps under ``vmap``.
     """
 
     lo: float = 0.2

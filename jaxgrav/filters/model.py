@@ -26,7 +26,6 @@ an additive bias state — which the UKF recognises to evaluate the map at the
 callable ``h(field, x, lat, lon)`` still works (the generic path).
 """
 
-import dataclasses
 import operator
 from collections.abc import Callable
 from typing import NamedTuple
@@ -34,11 +33,12 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import PointMasses
 from jaxgrav.fields.pointmass import anomaly_kernel as _anomaly_kernel
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-from jaxgrav.grid import Grid
+from jaxgrav.grid import Grid, make_sampler
 from jaxgrav.sim.ins import GRAV
 
 __all__ = [
@@ -53,6 +53,7 @@ __all__ = [
     "map_anomaly",
     "map_at_error",
     "predict_only",
+    "prepare_map",
     "run_filter",
     "status_messages_filter",
 ]
@@ -96,10 +97,15 @@ class Dynamics(NamedTuple):
     ----------
     f, q : Array, shape ``(n, n)``
         From :func:`jaxgrav.sim.ins.transition` (constant over a run).
+    dt : Array, shape ``()``, or None
+        Step length (s). The Gaussian filters do not use it; the point-mass filter
+        needs it for its random-walk spread (``q_pos · dt``), and its
+        ``dynamics(lat, dt)`` fills it in.
     """
 
     f: jax.Array
     q: jax.Array
+    dt: jax.Array | None = None
 
 
 class FilterState(NamedTuple):
@@ -157,6 +163,29 @@ class Filter(NamedTuple):
     predict: Callable | None = None
 
 
+def prepare_map(field):
+    """A map made ready to be evaluated many times: a Grid's bicubic coefficients, once.
+
+    :func:`run_filter` calls it before its scan, so the spline solve over the whole
+    map is not part of the step (XLA would usually hoist it out of the loop; this
+    does not rely on that).
+
+    Parameters
+    ----------
+    field : Grid, PointMasses or callable
+
+    Returns
+    -------
+    PointMasses or callable
+        For a Grid, ``f(lat, lon) -> mGal`` with the coefficients computed here
+        (:func:`jaxgrav.grid.make_sampler`, bicubic, NaN off the grid; no
+        validation); anything else unchanged.
+    """
+    if isinstance(field, Grid):
+        return make_sampler(field, "bicubic")
+    return field
+
+
 def map_anomaly(field, lat, lon):
     """Map anomaly (mGal) at points: bicubic Grid sampling, a point-mass model or a callable.
 
@@ -199,7 +228,7 @@ def map_at_error(field, d, lat, lon):
     return map_anomaly(field, true_lat, true_lon)
 
 
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class MapPlusBias:
     """A measurement ``h(x) = map_part(field, x[:n_position], lat, lon) + x[bias_index]``.
 
@@ -220,11 +249,13 @@ class MapPlusBias:
         Index of the additive bias state (``≥ n_position``).
     n_position : int
         Number of leading states the map part depends on.
+
+    All fields are static (a pytree without leaves): they decide the code, not data.
     """
 
-    map_part: Callable
-    bias_index: int = GRAV
-    n_position: int = 2
+    map_part: Callable = static_field()
+    bias_index: int = static_field(GRAV)
+    n_position: int = static_field(2)
 
     def __post_init__(self):
         if not 0 < self.n_position <= self.bias_index:
@@ -276,7 +307,8 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
     filt : Filter
     field : Grid, PointMasses or callable
         Map; pass it here (a traced argument), not closed over, so large grids are
-        not baked into the compiled code.
+        not baked into the compiled code. Prepared once (:func:`prepare_map`) for
+        all steps.
     dynamics : Dynamics
         Error dynamics per step.
     x0 : Array, shape ``(n,)``
@@ -286,7 +318,9 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
     every : int
         Readings sit on a fixed stride (static): only steps ``every − 1, 2·every − 1,
         …`` (indices into ``steps``) may carry one, as in
-        :func:`~jaxgrav.scenarios.paper_d.filter_scenario`. Those steps run
+        :func:`~jaxgrav.scenarios.paper_d.filter_scenario`
+        (:func:`~jaxgrav.filters.api.pad_to_stride` shifts other runs onto that
+        stride). Those steps run
         ``update`` (a NaN reading there is still a masked update); the others run the
         filter's ``predict`` only — no sigma points, no factorisation — and a finite
         reading on them is not used (flag ``reading_ignored``). Every step still
@@ -307,6 +341,7 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
     if isinstance(every, bool) or k < 1:
         raise ValueError(f"every must be a positive int (steps per reading); got {every!r}")
     every = k
+    field = prepare_map(field)
     state = filt.init(x0, p0)
 
     def body(state, step):

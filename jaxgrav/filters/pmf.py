@@ -48,6 +48,8 @@ The estimate is the posterior mean; its position covariance is the grid's (plus
 the cell's own variance ``cell²/12``), so NEES can be computed.
 """
 
+import warnings
+from collections.abc import Callable
 from typing import NamedTuple
 
 import jax
@@ -57,7 +59,13 @@ from jaxgrav import constants
 from jaxgrav._linalg import inv_2x2
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import PointMasses
-from jaxgrav.filters.model import STATUS_FILTER, StepInfo, gravity_measurement
+from jaxgrav.filters.model import (
+    STATUS_FILTER,
+    Dynamics,
+    StepInfo,
+    gravity_measurement,
+    run_filter,
+)
 from jaxgrav.geodesy import enu_basis, geodetic_to_ecef, meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import GRAV, N_STATES, INSErrorModel, transition
 
@@ -96,28 +104,29 @@ class PMFState(NamedTuple):
     p: jax.Array
 
 
-class PMFDynamics(NamedTuple):
-    """One prediction step: length ``dt`` (s) and the linear error model ``F``, ``Q`` (13 × 13)."""
-
-    dt: jax.Array
-    f: jax.Array
-    q: jax.Array
+PMFDynamics = Dynamics
+"""The point-mass filter's dynamics: a :class:`~jaxgrav.filters.model.Dynamics` with its
+step length ``dt`` (the name is kept for one release)."""
 
 
 class PMFFilter(NamedTuple):
-    """The point-mass filter's pure functions.
+    """The point-mass filter: a :class:`~jaxgrav.filters.model.Filter` plus its error model.
 
-    ``init(x0, P0) -> PMFState``; ``update(state, step, field, dynamics) -> (state,
-    StepInfo)`` (predict, then the reading); ``predict(state, dynamics) -> (state,
-    StepInfo)`` (no reading, no map evaluation); ``dynamics(lat, dt) ->
-    PMFDynamics`` (the error model over a step at a latitude). ``dynamics`` may
-    also be a scalar ``dt``: a pure random walk of density ``q_pos``, no error model.
+    ``init``, ``update`` and ``predict`` follow the ``Filter`` protocol, so
+    :func:`~jaxgrav.filters.model.run_filter` runs it: ``init(x0, P0) -> PMFState``;
+    ``update(state, step, field, dynamics) -> (state, StepInfo)`` (predict, then the
+    reading); ``predict(state, step, field, dynamics) -> (state, StepInfo)`` (no
+    reading, no map evaluation; ``step`` only for the ``reading_ignored`` flag).
+    ``dynamics(lat, dt) -> Dynamics`` is the error model over a step of ``dt`` seconds at a
+    latitude, with ``dt`` filled in (the filter's random-walk spread needs it). The
+    ``dynamics`` argument of ``update`` and ``predict`` may also be a scalar ``dt``: a
+    pure random walk of density ``q_pos``, no error model.
     """
 
-    init: object
-    update: object
-    predict: object
-    dynamics: object
+    init: Callable
+    update: Callable
+    predict: Callable
+    dynamics: Callable
 
 
 def _neumann_basis(n):
@@ -202,8 +211,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         error model's own spread (model mismatch, grid discretisation); the only
         diffusion when ``ins`` is None or ``dynamics`` is a scalar.
     ins : INSErrorModel or None
-        Error model of :func:`dynamics` (used by :func:`run_pmf`); None: position
-        random walk only (no drift), the classic PMF.
+        Error model of the filter's ``dynamics(lat, dt)``; None: position random walk
+        only (no drift), the classic PMF.
     measurement : callable
         ``h(field, x, lat, lon)``, evaluated with ``x`` holding a cell's offset and
         zero bias.
@@ -212,7 +221,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
     -------
     PMFFilter
         ``init(x0, P0)`` takes the Gaussian prior of the 13-state error model; the
-        grid starts centred on zero error.
+        grid starts centred on zero error. Run it with
+        ``run_filter(filt, field, filt.dynamics(lat, dt), x0, p0, steps, every=k)``.
     """
     if n_cells % 2 != 1 or n_cells < 3:
         raise ValueError(f"n_cells must be an odd integer >= 3; got {n_cells!r}")
@@ -239,12 +249,12 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         if ins is None:
             return _random_walk(dt)
         f, q = transition(ins, lat, dt)
-        return PMFDynamics(jnp.asarray(dt, f.dtype), f, q)
+        return Dynamics(f, q, jnp.asarray(dt, f.dtype))
 
     def _random_walk(dt):
         dt = jnp.asarray(dt, float)
-        return PMFDynamics(dt, jnp.eye(N_STATES, dtype=dt.dtype), jnp.zeros((N_STATES,) * 2,
-                                                                          dt.dtype))
+        return Dynamics(jnp.eye(N_STATES, dtype=dt.dtype), jnp.zeros((N_STATES,) * 2, dt.dtype),
+                        dt)
 
     def _recentre(state):
         mean = state.x[:2]
@@ -266,8 +276,11 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return state._replace(w=w, bias_mean=m, bias_var=s, centre=centre)
 
     def _predict(state, dyn):
-        if not isinstance(dyn, PMFDynamics):
+        if not isinstance(dyn, Dynamics):
             dyn = _random_walk(dyn)
+        if dyn.dt is None:
+            raise ValueError("the point-mass filter needs the step length: pass "
+                             "Dynamics(f, q, dt), e.g. from its dynamics(lat, dt)")
         state = _recentre(state)
         x, p, f, q = state.x, state.p, dyn.f, dyn.q
         x_new = f @ x
@@ -314,13 +327,16 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         flags = flags | jnp.where(edge, STATUS_FILTER["grid_edge"], 0)
         return StepInfo(x, sigma, cov, innovation, innovation_var, flags.astype(jnp.int32))
 
-    def predict(state, dynamics):
+    def predict(state, step, field, dynamics):
+        del field
         state = _predict(state, dynamics)
         dn, de = cells(state.centre)
         mean, cov = _moments(state.w, dn, de, cell_m)
         state = _sync(state, mean, cov, mean)  # the grid's own edge effects move no velocity
         nan = jnp.full((), jnp.nan, state.x.dtype)
-        return state, _info(state, mean, cov, nan, nan, jnp.int32(STATUS_FILTER["no_reading"]))
+        flags = STATUS_FILTER["no_reading"] | jnp.where(
+            jnp.isfinite(step.z), STATUS_FILTER["reading_ignored"], 0)
+        return state, _info(state, mean, cov, nan, nan, flags)
 
     def _cell_values(field, step, dn, de):
         if measurement is gravity_measurement and isinstance(field, PointMasses):
@@ -375,53 +391,22 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
 
 
 def run_pmf(filt, field, dt, x0, p0, steps, every=1):
-    """Run a point-mass filter, predicting every step and updating on every ``every``-th.
+    """Deprecated: :func:`~jaxgrav.filters.model.run_filter` runs the point-mass filter.
 
-    The grid update is the costly part (``G²`` map values), so readings are taken
-    only on steps ``every−1, 2·every−1, …`` (index into ``steps``), as in
-    :func:`~jaxgrav.scenarios.paper_d.filter_scenario`; readings on other steps
-    are ignored. Every step is predicted with the error model over ``dt``, so the
-    output is causal: step ``k`` shows the prediction from the readings up to
-    step ``k``, never a later one.
+    ``run_pmf(filt, field, dt, x0, p0, steps, every)`` is
+    ``run_filter(filt, field, filt.dynamics(mean(steps.lat), dt), x0, p0, steps, every)``
+    (the error model at the mean INS latitude) for ``T`` a multiple of ``every``; pad
+    other runs with :func:`~jaxgrav.filters.api.pad_to_stride`. Kept for one release.
 
-    Parameters
-    ----------
-    filt : PMFFilter
-        From :func:`pmf`.
-    field : Grid, PointMasses or callable
-    dt : float
-        Step length (s).
-    x0, p0 : Array
-        Gaussian prior of the 13-state model.
-    steps : Step
-        Leading axis ``T``, a multiple of ``every``. The error model is taken at
-        the mean INS latitude.
-    every : int
-        Steps per update (static).
-
-    Returns
-    -------
-    final : PMFState
-    infos : StepInfo
-        Leading axis ``T``: the prediction on steps without an update (flag
-        ``no_reading``), the posterior on update steps.
+    Raises
+    ------
+    ValueError
+        ``every`` not a positive int dividing the number of steps.
     """
+    warnings.warn("run_pmf is deprecated: use run_filter(filt, field, filt.dynamics(lat, dt), "
+                  "x0, p0, steps, every=k) (and pad_to_stride for runs off the stride)",
+                  DeprecationWarning, stacklevel=2)
     t = steps.z.shape[0]
     if not isinstance(every, int) or every < 1 or t % every:
         raise ValueError(f"every must be a positive int dividing the {t} steps; got {every!r}")
-    dyn = filt.dynamics(jnp.mean(steps.lat), dt)
-    blocks = jax.tree.map(lambda a: a.reshape((t // every, every, *a.shape[1:])), steps)
-
-    def block(state, b):
-        if every > 1:
-            state, head = jax.lax.scan(lambda s, _: filt.predict(s, dyn), state, None,
-                                       length=every - 1)
-        state, info = filt.update(state, jax.tree.map(lambda a: a[-1], b), field, dyn)
-        if every > 1:
-            info = jax.tree.map(lambda h, i: jnp.concatenate([h, i[None]]), head, info)
-        else:
-            info = jax.tree.map(lambda i: i[None], info)
-        return state, info
-
-    final, infos = jax.lax.scan(block, filt.init(x0, p0), blocks)
-    return final, jax.tree.map(lambda a: a.reshape((t, *a.shape[2:])), infos)
+    return run_filter(filt, field, filt.dynamics(jnp.mean(steps.lat), dt), x0, p0, steps, every)

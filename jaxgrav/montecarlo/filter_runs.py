@@ -19,9 +19,9 @@ from jaxgrav.filters import (
     ekf,
     gaussian_sum,
     guard_run,
+    pad_to_stride,
     pmf,
     run_filter,
-    run_pmf,
     ukf,
 )
 
@@ -109,18 +109,20 @@ def gsf_guard_run(key, field, scenario):
 def pmf_run(key, field, scenario):
     """One paper-D run filtered by the grid point-mass filter (61 × 61 cells of 200 m).
 
-    The filter updates at every reading (``run_pmf`` with ``every =
-    scenario.reading_every``); between readings the estimate is predicted. Returns as
-    :func:`ukf_run`.
+    The filter updates at every reading (``run_filter`` with ``every =
+    scenario.reading_every``, the run padded to whole strides); between readings the
+    estimate is predicted. Its error model is taken at the mean INS latitude of the
+    padded run. Returns as :func:`ukf_run`.
     """
     run = filter_scenario(key, field, scenario)
     _, steps = run_steps(run, scenario)
     x0, p0 = initial_state(scenario)
     every = scenario.reading_every
+    padded, _ = pad_to_stride(steps, every)  # readings already on steps every-1, 2 every-1, …
+    filt = pmf()
+    dynamics = filt.dynamics(jnp.mean(padded.lat), scenario.dt)
+    _, infos = run_filter(filt, field, dynamics, x0, p0, padded, every)
     t = steps.z.shape[0]
-    pad = -t % every  # readings sit on steps every-1, 2 every-1, …; pad to a multiple
-    steps = jax.tree.map(lambda a: jnp.concatenate([a, jnp.repeat(a[-1:], pad, 0)]), steps)
-    _, infos = run_pmf(pmf(), field, scenario.dt, x0, p0, steps, every)
     return run_metrics(run, jax.tree.map(lambda a: a[:t], infos))
 
 

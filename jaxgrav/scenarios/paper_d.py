@@ -9,14 +9,13 @@ sizes, random directions). The gravimeter reads the true anomaly + a 1 mGal bias
 1 mGal white noise every 10 s (NaN in between); Eötvös is taken as corrected.
 """
 
-import dataclasses
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import inv_2x2
-from jaxgrav._pytree import static_field
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import DEG
 from jaxgrav.filters.model import STATUS_FILTER, Dynamics, Step, map_anomaly
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
@@ -43,8 +42,7 @@ MASS_LON = 122.918751
 """Longitude of paper D's mass line (degrees)."""
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class FilterScenario:
     """Paper D's filtering experiment (numbers are sweepable arrays; shapes static).
 
@@ -139,7 +137,7 @@ def _true_track(key, s):
     return track_from_heading(lat0, lon0, s.speed, heading, s.dt)
 
 
-def filter_scenario(key, field, scenario=FilterScenario()):
+def filter_scenario(key, field, scenario=None):
     """Simulate one run of paper D's experiment.
 
     Parameters
@@ -147,13 +145,14 @@ def filter_scenario(key, field, scenario=FilterScenario()):
     key : PRNG key
     field : Grid, PointMasses or callable
         True anomaly field (mGal).
-    scenario : FilterScenario
+    scenario : FilterScenario, optional
+        Default ``FilterScenario()``.
 
     Returns
     -------
     FilterRun
     """
-    s = scenario
+    s = FilterScenario() if scenario is None else scenario
     k_track, k_err0, k_err, k_noise = jax.random.split(key, 4)
     truth = _true_track(k_track, s)
     f, q = transition(s.ins, jnp.mean(truth.lat), s.dt)
@@ -169,37 +168,50 @@ def filter_scenario(key, field, scenario=FilterScenario()):
     return FilterRun(truth, ins_lat, ins_lon, readings, errors)
 
 
-def initial_state(scenario=FilterScenario()):
+def initial_state(scenario=None):
     """The filter's prior: zero error, covariance matching the scenario's error sizes.
 
     Position and velocity errors of size ``a`` in a random direction have
     ``E[d_n²] = E[d_e²] = a²/2``; the gravimeter bias prior is the model's σ.
+
+    Parameters
+    ----------
+    scenario : FilterScenario, optional
+        Default ``FilterScenario()``.
 
     Returns
     -------
     x0 : Array, shape ``(13,)``
     p0 : Array, shape ``(13, 13)``
     """
-    s = scenario
+    s = FilterScenario() if scenario is None else scenario
     p0 = initial_covariance(s.ins, s.pos_error / jnp.sqrt(2.0), s.vel_error / jnp.sqrt(2.0))
     return jnp.zeros(p0.shape[0]), p0
 
 
-def run_steps(run, scenario=FilterScenario()):
+def run_steps(run, scenario=None):
     """Filter inputs for a simulated run: one :class:`Step` per state after the first.
+
+    Parameters
+    ----------
+    run : FilterRun
+    scenario : FilterScenario, optional
+        The scenario the run was simulated with; default ``FilterScenario()``.
 
     Returns
     -------
     dynamics : Dynamics
-        The INS error model at the run's mean INS latitude.
+        The INS error model over ``scenario.dt`` at the run's mean INS latitude, with
+        ``dt`` filled in.
     steps : Step
         Leading axis ``T − 1``.
     """
-    s = scenario
+    s = FilterScenario() if scenario is None else scenario
     f, q = transition(s.ins, jnp.mean(run.ins_lat), s.dt)
     t = run.ins_lat.shape[0] - 1
     r = jnp.full(t, jnp.square(s.noise_mgal))
-    return Dynamics(f, q), Step(run.ins_lat[1:], run.ins_lon[1:], run.readings[1:], r)
+    dyn = Dynamics(f, q, jnp.asarray(s.dt, f.dtype))
+    return dyn, Step(run.ins_lat[1:], run.ins_lon[1:], run.readings[1:], r)
 
 
 def run_metrics(run, infos):

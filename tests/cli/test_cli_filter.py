@@ -5,8 +5,10 @@ process, so each filter compiles once per module: ukf, pmf on point masses, ekf 
 NetCDF map; gsf (one more compilation) runs with ``JAXGRAV_SLOW=1``.
 """
 
+import contextlib
 import os
 
+import jax
 import numpy as np
 import pytest
 
@@ -14,6 +16,7 @@ import jaxgrav as jg
 from jaxgrav.cli import main
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
+from jaxgrav.fields.pointmass_fit import save_point_masses
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.tracks import read_track_csv, write_track_csv
 
@@ -101,8 +104,6 @@ def test_guard_holds_back_weak_directions(sim, tmp_path, capsys):
 def test_point_mass_model_file(sim, tmp_path, capsys):
     """--point-masses MODEL.json (save_point_masses): paper D's masses with a +5 mGal offset
     on readings carrying that offset give the paper-d run on the original readings."""
-    from jaxgrav.fields.pointmass_fit import save_point_masses
-
     model = tmp_path / "model.json"
     save_point_masses(model, paper_d(), offset=5.0)
     cols = read_track_csv(sim / "track.csv")
@@ -272,3 +273,42 @@ def test_neither_map_nor_point_masses(sim, tmp_path, capsys):
     assert code == 2
     assert ("give exactly one of --map MAP.nc and --point-masses paper-d|MODEL.json; got "
             "neither") in capsys.readouterr().err
+
+
+@contextlib.contextmanager
+def _traces():
+    """Names of the functions JAX traces to a jaxpr inside the block (jax.monitoring)."""
+    names = []
+
+    def listener(event, duration, **kwargs):
+        if event == "/jax/core/compile/jaxpr_trace_duration":
+            names.append(kwargs.get("fun_name"))
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        yield names
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+
+
+def test_a_second_run_with_new_values_does_not_retrace(sim, stride_track, tmp_path):
+    """filter_track's and simulate-filter's jitted runners are module functions: a second
+    call with the same shapes (new values) traces nothing."""
+    with _traces() as names:
+        jax.jit(lambda x: x + 1.0)(1.0)
+    assert names == ["<lambda>"]  # the counter sees a trace
+    sim_args = ["simulate-filter", "--minutes", "20", "--dt", "10", "--reading-every", "1",
+                "--geometry", "east-west"]
+    runs = [
+        (_filter, (sim / "track.csv", tmp_path / "a.csv", "--method", "ukf"),
+         (sim / "track.csv", tmp_path / "b.csv", "--method", "ukf", "--guard", "0.5")),
+        (_filter, (stride_track, tmp_path / "c.csv", "--method", "pmf"),
+         (stride_track, tmp_path / "d.csv", "--method", "pmf", "--sigma-pos", "1500")),
+        (main, ([*sim_args, "--out", str(tmp_path / "e.csv"), "--seed", "3"],),
+         ([*sim_args, "--out", str(tmp_path / "f.csv"), "--seed", "4"],)),
+    ]
+    for fn, first, second in runs:
+        assert fn(*first) == 0
+        with _traces() as names:
+            assert fn(*second) == 0
+        assert names == [], (second, names)

@@ -11,6 +11,8 @@ import re
 import numpy as np
 from _examples import run_example
 
+from jaxgrav.fields.pointmass_fit import load_point_masses
+
 NUM = r"(-?[\d.]+|nan|inf)"
 
 
@@ -58,8 +60,6 @@ def test_paper_d_pointmass_fit_writes_and_filters_with_its_model(tmp_path):
     """The fit recovers a three-mass field and improves with K on the real map;
     --out-model writes a loadable model; --filter-runs: the fitted map is about as good
     as paper D's masses the readings came from."""
-    from jaxgrav.fields.pointmass_fit import load_point_masses
-
     model = tmp_path / "fit.json"
     out = run_example("paper_d_pointmass_fit.py", "--out-model", str(model),
                       "--filter-runs", "8", "--filter-minutes", "20")

@@ -8,6 +8,7 @@ compiles few programs.
 """
 
 import jax
+import jax.extend
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -459,6 +460,28 @@ def test_structured_ukf_equals_the_generic_ukf(map_kind, dynamics, prior, runs, 
         assert np.any(np.asarray(infos.status) & FLAGS["off_map"])
 
 
+def _dots(jaxpr, shape):
+    """dot_general equations with this output shape in a jaxpr and its sub-jaxprs."""
+    n = 0
+    for eqn in jaxpr.eqns:
+        n += eqn.primitive.name == "dot_general" and eqn.outvars[0].aval.shape == shape
+        for sub in jax.extend.core.jaxprs_in_params(eqn.params):
+            n += _dots(sub, shape)
+    return n
+
+
+@pytest.mark.parametrize("filt", [UKF, EKF], ids=["ukf", "ekf"])
+def test_a_grid_is_prepared_once_outside_the_scan(filt, dynamics, prior, runs, smooth_grid):
+    """run_filter computes the bicubic coefficients (a spline solve over the whole map,
+    ny × nx dots) before its scan, not in the step (traced only, nothing compiled)."""
+    x0, p0 = prior
+    jaxpr = jax.make_jaxpr(lambda g: fl.run_filter(filt, g, dynamics, x0, p0, _one(runs[0], 0)))(
+        smooth_grid).jaxpr
+    shape = tuple(smooth_grid.values.shape)
+    (scan,) = [e for e in jaxpr.eqns if e.primitive.name == "scan"]
+    assert _dots(jaxpr, shape) == 3 and _dots(scan.params["jaxpr"].jaxpr, shape) == 0
+
+
 def test_map_plus_bias_checks_its_layout():
     with pytest.raises(ValueError, match="n_position"):
         fl.MapPlusBias(fl.map_at_error, bias_index=1, n_position=2)
@@ -474,7 +497,7 @@ def test_update_only_on_reading_steps_equals_every_step(which, n_steps, dynamics
     filt = {"ukf": UKF, "ekf": EKF, "gsf": GSF3}[which]
     x0, p0 = prior
     steps = jax.tree.map(lambda a: a[:n_steps], _one(runs[0], 2))  # readings on odd steps
-    final_1, infos_1 = run_every(filt, FIELD, dynamics, x0, p0, steps, 1)
+    final_1, infos_1 = run_one(filt, FIELD, dynamics, x0, p0, steps)  # every=1, shared
     final_2, infos_2 = run_every(filt, FIELD, dynamics, x0, p0, steps, 2)
     _assert_trees_close(final_2, final_1, rtol=1e-9, atol=1e-9)
     for name in ("x", "sigma", "p_pos", "status"):
@@ -664,3 +687,25 @@ def test_split_prior_preserves_mean_and_covariance(per_axis, spacing, prior):
         cov / np.outer(sd, sd), np.asarray(p0) / np.outer(sd, sd), atol=1e-10
     )
     assert np.all(np.linalg.eigvalsh(p[:, :2, :2]) > 0)
+
+
+def test_pad_to_stride_puts_the_readings_on_the_update_steps():
+    """Readings every 3rd step from step 0: shifted by 2 steps, padded to whole strides."""
+    t, every = 7, 3
+    z = np.full(t, np.nan)
+    z[[0, 3, 6]] = [1.0, 2.0, 3.0]
+    steps = fl.Step(np.arange(t) + 20.0, np.arange(t) + 120.0, z, np.arange(t) + 1.0)
+    padded, start = fl.pad_to_stride(steps, every, first=0)
+    assert start == 2 and padded.z.shape == (9,)
+    for name in ("lat", "lon", "r"):  # the ends repeat the first and last step
+        np.testing.assert_array_equal(np.asarray(getattr(padded, name)),
+                                      np.asarray(getattr(steps, name))[[0, 0, *range(t)]])
+    zp = np.asarray(padded.z)
+    np.testing.assert_array_equal(zp[start:start + t], z)
+    assert np.isnan(zp[:start]).all()
+    assert np.all(np.flatnonzero(np.isfinite(zp)) % every == every - 1)
+    # already on the stride: only the end is padded
+    padded, start = fl.pad_to_stride(jax.tree.map(lambda a: a[1:6], steps), every)
+    zp = np.asarray(padded.z)
+    assert start == 0 and zp.shape == (6,) and np.isnan(zp[5])
+    np.testing.assert_array_equal(np.flatnonzero(np.isfinite(zp)), [2])

@@ -24,6 +24,8 @@ from jaxgrav.filters.guard import (
 from jaxgrav.sim import ins
 
 RNG = np.random.default_rng(7)
+# one compiled guard for the run-level tests (same shapes: 40 steps, window 10)
+guard_infos_jit = jax.jit(guard_infos, static_argnums=3)
 
 
 def _spd(rng, scale=1.0):
@@ -162,8 +164,7 @@ def test_guard_infos_vmap_equals_loop():
     runs, t = 4, 40
     cases = [_infos(np.random.default_rng(i), t) for i in range(runs)]
     cfg = GuardConfig(0.3, 0.6, 1.8)
-    fn = jax.jit(guard_infos, static_argnums=3)
-    looped = [fn(info, b, cfg, 10) for info, b in cases]
+    looped = [guard_infos_jit(info, b, cfg, 10) for info, b in cases]
     stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *[c[0] for c in cases])
     frees = jnp.stack([c[1] for c in cases])
     batched = jax.jit(jax.vmap(guard_infos, in_axes=(0, 0, None, None)), static_argnums=3)(
@@ -186,8 +187,8 @@ def test_guard_infos_vmap_equals_loop():
 
 
 def test_guard_infos_passthrough_default_rule():
-    info, b = _infos(np.random.default_rng(3), 25)
-    out = guard_infos(info, b, GuardConfig(2.0, 2.0))  # λ < 1 < 2: everything passes
+    info, b = _infos(np.random.default_rng(3), 40)
+    out = guard_infos_jit(info, b, GuardConfig(2.0, 2.0), 10)  # λ < 1 < 2: everything passes
     np.testing.assert_array_equal(np.asarray(out.x), np.asarray(info.x))
     np.testing.assert_array_equal(np.asarray(out.p_pos), np.asarray(info.p_pos))
 

@@ -3,7 +3,8 @@
 References: the diffusion kernel against a brute-force NumPy convolution with the
 exact lattice heat kernel (Skellam, e^{−v} I_n(v), reflected at the edges) and
 SciPy's matrix exponential; the prediction and the Bayes update against NumPy
-on a small grid; causality of ``run_pmf(every > 1)``; vmap against a Python loop.
+on a small grid; causality of ``run_filter(every > 1)``; vmap against a Python loop;
+the deprecated ``run_pmf`` as the same run.
 """
 
 import jax
@@ -27,12 +28,22 @@ PMF = fl.pmf(n_cells=G, cell_m=CELL, q_pos=Q_POS)
 PMF_RW = fl.pmf(n_cells=G, cell_m=CELL, q_pos=Q_POS, ins=None)
 LAT = 24.25
 
+
+
+def _run(filt, field, dt, x0, p0, steps, every):
+    """The point-mass filter through the one runner, its error model at the mean latitude."""
+    return fl.run_filter(filt, field, filt.dynamics(jnp.mean(steps.lat), dt), x0, p0, steps,
+                         every)
+
+
 init = jax.jit(lambda filt, x0, p0: filt.init(x0, p0), static_argnums=0)
-predict = jax.jit(lambda filt, s, dyn: filt.predict(s, dyn), static_argnums=0)
+# the Filter protocol's predict: (state, step, field, dynamics); a step without a reading
+predict = jax.jit(lambda filt, s, dyn: filt.predict(s, _step(jnp.nan), None, dyn),
+                  static_argnums=0)
 update = jax.jit(lambda filt, s, step, field, dyn: filt.update(s, step, field, dyn),
                  static_argnums=0)
-run = jax.jit(fl.run_pmf, static_argnums=(0, 6))
-run_batch = jax.jit(jax.vmap(fl.run_pmf, in_axes=(None, None, None, None, None, 0, None)),
+run = jax.jit(_run, static_argnums=(0, 6))
+run_batch = jax.jit(jax.vmap(_run, in_axes=(None, None, None, None, None, 0, None)),
                     static_argnums=(0, 6))
 
 
@@ -259,24 +270,41 @@ def test_every_is_causal_and_predicts_between_readings(prior):
 
 
 def test_vmap_equals_loop(prior):
+    # the single runs share the compiled program of the causality test (16 steps, every 4)
     x0, p0 = prior
-    steps = _steps(8, 2, seed=3, n_runs=3)
-    final_b, infos_b = run_batch(PMF, FIELD, DT, x0, p0, steps, 2)
-    assert infos_b.x.shape == (3, 8, ins.N_STATES)
+    steps = _steps(16, 4, seed=3, n_runs=3)
+    final_b, infos_b = run_batch(PMF, FIELD, DT, x0, p0, steps, 4)
+    assert infos_b.x.shape == (3, 16, ins.N_STATES)
     for i in range(3):
-        final, infos = run(PMF, FIELD, DT, x0, p0, jax.tree.map(lambda a, i=i: a[i], steps), 2)
+        final, infos = run(PMF, FIELD, DT, x0, p0, jax.tree.map(lambda a, i=i: a[i], steps), 4)
         for a, b in zip(jax.tree.leaves((final, infos)),
                         jax.tree.leaves(jax.tree.map(lambda a, i=i: a[i], (final_b, infos_b))),
                         strict=True):
             np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-9, atol=1e-12)
 
 
+def test_deprecated_run_pmf_is_run_filter(prior):
+    """run_pmf traces to the very program of run_filter with the filter's own dynamics (so
+    the same numbers; traced only, nothing compiled)."""
+    x0, p0 = prior
+    steps = _steps(16, 4)
+    with pytest.warns(DeprecationWarning, match="run_pmf is deprecated: use run_filter"):
+        old = jax.make_jaxpr(fl.run_pmf, static_argnums=(0, 6))(PMF, FIELD, DT, x0, p0, steps, 4)
+    new = jax.make_jaxpr(_run, static_argnums=(0, 6))(PMF, FIELD, DT, x0, p0, steps, 4)
+    assert str(old) == str(new)
+
+
 def test_bad_arguments(prior):
     x0, p0 = prior
-    with pytest.raises(ValueError, match="every must be a positive int dividing the 16 steps"):
+    with (pytest.warns(DeprecationWarning),
+          pytest.raises(ValueError, match="every must be a positive int dividing the 16 steps")):
         fl.run_pmf(PMF, FIELD, DT, x0, p0, _steps(16, 5), 5)
     with pytest.raises(ValueError, match="n_cells must be an odd integer"):
         fl.pmf(n_cells=60)
+    # dynamics without the step length: the random-walk spread needs it
+    f, q = ins.transition(ins.INSErrorModel(), LAT, DT)
+    with pytest.raises(ValueError, match="the point-mass filter needs the step length"):
+        fl.run_filter(PMF, FIELD, fl.Dynamics(f, q), x0, p0, _steps(16, 4), 4)
 
 
 def test_dynamics_arguments():
