@@ -10,19 +10,15 @@ import functools
 import jax.numpy as jnp
 
 from jaxgrav.geodesy import eotvos
-from jaxgrav.match.api import config_for
+from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import match_chains
 from jaxgrav.match.dense import match_dense
 from jaxgrav.match.entropy import entropy_config_for, match_entropy
-from jaxgrav.match.entropy_iccp import (
-    ALL_STATUS_B,
-    PaperBScenario,
-    iccp_config_for,
-    match_entropy_iccp,
-    paper_b_scenario,
-)
 from jaxgrav.match.iccp import match_iccp
-from jaxgrav.match.result import STATUS
+from jaxgrav.match.result import CORRELATION_STATUS as STATUS
+from jaxgrav.match.result import STATUS as ALL_STATUS_B
+from jaxgrav.match.sizing import config_for, iccp_config_for
+from jaxgrav.scenarios.paper_b import PaperBScenario, paper_b_scenario
 
 __all__ = [
     "CHAIN_NODE_DEG",

@@ -13,7 +13,7 @@ from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match import chains
 from jaxgrav.match import lattice_chains as lc
 from jaxgrav.match.candidates import lattice_candidates
-from jaxgrav.match.correlation import ChainConfig, _pair_cost, match_chains
+from jaxgrav.match.correlation import ChainConfig, match_chains, pair_cost
 
 
 def test_displacement_box_holds_every_accepted_step():
@@ -87,7 +87,7 @@ def test_kbest_equal_the_pairwise_programme(case):
     cands, steps, tol, geo, g = case["cands"], case["steps"], case["tol"], case["geo"], case["g"]
     alive = chains.eliminate(cands, steps, *tol)
     n = alive.shape[0]
-    pair = _pair_cost(jnp.asarray(g), jnp.ones(n - 1) / (n - 1))
+    pair = pair_cost(jnp.asarray(g), jnp.ones(n - 1) / (n - 1))
     unary = jnp.zeros(cands.value.shape)
     ref = chains.kbest_chains(cands, alive, steps, *tol, unary, pair, 8)
     got = lc.kbest_chains_lattice(cands, alive, geo, *tol, unary, pair, 8)

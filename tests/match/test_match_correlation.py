@@ -13,12 +13,12 @@ from jaxgrav import sim
 from jaxgrav.constants import KNOT
 from jaxgrav.match import candidates as cand_mod
 from jaxgrav.match import chains
-from jaxgrav.match.correlation import ChainConfig, _pair_cost, chain_tolerances, match_chains
+from jaxgrav.match.correlation import ChainConfig, chain_tolerances, match_chains, pair_cost
 from jaxgrav.match.dense import (
     DenseConfig,
+    lattice_table,
     match_dense,
     match_dense_batch,
-    prepare_map,
     shifted_tracks,
 )
 from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_track
@@ -98,7 +98,7 @@ def test_chain_steps_against_brute_force(rough_grid):
     np.testing.assert_array_equal(alive, on_chain)  # elimination keeps exactly the chain nodes
     assert float(chains.count_chains(cands, jnp.asarray(alive), steps, *tol)) == len(brute)
     res = chains.kbest_chains(cands, jnp.asarray(alive), steps, *tol, jnp.zeros((n, 25)),
-                              _pair_cost(jnp.asarray(g), wd), 6)
+                              pair_cost(jnp.asarray(g), wd), 6)
     np.testing.assert_allclose(res.score, [s for s, _ in brute[:6]], rtol=1e-10)
     np.testing.assert_array_equal(res.index, [c for _, c in brute[:6]])
 
@@ -329,7 +329,7 @@ def test_dense_grid_search_paths_agree(smooth_grid, score):
     # the offsets span 2*6*150 m = 1.8 km, 1.6-1.9 cells of this 0.01 degree map
     base = DenseConfig(spacing_m=150.0, half_size=6, n_rotations=3, score=score,
                        selection="nearest", bias_sigma_mgal=4.0)
-    table = prepare_map(smooth_grid)
+    table = lattice_table(smooth_grid)
     runs = {block: match_dense(smooth_grid, ilat, ilon, g,
                                dataclasses.replace(base, lattice_block=block), table)
             for block in (6, 3, 0)}  # fits the small block; needs the large one; points
@@ -464,7 +464,7 @@ def test_compact_and_small_capacity_kbest(rough_grid):
     brute = _brute_force(small, steps, tol, g, wd)
     k = cap + 3  # more chains than slots per fix
     res = chains.kbest_chains(small, small.mask, steps, *tol, jnp.zeros((n, cap)),
-                              _pair_cost(jnp.asarray(g), wd), k)
+                              pair_cost(jnp.asarray(g), wd), k)
     m = min(k, len(brute))
     np.testing.assert_allclose(res.score[:m], [s for s, _ in brute[:m]], rtol=1e-10)
     assert np.all(np.isinf(np.asarray(res.score[m:])))
