@@ -140,7 +140,7 @@ def paper_b_errors(key, truth_field, grid, scenario, entropy, iccp_alone, iccp_f
     pm = prepare_map(grid)
     run = paper_b_scenario(key, truth_field, scenario)
     lat, lon, z = run.ins_lat, run.ins_lon, run.readings
-    alone = iccp_result(pm, lat, lon, z, iccp_alone)
+    alone = iccp_result(pm.patches(), pm.grid, lat, lon, z, iccp_alone)
     both = match_entropy_iccp(pm, lat, lon, z, entropy, iccp_fine)
     c_lat, c_lon = both.topk_lat[0], both.topk_lon[0]  # the coarse (entropy) track
     # true rotation: of the truth relative to the INS track (what a matcher should return)
