@@ -16,7 +16,7 @@ import jax.numpy as jnp
 from jaxgrav import sim
 from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.geodesy import local_offsets_m
-from jaxgrav.match.entropy_iccp import match_entropy_iccp
+from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.iccp import iccp_result
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios.paper_a import MatchingRun
