@@ -86,7 +86,7 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
     Parameters
     ----------
     table : Array
-        Prepared map (:func:`~jaxgrav.match.dense.prepare_map`).
+        Lattice table (:func:`~jaxgrav.match.dense.lattice_table`).
     grid : Grid
         The map (its geometry).
     frame : tuple

@@ -25,7 +25,7 @@ def residual_function(table, frame, g, w, kind, prior, method):
     Parameters
     ----------
     table : Array
-        Prepared map (:func:`jaxgrav.match.dense.prepare_map`).
+        Lattice table (:func:`jaxgrav.match.dense.lattice_table`).
     frame : tuple
         ``(iy_c, ix_c, ky, kx, north, east)``: centroid in map indices, index steps
         per metre north and east, fixes' offsets from the centroid (m), ``(N,)``.
