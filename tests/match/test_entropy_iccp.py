@@ -25,6 +25,7 @@ from jaxgrav.match.iccp import (
 )
 from jaxgrav.match.rigid import refine_local, rotation_matrix, solve3
 from jaxgrav.match.sizing import iccp_config_for
+from jaxgrav.prepared import prepare_map
 from jaxgrav.sim import Track, track_error_m
 
 # jitted once per input shape: eager dispatch of many tiny ops is slow on a loaded machine
@@ -344,7 +345,8 @@ def test_match_entropy_finds_the_lattice_offset(smooth_grid, kind):
     z = smooth_grid.sample(t_lat, t_lon, "bicubic")
     shift = entropy_config_for(smooth_grid, 800.0, kind=kind).shift  # > 0 for H_XX here
     cfg = dataclasses.replace(ENT, kind=kind, shift=shift)
-    res = entropy_mod.match_entropy(smooth_grid, lat, lon, z, cfg)
+    # on the prepared map, as match_track passes it: one compiled matcher for both calls
+    res = entropy_mod.match_entropy(prepare_map(smooth_grid), lat, lon, z, cfg)
     np.testing.assert_allclose(res.lat, t_lat, atol=1e-9)
     np.testing.assert_allclose(res.lon, t_lon, atol=1e-9)
     assert float(res.offset_north_m) == pytest.approx(400.0, abs=0.5)
