@@ -442,21 +442,24 @@ def test_compact_and_small_capacity_kbest(rough_grid):
     flat = 30 + np.arange(n) * 0.06
     flon = 130 + np.arange(n) * 0.05
     g = np.asarray(rough_grid.sample(flat + 0.011, flon - 0.013))
-    cands = cand_mod.iso_candidates(rough_grid, flat, flon, g, half_size=2, capacity=25,
-                                    delta=2.0)
+    # each step jitted: one program each instead of hundreds of eagerly dispatched ones
+    iso = jax.jit(cand_mod.iso_candidates, static_argnames=("half_size", "capacity"))
+    eliminate = jax.jit(chains.eliminate)
+    compact = jax.jit(chains.compact, static_argnums=2)
+    cands = iso(rough_grid, flat, flon, g, half_size=2, capacity=25, delta=2.0)
     steps = cand_mod.local_offsets_m(flat[1:], flon[1:], flat[:-1], flon[:-1])
     tol = (3000.0, 10.0)
-    alive = chains.eliminate(cands, steps, *tol)
+    alive = eliminate(cands, steps, *tol)
     n_alive = np.asarray(alive.sum(axis=1))
     cap = int(n_alive.max())
-    small, lost = chains.compact(cands, alive, cap)
+    small, lost = compact(cands, alive, cap)
     assert not np.any(lost)
     for i in range(n):
         keep = np.flatnonzero(np.asarray(alive[i]))
         np.testing.assert_array_equal(np.asarray(small.value[i])[:keep.size],
                                       np.asarray(cands.value[i])[keep])
         np.testing.assert_array_equal(np.asarray(small.mask[i]), np.arange(cap) < keep.size)
-    np.testing.assert_array_equal(chains.eliminate(small, steps, *tol), small.mask)
+    np.testing.assert_array_equal(eliminate(small, steps, *tol), small.mask)
     w = decreasing_weights(n, 0.5)
     wd = w[:-1] / jnp.sum(w[:-1])
     brute = _brute_force(small, steps, tol, g, wd)
@@ -466,7 +469,7 @@ def test_compact_and_small_capacity_kbest(rough_grid):
     m = min(k, len(brute))
     np.testing.assert_allclose(res.score[:m], [s for s, _ in brute[:m]], rtol=1e-10)
     assert np.all(np.isinf(np.asarray(res.score[m:])))
-    _, lost = chains.compact(cands, alive, 1)
+    _, lost = compact(cands, alive, 1)
     np.testing.assert_array_equal(lost, n_alive > 1)
 
 
@@ -485,6 +488,7 @@ def test_grad_of_score_through_the_map(smooth_grid):
     g = smooth_grid.sample(tr.lat, tr.lon, "bicubic")
     w = decreasing_weights(10, 0.0)
 
+    @jax.jit  # one program, not hundreds of eagerly dispatched ones
     def s(dn):
         la, lo = shifted_tracks(tr.lat, tr.lon, dn, 0.0, 0.0)
         return score_track(g, smooth_grid.sample(la, lo, "bicubic"), w, "bias")[0]
