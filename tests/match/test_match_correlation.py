@@ -24,6 +24,11 @@ from jaxgrav.match.dense import (
 from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_track
 
 RNG = np.random.default_rng(0)
+# the chain steps jitted: one program each instead of hundreds of eagerly dispatched ones
+iso_candidates = jax.jit(cand_mod.iso_candidates, static_argnames=("half_size", "capacity"))
+eliminate = jax.jit(chains.eliminate)
+compact = jax.jit(chains.compact, static_argnums=2)
+count_chains = jax.jit(chains.count_chains)
 LAT = np.linspace(29, 31, 41)
 LON = np.linspace(129, 131, 41)
 
@@ -76,8 +81,7 @@ def test_chain_steps_against_brute_force(rough_grid):
     flat = 30 + np.arange(n) * 0.06
     flon = 130 + np.arange(n) * 0.05
     g = np.asarray(rough_grid.sample(flat + 0.011, flon - 0.013)) + RNG.normal(size=n) * 0.2
-    cands = cand_mod.iso_candidates(rough_grid, flat, flon, g, half_size=2, capacity=25,
-                                    delta=3.0)
+    cands = iso_candidates(rough_grid, flat, flon, g, half_size=2, capacity=25, delta=3.0)
     # iso masks: exactly the window nodes within the tolerance
     win = rough_grid.window(flat, flon, 2)
     assert int(cands.mask.sum()) == int(cands.count.sum())
@@ -87,7 +91,7 @@ def test_chain_steps_against_brute_force(rough_grid):
         assert set(vals) <= set(np.asarray(win.values[i]).ravel())
     steps = cand_mod.local_offsets_m(flat[1:], flon[1:], flat[:-1], flon[:-1])
     tol = (3000.0, 10.0)
-    alive = np.asarray(chains.eliminate(cands, steps, *tol))
+    alive = np.asarray(eliminate(cands, steps, *tol))
     w = decreasing_weights(n, 0.5)
     wd = w[:-1] / jnp.sum(w[:-1])
     brute = _brute_force(cands, steps, tol, g, wd)
@@ -96,7 +100,7 @@ def test_chain_steps_against_brute_force(rough_grid):
     for _, ch in brute:
         on_chain[np.arange(n), list(ch)] = True
     np.testing.assert_array_equal(alive, on_chain)  # elimination keeps exactly the chain nodes
-    assert float(chains.count_chains(cands, jnp.asarray(alive), steps, *tol)) == len(brute)
+    assert float(count_chains(cands, jnp.asarray(alive), steps, *tol)) == len(brute)
     res = chains.kbest_chains(cands, jnp.asarray(alive), steps, *tol, jnp.zeros((n, 25)),
                               pair_cost(jnp.asarray(g), wd), 6)
     np.testing.assert_allclose(res.score, [s for s, _ in brute[:6]], rtol=1e-10)
@@ -164,8 +168,8 @@ def test_iso_masks_equal_the_rule_by_brute_force(smooth_grid, slope_factor, delt
 
     v = np.asarray(grid.values)
     for cap in (49, small_cap):
-        c = cand_mod.iso_candidates(grid, lat, lon, g, half_size=k, capacity=cap, delta=delta,
-                                    slope_factor=slope_factor)
+        c = iso_candidates(grid, lat, lon, g, half_size=k, capacity=cap, delta=delta,
+                           slope_factor=slope_factor)
         np.testing.assert_array_equal(c.count, counts)
         np.testing.assert_array_equal(c.overflow, counts > cap)
         np.testing.assert_array_equal(np.asarray(c.mask).sum(axis=1), np.minimum(counts, cap))
@@ -442,11 +446,7 @@ def test_compact_and_small_capacity_kbest(rough_grid):
     flat = 30 + np.arange(n) * 0.06
     flon = 130 + np.arange(n) * 0.05
     g = np.asarray(rough_grid.sample(flat + 0.011, flon - 0.013))
-    # each step jitted: one program each instead of hundreds of eagerly dispatched ones
-    iso = jax.jit(cand_mod.iso_candidates, static_argnames=("half_size", "capacity"))
-    eliminate = jax.jit(chains.eliminate)
-    compact = jax.jit(chains.compact, static_argnums=2)
-    cands = iso(rough_grid, flat, flon, g, half_size=2, capacity=25, delta=2.0)
+    cands = iso_candidates(rough_grid, flat, flon, g, half_size=2, capacity=25, delta=2.0)
     steps = cand_mod.local_offsets_m(flat[1:], flon[1:], flat[:-1], flon[:-1])
     tol = (3000.0, 10.0)
     alive = eliminate(cands, steps, *tol)
