@@ -12,7 +12,7 @@ difference score forms cancel any constant residual anyway). Batches of 1, 100 a
   (500 m spacing, half_size sized so that half_size·spacing ≥ 1.2 × drift radius:
   441 offsets), bicubic map, 8 Gauss–Newton steps; float64, and float32
   (``jax_enable_x64`` off) at the end. The map is prepared once
-  (:func:`~jaxgrav.match.dense.prepare_map`, the spline coefficients), as the
+  (:func:`~jaxgrav.match.dense.lattice_table`, the spline coefficients), as the
   baseline builds its spline once; ``with_prepare_*`` fields time jaxgrav preparing
   it inside every call instead.
 * ``chain``: :func:`jaxgrav.match.correlation.match_chains` on the map refined ×8
@@ -40,6 +40,9 @@ the timed tracks is reported in every line.
 ``--profile`` adds lines (bench ``match_correlation_profile``) timing the parts of
 each path at the largest batch and XLA's cost analysis.
 """
+import argparse
+import dataclasses
+import json
 import math
 import sys
 import time
@@ -58,6 +61,7 @@ import _numpy_correlation as npc  # noqa: E402
 from jaxgrav import datasets, sim  # noqa: E402
 from jaxgrav.constants import KNOT  # noqa: E402
 from jaxgrav.match import candidates, chains  # noqa: E402
+from jaxgrav.match import offsets as offsets_mod  # noqa: E402
 from jaxgrav.match.correlation import (  # noqa: E402
     ChainConfig,
     chain_tolerances,
@@ -65,11 +69,13 @@ from jaxgrav.match.correlation import (  # noqa: E402
 )
 from jaxgrav.match.dense import (  # noqa: E402
     DenseConfig,
+    lattice_table,
     match_dense,
     match_dense_batch,
-    prepare_map,
 )
+from jaxgrav.match.lattice import lattice_values  # noqa: E402
 from jaxgrav.match.lattice_chains import stencil_size_for  # noqa: E402
+from jaxgrav.match.scoring import decreasing_weights  # noqa: E402
 
 BENCH = "match_correlation"
 N_FIX = 16
@@ -80,8 +86,6 @@ BASELINE_BUDGET_S = 60.0
 
 
 def parse_args():
-    import argparse
-
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="CI-sized run (< 60 s)")
     p.add_argument("--profile", action="store_true", help="time the parts of each path")
@@ -244,7 +248,7 @@ def run_dense(grid, tracks, batches, quick, profile):
     cfg = dense_config()
     m = npc.prepare_grid(grid)
     fn, fn_vmap, fn_inside = _dense_fns()
-    table = prepare_map(grid)
+    table = lattice_table(grid)
     hint = None
     res64 = {}
     for b in batches:
@@ -289,10 +293,8 @@ def run_dense_float32(grid, tracks, batches, cfg, m, res64, quick):
     values = np.asarray(grid.values)
     jax.config.update("jax_enable_x64", False)
     try:
-        import dataclasses
-
         g32 = dataclasses.replace(grid, values=jnp.asarray(values, jnp.float32))
-        table = prepare_map(g32)
+        table = lattice_table(g32)
         fn, fn_vmap, fn_inside = _dense_fns()
         hint = None
         for b in batches:
@@ -388,8 +390,6 @@ def chain_config(fine, tracks, quick):
 
 def stencil_config(pairwise, stats):
     """The stencil search on the same windows (every window node a slot)."""
-    import dataclasses
-
     return dataclasses.replace(pairwise, stencil_size=stats["stencil_size"],
                                capacity=(2 * pairwise.half_size + 1) ** 2, survivor_capacity=0)
 
@@ -469,12 +469,8 @@ def _time_parts(parts, rounds):
 
 def profile_dense(grid, tracks, cfg, m, b, quick):
     """Time the parts of the dense path (float64) and the NumPy loop's refinement share."""
-    from jaxgrav.match import offsets as offsets_mod
-    from jaxgrav.match.lattice import lattice_values
-    from jaxgrav.match.scoring import decreasing_weights
-
     _, _, lat, lon, g = tracks
-    table = prepare_map(grid)
+    table = lattice_table(grid)
     data = (jnp.asarray(lat[:b]), jnp.asarray(lon[:b]), jnp.asarray(g[:b]))
     args = (grid, *data, cfg, table)
     h = cfg.half_size
@@ -489,11 +485,11 @@ def profile_dense(grid, tracks, cfg, m, b, quick):
             if not score:
                 return v
             w = decreasing_weights(a.shape[0], c.weight_decay)
-            return offsets_mod._lattice_scores(r, v[None], w, c.score, 0.0, h)[0]
+            return offsets_mod.lattice_scores(r, v[None], w, c.score, 0.0, h)[0]
         return jax.vmap(one)(la, lo, gg)
 
     def prepare(grid, la, lo, gg, c, tab):
-        return prepare_map(grid)
+        return lattice_table(grid)
 
     full = jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None, None))
     cfg0 = DenseConfig(spacing_m=cfg.spacing_m, half_size=h, refine_steps=0)
@@ -578,8 +574,6 @@ def profile_chain(fine, tracks, cfg, b, quick):
 
 
 def print_profile(path, part, n, seconds, **extra):
-    import json
-
     print(json.dumps({"bench": f"{BENCH}_profile", "path": path, "part": part, "n": n,
                       "seconds": round(seconds, 6),
                       "ms_per_track": round(1e3 * seconds / n, 4), **extra}), flush=True)
@@ -589,8 +583,6 @@ def main():
     args = parse_args()
     paths = set(args.paths.split(","))
     batches = (10,) if args.quick else (1, 100, 1000)
-    import dataclasses
-
     grid = datasets.load("ryukyu")["anomaly_2p5min"]
     # float64 values: the shipped file is float32 (see the float32 case for that precision)
     grid = dataclasses.replace(grid, values=jnp.asarray(np.asarray(grid.values), jnp.float64))

@@ -35,12 +35,9 @@ from jaxgrav import datasets, interp  # noqa: E402
 from jaxgrav.constants import DEG  # noqa: E402
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius  # noqa: E402
 from jaxgrav.grid import Grid  # noqa: E402
-from jaxgrav.match.entropy_iccp import (  # noqa: E402
-    PaperBScenario,
-    iccp_config_for,
-    paper_b_scenario,
-)
 from jaxgrav.match.iccp import match_iccp, match_iccp_batch  # noqa: E402
+from jaxgrav.match.sizing import iccp_config_for  # noqa: E402
+from jaxgrav.scenarios.paper_b import PaperBScenario, paper_b_scenario  # noqa: E402
 from jaxgrav.sim import DEG_ARC_M  # noqa: E402
 
 

@@ -2,7 +2,7 @@
 
 For each case, ``--n`` tracks (default 1000) are simulated and matched by entropy
 alone, ICCP alone and entropy + ICCP in one jitted, vmapped call per chunk
-(:func:`jaxgrav.match.entropy_iccp.paper_b_errors`). A track: 60 fixes a minute apart
+(:func:`jaxgrav.scenarios.paper_b.paper_b_errors`). A track: 60 fixes a minute apart
 at 10 m/s in a random direction; the INS track is offset by a random vector and
 rotated by ±1.5° about its start (the issue's accuracy goal); readings are the field
 at the true positions plus white noise.
@@ -44,11 +44,8 @@ jax.config.update("jax_enable_x64", True)  # a script, not the library
 
 from jaxgrav import datasets  # noqa: E402
 from jaxgrav.match.entropy import entropy_config_for  # noqa: E402
-from jaxgrav.match.entropy_iccp import (  # noqa: E402
-    PaperBScenario,
-    iccp_config_for,
-    paper_b_errors,
-)
+from jaxgrav.match.sizing import iccp_config_for  # noqa: E402
+from jaxgrav.scenarios.paper_b import PaperBScenario, paper_b_errors  # noqa: E402
 from jaxgrav.sim import DEG_ARC_M  # noqa: E402
 
 CHUNK = 250

@@ -5,7 +5,7 @@ from the truth than the entropy track it started from. This script looks at thos
 tracks. For each of ``--n`` tracks of the issue's scenario (60 fixes a minute apart at
 10 m/s, INS offset 0.02–0.03° and rotated 1.5°; the matchers are told drift ≤ 0.035° and
 heading error ≤ 2°), it runs the entropy stage and ICCP from every start that
-:func:`~jaxgrav.match.entropy_iccp.match_entropy_iccp` uses (the entropy stage's best
+:func:`~jaxgrav.match.combined.match_entropy_iccp` uses (the entropy stage's best
 offsets and the INS track), keeping every start's fit, and reports:
 
 - on the failing tracks: the normalised misfit ``N·m/σ²`` of the truth and of the chosen
@@ -29,15 +29,11 @@ jax.config.update("jax_enable_x64", True)  # a script, not the library
 
 from jaxgrav import datasets  # noqa: E402
 from jaxgrav.geodesy import local_offsets_m  # noqa: E402
-from jaxgrav.grid import make_sampler  # noqa: E402
-from jaxgrav.match.contour import patch_coefficients  # noqa: E402
 from jaxgrav.match.entropy import coarse_offsets, entropy_config_for  # noqa: E402
-from jaxgrav.match.entropy_iccp import (  # noqa: E402
-    PaperBScenario,
-    iccp_config_for,
-    paper_b_scenario,
-)
-from jaxgrav.match.iccp import _iccp_result  # noqa: E402
+from jaxgrav.match.iccp import iccp_result  # noqa: E402
+from jaxgrav.match.sizing import iccp_config_for  # noqa: E402
+from jaxgrav.prepared import prepare_map  # noqa: E402
+from jaxgrav.scenarios.paper_b import PaperBScenario, paper_b_scenario  # noqa: E402
 from jaxgrav.sim import (  # noqa: E402
     DEG_ARC_M,
     track_error_m,
@@ -53,12 +49,13 @@ def every_start(key, grid, scenario, entropy, fine):
     """One track: the entropy match and ICCP from each start, with errors and misfits."""
     run = paper_b_scenario(key, grid, scenario)
     lat, lon, z = run.ins_lat, run.ins_lon, run.readings
-    sample = make_sampler(grid, "bicubic")
+    pm = prepare_map(grid)  # once for both stages
+    sample = pm.sampler("bicubic")
     misfit = lambda la, lo: jnp.mean((z - sample(la, lo)) ** 2)  # noqa: E731
     error = lambda la, lo: track_error_m(la, lo, run.truth)  # noqa: E731
     coarse, _, _, top_n, top_e = coarse_offsets(sample, lat, lon, z, entropy)
-    coef = patch_coefficients(grid.values)
-    fits = jax.vmap(lambda a, b: _iccp_result(coef, grid, lat, lon, z, fine, a, b))(
+    coef = pm.patches()
+    fits = jax.vmap(lambda a, b: iccp_result(coef, pm.grid, lat, lon, z, fine, a, b))(
         jnp.append(top_n, 0.0), jnp.append(top_e, 0.0))
     off_n, off_e = jax.vmap(lambda la, lo: local_offsets_m(la, lo, lat, lon))(fits.lat, fits.lon)
     return dict(entropy_err=error(coarse.lat, coarse.lon),

@@ -32,6 +32,7 @@ from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.grid_axes import GeographicAxes, regular_axis
 from jaxgrav.grid_files import read_netcdf, write_netcdf
 from jaxgrav.grid_windows import Window, node_windows, refined
+from jaxgrav.prepared import prepare_map
 
 __all__ = ["Grid", "Window", "make_sampler", "sample"]
 
@@ -277,7 +278,7 @@ def sample(grid, lat, lon, method="bilinear", *, strict=False):
         Interpolated values, NaN off the grid (use :meth:`Grid.contains` for the mask).
         Differentiable in the points and in ``grid.values``.
     """
-    interp._check_method(method)
+    interp.check_method(method)
     check_same_shape(lat=lat, lon=lon)
     check_latitude(lat, "lat")
     if strict:
@@ -321,7 +322,7 @@ def make_sampler(grid, method="bilinear"):
     callable
         ``f(lat, lon) -> values``, as :func:`sample` (NaN off the grid).
     """
-    interp._check_method(method)
+    interp.check_method(method)
     if method == "bilinear":
         values = grid.values
 
@@ -329,9 +330,4 @@ def make_sampler(grid, method="bilinear"):
             return interp.bilinear(values, *grid.fractional_index(lat, lon))
 
         return f
-    coef = interp.bicubic_coefficients(grid.values)
-
-    def f(lat, lon):
-        return interp.bicubic(coef, *grid.fractional_index(lat, lon))
-
-    return f
+    return prepare_map(grid).sampler("bicubic")

@@ -132,5 +132,5 @@ class GeographicAxes:
     def contains(self, lat, lon):
         """Boolean mask of points inside the grid (edges included), points' broadcast shape."""
         iy, ix = self.fractional_index(lat, lon)
-        eps = interp._edge_eps(iy.dtype, max(self.ny, self.nx))
+        eps = interp.edge_eps(iy.dtype, max(self.ny, self.nx))
         return (iy >= -eps) & (iy <= self.ny - 1 + eps) & (ix >= -eps) & (ix <= self.nx - 1 + eps)

@@ -105,7 +105,7 @@ def refined(grid, factor, method="bilinear"):
     """
     if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
         raise ValueError(f"factor must be an integer >= 1; got {factor!r}")
-    interp._check_method(method)
+    interp.check_method(method)
     factor = int(factor)
     wy = interp.interpolation_matrix(
         grid.ny, np.arange((grid.ny - 1) * factor + 1) / factor, method

@@ -28,28 +28,53 @@ __all__ = [
     "METHODS",
     "bicubic",
     "bicubic_coefficients",
+    "bicubic_patches",
     "bicubic_value_and_gradient",
     "bilinear",
+    "cell",
+    "check_method",
+    "edge_eps",
+    "hermite",
+    "hermite_derivative",
+    "interleave_coefficients",
     "spline_slopes",
 ]
 
 METHODS = ("bilinear", "bicubic")
 
 
-def _check_method(method):
+def check_method(method):
+    """Raise ``ValueError`` unless ``method`` is one of :data:`METHODS`."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
 
 
-def _cell(i, n, eps):
-    """Cell index, local coordinate in [0, 1] and inside flag for fractional index ``i``."""
+def cell(i, n, eps):
+    """Cell index, local coordinate in [0, 1] and inside flag for fractional index ``i``.
+
+    Parameters
+    ----------
+    i : Array
+        Fractional indices along one axis.
+    n : int
+        Nodes along the axis.
+    eps : float
+        Tolerance (index steps) within which a point just outside counts as inside.
+
+    Returns
+    -------
+    tuple of Array
+        ``(i0, t, inside)``: cell (int32, in ``[0, n−2]``), local coordinate ``i − i0``
+        and a bool mask, each shaped like ``i``.
+    """
     inside = (i >= -eps) & (i <= (n - 1) + eps)
     i_safe = jnp.clip(jnp.where(inside, i, 0.0), 0.0, n - 1.0)
     i0 = jnp.clip(jnp.floor(i_safe), 0, max(n - 2, 0)).astype(jnp.int32)
     return i0, i_safe - i0, inside
 
 
-def _edge_eps(dtype, n):
+def edge_eps(dtype, n):
+    """Tolerance (index steps) for points on the edge of an ``n``-node axis: 8 ε·n."""
     return 8.0 * float(jnp.finfo(dtype).eps) * max(n, 1)
 
 
@@ -71,9 +96,9 @@ def bilinear(values, iy, ix):
     ny, nx = values.shape[-2:]
     iy, ix = jnp.broadcast_arrays(jnp.asarray(iy), jnp.asarray(ix))
     dtype = jnp.result_type(values.dtype, iy.dtype, float)
-    eps = _edge_eps(dtype, max(ny, nx))
-    r0, ty, in_y = _cell(iy, ny, eps)
-    c0, tx, in_x = _cell(ix, nx, eps)
+    eps = edge_eps(dtype, max(ny, nx))
+    r0, ty, in_y = cell(iy, ny, eps)
+    c0, tx, in_x = cell(ix, nx, eps)
     r1 = jnp.minimum(r0 + 1, ny - 1)
     c1 = jnp.minimum(c0 + 1, nx - 1)
     g_a = values[..., r0, c0]
@@ -142,7 +167,66 @@ def bicubic_coefficients(values):
     return jnp.stack([values, fx, fy, fxy], axis=-1)
 
 
-def _hermite(t):
+def _hermite_to_powers(v0, v1, s0, s1):
+    """Coefficients of ``1, t, t², t³`` of ``v0 h0 + v1 h1 + s0 g0 + s1 g1`` (Hermite basis)."""
+    return v0, s0, 3.0 * (v1 - v0) - 2.0 * s0 - s1, 2.0 * (v0 - v1) + s0 + s1
+
+
+def bicubic_patches(coefficients):
+    """Power-basis coefficients of the bicubic interpolant, 16 per cell.
+
+    The same interpolant as :func:`bicubic`, in the form ``f(ty, tx) = Σ a_ij ty^i tx^j``
+    for ``ty, tx ∈ [0, 1]`` within each cell: one contiguous read of 16 numbers per
+    point, and the value and both derivatives by two short Horner sums.
+
+    Parameters
+    ----------
+    coefficients : Array, shape ``(ny, nx, 4)``
+        Output of :func:`bicubic_coefficients` (``ny, nx ≥ 4``).
+
+    Returns
+    -------
+    Array, shape ``(ny−1, nx−1, 16)``
+        Cell ``[r, c]`` holds ``a_ij`` at ``4i + j``, with ``ty = iy − r``, ``tx = ix − c``.
+    """
+    k = coefficients
+    ny, nx = k.shape[0], k.shape[1]
+    corner = lambda q, dr, dc: k[dr:ny - 1 + dr, dc:nx - 1 + dc, q]  # noqa: E731
+    # along x first: for each row r0/r1 and each y-kind (value f / slope f_y), the
+    # x-polynomial from the values (f or f_y) and x-slopes (f_x or f_xy) at c0, c1
+    rows = [_hermite_to_powers(corner(q, dr, 0), corner(q, dr, 1), corner(q + 1, dr, 0),
+                               corner(q + 1, dr, 1))
+            for q, dr in ((0, 0), (0, 1), (2, 0), (2, 1))]  # value r0, value r1, slope r0, r1
+    # then along y, per x-power j
+    cols = [_hermite_to_powers(*(rows[a][j] for a in range(4))) for j in range(4)]
+    return jnp.stack([cols[j][i] for i in range(4) for j in range(4)], axis=-1)
+
+
+def interleave_coefficients(coefficients):
+    """Bicubic coefficients ``(ny, nx, 4)`` as one interleaved ``(2·ny, 2·nx)`` array.
+
+    Node ``(r, c)`` holds ``[[f, f_x], [f_y, f_xy]]`` at rows ``2r, 2r+1`` and columns
+    ``2c, 2c+1``, so a block of nodes is one 2-D slice and the 16 coefficients of one
+    bicubic patch are one ``4 × 4`` slice.
+
+    Parameters
+    ----------
+    coefficients : Array, shape ``(ny, nx, 4)``
+        Output of :func:`bicubic_coefficients`.
+
+    Returns
+    -------
+    Array, shape ``(2·ny, 2·nx)``
+        ``out[2r + u, 2c + v]`` is ``f, f_x, f_y, f_xy`` for ``(u, v)`` = (0, 0),
+        (0, 1), (1, 0), (1, 1) at node ``(r, c)``.
+    """
+    ny, nx = coefficients.shape[:2]
+    c = coefficients.reshape(ny, nx, 2, 2)
+    return jnp.transpose(c, (0, 2, 1, 3)).reshape(2 * ny, 2 * nx)
+
+
+def hermite(t):
+    """Cubic Hermite basis at ``t ∈ [0, 1]``: ``(h0, h1, g0, g1)`` (values 0/1, slopes 0/1)."""
     t2, t3 = t * t, t * t * t
     return (2 * t3 - 3 * t2 + 1, -2 * t3 + 3 * t2, t3 - 2 * t2 + t, t3 - t2)
 
@@ -165,11 +249,11 @@ def bicubic(coefficients, iy, ix):
     ny, nx = coefficients.shape[-3:-1]
     iy, ix = jnp.broadcast_arrays(jnp.asarray(iy), jnp.asarray(ix))
     dtype = jnp.result_type(coefficients.dtype, iy.dtype, float)
-    eps = _edge_eps(dtype, max(ny, nx))
-    r0, ty, in_y = _cell(iy, ny, eps)
-    c0, tx, in_x = _cell(ix, nx, eps)
-    hy0, hy1, gy0, gy1 = _hermite(ty)
-    hx0, hx1, gx0, gx1 = _hermite(tx)
+    eps = edge_eps(dtype, max(ny, nx))
+    r0, ty, in_y = cell(iy, ny, eps)
+    c0, tx, in_x = cell(ix, nx, eps)
+    hy0, hy1, gy0, gy1 = hermite(ty)
+    hx0, hx1, gx0, gx1 = hermite(tx)
     out = 0.0
     for r, hy, gy in ((r0, hy0, gy0), (r0 + 1, hy1, gy1)):
         for col, hx, gx in ((c0, hx0, gx0), (c0 + 1, hx1, gx1)):
@@ -183,7 +267,8 @@ def bicubic(coefficients, iy, ix):
     return jnp.where(in_x & in_y, out, jnp.nan).astype(dtype)
 
 
-def _hermite_derivative(t):
+def hermite_derivative(t):
+    """Derivatives ``d/dt`` of :func:`hermite`'s four basis functions."""
     t2 = t * t
     return (6 * t2 - 6 * t, -6 * t2 + 6 * t, 3 * t2 - 4 * t + 1, 3 * t2 - 2 * t)
 
@@ -210,11 +295,11 @@ def bicubic_value_and_gradient(coefficients, iy, ix):
     ny, nx = coefficients.shape[-3:-1]
     iy, ix = jnp.broadcast_arrays(jnp.asarray(iy), jnp.asarray(ix))
     dtype = jnp.result_type(coefficients.dtype, iy.dtype, float)
-    eps = _edge_eps(dtype, max(ny, nx))
-    r0, ty, in_y = _cell(iy, ny, eps)
-    c0, tx, in_x = _cell(ix, nx, eps)
-    hy, dhy = _hermite(ty), _hermite_derivative(ty)
-    hx, dhx = _hermite(tx), _hermite_derivative(tx)
+    eps = edge_eps(dtype, max(ny, nx))
+    r0, ty, in_y = cell(iy, ny, eps)
+    c0, tx, in_x = cell(ix, nx, eps)
+    hy, dhy = hermite(ty), hermite_derivative(ty)
+    hx, dhx = hermite(tx), hermite_derivative(tx)
     val = d_y = d_x = 0.0
     for j, r in enumerate((r0, r0 + 1)):
         for i, col in enumerate((c0, c0 + 1)):
@@ -252,7 +337,7 @@ def interpolation_matrix(n, positions, method):
     -------
     numpy.ndarray, shape ``(len(positions), n)``
     """
-    _check_method(method)
+    check_method(method)
     p = np.asarray(positions, dtype=float)
     i0 = np.clip(np.floor(p), 0, n - 2).astype(int)
     t = p - i0
@@ -262,8 +347,9 @@ def interpolation_matrix(n, positions, method):
         np.add.at(w, (rows, i0), 1 - t)
         np.add.at(w, (rows, i0 + 1), t)
         return w
-    h0, h1, g0, g1 = (np.asarray(v) for v in _hermite(t))
+    h0, h1, g0, g1 = (np.asarray(v) for v in hermite(t))
     s = _slope_matrix(n)
     np.add.at(w, (rows, i0), h0)
     np.add.at(w, (rows, i0 + 1), h1)
     return w + g0[:, None] * s[i0] + g1[:, None] * s[i0 + 1]
+

@@ -13,16 +13,15 @@ import numpy as np
 from jaxgrav._io import atomic_output
 from jaxgrav.constants import KNOT
 from jaxgrav.datasets import load_map
-from jaxgrav.geodesy import eotvos
-from jaxgrav.match import METHODS_B, match_track, match_track_b, status_messages, status_messages_b
+from jaxgrav.match import ENTROPY_HALF_SIZE, METHODS, match_track, status_messages
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
 from jaxgrav.sim import DEG_ARC_M, rayleigh_quantile
 from jaxgrav.tracks import read_track_csv, write_track_csv
 
-__all__ = ["ENTROPY_HALF_SIZE", "add_parsers"]
+__all__ = ["CONTOUR_METHODS", "ENTROPY_HALF_SIZE", "add_parsers"]
 
-ENTROPY_HALF_SIZE = 20
-"""Default ``--entropy-half-size`` (as ``examples/paper_b_entropy_iccp.py``)."""
+CONTOUR_METHODS = ("entropy", "iccp", "entropy+iccp")
+"""Methods that match magnetic as well as gravity tracks (they estimate no bias)."""
 
 
 def add_parsers(sub):
@@ -36,8 +35,7 @@ def add_parsers(sub):
                    help="CSV: t (s), lat, lon (INS, degrees), gravity (mGal) or magnetic "
                         "(nT); optional v_east, v_north (m/s), drift_radius (degrees)")
     m.add_argument("--out", required=True, help="result JSON")
-    m.add_argument("--method", choices=("dense", "chains", "entropy", "iccp", "entropy+iccp"),
-                   default="dense",
+    m.add_argument("--method", choices=METHODS, default="dense",
                    help="dense (default, most accurate), chains (paper A's constrained "
                         "iso-point chains), or paper B's entropy, iccp, entropy+iccp")
     m.add_argument("--drift-radius", type=float, default=None,
@@ -99,7 +97,6 @@ def add_parsers(sub):
 
 
 def _cmd_sample(args):
-
     grid = load_map(args.map, args.var)
     track = read_track_csv(args.track, required=("lat", "lon"))
     values = np.asarray(grid.sample(track["lat"], track["lon"], args.method, strict=True))
@@ -110,8 +107,6 @@ def _cmd_sample(args):
 
 
 def _cmd_match(args):
-
-
     _check_match_args(args)
     grid = load_map(args.map, args.var)
     track = read_track_csv(args.track, required=("t", "lat", "lon"))
@@ -129,33 +124,29 @@ def _cmd_match(args):
         grid = grid.refine(args.refine)
     has_v = (field == "gravity" and "v_east" in track and "v_north" in track
              and not args.no_eotvos)
-    if args.method in METHODS_B:
-        z = track[field]
-        if has_v:
-            z = z + np.asarray(eotvos(track["lat"], track["v_east"], track["v_north"]))
-        max_rotation = 90.0 if args.max_rotation is None else args.max_rotation
-        result = match_track_b(grid, track["lat"], track["lon"], z, method=args.method,
-                               drift_radius_m=radius_deg * DEG_ARC_M, noise=args.noise,
-                               max_rotation_deg=max_rotation,
-                               entropy_half_size=args.entropy_half_size, warn=False)
-        messages = status_messages_b(int(result.status))
-    else:
-        if field != "gravity":
-            raise ValueError(f"--method {args.method} matches gravity; use entropy, iccp or "
-                             "entropy+iccp for a magnetic track")
-        result = match_track(
-            grid, track["lat"], track["lon"], track["gravity"], method=args.method,
-            drift_radius_m=radius_deg * DEG_ARC_M, noise_mgal=args.noise,
-            v_east=track["v_east"] if has_v else None,
-            v_north=track["v_north"] if has_v else None,
-            bias_sigma_mgal=args.bias_sigma, warn=False,
-        )
-        messages = status_messages(int(result.status))
+    if field != "gravity" and args.method not in CONTOUR_METHODS:
+        raise ValueError(f"--method {args.method} matches gravity; use entropy, iccp or "
+                         "entropy+iccp for a magnetic track")
+    max_rotation = 90.0 if args.max_rotation is None else args.max_rotation
+    kw = {}  # the options each method takes (--bias-sigma is ignored by the others)
+    if args.method in ("dense", "chains"):
+        kw["bias_sigma_mgal"] = args.bias_sigma
+    if args.method in ("iccp", "entropy+iccp"):
+        kw["max_rotation_deg"] = max_rotation
+    if args.method in ("entropy", "entropy+iccp"):
+        kw["entropy_half_size"] = args.entropy_half_size
+    result = match_track(
+        grid, track["lat"], track["lon"], track[field], method=args.method,
+        drift_radius_m=radius_deg * DEG_ARC_M, noise=args.noise,
+        v_east=track["v_east"] if has_v else None,
+        v_north=track["v_north"] if has_v else None, warn=False, **kw,
+    )
+    messages = status_messages(int(result.status))
     r = {k: np.asarray(v).tolist() for k, v in result._asdict().items()}
     r["status_messages"] = messages
     r.update(method=args.method, field=field, map=str(args.map), track=str(args.track),
              drift_radius_deg=radius_deg, eotvos_corrected=has_v)
-    if args.method in METHODS_B:
+    if args.method in CONTOUR_METHODS:
         r.update(max_rotation_deg=max_rotation, entropy_half_size=args.entropy_half_size)
     with atomic_output(args.out, force=args.force) as tmp:
         tmp.write_text(json.dumps(r, indent=1))
@@ -196,7 +187,6 @@ def _check_match_args(args):
 
 
 def _cmd_simulate(args):
-
     grid = load_map(args.map, args.var)
     w, e, s, n = grid.extent
     scen = MatchingScenario(

@@ -5,7 +5,7 @@ INS error model of :mod:`jaxgrav.sim.ins`; each is an optax-style ``init`` /
 ``update`` / ``predict`` triple (:class:`Filter`) run by the one runner
 :func:`run_filter` with ``lax.scan`` (``every=k`` updates only on the reading steps of
 a fixed stride; :func:`pad_to_stride` puts a run's readings there) and vmapped over
-runs. The map is prepared once per run (:func:`prepare_map`). :func:`guard_run` holds
+runs. The map is prepared once per run (:func:`prepare_field`). :func:`guard_run` holds
 back the position corrections in weakly observed directions (paper D's "no harm").
 :func:`filter_track` is the validated single-track entry point.
 """
@@ -26,7 +26,7 @@ from jaxgrav.filters.model import (
     map_anomaly,
     map_at_error,
     predict_only,
-    prepare_map,
+    prepare_field,
     run_filter,
     status_messages_filter,
 )
@@ -58,7 +58,7 @@ __all__ = [
     "pmf",
     "predict",
     "predict_only",
-    "prepare_map",
+    "prepare_field",
     "run_filter",
     "run_pmf",
     "sigma_weights",

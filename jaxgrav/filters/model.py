@@ -38,7 +38,8 @@ from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import PointMasses
 from jaxgrav.fields.pointmass import anomaly_kernel as _anomaly_kernel
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-from jaxgrav.grid import Grid, make_sampler
+from jaxgrav.grid import Grid
+from jaxgrav.prepared import PreparedMap, prepare_map
 from jaxgrav.sim.ins import GRAV
 
 __all__ = [
@@ -53,7 +54,7 @@ __all__ = [
     "map_anomaly",
     "map_at_error",
     "predict_only",
-    "prepare_map",
+    "prepare_field",
     "run_filter",
     "status_messages_filter",
 ]
@@ -163,7 +164,7 @@ class Filter(NamedTuple):
     predict: Callable | None = None
 
 
-def prepare_map(field):
+def prepare_field(field):
     """A map made ready to be evaluated many times: a Grid's bicubic coefficients, once.
 
     :func:`run_filter` calls it before its scan, so the spline solve over the whole
@@ -176,13 +177,13 @@ def prepare_map(field):
 
     Returns
     -------
-    PointMasses or callable
-        For a Grid, ``f(lat, lon) -> mGal`` with the coefficients computed here
-        (:func:`jaxgrav.grid.make_sampler`, bicubic, NaN off the grid; no
-        validation); anything else unchanged.
+    PreparedMap, PointMasses or callable
+        For a Grid, its :class:`~jaxgrav.prepared.PreparedMap` (a pytree value, passed
+        through the scan as data; sampled bicubic, NaN off the grid, no validation);
+        anything else unchanged.
     """
     if isinstance(field, Grid):
-        return make_sampler(field, "bicubic")
+        return prepare_map(field)
     return field
 
 
@@ -191,7 +192,7 @@ def map_anomaly(field, lat, lon):
 
     Parameters
     ----------
-    field : Grid, PointMasses or callable
+    field : Grid, PreparedMap, PointMasses or callable
     lat, lon : Array
         Points (degrees), broadcast together.
 
@@ -200,6 +201,8 @@ def map_anomaly(field, lat, lon):
     Array
         NaN off a Grid.
     """
+    if isinstance(field, PreparedMap):
+        return field.sample(lat, lon, "bicubic")
     if isinstance(field, Grid):
         return field.sample(lat, lon, "bicubic")
     if isinstance(field, PointMasses):
@@ -307,7 +310,7 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
     filt : Filter
     field : Grid, PointMasses or callable
         Map; pass it here (a traced argument), not closed over, so large grids are
-        not baked into the compiled code. Prepared once (:func:`prepare_map`) for
+        not baked into the compiled code. Prepared once (:func:`prepare_field`) for
         all steps.
     dynamics : Dynamics
         Error dynamics per step.
@@ -341,7 +344,7 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
     if isinstance(every, bool) or k < 1:
         raise ValueError(f"every must be a positive int (steps per reading); got {every!r}")
     every = k
-    field = prepare_map(field)
+    field = prepare_field(field)
     state = filt.init(x0, p0)
 
     def body(state, step):

@@ -1,15 +1,23 @@
-"""Map matching: correlation-extremum gravity matching (paper A) and entropy + ICCP
-matching (paper B).
+"""Map matching of one track: correlation-extremum matching (dense offsets, iso-point
+chains) and entropy + ICCP matching.
 
-``match_track`` (paper A) and ``match_track_b`` (paper B) are the validated entry
-points for one track; ``match_dense``, ``match_chains``, ``match_entropy``,
-``match_iccp`` and ``match_entropy_iccp`` are the jitted single-track cores to
-``jax.vmap`` over many.
+:func:`match_track` is the validated entry point for one track, with ``method`` in
+:data:`METHODS` (``dense``, ``chains``, ``entropy``, ``iccp``, ``entropy+iccp``); its
+status bits are in the one table :data:`STATUS` (:func:`status_messages`).
+``match_dense``, ``match_chains``, ``match_entropy``, ``match_iccp`` and
+``match_entropy_iccp`` are the jitted single-track cores to ``jax.vmap`` over many;
+each takes a :class:`~jaxgrav.grid.Grid` or a :class:`~jaxgrav.prepared.PreparedMap`
+(the map prepared once, passed as data).
+
+``match_track_b``, ``METHODS_B`` and ``status_messages_b`` are deprecated (one
+release): use ``match_track``, ``METHODS`` and ``status_messages``.
 """
 
-from jaxgrav.match.api import METHODS, MIN_FIXES, config_for, match_track
+from jaxgrav.match import entropy_iccp as _entropy_iccp
+from jaxgrav.match.api import ENTROPY_HALF_SIZE, METHODS, MIN_FIXES, match_track, validate_track
+from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import ChainConfig, match_chains
-from jaxgrav.match.dense import DenseConfig, match_dense, shifted_tracks
+from jaxgrav.match.dense import DenseConfig, lattice_table, match_dense, shifted_tracks
 from jaxgrav.match.entropy import (
     EntropyConfig,
     difference_entropy,
@@ -18,20 +26,16 @@ from jaxgrav.match.entropy import (
     match_entropy,
     sequence_entropy,
 )
-from jaxgrav.match.entropy_iccp import (
-    METHODS_B,
-    iccp_config_for,
-    match_entropy_iccp,
-    match_track_b,
-    status_messages_b,
-)
+from jaxgrav.match.entropy_iccp import match_track_b, status_messages_b
 from jaxgrav.match.iccp import IccpConfig, kabsch_2d, match_iccp, match_iccp_batch
 from jaxgrav.match.result import STATUS, MatchResult, status_messages
 from jaxgrav.match.scoring import SCORES, bias_precision, decreasing_weights, score_track
+from jaxgrav.match.sizing import config_for, iccp_config_for
+from jaxgrav.prepared import PreparedMap, prepare_map
 
 __all__ = [
+    "ENTROPY_HALF_SIZE",
     "METHODS",
-    "METHODS_B",
     "MIN_FIXES",
     "SCORES",
     "STATUS",
@@ -40,6 +44,7 @@ __all__ = [
     "EntropyConfig",
     "IccpConfig",
     "MatchResult",
+    "PreparedMap",
     "bias_precision",
     "config_for",
     "decreasing_weights",
@@ -48,6 +53,7 @@ __all__ = [
     "iccp_config_for",
     "information_entropy",
     "kabsch_2d",
+    "lattice_table",
     "match_chains",
     "match_dense",
     "match_entropy",
@@ -56,9 +62,18 @@ __all__ = [
     "match_iccp_batch",
     "match_track",
     "match_track_b",
+    "prepare_map",
     "score_track",
     "sequence_entropy",
     "shifted_tracks",
     "status_messages",
     "status_messages_b",
+    "validate_track",
 ]
+
+
+def __getattr__(name):
+    """Deprecated constants (``METHODS_B``), with a ``DeprecationWarning``."""
+    if name in ("METHODS_B", "ALL_STATUS_B"):
+        return getattr(_entropy_iccp, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,10 +1,13 @@
-"""Validated entry point for matching one track: :func:`match_track`.
+"""Validated entry point for matching one track, by any method: :func:`match_track`.
 
 The jitted cores (:func:`~jaxgrav.match.dense.match_dense`,
-:func:`~jaxgrav.match.correlation.match_chains`) take one track and are meant to be
-vmapped; they cannot raise. This wrapper checks the inputs first, sizes the search
-to the INS drift, applies the velocity-based Eötvös correction when velocities are
-given, runs the matcher and turns its status flags into warnings.
+:func:`~jaxgrav.match.correlation.match_chains`, :func:`~jaxgrav.match.entropy.match_entropy`,
+:func:`~jaxgrav.match.iccp.match_iccp`, :func:`~jaxgrav.match.combined.match_entropy_iccp`)
+take one track and are meant to be vmapped; they cannot raise. This wrapper checks the
+inputs first, sizes the search to the INS drift, applies the velocity-based Eötvös
+correction when velocities are given, prepares the map once
+(:class:`~jaxgrav.prepared.PreparedMap`), runs the matcher and turns its status flags
+(:data:`~jaxgrav.match.result.STATUS`) into warnings.
 """
 
 import dataclasses
@@ -16,83 +19,56 @@ import numpy as np
 
 from jaxgrav._validate import check_latitude
 from jaxgrav.geodesy import eotvos
+from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import ChainConfig, chain_tolerances, match_chains
 from jaxgrav.match.dense import DenseConfig, match_dense
-from jaxgrav.match.lattice_chains import stencil_size_for, stencil_size_for_step
+from jaxgrav.match.entropy import EntropyConfig, entropy_config_for, match_entropy
+from jaxgrav.match.iccp import IccpConfig, match_iccp
+from jaxgrav.match.lattice_chains import stencil_size_for
 from jaxgrav.match.result import status_messages
+from jaxgrav.match.sizing import config_for, iccp_config_for
+from jaxgrav.prepared import as_grid, prepare_map
 
-__all__ = ["METHODS", "MIN_FIXES", "config_for", "match_track"]
+__all__ = ["ENTROPY_HALF_SIZE", "METHODS", "MIN_FIXES", "match_track", "validate_track"]
 
-METHODS = ("dense", "chains")
+METHODS = ("dense", "chains", "entropy", "iccp", "entropy+iccp")
 """``dense``: offset grid + Gauss–Newton (default, most accurate on real maps);
-``chains``: paper A's iso-point chains with constraint elimination."""
+``chains``: paper A's iso-point chains with constraint elimination; ``entropy``:
+difference-entropy coarse match; ``iccp``: iterative closest contour point;
+``entropy+iccp``: entropy coarse then ICCP fine (paper B)."""
 
 MIN_FIXES = 5
 """Fewest fixes a track may have (paper A uses N ≥ 10)."""
 
+ENTROPY_HALF_SIZE = 20
+"""Default cap on entropy offsets per side in :func:`match_track`."""
 
-def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=math.inf,
-               n_rotations=1, score=None, step_m=None):
-    """A matcher configuration whose search region covers the drift.
+_CONFIG_TYPES = {"dense": DenseConfig, "chains": ChainConfig, "entropy": EntropyConfig,
+                 "iccp": IccpConfig}
+
+
+def validate_track(grid, lat, lon, readings):
+    """Check one track against a map; return it as float NumPy arrays.
 
     Parameters
     ----------
-    method : {"dense", "chains"}
-    grid : Grid
-        The map that will be matched (for ``chains``, the refined one).
-    drift_radius_m : float
-        Largest expected INS drift (m); the search reaches 1.2× this.
-    noise_mgal : float
-        Reading noise σ (mGal).
-    bias_sigma_mgal : float
-        Prior σ of the reading bias (mGal); ``inf`` estimates it freely.
-    n_rotations : int
-        Heading errors tried by the dense path (1 = none).
-    score : str, optional
-        Score form; default ``"bias"`` (dense) or ``"difference"`` (chains, the paper's).
-    step_m : float, optional
-        ``chains``: the distance between consecutive fixes (m). When given, the
-        chain search uses the displacement stencil
-        (:attr:`~jaxgrav.match.correlation.ChainConfig.stencil_size`) sized for such
-        steps in any direction; otherwise the pairwise search on ``capacity`` slots.
+    grid : Grid or PreparedMap
+    lat, lon : array_like, shape ``(N,)``
+        Fixes (degrees).
+    readings : array_like, shape ``(N,)``
+        Measured values (map units).
 
     Returns
     -------
-    DenseConfig or ChainConfig
+    tuple of numpy.ndarray
+        ``(lat, lon, readings)``.
+
+    Raises
+    ------
+    ValueError
+        Not 1-D, mismatched lengths, fewer than :data:`MIN_FIXES` fixes, NaN/inf
+        values, a latitude outside ±90°, a track off the map.
     """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}; got {method!r}")
-    if not drift_radius_m > 0:
-        raise ValueError(f"drift_radius_m must be positive (m); got {drift_radius_m!r}")
-    reach = 1.2 * float(drift_radius_m)
-    dy, dx = grid.spacing_m()
-    if method == "dense":
-        spacing = min(max(min(dy, dx) / 8.0, 50.0), reach / 3.0)
-        half = math.ceil(reach / spacing)
-        if half > 40:
-            half, spacing = 40, reach / 40
-        return DenseConfig(spacing_m=spacing, half_size=half, noise_mgal=noise_mgal,
-                           bias_sigma_mgal=bias_sigma_mgal, n_rotations=n_rotations,
-                           score=score or "bias")
-    half = math.ceil(reach / min(dy, dx))
-    if 2 * half + 1 > min(grid.ny, grid.nx):
-        raise ValueError(
-            f"drift_radius_m={drift_radius_m!r} needs a search window of {2 * half + 1} nodes, "
-            f"larger than the {grid.ny}x{grid.nx} map")
-    config = ChainConfig(half_size=half, capacity=min((2 * half + 1) ** 2, 384),
-                         delta=2.0 * noise_mgal, score=score or "difference")
-    if step_m is None:
-        return config
-    if not step_m >= 0:
-        raise ValueError(f"step_m must be a distance >= 0 (m); got {step_m!r}")
-    # the largest tolerance on the map: the node allowance grows with the cell diagonal
-    tols = [chain_tolerances(grid, la, config) for la in (grid.lat0, grid.extent[3])]
-    step_tol, angle_tol = max(float(t[0]) for t in tols), float(tols[0][1])
-    size = stencil_size_for_step(grid, float(step_m), step_tol, angle_tol)
-    return dataclasses.replace(config, stencil_size=size)
-
-
-def _validate(grid, lat, lon, readings):
     lat, lon, readings = (np.asarray(a, dtype=float) for a in (lat, lon, readings))
     for name, a in (("lat", lat), ("lon", lon), ("readings", readings)):
         if a.ndim != 1:
@@ -108,6 +84,7 @@ def _validate(grid, lat, lon, readings):
             raise ValueError(f"{name} has {int(bad.sum())} NaN/inf value(s), first at fix "
                              f"{int(np.flatnonzero(bad)[0])}; matching needs a value at every fix")
     check_latitude(lat, "lat")
+    grid = as_grid(grid)
     inside = np.asarray(grid.contains(lat, lon))
     if not inside.all():
         i = int(np.flatnonzero(~inside)[0])
@@ -117,36 +94,94 @@ def _validate(grid, lat, lon, readings):
     return lat, lon, readings
 
 
+def _check_options(method, noise, bias_sigma_mgal, max_rotation_deg, entropy_half_size,
+                   config):
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}; got {method!r}")
+    if not noise >= 0:
+        raise ValueError(f"noise must be a non-negative standard deviation; got {noise!r}")
+    if bias_sigma_mgal is not None and method not in ("dense", "chains"):
+        raise ValueError(f"bias_sigma_mgal is the bias prior of dense and chains; method "
+                         f"{method!r} estimates no bias (correct the readings instead)")
+    if max_rotation_deg is not None:
+        if method not in ("iccp", "entropy+iccp"):
+            raise ValueError(f"max_rotation_deg bounds ICCP's rotation; it has no effect with "
+                             f"method {method!r} (use iccp or entropy+iccp)")
+        if not 0 <= max_rotation_deg <= 180:
+            raise ValueError(f"max_rotation_deg must be the INS heading-error bound in "
+                             f"degrees, between 0 and 180; got {max_rotation_deg!r}")
+    if entropy_half_size is not None:
+        if method not in ("entropy", "entropy+iccp"):
+            raise ValueError(f"entropy_half_size sizes the entropy stage; it has no effect "
+                             f"with method {method!r} (use entropy or entropy+iccp)")
+        if not (isinstance(entropy_half_size, int) and entropy_half_size >= 1):
+            raise ValueError(f"entropy_half_size must be an integer >= 1; "
+                             f"got {entropy_half_size!r}")
+    if config is None:
+        return
+    if method == "entropy+iccp":
+        ok = (isinstance(config, tuple) and len(config) == 2
+              and isinstance(config[0], (EntropyConfig, type(None)))
+              and isinstance(config[1], (IccpConfig, type(None))))
+        expected = "a pair (EntropyConfig or None, IccpConfig or None)"
+    else:
+        ok = isinstance(config, _CONFIG_TYPES[method])
+        expected = f"a {_CONFIG_TYPES[method].__name__}"
+    if not ok:
+        raise ValueError(f"config for method {method!r} must be {expected}; "
+                         f"got {type(config).__name__}")
+
+
 def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000.0,
-                v_east=None, v_north=None, noise_mgal=1.0, bias_sigma_mgal=None, config=None,
-                warn=True):
+                noise=1.0, v_east=None, v_north=None, bias_sigma_mgal=None,
+                max_rotation_deg=None, entropy_half_size=None, config=None, warn=True,
+                noise_mgal=None):
     """Match one track against a map, with input checks (the public entry point).
 
     Parameters
     ----------
-    grid : Grid
-        Anomaly map (mGal). For ``method="chains"`` refine it first to the node
-        spacing wanted (paper A: 0.005°, ``grid.refine(100)`` of a 0.5° map).
+    grid : Grid or PreparedMap
+        Map: gravity anomaly (mGal), or for ``entropy``, ``iccp``, ``entropy+iccp``
+        also magnetic total intensity or anomaly (nT). For ``method="chains"`` refine
+        it first to the node spacing wanted (paper A: 0.005°, ``grid.refine(100)`` of
+        a 0.5° map). A Grid is prepared here (:func:`~jaxgrav.prepared.prepare_map`)
+        once for the whole match.
     lat, lon : array_like, shape ``(N,)``
         INS-indicated fixes (degrees), N ≥ :data:`MIN_FIXES`.
     readings : array_like, shape ``(N,)``
-        Gravimeter anomaly readings (mGal), without Eötvös correction if velocities
-        are given.
-    method : {"dense", "chains"}
+        Measured values in the map's units; gravimeter readings without Eötvös
+        correction if velocities are given. ``entropy`` and ``iccp`` estimate no
+        bias: correct the readings for any known one.
+    method : {"dense", "chains", "entropy", "iccp", "entropy+iccp"}
+        See :data:`METHODS`.
     drift_radius_m : float
         Largest expected INS drift (m); sizes the search.
+    noise : float
+        Reading noise σ (map units: mGal or nT).
     v_east, v_north : array_like, optional
-        INS velocity (m/s). When given, readings are Eötvös-corrected with it and the
-        bias prior defaults to 3 mGal (velocity error of about 0.2 m/s plus
-        gravimeter bias); otherwise the bias is estimated freely.
-    noise_mgal : float
-        Reading noise σ (mGal).
+        INS velocity (m/s). When given, readings are Eötvös-corrected with it and
+        (dense, chains) the bias prior defaults to 3 mGal (velocity error of about
+        0.2 m/s plus gravimeter bias); otherwise the bias is estimated freely.
     bias_sigma_mgal : float, optional
-        Prior σ of the remaining bias (mGal), overriding the default above.
-    config : DenseConfig or ChainConfig, optional
-        Full control; replaces the sizing from ``drift_radius_m`` and the noise.
+        ``dense``, ``chains``: prior σ of the remaining bias (mGal), overriding the
+        default above.
+    max_rotation_deg : float, optional
+        ``iccp``, ``entropy+iccp``: largest INS heading error (degrees, 0–180), the
+        bound on ICCP's rotation; default 90.
+    entropy_half_size : int, optional
+        ``entropy``, ``entropy+iccp``: at most this many offsets per side (default
+        :data:`ENTROPY_HALF_SIZE`; on fine maps the offset spacing grows instead).
+    config : optional
+        Full control, replacing the sizing from ``drift_radius_m`` and ``noise``: a
+        :class:`~jaxgrav.match.dense.DenseConfig`,
+        :class:`~jaxgrav.match.correlation.ChainConfig`,
+        :class:`~jaxgrav.match.entropy.EntropyConfig` or
+        :class:`~jaxgrav.match.iccp.IccpConfig` for the method; for ``entropy+iccp``
+        a pair ``(EntropyConfig or None, IccpConfig or None)`` (None parts sized).
     warn : bool
         Emit a ``RuntimeWarning`` for each status flag raised.
+    noise_mgal : float, optional
+        Deprecated spelling of ``noise``.
 
     Returns
     -------
@@ -155,30 +190,73 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
     Raises
     ------
     ValueError
-        Unknown method, mismatched lengths, too short a track, NaN readings, a
-        track off the map.
+        Unknown method, an option the method does not use, a config of the wrong
+        type, mismatched lengths, too short a track, NaN readings, a track off the map,
+        non-positive drift radius, a rotation bound outside 0–180°.
     """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}; got {method!r}")
-    lat, lon, readings = _validate(grid, lat, lon, readings)
+    if noise_mgal is not None:
+        warnings.warn("match_track(noise_mgal=...) is deprecated; use noise=...",
+                      DeprecationWarning, stacklevel=2)
+        noise = noise_mgal
+    _check_options(method, noise, bias_sigma_mgal, max_rotation_deg, entropy_half_size, config)
+    lat, lon, readings = validate_track(grid, lat, lon, readings)
     corrected = v_east is not None and v_north is not None
     if corrected:
         ve, vn = (np.broadcast_to(np.asarray(v, float), lat.shape) for v in (v_east, v_north))
         if not (np.isfinite(ve).all() and np.isfinite(vn).all()):
             raise ValueError("v_east and v_north must be finite at every fix")
         readings = readings + np.asarray(eotvos(lat, ve, vn))
-    if bias_sigma_mgal is None:
-        bias_sigma_mgal = 3.0 if corrected else math.inf
-    if config is None:
-        config = config_for(method, grid, drift_radius_m, noise_mgal=noise_mgal,
-                            bias_sigma_mgal=bias_sigma_mgal)
-        if method == "chains":  # the displacement stencil, sized for this track
-            tol = (float(v) for v in chain_tolerances(grid, lat, config))
-            config = dataclasses.replace(config,
-                                         stencil_size=stencil_size_for(grid, lat, lon, *tol))
-    fn = match_dense if method == "dense" else match_chains
-    result = fn(grid, jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(readings), config)
+    if method in ("dense", "chains"):
+        result = _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
+                                    bias_sigma_mgal, corrected, config)
+    else:
+        result = _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise,
+                                max_rotation_deg, entropy_half_size, config)
     if warn:
         for msg in status_messages(int(result.status)):
             warnings.warn(f"match_track: {msg}", RuntimeWarning, stacklevel=2)
     return result
+
+
+def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
+                       bias_sigma_mgal, corrected, config):
+    """``dense`` or ``chains`` on checked inputs."""
+    if bias_sigma_mgal is None:
+        bias_sigma_mgal = 3.0 if corrected else math.inf
+    if config is None:
+        config = config_for(method, grid, drift_radius_m, noise_mgal=noise,
+                            bias_sigma_mgal=bias_sigma_mgal)
+        if method == "chains":  # the displacement stencil, sized for this track
+            tol = (float(v) for v in chain_tolerances(as_grid(grid), lat, config))
+            config = dataclasses.replace(
+                config, stencil_size=stencil_size_for(as_grid(grid), lat, lon, *tol))
+    args = (jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(readings), config)
+    if method == "dense":
+        return match_dense(prepare_map(grid), *args)
+    return match_chains(as_grid(grid), *args)  # reads node values only: nothing to prepare
+
+
+def _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise, max_rotation_deg,
+                   entropy_half_size, config):
+    """``entropy``, ``iccp`` or ``entropy+iccp`` on checked inputs."""
+    entropy = iccp = None
+    if method == "entropy":
+        entropy = config
+    elif method == "iccp":
+        iccp = config
+    elif config is not None:
+        entropy, iccp = config
+    if method != "iccp" and entropy is None:
+        half = ENTROPY_HALF_SIZE if entropy_half_size is None else entropy_half_size
+        entropy = entropy_config_for(grid, drift_radius_m, max_half_size=half)
+    if method != "entropy" and iccp is None:
+        stage = "alone" if method == "iccp" else "fine"
+        iccp = iccp_config_for(grid, drift_radius_m, stage=stage, noise=noise,
+                               max_rotation_deg=90.0 if max_rotation_deg is None
+                               else max_rotation_deg)
+    pm = prepare_map(grid)
+    if method == "entropy":
+        return match_entropy(pm, lat, lon, readings, entropy)
+    if method == "iccp":
+        return match_iccp(pm, lat, lon, readings, iccp)
+    return match_entropy_iccp(pm, lat, lon, readings, entropy, iccp)

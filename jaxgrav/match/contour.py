@@ -3,9 +3,9 @@
 ICCP evaluates the map and its gradient millions of times (points × Newton steps ×
 iterations × tracks), so this module prepares the map once for that loop:
 
-- :func:`patch_coefficients` turns the not-a-knot bicubic spline of
-  :func:`jaxgrav.interp.bicubic_coefficients` (node values and slopes, Hermite form)
-  into the 16 power-basis coefficients ``a_ij`` of every cell,
+- :func:`patch_coefficients` (:meth:`jaxgrav.prepared.PreparedMap.patches`) turns the
+  not-a-knot bicubic spline of :func:`jaxgrav.interp.bicubic_coefficients` (node values
+  and slopes, Hermite form) into the 16 power-basis coefficients ``a_ij`` of every cell,
   ``f(ty, tx) = Σ a_ij ty^i tx^j`` for ``ty, tx ∈ [0, 1]``: the *same* interpolant,
   but one contiguous gather of 16 numbers per point instead of four of four, and the
   value and both derivatives by two short Horner sums with no basis functions to build.
@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav import interp
+from jaxgrav.prepared import as_grid
 
 __all__ = [
     "LocalField",
@@ -37,13 +38,11 @@ __all__ = [
     "value_grad_ne",
 ]
 
-def _hermite_to_powers(v0, v1, s0, s1):
-    """Coefficients of ``1, t, t², t³`` of ``v0 h0 + v1 h1 + s0 g0 + s1 g1`` (Hermite basis)."""
-    return v0, s0, 3.0 * (v1 - v0) - 2.0 * s0 - s1, 2.0 * (v0 - v1) + s0 + s1
-
-
 def patch_coefficients(values):
     """Power-basis coefficients of the bicubic (not-a-knot spline) interpolant per cell.
+
+    :func:`jaxgrav.interp.bicubic_patches` of the node coefficients; with a
+    :class:`~jaxgrav.prepared.PreparedMap` use its :meth:`~jaxgrav.prepared.PreparedMap.patches`.
 
     Parameters
     ----------
@@ -56,17 +55,7 @@ def patch_coefficients(values):
         Cell ``[r, c]`` holds ``a_ij`` at ``4i + j``:
         ``f = Σ a_ij ty^i tx^j`` with ``ty = iy − r``, ``tx = ix − c`` in ``[0, 1]``.
     """
-    k = interp.bicubic_coefficients(values)  # (ny, nx, 4): f, f_x, f_y, f_xy per node
-    ny, nx = values.shape[-2:]
-    corner = lambda q, dr, dc: k[dr:ny - 1 + dr, dc:nx - 1 + dc, q]  # noqa: E731
-    # along x first: for each row r0/r1 and each y-kind (value f / slope f_y), the
-    # x-polynomial from the values (f or f_y) and x-slopes (f_x or f_xy) at c0, c1
-    rows = [_hermite_to_powers(corner(q, dr, 0), corner(q, dr, 1), corner(q + 1, dr, 0),
-                               corner(q + 1, dr, 1))
-            for q, dr in ((0, 0), (0, 1), (2, 0), (2, 1))]  # value r0, value r1, slope r0, r1
-    # then along y, per x-power j
-    cols = [_hermite_to_powers(*(rows[a][j] for a in range(4))) for j in range(4)]
-    return jnp.stack([cols[j][i] for i in range(4) for j in range(4)], axis=-1)
+    return interp.bicubic_patches(interp.bicubic_coefficients(values))
 
 
 class LocalField(NamedTuple):
@@ -96,7 +85,7 @@ def local_field(coef, grid, lat_c, lon_c, m_per_deg_lat, m_per_deg_lon):
     ----------
     coef : Array
         :func:`patch_coefficients` of ``grid.values``.
-    grid : Grid
+    grid : Grid or PreparedMap
     lat_c, lon_c : Array
         Origin (degrees).
     m_per_deg_lat, m_per_deg_lon : Array
@@ -106,15 +95,12 @@ def local_field(coef, grid, lat_c, lon_c, m_per_deg_lat, m_per_deg_lon):
     -------
     LocalField
     """
+    grid = as_grid(grid)
     iy0, ix0 = grid.fractional_index(lat_c, lon_c)
     dtype = jnp.result_type(coef.dtype, iy0.dtype)
     return LocalField(coef, iy0.astype(dtype), ix0.astype(dtype),
                       (1.0 / (m_per_deg_lat * grid.dlat)).astype(dtype),
                       (1.0 / (m_per_deg_lon * grid.dlon)).astype(dtype))
-
-
-def _edge_eps(dtype, n):
-    return 8.0 * float(jnp.finfo(dtype).eps) * n
 
 
 def value_grad_ne(field, north, east):
@@ -136,7 +122,7 @@ def value_grad_ne(field, north, east):
         components (map units per metre; 0 off the map).
     """
     ny, nx = field.coef.shape[0] + 1, field.coef.shape[1] + 1
-    eps = _edge_eps(field.coef.dtype, max(ny, nx))
+    eps = interp.edge_eps(field.coef.dtype, max(ny, nx))
     iy = field.iy0 + north * field.sy
     ix = field.ix0 + east * field.sx
     inside = (iy >= -eps) & (iy <= ny - 1 + eps) & (ix >= -eps) & (ix <= nx - 1 + eps)

@@ -18,12 +18,11 @@ Paper A's pipeline, one step per function (each testable on its own):
 (the map is shared). The dense-offset fast path is :mod:`jaxgrav.match.dense`.
 """
 
-import dataclasses
 
 import jax
 import jax.numpy as jnp
 
-from jaxgrav._pytree import static_field
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.candidates import iso_candidates, lattice_candidates
 from jaxgrav.match.chains import (
@@ -41,13 +40,13 @@ from jaxgrav.match.lattice_chains import (
 )
 from jaxgrav.match.result import MatchResult, nearest_to_ins
 from jaxgrav.match.scoring import SCORES, decreasing_weights, score_track
+from jaxgrav.prepared import as_grid
 
-__all__ = ["ChainConfig", "chain_tolerances", "match_chains"]
+__all__ = ["ChainConfig", "chain_tolerances", "match_chains", "pair_cost"]
 
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class ChainConfig:
     """Settings of the chain matcher.
 
@@ -135,7 +134,7 @@ class ChainConfig:
                              f"got {self.survivor_capacity!r}")
 
 
-def _pair_cost(readings, w_diff):
+def pair_cost(readings, w_diff):
     """Difference-form cost of a step from value v0 at fix i to v1 at fix i+1 (broadcasts)."""
     dg = jnp.diff(readings)
 
@@ -146,12 +145,12 @@ def _pair_cost(readings, w_diff):
 
 
 @jax.jit
-def match_chains(grid, lat, lon, readings, config=ChainConfig()):
+def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
     """Match one track by paper A's constrained chain search.
 
     Parameters
     ----------
-    grid : Grid
+    grid : Grid or PreparedMap
         Anomaly map (mGal), refined to the node spacing wanted (paper A: 0.005°).
     lat, lon : Array, shape ``(N,)``
         INS-indicated fixes (degrees).
@@ -164,6 +163,7 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
     MatchResult
         If no chain survives, the INS fixes are returned with status bit 1.
     """
+    grid = as_grid(grid)  # the chain search reads node values only
     lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
     n = lat.shape[0]
     steps = local_offsets_m(lat[1:], lon[1:], lat[:-1], lon[:-1])
@@ -176,7 +176,7 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):
                                            dtype)
     else:
         unary_fn = lambda value: jnp.zeros(value.shape, dtype)  # noqa: E731
-        pair = _pair_cost(readings, w[:-1] / jnp.sum(w[:-1]))
+        pair = pair_cost(readings, w[:-1] / jnp.sum(w[:-1]))
     search_args = (grid, lat, lon, readings, steps, tol, unary_fn, pair, config)
     if config.stencil_size > 0:
         cands, alive, work_constrained, search, stencil_overflow = _lattice_search(*search_args)

@@ -22,21 +22,21 @@ and an offset grid coarser than the map falls back to sampling every shifted fix
 on its own (same values, slower). The refinement
 uses the analytic gradient of the bicubic patch and a closed-form solve of its 4 × 4
 normal equations (:mod:`~jaxgrav.match.refine`). The map's spline coefficients may
-be prepared once (:func:`prepare_map`) and passed in, as a hot loop over many calls
-should; :func:`match_dense_batch` matches many tracks in cache-sized chunks.
+be prepared once (a :class:`~jaxgrav.prepared.PreparedMap` as ``grid``, or its
+:func:`lattice_table`) and passed in, as a hot loop over many calls should;
+:func:`match_dense_batch` matches many tracks in cache-sized chunks.
 """
 
-import dataclasses
 import functools
 
 import jax
 import jax.numpy as jnp
 
 from jaxgrav import interp
-from jaxgrav._pytree import static_field
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
-from jaxgrav.match.lattice import interleave, patch_values
+from jaxgrav.match.lattice import patch_values
 from jaxgrav.match.offsets import means, offset_scores, track_frame
 from jaxgrav.match.refine import gauss_newton, residual_function
 from jaxgrav.match.result import MatchResult, nearest_to_ins
@@ -48,12 +48,12 @@ from jaxgrav.match.scoring import (
     score_track,
     sums,
 )
+from jaxgrav.prepared import as_grid, prepare_map
 
-__all__ = ["DenseConfig", "match_dense", "match_dense_batch", "prepare_map", "shifted_tracks"]
+__all__ = ["DenseConfig", "lattice_table", "match_dense", "match_dense_batch", "shifted_tracks"]
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class DenseConfig:
     """Settings of the dense-offset matcher.
 
@@ -122,13 +122,14 @@ class DenseConfig:
             raise ValueError(f"lattice_block must be >= 0; got {self.lattice_block!r}")
 
 
-def prepare_map(grid, method="bicubic"):
+def lattice_table(grid, method="bicubic"):
     """The map as :func:`match_dense` reads it, to compute once per map and pass in.
 
     Parameters
     ----------
-    grid : Grid
-        Anomaly map (mGal).
+    grid : Grid or PreparedMap
+        Anomaly map (mGal); a :class:`~jaxgrav.prepared.PreparedMap` gives its table
+        without recomputing the spline.
     method : {"bicubic", "bilinear"}
         ``DenseConfig.method``.
 
@@ -140,10 +141,10 @@ def prepare_map(grid, method="bicubic"):
         ``(2·ny, 2·nx)`` table (:func:`jaxgrav.match.lattice.interleave`);
         ``bilinear``: the node values ``(ny, nx)``.
     """
-    interp._check_method(method)
+    interp.check_method(method)
     if method == "bilinear":
-        return jnp.asarray(grid.values)
-    return interleave(interp.bicubic_coefficients(grid.values))
+        return jnp.asarray(as_grid(grid).values)
+    return prepare_map(grid).interleaved()
 
 
 def shifted_tracks(lat, lon, d_north, d_east, rotation_rad):
@@ -174,12 +175,12 @@ def shifted_tracks(lat, lon, d_north, d_east, rotation_rad):
 
 
 @jax.jit
-def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None):
+def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None):  # noqa: B008
     """Match one track by scoring every shift of the INS track on an offset grid.
 
     Parameters
     ----------
-    grid : Grid
+    grid : Grid or PreparedMap
         Anomaly map (mGal); sampled continuously, so it need not be refined.
     lat, lon : Array, shape ``(N,)``
         INS-indicated fixes (degrees).
@@ -187,9 +188,10 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None):
         Gravimeter readings (mGal).
     config : DenseConfig
     prepared : Array, optional
-        :func:`prepare_map` of ``grid`` for ``config.method``, computed once per map;
-        computed here when omitted (under ``vmap`` with the grid shared, once per
-        call).
+        :func:`lattice_table` of ``grid`` for ``config.method``, computed once per map;
+        taken from ``grid`` when omitted (computed here unless ``grid`` is a
+        :class:`~jaxgrav.prepared.PreparedMap`; under ``vmap`` with the grid shared,
+        once per call).
 
     Returns
     -------
@@ -198,10 +200,11 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None):
         ``work_pairs`` the number of map samples taken.
     """
     lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
-    table = prepare_map(grid, config.method) if prepared is None else prepared
+    table = lattice_table(grid, config.method) if prepared is None else prepared
+    grid = as_grid(grid)
     f = 2 if config.method == "bicubic" else 1
     if table.shape != (f * grid.ny, f * grid.nx):
-        raise ValueError(f"prepared must have shape {(f * grid.ny, f * grid.nx)} (prepare_map of "
+        raise ValueError(f"prepared must have shape {(f * grid.ny, f * grid.nx)} (lattice_table of "
                          f"the grid for method={config.method!r}); got {table.shape}")
     dtype = jnp.result_type(table.dtype, lat.dtype, float)
     lat, lon, readings = lat.astype(dtype), lon.astype(dtype), readings.astype(dtype)
@@ -278,7 +281,7 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None):
 
 
 @functools.partial(jax.jit, static_argnames=("chunk",))
-def match_dense_batch(grid, lat, lon, readings, config=DenseConfig(), prepared=None, chunk=128):
+def match_dense_batch(grid, lat, lon, readings, config=DenseConfig(), prepared=None, chunk=128):  # noqa: B008
     """:func:`match_dense` over a batch of tracks sharing one map, in chunks.
 
     Equal to ``jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None, None))``; tracks
@@ -288,7 +291,7 @@ def match_dense_batch(grid, lat, lon, readings, config=DenseConfig(), prepared=N
 
     Parameters
     ----------
-    grid : Grid
+    grid : Grid or PreparedMap
         Anomaly map (mGal).
     lat, lon : Array, shape ``(B, N)``
         INS-indicated fixes of ``B`` tracks (degrees).
@@ -296,7 +299,7 @@ def match_dense_batch(grid, lat, lon, readings, config=DenseConfig(), prepared=N
         Gravimeter readings (mGal).
     config : DenseConfig
     prepared : Array, optional
-        :func:`prepare_map` of ``grid``; computed once here when omitted.
+        :func:`lattice_table` of ``grid``; computed once here when omitted.
     chunk : int
         Most tracks per chunk (static); the batch is cut into equal chunks, the
         last one padded with copies of the first track (results dropped).
@@ -306,7 +309,8 @@ def match_dense_batch(grid, lat, lon, readings, config=DenseConfig(), prepared=N
     MatchResult
         Fields with a leading batch axis ``B``.
     """
-    table = prepare_map(grid, config.method) if prepared is None else prepared
+    table = lattice_table(grid, config.method) if prepared is None else prepared
+    grid = as_grid(grid)
     b = lat.shape[0]
     n_chunks = -(-b // chunk)
     size = -(-b // n_chunks)  # equal chunks: one compiled body (no remainder branch)

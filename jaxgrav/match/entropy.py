@@ -1,6 +1,6 @@
 """Entropy coarse matching (paper B, first stage).
 
-Two entropies of a sequence ``h_1..h_N`` of field values (SPEC §B):
+Two entropies of a sequence ``h_1..h_N`` of field values (paper B):
 
 - information entropy ``H_XX = −Σ p_i log p_i`` with ``p_i = h_i / Σ_j h_j``, defined
   for positive values only;
@@ -30,16 +30,18 @@ paper's rule). When no candidate beats the INS RMS the INS track is kept and sta
 bit 32 is raised.
 """
 
-import dataclasses
+
+import math
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from jaxgrav._pytree import static_field
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.geodesy import local_offsets_m
-from jaxgrav.grid import make_sampler
 from jaxgrav.match.dense import shifted_tracks
-from jaxgrav.match.result import MatchResult
+from jaxgrav.match.result import STATUS, MatchResult
+from jaxgrav.prepared import as_grid, prepare_map
 
 __all__ = [
     "ENTROPIES",
@@ -57,12 +59,10 @@ __all__ = [
 ENTROPIES = ("difference", "information")
 """``difference``: H_CY (default); ``information``: H_XX of ``h + shift``."""
 
-ENTROPY_STATUS = {
-    32: "entropy coarse match: no candidate beat the INS track's RMS misfit; INS track kept",
-}
-"""Status bits raised by the entropy matcher, in addition to :data:`~jaxgrav.match.STATUS`
-bits 1 (no finite candidate) and 8 (best candidate on the edge of the search region)."""
-
+ENTROPY_STATUS = {bit: STATUS[bit] for bit in (32,)}
+"""The status bit raised by the entropy matcher only (an excerpt of
+:data:`~jaxgrav.match.result.STATUS`); it also raises bits 1 (no finite candidate) and 8
+(best candidate on the edge of the search region)."""
 
 
 def _neg_plogp(p, valid):
@@ -144,8 +144,7 @@ def sequence_entropy(h, kind="difference", shift=0.0):
     raise ValueError(f"kind must be one of {ENTROPIES}; got {kind!r}")
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class EntropyConfig:
     """Settings of the entropy coarse matcher.
 
@@ -197,7 +196,7 @@ def entropy_config_for(grid, drift_radius_m, *, kind="difference", max_half_size
 
     Parameters
     ----------
-    grid : Grid
+    grid : Grid or PreparedMap
         The map (its node spacing sets the offset spacing: 1/8 of a cell, at least
         50 m, at most a third of the reach).
     drift_radius_m : float
@@ -214,13 +213,10 @@ def entropy_config_for(grid, drift_radius_m, *, kind="difference", max_half_size
         For ``kind="information"`` on a map with values ≤ 0, ``shift`` is set as
         described in the module docstring unless given.
     """
-    import math
-
-    import numpy as np
-
     if not drift_radius_m > 0:
         raise ValueError(f"drift_radius_m must be positive (m); got {drift_radius_m!r}")
     reach = 1.2 * float(drift_radius_m)
+    grid = as_grid(grid)
     dy, dx = grid.spacing_m()
     spacing = min(max(min(dy, dx) / 8.0, 50.0), reach / 3.0)
     half = math.ceil(reach / spacing)
@@ -254,7 +250,8 @@ def coarse_offsets(sample, lat, lon, readings, config):
     Parameters
     ----------
     sample : callable
-        ``f(lat, lon) -> values`` from :func:`~jaxgrav.grid.make_sampler`.
+        ``f(lat, lon) -> values`` (NaN off the map), e.g.
+        :meth:`~jaxgrav.prepared.PreparedMap.sampler`.
     lat, lon : Array, shape ``(N,)``
         INS fixes (degrees).
     readings : Array, shape ``(N,)``
@@ -332,12 +329,12 @@ def coarse_offsets(sample, lat, lon, readings, config):
 
 
 @jax.jit
-def match_entropy(grid, lat, lon, readings, config=EntropyConfig()):
+def match_entropy(grid, lat, lon, readings, config=EntropyConfig()):  # noqa: B008
     """Entropy coarse match of one track (jitted; vmap it over tracks).
 
     Parameters
     ----------
-    grid : Grid
+    grid : Grid or PreparedMap
         Map (nT for magnetic total intensity or anomaly, mGal for gravity).
     lat, lon : Array, shape ``(N,)``
         INS-indicated fixes (degrees).
@@ -351,4 +348,4 @@ def match_entropy(grid, lat, lon, readings, config=EntropyConfig()):
         The INS track shifted by the chosen offset (no rotation); see
         :func:`coarse_search` and :data:`ENTROPY_STATUS`.
     """
-    return coarse_search(make_sampler(grid, config.method), lat, lon, readings, config)
+    return coarse_search(prepare_map(grid).sampler(config.method), lat, lon, readings, config)

@@ -20,30 +20,25 @@ shift plus a rotation of the INS track about its centroid. Each iteration:
 
 ICCP minimises distances to contours, not the misfit ``mean((z − f)²)`` itself; the
 result carries the misfit so a caller can compare it with other estimates
-(:func:`~jaxgrav.match.entropy_iccp.match_entropy_iccp` does). ICCP assumes the truth
+(:func:`~jaxgrav.match.combined.match_entropy_iccp` does). ICCP assumes the truth
 near the indicated track: good after a coarse match, poor alone for large initial
 errors (see ``examples/paper_b_entropy_iccp.py``).
 """
 
-import dataclasses
 import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
-from jaxgrav._pytree import static_field
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
-from jaxgrav.match.contour import (
-    local_field,
-    patch_coefficients,
-    project_to_contours,
-    value_grad_ne,
-)
+from jaxgrav.match.contour import local_field, project_to_contours, value_grad_ne
 from jaxgrav.match.dense import shifted_tracks
-from jaxgrav.match.result import MatchResult
+from jaxgrav.match.result import STATUS, MatchResult
 from jaxgrav.match.rigid import kabsch_2d, kabsch_ne, refine_local
+from jaxgrav.prepared import prepare_map
 
 __all__ = [
     "ICCP_STATUS",
@@ -51,23 +46,22 @@ __all__ = [
     "IccpState",
     "iccp_fit",
     "iccp_local",
+    "iccp_result",
     "kabsch_2d",
+    "local_track_frame",
     "match_iccp",
     "match_iccp_batch",
     "refine_local",
 ]
 
-ICCP_STATUS = {
-    16: "ICCP did not converge within max_iter iterations",
-    64: "ICCP: fewer than 3 contour points inside the window at some iteration (transform kept)",
-}
-"""Status bits raised by the ICCP matcher, in addition to :data:`~jaxgrav.match.STATUS` bit 1."""
+ICCP_STATUS = {bit: STATUS[bit] for bit in (16, 64)}
+"""The status bits raised by the ICCP matcher only (an excerpt of
+:data:`~jaxgrav.match.result.STATUS`); it also raises bit 1."""
 
 WEIGHTS = ("uniform", "gradient")
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class IccpConfig:
     """Settings of the ICCP matcher.
 
@@ -252,22 +246,54 @@ def iccp_fit(field, p0, z, config, r0=None, t0=None):
     return st._replace(rotation=r, translation=t, misfit=m)
 
 
-def _track_frame(coef, grid, lat, lon):
-    """INS points in the local frame and the map prepared in it."""
+def local_track_frame(coef, grid, lat, lon):
+    """INS points in the local frame of :func:`shifted_tracks` and the map prepared in it.
+
+    Parameters
+    ----------
+    coef : Array, shape ``(ny−1, nx−1, 16)``
+        :meth:`~jaxgrav.prepared.PreparedMap.patches` of the map.
+    grid : Grid or PreparedMap
+        The map's geometry.
+    lat, lon : Array, shape ``(N,)``
+        INS fixes (degrees).
+
+    Returns
+    -------
+    p0 : Array, shape ``(N, 2)``
+        Fixes ``(north, east)`` about the centroid (m).
+    field : LocalField
+    """
     lat_c, lon_c, m_c, n_c = _local_frame(lat, lon)
     dtype = jnp.result_type(coef.dtype, lat.dtype, float)
     p0 = jnp.stack([(lat - lat_c) * m_c, (lon - lon_c) * n_c], axis=-1).astype(dtype)
     return p0, local_field(coef, grid, lat_c, lon_c, m_c, n_c)
 
 
-def _iccp_result(coef, grid, lat, lon, readings, config, start_n=0.0, start_e=0.0):
-    """ICCP from the INS track shifted by ``(start_n, start_e)`` m; returns MatchResult.
+def iccp_result(coef, grid, lat, lon, readings, config, start_n=0.0, start_e=0.0):
+    """ICCP from the INS track shifted by ``(start_n, start_e)`` m (the jit-free core).
 
-    ``coef`` is :func:`~jaxgrav.match.contour.patch_coefficients` of ``grid.values``.
+    Parameters
+    ----------
+    coef : Array, shape ``(ny−1, nx−1, 16)``
+        :meth:`~jaxgrav.prepared.PreparedMap.patches` of the map, prepared once by
+        the caller (outside any loop over tracks or starts).
+    grid : Grid or PreparedMap
+        The map's geometry.
+    lat, lon, readings : Array, shape ``(N,)``
+        INS fixes (degrees) and measured values (map units).
+    config : IccpConfig
+    start_n, start_e : float or Array
+        Starting translation (m), north and east.
+
+    Returns
+    -------
+    MatchResult
+        As :func:`match_iccp`.
     """
     lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
     n = lat.shape[0]
-    p0, field = _track_frame(coef, grid, lat, lon)
+    p0, field = local_track_frame(coef, grid, lat, lon)
     dtype = p0.dtype
     t0 = jnp.stack([jnp.asarray(start_n, dtype), jnp.asarray(start_e, dtype)])
     st = iccp_fit(field, p0, readings.astype(dtype), config, t0=t0)
@@ -301,12 +327,12 @@ def _iccp_result(coef, grid, lat, lon, readings, config, start_n=0.0, start_e=0.
 
 
 @jax.jit
-def match_iccp(grid, lat, lon, readings, config=IccpConfig()):
+def match_iccp(grid, lat, lon, readings, config=IccpConfig()):  # noqa: B008
     """ICCP fine match of one track (jitted; vmap it over tracks).
 
     Parameters
     ----------
-    grid : Grid
+    grid : Grid or PreparedMap
         Map (nT or mGal), sampled by its bicubic interpolant.
     lat, lon : Array, shape ``(N,)``
         INS-indicated fixes (degrees).
@@ -323,12 +349,12 @@ def match_iccp(grid, lat, lon, readings, config=IccpConfig()):
         ``work_constrained`` the iterations that changed the estimate; status bits in
         :data:`ICCP_STATUS`.
     """
-    coef = patch_coefficients(grid.values)
-    return _iccp_result(coef, grid, lat, lon, readings, config)
+    pm = prepare_map(grid)
+    return iccp_result(pm.patches(), pm.grid, lat, lon, readings, config)
 
 
 @functools.partial(jax.jit, static_argnames=("chunk",))
-def match_iccp_batch(grid, lat, lon, readings, config=IccpConfig(), chunk=100):
+def match_iccp_batch(grid, lat, lon, readings, config=IccpConfig(), chunk=100):  # noqa: B008
     """:func:`match_iccp` over a batch of tracks sharing one map, in chunks (jitted).
 
     Equal to ``jax.vmap(match_iccp, in_axes=(None, 0, 0, 0, None))``, but the map is
@@ -341,7 +367,7 @@ def match_iccp_batch(grid, lat, lon, readings, config=IccpConfig(), chunk=100):
 
     Parameters
     ----------
-    grid : Grid
+    grid : Grid or PreparedMap
         Map (nT or mGal).
     lat, lon : Array, shape ``(B, N)``
         INS-indicated fixes of ``B`` tracks (degrees).
@@ -359,7 +385,8 @@ def match_iccp_batch(grid, lat, lon, readings, config=IccpConfig(), chunk=100):
     """
     if chunk < 1:
         raise ValueError(f"chunk must be a positive number of tracks; got {chunk!r}")
-    coef = patch_coefficients(grid.values)
+    pm = prepare_map(grid)
+    coef, grid = pm.patches(), pm.grid
     b = lat.shape[0]
     n_chunks = -(-b // chunk)
     size = -(-b // n_chunks)  # equal chunks: one compiled body
@@ -367,5 +394,5 @@ def match_iccp_batch(grid, lat, lon, readings, config=IccpConfig(), chunk=100):
     xs = tuple(jnp.concatenate([a, jnp.broadcast_to(a[:1], (pad, *a.shape[1:]))])
                if pad else a for a in (lat, lon, readings))
     xs = tuple(a.reshape(n_chunks, size, *a.shape[1:]) for a in xs)
-    out = jax.lax.map(jax.vmap(lambda x: _iccp_result(coef, grid, *x, config)), xs)
+    out = jax.lax.map(jax.vmap(lambda x: iccp_result(coef, grid, *x, config)), xs)
     return jax.tree.map(lambda a: a.reshape(n_chunks * size, *a.shape[2:])[:b], out)

@@ -31,26 +31,17 @@ import jax.numpy as jnp
 
 from jaxgrav import interp
 
-__all__ = ["interleave", "lattice_values", "patch_values"]
+__all__ = ["computed_once", "interleave", "lattice_values", "patch_values"]
 
 
 def interleave(coefficients):
     """Bicubic coefficients ``(ny, nx, 4)`` as one interleaved ``(2·ny, 2·nx)`` array.
 
-    Parameters
-    ----------
-    coefficients : Array, shape ``(ny, nx, 4)``
-        Output of :func:`jaxgrav.interp.bicubic_coefficients`.
-
-    Returns
-    -------
-    Array, shape ``(2·ny, 2·nx)``
-        ``out[2r + u, 2c + v]`` is ``f, f_x, f_y, f_xy`` for ``(u, v)`` = (0, 0),
-        (0, 1), (1, 0), (1, 1) at node ``(r, c)``.
+    :func:`jaxgrav.interp.interleave_coefficients`; with a
+    :class:`~jaxgrav.prepared.PreparedMap` use its
+    :meth:`~jaxgrav.prepared.PreparedMap.interleaved`.
     """
-    ny, nx = coefficients.shape[:2]
-    c = coefficients.reshape(ny, nx, 2, 2)
-    return jnp.transpose(c, (0, 2, 1, 3)).reshape(2 * ny, 2 * nx)
+    return interp.interleave_coefficients(coefficients)
 
 
 def _cells(i, n, block, cubic):
@@ -77,19 +68,19 @@ def _cells(i, n, block, cubic):
     weights : tuple of Array, shape ``(P, A)``
     inside : Array of bool, shape ``(P, A)``
     """
-    eps = interp._edge_eps(i.dtype, n)
+    eps = interp.edge_eps(i.dtype, n)
     inside = (i >= -eps) & (i <= (n - 1) + eps)
     i_safe = jnp.clip(i, 0.0, n - 1.0)
     start = jnp.clip(jnp.floor(i_safe[:, :1]), 0, n - block)
-    (x,) = _computed_once((i_safe - start,), i)  # position in the block
+    (x,) = computed_once((i_safe - start,), i)  # position in the block
     cell = jnp.clip(jnp.floor(x), 0, block - 2)
-    t = x - cell  # local coordinate in the cell, as interp._cell
+    t = x - cell  # local coordinate in the cell, as interp.cell
     if cubic:
-        h0, h1, g0, g1 = interp._hermite(t)
+        h0, h1, g0, g1 = interp.hermite(t)
         weights = (h0, g0, h1, g1)
     else:
         weights = (1.0 - t, t)
-    cell, weights = _computed_once((cell, weights), i)
+    cell, weights = computed_once((cell, weights), i)
     return start.astype(jnp.int32), cell, weights, inside
 
 
@@ -107,7 +98,7 @@ def _basis(cell, weights, block):
     return w
 
 
-def _computed_once(xs, like):
+def computed_once(xs, like):
     """``xs`` unchanged, but computed once rather than inside every consumer element.
 
     XLA fuses cheap element-wise producers into their consumers and recomputes
@@ -163,7 +154,7 @@ def lattice_values(table, rows, cols, block, method="bicubic"):
     a batched matrix product. On CPU this beats both a dense product along rows
     and gathers along columns.
     """
-    interp._check_method(method)
+    interp.check_method(method)
     cubic = method == "bicubic"
     f = 2 if cubic else 1
     ny, nx = table.shape[0] // f, table.shape[1] // f
@@ -202,24 +193,24 @@ def patch_values(table, iy, ix, method="bicubic", gradient=False):
         Values NaN off the map, derivatives 0 there; the same as
         :func:`jaxgrav.interp.bicubic` and :func:`jaxgrav.interp.bicubic_value_and_gradient`.
     """
-    interp._check_method(method)
+    interp.check_method(method)
     cubic = method == "bicubic"
     f = 2 if cubic else 1
     ny, nx = table.shape[0] // f, table.shape[1] // f
     iy, ix = jnp.broadcast_arrays(jnp.asarray(iy), jnp.asarray(ix))
     dtype = jnp.result_type(table.dtype, iy.dtype, float)
-    eps = interp._edge_eps(dtype, max(ny, nx))
-    r0, ty, in_y = interp._cell(iy.astype(dtype), ny, eps)
-    c0, tx, in_x = interp._cell(ix.astype(dtype), nx, eps)
+    eps = interp.edge_eps(dtype, max(ny, nx))
+    r0, ty, in_y = interp.cell(iy.astype(dtype), ny, eps)
+    c0, tx, in_x = interp.cell(ix.astype(dtype), nx, eps)
     shape = iy.shape
     r0, c0, ty, tx = (a.reshape(-1) for a in (r0, c0, ty, tx))
     p = jax.vmap(lambda r, c: jax.lax.dynamic_slice(table, (f * r, f * c), (2 * f, 2 * f)))(
         r0, c0
     ).astype(dtype)  # (P, 2f, 2f)
     if cubic:  # weights in the interleaved order: node 0 value, slope, node 1 value, slope
-        h0, h1, g0, g1 = interp._hermite(ty)
+        h0, h1, g0, g1 = interp.hermite(ty)
         hy = (h0, g0, h1, g1)
-        h0, h1, g0, g1 = interp._hermite(tx)
+        h0, h1, g0, g1 = interp.hermite(tx)
         hx = (h0, g0, h1, g1)
     else:
         hy, hx = (1.0 - ty, ty), (1.0 - tx, tx)
@@ -230,9 +221,9 @@ def patch_values(table, iy, ix, method="bicubic", gradient=False):
     if not gradient:
         return val
     if cubic:
-        d0, d1, e0, e1 = interp._hermite_derivative(ty)
+        d0, d1, e0, e1 = interp.hermite_derivative(ty)
         dy = (d0, e0, d1, e1)
-        d0, d1, e0, e1 = interp._hermite_derivative(tx)
+        d0, d1, e0, e1 = interp.hermite_derivative(tx)
         dx = (d0, e0, d1, e1)
     else:
         one = jnp.ones_like(ty)

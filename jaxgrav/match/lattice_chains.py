@@ -24,6 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.chains import kbest_run, kbest_step, step_ok, step_region
 
 __all__ = [
@@ -193,8 +194,6 @@ def stencil_size_for(grid, lat, lon, step_tol_m, angle_tol_deg):
     -------
     int
     """
-    from jaxgrav.geodesy import local_offsets_m
-
     lat, lon = np.atleast_2d(np.asarray(lat, float)), np.atleast_2d(np.asarray(lon, float))
     steps = local_offsets_m(lat[:, 1:], lon[:, 1:], lat[:, :-1], lon[:, :-1])
     # no offset from a fix exceeds the map's extent

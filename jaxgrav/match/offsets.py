@@ -19,7 +19,7 @@ from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.match.lattice import lattice_values, patch_values
 from jaxgrav.match.scoring import score_track, sums
 
-__all__ = ["means", "offset_scores", "track_frame"]
+__all__ = ["lattice_scores", "means", "offset_scores", "track_frame"]
 
 
 def means(*xs):
@@ -86,7 +86,7 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
     Parameters
     ----------
     table : Array
-        Prepared map (:func:`~jaxgrav.match.dense.prepare_map`).
+        Lattice table (:func:`~jaxgrav.match.dense.lattice_table`).
     grid : Grid
         The map (its geometry).
     frame : tuple
@@ -121,7 +121,7 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
             v = v.reshape(n_rot, n, a, a)
             bad = (jnp.any(~in_y.reshape(n_rot, n, a), axis=1)[:, :, None]
                    | jnp.any(~in_x.reshape(n_rot, n, a), axis=1)[:, None, :])
-            sc, b = _lattice_scores(readings, v, w, config.score, prior, config.half_size)
+            sc, b = lattice_scores(readings, v, w, config.score, prior, config.half_size)
             return jnp.where(bad, jnp.inf, sc).reshape(-1), b.reshape(-1)
 
         return run
@@ -142,7 +142,7 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
     return jax.lax.switch(index, [separable(b) for b in blocks] + [points], None)
 
 
-def _lattice_scores(g, v, w, kind, prior, centre):
+def lattice_scores(g, v, w, kind, prior, centre):
     """:func:`~jaxgrav.match.scoring.score_track` of lattice values ``v`` ``(R, N, A, B)``.
 
     One pass over ``v`` (weighted sums of the residuals and of their squares, one

@@ -13,7 +13,7 @@ few element-wise operations per step rather than per-track LAPACK calls.
 import jax
 import jax.numpy as jnp
 
-from jaxgrav.match.lattice import _computed_once, patch_values
+from jaxgrav.match.lattice import computed_once, patch_values
 from jaxgrav.match.scoring import sums
 
 __all__ = ["gauss_newton", "residual_function", "solve_spd"]
@@ -25,7 +25,7 @@ def residual_function(table, frame, g, w, kind, prior, method):
     Parameters
     ----------
     table : Array
-        Prepared map (:func:`jaxgrav.match.dense.prepare_map`).
+        Lattice table (:func:`jaxgrav.match.dense.lattice_table`).
     frame : tuple
         ``(iy_c, ix_c, ky, kx, north, east)``: centroid in map indices, index steps
         per metre north and east, fixes' offsets from the centroid (m), ``(N,)``.
@@ -57,7 +57,7 @@ def residual_function(table, frame, g, w, kind, prior, method):
         v, v_y, v_x = patch_values(table, iy_c + ky * (rn + p[0]), ix_c + kx * (re + p[1]),
                                    method, gradient=True)
         # computed once: each of the normal equations' 15 products would recompute them
-        v, v_y, v_x = _computed_once((v, v_y, v_x), v)
+        v, v_y, v_x = computed_once((v, v_y, v_x), v)
         r = g - v
         a, b = v_y * ky, v_x * kx  # dv/d(north), dv/d(east)
         cols = (-a, -b, a * re - b * rn)  # dr/dp for the shift and turn

@@ -1,11 +1,11 @@
-"""The result of a correlation match, shared by the chain and the dense-offset paths."""
+"""The result of a match and the status bits, shared by every matcher."""
 
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
-__all__ = ["STATUS", "MatchResult", "nearest_to_ins", "status_messages"]
+__all__ = ["CORRELATION_STATUS", "STATUS", "MatchResult", "nearest_to_ins", "status_messages"]
 
 STATUS = {
     1: "no candidate track survived (tolerances too tight, or the track is off the map)",
@@ -14,8 +14,20 @@ STATUS = {
     8: "the best candidate lies on the edge of the search region (drift may exceed it)",
     256: "a step's accepted displacements exceed the chain stencil (pairs outside it not "
          "considered; raise stencil_size)",
+    32: "entropy coarse match: no candidate beat the INS track's RMS misfit; INS track kept",
+    16: "ICCP did not converge within max_iter iterations",
+    64: "ICCP: fewer than 3 contour points inside the window at some iteration (transform kept)",
+    128: "entropy+ICCP: the ICCP result did not fit significantly better than the coarse "
+         "match; coarse track kept",
 }
-"""Bit flags of :attr:`MatchResult.status`."""
+"""Bit flags of :attr:`MatchResult.status`, for every method (one table).
+
+``dense`` raises 1 and 8; ``chains`` 1, 2, 4, 8 and 256; ``entropy`` 1, 8 and 32;
+``iccp`` 1, 16 and 64; ``entropy+iccp`` those of entropy and ICCP and 128.
+"""
+
+CORRELATION_STATUS = {bit: STATUS[bit] for bit in (1, 2, 4, 8, 256)}
+"""The bits of the correlation matchers (``dense``, ``chains``): an excerpt of :data:`STATUS`."""
 
 
 class MatchResult(NamedTuple):
@@ -98,5 +110,15 @@ def nearest_to_ins(topk_score, distance, selection):
 
 
 def status_messages(status):
-    """Human-readable messages of a status bit field (a Python int)."""
+    """Messages of the bits set in a status bit field (any method), in :data:`STATUS` order.
+
+    Parameters
+    ----------
+    status : int
+        :attr:`MatchResult.status` (a Python int or a scalar array).
+
+    Returns
+    -------
+    list of str
+    """
     return [msg for bit, msg in STATUS.items() if int(status) & bit]

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 
 from jaxgrav.match.contour import value_grad_ne
 
-__all__ = ["kabsch_2d", "kabsch_ne", "refine_local", "rotation_matrix"]
+__all__ = ["kabsch_2d", "kabsch_ne", "refine_local", "rotation_matrix", "solve3"]
 
 
 def kabsch_2d(p, x, w=None, max_rotation_rad=None):
@@ -143,7 +143,7 @@ def refine_local(field, p0, z, r, t, max_rotation_rad, steps):
 
     def step(_, s):
         theta, t, m, jtj, jtr, lam = s
-        d = _solve3(jtj + lam * jnp.diag(jnp.diag(jtj)), -jtr)
+        d = solve3(jtj + lam * jnp.diag(jnp.diag(jtj)), -jtr)
         theta_n = jnp.clip(theta + d[0], -max_rotation_rad, max_rotation_rad)
         t_n = t + d[1:]
         m_n, jtj_n, jtr_n = evaluate(theta_n, t_n)
@@ -157,7 +157,7 @@ def refine_local(field, p0, z, r, t, max_rotation_rad, steps):
     return rotation_matrix(theta), t, m
 
 
-def _solve3(a, b):
+def solve3(a, b):
     """Solve a 3×3 linear system by Cramer's rule (zero where singular)."""
     c0 = jnp.cross(a[1], a[2])
     det = a[0] @ c0

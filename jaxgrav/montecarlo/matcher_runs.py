@@ -13,21 +13,17 @@ import warnings
 import jax.numpy as jnp
 
 from jaxgrav.geodesy import eotvos
-from jaxgrav.match.api import config_for
+from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import match_chains
 from jaxgrav.match.dense import match_dense
 from jaxgrav.match.entropy import entropy_config_for, match_entropy
-from jaxgrav.match.entropy_iccp import (
-    ALL_STATUS_B,
-    PaperBScenario,
-    iccp_config_for,
-    match_entropy_iccp,
-    paper_b_scenario,
-)
 from jaxgrav.match.iccp import match_iccp
-from jaxgrav.match.result import STATUS
+from jaxgrav.match.result import CORRELATION_STATUS
+from jaxgrav.match.result import STATUS as ALL_STATUS
+from jaxgrav.match.sizing import config_for, iccp_config_for
 from jaxgrav.montecarlo.spec import MethodSpec, check_settings, default_grid, region_of
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
+from jaxgrav.scenarios.paper_b import PaperBScenario, paper_b_scenario
 from jaxgrav.sim import DEG_ARC_M, track_error_m
 
 __all__ = [
@@ -158,7 +154,7 @@ def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
     settings = dict(description="paper A: dense-offset matcher, fixed INS drift",
                     drift_deg=drift, noise_mgal=noise, n_fixes=n, dt_s=scen.dt,
                     search_half_size=cfg.half_size, search_spacing_m=cfg.spacing_m)
-    return MethodSpec(dense_run, (grid, scen, cfg), settings, dict(STATUS))
+    return MethodSpec(dense_run, (grid, scen, cfg), settings, dict(CORRELATION_STATUS))
 
 
 # ------------------------------------------------------------------------ chains (A)
@@ -208,7 +204,7 @@ def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
                     drift_deg=drift, noise_mgal=noise, n_fixes=n, dt_s=scen.dt,
                     refine_factor=factor, search_half_size=cfg.half_size,
                     stencil_size=cfg.stencil_size)
-    return MethodSpec(chains_run, (grid, refined, scen, cfg), settings, dict(STATUS))
+    return MethodSpec(chains_run, (grid, refined, scen, cfg), settings, dict(CORRELATION_STATUS))
 
 
 # ----------------------------------------------------------------- entropy, ICCP (B)
@@ -295,7 +291,7 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
                               noise=max(noise, 0.1))
         settings["iccp_window_m"] = float(icp.window_m)
         args += (icp,)
-    return MethodSpec(fn, args, settings, dict(ALL_STATUS_B))
+    return MethodSpec(fn, args, settings, dict(ALL_STATUS))
 
 
 entropy_iccp_builder = functools.partial(paper_b_builder, stage="entropy+iccp")

@@ -6,7 +6,6 @@ It is what the demo, the paper-A example, the benchmarks and the Monte Carlo run
 simulate, so that they all mean the same thing by "a track".
 """
 
-import dataclasses
 from typing import NamedTuple
 
 import jax
@@ -14,15 +13,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import sim
-from jaxgrav._pytree import static_field
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import KNOT
 
 __all__ = ["MatchingRun", "MatchingScenario", "matching_scenario"]
 
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
+@pytree_dataclass
 class MatchingScenario:
     """Paper A's matching experiment.
 
@@ -82,7 +80,7 @@ class MatchingRun(NamedTuple):
     drift_east_m: jax.Array
 
 
-def matching_scenario(key, truth_field, scenario=MatchingScenario()):
+def matching_scenario(key, truth_field, scenario=MatchingScenario()):  # noqa: B008
     """Simulate one matching run.
 
     The start point is uniform in ``scenario.region`` with a margin so that the

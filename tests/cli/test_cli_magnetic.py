@@ -12,8 +12,8 @@ import pytest
 
 from jaxgrav.cli import main
 from jaxgrav.fields import magnetic
+from jaxgrav.match import match_track
 from jaxgrav.match.dense import shifted_tracks
-from jaxgrav.match.entropy_iccp import match_track_b
 from jaxgrav.sim import DEG_ARC_M, Track, track_error_m
 from jaxgrav.tracks import read_track_csv, write_track_csv
 
@@ -48,9 +48,9 @@ def test_match_magnetic_track_entropy_iccp(tmp_path, capsys):
     assert float(track_error_m(np.array(r["lat"]), np.array(r["lon"]), truth)) < 0.25 * ins_err
     # the CLI passes the nT readings and options through unchanged: same as the library
     cols = read_track_csv(tmp_path / "t.csv")
-    lib = match_track_b(grid, cols["lat"], cols["lon"], cols["magnetic"], method="entropy+iccp",
-                        drift_radius_m=0.035 * DEG_ARC_M, noise=10.0, max_rotation_deg=2.0,
-                        entropy_half_size=8, warn=False)
+    lib = match_track(grid, cols["lat"], cols["lon"], cols["magnetic"], method="entropy+iccp",
+                      drift_radius_m=0.035 * DEG_ARC_M, noise=10.0, max_rotation_deg=2.0,
+                      entropy_half_size=8, warn=False)
     np.testing.assert_allclose(r["lat"], np.asarray(lib.lat), rtol=0, atol=1e-12)
     np.testing.assert_allclose(r["lon"], np.asarray(lib.lon), rtol=0, atol=1e-12)
     # a magnetic track cannot go to the gravity matchers

@@ -2,6 +2,7 @@
 
 import dataclasses
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -10,22 +11,21 @@ import pytest
 
 from jaxgrav.grid import make_sampler
 from jaxgrav.match import entropy as entropy_mod
+from jaxgrav.match.api import match_track
+from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.contour import local_field, patch_coefficients, value_grad
 from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.entropy import EntropyConfig, entropy_config_for
-from jaxgrav.match.entropy_iccp import (
-    iccp_config_for,
-    match_entropy_iccp,
-    match_track_b,
-)
 from jaxgrav.match.iccp import (
     IccpConfig,
-    _track_frame,
     kabsch_2d,
+    local_track_frame,
     match_iccp,
     match_iccp_batch,
 )
-from jaxgrav.match.rigid import _solve3, refine_local, rotation_matrix
+from jaxgrav.match.rigid import refine_local, rotation_matrix, solve3
+from jaxgrav.match.sizing import iccp_config_for
+from jaxgrav.prepared import prepare_map
 from jaxgrav.sim import Track, track_error_m
 
 # jitted once per input shape: eager dispatch of many tiny ops is slow on a loaded machine
@@ -131,17 +131,17 @@ def test_solve3_matches_numpy():
     a = rng.normal(size=(3, 3))
     a = a @ a.T + np.eye(3)
     b = rng.normal(size=3)
-    np.testing.assert_allclose(_solve3(jnp.asarray(a), jnp.asarray(b)), np.linalg.solve(a, b),
+    np.testing.assert_allclose(solve3(jnp.asarray(a), jnp.asarray(b)), np.linalg.solve(a, b),
                                rtol=1e-10)
-    assert np.all(np.asarray(_solve3(jnp.zeros((3, 3)), jnp.ones(3))) == 0.0)
+    assert np.all(np.asarray(solve3(jnp.zeros((3, 3)), jnp.ones(3))) == 0.0)
 
 
 def test_patch_coefficients_are_the_bicubic_interpolant(smooth_grid):
     """Value and analytic gradient in local metres = the Grid's bicubic sampler + autodiff."""
     lat_c, lon_c = jnp.asarray(30.0), jnp.asarray(130.0)
     lat, lon = np.full(2, 30.0), np.array([129.99, 130.01])  # a two-point "track" about the centre
-    p0, field = _track_frame(patch_coefficients(smooth_grid.values), smooth_grid,
-                             jnp.asarray(lat), jnp.asarray(lon))
+    p0, field = local_track_frame(patch_coefficients(smooth_grid.values), smooth_grid,
+                                  jnp.asarray(lat), jnp.asarray(lon))
     assert np.abs(np.asarray(p0[:, 0])).max() < 1e-6
     rng = np.random.default_rng(6)
     x = jnp.asarray(rng.uniform(-40e3, 40e3, (200, 2)))
@@ -154,7 +154,7 @@ def test_patch_coefficients_are_the_bicubic_interpolant(smooth_grid):
     # off the map: NaN value, zero gradient
     f_off, g_off = value_grad(field, jnp.array([[1e7, 0.0]]))
     assert np.isnan(float(f_off[0])) and np.all(np.asarray(g_off) == 0.0)
-    assert local_field  # the public constructor used by _track_frame
+    assert local_field  # the public constructor used by local_track_frame
 
 
 def test_least_squares_refinement_and_rotation_bound(smooth_grid):
@@ -162,7 +162,8 @@ def test_least_squares_refinement_and_rotation_bound(smooth_grid):
     z = smooth_grid.sample(lat, lon, "bicubic")
     ins_lat, ins_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), 120.0, -90.0,
                                       jnp.deg2rad(1.0))
-    p0, field = _track_frame(patch_coefficients(smooth_grid.values), smooth_grid, ins_lat, ins_lon)
+    p0, field = local_track_frame(patch_coefficients(smooth_grid.values), smooth_grid, ins_lat,
+                                  ins_lon)
     bound = jnp.deg2rad(3.0)
     r, t, m = jax.jit(refine_local, static_argnums=6)(field, p0, jnp.asarray(z), jnp.eye(2),
                                                       jnp.zeros(2), bound, 15)
@@ -294,19 +295,26 @@ def test_combined_keeps_coarse_unless_significantly_better(smooth_grid):
     np.testing.assert_allclose(kept.lat, kept.topk_lat[0])
 
 
-def test_match_track_b_validates(smooth_grid):
+def test_match_track_validates_the_contour_methods(smooth_grid):
     lat, lon = _track()
     t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), -200.0, 400.0, 0.0)
     z = np.asarray(smooth_grid.sample(t_lat, t_lon, "bicubic"))
-    res = match_track_b(smooth_grid, lat, lon, z, method="entropy+iccp", entropy=ENT, iccp=ICP,
-                        warn=False)
+    res = match_track(smooth_grid, lat, lon, z, method="entropy+iccp", config=(ENT, ICP),
+                      warn=False)
     assert float(track_error_m(res.lat, res.lon, Track(t_lat, t_lat, t_lon, t_lat, t_lat))) < 20
+    b = dict(method="entropy+iccp")
     with pytest.raises(ValueError, match="method"):
-        match_track_b(smooth_grid, lat, lon, z, method="icp")
+        match_track(smooth_grid, lat, lon, z, method="icp")
     with pytest.raises(ValueError, match="equal lengths"):
-        match_track_b(smooth_grid, lat, lon[:-1], z)
+        match_track(smooth_grid, lat, lon[:-1], z, **b)
     with pytest.raises(ValueError, match="leaves the map"):
-        match_track_b(smooth_grid, lat + 5.0, lon, z)
+        match_track(smooth_grid, lat + 5.0, lon, z, **b)
+    with pytest.raises(ValueError, match="config for method 'entropy\\+iccp' must be a pair"):
+        match_track(smooth_grid, lat, lon, z, config=ICP, **b)
+    with pytest.raises(ValueError, match="max_rotation_deg bounds ICCP's rotation"):
+        match_track(smooth_grid, lat, lon, z, method="dense", max_rotation_deg=2.0)
+    with pytest.raises(ValueError, match="estimates no bias"):
+        match_track(smooth_grid, lat, lon, z, method="iccp", bias_sigma_mgal=3.0)
     with pytest.raises(ValueError, match="drift_radius_m"):
         iccp_config_for(smooth_grid, -1.0)
     with pytest.raises(ValueError, match="max_iter"):
@@ -314,16 +322,16 @@ def test_match_track_b_validates(smooth_grid):
     with pytest.raises(ValueError, match="kind"):
         EntropyConfig(kind="shannon")
     with pytest.raises(ValueError, match="noise"):
-        match_track_b(smooth_grid, lat, lon, z, noise=-1.0)
+        match_track(smooth_grid, lat, lon, z, noise=-1.0, **b)
     with pytest.raises(ValueError, match=r"max_rotation_deg .* between 0 and 180; got -2"):
-        match_track_b(smooth_grid, lat, lon, z, max_rotation_deg=-2.0)
+        match_track(smooth_grid, lat, lon, z, max_rotation_deg=-2.0, **b)
     with pytest.raises(ValueError, match="entropy_half_size"):
-        match_track_b(smooth_grid, lat, lon, z, entropy_half_size=0)
+        match_track(smooth_grid, lat, lon, z, entropy_half_size=0, **b)
 
 
 # ---------------------------------------------------------------------- entropy alone
 def _hcy(h):
-    """H_CY of the rows of ``h`` in plain NumPy (SPEC §B)."""
+    """H_CY of the rows of ``h`` in plain NumPy (paper B's definition)."""
     c = np.abs(h - h.mean(axis=-1, keepdims=True))
     q = c / c.sum(axis=-1, keepdims=True)
     return -np.sum(np.where(q > 0, q * np.log(np.where(q > 0, q, 1.0)), 0.0), axis=-1)
@@ -331,15 +339,14 @@ def _hcy(h):
 
 @pytest.mark.parametrize("kind", ["difference", "information"])
 def test_match_entropy_finds_the_lattice_offset(smooth_grid, kind):
-    import warnings
-
     lat, lon = _track()
     # truth = INS shifted by an offset of the lattice (200 m spacing), noiseless readings
     t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), 400.0, -600.0, 0.0)
     z = smooth_grid.sample(t_lat, t_lon, "bicubic")
     shift = entropy_config_for(smooth_grid, 800.0, kind=kind).shift  # > 0 for H_XX here
     cfg = dataclasses.replace(ENT, kind=kind, shift=shift)
-    res = entropy_mod.match_entropy(smooth_grid, lat, lon, z, cfg)
+    # on the prepared map, as match_track passes it: one compiled matcher for both calls
+    res = entropy_mod.match_entropy(prepare_map(smooth_grid), lat, lon, z, cfg)
     np.testing.assert_allclose(res.lat, t_lat, atol=1e-9)
     np.testing.assert_allclose(res.lon, t_lon, atol=1e-9)
     assert float(res.offset_north_m) == pytest.approx(400.0, abs=0.5)
@@ -349,9 +356,9 @@ def test_match_entropy_finds_the_lattice_offset(smooth_grid, kind):
     # the checked entry point runs the same matcher and warns about nothing
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        via_b = match_track_b(smooth_grid, lat, lon, np.asarray(z), method="entropy", entropy=cfg)
-    np.testing.assert_allclose(via_b.lat, res.lat, atol=0)
-    np.testing.assert_allclose(via_b.lon, res.lon, atol=0)
+        via = match_track(smooth_grid, lat, lon, np.asarray(z), method="entropy", config=cfg)
+    np.testing.assert_allclose(via.lat, res.lat, atol=0)
+    np.testing.assert_allclose(via.lon, res.lon, atol=0)
 
 
 ENT1 = EntropyConfig(spacing_m=300.0, half_size=1)  # 9 candidates, checked by hand below

@@ -13,7 +13,12 @@ from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match import chains
 from jaxgrav.match import lattice_chains as lc
 from jaxgrav.match.candidates import lattice_candidates
-from jaxgrav.match.correlation import ChainConfig, _pair_cost, match_chains
+from jaxgrav.match.correlation import ChainConfig, match_chains, pair_cost
+
+# the search steps jitted: one program each instead of hundreds of eagerly dispatched ones
+lattice_candidates = jax.jit(lattice_candidates, static_argnames="half_size")
+eliminate = jax.jit(chains.eliminate)
+count_chains = jax.jit(chains.count_chains)
 
 
 def test_displacement_box_holds_every_accepted_step():
@@ -73,11 +78,11 @@ def test_elimination_and_count_equal_the_pairwise_search(case):
     cands, steps, tol, geo = case["cands"], case["steps"], case["tol"], case["geo"]
     assert not np.asarray(geo.overflow).any()
     assert case["size"] < int(np.sqrt(cands.mask.shape[1]))  # a real saving
-    alive = chains.eliminate(cands, steps, *tol)
-    alive_l = lc.eliminate_lattice(cands, geo, *tol)
+    alive = eliminate(cands, steps, *tol)
+    alive_l = lc.eliminate_lattice(cands, geo, *tol)  # geo.size is static: not jitted
     np.testing.assert_array_equal(alive_l, alive)
     assert 0 < int(alive.sum()) < int(cands.mask.sum())  # elimination did something
-    n = chains.count_chains(cands, alive, steps, *tol)
+    n = count_chains(cands, alive, steps, *tol)
     n_l = lc.count_chains_lattice(cands, alive, geo, *tol)
     assert float(n) > 1
     np.testing.assert_allclose(n_l, n, rtol=1e-12)
@@ -85,9 +90,9 @@ def test_elimination_and_count_equal_the_pairwise_search(case):
 
 def test_kbest_equal_the_pairwise_programme(case):
     cands, steps, tol, geo, g = case["cands"], case["steps"], case["tol"], case["geo"], case["g"]
-    alive = chains.eliminate(cands, steps, *tol)
+    alive = eliminate(cands, steps, *tol)
     n = alive.shape[0]
-    pair = _pair_cost(jnp.asarray(g), jnp.ones(n - 1) / (n - 1))
+    pair = pair_cost(jnp.asarray(g), jnp.ones(n - 1) / (n - 1))
     unary = jnp.zeros(cands.value.shape)
     ref = chains.kbest_chains(cands, alive, steps, *tol, unary, pair, 8)
     got = lc.kbest_chains_lattice(cands, alive, geo, *tol, unary, pair, 8)

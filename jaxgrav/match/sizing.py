@@ -1,0 +1,120 @@
+"""Matcher configurations sized to the expected INS error.
+
+:func:`config_for` sizes the correlation matchers (``dense``, ``chains``),
+:func:`iccp_config_for` ICCP, and :func:`~jaxgrav.match.entropy.entropy_config_for`
+the entropy stage: each search region covers 1.2 × the drift radius.
+"""
+
+import dataclasses
+import math
+
+from jaxgrav.match.correlation import ChainConfig, chain_tolerances
+from jaxgrav.match.dense import DenseConfig
+from jaxgrav.match.iccp import IccpConfig
+from jaxgrav.match.lattice_chains import stencil_size_for_step
+from jaxgrav.prepared import as_grid
+
+__all__ = ["config_for", "iccp_config_for"]
+
+
+def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=math.inf,
+               n_rotations=1, score=None, step_m=None):
+    """A matcher configuration whose search region covers the drift.
+
+    Parameters
+    ----------
+    method : {"dense", "chains"}
+    grid : Grid or PreparedMap
+        The map that will be matched (for ``chains``, the refined one).
+    drift_radius_m : float
+        Largest expected INS drift (m); the search reaches 1.2× this.
+    noise_mgal : float
+        Reading noise σ (mGal).
+    bias_sigma_mgal : float
+        Prior σ of the reading bias (mGal); ``inf`` estimates it freely.
+    n_rotations : int
+        Heading errors tried by the dense path (1 = none).
+    score : str, optional
+        Score form; default ``"bias"`` (dense) or ``"difference"`` (chains, the paper's).
+    step_m : float, optional
+        ``chains``: the distance between consecutive fixes (m). When given, the
+        chain search uses the displacement stencil
+        (:attr:`~jaxgrav.match.correlation.ChainConfig.stencil_size`) sized for such
+        steps in any direction; otherwise the pairwise search on ``capacity`` slots.
+
+    Returns
+    -------
+    DenseConfig or ChainConfig
+    """
+    if method not in ("dense", "chains"):
+        raise ValueError(f"method must be 'dense' or 'chains'; got {method!r}")
+    grid = as_grid(grid)
+    if not drift_radius_m > 0:
+        raise ValueError(f"drift_radius_m must be positive (m); got {drift_radius_m!r}")
+    reach = 1.2 * float(drift_radius_m)
+    dy, dx = grid.spacing_m()
+    if method == "dense":
+        spacing = min(max(min(dy, dx) / 8.0, 50.0), reach / 3.0)
+        half = math.ceil(reach / spacing)
+        if half > 40:
+            half, spacing = 40, reach / 40
+        return DenseConfig(spacing_m=spacing, half_size=half, noise_mgal=noise_mgal,
+                           bias_sigma_mgal=bias_sigma_mgal, n_rotations=n_rotations,
+                           score=score or "bias")
+    half = math.ceil(reach / min(dy, dx))
+    if 2 * half + 1 > min(grid.ny, grid.nx):
+        raise ValueError(
+            f"drift_radius_m={drift_radius_m!r} needs a search window of {2 * half + 1} nodes, "
+            f"larger than the {grid.ny}x{grid.nx} map")
+    config = ChainConfig(half_size=half, capacity=min((2 * half + 1) ** 2, 384),
+                         delta=2.0 * noise_mgal, score=score or "difference")
+    if step_m is None:
+        return config
+    if not step_m >= 0:
+        raise ValueError(f"step_m must be a distance >= 0 (m); got {step_m!r}")
+    # the largest tolerance on the map: the node allowance grows with the cell diagonal
+    tols = [chain_tolerances(grid, la, config) for la in (grid.lat0, grid.extent[3])]
+    step_tol, angle_tol = max(float(t[0]) for t in tols), float(tols[0][1])
+    size = stencil_size_for_step(grid, float(step_m), step_tol, angle_tol)
+    return dataclasses.replace(config, stencil_size=size)
+
+
+def iccp_config_for(grid, drift_radius_m, *, stage="alone", noise=1.0, max_rotation_deg=90.0,
+                    **kw):
+    """An :class:`IccpConfig` sized to the expected error.
+
+    Parameters
+    ----------
+    grid : Grid or PreparedMap
+    drift_radius_m : float
+        Largest expected INS error (m).
+    stage : {"alone", "fine"}
+        ``"alone"``: the window covers 1.2 × the drift, plain ICCP; ``"fine"`` (after
+        the entropy stage, whose error can still reach the drift: entropy is a weak
+        criterion): the larger of that and one map cell diagonal, and 10 least-squares
+        refinement steps (``refine_steps``).
+    noise : float
+        Reading noise σ (map units): contour points must match their value within 3σ;
+        the combined matcher's acceptance test uses it.
+    max_rotation_deg : float
+        Largest expected INS heading error (degrees): ICCP's rotation bound.
+    **kw
+        Other :class:`IccpConfig` fields.
+
+    Returns
+    -------
+    IccpConfig
+    """
+    if not drift_radius_m > 0:
+        raise ValueError(f"drift_radius_m must be positive (m); got {drift_radius_m!r}")
+    if stage not in ("alone", "fine"):
+        raise ValueError(f"stage must be 'alone' or 'fine'; got {stage!r}")
+    dy, dx = as_grid(grid).spacing_m()
+    cell = math.hypot(dy, dx)
+    window = 1.2 * float(drift_radius_m) if stage == "alone" else max(cell, 1.2 * drift_radius_m)
+    kw.setdefault("window_m", window)
+    kw.setdefault("max_step_m", max(cell / 2.0, 200.0))
+    kw.setdefault("contour_tol", 3.0 * float(noise) + 1e-6)
+    kw.setdefault("noise", float(noise))
+    kw.setdefault("refine_steps", 10 if stage == "fine" else 0)
+    return IccpConfig(max_rotation_deg=max_rotation_deg, **kw)
