@@ -9,6 +9,9 @@ import numpy as np
 import pytest
 
 from jaxgrav.fields import magnetic
+from jaxgrav.match import match_track
+from jaxgrav.match.dense import shifted_tracks
+from jaxgrav.sim import DEG_ARC_M, Track, track_error_m
 
 LAT = 39.0 + 0.1 * np.arange(20)
 LON = 115.0 + 0.1 * np.arange(20)
@@ -90,8 +93,6 @@ MAG_DRIFT_DEG = 0.035  # largest INS offset (~0.03°) + margin, as examples/pape
 
 def magnetic_track(grid, d_north_m, d_east_m, rot_deg, seed):
     """Truth: 20 fixes 600 m apart heading north-east; INS: truth shifted and turned."""
-    from jaxgrav.match.dense import shifted_tracks
-
     k = np.arange(20)
     lat = 39.15 + 0.00382 * k
     lon = 115.15 + 0.00492 * k
@@ -104,8 +105,6 @@ def magnetic_track(grid, d_north_m, d_east_m, rot_deg, seed):
 
 def test_entropy_iccp_on_a_magnetic_map_beats_the_ins(tmp_path):
     pytest.importorskip("xarray")
-    from jaxgrav.match.entropy_iccp import match_track_b
-    from jaxgrav.sim import DEG_ARC_M, Track, track_error_m
 
     magnetic.magnetic_map(MAG_REGION, 0.01, main_field=False).anomaly.to_netcdf(tmp_path / "m.nc")
     grid = magnetic.read_anomaly(tmp_path / "m.nc")
@@ -113,9 +112,9 @@ def test_entropy_iccp_on_a_magnetic_map_beats_the_ins(tmp_path):
     # INS offset by ~0.02-0.03° and turned by 1.5° (paper B's errors), 10 nT noise
     for d_n, d_e, rot, seed in ((2500.0, -1500.0, 1.5, 0), (-2000.0, -2000.0, -1.5, 1)):
         lat, lon, ins_lat, ins_lon, z = magnetic_track(grid, d_n, d_e, rot, seed)
-        res = match_track_b(grid, ins_lat, ins_lon, z, method="entropy+iccp",
-                            drift_radius_m=MAG_DRIFT_DEG * DEG_ARC_M, noise=MAG_NOISE_NT,
-                            max_rotation_deg=2.0, entropy_half_size=8, warn=False)
+        res = match_track(grid, ins_lat, ins_lon, z, method="entropy+iccp",
+                          drift_radius_m=MAG_DRIFT_DEG * DEG_ARC_M, noise=MAG_NOISE_NT,
+                          max_rotation_deg=2.0, entropy_half_size=8, warn=False)
         truth = Track(lat, lat, lon, lat, lat)
         ins_err = float(track_error_m(ins_lat, ins_lon, truth))
         assert ins_err > 2000.0
