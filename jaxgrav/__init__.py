@@ -1,7 +1,7 @@
 """jaxgrav: geophysical map-matching aided inertial navigation in JAX.
 
 The public API is re-exported here; see the README for a tour. Packages, bottom to
-top: ``constants``, ``geodesy``, ``interp``, ``grid`` → ``fields``, ``sim``,
+top: ``constants``, ``geodesy``, ``interp`` → ``grid``, ``prepared`` → ``fields``, ``sim`` →
 ``datasets`` → ``match``, ``filters``, ``dov`` → ``scenarios`` → ``montecarlo`` →
 ``cli`` (the command, not imported here).
 """
@@ -33,12 +33,14 @@ from jaxgrav.geodesy import (
     prime_vertical_radius,
 )
 from jaxgrav.grid import Grid, Window, sample
+from jaxgrav.prepared import PreparedMap, prepare_map
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Grid",
     "LayeredGrid",
+    "PreparedMap",
     "Window",
     "__version__",
     "constants",
@@ -57,6 +59,7 @@ __all__ = [
     "meridian_radius",
     "montecarlo",
     "normal_gravity",
+    "prepare_map",
     "prime_vertical_radius",
     "sample",
     "scenarios",
