@@ -390,3 +390,20 @@ def test_builder_truth_grid_and_its_coverage():
         montecarlo_methods.build("dense", grid, map_error=3.0)
     # None is not passed on: a builder without the keyword still builds
     assert montecarlo_methods.build("ukf", None, map_error=None, n_fixes=20).fn is not None
+
+
+def test_paper_a_table1_run_batch_takes_a_map_error():
+    from jaxgrav.fields.map_error import map_error
+    from jaxgrav.match.sizing import config_for
+    from jaxgrav.montecarlo.paper_a_table1 import run_batch
+    from jaxgrav.montecarlo.spec import region_of
+    from jaxgrav.scenarios import MatchingScenario
+
+    grid = _me_grid()
+    scen = MatchingScenario(region=region_of(grid), drift_deg=0.02, n_fixes=12)
+    cfg = config_for("dense", grid, 0.02 * DEG_ARC_M)
+    key = jax.random.key(1)
+    a = run_batch(key, 2, grid, grid, scen, "dense", cfg)
+    b = run_batch(key, 2, grid, grid, scen, "dense", cfg, map_error=map_error(4.0, 1e4))
+    np.testing.assert_array_equal(a["true_lat"], b["true_lat"])
+    assert np.all(np.isfinite(b["err_m"])) and not np.array_equal(a["score"], b["score"])
