@@ -4,6 +4,7 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``; the command function is
 :func:`cmd_montecarlo`.
 """
 
+import inspect
 import json
 import os
 import sys
@@ -15,6 +16,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from jaxgrav import __version__, montecarlo
+from jaxgrav.cli.simulate import (
+    DEFAULT_MAP_ERROR_LENGTH_M,
+    add_map_error_options,
+    describe_map_error,
+    map_error_from_args,
+)
 from jaxgrav.datasets import load_map
 from jaxgrav.montecarlo.methods import (
     BUILDERS,
@@ -22,6 +29,7 @@ from jaxgrav.montecarlo.methods import (
     FILTER_METHODS,
     METRICS,
     build,
+    default_grid,
     resolve_method,
 )
 from jaxgrav.plot import save_figure
@@ -69,6 +77,7 @@ def add_parser(subparsers):
     m.add_argument("--out", required=True,
                    help="results NetCDF (one value per run); a PNG of the errors is written "
                         "next to it with suffix .png")
+    add_map_error_options(m)
     m.add_argument("--no-progress", action="store_true", help="no progress bar")
     m.add_argument("--force", action="store_true", help="overwrite existing outputs")
     m.set_defaults(func=cmd_montecarlo)
@@ -179,7 +188,7 @@ def _plot_errors(results, summary, title, path, force, label="matched",
     ax1.set_ylabel("fraction of runs ≤ error")
     ax1.grid(True, which="both", alpha=0.3)
     ax1.legend(loc="lower right")
-    ax0.set_title(title)
+    ax0.set_title(title, fontsize=9)
     ax1.set_title(f"error > {summary['failure_ratio']:.3g} x INS: "
                   f"{100 * summary['failure_rate']:.1f} %, median error / INS "
                   f"{summary['ratio']['p50']:.3f}")
@@ -200,7 +209,9 @@ def _split_cpu(n):
 def _command(args):
     opts = [("--method", args.method), ("--runs", args.runs), ("--chunk", args.chunk),
             ("--seed", args.seed), ("--devices", args.devices), ("--map", args.map),
-            ("--drift", args.drift), ("--noise", args.noise), ("--fixes", args.fixes)]
+            ("--drift", args.drift), ("--noise", args.noise), ("--fixes", args.fixes),
+            ("--map-error", args.map_error), ("--map-error-length", args.map_error_length),
+            ("--truth-map", args.truth_map)]
     return "jaxgrav montecarlo " + " ".join(f"{k} {v}" for k, v in opts if v is not None)
 
 
@@ -231,11 +242,20 @@ def cmd_montecarlo(args):
         map_name = "paper-d" if kind == "filter" else "ryukyu"
     grid = (None if args.map is None or (kind == "filter" and args.map == "paper-d")
             else load_map(args.map, None))
-    spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes)
+    if kind == "matcher" and grid is None and args.truth_map is not None:
+        grid = default_grid()
+    model = map_error_from_args(args, grid)
+    if model is not None and "map_error" not in inspect.signature(BUILDERS[args.method]).parameters:
+        raise ValueError(f"--method {args.method} does not take a map error yet (--map-error, "
+                         "--truth-map); use a matcher")
+    spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes,
+                 map_error=model)
     n_dev = args.devices or len(jax.devices())
+    setting = describe_map_error(args)
     print(f"jaxgrav montecarlo: {args.method} ({spec.settings['description']}), {args.runs} "
           f"runs on {n_dev} {jax.devices()[0].platform} device(s), "
-          + ("paper D's point masses" if map_name == "paper-d" else f"map {map_name}"))
+          + ("paper D's point masses" if map_name == "paper-d" else f"map {map_name}")
+          + f", {setting}")
     t0 = time.perf_counter()
     results = montecarlo.run(spec.fn, jax.random.key(args.seed), args.runs, chunk=args.chunk,
                              devices=args.devices, progress=not args.no_progress,
@@ -245,13 +265,18 @@ def cmd_montecarlo(args):
     if missing:
         raise ValueError(f"method {args.method!r} does not return {missing}")
     summary = summarize(results, kind)
+    print(f"readings: {setting}")
     print(format_summary(summary))
     print(f"{args.runs} runs in {seconds:.1f} s ({args.runs / seconds:.1f} runs/s, "
           "compilation included)")
     attrs = dict(
         title=f"jaxgrav montecarlo --method {args.method}", method=args.method,
         runs=args.runs, seed=args.seed, chunk=args.chunk or montecarlo.DEFAULT_CHUNK,
-        devices=n_dev, map=map_name,
+        devices=n_dev, map=map_name, map_error_setting=setting,
+        map_error_sigma=float(args.map_error or 0.0),
+        map_error_length_m=float(DEFAULT_MAP_ERROR_LENGTH_M if args.map_error_length is None
+                                 else args.map_error_length),
+        truth_map=str(args.truth_map or map_name),
         seconds=round(seconds, 3),
         jax_version=jax.__version__, jaxgrav_version=__version__,
         command=_command(args),
@@ -263,8 +288,10 @@ def cmd_montecarlo(args):
     )
     montecarlo.write_netcdf(results, out, attrs=attrs, force=args.force)
     if kind == "filter":
-        _plot_errors(results, summary, f"{args.method}: {args.runs} runs", png, args.force,
-                     label="filtered", xlabel="RMS position error, second half of the run (m)")
+        _plot_errors(results, summary, f"{args.method}: {args.runs} runs, {setting}", png,
+                     args.force, label="filtered",
+                     xlabel="RMS position error, second half of the run (m)")
     else:
-        _plot_errors(results, summary, f"{args.method}: {args.runs} runs", png, args.force)
+        _plot_errors(results, summary, f"{args.method}: {args.runs} runs, {setting}", png,
+                     args.force)
     print(f"wrote {out} and {png}")

@@ -21,3 +21,24 @@ __all__ += [
     "pointmass_fit",
     "sweep_point_masses",
 ]
+
+# map-error models: the field the sensors see when the map is not the truth
+from jaxgrav.fields import map_error  # noqa: E402  (the module; map_error.map_error builds one)
+from jaxgrav.fields.map_error import (  # noqa: E402
+    CorrelatedMapError,
+    TruthGrid,
+    along_track_covariance,
+    map_error_key,
+    truth_field,
+    truth_grid,
+)
+
+__all__ += [
+    "CorrelatedMapError",
+    "TruthGrid",
+    "along_track_covariance",
+    "map_error",
+    "map_error_key",
+    "truth_field",
+    "truth_grid",
+]

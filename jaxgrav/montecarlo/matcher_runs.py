@@ -21,7 +21,14 @@ from jaxgrav.match.iccp import match_iccp
 from jaxgrav.match.result import CORRELATION_STATUS
 from jaxgrav.match.result import STATUS as ALL_STATUS
 from jaxgrav.match.sizing import config_for, iccp_config_for
-from jaxgrav.montecarlo.spec import MethodSpec, check_settings, default_grid, region_of
+from jaxgrav.montecarlo.spec import (
+    MethodSpec,
+    check_map_error,
+    check_settings,
+    default_grid,
+    map_error_settings,
+    region_of,
+)
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
 from jaxgrav.scenarios.paper_b import PaperBScenario, paper_b_scenario
 from jaxgrav.sim import DEG_ARC_M, track_error_m
@@ -89,7 +96,7 @@ def _offset(r):
 
 
 # -------------------------------------------------------------------------- paper A
-def paper_a_match(matcher, key, truth_field, match_map, scenario, config):
+def paper_a_match(matcher, key, truth_field, match_map, scenario, config, map_error=None):
     """One paper-A run: simulate on ``truth_field``, correct Eötvös, match on ``match_map``.
 
     Parameters
@@ -105,6 +112,10 @@ def paper_a_match(matcher, key, truth_field, match_map, scenario, config):
     scenario : MatchingScenario
     config : DenseConfig or ChainConfig
         ``matcher``'s settings.
+    map_error : CorrelatedMapError, TruthGrid or None, optional
+        Map error of the readings (drawn per run on ``truth_field`` from the run's key;
+        :func:`~jaxgrav.scenarios.matching_scenario`); the matcher still uses
+        ``match_map``. None: readings from ``truth_field`` itself.
 
     Returns
     -------
@@ -115,16 +126,17 @@ def paper_a_match(matcher, key, truth_field, match_map, scenario, config):
         user with an INS velocity would.
     result : MatchResult
     """
-    run = matching_scenario(key, truth_field, scenario)
+    run = matching_scenario(key, truth_field, scenario, map_error)
     g = run.readings + eotvos(run.ins_lat, run.truth.v_east, run.truth.v_north)
     return run, g, matcher(match_map, run.ins_lat, run.ins_lon, g, config)
 
 
 # ------------------------------------------------------------------------- dense (A)
-def dense_run(key, grid, scenario, config):
+def dense_run(key, grid, scenario, config, map_error=None):
     """One paper-A run on ``grid`` matched by :func:`~jaxgrav.match.dense.match_dense`.
 
-    As :func:`paper_a_match` with ``grid`` both the truth and the map.
+    As :func:`paper_a_match` with ``grid`` the map and, with ``map_error`` None, also
+    the truth (else the truth is drawn per run by ``map_error``).
 
     Returns
     -------
@@ -132,18 +144,27 @@ def dense_run(key, grid, scenario, config):
         :func:`matcher_record` (``ins_err_m``, ``err_m``, ``status``, ``score``) and
         ``offset_north_m``, ``offset_east_m`` (estimated correction, m).
     """
-    run, _, r = paper_a_match(match_dense, key, grid, grid, scenario, config)
+    run, _, r = paper_a_match(match_dense, key, grid, grid, scenario, config, map_error)
     return matcher_record(run, r, **_offset(r))
 
 
-def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
+def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=None):
     """Paper A, dense-offset matcher (the ``jaxgrav demo`` realistic setting).
 
     Defaults: INS drift 0.035° (fixed radius, random direction), 1 mGal noise, 30
     fixes 2 min apart at 10 kn east + 10 kn north; search radius 1.2 × the drift,
-    bias prior σ 3 mGal.
+    bias prior σ 3 mGal; a perfect map (``map_error`` None).
+
+    ``map_error`` (every matcher builder): a
+    :class:`~jaxgrav.fields.map_error.CorrelatedMapError` (drawn once per run from the
+    run's key on ``grid``; σ = 0 is the perfect map, exactly as None) or a
+    :class:`~jaxgrav.fields.map_error.TruthGrid` (the readings come from its grid,
+    which must cover ``grid``'s area). The matcher always uses ``grid``; the spec's
+    settings record σ and L (``map_error_sigma``, ``map_error_length_m``) or the truth
+    grid's name (``truth_map``).
     """
     grid = default_grid() if grid is None else grid
+    map_error = check_map_error(map_error, grid)
     drift = 0.035 if drift_deg is None else float(drift_deg)
     noise = 1.0 if noise is None else float(noise)
     n = 30 if n_fixes is None else int(n_fixes)
@@ -153,8 +174,10 @@ def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
                      bias_sigma_mgal=3.0)
     settings = dict(description="paper A: dense-offset matcher, fixed INS drift",
                     drift_deg=drift, noise_mgal=noise, n_fixes=n, dt_s=scen.dt,
-                    search_half_size=cfg.half_size, search_spacing_m=cfg.spacing_m)
-    return MethodSpec(dense_run, (grid, scen, cfg), settings, dict(CORRELATION_STATUS))
+                    search_half_size=cfg.half_size, search_spacing_m=cfg.spacing_m,
+                    **map_error_settings(map_error))
+    return MethodSpec(dense_run, (grid, scen, cfg, map_error), settings,
+                      dict(CORRELATION_STATUS))
 
 
 # ------------------------------------------------------------------------ chains (A)
@@ -163,11 +186,11 @@ CHAIN_NODE_DEG = 0.005
 (its 0.5° map refined ×100; the 2.5′ map refined ×8, as ``examples/paper_a_table1.py``)."""
 
 
-def chains_run(key, grid, refined, scenario, config):
+def chains_run(key, grid, refined, scenario, config, map_error=None):
     """One paper-A run: simulate on ``grid``, match by iso-point chains on ``refined``.
 
     As :func:`paper_a_match` with
-    :func:`~jaxgrav.match.correlation.match_chains`.
+    :func:`~jaxgrav.match.correlation.match_chains` (``map_error`` as :func:`dense_run`).
 
     Returns
     -------
@@ -176,11 +199,11 @@ def chains_run(key, grid, refined, scenario, config):
         ``offset_north_m``, ``offset_east_m`` (m), ``work_constrained`` (chains left
         after constraint elimination).
     """
-    run, _, r = paper_a_match(match_chains, key, grid, refined, scenario, config)
+    run, _, r = paper_a_match(match_chains, key, grid, refined, scenario, config, map_error)
     return matcher_record(run, r, **_offset(r), work_constrained=r.work_constrained)
 
 
-def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
+def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=None):
     """Paper A's pipeline: iso-point chains with constraint elimination.
 
     The readings come from ``grid``; the matcher searches ``grid`` refined (bilinear)
@@ -188,8 +211,10 @@ def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
     ×8 for the 2.5′ map). Scenario as :func:`dense_builder` (drift 0.035°,
     1 mGal, 30 fixes 2 min apart); search window and tolerances from
     :func:`~jaxgrav.match.api.config_for` ``("chains", ...)`` for 1.2 × the drift.
+    ``map_error`` as :func:`dense_builder` (drawn on ``grid``, not the refined map).
     """
     grid = default_grid() if grid is None else grid
+    map_error = check_map_error(map_error, grid)
     drift = 0.035 if drift_deg is None else float(drift_deg)
     noise = 1.0 if noise is None else float(noise)
     n = 30 if n_fixes is None else int(n_fixes)
@@ -203,13 +228,17 @@ def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None):
                                 "fixed INS drift",
                     drift_deg=drift, noise_mgal=noise, n_fixes=n, dt_s=scen.dt,
                     refine_factor=factor, search_half_size=cfg.half_size,
-                    stencil_size=cfg.stencil_size)
-    return MethodSpec(chains_run, (grid, refined, scen, cfg), settings, dict(CORRELATION_STATUS))
+                    stencil_size=cfg.stencil_size, **map_error_settings(map_error))
+    return MethodSpec(chains_run, (grid, refined, scen, cfg, map_error), settings,
+                      dict(CORRELATION_STATUS))
 
 
 # ----------------------------------------------------------------- entropy, ICCP (B)
-def entropy_iccp_run(key, grid, scenario, entropy, iccp):
+def entropy_iccp_run(key, grid, scenario, entropy, iccp, map_error=None):
     """One paper-B run: simulate (:func:`~jaxgrav.match.entropy_iccp.paper_b_scenario`), match.
+
+    ``map_error`` as :func:`dense_run`: the readings' truth, drawn per run; the matchers
+    use ``grid``.
 
     Returns
     -------
@@ -217,21 +246,21 @@ def entropy_iccp_run(key, grid, scenario, entropy, iccp):
         ``ins_err_m``, ``err_m`` (m), ``status`` (int32), ``score`` (mean squared
         misfit), ``rotation_deg`` (estimated heading correction).
     """
-    run = paper_b_scenario(key, grid, scenario)
+    run = paper_b_scenario(key, grid, scenario, map_error)
     r = match_entropy_iccp(grid, run.ins_lat, run.ins_lon, run.readings, entropy, iccp)
     return _b_metrics(run, r)
 
 
-def entropy_run(key, grid, scenario, entropy):
+def entropy_run(key, grid, scenario, entropy, map_error=None):
     """One paper-B run matched by the entropy coarse stage alone; as :func:`entropy_iccp_run`
     (``rotation_deg`` is 0: the stage only shifts the track)."""
-    run = paper_b_scenario(key, grid, scenario)
+    run = paper_b_scenario(key, grid, scenario, map_error)
     return _b_metrics(run, match_entropy(grid, run.ins_lat, run.ins_lon, run.readings, entropy))
 
 
-def iccp_run(key, grid, scenario, iccp):
+def iccp_run(key, grid, scenario, iccp, map_error=None):
     """One paper-B run matched by ICCP alone from the INS track; as :func:`entropy_iccp_run`."""
-    run = paper_b_scenario(key, grid, scenario)
+    run = paper_b_scenario(key, grid, scenario, map_error)
     return _b_metrics(run, match_iccp(grid, run.ins_lat, run.ins_lon, run.readings, iccp))
 
 
@@ -246,7 +275,8 @@ _B_RUNS = {
 }
 
 
-def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n_fixes=None):
+def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n_fixes=None,
+                    map_error=None):
     """Paper B: entropy coarse matching, ICCP, or both (``stage``).
 
     Defaults (paper B's gravity case, as ``examples/paper_b_entropy_iccp.py``): INS
@@ -264,6 +294,8 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
     stage : {"entropy+iccp", "entropy", "iccp"}
     drift_deg, noise, n_fixes : optional
         Offset bound (degrees of arc), reading noise σ (map units), fixes per track.
+    map_error : CorrelatedMapError, TruthGrid or None, optional
+        The readings' map error, as :func:`dense_builder`.
 
     Returns
     -------
@@ -271,6 +303,7 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
     """
     fn, label = _B_RUNS[stage]
     grid = default_grid() if grid is None else grid
+    map_error = check_map_error(map_error, grid)
     drift = 0.03 if drift_deg is None else float(drift_deg)
     noise = 1.0 if noise is None else float(noise)
     n = 60 if n_fixes is None else int(n_fixes)
@@ -280,7 +313,8 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
     reach_m = (drift + 0.005) * DEG_ARC_M
     settings = dict(description=f"paper B: {label}; offset and rotated INS track",
                     drift_deg=drift, offset_min_deg=scen.offset_min_deg, noise_mgal=noise,
-                    n_fixes=n, dt_s=scen.dt, rotation_deg=scen.rotation_deg)
+                    n_fixes=n, dt_s=scen.dt, rotation_deg=scen.rotation_deg,
+                    **map_error_settings(map_error))
     args = (grid, scen)
     if stage != "iccp":
         ent = entropy_config_for(grid, reach_m, max_half_size=20)
@@ -291,7 +325,7 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
                               noise=max(noise, 0.1))
         settings["iccp_window_m"] = float(icp.window_m)
         args += (icp,)
-    return MethodSpec(fn, args, settings, dict(ALL_STATUS))
+    return MethodSpec(fn, (*args, map_error), settings, dict(ALL_STATUS))
 
 
 entropy_iccp_builder = functools.partial(paper_b_builder, stage="entropy+iccp")

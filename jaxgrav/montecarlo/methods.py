@@ -2,7 +2,7 @@
 
 Each entry of :data:`BUILDERS` maps a method name to a *builder*::
 
-    builder(grid, *, drift_deg=None, noise=None, n_fixes=None) -> MethodSpec
+    builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=None) -> MethodSpec
 
 ``None`` means the method's own default; for ``grid`` that is the shipped ``ryukyu``
 2.5′ map for the matchers and paper D's three point masses for the filters. The
@@ -143,12 +143,18 @@ def build(method, grid=None, **options):
         (:func:`default_grid` for the matchers, paper D's point masses for the filters).
     **options
         ``drift_deg`` (degrees of arc), ``noise`` (map units), ``n_fixes``; None
-        keeps the method's default.
+        keeps the method's default. ``map_error`` (a ``CorrelatedMapError``, a
+        ``TruthGrid`` or None): the readings' map error, drawn per run (see
+        :func:`~jaxgrav.montecarlo.matcher_runs.dense_builder`); passed to the builder
+        only when not None, so builders without the keyword still build the
+        perfect-map case.
 
     Returns
     -------
     MethodSpec
     """
+    if options.get("map_error", 0) is None:
+        options = {k: v for k, v in options.items() if k != "map_error"}
     return BUILDERS[resolve_method(method)](grid, **options)
 
 

@@ -41,7 +41,8 @@ def _table_record(run, r, slope_n, slope_e, true_score):
         ins_lat=run.ins_lat, ins_lon=run.ins_lon, lat=r.lat, lon=r.lon)
 
 
-def dense_table_run(key, truth_field, match_map, slope_n, slope_e, scenario, config):
+def dense_table_run(key, truth_field, match_map, slope_n, slope_e, scenario, config,
+                    map_error=None):
     """One track of a Table-1 batch matched by :func:`~jaxgrav.match.dense.match_dense`.
 
     Parameters
@@ -53,6 +54,9 @@ def dense_table_run(key, truth_field, match_map, slope_n, slope_e, scenario, con
         ``match_map.gradient()`` (mGal/m), for the mean map slope along the track.
     scenario : MatchingScenario
     config : DenseConfig
+    map_error : CorrelatedMapError, TruthGrid or None, optional
+        Map error of the readings, drawn per run on ``truth_field``
+        (:func:`~jaxgrav.montecarlo.matcher_runs.paper_a_match`).
 
     Returns
     -------
@@ -64,7 +68,8 @@ def dense_table_run(key, truth_field, match_map, slope_n, slope_e, scenario, con
         ``true_lat``, ``true_lon``, ``ins_lat``, ``ins_lon``, ``lat``, ``lon``
         (degrees, shape ``(n_fixes,)``).
     """
-    run, g, r = paper_a_match(match_dense, key, truth_field, match_map, scenario, config)
+    run, g, r = paper_a_match(match_dense, key, truth_field, match_map, scenario, config,
+                              map_error)
     w = decreasing_weights(g.shape[0], config.weight_decay)
     prior = bias_precision(w, config.noise_mgal, config.bias_sigma_mgal)
     m = match_map.sample(run.truth.lat, run.truth.lon, config.method)
@@ -72,11 +77,13 @@ def dense_table_run(key, truth_field, match_map, slope_n, slope_e, scenario, con
     return _table_record(run, r, slope_n, slope_e, true_score)
 
 
-def chains_table_run(key, truth_field, match_map, slope_n, slope_e, scenario, config):
+def chains_table_run(key, truth_field, match_map, slope_n, slope_e, scenario, config,
+                     map_error=None):
     """One track of a Table-1 batch matched by
     :func:`~jaxgrav.match.correlation.match_chains` (``config`` a ChainConfig); as
     :func:`dense_table_run`, with ``true_score`` NaN."""
-    run, _, r = paper_a_match(match_chains, key, truth_field, match_map, scenario, config)
+    run, _, r = paper_a_match(match_chains, key, truth_field, match_map, scenario, config,
+                              map_error)
     return _table_record(run, r, slope_n, slope_e, jnp.nan)
 
 
@@ -85,7 +92,7 @@ TABLE_RUNS = {"dense": dense_table_run, "chains": chains_table_run}
 
 
 def run_batch(key, n_runs, truth_field, match_map, scenario, method, config, *, chunk=None,
-              progress=False):
+              progress=False, map_error=None):
     """Simulate and match ``n_runs`` tracks with the Monte Carlo runner.
 
     Parameters
@@ -107,6 +114,9 @@ def run_batch(key, n_runs, truth_field, match_map, scenario, method, config, *, 
         floats may then differ in the last digits (another XLA programme).
     progress : bool
         Show the runner's progress bar.
+    map_error : CorrelatedMapError, TruthGrid or None, optional
+        Map error of the readings, drawn per track from its key on ``truth_field``;
+        None (default): the readings come from ``truth_field`` itself, as before.
 
     Returns
     -------
@@ -120,7 +130,7 @@ def run_batch(key, n_runs, truth_field, match_map, scenario, method, config, *, 
     slope_n, slope_e = match_map.gradient()
     return run(TABLE_RUNS[method], key, n_runs, chunk=n_runs if chunk is None else chunk,
                progress=progress,
-               args=(truth_field, match_map, slope_n, slope_e, scenario, config))
+               args=(truth_field, match_map, slope_n, slope_e, scenario, config, map_error))
 
 
 def summarize(out, success_deg=0.01):

@@ -2,10 +2,15 @@
 
 from collections.abc import Callable
 
+import numpy as np
+
 from jaxgrav import datasets
 from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav.fields.map_error import CorrelatedMapError, TruthGrid
+from jaxgrav.scenarios.paper_a import check_region_covered
 
-__all__ = ["METRICS", "MethodSpec", "check_settings", "default_grid", "region_of"]
+__all__ = ["METRICS", "MethodSpec", "check_map_error", "check_settings", "default_grid",
+           "map_error_settings", "region_of"]
 
 METRICS = ("ins_err_m", "err_m", "status")
 """Metrics every method returns per run."""
@@ -54,3 +59,58 @@ def check_settings(drift, noise, n):
         raise ValueError(f"noise must be a non-negative standard deviation (mGal); got {noise!r}")
     if n < 5:
         raise ValueError(f"fixes must be at least 5 per track; got {n}")
+
+
+def check_map_error(map_error, grid):
+    """The map-error model a builder simulates with (validated), or None.
+
+    Parameters
+    ----------
+    map_error : CorrelatedMapError, TruthGrid or None
+        A CorrelatedMapError must have scalar σ and L; σ = 0 (a perfect map) becomes
+        None, so that the runs are exactly the perfect-map runs. A TruthGrid must
+        cover ``grid``'s area.
+    grid : Grid
+        The map the method uses.
+
+    Returns
+    -------
+    CorrelatedMapError, TruthGrid or None
+
+    Raises TypeError for another type, ValueError for a TruthGrid that does not cover
+    the map or a non-scalar σ or L.
+    """
+    if map_error is None:
+        return None
+    if isinstance(map_error, TruthGrid):
+        check_region_covered(map_error.grid, region_of(grid), "the truth map (map_error.grid)")
+        return map_error
+    if not isinstance(map_error, CorrelatedMapError):
+        raise TypeError("map_error must be a CorrelatedMapError (fields.map_error.map_error"
+                        "(sigma, length_m)), a TruthGrid or None; got "
+                        f"{type(map_error).__name__}")
+    if np.ndim(map_error.sigma) or np.ndim(map_error.length_m):
+        raise ValueError("map_error.sigma and map_error.length_m must be scalars; got shapes "
+                         f"{np.shape(map_error.sigma)}, {np.shape(map_error.length_m)}")
+    return None if float(map_error.sigma) == 0 else map_error
+
+
+def map_error_settings(map_error):
+    """Settings entries describing a map-error model (for a spec's ``settings``).
+
+    ``map_error_sigma`` (map units; 0 for a perfect map), ``map_error_length_m``,
+    ``map_error_family``; for a TruthGrid ``truth_map`` (its grid's name) and, if it
+    states one, its error's σ and L.
+    """
+    if map_error is None:
+        return dict(map_error_sigma=0.0)
+    out = {}
+    if isinstance(map_error, TruthGrid):
+        out["truth_map"] = map_error.grid.name or "explicit truth grid"
+        map_error = map_error.error
+        if map_error is None:
+            return out
+    out.update(map_error_sigma=float(map_error.sigma),
+               map_error_length_m=float(map_error.length_m),
+               map_error_family=map_error.family)
+    return out

@@ -15,10 +15,12 @@ import numpy as np
 from jaxgrav import sim
 from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import KNOT
+from jaxgrav.fields import map_error as map_errors
+from jaxgrav.fields.map_error import CorrelatedMapError, TruthGrid, map_error_key
+from jaxgrav.grid import Grid
 
-__all__ = ["MatchingRun", "MatchingScenario", "matching_scenario"]
-
-
+__all__ = ["MatchingRun", "MatchingScenario", "check_region_covered", "matching_scenario",
+           "scenario_truth"]
 
 @pytree_dataclass
 class MatchingScenario:
@@ -80,7 +82,72 @@ class MatchingRun(NamedTuple):
     drift_east_m: jax.Array
 
 
-def matching_scenario(key, truth_field, scenario=MatchingScenario()):  # noqa: B008
+def check_region_covered(grid, region, name="map_error.grid (the truth grid)"):
+    """Raise ``ValueError`` naming ``name`` unless Grid ``grid`` covers ``region``.
+
+    ``region`` is ``(lat_min, lat_max, lon_min, lon_max)`` (degrees); the two may use
+    different longitude conventions (0–360 or ±180).
+    """
+    lat_min, lat_max, lon_min, lon_max = (float(v) for v in region)
+    w, e, s, n = (float(v) for v in grid.extent)
+    tol = 1e-6 * max(grid.dlat, grid.dlon) + 1e-9
+    w0 = w + np.mod(lon_min - w, 360.0)  # region's west edge in the grid's range
+    if w0 - w > 360.0 - tol:
+        w0 -= 360.0
+    ok = (lat_min >= s - tol and lat_max <= n + tol and w0 >= w - tol
+          and w0 + (lon_max - lon_min) <= e + tol)
+    if not ok:
+        raise ValueError(
+            f"{name} must cover the scenario's region (lat {lat_min:g}..{lat_max:g} deg, lon "
+            f"{lon_min:g}..{lon_max:g} deg); got a grid over lat {s:g}..{n:g} deg, lon "
+            f"{w:g}..{e:g} deg"
+        )
+
+
+def scenario_truth(key, truth_field, map_error, region):
+    """The field a scenario's sensor sees: ``truth_field`` with the map error applied.
+
+    Parameters
+    ----------
+    key : PRNG key
+        The run's key; a :class:`~jaxgrav.fields.map_error.CorrelatedMapError` is drawn
+        from :func:`~jaxgrav.fields.map_error.map_error_key` of it, so the run's other
+        draws are unchanged.
+    truth_field : Grid or callable
+        The map (a Grid when ``map_error`` is a CorrelatedMapError), or the truth itself.
+    map_error : CorrelatedMapError, TruthGrid or None
+        None: ``truth_field`` is the truth (one field for every run, e.g. one drawn once
+        per batch); CorrelatedMapError: ``truth_field`` plus an error field drawn per run
+        (:func:`~jaxgrav.fields.map_error.truth_field`); TruthGrid: its grid, which must
+        cover ``region``.
+    region : tuple of float
+        ``(lat_min, lat_max, lon_min, lon_max)`` the run stays in (degrees), static.
+
+    Returns
+    -------
+    Grid or callable
+        The truth to sample.
+
+    Raises TypeError for a wrong ``map_error`` type (or a CorrelatedMapError on a
+    ``truth_field`` that is not a Grid), ValueError for a TruthGrid that does not cover
+    ``region``.
+    """
+    if map_error is None:
+        return truth_field
+    if isinstance(map_error, TruthGrid):
+        check_region_covered(map_error.grid, region)
+        return map_error.grid
+    if not isinstance(map_error, CorrelatedMapError):
+        raise TypeError("map_error must be a CorrelatedMapError (fields.map_error.map_error"
+                        "(sigma, length_m)), a TruthGrid or None; got "
+                        f"{type(map_error).__name__}")
+    if not isinstance(truth_field, Grid):
+        raise TypeError("a CorrelatedMapError is drawn on the map's grid: truth_field must be "
+                        f"a Grid; got {type(truth_field).__name__}")
+    return map_errors.truth_field(map_error_key(key), truth_field, map_error)
+
+
+def matching_scenario(key, truth_field, scenario=MatchingScenario(), map_error=None):  # noqa: B008
     """Simulate one matching run.
 
     The start point is uniform in ``scenario.region`` with a margin so that the
@@ -90,13 +157,24 @@ def matching_scenario(key, truth_field, scenario=MatchingScenario()):  # noqa: B
     ----------
     key : PRNG key
     truth_field : Grid or callable
-        Field the gravimeter senses (mGal).
+        Field the gravimeter senses (mGal), or, with ``map_error``, the map it is
+        drawn from.
     scenario : MatchingScenario
+    map_error : CorrelatedMapError, TruthGrid or None, optional
+        How the truth differs from ``truth_field`` (:func:`scenario_truth`):
+        a CorrelatedMapError is drawn once per run from the run's own key
+        (``map_error_key(key)``); a TruthGrid is sampled instead of ``truth_field``
+        (it must cover ``scenario.region``). None (default): the readings come from
+        ``truth_field`` itself, bit-identical to the scenario without this argument;
+        for one map-error draw per batch, draw the truth Grid once
+        (``fields.map_error.truth_field(key, grid, model)``) and pass it as
+        ``truth_field`` with ``map_error=None``.
 
     Returns
     -------
     MatchingRun
     """
+    truth_field = scenario_truth(key, truth_field, map_error, scenario.region)
     k_start, k_drift, k_noise = jax.random.split(key, 3)
     s = scenario
     span = (s.n_fixes - 1) * s.dt

@@ -19,7 +19,7 @@ from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.iccp import iccp_result
 from jaxgrav.prepared import prepare_map
-from jaxgrav.scenarios.paper_a import MatchingRun
+from jaxgrav.scenarios.paper_a import MatchingRun, scenario_truth
 from jaxgrav.sim import track_error_m
 
 __all__ = ["PaperBErrors", "PaperBScenario", "paper_b_errors", "paper_b_scenario"]
@@ -57,15 +57,21 @@ class PaperBScenario:
     n_fixes: int = static_field(60)
 
 
-def paper_b_scenario(key, truth_field, scenario=PaperBScenario()):  # noqa: B008
+def paper_b_scenario(key, truth_field, scenario=PaperBScenario(), map_error=None):  # noqa: B008
     """Simulate one run of :class:`PaperBScenario`.
 
     Parameters
     ----------
     key : PRNG key
     truth_field : Grid or callable
-        Field sensed (nT or mGal), sampled bicubically if a Grid.
+        Field sensed (nT or mGal), sampled bicubically if a Grid; with ``map_error``,
+        the map the truth is drawn from.
     scenario : PaperBScenario
+    map_error : CorrelatedMapError, TruthGrid or None, optional
+        As :func:`~jaxgrav.scenarios.paper_a.matching_scenario` (drawn per run from
+        ``map_error_key(key)``; a TruthGrid must cover ``scenario.region``; None:
+        today's readings, bit for bit; a per-batch draw: pass the drawn truth Grid as
+        ``truth_field``).
 
     Returns
     -------
@@ -73,6 +79,7 @@ def paper_b_scenario(key, truth_field, scenario=PaperBScenario()):  # noqa: B008
         ``drift_north_m``/``drift_east_m`` are the INS errors at each fix (m).
     """
     s = scenario
+    truth_field = scenario_truth(key, truth_field, map_error, s.region)
     k_start, k_head, k_off, k_dir, k_sign, k_noise = jax.random.split(key, 6)
     length_m = (s.n_fixes - 1) * s.dt * s.speed
     m_lat = (length_m + s.offset_max_deg * sim.DEG_ARC_M) / sim.DEG_ARC_M * 1.05

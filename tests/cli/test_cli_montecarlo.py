@@ -299,3 +299,46 @@ def test_bench_default_dir_missing_names_both(tmp_path, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert str(tmp_path / "benchmarks") in err and str(site / "benchmarks") in err
     assert "pass --dir" in err and not (tmp_path / "b.md").exists()
+
+
+def test_montecarlo_map_error_setting_in_summary_and_attributes(tmp_path, capsys):
+    out = tmp_path / "me.nc"
+    assert main(["montecarlo", "--method", "dense", "--runs", "4", "--chunk", "4", "--fixes",
+                 "12", "--map-error", "3", "--map-error-length", "8000", "--out", str(out),
+                 "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "readings: map error 3 (map units), L = 8 km" in text
+    with xr.open_dataset(out) as ds:
+        a = ds.attrs
+        assert (a["map_error_sigma"], a["map_error_length_m"]) == (3.0, 8000.0)
+        assert (a["setting_map_error_sigma"], a["setting_map_error_length_m"]) == (3.0, 8000.0)
+        assert "--map-error 3.0 --map-error-length 8000.0" in a["command"]
+        assert a["map_error_setting"] == "map error 3 (map units), L = 8 km"
+
+
+def test_montecarlo_truth_map(tmp_path, capsys):
+    out = tmp_path / "tm.nc"
+    assert main(["montecarlo", "--method", "dense", "--runs", "2", "--chunk", "2", "--fixes",
+                 "12", "--map", "ryukyu:anomaly_0p5deg", "--truth-map", "ryukyu", "--out",
+                 str(out), "--no-progress"]) == 0
+    assert "readings: truth map ryukyu" in capsys.readouterr().out
+    with xr.open_dataset(out) as ds:
+        assert ds.attrs["truth_map"] == "ryukyu" and ds.attrs["map"] == "ryukyu:anomaly_0p5deg"
+        assert ds.attrs["setting_truth_map"]
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--map-error", "-2"], "--map-error must be a finite standard deviation >= 0 (map units, "
+                            "0 = perfect map); got -2.0"),
+    (["--map-error", "1", "--map-error-length", "inf"], "--map-error-length must be a finite"),
+    (["--map-error", "1", "--truth-map", "ryukyu"], "exclude each other"),
+    (["--method", "ukf", "--map-error", "1"], "--method ukf does not take a map error yet"),
+])
+def test_montecarlo_bad_map_error(tmp_path, capsys, args, match):
+    argv = ["montecarlo", "--runs", "2", *args, "--out", str(tmp_path / "x.nc")]
+    if "--method" not in args:
+        argv[1:1] = ["--method", "dense"]
+    code = main(argv)
+    assert code == 2
+    assert match in capsys.readouterr().err
+    assert not (tmp_path / "x.nc").exists()

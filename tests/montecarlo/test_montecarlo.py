@@ -342,3 +342,68 @@ def test_two_processes_on_loopback_give_the_numbers_of_one(tmp_path):
     assert int(npz["n_devices"]) == 4  # 2 processes × 2 local devices in one mesh
     for name, res in _split(npz, ["hosts_chunk4"]).items():
         assert_same(res, reference(), name)
+
+
+# ------------------------------------------------------ map error (issue 15, item 1)
+def _me_grid():
+    lat, lon = np.linspace(29.0, 31.0, 49), np.linspace(129.0, 131.0, 49)
+    values = 30 * np.sin(9 * lat)[:, None] * np.cos(7 * lon)[None, :] + 5 * np.add.outer(
+        np.cos(23 * lat), np.sin(19 * lon))
+    return Grid.from_arrays(lat, lon, values, name="me", units="mGal")
+
+
+@pytest.mark.parametrize("method", ["dense", "entropy"])
+def test_matcher_builders_take_a_map_error(method):
+    from jaxgrav.fields.map_error import map_error
+
+    grid = _me_grid()
+    opts = dict(drift_deg=0.02, n_fixes=12)
+    plain = montecarlo_methods.build(method, grid, **opts)
+    zero = montecarlo_methods.build(method, grid, map_error=map_error(0.0, 1e4), **opts)
+    noisy = montecarlo_methods.build(method, grid, map_error=map_error(3.0, 1e4), **opts)
+    assert plain.settings["map_error_sigma"] == zero.settings["map_error_sigma"] == 0.0
+    assert (noisy.settings["map_error_sigma"], noisy.settings["map_error_length_m"]) == (3.0,
+                                                                                        1e4)
+    key = jax.random.key(4)
+    runs = {name: montecarlo.run(s.fn, key, 4, chunk=2, args=s.args, progress=False)
+            for name, s in (("plain", plain), ("zero", zero), ("noisy", noisy))}
+    np.testing.assert_array_equal(runs["plain"]["err_m"], runs["zero"]["err_m"])
+    np.testing.assert_array_equal(runs["plain"]["ins_err_m"], runs["noisy"]["ins_err_m"])
+    assert not np.array_equal(runs["plain"]["score"], runs["noisy"]["score"])
+    # the runner's run i is fn(split(key)[i], *args)
+    one = noisy.fn(jax.random.split(key, 4)[3], *noisy.args)
+    np.testing.assert_allclose(runs["noisy"]["err_m"][3], np.asarray(one["err_m"]), rtol=1e-5)
+
+
+def test_builder_truth_grid_and_its_coverage():
+    from jaxgrav.fields.map_error import truth_grid
+
+    grid = _me_grid()
+    spec = montecarlo_methods.build("dense", grid, drift_deg=0.02, n_fixes=12,
+                                    map_error=truth_grid(grid))
+    assert spec.settings["truth_map"] == "me"
+    small = Grid.from_arrays(np.linspace(29.0, 30.0, 11), np.linspace(129.0, 130.0, 11),
+                             np.zeros((11, 11)), name="small")
+    with pytest.raises(ValueError, match=r"the truth map \(map_error.grid\) must cover"):
+        montecarlo_methods.build("chains", grid, map_error=truth_grid(small))
+    with pytest.raises(TypeError, match="map_error must be"):
+        montecarlo_methods.build("dense", grid, map_error=3.0)
+    # None is not passed on: a builder without the keyword still builds
+    assert montecarlo_methods.build("ukf", None, map_error=None, n_fixes=20).fn is not None
+
+
+def test_paper_a_table1_run_batch_takes_a_map_error():
+    from jaxgrav.fields.map_error import map_error
+    from jaxgrav.match.sizing import config_for
+    from jaxgrav.montecarlo.paper_a_table1 import run_batch
+    from jaxgrav.montecarlo.spec import region_of
+    from jaxgrav.scenarios import MatchingScenario
+
+    grid = _me_grid()
+    scen = MatchingScenario(region=region_of(grid), drift_deg=0.02, n_fixes=12)
+    cfg = config_for("dense", grid, 0.02 * DEG_ARC_M)
+    key = jax.random.key(1)
+    a = run_batch(key, 2, grid, grid, scen, "dense", cfg)
+    b = run_batch(key, 2, grid, grid, scen, "dense", cfg, map_error=map_error(4.0, 1e4))
+    np.testing.assert_array_equal(a["true_lat"], b["true_lat"])
+    assert np.all(np.isfinite(b["err_m"])) and not np.array_equal(a["score"], b["score"])

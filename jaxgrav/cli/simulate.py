@@ -1,0 +1,147 @@
+"""``jaxgrav simulate``: write a track CSV from paper A's matching scenario.
+
+Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
+"""
+
+import math
+
+import jax
+import numpy as np
+
+from jaxgrav.constants import KNOT
+from jaxgrav.datasets import load_map
+from jaxgrav.fields.map_error import map_error, truth_grid
+from jaxgrav.montecarlo.spec import region_of
+from jaxgrav.scenarios import MatchingScenario, matching_scenario
+from jaxgrav.scenarios.paper_a import check_region_covered
+from jaxgrav.sim import rayleigh_quantile
+from jaxgrav.tracks import write_track_csv
+
+__all__ = ["DEFAULT_MAP_ERROR_LENGTH_M", "add_map_error_options", "add_parser",
+           "describe_map_error", "map_error_from_args"]
+
+DEFAULT_MAP_ERROR_LENGTH_M = 10000.0
+"""Default correlation length of ``--map-error`` (m)."""
+
+
+def add_map_error_options(parser):
+    """Add ``--map-error``, ``--map-error-length`` and ``--truth-map`` to a sub-parser."""
+    parser.add_argument("--map-error", type=float, default=None, metavar="SIGMA",
+                        help="the readings see the map plus a correlated error field of this "
+                             "standard deviation (map units, e.g. mGal), drawn per run "
+                             "(second-order Gauss-Markov); default 0 = a perfect map")
+    parser.add_argument("--map-error-length", type=float, default=None, metavar="L",
+                        help="correlation length of --map-error (m, default "
+                             f"{DEFAULT_MAP_ERROR_LENGTH_M:.0f})")
+    parser.add_argument("--truth-map", default=None, metavar="MAP",
+                        help="the readings come from MAP (NetCDF grid or shipped map, e.g. "
+                             "ryukyu, the 2.5' map) while --map is the map used; exclusive "
+                             "with --map-error")
+
+
+def map_error_from_args(args, grid):
+    """The map-error model of ``--map-error``/``--map-error-length``/``--truth-map``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``map_error``, ``map_error_length``, ``truth_map`` (and ``var``).
+    grid : Grid or None
+        The map used; a ``--truth-map`` must cover its area.
+
+    Returns
+    -------
+    CorrelatedMapError, TruthGrid or None
+        None for a perfect map (``--map-error`` absent or 0 and no ``--truth-map``).
+
+    Raises ValueError naming the option and the value for a negative, NaN or infinite
+    σ or L, both ``--map-error`` and ``--truth-map``, or a truth map that does not cover
+    the map.
+    """
+    sigma, length = args.map_error, args.map_error_length
+    if sigma is not None and not (math.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"--map-error must be a finite standard deviation >= 0 (map units, "
+                         f"0 = perfect map); got {sigma!r}")
+    if length is not None and not (math.isfinite(length) and length > 0):
+        raise ValueError(f"--map-error-length must be a finite correlation length > 0 (m); "
+                         f"got {length!r}")
+    if args.truth_map is not None:
+        if sigma is not None:
+            raise ValueError(f"--truth-map {args.truth_map} and --map-error {sigma!r} exclude "
+                             "each other: give the truth as a map or as an error model")
+        if grid is None:
+            raise ValueError(f"--truth-map {args.truth_map} needs a --map to compare with")
+        truth = load_map(args.truth_map, None)
+        check_region_covered(truth, region_of(grid), f"--truth-map {args.truth_map}")
+        return truth_grid(truth)
+    if not sigma:
+        return None
+    return map_error(sigma, DEFAULT_MAP_ERROR_LENGTH_M if length is None else length)
+
+
+def describe_map_error(args):
+    """One phrase for the map-error setting of ``args`` (summaries, titles)."""
+    if args.truth_map is not None:
+        return f"truth map {args.truth_map}"
+    if not args.map_error:
+        return "perfect map (no map error)"
+    length = DEFAULT_MAP_ERROR_LENGTH_M if args.map_error_length is None else args.map_error_length
+    return f"map error {args.map_error:g} (map units), L = {length / 1000:g} km"
+
+
+def add_parser(sub):
+    """Add the ``simulate`` sub-command to an ``argparse`` sub-parser set."""
+    sim_p = sub.add_parser("simulate", help="write a track CSV from a matching scenario")
+    sim_p.add_argument("--map", default="ryukyu",
+                       help="map the readings are simulated from (plus --map-error; or the region "
+                            "of --truth-map): NetCDF grid or shipped map (default ryukyu, "
+                            "2.5')")
+    sim_p.add_argument("--var", default=None)
+    sim_p.add_argument("--out", required=True, help="track CSV (INS fixes and readings)")
+    sim_p.add_argument("--truth", default=None, help="also write the true track here")
+    sim_p.add_argument("--n", type=int, default=30, help="fixes (default 30)")
+    sim_p.add_argument("--dt", type=float, default=120.0, help="interval (s, default 120)")
+    sim_p.add_argument("--v-east", type=float, default=10.0, help="knots (default 10)")
+    sim_p.add_argument("--v-north", type=float, default=10.0, help="knots (default 10)")
+    sim_p.add_argument("--drift", type=float, default=0.035,
+                       help="INS drift (degrees of arc, default 0.035)")
+    sim_p.add_argument("--drift-law", choices=("fixed", "rayleigh"), default="fixed",
+                       help="fixed: the drift is --drift; rayleigh: --drift is the Rayleigh "
+                            "scale and the search radius its --probability quantile")
+    sim_p.add_argument("--probability", type=float, default=0.99,
+                       help="Rayleigh quantile written as drift_radius (default 0.99)")
+    sim_p.add_argument("--noise", type=float, default=1.0, help="reading noise (mGal)")
+    sim_p.add_argument("--bias", type=float, default=0.0, help="gravimeter bias (mGal)")
+    sim_p.add_argument("--seed", type=int, default=0)
+    sim_p.add_argument("--force", action="store_true")
+    add_map_error_options(sim_p)
+    sim_p.set_defaults(func=_cmd_simulate)
+    return sim_p
+
+
+def _cmd_simulate(args):
+    grid = load_map(args.map, args.var)
+    w, e, s, n = grid.extent
+    scen = MatchingScenario(
+        region=(s, n, w, e), v_east=args.v_east * KNOT, v_north=args.v_north * KNOT,
+        dt=args.dt, drift_deg=args.drift, noise_mgal=args.noise, bias_mgal=args.bias,
+        n_fixes=args.n, drift_law=args.drift_law,
+    )
+    if args.n < 2:
+        raise ValueError(f"--n must be at least 2; got {args.n}")
+    model = map_error_from_args(args, grid)
+    run = matching_scenario(jax.random.key(args.seed), grid, scen, model)
+    truth = run.truth
+    write_track_csv(args.out, {
+        "t": truth.t, "lat": run.ins_lat, "lon": run.ins_lon, "gravity": run.readings,
+        "v_east": truth.v_east, "v_north": truth.v_north,
+        "drift_radius": np.full(args.n, 1.2 * args.drift if args.drift_law == "fixed"
+                                else float(rayleigh_quantile(args.drift, args.probability))),
+    }, force=args.force)
+    if args.truth:
+        write_track_csv(args.truth, {"t": truth.t, "lat": truth.lat, "lon": truth.lon},
+                        force=args.force)
+    drift_m = float(np.hypot(run.drift_north_m, run.drift_east_m).mean())
+    also = f" and {args.truth}" if args.truth else ""
+    print(f"wrote {args.out}{also}: {args.n} fixes, INS drift {drift_m:.0f} m, "
+          f"{describe_map_error(args)}")
