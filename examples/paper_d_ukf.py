@@ -19,6 +19,15 @@ Run::
     python examples/paper_d_ukf.py --runs 1000          # paper D's area
     python examples/paper_d_ukf.py --runs 1000 --map ryukyu   # shipped 2.5' map
     python examples/paper_d_ukf.py --smoke      # 8 runs of 20 min, EKF and UKF
+    # the map is not the truth: a 3 mGal, 10 km map error (markov2) drawn per run
+    python examples/paper_d_ukf.py --runs 200 --map ryukyu --map-error 3 \
+        --methods ukf,ukf-white,ukf-fogm,gsf-fogm
+
+With ``--map-error`` the readings see ``truth_field(map_error_key(key), map,
+map_error(SIGMA, L))``. ``ukf``, ``ekf``, ``pmf`` are told nothing of it; ``*-white``
+add ``SIGMA²`` to their reading variance; ``*-fogm`` (ukf, ekf, gsf) carry a
+first-order Gauss–Markov map-error state of σ = SIGMA and length 2 L (the markov2
+field's integral scale; :mod:`jaxgrav.filters.map_state`).
 
 The runs are simulated once, then every method filters the same runs; each method's
 time (compilation included) is printed after its row.
@@ -38,32 +47,47 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import datasets
+from jaxgrav.fields.map_error import map_error
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.filters import ekf, gaussian_sum, pmf, run_filter, ukf
+from jaxgrav.filters.map_state import augment, fogm_length, map_error_state
 from jaxgrav.scenarios import FilterScenario, filter_scenario, initial_state, run_metrics, run_steps
 
 
-def make_simulate(scenario):
+def make_simulate(scenario, truth_error=None):
     """Simulate runs once for every method: (run, dynamics, steps) per key, vmapped."""
 
     def one(key, field):
-        run = filter_scenario(key, field, scenario)
+        run = filter_scenario(key, field, scenario, truth_error)
         dynamics, steps = run_steps(run, scenario)
         return run, dynamics, steps
 
     return jax.jit(jax.vmap(one, in_axes=(0, None)))
 
 
-def make_one(method, scenario):
+def make_one(method, scenario, truth_error=None):
     """Filter one simulated run; returns (INS RMS, filter RMS, NEES, geometry flag)."""
+    base, _, told = method.partition("-")
+    if base == "gsf" and told == "ukf":
+        told = ""
 
     def one(run, dynamics, steps, field):
         x0, p0 = initial_state(scenario)
-        if method == "pmf":
+        meas = None
+        if told and truth_error is None:
+            raise ValueError(f"--methods {method}: *-white and *-fogm need --map-error")
+        if told == "white":
+            steps = steps._replace(r=steps.r + jnp.square(truth_error.sigma))
+        elif told == "fogm":
+            cfg = map_error_state(truth_error.sigma, fogm_length(truth_error))
+            dynamics, x0, p0, meas = augment(cfg, dynamics, x0, p0, scenario.speed)
+        if base == "pmf":
             filt = pmf()  # its own error model (with the step length) at the mean latitude
             dynamics = filt.dynamics(jnp.mean(steps.lat), scenario.dt)
         else:
-            filt = {"ekf": ekf(), "ukf": ukf(), "gsf-ukf": gaussian_sum(ukf(), 3, 1.0)}[method]
+            make = {"ekf": ekf, "ukf": ukf,
+                    "gsf": lambda *m: gaussian_sum(ukf(*m), 3, 1.0)}[base]
+            filt = make() if meas is None else make(meas)
         _, info = run_filter(filt, field, dynamics, x0, p0, steps)
         m = run_metrics(run, info)
         turned = jnp.abs(run.truth.lat[-1] - run.truth.lat[0]) > 0.05
@@ -74,7 +98,7 @@ def make_one(method, scenario):
 
 def summarize(name, rms_i, rms_f, nees, turned, seconds):
     ratio = rms_f / rms_i
-    row = (f"{name:8s} {np.mean(ratio):6.3f} {np.median(ratio):6.3f} {np.max(ratio):6.2f} "
+    row = (f"{name:9s} {np.mean(ratio):6.3f} {np.median(ratio):6.3f} {np.max(ratio):6.2f} "
            f"{100 * np.mean(ratio > 1.05):6.1f}% {np.median(rms_f):8.0f} {np.mean(nees):6.2f}")
     if turned.any() and (~turned).any():
         row += f"   {np.mean(ratio[~turned]):.3f} / {np.mean(ratio[turned]):.3f}"
@@ -87,7 +111,14 @@ def main(argv=None):
     p.add_argument("--map", choices=["paper-d", "ryukyu"], default="paper-d")
     p.add_argument("--methods", default=None,
                    help="comma-separated: ekf, ukf, pmf, gsf-ukf (9x cost); default "
-                        "ekf,ukf,pmf (--smoke: ekf,ukf)")
+                        "ekf,ukf,pmf (--smoke: ekf,ukf); with --map-error also ukf-white, "
+                        "ekf-white, pmf-white (told SIGMA^2 white) and ukf-fogm, ekf-fogm, "
+                        "gsf-fogm (FOGM map-error state)")
+    p.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
+                   help="with --map ryukyu: the readings see the map + a drawn error of this "
+                        "sigma (mGal, markov2; default 0: the map is the truth)")
+    p.add_argument("--map-error-length", type=float, default=10e3, metavar="L",
+                   help="the map error's correlation length (m, default 10000)")
     p.add_argument("--minutes", type=float, default=None,
                    help="run length (default 120; --smoke: 20)")
     p.add_argument("--seed", type=int, default=0)
@@ -106,21 +137,28 @@ def main(argv=None):
     else:
         field = datasets.load("ryukyu")["anomaly_2p5min"]
         scenario = FilterScenario(dt=10.0, reading_every=1, n_steps=n_steps, geometry="random")
+    truth_error = None
+    if args.map_error:
+        if args.map == "paper-d":
+            p.error("--map-error needs --map ryukyu (the point masses have no grid)")
+        truth_error = map_error(args.map_error, args.map_error_length)
     keys = jax.random.split(jax.random.key(args.seed), runs)
     t0 = time.perf_counter()
-    sims = jax.block_until_ready(make_simulate(scenario)(keys, field))
-    print(f"paper D filtering, map {args.map}, {runs} runs of {(n_steps - 1) * 10 / 3600:.1f} h "
+    sims = jax.block_until_ready(make_simulate(scenario, truth_error)(keys, field))
+    where = args.map + (f" + map error {args.map_error:g} mGal, L {args.map_error_length:g} m"
+                        if truth_error is not None else "")
+    print(f"paper D filtering, map {where}, {runs} runs of {(n_steps - 1) * 10 / 3600:.1f} h "
           f"(simulated in {time.perf_counter() - t0:.0f} s; filter step 10 s, run_filter "
           "every=1: a reading every step)")
-    print("method   mean   median  worst  >1.05  median-m  NEES   E-W / N-then-E mean")
+    print("method    mean   median  worst  >1.05  median-m  NEES   E-W / N-then-E mean")
     ins_row = None
     for method in methods:
-        fn = jax.jit(jax.vmap(make_one(method, scenario), in_axes=(0, 0, 0, None)))
+        fn = jax.jit(jax.vmap(make_one(method, scenario, truth_error), in_axes=(0, 0, 0, None)))
         t0 = time.perf_counter()
         rms_i, rms_f, nees, turned = jax.tree.map(np.asarray, fn(*sims, field))
         seconds = time.perf_counter() - t0
         if ins_row is None:
-            ins_row = f"{'INS':8s} {1:6.3f} {1:6.3f} {1:6.2f} {0:6.1f}% {np.median(rms_i):8.0f}"
+            ins_row = f"{'INS':9s} {1:6.3f} {1:6.3f} {1:6.2f} {0:6.1f}% {np.median(rms_i):8.0f}"
             print(ins_row)
         print(summarize(method, rms_i, rms_f, nees, turned, seconds), flush=True)
 

@@ -22,9 +22,13 @@ paper-d``) or a fitted point-mass model file (``--point-masses MODEL.json``, see
 readings).
 
 ``simulate-filter`` writes such a track from paper D's scenario
-(:func:`~jaxgrav.scenarios.filter_scenario`) over its three point masses.
+(:func:`~jaxgrav.scenarios.filter_scenario`) over its three point masses, or over a
+map (``--map``) whose readings may see a drawn map error (``--map-error SIGMA
+--map-error-length L``). ``filter --map-error SIGMA --map-error-length L`` tells the
+filter the map is wrong (:mod:`jaxgrav.filters.map_state`).
 """
 
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -32,11 +36,14 @@ import jax
 import numpy as np
 
 from jaxgrav.datasets import load_map
+from jaxgrav.fields.map_error import map_error
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
 from jaxgrav.filters import STATUS_FILTER, status_messages_filter
 from jaxgrav.filters.api import FILTER_METHODS, filter_track, reading_stride
+from jaxgrav.filters.map_state import map_error_state
 from jaxgrav.scenarios import FilterScenario, filter_scenario
+from jaxgrav.sim import DEG_ARC_M
 from jaxgrav.tracks import csv_line, read_track_csv, write_track_csv
 
 __all__ = ["add_parsers", "cmd_filter", "cmd_simulate_filter"]
@@ -90,6 +97,14 @@ def add_parsers(subparsers):
                         "in directions whose variance fell below RATIO times the free INS's "
                         "(default 0.2 when given without a value; chosen on paper D's "
                         "experiment); elsewhere the output stays the INS with its own 1-σ")
+    f.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
+                   help="the map's error, 1-sigma (mGal): ukf, ekf, gsf add a first-order "
+                        "Gauss-Markov map-error state over the distance travelled; pmf adds "
+                        "SIGMA^2 to the reading variance. Default 0: the map is the truth")
+    f.add_argument("--map-error-length", type=float, default=10e3, metavar="L",
+                   help="correlation length of that state over the distance travelled (m, "
+                        "default 10000; time constant L / ground speed). For a map error "
+                        "with covariance s^2 (1 + r/L) e^(-r/L) use 2 L")
     f.add_argument("--force", action="store_true", help="overwrite an existing output")
     f.set_defaults(func=cmd_filter)
 
@@ -105,6 +120,17 @@ def add_parsers(subparsers):
     s.add_argument("--dt", type=float, default=2.0, help="row interval (s, default 2)")
     s.add_argument("--reading-every", type=int, default=5,
                    help="a gravity reading every this many rows (default 5: every 10 s)")
+    s.add_argument("--map", default=None,
+                   help="simulate over this anomaly map (NetCDF or a shipped map, e.g. "
+                        "ryukyu) instead of paper D's point masses: straight tracks from a "
+                        "random start at least the track length + 16 km inside the map, "
+                        "random heading (--geometry is then not used)")
+    s.add_argument("--var", default=None, help="variable of --map when the file has several")
+    s.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
+                   help="with --map: the readings see the map + a drawn error field of this "
+                        "1-sigma (mGal), covariance s^2 (1 + r/L) e^(-r/L) (default 0)")
+    s.add_argument("--map-error-length", type=float, default=10e3, metavar="L",
+                   help="the map error's correlation length L (m, default 10000)")
     s.add_argument("--seed", type=int, default=0, help="PRNG seed")
     s.add_argument("--force", action="store_true", help="overwrite existing outputs")
     s.set_defaults(func=cmd_simulate_filter)
@@ -129,6 +155,17 @@ def _uniform_dt(t, where):
             f"(step {d[i]:g} s) on lines {csv_line(i)}-{csv_line(i + 1)}, expected {dt:g} s "
             f"(the median) within {DT_RTOL:.1%}; {bad.size} bad step(s)")
     return dt
+
+
+def _map_error_args(args):
+    """Validated ``--map-error`` / ``--map-error-length`` (a ValueError naming the option)."""
+    if not (np.isfinite(args.map_error) and args.map_error >= 0):
+        raise ValueError(f"--map-error must be a finite map-error sigma >= 0 (mGal); got "
+                         f"{args.map_error!r}")
+    if not (np.isfinite(args.map_error_length) and args.map_error_length > 0):
+        raise ValueError(f"--map-error-length must be a finite correlation length > 0 (m); "
+                         f"got {args.map_error_length!r}")
+    return args.map_error, args.map_error_length
 
 
 def _check_sigma(name, value):
@@ -189,13 +226,15 @@ def cmd_filter(args):
                              f"INS, e.g. 0.2); got {args.guard!r}")
     if args.method == "pmf":
         reading_stride(np.flatnonzero(np.isfinite(g)), where)
+    me_sigma, me_length = _map_error_args(args)
+    fogm = map_error_state(me_sigma, me_length) if me_sigma > 0 else None
     field, field_name, offset = _field(args)
     if args.map is not None:
         _check_on_map(field, lat, lon, where, args.map)
     # the model is masses + offset: z − (masses + offset + bias) = (z − offset) − (masses + bias)
     res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
-                       guard=args.guard, where=where)
+                       guard=args.guard, map_error=fogm, where=where)
     write_track_csv(args.out, {"t": t, "lat": res["lat"], "lon": res["lon"],
                                "sigma_north": res["sigma_north"],
                                "sigma_east": res["sigma_east"]},
@@ -203,6 +242,9 @@ def cmd_filter(args):
     n_read = int(np.isfinite(g).sum())
     stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""
     stride += f", no-harm guard {args.guard:g}" if args.guard is not None else ""
+    if fogm is not None:
+        stride += (f", map error {me_sigma:g} mGal white" if args.method == "pmf" else
+                   f", map-error state {me_sigma:g} mGal over {me_length:g} m")
     print(f"wrote {args.out}: {args.method} over {t.size} rows ({n_read} readings{stride}) "
           f"on {field_name}; final 1-sigma {res['sigma_north'][-1]:.0f} m north, "
           f"{res['sigma_east'][-1]:.0f} m east")
@@ -217,6 +259,20 @@ def cmd_filter(args):
 
 # ---------------------------------------------------------------------- simulate
 _simulate = jax.jit(filter_scenario)
+_SIM_MARGIN_M = 16e3  # 3 x 2 km initial error + 10 km: the INS track stays on the map
+
+
+def _inner_region(grid, margin_m, name):
+    """``(lat_min, lat_max, lon_min, lon_max)`` of ``grid`` shrunk by ``margin_m`` (m)."""
+    w, e, s, n = (float(v) for v in grid.extent)
+    dlat = margin_m / DEG_ARC_M
+    dlon = margin_m / (DEG_ARC_M * np.cos(np.radians(min(max(abs(s), abs(n)), 89.0))))
+    region = (s + dlat, n - dlat, w + dlon, e - dlon)
+    if not (region[0] < region[1] and region[2] < region[3]):
+        raise ValueError(f"--map {name} (lat {s:g}..{n:g}, lon {w:g}..{e:g}) is too small for "
+                         f"the run: starts must lie {margin_m / 1e3:.0f} km inside it; use "
+                         "fewer --minutes or a larger map")
+    return region
 """Paper D's scenario, compiled once per process and scenario shape."""
 
 
@@ -237,9 +293,26 @@ def cmd_simulate_filter(args):
     if n < 2:
         raise ValueError(f"--minutes must cover at least one --dt step ({args.dt:g} s); got "
                          f"{args.minutes!r}")
-    scen = FilterScenario(dt=args.dt, reading_every=args.reading_every, n_steps=n,
-                          geometry=args.geometry)
-    run = _simulate(jax.random.key(args.seed), paper_d(), scen)
+    me_sigma, me_length = _map_error_args(args)
+    if args.map is None:
+        if me_sigma > 0:
+            raise ValueError("--map-error needs --map (paper D's point masses have no grid to "
+                             "draw the map error on)")
+        scen = FilterScenario(dt=args.dt, reading_every=args.reading_every, n_steps=n,
+                              geometry=args.geometry)
+        run = _simulate(jax.random.key(args.seed), paper_d(), scen)
+        over = f"{args.geometry} over paper D's point masses"
+    else:
+        grid = load_map(args.map, args.var)
+        scen = FilterScenario(dt=args.dt, reading_every=args.reading_every, n_steps=n)
+        margin = scen.speed * args.dt * (n - 1) + _SIM_MARGIN_M
+        scen = dataclasses.replace(scen, geometry="random",
+                                   region=_inner_region(grid, margin, args.map))
+        me = map_error(me_sigma, me_length) if me_sigma > 0 else None
+        run = _simulate(jax.random.key(args.seed), grid, scen, me)
+        over = f"a random straight track over --map {args.map}"
+        if me is not None:
+            over += f" (map error {me_sigma:g} mGal, L {me_length:g} m)"
     truth = run.truth
     err = np.asarray(run.errors)
     write_track_csv(args.out, {
@@ -255,6 +328,6 @@ def cmd_simulate_filter(args):
     drift = np.hypot(err[:, 0], err[:, 1])
     also = f" and {args.truth}" if args.truth else ""
     print(f"wrote {args.out}{also}: {n} rows every {args.dt:g} s, "
-          f"{int(np.isfinite(np.asarray(run.readings)).sum())} readings, {args.geometry} "
-          f"over paper D's point masses; INS error {drift[0]:.0f} m at the start, RMS "
+          f"{int(np.isfinite(np.asarray(run.readings)).sum())} readings, {over}; INS error "
+          f"{drift[0]:.0f} m at the start, RMS "
           f"{np.sqrt(np.mean(drift**2)):.0f} m")

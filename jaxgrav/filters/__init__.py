@@ -7,13 +7,23 @@ INS error model of :mod:`jaxgrav.sim.ins`; each is an optax-style ``init`` /
 a fixed stride; :func:`pad_to_stride` puts a run's readings there) and vmapped over
 runs. The map is prepared once per run (:func:`prepare_field`). :func:`guard_run` holds
 back the position corrections in weakly observed directions (paper D's "no harm").
-:func:`filter_track` is the validated single-track entry point.
+:func:`filter_track` is the validated single-track entry point. When the map is not
+the truth, :func:`augment` appends a first-order Gauss–Markov map-error state
+(:mod:`jaxgrav.filters.map_state`) that the UKF, EKF and Gaussian sum carry unchanged.
 """
 
 from jaxgrav.filters.api import FILTER_METHODS, filter_track, pad_to_stride
 from jaxgrav.filters.gaussian_sum import GaussianSumState, gaussian_sum, split_prior
 from jaxgrav.filters.guard import GuardConfig, free_covariance, guard_infos, guard_run
 from jaxgrav.filters.kalman import ekf, predict, sigma_weights, ukf
+from jaxgrav.filters.map_state import (
+    MapErrorState,
+    augment,
+    fogm_length,
+    fogm_transition,
+    map_error_measurement,
+    map_error_state,
+)
 from jaxgrav.filters.model import (
     STATUS_FILTER,
     Dynamics,
@@ -40,13 +50,17 @@ __all__ = [
     "FilterState",
     "GaussianSumState",
     "GuardConfig",
+    "MapErrorState",
     "MapPlusBias",
     "PMFFilter",
     "PMFState",
     "Step",
     "StepInfo",
+    "augment",
     "ekf",
     "filter_track",
+    "fogm_length",
+    "fogm_transition",
     "free_covariance",
     "gaussian_sum",
     "gravity_measurement",
@@ -54,6 +68,8 @@ __all__ = [
     "guard_run",
     "map_anomaly",
     "map_at_error",
+    "map_error_measurement",
+    "map_error_state",
     "pad_to_stride",
     "pmf",
     "predict",

@@ -17,7 +17,8 @@ from jaxgrav.constants import DEG
 from jaxgrav.filters.gaussian_sum import gaussian_sum
 from jaxgrav.filters.guard import GuardConfig, guard_run
 from jaxgrav.filters.kalman import ekf, ukf
-from jaxgrav.filters.model import Dynamics, Step, run_filter
+from jaxgrav.filters.map_state import augment
+from jaxgrav.filters.model import Dynamics, Step, gravity_measurement, run_filter
 from jaxgrav.filters.pmf import pmf
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance, transition
@@ -119,8 +120,9 @@ def _prior_and_dynamics(lat_mean, dt, sigma_pos, sigma_vel):
 
 
 @functools.partial(jax.jit, static_argnames=("kind",))
-def _gaussian_run(kind, field, dynamics, p0, steps, guard):
-    filt = {"ukf": ukf, "ekf": ekf, "gsf": lambda: gaussian_sum(ukf(), 3)}[kind]()
+def _gaussian_run(kind, field, dynamics, p0, steps, guard, meas):
+    # meas: a MapPlusBias (a pytree without leaves: its layout is part of the compiled code)
+    filt = {"ukf": ukf, "ekf": ekf, "gsf": lambda m: gaussian_sum(ukf(m), 3)}[kind](meas)
     _, infos = run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps)
     # guard: a traced ratio (inf = off), so one compilation serves both
     guarded = guard_run(infos, dynamics, p0, GuardConfig(guard, guard))
@@ -136,7 +138,8 @@ def _pmf_run(field, dt, p0, cell_m, q_pos, steps, every):
 
 
 def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
-                 sigma_vel=0.1414, sigma_gravity=1.0, guard=None, where="track"):
+                 sigma_vel=0.1414, sigma_gravity=1.0, guard=None, map_error=None,
+                 where="track"):
     """Filter one track; the engine of ``jaxgrav filter`` (inputs already validated).
 
     Run with x64 enabled (the CLI does): positions are in degrees.
@@ -159,6 +162,12 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         No-harm guard ratio for ``ukf``, ``ekf``, ``gsf``
         (:func:`~jaxgrav.filters.guard_run` with ``GuardConfig(guard, guard)``);
         None: the filter's own output.
+    map_error : MapErrorState, optional
+        The map's error (:func:`~jaxgrav.filters.map_state.map_error_state`: σ mGal,
+        L m). ``ukf``, ``ekf``, ``gsf``: a FOGM map-error state over the distance
+        travelled, ``τ = L / speed`` with the track's median ground speed (from the
+        INS positions); ``pmf`` (no such state): σ² added to the reading variance.
+        None or σ = 0: today's filters.
     where : str
         How error messages name the track.
 
@@ -179,6 +188,16 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     r = float(sigma_gravity) ** 2
     p0, dynamics = _prior_and_dynamics(float(np.mean(lat)), dt, sigma_pos, sigma_vel)
     every = None
+    meas = gravity_measurement
+    if map_error is not None and method == "pmf":
+        r = r + float(map_error.sigma) ** 2
+    elif map_error is not None:
+        dn = np.diff(lat) * DEG * np.asarray(meridian_radius(lat[1:]))
+        de = (np.diff(lon) * DEG * np.asarray(prime_vertical_radius(lat[1:]))
+              * np.cos(lat[1:] * DEG))
+        speed = float(np.median(np.hypot(dn, de))) / dt if n > 1 else 0.0
+        dynamics = dynamics._replace(dt=jnp.asarray(dt))
+        dynamics, _, p0, meas = augment(map_error, dynamics, jnp.zeros(p0.shape[0]), p0, speed)
     steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r))
     if method == "pmf":
         rows = np.flatnonzero(np.isfinite(gravity))
@@ -192,7 +211,7 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
                             for a in (infos.x, infos.sigma, infos.status))
     else:
         ratio = np.inf if guard is None else float(guard)
-        infos = _gaussian_run(method, field, dynamics, p0, steps, ratio)
+        infos = _gaussian_run(method, field, dynamics, p0, steps, ratio, meas)
         x, sigma, status = (np.asarray(a) for a in (infos.x, infos.sigma, infos.status))
     m = np.asarray(meridian_radius(lat))
     e = np.asarray(prime_vertical_radius(lat)) * np.cos(lat * DEG)

@@ -111,7 +111,10 @@ def _sigma_measurements(measurement, field, step, x, delta):
     g = jax.vmap(lambda d: measurement.map_part(field, d, step.lat, step.lon))(pos)
     rest = jnp.broadcast_to(g[0], (n - m,))
     g = jnp.concatenate([g[:1], g[1 : m + 1], rest, g[m + 1 :], rest])
-    return g + jnp.concatenate([x[b : b + 1], x[b] + delta[:, b], x[b] - delta[:, b]])
+    lin = jnp.concatenate([x[b : b + 1], x[b] + delta[:, b], x[b] - delta[:, b]])
+    for i in measurement.extra_indices:
+        lin = lin + jnp.concatenate([x[i : i + 1], x[i] + delta[:, i], x[i] - delta[:, i]])
+    return g + lin
 
 
 def _finish(pred, x_new, p_new, nu, s, flags, skip):

@@ -252,6 +252,9 @@ class MapPlusBias:
         Index of the additive bias state (``≥ n_position``).
     n_position : int
         Number of leading states the map part depends on.
+    extra_indices : tuple of int
+        Further additive states (e.g. the map-error state of
+        :mod:`jaxgrav.filters.map_state`); default none.
 
     All fields are static (a pytree without leaves): they decide the code, not data.
     """
@@ -259,6 +262,7 @@ class MapPlusBias:
     map_part: Callable = static_field()
     bias_index: int = static_field(GRAV)
     n_position: int = static_field(2)
+    extra_indices: tuple = static_field(())
 
     def __post_init__(self):
         if not 0 < self.n_position <= self.bias_index:
@@ -266,9 +270,22 @@ class MapPlusBias:
                 f"MapPlusBias needs 0 < n_position <= bias_index (the bias after the position "
                 f"states); got n_position={self.n_position!r}, bias_index={self.bias_index!r}"
             )
+        if any(not isinstance(i, int) or i < self.n_position or i == self.bias_index
+               for i in self.extra_indices):
+            raise ValueError(
+                "MapPlusBias extra_indices must be ints after the position states, other than "
+                f"bias_index; got {self.extra_indices!r}")
+
+    @property
+    def additive(self):
+        """Indices of all additive states: ``(bias_index, *extra_indices)``."""
+        return (self.bias_index, *self.extra_indices)
 
     def __call__(self, field, x, lat, lon):
-        return self.map_part(field, x[: self.n_position], lat, lon) + x[self.bias_index]
+        z = self.map_part(field, x[: self.n_position], lat, lon) + x[self.bias_index]
+        for i in self.extra_indices:
+            z = z + x[i]
+        return z
 
 
 gravity_measurement = MapPlusBias(map_at_error)

@@ -12,21 +12,27 @@ import math
 import jax
 import jax.numpy as jnp
 
+from jaxgrav._pytree import pytree_dataclass
+from jaxgrav.fields.map_error import CorrelatedMapError, TruthGrid
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.filters import (
     STATUS_FILTER,
     GuardConfig,
     ekf,
     gaussian_sum,
+    gravity_measurement,
     guard_run,
     pad_to_stride,
     pmf,
     run_filter,
     ukf,
 )
+from jaxgrav.filters.map_state import MapErrorState, augment, fogm_length, map_error_state
 
 __all__ = [
     "FILTER_METHODS",
+    "MAP_ERROR_TOLD",
+    "ToldMapError",
     "ekf_run",
     "filter_builder",
     "gsf_guard_run",
@@ -48,26 +54,56 @@ from jaxgrav.sim import DEG_ARC_M
 
 
 # ----------------------------------------------------------------- paper-D filters (D)
-def _kalman_run(key, field, scenario, filt, guard=False):
-    run = filter_scenario(key, field, scenario)
+@pytree_dataclass
+class ToldMapError:
+    """What a filter is told about the map error (all data; None fields are off).
+
+    Attributes
+    ----------
+    white_var : Array, scalar
+        Added to the reading noise variance (mGal²): the map error told as white noise.
+    state : MapErrorState or None
+        The FOGM map-error state (:mod:`jaxgrav.filters.map_state`); None: no state.
+    """
+
+    white_var: jax.Array
+    state: MapErrorState | None = None
+
+
+def _told_steps(run, scenario, told):
     dynamics, steps = run_steps(run, scenario)
     x0, p0 = initial_state(scenario)
+    if told is None:
+        return dynamics, steps, x0, p0, gravity_measurement
+    steps = steps._replace(r=steps.r + told.white_var)
+    dynamics, x0, p0, meas = augment(told.state, dynamics, x0, p0, scenario.speed)
+    return dynamics, steps, x0, p0, meas
+
+
+def _kalman_run(key, field, scenario, make, guard=False, map_error=None, told=None):
+    run = filter_scenario(key, field, scenario, map_error)
+    dynamics, steps, x0, p0, meas = _told_steps(run, scenario, told)
     # readings sit on steps every-1, 2 every-1, …: update only there, predict in between
-    _, infos = run_filter(filt, field, dynamics, x0, p0, steps, scenario.reading_every)
+    _, infos = run_filter(make(meas), field, dynamics, x0, p0, steps, scenario.reading_every)
     if guard:
         infos = guard_run(infos, dynamics, p0, GuardConfig())
     return run_metrics(run, infos)
 
 
-def ukf_run(key, field, scenario):
+def ukf_run(key, field, scenario, map_error=None, told=None):
     """One paper-D run filtered by the UKF (default sigma points).
 
     Parameters
     ----------
     key : PRNG key
     field : PointMasses or Grid
-        Anomaly field simulated and filtered (mGal).
+        Anomaly map filtered (mGal); also the truth when ``map_error`` is None.
     scenario : FilterScenario
+    map_error : CorrelatedMapError, TruthGrid or None
+        Truth = ``truth_field(map_error_key(key), field, map_error)``
+        (:func:`~jaxgrav.scenarios.filter_scenario`); needs a Grid.
+    told : ToldMapError or None
+        What the filter is told about the map error (None: nothing, today's filter).
 
     Returns
     -------
@@ -77,45 +113,56 @@ def ukf_run(key, field, scenario):
         flags without ``no_reading``; int32), ``nees`` (mean position NEES over the
         second half; 2 for a consistent filter).
     """
-    return _kalman_run(key, field, scenario, ukf())
+    return _kalman_run(key, field, scenario, ukf, False, map_error, told)
 
 
-def ekf_run(key, field, scenario):
+def ekf_run(key, field, scenario, map_error=None, told=None):
     """One paper-D run filtered by the EKF (``jax.jacfwd`` Jacobian); as :func:`ukf_run`."""
-    return _kalman_run(key, field, scenario, ekf())
+    return _kalman_run(key, field, scenario, ekf, False, map_error, told)
 
 
-def gsf_run(key, field, scenario):
+def _gsf(meas):
+    return gaussian_sum(ukf(meas), 3)
+
+
+def gsf_run(key, field, scenario, map_error=None, told=None):
     """One paper-D run filtered by a Gaussian sum of 3 × 3 UKFs; as :func:`ukf_run`."""
-    return _kalman_run(key, field, scenario, gaussian_sum(ukf(), 3))
+    return _kalman_run(key, field, scenario, _gsf, False, map_error, told)
 
 
-def ukf_guard_run(key, field, scenario):
+def ukf_guard_run(key, field, scenario, map_error=None, told=None):
     """One paper-D run filtered by the UKF, its output guarded; as :func:`ukf_run`.
 
     :func:`~jaxgrav.filters.guard_run` with the default
     :class:`~jaxgrav.filters.GuardConfig`: position corrections only in the
     directions whose variance fell below 0.2 of the free INS's.
     """
-    return _kalman_run(key, field, scenario, ukf(), guard=True)
+    return _kalman_run(key, field, scenario, ukf, True, map_error, told)
 
 
-def gsf_guard_run(key, field, scenario):
+def gsf_guard_run(key, field, scenario, map_error=None, told=None):
     """One paper-D run filtered by the Gaussian sum of 3 × 3 UKFs, output guarded; as
     :func:`ukf_guard_run`."""
-    return _kalman_run(key, field, scenario, gaussian_sum(ukf(), 3), guard=True)
+    return _kalman_run(key, field, scenario, _gsf, True, map_error, told)
 
 
-def pmf_run(key, field, scenario):
+def pmf_run(key, field, scenario, map_error=None, told=None):
     """One paper-D run filtered by the grid point-mass filter (61 × 61 cells of 200 m).
 
     The filter updates at every reading (``run_filter`` with ``every =
     scenario.reading_every``, the run padded to whole strides); between readings the
     estimate is predicted. Its error model is taken at the mean INS latitude of the
-    padded run. Returns as :func:`ukf_run`.
+    padded run. Map error: ``told.white_var`` is added to the reading variance; a
+    FOGM state is not implemented in the point-mass filter (``told.state`` must be
+    None, ValueError). Returns as :func:`ukf_run`.
     """
-    run = filter_scenario(key, field, scenario)
+    if told is not None and told.state is not None:
+        raise ValueError("the point-mass filter has no FOGM map-error state; tell it the map "
+                         "error as white noise (map_error_told='white') instead")
+    run = filter_scenario(key, field, scenario, map_error)
     _, steps = run_steps(run, scenario)
+    if told is not None:
+        steps = steps._replace(r=steps.r + told.white_var)
     x0, p0 = initial_state(scenario)
     every = scenario.reading_every
     padded, _ = pad_to_stride(steps, every)  # readings already on steps every-1, 2 every-1, …
@@ -136,7 +183,36 @@ _FILTER_RUNS = {
 }
 
 
-def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None):
+MAP_ERROR_TOLD = ("none", "white", "fogm")
+"""What :func:`filter_builder`'s filters are told about the map error."""
+
+
+def _told(map_error, told, kind):
+    """The :class:`ToldMapError` of a builder's map-error settings (None: told nothing)."""
+    if told is None:
+        told = "white" if kind == "pmf" else "fogm"
+        if isinstance(map_error, TruthGrid) and map_error.error is None:
+            told = "none"
+    if told not in MAP_ERROR_TOLD:
+        raise ValueError(f"map_error_told must be one of {MAP_ERROR_TOLD}; got {told!r}")
+    if map_error is None or told == "none":
+        return None, "none"
+    model = map_error.error if isinstance(map_error, TruthGrid) else map_error
+    if model is None:
+        raise ValueError("map_error is a TruthGrid without an error description (sigma, L), so "
+                         "the filter cannot be told it: use map_error_told='none' or "
+                         "truth_grid(grid, error=map_error(sigma, length_m))")
+    if told == "fogm" and kind == "pmf":
+        raise ValueError("map_error_told='fogm' is not available for the point-mass filter "
+                         "(kind 'pmf'); use 'white' or 'none'")
+    if told == "white":
+        return ToldMapError(jnp.square(model.sigma)), told
+    state = map_error_state(model.sigma, fogm_length(model))
+    return ToldMapError(jnp.zeros_like(model.sigma), state), told
+
+
+def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None, map_error=None,
+                   map_error_told=None):
     """Paper D: gravity/INS filtering over ``paper_d()``'s three point masses or a map.
 
     The scenario is :class:`~jaxgrav.scenarios.FilterScenario` at 5 m/s, stepping
@@ -164,6 +240,16 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None):
         Reading noise σ (mGal, default 1), also the filters' reading noise.
     n_fixes : int, optional
         Steps (= readings) per run including the start (default 721).
+    map_error : CorrelatedMapError, TruthGrid or None
+        The map is not the truth: each run's readings come from
+        ``truth_field(map_error_key(key), grid, map_error)`` (one error field per run);
+        needs a ``grid``. None: the map is the truth (today).
+    map_error_told : {"fogm", "white", "none"}, optional
+        What the filters are told: ``"fogm"`` (default for the Kalman filters) a
+        first-order Gauss–Markov map-error state with the model's σ and length
+        :func:`~jaxgrav.filters.map_state.fogm_length` (L for ``markov1``, 2 L for
+        ``markov2``); ``"white"`` (default for ``pmf``, which has no FOGM state) σ²
+        added to the reading variance; ``"none"`` nothing.
 
     Returns
     -------
@@ -172,9 +258,20 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None):
     Raises
     ------
     ValueError
-        A map too small for the tracks (smaller than twice the margin above).
+        A map too small for the tracks (smaller than twice the margin above); a
+        ``map_error`` without a map; an unknown ``map_error_told``.
+    TypeError
+        A ``map_error`` that is not a CorrelatedMapError, TruthGrid or None.
     """
     fn, label = _FILTER_RUNS[kind]
+    if map_error is not None:
+        if not isinstance(map_error, CorrelatedMapError | TruthGrid):
+            raise TypeError("map_error must be a CorrelatedMapError (map_error(sigma, length_m)), "
+                            f"a TruthGrid or None; got {type(map_error).__name__}")
+        if grid is None:
+            raise ValueError("map_error needs a map (grid): paper D's point masses have no grid "
+                             "to draw the map error on")
+    told, told_name = _told(map_error, map_error_told, kind)
     pos_error = 2000.0 if drift_deg is None else float(drift_deg) * DEG_ARC_M
     noise = 1.0 if noise is None else float(noise)
     n = 721 if n_fixes is None else int(n_fixes)
@@ -196,8 +293,14 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None):
                     vel_error_m_s=scen.vel_error, noise_mgal=noise, bias_mgal=scen.bias_mgal,
                     n_steps=n, dt_s=scen.dt, reading_every=scen.reading_every,
                     geometry=scen.geometry, speed_m_s=scen.speed)
+    if map_error is not None:
+        me = map_error.error if isinstance(map_error, TruthGrid) else map_error
+        settings.update(map_error="truth grid" if isinstance(map_error, TruthGrid) else
+                        f"{me.family} sigma {float(me.sigma):g} mGal, L {float(me.length_m):g} m",
+                        map_error_told=told_name)
     bits = {b: name for name, b in STATUS_FILTER.items() if b and name != "no_reading"}
-    return MethodSpec(fn, (field, scen), settings, bits)
+    args = (field, scen) if map_error is None else (field, scen, map_error, told)
+    return MethodSpec(fn, args, settings, bits)
 
 
 def _innerregion_of(grid, margin_m):

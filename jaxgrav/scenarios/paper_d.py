@@ -17,8 +17,10 @@ import jax.numpy as jnp
 from jaxgrav._linalg import inv_2x2
 from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import DEG
+from jaxgrav.fields.map_error import map_error_key, truth_field
 from jaxgrav.filters.model import STATUS_FILTER, Dynamics, Step, map_anomaly
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.grid import Grid
 from jaxgrav.sim.ins import (
     INSErrorModel,
     initial_covariance,
@@ -137,22 +139,36 @@ def _true_track(key, s):
     return track_from_heading(lat0, lon0, s.speed, heading, s.dt)
 
 
-def filter_scenario(key, field, scenario=None):
+def filter_scenario(key, field, scenario=None, map_error=None):
     """Simulate one run of paper D's experiment.
 
     Parameters
     ----------
     key : PRNG key
     field : Grid, PointMasses or callable
-        True anomaly field (mGal).
+        The anomaly map (mGal); the truth when ``map_error`` is None.
     scenario : FilterScenario, optional
         Default ``FilterScenario()``.
+    map_error : CorrelatedMapError, TruthGrid or None
+        The map is not the truth: the readings are simulated from
+        :func:`~jaxgrav.fields.map_error.truth_field` ``(map_error_key(key), field,
+        map_error)`` (one error field per run, drawn from a key folded off ``key``, so
+        every other draw is the same as without map error). Needs ``field`` to be a
+        Grid (TypeError otherwise: a point-mass model has no grid to draw the error
+        on). None: the readings come from ``field`` (bit-identical to no argument).
 
     Returns
     -------
     FilterRun
     """
     s = FilterScenario() if scenario is None else scenario
+    if map_error is not None:
+        if not isinstance(field, Grid):
+            raise TypeError(
+                "map_error needs the map (field) to be a Grid; got "
+                f"{type(field).__name__} (a point-mass model has no grid to draw the map "
+                "error on: pass the truth as the field instead)")
+        field = truth_field(map_error_key(key), field, map_error)
     k_track, k_err0, k_err, k_noise = jax.random.split(key, 4)
     truth = _true_track(k_track, s)
     f, q = transition(s.ins, jnp.mean(truth.lat), s.dt)

@@ -254,6 +254,11 @@ def _bad(kind, cols):
     ("ok", ("--sigma-gravity", "nan"), "--sigma-gravity must be a positive"),
     ("ok", ("--method", "pmf", "--guard"), "--guard applies to ukf, ekf and gsf; got --method pmf"),
     ("ok", ("--guard", "-0.5"), "--guard must be a positive variance ratio"),
+    ("ok", ("--map-error", "-1"), "--map-error must be a finite map-error sigma >= 0 (mGal); "
+                                  "got -1.0"),
+    ("ok", ("--map-error", "nan"), "--map-error must be a finite map-error sigma >= 0"),
+    ("ok", ("--map-error", "1", "--map-error-length", "0"),
+     "--map-error-length must be a finite correlation length > 0 (m); got 0.0"),
 ])
 def test_bad_input_gets_one_clear_line(sim, tmp_path, capsys, kind, extra, message):
     cols = _bad(kind, read_track_csv(sim / "track.csv"))
@@ -312,3 +317,33 @@ def test_a_second_run_with_new_values_does_not_retrace(sim, stride_track, tmp_pa
         with _traces() as names:
             assert fn(*second) == 0
         assert names == [], (second, names)
+
+
+def test_map_error_on_a_map_end_to_end(tmp_path, capsys):
+    """simulate-filter --map with a 3 mGal map error; filter --map-error adds the FOGM state,
+    which widens the filter's 1-sigma (it no longer trusts the map to 1 mGal)."""
+    d = tmp_path
+    assert main(["simulate-filter", "--map", "ryukyu", "--map-error", "3",
+                 "--map-error-length", "10000", "--out", str(d / "t.csv"), "--truth",
+                 str(d / "truth.csv"), "--minutes", "20", "--dt", "10", "--reading-every", "1",
+                 "--seed", "1"]) == 0
+    assert "map error 3 mGal, L 10000 m" in capsys.readouterr().out
+    base = ["filter", "--map", "ryukyu", "--track", str(d / "t.csv")]
+    assert main([*base, "--out", str(d / "o0.csv")]) == 0
+    assert main([*base, "--out", str(d / "o1.csv"), "--map-error", "3",
+                 "--map-error-length", "20000"]) == 0
+    out = capsys.readouterr().out
+    assert "map-error state 3 mGal over 20000 m" in out
+    o0, o1 = read_track_csv(d / "o0.csv"), read_track_csv(d / "o1.csv")
+    assert np.all(np.isfinite(o1["lat"])) and np.all(o1["sigma_north"] > 0)
+    assert o1["sigma_north"][-1] > o0["sigma_north"][-1]
+    # 0 is today's filter, bit for bit
+    assert main([*base, "--out", str(d / "o2.csv"), "--map-error", "0"]) == 0
+    o2 = read_track_csv(d / "o2.csv")
+    np.testing.assert_array_equal(o2["lat"], o0["lat"])
+
+
+def test_simulate_filter_map_error_needs_a_map(tmp_path, capsys):
+    code = main(["simulate-filter", "--out", str(tmp_path / "t.csv"), "--map-error", "2"])
+    assert code == 2
+    assert "--map-error needs --map" in capsys.readouterr().err

@@ -36,6 +36,21 @@ def test_paper_d_ukf_smoke():
     assert median_m < ins_median_m
 
 
+
+def test_paper_d_ukf_smoke_with_map_error():
+    """--map-error: the told filters (white, FOGM state) print rows; the FOGM state's NEES
+    is far below the untold filter's (8 runs: a sanity check, not a measurement)."""
+    out = run_example("paper_d_ukf.py", "--map", "ryukyu", "--map-error", "3",
+                      "--methods", "ukf,ukf-white,ukf-fogm")
+    assert "map ryukyu + map error 3 mGal, L 10000 m, 8 runs" in out
+    rows = {m[0]: [float(v) for v in m[1:]] for m in re.findall(
+        rf"^(ukf|ukf-white|ukf-fogm)\s+{NUM}\s+{NUM}\s+{NUM}\s+{NUM}%\s+{NUM}\s+{NUM}\s",
+        out, flags=re.M)}
+    assert sorted(rows) == ["ukf", "ukf-fogm", "ukf-white"], out
+    for vals in rows.values():
+        assert np.all(np.isfinite(vals))
+    assert rows["ukf-fogm"][5] < rows["ukf"][5]
+
 def test_paper_d_noharm_smoke():
     out = run_example("paper_d_noharm.py")
     assert "ukf: 16 runs, selection seed 1, test seed 0" in out
