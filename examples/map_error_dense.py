@@ -22,7 +22,7 @@ import numpy as np
 
 from jaxgrav import datasets
 from jaxgrav.fields.map_error import map_error, map_error_key, truth_field
-from jaxgrav.match.dense import lattice_table, match_dense
+from jaxgrav.match.dense import lattice_table, match_dense, match_dense_batch
 from jaxgrav.match.sizing import config_for
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
@@ -84,6 +84,20 @@ def evaluate(prepared, table, sims, config):
             "rank": {k: _spearman(v, e) for k, v in stats.items()}}
 
 
+def bench(prepared, table, sims, configs, n=1000, repeat=2):
+    """Tracks per second of :func:`match_dense_batch` (``n`` tracks) for each config."""
+    lat, lon, g, _ = (np.resize(x, (n, *x.shape[1:])) for x in sims)
+    out = {}
+    for name, cfg in configs.items():
+        f = jax.jit(lambda a, b, c, cfg=cfg: match_dense_batch(prepared, a, b, c, cfg, table))
+        jax.block_until_ready(f(lat, lon, g))
+        t0 = time.perf_counter()
+        for _ in range(repeat):
+            jax.block_until_ready(f(lat, lon, g))
+        out[name] = n * repeat / (time.perf_counter() - t0)
+    return out
+
+
 def _spearman(x, y):
     ok = np.isfinite(x) & np.isfinite(y)
     if ok.sum() < 3:
@@ -100,6 +114,8 @@ def main(argv=None):
     ap.add_argument("--fixes", type=int, default=30)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--smoke", action="store_true", help="tiny size for the tests")
+    ap.add_argument("--bench", action="store_true",
+                    help="only time match_dense_batch on 1000 tracks, white vs GLS")
     a = ap.parse_args(argv)
     grid = datasets.load("ryukyu")["anomaly_2p5min"]
     runs = 4 if a.smoke else a.runs
@@ -111,6 +127,13 @@ def main(argv=None):
     sims = tuple(np.asarray(x) for x in sims)
     print(f"simulated {runs} runs in {time.perf_counter() - t0:.1f} s "
           f"(σ = {a.sigma} mGal, L = {a.length:.0f} m, {a.fixes} fixes)")
+    if a.bench:
+        cfgs = variants(grid, scen, max(a.sigma, 1e-3), a.length)
+        speed = bench(prepared, table, sims, {k: cfgs[k] for k in ("white", "gls-posterior")})
+        for name, v in speed.items():
+            print(f"{name}: {v:.0f} tracks/s")
+        print(f"GLS / white time: {speed['white'] / speed['gls-posterior']:.2f}")
+        return speed
     rows = {}
     for name, cfg in variants(grid, scen, max(a.sigma, 1e-3) if a.sigma > 0 else 1.0,
                               a.length).items():

@@ -35,9 +35,9 @@ import numpy as np
 
 from jaxgrav import interp
 from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav._validate import concrete
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
-from jaxgrav._validate import concrete
 from jaxgrav.match.gls import gls_dof, gls_score, gls_whitener, track_covariance
 from jaxgrav.match.integrity import fix_quality
 from jaxgrav.match.lattice import patch_values

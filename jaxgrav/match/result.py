@@ -31,7 +31,8 @@ STATUS = {
 """Bit flags of :attr:`MatchResult.status`, for every method (one table).
 
 ``dense`` raises 1 and 8, and the integrity bits 512, 1024, 2048 and 4096 (a
-rejected fix: :attr:`MatchResult.accepted` false); ``chains`` 1, 2, 4, 8 and 256; ``entropy`` 1, 8 and 32;
+rejected fix: :attr:`MatchResult.accepted` false); ``chains`` 1, 2, 4, 8 and 256;
+``entropy`` 1, 8 and 32;
 ``iccp`` 1, 16 and 64; ``entropy+iccp`` those of entropy and ICCP and 128.
 """
 
