@@ -25,6 +25,11 @@ normal equations (:mod:`~jaxgrav.match.refine`). The map's spline coefficients m
 be prepared once (a :class:`~jaxgrav.prepared.PreparedMap` as ``grid``, or its
 :func:`lattice_table`) and passed in, as a hot loop over many calls should;
 :func:`match_dense_batch` matches many tracks in cache-sized chunks.
+
+With a map error (``DenseConfig.map_error_mgal`` > 0) the candidates are scored by
+the GLS likelihood of :mod:`~jaxgrav.match.gls` (one whitener per track, shared by
+every shifted and turned candidate); every match reports the covariance of its fix
+and an integrity decision (:mod:`~jaxgrav.match.integrity`).
 """
 
 import functools
@@ -249,7 +254,9 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
     -------
     MatchResult
         ``work_constrained`` is the number of candidate tracks scored,
-        ``work_pairs`` the number of map samples taken.
+        ``work_pairs`` the number of map samples taken; ``covariance_m2``,
+        ``accepted`` and the test statistics from the offset posterior
+        (:func:`~jaxgrav.match.integrity.fix_quality`). A rejected fix is the INS track.
     """
     lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
     table = lattice_table(grid, config.method) if prepared is None else prepared
