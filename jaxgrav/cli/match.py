@@ -11,6 +11,7 @@ import numpy as np
 
 from jaxgrav._io import atomic_output
 from jaxgrav.datasets import load_map
+from jaxgrav.fields.map_error import map_error
 from jaxgrav.match import ENTROPY_HALF_SIZE, METHODS, match_track, status_messages
 from jaxgrav.sim import DEG_ARC_M
 from jaxgrav.tracks import read_track_csv, write_track_csv
@@ -54,6 +55,11 @@ def add_parsers(sub):
                         "the offset spacing grows instead")
     m.add_argument("--refine", type=int, default=1,
                    help="refine the map by this factor first (chains: paper A used 100)")
+    m.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
+                   help="dense: σ of the map's error (mGal, default 0 = white-noise score); "
+                        "> 0 scores by GLS, returns the posterior fix and tests its integrity")
+    m.add_argument("--map-error-length", type=float, default=10000.0, metavar="L",
+                   help="dense: correlation length of the map's error (m, default 10000)")
     m.add_argument("--no-eotvos", action="store_true",
                    help="do not Eötvös-correct the readings even if velocities are given")
     m.add_argument("--force", action="store_true", help="overwrite an existing output")
@@ -105,6 +111,8 @@ def _cmd_match(args):
     kw = {}  # the options each method takes (--bias-sigma is ignored by the others)
     if args.method in ("dense", "chains"):
         kw["bias_sigma_mgal"] = args.bias_sigma
+    if args.map_error > 0:
+        kw["map_error"] = map_error(args.map_error, args.map_error_length)
     if args.method in ("iccp", "entropy+iccp"):
         kw["max_rotation_deg"] = max_rotation
     if args.method in ("entropy", "entropy+iccp"):
@@ -118,6 +126,10 @@ def _cmd_match(args):
     messages = status_messages(int(result.status))
     r = {k: np.asarray(v).tolist() for k, v in result._asdict().items()}
     r["status_messages"] = messages
+    cov = np.asarray(result.covariance_m2, float)
+    r.update(accepted=bool(result.accepted), covariance_m2=cov.tolist(),
+             sigma_north_m=float(np.sqrt(cov[0, 0])), sigma_east_m=float(np.sqrt(cov[1, 1])),
+             map_error_mgal=args.map_error, map_error_length_m=args.map_error_length)
     r.update(method=args.method, field=field, map=str(args.map), track=str(args.track),
              drift_radius_deg=radius_deg, eotvos_corrected=has_v)
     if args.method in CONTOUR_METHODS:
@@ -145,6 +157,13 @@ def _check_match_args(args):
         bad("--noise", args.noise, "a finite standard deviation >= 0 (mGal or nT)")
     if args.refine < 1:
         bad("--refine", args.refine, "an integer factor >= 1")
+    if not (math.isfinite(args.map_error) and args.map_error >= 0):
+        bad("--map-error", args.map_error, "a finite standard deviation >= 0 (mGal)")
+    if not (math.isfinite(args.map_error_length) and args.map_error_length > 0):
+        bad("--map-error-length", args.map_error_length, "a finite correlation length > 0 (m)")
+    if args.map_error > 0 and args.method != "dense":
+        raise ValueError(f"--map-error is used by --method dense only; got --method "
+                         f"{args.method}")
     if args.max_rotation is not None:
         if args.method not in ("iccp", "entropy+iccp"):
             raise ValueError(f"--max-rotation bounds ICCP's rotation; it has no effect with "

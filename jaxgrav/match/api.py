@@ -135,7 +135,7 @@ def _check_options(method, noise, bias_sigma_mgal, max_rotation_deg, entropy_hal
 def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000.0,
                 noise=1.0, v_east=None, v_north=None, bias_sigma_mgal=None,
                 max_rotation_deg=None, entropy_half_size=None, config=None, warn=True,
-                noise_mgal=None):
+                noise_mgal=None, map_error=None):
     """Match one track against a map, with input checks (the public entry point).
 
     Parameters
@@ -182,6 +182,10 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
         Emit a ``RuntimeWarning`` for each status flag raised.
     noise_mgal : float, optional
         Deprecated spelling of ``noise``.
+    map_error : CorrelatedMapError, optional
+        ``dense``: the map's error model (:func:`~jaxgrav.fields.map_error.map_error`):
+        GLS score, posterior fix and integrity test (:func:`config_for`); None
+        (default) or σ = 0: today's white-noise score.
 
     Returns
     -------
@@ -199,6 +203,8 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
                       DeprecationWarning, stacklevel=2)
         noise = noise_mgal
     _check_options(method, noise, bias_sigma_mgal, max_rotation_deg, entropy_half_size, config)
+    if map_error is not None and method != "dense":
+        raise ValueError(f"map_error is used by method 'dense' only; got method {method!r}")
     lat, lon, readings = validate_track(grid, lat, lon, readings)
     corrected = v_east is not None and v_north is not None
     if corrected:
@@ -208,7 +214,7 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
         readings = readings + np.asarray(eotvos(lat, ve, vn))
     if method in ("dense", "chains"):
         result = _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
-                                    bias_sigma_mgal, corrected, config)
+                                    bias_sigma_mgal, corrected, config, map_error)
     else:
         result = _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise,
                                 max_rotation_deg, entropy_half_size, config)
@@ -219,13 +225,14 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
 
 
 def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
-                       bias_sigma_mgal, corrected, config):
+                       bias_sigma_mgal, corrected, config, map_error=None):
     """``dense`` or ``chains`` on checked inputs."""
     if bias_sigma_mgal is None:
         bias_sigma_mgal = 3.0 if corrected else math.inf
     if config is None:
         config = config_for(method, grid, drift_radius_m, noise_mgal=noise,
-                            bias_sigma_mgal=bias_sigma_mgal)
+                            bias_sigma_mgal=bias_sigma_mgal,
+                            **({"map_error": map_error} if map_error is not None else {}))
         if method == "chains":  # the displacement stencil, sized for this track
             tol = (float(v) for v in chain_tolerances(as_grid(grid), lat, config))
             config = dataclasses.replace(

@@ -25,20 +25,34 @@ normal equations (:mod:`~jaxgrav.match.refine`). The map's spline coefficients m
 be prepared once (a :class:`~jaxgrav.prepared.PreparedMap` as ``grid``, or its
 :func:`lattice_table`) and passed in, as a hot loop over many calls should;
 :func:`match_dense_batch` matches many tracks in cache-sized chunks.
+
+With a map error (``DenseConfig.map_error_mgal`` > 0) the candidates are scored by
+the GLS likelihood of :mod:`~jaxgrav.match.gls` (one whitener per track, shared by
+every shifted and turned candidate); every match reports the covariance of its fix
+and an integrity decision (:mod:`~jaxgrav.match.integrity`).
 """
 
 import functools
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrav import interp
 from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav._validate import concrete
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
+from jaxgrav.match.gls import gls_dof, gls_score, gls_whitener, track_covariance
+from jaxgrav.match.integrity import fix_quality
 from jaxgrav.match.lattice import patch_values
 from jaxgrav.match.offsets import means, offset_scores, track_frame
-from jaxgrav.match.refine import gauss_newton, residual_function
+from jaxgrav.match.refine import (
+    gauss_newton,
+    gls_residual_function,
+    laplace_covariance,
+    residual_function,
+)
 from jaxgrav.match.result import MatchResult, nearest_to_ins
 from jaxgrav.match.scoring import (
     SCORES,
@@ -96,6 +110,31 @@ class DenseConfig:
         to 2 cells); otherwise a block of ``2·half_size + 2`` nodes, which fits
         whenever ``spacing_m`` is at most the node spacing; otherwise, or with 0,
         every shifted fix is sampled on its own (same values, slowest).
+    map_error_mgal : float
+        σ of the map's error (mGal). 0 (default): the white-noise score, exactly as
+        without this field; > 0: candidates are scored by the GLS likelihood with
+        covariance ``σ_n² I + C_map`` along the track (:mod:`~jaxgrav.match.gls`,
+        the bias marginalised; ``score="absolute"`` has no bias, ``"difference"``
+        a flat-prior one), the refinement whitened the same way and clamped to the
+        searched region. Traced: changing it never recompiles.
+    map_error_length_m : float
+        Correlation length L of the map error (m), traced.
+    map_error_order : {1, 2}
+        Gauss–Markov order of the map-error covariance (static), as
+        :class:`~jaxgrav.fields.map_error.CorrelatedMapError`'s family.
+    fix : {"best", "posterior"}
+        The returned offset (static): the refined best candidate, or the
+        likelihood-weighted posterior mean over all offsets (the refined best when
+        the posterior is unresolved, see ``resolved_n_effective``).
+    resolved_n_effective : float
+        The posterior is resolved by the offset grid when ``n_effective`` reaches this;
+        otherwise the covariance is the Gauss–Newton (Laplace) one.
+    max_sigma_m, max_second_mode, max_chi2_per_dof, max_edge_mass : float
+        Integrity thresholds (traced): the fix is rejected (INS track returned,
+        status 512, 1024, 2048, 4096) when the largest σ of its covariance (m), the
+        second-mode likelihood ratio, the refined best χ² per degree of freedom or
+        the posterior mass on the outermost offsets exceeds it. Defaults ``inf``:
+        every found fix is accepted.
     """
 
     spacing_m: float = 500.0
@@ -112,8 +151,26 @@ class DenseConfig:
     score: str = static_field("bias")
     selection: str = static_field("best")
     lattice_block: int = static_field(6)
+    map_error_mgal: float = 0.0
+    map_error_length_m: float = 10000.0
+    map_error_order: int = static_field(2)
+    fix: str = static_field("best")
+    resolved_n_effective: float = 3.0
+    max_sigma_m: float = float("inf")
+    max_second_mode: float = float("inf")
+    max_chi2_per_dof: float = float("inf")
+    max_edge_mass: float = float("inf")
 
     def __post_init__(self):
+        if self.fix not in ("best", "posterior"):
+            raise ValueError(f"fix must be 'best' or 'posterior'; got {self.fix!r}")
+        if self.map_error_order not in (1, 2):
+            raise ValueError(f"map_error_order must be 1 or 2; got {self.map_error_order!r}")
+        for name in ("map_error_mgal", "map_error_length_m"):
+            arr = concrete(getattr(self, name))
+            if arr is not None and arr.dtype != object and not (
+                    np.all(np.isfinite(arr)) and np.all(arr >= 0)):
+                raise ValueError(f"{name} must be finite and >= 0; got {arr}")
         if isinstance(self.score, str) and self.score not in SCORES:
             raise ValueError(f"score must be one of {SCORES}; got {self.score!r}")
         if isinstance(self.n_rotations, int) and self.n_rotations < 1:
@@ -197,7 +254,9 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
     -------
     MatchResult
         ``work_constrained`` is the number of candidate tracks scored,
-        ``work_pairs`` the number of map samples taken.
+        ``work_pairs`` the number of map samples taken; ``covariance_m2``,
+        ``accepted`` and the test statistics from the offset posterior
+        (:func:`~jaxgrav.match.integrity.fix_quality`). A rejected fix is the INS track.
     """
     lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
     table = lattice_table(grid, config.method) if prepared is None else prepared
@@ -222,42 +281,84 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
     w = decreasing_weights(n, config.weight_decay).astype(dtype)
     prior = bias_precision(w, config.noise_mgal, config.bias_sigma_mgal).astype(dtype)
     frame = track_frame(grid, lat, lon)
-    scores, biases = offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e,
-                                   rot, config)
-    k = min(config.k_best, scores.shape[0])
-    top = k_smallest(scores, k)
-    topk_score = scores[top]
-    topk_lat, topk_lon = shifted_tracks(lat, lon, d_n[top], d_e[top], rr[top])  # (k, N)
-    (distance,) = sums([jnp.hypot(*local_offsets_m(topk_lat, topk_lon, lat, lon))], -1)
-    chosen = nearest_to_ins(topk_score, distance, config.selection)
-    i = top[chosen]
-    found = jnp.isfinite(scores[i])
-
-    p0 = jnp.stack([d_n[i], d_e[i], rr[i], biases[i]])
-    free = (True, True, config.n_rotations > 1, config.score == "bias")
-    step_max = jnp.stack(
-        [
-            jnp.asarray(config.spacing_m, dtype),
-            jnp.asarray(config.spacing_m, dtype),
-            jnp.asarray(config.max_rotation_deg, dtype) * DEG / max(config.n_rotations - 1, 1),
-            jnp.asarray(jnp.inf, dtype),
-        ]
-    )
-    res = residual_function(table, frame, readings, w, config.score, prior, config.method)
-    p = (
-        gauss_newton(res, p0, free, step_max, config.damping, config.refine_steps)
-        if config.refine_steps
-        else p0
-    )
-    p = jnp.where(found, p, jnp.zeros_like(p))
-    m_lat, m_lon = shifted_tracks(lat, lon, p[0], p[1], p[2])
-    iy_c, ix_c, ky, kx, north, east = frame
-    c, s = jnp.cos(p[2]), jnp.sin(p[2])
-    v = patch_values(table, iy_c + ky * (c * north - s * east + p[0]),
-                     ix_c + kx * (s * north + c * east + p[1]), config.method)
-    final_score, final_bias = score_track(readings, v, w, config.score, prior)
-    mean_off = means(*local_offsets_m(m_lat, m_lon, lat, lon))
+    scale = jnp.asarray(config.noise_mgal, dtype) ** 2 * jnp.sum(w**2)  # mGal² per unit χ²
     reach = h * config.spacing_m
+
+    def search(use_gls):
+        """Grid search, selection and refinement: white (today's) or GLS score."""
+        def run(_):
+            gls = None
+            if use_gls:
+                cov = track_covariance(frame[4], frame[5], config.noise_mgal,
+                                       config.map_error_mgal, config.map_error_length_m,
+                                       config.map_error_order, weights=w)
+                wh = gls_whitener(cov)
+                gls = (wh, _gls_bias_sigma(config, dtype), scale)
+            scores, biases = offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n,
+                                           d_e, rot, config, gls)
+            k = min(config.k_best, scores.shape[0])
+            top = k_smallest(scores, k)
+            topk_lat, topk_lon = shifted_tracks(lat, lon, d_n[top], d_e[top], rr[top])
+            (distance,) = sums([jnp.hypot(*local_offsets_m(topk_lat, topk_lon, lat, lon))], -1)
+            chosen = nearest_to_ins(scores[top], distance, config.selection)
+            i = top[chosen]
+            found = jnp.isfinite(scores[i])
+            p0 = jnp.stack([d_n[i], d_e[i], rr[i], biases[i]])
+            free = (True, True, config.n_rotations > 1,
+                    config.score == "bias" or (use_gls and config.score != "absolute"))
+            step_max = jnp.stack([
+                jnp.asarray(config.spacing_m, dtype),
+                jnp.asarray(config.spacing_m, dtype),
+                jnp.asarray(config.max_rotation_deg, dtype) * DEG / max(config.n_rotations - 1, 1),
+                jnp.asarray(jnp.inf, dtype),
+            ])
+            if use_gls:
+                res = gls_residual_function(table, frame, readings, wh.inv_chol, wh.ones, scale,
+                                            jnp.maximum(gls[1], 1e-6), config.method)
+            else:
+                res = residual_function(table, frame, readings, w, config.score, prior,
+                                        config.method)
+            p = (gauss_newton(res, p0, free, step_max, config.damping, config.refine_steps)
+                 if config.refine_steps else p0)
+            if use_gls:  # the refinement may not leave the searched region
+                p = p.at[:2].set(jnp.clip(p[:2], -reach, reach))
+            p = jnp.where(found, p, jnp.zeros_like(p))
+            iy_c, ix_c, ky, kx, north, east = frame
+            c, s = jnp.cos(p[2]), jnp.sin(p[2])
+            v = patch_values(table, iy_c + ky * (c * north - s * east + p[0]),
+                             ix_c + kx * (s * north + c * east + p[1]), config.method)
+            if use_gls:
+                final_score, final_bias = gls_score(wh, readings - v, gls[1])
+                final_score = final_score * scale
+                if free[3]:
+                    final_bias = p[3]
+            else:
+                final_score, final_bias = score_track(readings, v, w, config.score, prior)
+                if config.score == "bias":
+                    final_bias = p[3]
+            laplace = laplace_covariance(res, p, free) * scale
+            return (scores, top, topk_lat, topk_lon, chosen, found, p,
+                    final_score, final_bias, laplace)
+
+        return run
+
+    # today's white path runs outside the branch (a branch body compiles to other bits)
+    white = search(False)(None)
+    (scores, top, topk_lat, topk_lon, chosen, found, p, final_score, final_bias,
+     laplace) = jax.lax.cond(jnp.asarray(config.map_error_mgal) > 0, search(True),
+                             lambda _: white, None)
+    topk_score = scores[top]
+    chi2 = scores / jnp.maximum(scale, jnp.finfo(dtype).tiny)
+    quality = fix_quality(chi2, config.n_rotations, on, oe, p[:2], laplace,
+                          final_score / jnp.maximum(scale, jnp.finfo(dtype).tiny),
+                          gls_dof(n, _gls_bias_sigma(config, dtype)), found, config)
+    if config.fix == "posterior":
+        p = p.at[:2].set(jnp.where(found, jnp.stack([quality.mean_north_m,
+                                                     quality.mean_east_m]), 0.0))
+    accepted = quality.accepted
+    m_lat, m_lon = shifted_tracks(lat, lon, p[0], p[1], p[2])
+    m_lat, m_lon = jnp.where(accepted, m_lat, lat), jnp.where(accepted, m_lon, lon)
+    mean_off = means(*local_offsets_m(m_lat, m_lon, lat, lon))
     edge = (jnp.abs(p[0]) >= reach) | (jnp.abs(p[1]) >= reach)
     n_off = jnp.asarray(scores.shape[0], dtype)
     return MatchResult(
@@ -265,9 +366,9 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
         lon=m_lon,
         offset_north_m=mean_off[0],
         offset_east_m=mean_off[1],
-        rotation_deg=p[2] / DEG,
+        rotation_deg=jnp.where(accepted, p[2], 0.0) / DEG,
         score=jnp.where(found, final_score, jnp.inf),
-        bias=jnp.where(found, final_bias, 0.0) if config.score != "bias" else p[3],
+        bias=jnp.where(found, final_bias, 0.0) if config.score != "bias" else final_bias,
         topk_lat=topk_lat,
         topk_lon=topk_lon,
         topk_score=topk_score,
@@ -276,8 +377,23 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
         work_unconstrained=n_off**n,
         work_constrained=n_off,
         work_pairs=n_off * n,
-        status=jnp.where(found, 0, 1) | jnp.where(found & edge, 8, 0),
+        status=jnp.where(found, 0, 1) | jnp.where(found & edge, 8, 0) | quality.status,
+        covariance_m2=quality.covariance_m2,
+        accepted=accepted,
+        n_effective=quality.n_effective,
+        second_mode_ratio=quality.second_mode_ratio,
+        edge_mass=quality.edge_mass,
+        chi2_per_dof=quality.chi2_per_dof,
     )
+
+
+def _gls_bias_sigma(config, dtype):
+    """σ_b of the GLS score (mGal): 0 for ``absolute``, ``inf`` for ``difference``."""
+    if config.score == "absolute":
+        return jnp.zeros((), dtype)
+    if config.score == "difference":
+        return jnp.asarray(jnp.inf, dtype)
+    return jnp.asarray(config.bias_sigma_mgal, dtype)
 
 
 @functools.partial(jax.jit, static_argnames=("chunk",))

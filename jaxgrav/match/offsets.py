@@ -16,6 +16,7 @@ import jax.numpy as jnp
 
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.match.gls import gls_score
 from jaxgrav.match.lattice import lattice_values, patch_values
 from jaxgrav.match.scoring import score_track, sums
 
@@ -80,7 +81,8 @@ def _lattice_blocks(grid, config):
     return [config.lattice_block] + ([big] if big > config.lattice_block else [])
 
 
-def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, config):
+def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, config,
+                  gls=None):
     """Scores and biases of every candidate track, flattened rotation-major then (north, east).
 
     Parameters
@@ -102,6 +104,12 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
     rot : Array, shape ``(R,)``
         Heading errors (rad).
     config : DenseConfig
+    gls : tuple, optional
+        ``(whitener, bias_sigma, scale)``: score by the GLS likelihood instead
+        (:func:`~jaxgrav.match.gls.gls_score` of the track's
+        :class:`~jaxgrav.match.gls.GlsWhitener`, bias prior σ_b in mGal), times
+        ``scale`` (mGal²) to keep the white score's mGal² scale. The lattice values
+        are whitened after the lattice evaluation, one product per candidate.
 
     Returns
     -------
@@ -121,7 +129,12 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
             v = v.reshape(n_rot, n, a, a)
             bad = (jnp.any(~in_y.reshape(n_rot, n, a), axis=1)[:, :, None]
                    | jnp.any(~in_x.reshape(n_rot, n, a), axis=1)[:, None, :])
-            sc, b = lattice_scores(readings, v, w, config.score, prior, config.half_size)
+            if gls is None:
+                sc, b = lattice_scores(readings, v, w, config.score, prior, config.half_size)
+            else:
+                r = jnp.moveaxis(readings[None, :, None, None] - v, 1, -1)  # (R, A, A, N)
+                sc, b = gls_score(gls[0], r, gls[1])
+                sc = sc * gls[2]
             return jnp.where(bad, jnp.inf, sc).reshape(-1), b.reshape(-1)
 
         return run
@@ -130,6 +143,10 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
         r_of = jnp.repeat(jnp.arange(n_rot), d_n.shape[0] // n_rot)
         iy = iy_c + ky * (rn[r_of] + d_n[:, None])
         ix = ix_c + kx * (re[r_of] + d_e[:, None])
+        if gls is not None:
+            r = readings - patch_values(table, iy, ix, config.method)
+            sc, b = gls_score(gls[0], r, gls[1])
+            return sc * gls[2], b
         return score_track(readings, patch_values(table, iy, ix, config.method), w,
                            config.score, prior)
 

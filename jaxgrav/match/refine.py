@@ -16,7 +16,8 @@ import jax.numpy as jnp
 from jaxgrav.match.lattice import computed_once, patch_values
 from jaxgrav.match.scoring import sums
 
-__all__ = ["gauss_newton", "residual_function", "solve_spd"]
+__all__ = ["gauss_newton", "gls_residual_function", "laplace_covariance", "residual_function",
+           "solve_spd"]
 
 
 def residual_function(table, frame, g, w, kind, prior, method):
@@ -72,6 +73,47 @@ def residual_function(table, frame, g, w, kind, prior, method):
         return sqrt_w * r, (*(sqrt_w * x for x in cols), zero), no_prior
 
     return res
+
+
+def gls_residual_function(table, frame, g, inv_chol, ones, scale, bias_sigma, method):
+    """Whitened residuals ``√s·W(g − v(p) − b)`` of ``p`` and their Jacobian (GLS refinement).
+
+    As :func:`residual_function`, for readings whose error has covariance Σ = L Lᵀ
+    (:func:`~jaxgrav.match.gls.gls_whitener`): ``W = L⁻¹`` ``(N, N)``, ``ones = W 1``,
+    the Jacobian ``√s·W ∂v/∂p``, bias column ``−√s·W 1``, prior row ``√s·b/σ_b``.
+    ``scale`` s (mGal²) puts the squared norm on the mGal² scale of the white score
+    (χ² · s); ``bias_sigma`` σ_b (mGal, ``inf`` flat, a large finite value for none).
+    """
+    iy_c, ix_c, ky, kx, north, east = frame
+    root = jnp.sqrt(scale)
+    wt = inv_chol.T * root
+    sp = root / bias_sigma
+    j_prior = jnp.zeros((4,), north.dtype).at[3].set(sp)
+
+    def res(p):
+        c, s = jnp.cos(p[2]), jnp.sin(p[2])
+        rn, re = c * north - s * east, s * north + c * east
+        v, v_y, v_x = patch_values(table, iy_c + ky * (rn + p[0]), ix_c + kx * (re + p[1]),
+                                   method, gradient=True)
+        a, b = v_y * ky, v_x * kx
+        m = jnp.stack([g - v - p[3], -a, -b, a * re - b * rn]) @ wt
+        return m[0], (m[1], m[2], m[3], -ones * root), (sp * p[3], j_prior)
+
+    return res
+
+
+def laplace_covariance(res, p, free):
+    """``(JᵀJ)⁻¹`` of the north/east offset at ``p`` (m² per unit of ``‖r‖²``), ``(2, 2)``.
+
+    The other free parameters (turn, bias) marginalised; multiply by the scale that
+    makes ``‖r‖²`` a χ² to get the Laplace covariance of the offset.
+    """
+    jtj, _, _ = _normal_equations(*res(p), free)
+    fixed = jnp.diag(1.0 - jnp.asarray(free, p.dtype))
+    a = jtj + fixed
+    eye = jnp.eye(p.shape[0], dtype=p.dtype)
+    cols = [solve_spd(a, eye[k]) for k in range(2)]
+    return jnp.stack([cols[0][:2], cols[1][:2]])
 
 
 def solve_spd(a, b):

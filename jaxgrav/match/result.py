@@ -4,6 +4,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 __all__ = ["CORRELATION_STATUS", "STATUS", "MatchResult", "nearest_to_ins", "status_messages"]
 
@@ -19,14 +20,23 @@ STATUS = {
     64: "ICCP: fewer than 3 contour points inside the window at some iteration (transform kept)",
     128: "entropy+ICCP: the ICCP result did not fit significantly better than the coarse "
          "match; coarse track kept",
+    512: "fix rejected: the posterior of the offset is too wide (max_sigma_m); INS track kept",
+    1024: "fix rejected: a distinct second mode is nearly as likely (max_second_mode); INS "
+          "track kept",
+    2048: "fix rejected: the best candidate's misfit is inconsistent with the error model "
+          "(max_chi2_per_dof); INS track kept",
+    4096: "fix rejected: posterior mass at the edge of the search region (max_edge_mass); "
+          "INS track kept",
 }
 """Bit flags of :attr:`MatchResult.status`, for every method (one table).
 
-``dense`` raises 1 and 8; ``chains`` 1, 2, 4, 8 and 256; ``entropy`` 1, 8 and 32;
+``dense`` raises 1 and 8, and the integrity bits 512, 1024, 2048 and 4096 (a
+rejected fix: :attr:`MatchResult.accepted` false); ``chains`` 1, 2, 4, 8 and 256;
+``entropy`` 1, 8 and 32;
 ``iccp`` 1, 16 and 64; ``entropy+iccp`` those of entropy and ICCP and 128.
 """
 
-CORRELATION_STATUS = {bit: STATUS[bit] for bit in (1, 2, 4, 8, 256)}
+CORRELATION_STATUS = {bit: STATUS[bit] for bit in (1, 2, 4, 8, 256, 512, 1024, 2048, 4096)}
 """The bits of the correlation matchers (``dense``, ``chains``): an excerpt of :data:`STATUS`."""
 
 
@@ -65,6 +75,23 @@ class MatchResult(NamedTuple):
         taken (dense path).
     status : Array of int
         Bit flags, see :data:`STATUS`; 0 is a clean match.
+    covariance_m2 : Array, shape ``(2, 2)``
+        Covariance of the mean-track position error (m², north/east). ``dense``: from
+        the likelihood-weighted posterior over the offsets (or the Gauss–Newton
+        curvature when the posterior is narrower than the offset grid); the other
+        matchers: NaN (not estimated).
+    accepted : Array of bool
+        Integrity decision; a rejected fix returns the INS track (status bits 512–4096).
+        True for the matchers without a test.
+    n_effective : Array
+        ``dense``: offsets sharing the posterior mass (``1/Σp²``); NaN otherwise.
+    second_mode_ratio : Array
+        ``dense``: likelihood ratio of the best offset outside the mode to the best.
+    edge_mass : Array
+        ``dense``: posterior mass on the outermost offsets.
+    chi2_per_dof : Array
+        ``dense``: best score over its degrees of freedom (χ², about 1 when the error
+        model is right).
     """
 
     lat: jax.Array
@@ -83,6 +110,12 @@ class MatchResult(NamedTuple):
     work_constrained: jax.Array
     work_pairs: jax.Array
     status: jax.Array
+    covariance_m2: jax.Array = np.full((2, 2), np.nan, np.float32)
+    accepted: jax.Array = np.bool_(True)
+    n_effective: jax.Array = np.float32(np.nan)
+    second_mode_ratio: jax.Array = np.float32(np.nan)
+    edge_mass: jax.Array = np.float32(np.nan)
+    chi2_per_dof: jax.Array = np.float32(np.nan)
 
 
 def nearest_to_ins(topk_score, distance, selection):

@@ -14,11 +14,15 @@ from jaxgrav.match.iccp import IccpConfig
 from jaxgrav.match.lattice_chains import stencil_size_for_step
 from jaxgrav.prepared import as_grid
 
-__all__ = ["config_for", "iccp_config_for"]
+__all__ = ["MAP_ERROR_INTEGRITY", "config_for", "iccp_config_for"]
+
+MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
+"""DenseConfig fields :func:`config_for` sets with a map error (σ > 0): the fix and the
+integrity thresholds chosen by ``examples/map_error_dense.py`` (see the README)."""
 
 
 def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=math.inf,
-               n_rotations=1, score=None, step_m=None):
+               n_rotations=1, score=None, step_m=None, map_error=None):
     """A matcher configuration whose search region covers the drift.
 
     Parameters
@@ -41,6 +45,12 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         chain search uses the displacement stencil
         (:attr:`~jaxgrav.match.correlation.ChainConfig.stencil_size`) sized for such
         steps in any direction; otherwise the pairwise search on ``capacity`` slots.
+    map_error : CorrelatedMapError, optional
+        ``dense``: the map's error model
+        (:func:`~jaxgrav.fields.map_error.map_error`); fills ``map_error_mgal``,
+        ``map_error_length_m`` and ``map_error_order``, and when σ > 0 the integrity
+        thresholds of :data:`MAP_ERROR_INTEGRITY` (measured with
+        ``examples/map_error_dense.py``). None: the white-noise score.
 
     Returns
     -------
@@ -58,9 +68,18 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         half = math.ceil(reach / spacing)
         if half > 40:
             half, spacing = 40, reach / 40
-        return DenseConfig(spacing_m=spacing, half_size=half, noise_mgal=noise_mgal,
-                           bias_sigma_mgal=bias_sigma_mgal, n_rotations=n_rotations,
-                           score=score or "bias")
+        config = DenseConfig(spacing_m=spacing, half_size=half, noise_mgal=noise_mgal,
+                             bias_sigma_mgal=bias_sigma_mgal, n_rotations=n_rotations,
+                             score=score or "bias")
+        if map_error is None:
+            return config
+        sigma = float(map_error.sigma)
+        kw = dict(MAP_ERROR_INTEGRITY) if sigma > 0 else {}
+        return dataclasses.replace(config, map_error_mgal=sigma,
+                                   map_error_length_m=float(map_error.length_m),
+                                   map_error_order=map_error.order, **kw)
+    if map_error is not None:
+        raise ValueError("map_error is used by method 'dense' only")
     half = math.ceil(reach / min(dy, dx))
     if 2 * half + 1 > min(grid.ny, grid.nx):
         raise ValueError(

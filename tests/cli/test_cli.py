@@ -188,3 +188,26 @@ def test_match_help_documents_paper_b_options(capsys):
     for option in ("--max-rotation DEG", "--entropy-half-size N", "--drift-radius"):
         assert option in text
     assert "heading error" in text
+
+
+def test_match_map_error_options_and_result_fields(track, tmp_path, capsys):
+    out = tmp_path / "gls.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"), "--out", str(out),
+                 "--map-error", "3", "--map-error-length", "10000"]) == 0
+    r = json.loads(out.read_text())
+    cov = np.asarray(r["covariance_m2"])
+    assert cov.shape == (2, 2) and isinstance(r["accepted"], bool)
+    assert r["sigma_north_m"] == pytest.approx(np.sqrt(cov[0, 0]))
+    assert r["sigma_east_m"] == pytest.approx(np.sqrt(cov[1, 1]))
+    for k in ("n_effective", "second_mode_ratio", "edge_mass", "chi2_per_dof"):
+        assert k in r
+    white = tmp_path / "white.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"),
+                 "--out", str(white)]) == 0
+    assert json.loads(white.read_text())["accepted"] is True
+    for opt, val in (("--map-error", "-1"), ("--map-error", "nan"),
+                     ("--map-error-length", "0"), ("--map-error-length", "inf")):
+        code = main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"),
+                     "--out", str(tmp_path / "bad.json"), opt, val])
+        assert code == 2
+        assert opt in capsys.readouterr().err

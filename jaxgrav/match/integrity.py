@@ -1,0 +1,113 @@
+"""How good a dense-offset fix is: its covariance, test statistics and integrity decision.
+
+The dense matcher scores every offset of a lattice; the scores (χ² units) define the
+likelihood-weighted posterior of the offset (:func:`~jaxgrav.match.gls.offset_posterior`).
+:func:`fix_quality` turns it into the fix's 2 × 2 covariance (the posterior's, with
+the cell quantisation term, or, when the posterior is narrower than the lattice, the
+Laplace covariance of the Gauss–Newton refinement), the test statistics, and the
+integrity decision of :class:`~jaxgrav.match.dense.DenseConfig`'s thresholds with
+the status bits of :data:`~jaxgrav.match.result.STATUS` (512, 1024, 2048, 4096).
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from jaxgrav.match.gls import offset_posterior
+
+__all__ = ["FixQuality", "fix_quality", "largest_sigma"]
+
+
+class FixQuality(NamedTuple):
+    """Posterior of the offset and the integrity decision of one track.
+
+    Attributes
+    ----------
+    mean_north_m, mean_east_m : Array
+        Posterior mean offset (m), or the refined best offset when unresolved.
+    covariance_m2 : Array, shape ``(2, 2)``
+        Covariance of the offset (m², north/east).
+    resolved : Array of bool
+        The posterior spreads over at least ``resolved_n_effective`` offsets.
+    n_effective, second_mode_ratio, edge_mass, chi2_per_dof : Array
+        Test statistics (:class:`~jaxgrav.match.gls.OffsetPosterior`; ``chi2_per_dof``
+        of the refined best track).
+    accepted : Array of bool
+    status : Array of int
+        Integrity bits of a rejected fix (0 when accepted).
+    """
+
+    mean_north_m: jax.Array
+    mean_east_m: jax.Array
+    covariance_m2: jax.Array
+    resolved: jax.Array
+    n_effective: jax.Array
+    second_mode_ratio: jax.Array
+    edge_mass: jax.Array
+    chi2_per_dof: jax.Array
+    accepted: jax.Array
+    status: jax.Array
+
+
+def largest_sigma(cov):
+    """Square root of the larger eigenvalue of 2 × 2 covariances ``(..., 2, 2)`` (m)."""
+    a, b, d = cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1]
+    return jnp.sqrt(0.5 * (a + d) + jnp.sqrt(0.25 * (a - d) ** 2 + b * b))
+
+
+def fix_quality(chi2, n_rot, d_n, d_e, best_ne, laplace_m2, final_chi2, dof, found, config):
+    """Covariance, statistics and integrity decision of one dense match.
+
+    Parameters
+    ----------
+    chi2 : Array, shape ``(R·A²,)``
+        Scores of every candidate in χ² units, rotation-major (inf: invalid).
+    n_rot : int
+        R, heading errors tried (static); the posterior is marginalised over them
+        first (``−2 logsumexp(−J/2)``).
+    d_n, d_e : Array, shape ``(A²,)``
+        The offsets (m).
+    best_ne : Array, shape ``(2,)``
+        Refined best offset (m): the fix when the posterior is unresolved.
+    laplace_m2 : Array, shape ``(2, 2)``
+        Gauss–Newton (Laplace) covariance at the refined best (m²).
+    final_chi2 : Array
+        χ² of the refined best track.
+    dof : Array
+        Its degrees of freedom (:func:`~jaxgrav.match.gls.gls_dof`).
+    found : Array of bool
+        Whether any candidate was valid.
+    config : DenseConfig
+        ``spacing_m``, ``resolved_n_effective`` and the thresholds ``max_sigma_m``,
+        ``max_second_mode``, ``max_chi2_per_dof``, ``max_edge_mass``.
+
+    Returns
+    -------
+    FixQuality
+    """
+    j = chi2.reshape(n_rot, -1)
+    j = j[0] if n_rot == 1 else -2.0 * jax.nn.logsumexp(-0.5 * j, axis=0)
+    post = offset_posterior(j, d_n, d_e, config.spacing_m, dof=dof)
+    resolved = post.n_effective >= config.resolved_n_effective
+    lap_ok = jnp.all(jnp.isfinite(laplace_m2)) & (laplace_m2[0, 0] > 0) & (laplace_m2[1, 1] > 0)
+    cov = jnp.where(resolved | ~lap_ok, post.covariance_m2, laplace_m2)
+    chi2_dof = final_chi2 / dof
+    sigma = largest_sigma(cov)
+    status = (jnp.where(sigma > config.max_sigma_m, 512, 0)
+              | jnp.where(post.second_mode_ratio > config.max_second_mode, 1024, 0)
+              | jnp.where(chi2_dof > config.max_chi2_per_dof, 2048, 0)
+              | jnp.where(post.edge_mass > config.max_edge_mass, 4096, 0))
+    status = jnp.where(found, status, 0)
+    return FixQuality(
+        mean_north_m=jnp.where(resolved, post.mean_north_m, best_ne[0]),
+        mean_east_m=jnp.where(resolved, post.mean_east_m, best_ne[1]),
+        covariance_m2=cov,
+        resolved=resolved,
+        n_effective=post.n_effective,
+        second_mode_ratio=post.second_mode_ratio,
+        edge_mass=post.edge_mass,
+        chi2_per_dof=chi2_dof,
+        accepted=found & (status == 0),
+        status=status,
+    )
