@@ -6,7 +6,7 @@ direction), 1 mGal white reading noise (readings Eötvös-corrected; the bias an
 difference score forms cancel any constant residual anyway). Batches of 1, 100 and
 1000 tracks.
 
-* ``dense``: :func:`jaxgrav.match.dense.match_dense_batch` (``match_dense`` vmapped
+* ``dense``: :func:`jaxgrav.match.dense_batch.match_dense_batch` (``match_dense`` vmapped
   over chunks of 128 tracks; ``one_vmap_*`` fields: one ``vmap`` over the whole
   batch instead) with the default DenseConfig
   (500 m spacing, half_size sized so that half_size·spacing ≥ 1.2 × drift radius:
@@ -71,8 +71,8 @@ from jaxgrav.match.dense import (  # noqa: E402
     DenseConfig,
     lattice_table,
     match_dense,
-    match_dense_batch,
 )
+from jaxgrav.match.dense_batch import match_dense_batch  # noqa: E402
 from jaxgrav.match.lattice import lattice_values  # noqa: E402
 from jaxgrav.match.lattice_chains import stencil_size_for  # noqa: E402
 from jaxgrav.match.scoring import decreasing_weights  # noqa: E402

@@ -22,7 +22,8 @@ import numpy as np
 
 from jaxgrav import datasets
 from jaxgrav.fields.map_error import map_error, map_error_key, truth_field
-from jaxgrav.match.dense import lattice_table, match_dense, match_dense_batch
+from jaxgrav.match.dense import lattice_table, match_dense
+from jaxgrav.match.dense_batch import match_dense_batch
 from jaxgrav.match.sizing import config_for
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import MatchingScenario, matching_scenario

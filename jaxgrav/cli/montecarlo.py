@@ -4,7 +4,6 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``; the command function is
 :func:`cmd_montecarlo`.
 """
 
-import inspect
 import json
 import os
 import sys
@@ -245,9 +244,10 @@ def cmd_montecarlo(args):
     if kind == "matcher" and grid is None and args.truth_map is not None:
         grid = default_grid()
     model = map_error_from_args(args, grid)
-    if model is not None and "map_error" not in inspect.signature(BUILDERS[args.method]).parameters:
-        raise ValueError(f"--method {args.method} does not take a map error yet (--map-error, "
-                         "--truth-map); use a matcher")
+    if model is not None and grid is None:
+        raise ValueError(f"--map-error and --truth-map need --map MAP with --method "
+                         f"{args.method}: paper D's point masses have no grid to draw a map "
+                         "error on")
     spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes,
                  map_error=model)
     n_dev = args.devices or len(jax.devices())

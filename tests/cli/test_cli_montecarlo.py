@@ -332,7 +332,7 @@ def test_montecarlo_truth_map(tmp_path, capsys):
                             "0 = perfect map); got -2.0"),
     (["--map-error", "1", "--map-error-length", "inf"], "--map-error-length must be a finite"),
     (["--map-error", "1", "--truth-map", "ryukyu"], "exclude each other"),
-    (["--method", "ukf", "--map-error", "1"], "--method ukf does not take a map error yet"),
+    (["--method", "ukf", "--map-error", "1"], "--map-error and --truth-map need --map MAP"),
 ])
 def test_montecarlo_bad_map_error(tmp_path, capsys, args, match):
     argv = ["montecarlo", "--runs", "2", *args, "--out", str(tmp_path / "x.nc")]

@@ -18,9 +18,9 @@ from jaxgrav.match.dense import (
     DenseConfig,
     lattice_table,
     match_dense,
-    match_dense_batch,
     shifted_tracks,
 )
+from jaxgrav.match.dense_batch import match_dense_batch
 from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_track
 
 RNG = np.random.default_rng(0)
