@@ -11,16 +11,22 @@ import pytest
 # Persistent compilation cache: a second run of the suite (and of the example scripts
 # the tests start as subprocesses, through the environment) loads compiled programs
 # instead of compiling them again. JAXGRAV_TEST_CACHE=off disables it; any other value
-# is the folder (default: the user's cache folder).
+# is the folder (default: the user's cache folder). A size bound turns on JAX's file
+# lock around every cache read and write (needs `filelock`): without it two processes
+# (the xdist workers, the two-process Monte Carlo test) can read an entry while another
+# writes it, and deserialising a torn executable aborts the process.
 _CACHE = os.environ.get("JAXGRAV_TEST_CACHE",
                         str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-                            / "jaxgrav" / "xla-tests"))
+                            / "jaxgrav" / "xla-tests-locked"))
 if _CACHE != "off":
     os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", _CACHE)
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
+    os.environ.setdefault("JAX_COMPILATION_CACHE_MAX_SIZE", str(4 * 2**30))
     jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
     jax.config.update("jax_persistent_cache_min_compile_time_secs",
                       float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]))
+    jax.config.update("jax_compilation_cache_max_size",
+                      int(os.environ["JAX_COMPILATION_CACHE_MAX_SIZE"]))
 
 jax.config.update("jax_enable_x64", True)
 
