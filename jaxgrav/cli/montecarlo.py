@@ -244,7 +244,7 @@ def cmd_montecarlo(args):
     if kind == "matcher" and grid is None and args.truth_map is not None:
         grid = default_grid()
     model = map_error_from_args(args, grid)
-    if model is not None and grid is None:
+    if model is not None and grid is None and kind == "filter":
         raise ValueError(f"--map-error and --truth-map need --map MAP with --method "
                          f"{args.method}: paper D's point masses have no grid to draw a map "
                          "error on")
