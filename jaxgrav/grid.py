@@ -134,14 +134,8 @@ class Grid(GeographicAxes):
     def to_netcdf(self, path, *, attrs=None, force=False):
         """Write the grid to NetCDF (CF ``lat``/``lon`` coordinates), atomically.
 
-        Parameters
-        ----------
-        path : str or Path
-            Output file. An existing file is replaced only with ``force=True``.
-        attrs : dict, optional
-            Global attributes (provenance).
-        force : bool
-            Overwrite an existing file.
+        See :func:`jaxgrav.grid_files.write_netcdf` for the parameters (``path``,
+        ``attrs``, ``force``: an existing file is replaced only with ``force=True``).
         """
         write_netcdf(self, path, attrs=attrs, force=force)
 
@@ -168,25 +162,11 @@ class Grid(GeographicAxes):
         return refined(self, factor, method)
 
     def window(self, lat, lon, half_size):
-        """Fixed-size square windows of nodes centred on the node nearest each point.
+        """Fixed-size ``(2k+1) × (2k+1)`` node windows centred on the node nearest each point.
 
-        Parameters
-        ----------
-        lat, lon : array_like
-            Window centres (degrees), broadcast to shape ``P``.
-        half_size : int
-            Half-width k in nodes (static); windows are ``(2k+1) × (2k+1)``.
-
-        Returns
-        -------
-        Window
-            Values, south-west indices and a ``complete`` flag. A window that would
-            cross the grid's edge is shifted inside and flagged ``complete=False``.
-
-        Raises
-        ------
-        ValueError
-            If the window is larger than the grid.
+        See :func:`jaxgrav.grid_windows.node_windows` (centres in degrees, ``half_size``
+        k static; a window crossing the edge is shifted inside and flagged
+        ``complete=False``; ValueError if larger than the grid).
         """
         return node_windows(self, lat, lon, half_size)
 

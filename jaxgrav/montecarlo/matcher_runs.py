@@ -148,6 +148,18 @@ def dense_run(key, grid, scenario, config, map_error=None):
     return matcher_record(run, r, **_offset(r))
 
 
+def _paper_a_settings(grid, drift_deg, noise, n_fixes, map_error):
+    """The paper-A builders' defaults and checks: map, map error, drift, noise, fixes, scenario."""
+    grid = default_grid() if grid is None else grid
+    map_error = check_map_error(map_error, grid)
+    drift = 0.035 if drift_deg is None else float(drift_deg)
+    noise = 1.0 if noise is None else float(noise)
+    n = 30 if n_fixes is None else int(n_fixes)
+    check_settings(drift, noise, n)
+    scen = MatchingScenario(region=region_of(grid), drift_deg=drift, noise_mgal=noise, n_fixes=n)
+    return grid, map_error, drift, noise, n, scen
+
+
 def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=None):
     """Paper A, dense-offset matcher (the ``jaxgrav demo`` realistic setting).
 
@@ -163,13 +175,8 @@ def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=N
     settings record σ and L (``map_error_sigma``, ``map_error_length_m``) or the truth
     grid's name (``truth_map``).
     """
-    grid = default_grid() if grid is None else grid
-    map_error = check_map_error(map_error, grid)
-    drift = 0.035 if drift_deg is None else float(drift_deg)
-    noise = 1.0 if noise is None else float(noise)
-    n = 30 if n_fixes is None else int(n_fixes)
-    check_settings(drift, noise, n)
-    scen = MatchingScenario(region=region_of(grid), drift_deg=drift, noise_mgal=noise, n_fixes=n)
+    grid, map_error, drift, noise, n, scen = _paper_a_settings(grid, drift_deg, noise, n_fixes,
+                                                             map_error)
     cfg = config_for("dense", grid, 1.2 * drift * DEG_ARC_M, noise_mgal=max(noise, 0.1),
                      bias_sigma_mgal=3.0)
     settings = dict(description="paper A: dense-offset matcher, fixed INS drift",
@@ -213,15 +220,10 @@ def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=
     :func:`~jaxgrav.match.api.config_for` ``("chains", ...)`` for 1.2 × the drift.
     ``map_error`` as :func:`dense_builder` (drawn on ``grid``, not the refined map).
     """
-    grid = default_grid() if grid is None else grid
-    map_error = check_map_error(map_error, grid)
-    drift = 0.035 if drift_deg is None else float(drift_deg)
-    noise = 1.0 if noise is None else float(noise)
-    n = 30 if n_fixes is None else int(n_fixes)
-    check_settings(drift, noise, n)
+    grid, map_error, drift, noise, n, scen = _paper_a_settings(grid, drift_deg, noise, n_fixes,
+                                                             map_error)
     factor = max(1, round(min(grid.dlat, grid.dlon) / CHAIN_NODE_DEG))
     refined = grid.refine(factor) if factor > 1 else grid
-    scen = MatchingScenario(region=region_of(grid), drift_deg=drift, noise_mgal=noise, n_fixes=n)
     cfg = config_for("chains", refined, 1.2 * drift * DEG_ARC_M, noise_mgal=max(noise, 0.1),
                      step_m=scen.step_m)
     settings = dict(description=f"paper A: iso-point chains on the map refined x{factor}, "
