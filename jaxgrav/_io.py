@@ -3,7 +3,11 @@
 Every file jaxgrav writes goes through :func:`atomic_output`: the data are written to a
 temporary file in the target's directory and renamed into place only when writing
 succeeded, so a crash never leaves a half-written file, and an existing file is
-replaced only when the caller passes ``force=True``.
+replaced only when the caller passes ``force=True``. The file gets the permissions an
+ordinary ``open(path, "w")`` would give (``0o666`` less the user's umask), not the
+temporary file's ``0o600``. A command that writes several files checks all of them
+with :func:`check_outputs` before it writes any, so it never leaves some written and
+others refused.
 """
 
 import contextlib
@@ -11,7 +15,51 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_output"]
+__all__ = ["atomic_output", "check_outputs"]
+
+
+def _umask():
+    """The process's file-creation mask (read without changing it for long)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def check_outputs(paths, *, force=False, names=None):
+    """Refuse a set of output files before any of them is written.
+
+    Parameters
+    ----------
+    paths : sequence of str, Path or None
+        The files a command will write (None entries are skipped).
+    force : bool
+        Existing files may be replaced.
+    names : sequence of str, optional
+        The option that names each path (``--out``, ``--truth``), for the message.
+
+    Raises
+    ------
+    FileExistsError
+        If a path exists and ``force`` is false.
+    ValueError
+        If two options name the same file, or a path is an existing folder.
+    """
+    names = [None] * len(paths) if names is None else list(names)
+    seen = {}
+    for path, name in zip(paths, names, strict=True):
+        if path is None:
+            continue
+        label = f"{name} {str(path)!r}" if name else repr(str(path))
+        resolved = Path(path).resolve()
+        if resolved in seen:
+            raise ValueError(f"{label} and {seen[resolved]} are the same file; give each "
+                             "output its own path")
+        seen[resolved] = label
+        if Path(path).is_dir():
+            raise ValueError(f"{label} is a folder; expected a file path")
+        if Path(path).exists() and not force:
+            raise FileExistsError(f"{label} exists; pass --force to overwrite it "
+                                  "(nothing was written)")
 
 
 @contextlib.contextmanager
@@ -38,6 +86,7 @@ def atomic_output(path, *, force=False):
     os.close(fd)
     try:
         yield Path(tmp)
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

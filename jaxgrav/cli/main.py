@@ -13,11 +13,15 @@ Sub-commands
 ``bench``           run every benchmark script; Markdown table of ratios
 ``data egm2008``    rebuild the shipped EGM2008 regional files (extra ``egm2008``)
 
-Errors in user input are reported as one line on stderr with exit code 2.
+Errors in user input are reported as one line on stderr with exit code 2; a failure
+while running (anything else that goes wrong) as one line with exit code 1. ``--debug``
+shows the traceback instead. ``--version`` prints the installed version.
 """
 
 import argparse
 import sys
+import traceback
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import jax
@@ -39,9 +43,19 @@ def _cmd_data_egm2008(args):
         print(f"wrote {p}")
 
 
+def _version():
+    try:
+        return version("jaxgrav")
+    except PackageNotFoundError:  # running from a source tree that is not installed
+        return "unknown (not installed)"
+
+
 def build_parser():
     """The argument parser of the ``jaxgrav`` command."""
     p = argparse.ArgumentParser(prog="jaxgrav", description=__doc__.split("\n")[0])
+    p.add_argument("--version", action="version", version=f"jaxgrav {_version()}")
+    p.add_argument("--debug", action="store_true",
+                   help="show the Python traceback of an error instead of one line")
     sub = p.add_subparsers(dest="command", required=True)
 
     demo.add_parser(sub)
@@ -69,7 +83,18 @@ def main(argv=None):
     try:
         args.func(args)
     except (ValueError, FileExistsError, FileNotFoundError, ImportError) as err:
+        if args.debug:
+            traceback.print_exc()
         print(f"jaxgrav {args.command}: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"jaxgrav {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as err:  # a run-time failure: one line, exit 1 (traceback with --debug)
+        if args.debug:
+            traceback.print_exc()
+        print(f"jaxgrav {args.command}: failed: {type(err).__name__}: {err} (run again with "
+              "--debug for the traceback)", file=sys.stderr)
+        return 1
     return 0
 

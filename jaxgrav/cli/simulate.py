@@ -8,6 +8,7 @@ import math
 import jax
 import numpy as np
 
+from jaxgrav._io import check_outputs
 from jaxgrav.constants import KNOT
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import map_error, truth_grid
@@ -119,7 +120,29 @@ def add_parser(sub):
     return sim_p
 
 
+def _check_simulate_args(args):
+    """Range-check every numeric option of ``simulate`` before anything runs."""
+    def finite(name, value, ok, expected):
+        if not (math.isfinite(value) and ok(value)):
+            raise ValueError(f"{name} must be {expected}; got {value!r}")
+    if args.n < 2:
+        raise ValueError(f"--n must be at least 2 fixes; got {args.n}")
+    finite("--dt", args.dt, lambda v: v > 0, "a positive interval between fixes (s)")
+    finite("--v-east", args.v_east, lambda v: abs(v) <= 100, "a speed within ±100 knots")
+    finite("--v-north", args.v_north, lambda v: abs(v) <= 100, "a speed within ±100 knots")
+    if math.hypot(args.v_east, args.v_north) == 0:
+        raise ValueError("--v-east and --v-north are both 0; a matching track must move")
+    finite("--drift", args.drift, lambda v: 0 < v <= 5,
+           "a positive INS drift of at most 5 degrees of arc")
+    finite("--probability", args.probability, lambda v: 0 < v < 1,
+           "a probability strictly between 0 and 1")
+    finite("--noise", args.noise, lambda v: v >= 0, "a reading noise >= 0 (mGal)")
+    finite("--bias", args.bias, lambda v: True, "a finite gravimeter bias (mGal)")
+
+
 def _cmd_simulate(args):
+    _check_simulate_args(args)
+    check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"])
     grid = load_map(args.map, args.var)
     w, e, s, n = grid.extent
     scen = MatchingScenario(
@@ -127,8 +150,6 @@ def _cmd_simulate(args):
         dt=args.dt, drift_deg=args.drift, noise_mgal=args.noise, bias_mgal=args.bias,
         n_fixes=args.n, drift_law=args.drift_law,
     )
-    if args.n < 2:
-        raise ValueError(f"--n must be at least 2; got {args.n}")
     model = map_error_from_args(args, grid)
     run = matching_scenario(jax.random.key(args.seed), grid, scen, model)
     truth = run.truth
