@@ -24,8 +24,11 @@ from jaxgrav.montecarlo.runner import run
 from jaxgrav.scenarios import MatchingScenario
 from jaxgrav.sim import DEG_ARC_M
 
-__all__ = ["TABLE1_DRIFTS_DEG", "TABLE_RUNS", "chains_table_run", "dense_table_run",
-           "format_table", "run_batch", "summarize", "table1"]
+__all__ = ["REJECTED_BITS", "TABLE1_DRIFTS_DEG", "TABLE_RUNS", "chains_table_run",
+           "dense_table_run", "format_table", "run_batch", "summarize", "table1"]
+
+REJECTED_BITS = 512 | 1024 | 2048 | 4096
+"""Status bits of a rejected fix (:data:`jaxgrav.match.STATUS`)."""
 
 TABLE1_DRIFTS_DEG = (0.005, 0.0125, 0.02, 0.0275, 0.035)
 """INS drift of the five groups (degrees of arc), spanning paper A's Table 1."""
@@ -140,7 +143,9 @@ def summarize(out, success_deg=0.01):
     -------
     dict
         Medians and means of INS and matched errors, their ratio, the success rate
-        ``error < success_deg``, the fraction of tracks improved over the INS, the
+        ``error < success_deg``, the fractions of tracks improved over the INS and made
+        worse than it, the fraction of fixes accepted (no integrity bit, see
+        :data:`REJECTED_BITS`; a rejected fix is the INS track), the
         failure rate (error above a third of the INS error) overall and by mean map
         slope along the track, and among failures the fraction whose chosen track
         scores no worse than the true one (ambiguity, not a search failure).
@@ -169,6 +174,8 @@ def summarize(out, success_deg=0.01):
         median_ratio=float(np.median(err) / np.median(ins)),
         success_rate=float(np.mean(err < success_deg * DEG_ARC_M)),
         improved_rate=float(np.mean(err < ins)),
+        worse_rate=float(np.mean(err > ins)),
+        accepted_rate=float(np.mean((np.asarray(out["status"]) & REJECTED_BITS) == 0)),
         flagged_rate=float(np.mean(out["status"] != 0)),
         work_unconstrained_median=float(np.median(wu)),
         work_constrained_median=float(np.median(wc)),
@@ -202,12 +209,14 @@ def table1(key, truth_field, match_map, *, method, runs_per_group, base=None,
 def format_table(rows, title):
     """Markdown table of Table-1-like rows."""
     head = ("| INS drift (°) | INS error (°) | matched error (°), mean | median error (m) | "
-            "success < 0.01° | ∏N_i (median) | constrained (median) | runs |")
-    lines = [f"**{title}**", "", head, "|" + "---|" * 8]
+            "median ÷ INS median | worse than INS | error < 0.01° | ∏N_i (median) | "
+            "constrained (median) | runs |")
+    lines = [f"**{title}**", "", head, "|" + "---|" * 10]
     for r in rows:
         lines.append(
             f"| {r['drift_deg']:.4f} | {r['ins_error_deg_mean']:.4f} | {r['error_deg_mean']:.4f} "
-            f"| {r['error_m_median']:.0f} | {100 * r['success_rate']:.0f} % "
+            f"| {r['error_m_median']:.0f} | {r['median_ratio']:.2f} "
+            f"| {100 * r['worse_rate']:.0f} % | {100 * r['success_rate']:.0f} % "
             f"| {_sci(r['work_unconstrained_median'])} | {_sci(r['work_constrained_median'])} "
             f"| {r['runs']} |")
     return "\n".join(lines)

@@ -36,10 +36,11 @@ def demo_dir(tmp_path_factory):
 
 
 def test_demo_batches_reuse_the_compiled_code(demo_dir):
-    """Six batches (five table groups, one Monte Carlo) through the runner's one jitted
-    chunk function: traced once per distinct shape, here the chain search's two window
-    sizes (the four smaller drifts share one) and the dense matcher."""
-    assert 1 <= TRACED.count("chunk_fn") <= 3  # fewer if a test compiled them already
+    """Eight batches (five table groups, three realistic settings) through the runner's
+    one jitted chunk function: traced once per distinct shape, here the chain search's
+    two window sizes (the four smaller drifts share one) and the dense matcher's three
+    settings (perfect map, map error with the white matcher, map error told)."""
+    assert 1 <= TRACED.count("chunk_fn") <= 5  # fewer if a test compiled them already
 
 
 def test_demo_table_has_the_five_drift_groups(demo_dir):
@@ -72,8 +73,32 @@ def test_demo_summary_json(demo_dir):
     np.testing.assert_allclose(real["median_ratio"],
                                real["error_m_median"] / real["ins_error_m_median"])
     assert all(0.0 <= real[k] <= 1.0 for k in ("success_rate", "improved_rate"))
+    rows = s["realistic_settings"]
+    assert len(rows) == 3 and s["realistic_setting"] == rows[-1]
+    assert s["headline"] == rows[-1]["setting"] and "told the map error" in s["headline"]
+    assert "perfect map" in rows[0]["setting"] and "white-noise" in rows[1]["setting"]
+    for r in rows:  # the same tracks in every row: the INS errors are the same
+        assert r["ins_error_m_median"] == rows[0]["ins_error_m_median"]
+        assert 0.0 <= r["worse_rate"] <= 1.0 and 0.0 <= r["accepted_rate"] <= 1.0
+    assert rows[0]["accepted_rate"] == rows[1]["accepted_rate"] == 1.0  # white: never rejects
     cfg = s["realistic_config"]
     assert cfg["half_size"] >= 1 and cfg["spacing_m"] > 0 and math.isfinite(cfg["noise_mgal"])
+
+
+def test_demo_realistic_table_reports_what_the_summary_says(demo_dir):
+    text = (demo_dir / "table1.md").read_text()
+    s = json.loads((demo_dir / "summary.json").read_text())
+    rows = [line.split("|")[1:-1] for line in text.splitlines()
+            if line.startswith(("| perfect", "| map error"))]
+    assert len(rows) == 3
+    for cells, r in zip(rows, s["realistic_settings"], strict=True):
+        assert cells[0].strip() == r["setting"]
+        assert float(cells[2]) == pytest.approx(r["median_ratio"], abs=0.006)
+        assert cells[3].strip() == f"{100 * r['worse_rate']:.0f} %"
+    # the paper-setting table shows the ratio and the share worse than the INS beside
+    # "error < 0.01°", so a drift below 0.01° cannot read as a success on its own
+    head = next(line for line in text.splitlines() if line.startswith("| INS drift"))
+    assert "worse than INS" in head and "error < 0.01°" in head
 
 
 def test_demo_png(demo_dir):
