@@ -8,10 +8,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.ticker import LogFormatterSciNotation, MaxNLocator
 
 from jaxgrav._io import atomic_output
 
-__all__ = ["add_scale_bar", "plot_map", "save_figure"]
+__all__ = ["add_scale_bar", "plot_error_summary", "plot_map", "save_figure"]
 
 
 def _nice_length_km(width_km):
@@ -120,6 +121,70 @@ def plot_map(grid, ax=None, *, tracks=None, title=None, cmap="RdBu_r", channel=N
     ax.set_ylabel("latitude (°N)")
     ax.set_title(title or grid.name, fontsize=10)
     return ax
+
+
+def plot_error_summary(ins_err, err, *, title, label="matched",
+                       xlabel="mean track error (m)", failure_ratio=1 / 3):
+    """Two panels comparing a method's per-run errors with the free INS's.
+
+    Left: histogram of the per-run ratio error / INS error on a log axis, with the INS
+    (ratio 1) and the failure bound as vertical lines — a ratio, so a fixed-size INS
+    drift (the same error in every run) does not draw one spike that squashes the
+    method's histogram. Right: the cumulative distributions of both errors.
+
+    Parameters
+    ----------
+    ins_err, err : array_like, shape ``(runs,)``
+        Errors of the free INS and of the method (m); non-finite runs are counted in
+        the title and left out of the panels.
+    title : str
+        The scenario (method, runs, map error...), shown above both panels.
+    label : str
+        Name of the method's curve.
+    xlabel : str
+        What the errors are (with units).
+    failure_ratio : float
+        Ratio above which a run counts as failed (drawn as a line).
+
+    Returns
+    -------
+    matplotlib Figure
+    """
+    ins = np.asarray(ins_err, float)
+    err = np.asarray(err, float)
+    ok = np.isfinite(ins) & np.isfinite(err) & (ins > 0)
+    ratio = err[ok] / ins[ok]
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(12, 4.8), layout="constrained")
+    pos = ratio[ratio > 0]
+    lo = min(pos.min() if pos.size else 0.1, 0.5 * failure_ratio)
+    hi = max(pos.max() if pos.size else 2.0, 2.0)
+    bins = np.geomspace(lo, hi * 1.001, 40)
+    ax0.hist(np.clip(ratio, lo, None), bins=bins, color="C1", alpha=0.8,
+             label=f"{label} (median {np.median(ratio):.3f})" if ratio.size else label)
+    ax0.axvline(1.0, color="k", lw=1.5, label="free INS (= 1)")
+    ax0.axvline(failure_ratio, color="C3", ls="--", lw=1.2,
+                label=f"failure bound ({failure_ratio:.3g})")
+    ax0.set_xscale("log")
+    ax0.xaxis.set_major_formatter(LogFormatterSciNotation(labelOnlyBase=False,
+                                                          minor_thresholds=(2, 0.5)))
+    ax0.yaxis.set_major_locator(MaxNLocator(integer=True))
+    ax0.set_xlabel(f"error / INS error, per run ({xlabel.split(' (')[0]})")
+    ax0.set_ylabel("runs")
+    ax0.legend(fontsize=8)
+    worse = float(np.mean(ratio > 1.0)) if ratio.size else float("nan")
+    ax0.set_title(f"worse than the INS: {100 * worse:.1f} % of runs", fontsize=9)
+    for name, v, c in (("INS", ins, "k"), (label, err, "C1")):
+        v = np.sort(v[np.isfinite(v)])
+        ax1.plot(v, np.arange(1, v.size + 1) / max(v.size, 1), color=c, label=name)
+    ax1.set_xscale("log")
+    ax1.set_xlabel(xlabel)
+    ax1.set_ylabel("fraction of runs ≤ error")
+    ax1.set_ylim(0, 1.02)
+    ax1.grid(True, which="both", alpha=0.3)
+    ax1.legend(loc="lower right", fontsize=8)
+    bad = int((~ok).sum())
+    fig.suptitle(title + (f" ({bad} runs non-finite, left out)" if bad else ""), fontsize=10)
+    return fig
 
 
 def save_figure(fig, path, *, force=False, dpi=120):

@@ -11,7 +11,6 @@ import time
 from pathlib import Path
 
 import jax
-import matplotlib.pyplot as plt
 import numpy as np
 
 from jaxgrav import __version__, montecarlo
@@ -31,7 +30,7 @@ from jaxgrav.montecarlo.methods import (
     default_grid,
     resolve_method,
 )
-from jaxgrav.plot import save_figure
+from jaxgrav.plot import plot_error_summary, save_figure
 
 __all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize"]
 
@@ -166,31 +165,8 @@ def format_summary(s):
 
 def _plot_errors(results, summary, title, path, force, label="matched",
                  xlabel="mean track error (m)"):
-    ins = np.asarray(results["ins_err_m"], float)
-    err = np.asarray(results["err_m"], float)
-    pos = np.concatenate([ins, err])
-    pos = pos[np.isfinite(pos) & (pos > 0)]
-    lo, hi = (pos.min(), pos.max()) if pos.size else (1.0, 10.0)
-    bins = np.geomspace(max(lo, 1e-3), max(hi, lo * 1.01, 1e-3 * 1.01), 40)
-    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(12, 4.5))
-    for name, v in (("INS", ins), (label, err)):
-        v = v[np.isfinite(v)]
-        ax0.hist(v, bins=bins, alpha=0.6, label=f"{name} (median {np.median(v):.0f} m)"
-                 if v.size else name)
-        ax1.plot(np.sort(v), np.arange(1, v.size + 1) / max(v.size, 1), label=name)
-    ax0.set_xscale("log")
-    ax0.set_xlabel(xlabel)
-    ax0.set_ylabel("runs")
-    ax0.legend()
-    ax1.set_xscale("log")
-    ax1.set_xlabel(xlabel)
-    ax1.set_ylabel("fraction of runs ≤ error")
-    ax1.grid(True, which="both", alpha=0.3)
-    ax1.legend(loc="lower right")
-    ax0.set_title(title, fontsize=9)
-    ax1.set_title(f"error > {summary['failure_ratio']:.3g} x INS: "
-                  f"{100 * summary['failure_rate']:.1f} %, median error / INS "
-                  f"{summary['ratio']['p50']:.3f}")
+    fig = plot_error_summary(results["ins_err_m"], results["err_m"], title=title, label=label,
+                             xlabel=xlabel, failure_ratio=summary["failure_ratio"])
     save_figure(fig, path, force=force)
 
 
