@@ -82,14 +82,15 @@ def regular_axis(coord, name, source=None):
         raise ValueError(f"{what}; values {order} up to {name}[{i}] = {coord[i]:.10g}, then "
                          f"{name}[{i + 1}] = {coord[i + 1]:.10g} goes back (unsorted)")
     mean = (coord[-1] - coord[0]) / (coord.size - 1)
+    typical = float(np.median(step))  # the step most nodes have: the odd one is named
     eps = np.finfo(raw.dtype).eps if raw.dtype.kind == "f" else np.finfo(float).eps
     tol = max(1e-6 * abs(mean) + 1e-9, 16.0 * eps * float(np.max(np.abs(coord))))
-    irregular = np.flatnonzero(np.abs(step - mean) > tol)
-    if irregular.size:
-        i = int(irregular[0])
+    irregular = np.flatnonzero(np.abs(step - typical) > tol)
+    if irregular.size or abs(mean - typical) > tol:
+        i = int(irregular[0]) if irregular.size else int(np.argmax(np.abs(step - typical)))
         raise ValueError(f"{what}; the step from {name}[{i}] = {coord[i]:.10g} to "
                          f"{name}[{i + 1}] = {coord[i + 1]:.10g} is {step[i]:.6g}, not the "
-                         f"regular {mean:.6g} ({irregular.size} irregular step(s))")
+                         f"regular {typical:.6g} ({max(irregular.size, 1)} irregular step(s))")
     flipped = bool(sign < 0)
     first = coord[-1] if flipped else coord[0]
     return float(first), float(abs(mean)), flipped

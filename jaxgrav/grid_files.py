@@ -185,8 +185,8 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
         var = _choose_var(ds, var, (lat_dim, lon_dim), label, exclude)
         da = ds[var]
         extra = [d for d in da.dims if d not in (lat_dim, lon_dim)]
-        da = da.isel({d: 0 for d in extra if da.sizes[d] == 1})
         extra = [d for d in extra if da.sizes[d] > 1]
+        da = da.squeeze([d for d in da.dims if d not in (*extra, lat_dim, lon_dim)], drop=True)
         if ndim is not None and len(extra) + 2 > ndim:
             sizes = ", ".join(f"{d}: {da.sizes[d]}" for d in da.dims)
             raise ValueError(
