@@ -75,6 +75,8 @@ class TrackTable(dict):
         The text column holding those original times (``time`` unless named otherwise).
     renamed : dict of str to str
         Canonical name → the header it was read from, when they differ.
+    cells : dict of str to numpy.ndarray
+        The text of the numeric columns that no command reads (for :meth:`columns`).
     """
 
     path = ""
@@ -84,15 +86,22 @@ class TrackTable(dict):
     time_origin = None
     time_text = None
     renamed = None
+    cells = None
 
     def line(self, i):
         """The file line number of row ``i``."""
         return int(self.lines[i])
 
     def columns(self):
-        """Every column in file order (numeric float arrays and text str arrays), for
-        :func:`write_track_csv` to pass a track through."""
-        return {k: self[k] if k in self else self.text[k] for k in self.order}
+        """Every column in file order, for :func:`write_track_csv` to pass a track through.
+
+        The columns the commands read (:data:`KNOWN_COLUMNS`, ``--columns``) as float
+        arrays, normalised (``t`` in seconds, ``lon`` contiguous); text columns and other
+        numeric columns as the file's own text (str arrays), so that identifiers such as
+        ``0012`` or long integers come out as they went in.
+        """
+        return {k: self.cells.get(k, self[k]) if k in self else self.text[k]
+                for k in self.order}
 
 
 def parse_columns(text):
@@ -250,7 +259,7 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
     if not table.rows:
         raise ValueError(f"{label} has a header but no rows")
     track = TrackTable()
-    track.path, track.text, track.order = str(path), {}, []
+    track.path, track.text, track.order, track.cells = str(path), {}, [], {}
     track.lines = np.asarray(table.lines)
     track.renamed = {k: table.header[j] for k, j in found.items() if table.header[j] != k}
     canonical = {j: k for k, j in found.items()}
@@ -279,6 +288,8 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
             track.text[name] = np.asarray(cells, dtype=str)
         else:
             track[name] = values
+            if j not in canonical and name not in KNOWN_COLUMNS:
+                track.cells[name] = np.asarray(cells, dtype=str)
         track.order.append(name)
     _check_columns(track, required, allow_nan, label)
     return track
@@ -339,12 +350,16 @@ def write_track_csv(path, columns, *, force=False, precision=9):
     force : bool
         Overwrite an existing file.
     precision : int
-        Significant digits.
+        Significant digits (at least 3 decimals for large values, e.g. epoch seconds).
     """
-    arrays = {}
+    arrays, digits = {}, {}
     for k, v in columns.items():
         a = np.asarray(v).reshape(-1)
         arrays[k] = a.astype(str) if a.dtype.kind in "USO" else a.astype(float)
+        if a.dtype.kind not in "USO":
+            big = np.abs(arrays[k][np.isfinite(arrays[k])])
+            whole = int(np.floor(np.log10(big.max()))) + 1 if big.size and big.max() > 0 else 0
+            digits[k] = max(precision, whole + 3)  # epoch seconds keep their milliseconds
     lengths = {k: a.size for k, a in arrays.items()}
     if len(set(lengths.values())) > 1:
         raise ValueError(f"columns must have equal lengths; got {lengths}")
@@ -353,7 +368,7 @@ def write_track_csv(path, columns, *, force=False, precision=9):
         w.writerow(list(arrays))
         for row in zip(*arrays.values(), strict=True):
             w.writerow([v if isinstance(v, str) else "" if not np.isfinite(v)
-                        else f"{v:.{precision}g}" for v in row])
+                        else f"{v:.{digits[k]}g}" for k, v in zip(arrays, row, strict=True)])
 
 
 def csv_line(i):

@@ -172,7 +172,7 @@ def global_grid(step=1.0, lon0=0.0):
 
 
 def test_global_0_360_grid_for_a_track_across_greenwich():
-    grid, lat, lon, values = global_grid()
+    grid, lat, _, values = global_grid()
     tlat = np.array([0.2, 0.4, 0.6])
     tlon = np.array([-1.5, -0.25, 1.3])  # as the track reader gives 359.5 … 1.3
     region = grid.finite_region(tlat, tlon, 5000.0)

@@ -216,7 +216,7 @@ def render(tr):
     def quote(s):
         return f'"{s}"' if (d in s or (d == " " and " " in s) or "," in s) else s
 
-    start = dt.datetime(2024, 5, 1, tzinfo=dt.timezone.utc)
+    start = dt.datetime(2024, 5, 1, tzinfo=dt.UTC)
     times = ([(start + dt.timedelta(seconds=float(s))).isoformat() for s in tr["t"]]
              if tr["iso"] else [num(s) for s in tr["t"]])
     names = tr["names"]
@@ -290,3 +290,16 @@ def test_generated_malformed_tracks_name_the_line(tmp_path, tr, fault, data):
     assert "np." not in msg and str(path) in msg
     for p in phrases:
         assert p in msg, (p, msg)
+
+
+def test_pass_through_keeps_the_files_text_and_epoch_seconds(tmp_path):
+    path = tmp_path / "log.csv"
+    path.write_text("t,lat,lon,station,count\n1714564800.125,30,130,0012,7\n"
+                    "1714564801.250,30.1,130.1,0013,8\n")
+    track = read_track_csv(path, required=("t", "lat", "lon"))
+    np.testing.assert_allclose(np.diff(track["t"]), 1.125)
+    np.testing.assert_array_equal(track["station"], [12.0, 13.0])  # numeric for the commands
+    write_track_csv(tmp_path / "out.csv", track.columns())
+    text = (tmp_path / "out.csv").read_text().splitlines()
+    assert text[0] == "t,lat,lon,station,count"
+    assert text[1] == "1714564800.125,30,130,0012,7", text
