@@ -40,7 +40,7 @@ from jaxgrav.fields.harmonics import SphericalHarmonics
 from jaxgrav.grid import Grid
 from jaxgrav.grid_files import read_netcdf
 
-__all__ = ["available", "load", "load_map", "path", "provenance"]
+__all__ = ["available", "load", "load_map", "map_for_track", "path", "provenance"]
 
 _HERE = Path(__file__).resolve().parent
 
@@ -252,6 +252,37 @@ def load_map(path, var=None, dataset_default="anomaly_2p5min", *, error_var=None
                          f"{float(err.lat[i[0]]):g}, lon {float(err.lon[i[1]]):g} "
                          f"({int(negative.sum())} negative node(s))")
     return grid, _grid_with_mask(err, f"the uncertainty {error_var!r} of {label}", allow_nan)
+
+
+def map_for_track(path, var, lat, lon, margin_m, *, max_missing=0.0, option="--map"):
+    """The map a track needs: :func:`load_map` keeping NaN nodes, then its region.
+
+    One call for the commands: the file (or shipped map) is read with missing nodes
+    kept, and :meth:`Grid.finite_region` returns the map recentred when it is global and
+    its seam cuts the track's region, cut to the region when it has missing nodes
+    anywhere, and refused when the region itself has missing nodes (more than
+    ``max_missing`` of them).
+
+    Parameters
+    ----------
+    path, var
+        As :func:`load_map`.
+    lat, lon : array_like
+        The track (degrees).
+    margin_m : float
+        How far (m) the method reaches from the track, e.g. a matcher's drift radius.
+    max_missing : float
+        Fraction of missing nodes accepted in the region (0 until the method masks them).
+    option : str
+        The command's option, for messages.
+
+    Returns
+    -------
+    Grid
+    """
+    grid = load_map(path, var, allow_nan=True)
+    return grid.finite_region(lat, lon, margin_m, max_missing=max_missing,
+                              source=f"{option} {str(path)!r}")
 
 
 def _grid_with_mask(arrays, label, allow_nan):
