@@ -264,7 +264,7 @@ class GeographicAxes:
         values = jnp.roll(jnp.asarray(self.values)[..., :n], -k, axis=-1)
         return dataclasses.replace(self, values=values, lon0=float(lon0))
 
-    def finite_region(self, lat, lon, margin_m=0.0, *, pad_nodes=3, max_missing=0.0,
+    def finite_region(self, lat, lon, margin_m=0.0, *, pad_nodes=6, max_missing=0.0,
                       source="the map"):
         """The part of the map points need: contiguous (global maps recentred) and finite.
 
@@ -289,7 +289,9 @@ class GeographicAxes:
             Distance (m) the methods may reach from the points, e.g. the drift radius
             a matcher searches, ≥ 0.
         pad_nodes : int
-            Extra nodes on each side for the interpolation stencil (default 3).
+            Extra nodes on each side (default 6): the bicubic stencil, and the
+            not-a-knot spline's end effect of a cut map, which decays by about 0.27 per
+            node (4e-4 of it left after 6).
         max_missing : float
             Largest fraction (0–1) of missing nodes accepted in the region; 0 (default)
             for methods that do not mask NaN cells.
@@ -352,7 +354,7 @@ class GeographicAxes:
             la, lo = region.lat[idx[-2]], region.lon[idx[-1]]
             raise ValueError(
                 f"{source} has {int(missing.sum())} missing (NaN) node(s) among the "
-                f"{missing.size} within {margin_m / 1000:g} km (+{pad_nodes} nodes) of the "
+                f"{missing.size} within {margin_m / 1000:.3g} km (+{pad_nodes} nodes) of the "
                 f"track, the first at lat {la:.6g}, lon {lo:.6g}; the map must be complete "
                 f"there (missing nodes elsewhere are fine)")
         return region
