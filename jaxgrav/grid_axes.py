@@ -331,6 +331,8 @@ class GeographicAxes:
         centre, half = _lon_span(lon)
         half += margin_lon + pad_nodes * self.dlon
         grid = self
+        if grid.n_missing == 0 and not grid.is_global:
+            return grid  # whole, as it is: the methods' own checks name points off the map
         centre_w = _nearest_turn(centre, grid)
         if grid.is_global and (centre_w - half < grid.lon0
                                or centre_w + half > grid.lon0 + (grid.nx - 1) * grid.dlon):
@@ -346,8 +348,6 @@ class GeographicAxes:
                 f"the points (lat {lat.min():g}..{lat.max():g}, lon {centre - half:g}.."
                 f"{centre + half:g} with the margin) lie outside {source} (lat {s:g}..{n:g}, "
                 f"lon {w:g}..{e:g})")
-        if grid.n_missing == 0 and not self.is_global:
-            return grid
         region = dataclasses.replace(
             grid, values=jnp.asarray(grid.values)[..., iy0:iy1 + 1, ix0:ix1 + 1],
             lat0=float(grid.lat0 + iy0 * grid.dlat), lon0=float(grid.lon0 + ix0 * grid.dlon))
