@@ -2,25 +2,43 @@
 
 :class:`GeographicAxes` gives a grid-like dataclass with ``values (..., ny, nx)`` and
 static ``lat0``, ``dlat``, ``lon0``, ``dlon`` its node coordinates, extent, spacing in
-metres, the fractional node index of points and the inside mask; it is the base of
-:class:`jaxgrav.grid.Grid` and :class:`jaxgrav.dov.LayeredGrid`. :func:`regular_axis`
-validates a coordinate axis (package-internal).
+metres, the fractional node index of points, the inside mask, the count of missing
+(NaN) nodes and the part of the map a track needs (:meth:`~GeographicAxes.finite_region`,
+seamless across 0°/360° on global grids); it is the base of :class:`jaxgrav.grid.Grid`
+and :class:`jaxgrav.dov.LayeredGrid`. :func:`regular_axis` validates a coordinate axis and
+:func:`contiguous_longitudes` removes 360° jumps from longitudes (both package-internal,
+shared by the map and track readers).
 """
+
+import dataclasses
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import interp
-from jaxgrav._validate import check_finite
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 
-__all__ = ["GeographicAxes"]
+__all__ = ["GeographicAxes", "contiguous_longitudes", "regular_axis"]
+
+_EQUATOR_M_PER_DEG = 6335439.327 * DEG
+"""Metres per degree of latitude at the equator (the smallest on WGS84): margins in
+degrees computed with it are never too small."""
 
 
-def regular_axis(coord, name):
+def regular_axis(coord, name, source=None):
     """Validate a 1-D regular coordinate (degrees).
+
+    Parameters
+    ----------
+    coord : array_like, shape ``(n,)``
+        Node coordinates, ascending or descending. Float32 coordinates are allowed
+        the rounding of float32 in the spacing test.
+    name : str
+        The axis in messages (``"lat"``, ``"x"``).
+    source : str, optional
+        Where the axis comes from, leading the messages (e.g. ``"map 'gebco.nc'"``).
 
     Returns
     -------
@@ -32,23 +50,88 @@ def regular_axis(coord, name):
     Raises
     ------
     ValueError
-        Fewer than 2 nodes, non-finite, non-monotonic or irregular spacing.
+        Fewer than 2 nodes, a non-finite node, a repeated node, a turn (unsorted) or an
+        irregular step, naming the offending node (index and value).
     """
-    coord = np.asarray(coord, dtype=float)
-    if coord.ndim != 1 or coord.size < 2:
-        raise ValueError(f"{name} must be a 1-D array of at least 2 nodes; got shape {coord.shape}")
-    check_finite(coord, name)
-    flipped = coord[1] < coord[0]
-    if flipped:
-        coord = coord[::-1]
+    raw = np.asarray(coord)
+    where = f"{source}: " if source else ""
+    if raw.ndim != 1 or raw.size < 2:
+        raise ValueError(f"{where}{name} must be a 1-D array of at least 2 nodes; got shape "
+                         f"{raw.shape}")
+    try:
+        coord = raw.astype(float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}{name} must hold numbers (degrees); got {raw.dtype} "
+                         "values") from None
+    bad = np.flatnonzero(~np.isfinite(coord))
+    if bad.size:
+        raise ValueError(f"{where}{name} must be finite; {name}[{bad[0]}] is {coord[bad[0]]:g} "
+                         f"({bad.size} non-finite node(s))")
+    what = f"{where}{name} must be strictly monotonic and regularly spaced"
     step = np.diff(coord)
+    same = np.flatnonzero(step == 0)
+    if same.size:
+        i = int(same[0])
+        raise ValueError(f"{what}; {name}[{i + 1}] = {coord[i + 1]:.10g} repeats {name}[{i}] "
+                         f"({same.size} repeated node(s))")
+    sign = np.sign(step[0])
+    turn = np.flatnonzero(np.sign(step) != sign)
+    if turn.size:
+        i = int(turn[0])
+        order = "increase" if sign > 0 else "decrease"
+        raise ValueError(f"{what}; values {order} up to {name}[{i}] = {coord[i]:.10g}, then "
+                         f"{name}[{i + 1}] = {coord[i + 1]:.10g} goes back (unsorted)")
     mean = (coord[-1] - coord[0]) / (coord.size - 1)
-    if mean <= 0 or np.max(np.abs(step - mean)) > 1e-6 * abs(mean) + 1e-9:
-        raise ValueError(
-            f"{name} must be strictly monotonic and regularly spaced; steps range from "
-            f"{step.min()!r} to {step.max()!r}"
-        )
-    return float(coord[0]), float(mean), bool(flipped)
+    typical = float(np.median(step))  # the step most nodes have: the odd one is named
+    eps = np.finfo(raw.dtype).eps if raw.dtype.kind == "f" else np.finfo(float).eps
+    tol = max(1e-6 * abs(mean) + 1e-9, 16.0 * eps * float(np.max(np.abs(coord))))
+    irregular = np.flatnonzero(np.abs(step - typical) > tol)
+    if irregular.size or abs(mean - typical) > tol:
+        i = int(irregular[0]) if irregular.size else int(np.argmax(np.abs(step - typical)))
+        raise ValueError(f"{what}; the step from {name}[{i}] = {coord[i]:.10g} to "
+                         f"{name}[{i + 1}] = {coord[i + 1]:.10g} is {step[i]:.6g}, not the "
+                         f"regular {typical:.6g} ({max(irregular.size, 1)} irregular step(s))")
+    flipped = bool(sign < 0)
+    first = coord[-1] if flipped else coord[0]
+    return float(first), float(abs(mean)), flipped
+
+
+def contiguous_longitudes(lon):
+    """Longitudes without 360° jumps: each step taken the short way round (degrees).
+
+    The result equals ``lon`` plus a multiple of 360° at each point, shifted as a whole
+    by ∓360° when it would leave [−180, 360]. A regional map across 0° stored in the
+    0–360 convention (350 … 358, 0 … 10) becomes −10 … 10; a rolled global grid (180 …
+    359.5, 0 … 179.5) becomes −180 … 179.5; a track crossing 0° given in 0–360 (359.5,
+    0.5) becomes −0.5, 0.5; one crossing 180° given in ±180 (179.5, −179.5) becomes
+    179.5, 180.5. Points with no jump are returned unchanged.
+
+    Parameters
+    ----------
+    lon : array_like, shape ``(n,)``
+        Longitudes (degrees), finite, in either convention.
+
+    Returns
+    -------
+    numpy.ndarray, shape ``(n,)``
+        Longitudes in the input's float type (float64 for integers); ``lon`` itself when
+        it has no jump.
+    """
+    lon = np.asarray(lon).reshape(-1)
+    if lon.dtype.kind != "f":
+        lon = lon.astype(float)
+    if lon.size < 2:
+        return lon
+    step = np.diff(lon)
+    turns = np.concatenate([[0], np.cumsum((step < -180.0).astype(int) - (step > 180.0))])
+    if not turns.any():
+        return lon
+    out = lon + (360.0 * turns).astype(lon.dtype)
+    if out.max() > 360.0 + 1e-9:
+        out = out - 360.0
+    elif out.min() < -180.0 - 1e-9:
+        out = out + 360.0
+    return out
 
 
 class GeographicAxes:
@@ -134,3 +217,161 @@ class GeographicAxes:
         iy, ix = self.fractional_index(lat, lon)
         eps = interp.edge_eps(iy.dtype, max(self.ny, self.nx))
         return (iy >= -eps) & (iy <= self.ny - 1 + eps) & (ix >= -eps) & (ix <= self.nx - 1 + eps)
+
+    # ------------------------------------------------------------------ missing nodes, seams
+    @property
+    def n_missing(self):
+        """Number of missing (NaN or infinite) node values, an ``int``."""
+        return int(np.count_nonzero(~np.isfinite(np.asarray(self.values))))
+
+    @property
+    def is_global(self):
+        """True when the columns go all the way round (``nx · dlon ≥ 360°``)."""
+        return self.nx * self.dlon >= 360.0 - 1e-6 * self.dlon
+
+    def recentred(self, lon_centre):
+        """The same global map with its seam moved opposite ``lon_centre``.
+
+        The columns are rolled (a repeated 360° column is dropped) so that the first
+        column is the node nearest ``lon_centre − 180°``; the first longitude is then in
+        [−180, 180). Node values are unchanged; only where the map "ends" moves, so a
+        region around ``lon_centre`` is contiguous.
+
+        Parameters
+        ----------
+        lon_centre : float
+            Longitude (degrees, either convention) to put in the middle of the map.
+
+        Returns
+        -------
+        same type as ``self``
+
+        Raises
+        ------
+        ValueError
+            If the map is not global or its spacing does not divide 360°.
+        """
+        if not self.is_global:
+            w, e, _, _ = self.extent
+            raise ValueError(f"only a global map (360 degrees of longitude) can be recentred; "
+                             f"this one covers lon {w:g}..{e:g}")
+        n = round(360.0 / self.dlon)
+        if abs(n * self.dlon - 360.0) > 1e-6 * self.dlon:
+            raise ValueError(f"the longitude spacing {self.dlon:g} does not divide 360 degrees; "
+                             "a global map must repeat after a whole number of columns")
+        k = round((float(lon_centre) - 180.0 - self.lon0) / self.dlon) % n
+        lon0 = (self.lon0 + k * self.dlon + 180.0) % 360.0 - 180.0
+        values = jnp.roll(jnp.asarray(self.values)[..., :n], -k, axis=-1)
+        return dataclasses.replace(self, values=values, lon0=float(lon0))
+
+    def finite_region(self, lat, lon, margin_m=0.0, *, pad_nodes=6, max_missing=0.0,
+                      source="the map"):
+        """The part of the map points need: contiguous (global maps recentred) and finite.
+
+        The region is the points' bounding box (longitudes taken the short way round,
+        so a track across 0° or 180° is one box) widened by ``margin_m`` and by
+        ``pad_nodes`` nodes on each side, clipped to the map. Rules:
+
+        - a global map (360° of columns) whose seam cuts the region is first recentred
+          on the region (:meth:`recentred`), so a track across Greenwich on a 0–360
+          grid (or across 180° on a ±180 grid) sees one contiguous map;
+        - a regional map without missing nodes is returned whole, so its results are
+          exactly those of the full map;
+        - a global map, or a map with missing (NaN) nodes, is cut to the region (the
+          bicubic values inside differ from the whole map's by less than 1e-4 of the
+          field's local variation, see ``pad_nodes``): NaN cells elsewhere, such as land
+          on a marine grid, do not matter, and a fine global grid costs only its region;
+          missing nodes inside the region are refused when they are more than
+          ``max_missing`` of its nodes.
+
+        Parameters
+        ----------
+        lat, lon : array_like
+            Points (degrees), e.g. a track; longitudes in either convention.
+        margin_m : float
+            Distance (m) the methods may reach from the points, e.g. the drift radius
+            a matcher searches, ≥ 0.
+        pad_nodes : int
+            Extra nodes on each side (default 6): the bicubic stencil, and the
+            not-a-knot spline's end effect of a cut map, which decays by about 0.27 per
+            node (4e-4 of it left after 6).
+        max_missing : float
+            Largest fraction (0–1) of missing nodes accepted in the region; 0 (default)
+            for methods that do not mask NaN cells.
+        source : str
+            How the map is named in messages (e.g. ``"--map 'gebco.nc'"``).
+
+        Returns
+        -------
+        same type as ``self``
+            The map or its region, values ``(..., ny', nx')``.
+
+        Raises
+        ------
+        ValueError
+            Points empty or not finite, the region off the map, a bad ``margin_m`` or
+            ``max_missing``, or too many missing nodes in the region (their count and the
+            first one's position are named).
+        """
+        lat = np.asarray(lat, dtype=float).reshape(-1)
+        lon = np.asarray(lon, dtype=float).reshape(-1)
+        if lat.size == 0 or lat.size != lon.size:
+            raise ValueError(f"lat and lon must be non-empty and of equal length; got "
+                             f"{lat.size} and {lon.size} points")
+        if not (np.isfinite(lat).all() and np.isfinite(lon).all()):
+            raise ValueError("lat and lon must be finite to find the map region they need")
+        if not (np.isfinite(margin_m) and margin_m >= 0):
+            raise ValueError(f"margin_m must be a distance >= 0 (m); got {float(margin_m):g}")
+        if not (0.0 <= max_missing <= 1.0):
+            raise ValueError(f"max_missing must be a fraction in [0, 1]; got {max_missing:g}")
+        margin_lat = margin_m / _EQUATOR_M_PER_DEG
+        south, north = lat.min() - margin_lat, lat.max() + margin_lat
+        cos_lat = np.cos(min(89.0, max(abs(south), abs(north))) * DEG)
+        margin_lon = min(360.0, margin_m / (_EQUATOR_M_PER_DEG * cos_lat))
+        centre, half = _lon_span(lon)
+        half += margin_lon + pad_nodes * self.dlon
+        grid = self
+        if grid.n_missing == 0 and not grid.is_global:
+            return grid  # whole, as it is: the methods' own checks name points off the map
+        centre_w = _nearest_turn(centre, grid)
+        if grid.is_global and (centre_w - half < grid.lon0
+                               or centre_w + half > grid.lon0 + (grid.nx - 1) * grid.dlon):
+            grid = grid.recentred(centre)
+            centre_w = _nearest_turn(centre, grid)
+        iy0 = max(0, int(np.floor((south - grid.lat0) / grid.dlat)) - pad_nodes)
+        iy1 = min(grid.ny - 1, int(np.ceil((north - grid.lat0) / grid.dlat)) + pad_nodes)
+        ix0 = max(0, int(np.floor((centre_w - half - grid.lon0) / grid.dlon)))
+        ix1 = min(grid.nx - 1, int(np.ceil((centre_w + half - grid.lon0) / grid.dlon)))
+        if iy0 > iy1 or ix0 > ix1:
+            w, e, s, n = grid.extent
+            raise ValueError(
+                f"the points (lat {lat.min():g}..{lat.max():g}, lon {centre - half:g}.."
+                f"{centre + half:g} with the margin) lie outside {source} (lat {s:g}..{n:g}, "
+                f"lon {w:g}..{e:g})")
+        region = dataclasses.replace(
+            grid, values=jnp.asarray(grid.values)[..., iy0:iy1 + 1, ix0:ix1 + 1],
+            lat0=float(grid.lat0 + iy0 * grid.dlat), lon0=float(grid.lon0 + ix0 * grid.dlon))
+        missing = ~np.isfinite(np.asarray(region.values))
+        if missing.any() and missing.mean() > max_missing:
+            idx = np.unravel_index(int(np.flatnonzero(missing)[0]), missing.shape)
+            la, lo = region.lat[idx[-2]], region.lon[idx[-1]]
+            raise ValueError(
+                f"{source} has {int(missing.sum())} missing (NaN) node(s) among the "
+                f"{missing.size} within {margin_m / 1000:.3g} km (+{pad_nodes} nodes) of the "
+                f"track, the first at lat {la:.6g}, lon {lo:.6g}; the map must be complete "
+                f"there (missing nodes elsewhere are fine)")
+        return region
+
+
+def _nearest_turn(lon, grid):
+    """``lon`` plus the multiple of 360° that brings it nearest the map's middle column."""
+    mid = grid.lon0 + 0.5 * (grid.nx - 1) * grid.dlon
+    return mid + (np.mod(lon - mid + 180.0, 360.0) - 180.0)
+
+
+def _lon_span(lon):
+    """Centre and half-width (degrees) of the shortest arc holding every longitude."""
+    ref = float(lon[0])
+    offsets = np.mod(lon - ref + 180.0, 360.0) - 180.0
+    lo, hi = offsets.min(), offsets.max()
+    return ref + 0.5 * (lo + hi), 0.5 * (hi - lo)

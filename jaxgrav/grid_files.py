@@ -1,85 +1,230 @@
 """NetCDF files of :class:`~jaxgrav.grid.Grid` maps (xarray, GMT and CF conventions).
 
-:func:`read_netcdf` finds the 1-D latitude and longitude coordinates and the gridded
-variable of a file and returns plain arrays (:meth:`Grid.from_netcdf` validates them
-through :meth:`Grid.from_arrays`); :func:`write_netcdf` writes a grid with CF
-``lat``/``lon`` coordinates, atomically. Both are package-internal: use the
-:class:`~jaxgrav.grid.Grid` methods.
+:func:`read_netcdf` is the one map reader: it refuses a file that is not NetCDF (a CSV
+given as a map) in one line, finds the 1-D latitude and longitude coordinates (``lat``,
+``latitude``, ``y`` / ``lon``, ``longitude``, ``x`` in any case, or by their CF
+``standard_name``/``units``), picks the gridded variable, squeezes singleton extra
+dimensions (``time`` of length 1) and refuses other ones by name, makes the longitudes
+contiguous (a regional 0–360 map across 0°, 350 … 10, becomes −10 … 10) and checks both
+axes (a repeated, unsorted or irregular node is named with the file and its value).
+It returns plain arrays; :meth:`Grid.from_netcdf` and :func:`jaxgrav.datasets.load_map`
+build the grid. :func:`write_netcdf` writes a grid with CF ``lat``/``lon`` coordinates,
+atomically. Both are package-internal: use the :class:`~jaxgrav.grid.Grid` methods or
+``load_map``.
 """
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import xarray as xr
 
 from jaxgrav._io import atomic_output
+from jaxgrav.grid_axes import contiguous_longitudes, regular_axis
 
 LAT_NAMES = ("lat", "latitude", "y")
-"""Accepted names of the latitude coordinate, in order of preference."""
+"""Accepted names of the latitude coordinate (any case), in order of preference."""
 LON_NAMES = ("lon", "longitude", "x")
-"""Accepted names of the longitude coordinate, in order of preference."""
+"""Accepted names of the longitude coordinate (any case), in order of preference."""
+
+_CF = {
+    "latitude": ("latitude", {"degrees_north", "degree_north", "degrees_n", "degree_n"}),
+    "longitude": ("longitude", {"degrees_east", "degree_east", "degrees_e", "degree_e"}),
+}
+_MAGIC = (b"CDF\x01", b"CDF\x02", b"CDF\x05", b"\x89HDF\r\n\x1a\n")
+"""First bytes of NetCDF-3 (classic, 64-bit offset, 64-bit data) and NetCDF-4 (HDF5)."""
 
 
-def read_netcdf(path, var=None):
-    """Read one gridded variable and its coordinates from a NetCDF file.
+class GridArrays(NamedTuple):
+    """What :func:`read_netcdf` returns (unpacks as ``lat, lon, values, name, units``).
+
+    Attributes
+    ----------
+    lat : ndarray, shape ``(ny,)``
+        Latitudes (degrees), in the file's order.
+    lon : ndarray, shape ``(nx,)``
+        Longitudes (degrees), in the file's order, without 360° jumps.
+    values : ndarray, shape ``(..., ny, nx)``
+        The variable (float; fill values as NaN), latitude and longitude last.
+    name, units : str
+        The variable's name and its ``units`` attribute (``""`` if none).
+    """
+
+    lat: np.ndarray
+    lon: np.ndarray
+    values: np.ndarray
+    name: str
+    units: str
+
+
+def check_netcdf_file(path, what="map"):
+    """Refuse a path that is missing, a folder, or not a NetCDF file, in one line.
 
     Parameters
     ----------
     path : str or Path
-        NetCDF file with 1-D latitude (one of :data:`LAT_NAMES`) and longitude (one
-        of :data:`LON_NAMES`) coordinates.
-    var : str, optional
-        Data variable to read; required when the file holds more than one.
-
-    Returns
-    -------
-    lat : ndarray, shape ``(ny,)``
-        Latitudes (degrees), in the file's order.
-    lon : ndarray, shape ``(nx,)``
-        Longitudes (degrees), in the file's order.
-    values : ndarray, shape ``(..., ny, nx)``
-        The variable, latitude and longitude moved to the last two axes.
-    name, units : str
-        The variable's name and its ``units`` attribute (``""`` if none).
+    what : str
+        What the file is meant to be, for the message.
 
     Raises
     ------
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If the coordinates are missing or ``var`` is ambiguous or not gridded.
+        If it is a folder, or its first bytes are not those of NetCDF-3 or NetCDF-4 (the
+        message says what it looks like instead: empty, text such as a CSV, other binary).
     """
     path = Path(path)
     if not path.exists():
-        raise FileNotFoundError(f"path {str(path)!r} does not exist")
-    with xr.open_dataset(path) as ds:
-        lat_name = next((n for n in LAT_NAMES if n in ds.coords or n in ds.dims), None)
-        lon_name = next((n for n in LON_NAMES if n in ds.coords or n in ds.dims), None)
-        if lat_name is None or lon_name is None:
+        raise FileNotFoundError(f"{what} {str(path)!r} does not exist")
+    if path.is_dir():
+        raise ValueError(f"{what} {str(path)!r} is a folder; expected a NetCDF file")
+    with path.open("rb") as fh:
+        head = fh.read(256)
+    if any(head.startswith(m) for m in _MAGIC):
+        return
+    if not head:
+        looks = "it is empty"
+    elif b"\0" not in head:
+        first = head.decode("utf-8", "replace").lstrip("\ufeff").splitlines()[0][:40]
+        looks = f"it is a text file starting {first!r}, a CSV track or table?"
+    else:
+        looks = "its format is not NetCDF-3 or NetCDF-4"
+    raise ValueError(f"{what} {str(path)!r} is not a NetCDF file ({looks}); expected a "
+                     "NetCDF grid (CF, GMT .nc/.grd) with lat/lon coordinates")
+
+
+def _find_axis(ds, names, kind, label):
+    """Name of the latitude or longitude coordinate: by name (any case), then CF attributes."""
+    found = {str(n).lower(): n for n in [*ds.coords, *ds.dims, *ds.data_vars]}
+    for n in names:
+        if n in found:
+            return found[n]
+    standard, units = _CF[kind]
+    for n, v in ds.variables.items():
+        if (v.attrs.get("standard_name") == standard
+                or str(v.attrs.get("units", "")).lower() in units):
+            return n
+    raise ValueError(f"{label} has no {kind} coordinate: expected one named one of {names} "
+                     f"(any case) or with CF standard_name '{standard}'; it has "
+                     f"{sorted(map(str, ds.variables))}")
+
+
+def _axis_dim(ds, name, label):
+    """The dimension along which coordinate ``name`` varies (it must be 1-D)."""
+    if name not in ds.variables:
+        raise ValueError(f"{label}: dimension {name!r} has no coordinate values; the "
+                         "file must store the node latitudes and longitudes")
+    v = ds.variables[name]
+    if v.ndim != 1:
+        raise ValueError(f"{label}: coordinate {name!r} is {v.ndim}-D {tuple(v.dims)}; jaxgrav "
+                         "reads regular latitude/longitude grids (1-D coordinates), not "
+                         "curvilinear or projected ones")
+    return v.dims[0]
+
+
+def _choose_var(ds, var, dims, label, exclude):
+    gridded = [str(v) for v in ds.data_vars if set(dims) <= set(ds[v].dims)
+               and str(v) not in exclude]
+    if var is None:
+        if len(gridded) != 1:
+            raise ValueError(f"{label} holds {len(gridded)} gridded variables {gridded}; "
+                             "choose one with --var NAME (pass var=NAME in Python)")
+        return gridded[0]
+    if var not in ds.variables:
+        raise ValueError(f"{label} has no variable {var!r}; its gridded variables are "
+                         f"{gridded}")
+    if not set(dims) <= set(ds[var].dims):
+        raise ValueError(f"variable {var!r} of {label} is not on the latitude/longitude grid "
+                         f"{tuple(dims)}: its dimensions are {tuple(ds[var].dims)}; gridded "
+                         f"variables: {gridded}")
+    return var
+
+
+def read_netcdf(path, var=None, *, ndim=None, exclude=()):
+    """Read one gridded variable and its coordinates from a NetCDF file.
+
+    Parameters
+    ----------
+    path : str or Path
+        NetCDF file with 1-D latitude and longitude coordinates (see the module notes).
+    var : str, optional
+        Data variable to read; required when the file holds more than one.
+    ndim : int, optional
+        Refuse a variable with more than ``ndim`` dimensions after singleton ones are
+        squeezed (2 for a map: a depth or time axis of several levels is named).
+    exclude : sequence of str
+        Variables never chosen when ``var`` is None (e.g. the map's uncertainty).
+
+    Returns
+    -------
+    GridArrays
+        ``lat, lon, values (..., ny, nx), name, units``; coordinates checked regular.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        Not a NetCDF file, no latitude/longitude coordinates (or 2-D ones), ``var``
+        missing, ambiguous or not gridded, an extra dimension beyond ``ndim``, latitudes
+        outside ±90° or longitudes outside −360…720° (projected coordinates), or a
+        repeated, unsorted, irregular or non-finite coordinate node.
+    """
+    check_netcdf_file(path)
+    label = f"map {str(path)!r}"
+    try:
+        ds = xr.open_dataset(path, decode_times=False)
+    except (OSError, ValueError, RuntimeError) as err:
+        msg = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise ValueError(f"{label} cannot be read as NetCDF: {msg}") from None
+    with ds:
+        lat_name = _find_axis(ds, LAT_NAMES, "latitude", label)
+        lon_name = _find_axis(ds, LON_NAMES, "longitude", label)
+        lat_dim, lon_dim = _axis_dim(ds, lat_name, label), _axis_dim(ds, lon_name, label)
+        var = _choose_var(ds, var, (lat_dim, lon_dim), label, exclude)
+        da = ds[var]
+        extra = [d for d in da.dims if d not in (lat_dim, lon_dim)]
+        extra = [d for d in extra if da.sizes[d] > 1]
+        da = da.squeeze([d for d in da.dims if d not in (*extra, lat_dim, lon_dim)], drop=True)
+        if ndim is not None and len(extra) + 2 > ndim:
+            sizes = ", ".join(f"{d}: {da.sizes[d]}" for d in da.dims)
             raise ValueError(
-                f"{str(path)!r} needs latitude and longitude coordinates named one of "
-                f"{LAT_NAMES} and {LON_NAMES}; found {sorted(ds.coords)}"
-            )
-        candidates = [v for v in ds.data_vars if {lat_name, lon_name} <= set(ds[v].dims)]
-        if var is None:
-            if len(candidates) != 1:
-                raise ValueError(
-                    f"{str(path)!r} holds {len(candidates)} gridded variables {candidates}; "
-                    "pass var= to choose one"
-                )
-            var = candidates[0]
-        elif var not in candidates:
-            raise ValueError(
-                f"var {var!r} is not a gridded variable of {str(path)!r}: {candidates}"
-            )
-        da = ds[var].transpose(..., lat_name, lon_name).load()
-        return (
-            da[lat_name].values,
-            da[lon_name].values,
-            da.values,
-            str(var),
-            str(da.attrs.get("units", "")),
-        )
+                f"variable {var!r} of {label} has dimensions ({sizes}); a map must be 2-D "
+                f"(latitude, longitude): extract one level of {extra[0]!r} first (e.g. "
+                f"ncks -d {extra[0]},0 IN OUT)")
+        values = np.asarray(da.transpose(*extra, lat_dim, lon_dim).values)
+        lat = np.asarray(ds.variables[lat_name].values)
+        lon = np.asarray(ds.variables[lon_name].values)
+        units = str(da.attrs.get("units", ""))
+    if values.dtype.kind not in "fc":
+        values = values.astype(float)
+    return GridArrays(*_checked_axes(lat, lon, label, lat_name, lon_name), values, str(var),
+                      units)
+
+
+def _checked_axes(lat, lon, label, lat_name, lon_name):
+    """Latitudes and contiguous longitudes, regular and in range (else ValueError)."""
+    for name, c in ((lat_name, lat), (lon_name, lon)):
+        if c.dtype.kind not in "iuf":
+            raise ValueError(f"{label}: coordinate {name!r} holds {c.dtype} values; expected "
+                             "degrees")
+    regular_axis(lat, str(lat_name), label)
+    far = np.abs(lat.astype(float)) > 90.0
+    if far.any() or np.any(np.abs(lon.astype(float) - 180.0) > 540.0):
+        value = lat[far][0] if far.any() else lon[np.abs(lon - 180.0) > 540.0][0]
+        raise ValueError(f"{label}: coordinate value {float(value):g} is not a latitude/"
+                         "longitude in degrees (projected coordinates in metres?); jaxgrav "
+                         "reads geographic grids: reproject it first (e.g. gmt grdproject -I)")
+    joined = contiguous_longitudes(lon)
+    if joined is not lon:
+        try:  # a 360° jump only: use the joined axis; otherwise name the file's own values
+            regular_axis(joined, str(lon_name), label)
+            lon = joined
+        except ValueError:
+            pass
+    regular_axis(lon, str(lon_name), label)
+    return lat, lon
 
 
 def write_netcdf(grid, path, *, attrs=None, force=False):

@@ -1,85 +1,339 @@
-"""Track files: CSV with a header row, one fix per line, written atomically.
+"""Track files: one reader for tracks and logs, one writer (CSV, atomic).
 
-A track is a ``dict`` of equal-length 1-D NumPy arrays keyed by column name,
-e.g. ``t`` (s), ``lat``, ``lon`` (degrees), ``gravity`` (mGal). Empty cells read
-as NaN, so that missing readings survive a round trip.
+A track is a ``dict`` of equal-length 1-D float64 NumPy arrays keyed by column name,
+e.g. ``t`` (s), ``lat``, ``lon`` (degrees), ``gravity`` (mGal); missing cells read as
+NaN, so that missing readings survive a round trip. :func:`read_track_csv` returns a
+:class:`TrackTable`, such a dict that also carries the file's text columns, the original
+times and each row's line number, so outputs can pass every input column through.
+
+What the reader accepts (parsing of the text: :mod:`jaxgrav.track_files`):
+
+- comma, semicolon, tab or whitespace (``.xyz``) separated files, quoted fields, a
+  UTF-8 byte-order mark, CRLF line ends, ``#`` comment lines, a decimal comma in
+  semicolon/tab files;
+- column names in any case, trimmed, with a ``(unit)`` suffix ignored, and the aliases
+  of :data:`ALIASES` (``time`` for ``t``, ``latitude`` for ``lat``, ``longitude``,
+  ``long``, ``lng`` for ``lon``, ``height`` for ``h``); an exact name wins over an alias;
+  ``columns={"lat": "LAT", ...}`` (``--columns lat=LAT,...``, :func:`parse_columns`)
+  names any other column, by name or by 1-based number;
+- times in seconds or as ISO-8601 date-times (``2024-05-01T12:00:00Z``), which become
+  seconds since the first row (the text is kept in the column ``time``); times must
+  increase: a repeated or earlier time is refused with its line;
+- longitudes in the 0–360 or the ±180 convention; a track crossing 0° or 180° is made
+  contiguous (359.5, 0.5 → −0.5, 0.5), as maps are (:func:`~jaxgrav.grid_axes.
+  contiguous_longitudes`); latitudes must lie within ±90°;
+- extra numeric columns (in the dict) and text columns (in :attr:`TrackTable.text`).
 """
 
 import csv
-from pathlib import Path
+import datetime as dt
 
 import numpy as np
 
 from jaxgrav._io import atomic_output
+from jaxgrav.grid_axes import contiguous_longitudes
+from jaxgrav.track_files import column_key, parse_numbers, read_table
 
-__all__ = ["csv_line", "read_track_csv", "write_track_csv"]
+__all__ = ["ALIASES", "KNOWN_COLUMNS", "TrackTable", "csv_line", "parse_columns",
+           "read_track_csv", "write_track_csv"]
+
+ALIASES = {
+    "t": ("t", "time", "timestamp", "datetime"),
+    "lat": ("lat", "latitude"),
+    "lon": ("lon", "longitude", "long", "lng"),
+    "h": ("h", "height"),
+}
+"""Header names (any case) accepted for each column, in order of preference."""
+
+KNOWN_COLUMNS = ("t", "lat", "lon", "h", "gravity", "magnetic", "v_east", "v_north",
+                 "drift_radius")
+"""Columns the commands look for; found in any case and always numeric."""
+
+_EXPECTED = {"t": "seconds or an ISO-8601 date-time", "lat": "degrees", "lon": "degrees",
+             "h": "metres", "gravity": "mGal", "magnetic": "nT", "v_east": "m/s",
+             "v_north": "m/s", "drift_radius": "degrees"}
 
 
-def read_track_csv(path, required=(), optional=(), *, allow_nan=()):
-    """Read a track CSV.
+class TrackTable(dict):
+    """A track read from a file: numeric columns as a dict, plus what outputs pass through.
+
+    ``dict(track)`` (or ``track["lat"]``) gives the float64 columns as before.
+
+    Attributes
+    ----------
+    path : str
+        The file.
+    text : dict of str to numpy.ndarray
+        Text columns (str arrays), e.g. a ship name, or the original ISO times.
+    lines : numpy.ndarray of int, shape ``(n,)``
+        The file line number of each row (comment and blank lines skipped).
+    order : list of str
+        Every column name, numeric and text, in the file's order.
+    time_origin : str or None
+        The first row's ISO-8601 time when times were ISO (``t`` counts from it).
+    time_text : str or None
+        The text column holding those original times (``time`` unless named otherwise).
+    renamed : dict of str to str
+        Canonical name → the header it was read from, when they differ.
+    cells : dict of str to numpy.ndarray
+        The text of the numeric columns that no command reads (for :meth:`columns`).
+    """
+
+    path = ""
+    text = None
+    lines = None
+    order = None
+    time_origin = None
+    time_text = None
+    renamed = None
+    cells = None
+
+    def line(self, i):
+        """The file line number of row ``i``."""
+        return int(self.lines[i])
+
+    def columns(self):
+        """Every column in file order, for :func:`write_track_csv` to pass a track through.
+
+        The columns the commands read (:data:`KNOWN_COLUMNS`, ``--columns``) as float
+        arrays, normalised (``t`` in seconds, ``lon`` contiguous); text columns and other
+        numeric columns as the file's own text (str arrays), so that identifiers such as
+        ``0012`` or long integers come out as they went in.
+        """
+        return {k: self.cells.get(k, self[k]) if k in self else self.text[k]
+                for k in self.order}
+
+
+def parse_columns(text):
+    """Parse ``--columns lat=LAT,lon=LON`` into ``{"lat": "LAT", "lon": "LON"}``.
 
     Parameters
     ----------
-    path : str or Path
-        CSV file with a header row.
-    required : sequence of str
-        Columns that must be present.
-    optional : sequence of str
-        Columns read when present (others are read too and returned as they are).
-    allow_nan : sequence of str
-        Columns in which empty/NaN cells are allowed; NaN anywhere else in a
-        required column is an error.
+    text : str or None
+        ``NAME=COLUMN`` pairs separated by commas; COLUMN is a header (any case) or a
+        1-based column number.
 
     Returns
     -------
-    dict of str to numpy.ndarray
-        One float64 array per column, all of the same length.
+    dict of str to str
+        Empty for None or ``""``.
 
     Raises
     ------
     ValueError
-        Missing columns, non-numeric cells, NaN where not allowed, or no rows.
+        A pair without ``=``, an empty side, a name given twice or two names for one
+        column.
     """
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"track file {str(path)!r} does not exist")
-    with path.open(newline="") as fh:
-        reader = csv.reader(fh)
+    out = {}
+    example = "(e.g. --columns lat=LAT,lon=LON,gravity=FAA)"
+    for part in (text or "").split(","):
+        if not part.strip():
+            continue
+        name, eq, col = (s.strip() for s in part.partition("="))
+        if not eq or not name or not col:
+            raise ValueError(f"--columns must be NAME=COLUMN pairs separated by commas "
+                             f"{example}; got {part.strip()!r} in {text!r}")
+        if name in out:
+            raise ValueError(f"--columns names {name!r} twice in {text!r}")
+        if col.lower() in (c.lower() for c in out.values()):
+            raise ValueError(f"--columns gives column {col!r} two names in {text!r}")
+        out[name] = col
+    return out
+
+
+def _match_columns(header, wanted, columns, label):
+    """Header index of each canonical name found: ``--columns``, exact name, aliases."""
+    keys = [column_key(h) for h in header]
+    found = {}
+    for name, col in columns.items():
+        hits = [j for j, h in enumerate(header) if h == col] or [
+            j for j, k in enumerate(keys) if k == column_key(col)]
+        if not hits and col.isdigit() and 1 <= int(col) <= len(header):
+            hits = [int(col) - 1]
+        if not hits:
+            raise ValueError(f"{label} has no column {col!r} (asked for by --columns "
+                             f"{name}={col}); it has {header}")
+        found[name] = hits[0]
+    for name in wanted:
+        if name in found:
+            continue
+        for alias in ALIASES.get(name, (name,)):
+            hits = [j for j, k in enumerate(keys) if k == alias and j not in found.values()]
+            exact = [j for j in hits if header[j] == alias]
+            hits = exact if len(exact) == 1 else hits
+            if len(hits) > 1:
+                raise ValueError(f"{label}: columns {[header[j] for j in hits]} could all be "
+                                 f"{name!r}; choose one with --columns {name}=COLUMN")
+            if hits:
+                found[name] = hits[0]
+                break
+    used = {}
+    for name, j in found.items():
+        if j in used:
+            raise ValueError(f"{label}: column {header[j]!r} cannot be both {used[j]!r} and "
+                             f"{name!r}")
+        used[j] = name
+    return found
+
+
+def _iso_seconds(cells, lines, label, header):
+    """Seconds since the first row of ISO-8601 cells (aware times in UTC, naive as given)."""
+    stamps = []
+    for cell, line in zip(cells, lines, strict=True):
         try:
-            header = [h.strip() for h in next(reader)]
-        except StopIteration:
-            raise ValueError(f"track file {str(path)!r} is empty; expected a header row") from None
-        rows = [r for r in reader if r and any(cell.strip() for cell in r)]
-    missing = [c for c in required if c not in header]
+            stamps.append(dt.datetime.fromisoformat(cell.replace("z", "Z")))
+        except ValueError:
+            raise ValueError(
+                f"{label}, line {line}, column {header!r}: {cell!r} is neither a number "
+                "(seconds) nor an ISO-8601 date-time (e.g. 2024-05-01T12:00:00Z); times must "
+                "be complete") from None
+    aware = [s.tzinfo is not None for s in stamps]
+    if any(aware) and not all(aware):
+        i = aware.index(not aware[0])
+        raise ValueError(f"{label}, line {lines[i]}, column {header!r}: {cells[i]!r} "
+                         f"{'has' if aware[i] else 'lacks'} a time zone, unlike line "
+                         f"{lines[0]}; give every time with or every time without one")
+    seconds = np.array([(s - stamps[0]).total_seconds() for s in stamps])
+    return seconds, stamps[0].isoformat()
+
+
+def _time_steps(t, shown, lines, label, header):
+    """Refuse a time that repeats or goes back, naming both lines."""
+    step = np.diff(t)
+    bad = np.flatnonzero(~(step > 0))
+    if bad.size:
+        i = int(bad[0])
+        what = "repeats" if step[i] == 0 else "is earlier than"
+        raise ValueError(
+            f"{label}, line {lines[i + 1]}, column {header!r}: time {shown[i + 1]} {what} "
+            f"{shown[i]} on line {lines[i]}; times must increase ({int((step == 0).sum())} "
+            f"repeated, {int((step < 0).sum())} backward step(s))")
+
+
+def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None):
+    """Read a track or log file (see the module notes for what it accepts).
+
+    Parameters
+    ----------
+    path : str or Path
+        CSV (or semicolon, tab, whitespace separated) file, normally with a header row.
+    required : sequence of str
+        Columns that must be present (canonical names: ``t``, ``lat``, ``lon``, ...).
+    optional : sequence of str
+        Columns read under their canonical name when present (every other column is
+        read too, numeric ones into the dict, text ones into ``.text``).
+    allow_nan : sequence of str
+        Required columns in which empty/NaN cells are allowed; NaN anywhere else in a
+        required column is an error.
+    columns : dict of str to str, optional
+        Canonical name → header (any case) or 1-based column number, for names the
+        aliases do not cover (:func:`parse_columns` reads ``--columns``).
+
+    Returns
+    -------
+    TrackTable
+        One float64 array per numeric column, all of the same length ``n``; ``t`` in
+        seconds (from the first row for ISO times), ``lon`` without 360° jumps.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        Naming the file, the line, the column, the value and what was expected: an
+        unreadable or binary file, missing columns, a cell that is not a number in a
+        numeric column, NaN where not allowed, times that repeat or go back, latitudes
+        beyond ±90° or longitudes outside [−180, 360], no rows.
+    """
+    label = f"track file {str(path)!r}"
+    table = read_table(path, label)
+    columns = dict(columns or {})
+    wanted = [*required, *optional, *(c for c in KNOWN_COLUMNS if c not in required)]
+    found = _match_columns(table.header, wanted, columns, label)
+    missing = [c for c in required if c not in found]
     if missing:
         raise ValueError(
-            f"track file {str(path)!r} lacks column(s) {missing}; it has {header}; "
-            f"required: {list(required)}"
-        )
-    if not rows:
-        raise ValueError(f"track file {str(path)!r} has a header but no rows")
-    out = {}
-    for j, name in enumerate(header):
-        col = np.empty(len(rows))
-        for i, r in enumerate(rows):
-            cell = r[j].strip() if j < len(r) else ""
-            try:
-                col[i] = float(cell) if cell else np.nan
-            except ValueError:
-                raise ValueError(
-                    f"track file {str(path)!r}, line {i + 2}, column {name!r}: "
-                    f"{cell!r} is not a number"
-                ) from None
-        out[name] = col
+            f"{label} lacks column(s) {missing}; it has {table.header}; required: "
+            f"{list(required)} (names in any case; aliases: time, latitude, longitude; "
+            f"others with --columns {missing[0]}=COLUMN)")
+    if not table.rows:
+        raise ValueError(f"{label} has a header but no rows")
+    track = TrackTable()
+    track.path, track.text, track.order, track.cells = str(path), {}, [], {}
+    track.lines = np.asarray(table.lines)
+    track.renamed = {k: table.header[j] for k, j in found.items() if table.header[j] != k}
+    canonical = {j: k for k, j in found.items()}
+    lines = table.lines
+    for j, header in enumerate(table.header):
+        name = canonical.get(j, header)
+        cells = [r[j] for r in table.rows]
+        values, bad = parse_numbers(cells, decimal_comma=table.delimiter != ",")
+        if bad is not None and name == "t":
+            values, track.time_origin = _iso_seconds(cells, lines, label, header)
+            text_name = header if header != "t" else "time"
+            if text_name in table.header[:j] + table.header[j + 1:]:
+                text_name += "_iso"
+            track.time_text = text_name
+            track.text[text_name] = np.asarray(cells, dtype=str)
+            track.order += ["t", text_name]
+            track[name] = values
+            continue
+        if bad is not None and j in canonical:
+            raise ValueError(
+                f"{label}, line {lines[bad]}, column {header!r}: {cells[bad]!r} is not a "
+                f"number (expected {_EXPECTED.get(name, 'a number')})")
+        if j not in canonical and name in found:
+            name = f"{header}_col{j + 1}"  # "lat" beside --columns lat=LAT2
+        if bad is not None:
+            track.text[name] = np.asarray(cells, dtype=str)
+        else:
+            track[name] = values
+            if j not in canonical and name not in KNOWN_COLUMNS:
+                track.cells[name] = np.asarray(cells, dtype=str)
+        track.order.append(name)
+    _check_columns(track, required, allow_nan, label)
+    return track
+
+
+def _check_columns(track, required, allow_nan, label):
+    """Complete required columns, increasing times, latitudes and longitudes in range."""
+    lines = track.lines
     for name in required:
-        bad = ~np.isfinite(out[name])
+        bad = ~np.isfinite(track[name])
         if name not in allow_nan and bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(
-                f"track file {str(path)!r}, column {name!r} has {int(bad.sum())} missing or "
-                f"NaN value(s), first on line {i + 2}; this column must be complete"
-            )
-    return out
+                f"{label}, column {name!r} has {int(bad.sum())} missing or NaN value(s), "
+                f"first on line {lines[i]}; this column must be complete")
+    if "t" in track:
+        t = track["t"]
+        if np.isfinite(t).all():
+            shown = (track.text[track.time_text] if track.time_text
+                     else [f"{v:g}" for v in t])
+            _time_steps(t, shown, lines, label, track.renamed.get("t", "t"))
+        elif "t" in required:
+            i = int(np.flatnonzero(~np.isfinite(t))[0])
+            raise ValueError(f"{label}, line {lines[i]}: the time is missing; times must be "
+                             "complete")
+    if "lat" in track:
+        bad = np.flatnonzero(np.abs(track["lat"]) > 90.0)
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(f"{label}, line {lines[i]}, column "
+                             f"{track.renamed.get('lat', 'lat')!r}: latitude "
+                             f"{track['lat'][i]:g} is outside [-90, 90] degrees")
+    if "lon" in track:
+        lon = track["lon"]
+        bad = np.flatnonzero(np.isinf(lon) | (lon < -180.0) | (lon > 360.0))
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(f"{label}, line {lines[i]}, column "
+                             f"{track.renamed.get('lon', 'lon')!r}: longitude {lon[i]:g} is "
+                             "outside [-180, 360] degrees")
+        ok = np.isfinite(lon)
+        lon = lon.copy()
+        lon[ok] = contiguous_longitudes(lon[ok])
+        track["lon"] = lon
 
 
 def write_track_csv(path, columns, *, force=False, precision=9):
@@ -90,13 +344,22 @@ def write_track_csv(path, columns, *, force=False, precision=9):
     path : str or Path
         Output file; an existing file is replaced only with ``force=True``.
     columns : dict of str to array_like
-        Column name → 1-D values; NaN is written as an empty cell.
+        Column name → 1-D values: numbers (NaN written as an empty cell) or text (str
+        arrays, e.g. :attr:`TrackTable.text`, written as they are, quoted when needed).
+        ``{**track.columns(), "map": values}`` passes a read track through.
     force : bool
         Overwrite an existing file.
     precision : int
-        Significant digits.
+        Significant digits (at least 3 decimals for large values, e.g. epoch seconds).
     """
-    arrays = {k: np.asarray(v, dtype=float).reshape(-1) for k, v in columns.items()}
+    arrays, digits = {}, {}
+    for k, v in columns.items():
+        a = np.asarray(v).reshape(-1)
+        arrays[k] = a.astype(str) if a.dtype.kind in "USO" else a.astype(float)
+        if a.dtype.kind not in "USO":
+            big = np.abs(arrays[k][np.isfinite(arrays[k])])
+            whole = int(np.floor(np.log10(big.max()))) + 1 if big.size and big.max() > 0 else 0
+            digits[k] = max(precision, whole + 3)  # epoch seconds keep their milliseconds
     lengths = {k: a.size for k, a in arrays.items()}
     if len(set(lengths.values())) > 1:
         raise ValueError(f"columns must have equal lengths; got {lengths}")
@@ -104,9 +367,12 @@ def write_track_csv(path, columns, *, force=False, precision=9):
         w = csv.writer(fh)
         w.writerow(list(arrays))
         for row in zip(*arrays.values(), strict=True):
-            w.writerow(["" if not np.isfinite(v) else f"{v:.{precision}g}" for v in row])
+            w.writerow([v if isinstance(v, str) else "" if not np.isfinite(v)
+                        else f"{v:.{digits[k]}g}" for k, v in zip(arrays, row, strict=True)])
 
 
 def csv_line(i):
-    """The file line number of data row ``i`` of a track CSV (the header is line 1)."""
+    """The file line number of data row ``i`` of a track CSV written by
+    :func:`write_track_csv` (the header is line 1); for a file read with
+    :func:`read_track_csv` use :meth:`TrackTable.line`, which counts skipped lines."""
     return int(i) + 2

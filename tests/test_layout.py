@@ -16,6 +16,7 @@ LAYERS = {
     "constants": 0, "_io": 0, "_linalg": 0, "_pytree": 0, "_validate": 0, "interp": 0,
     "geodesy": 0,
     "grid": 1, "grid_axes": 1, "grid_files": 1, "grid_windows": 1, "prepared": 1, "tracks": 1,
+    "track_files": 1,
     "plot": 1,
     "fields": 2, "sim": 2,
     "datasets": 3,

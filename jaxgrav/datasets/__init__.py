@@ -28,16 +28,19 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
+import jax.numpy as jnp
 import netCDF4
 import numpy as np
 import xarray as xr
 
 from jaxgrav.fields.harmonics import SphericalHarmonics
 from jaxgrav.grid import Grid
+from jaxgrav.grid_files import read_netcdf
 
-__all__ = ["available", "load", "load_map", "path", "provenance"]
+__all__ = ["available", "load", "load_map", "map_for_track", "path", "provenance"]
 
 _HERE = Path(__file__).resolve().parent
 
@@ -179,10 +182,14 @@ def provenance(name):
     return out
 
 
-def load_map(path, var=None, dataset_default="anomaly_2p5min"):
+def load_map(path, var=None, dataset_default="anomaly_2p5min", *, error_var=None,
+             allow_nan=False):
     """A map by name or path: a shipped dataset (``ryukyu``, ``ryukyu:KEY``) or a NetCDF file.
 
-    The loader behind every ``--map`` option of the ``jaxgrav`` command.
+    The loader behind every ``--map`` option of the ``jaxgrav`` command; files are read
+    by :func:`jaxgrav.grid_files.read_netcdf` (lat/lon, latitude/longitude or GMT y/x
+    coordinates, singleton extra dimensions squeezed, descending axes flipped, a
+    regional 0–360 map across 0° made contiguous, a non-NetCDF file refused in one line).
 
     Parameters
     ----------
@@ -194,21 +201,107 @@ def load_map(path, var=None, dataset_default="anomaly_2p5min"):
         The variable to read from a NetCDF file with several.
     dataset_default : str
         The dataset's map when no ``KEY`` is given (default the 2.5′ anomaly).
+    error_var : str, optional
+        A second variable of the same file on the same grid: the map's 1-σ uncertainty
+        (map units, ≥ 0), returned as a second Grid (never chosen as ``var``).
+    allow_nan : bool
+        Keep missing (NaN, fill-value) nodes in the Grid, as a mask: for commands that
+        then take :meth:`Grid.finite_region` around the track (``grid.n_missing`` counts
+        them). By default a map with missing nodes is refused, naming their count and
+        the first one's position.
 
     Returns
     -------
-    Grid
+    Grid, or (Grid, Grid)
+        Values ``(ny, nx)``; with ``error_var`` the map and its uncertainty.
 
     Raises
     ------
+    FileNotFoundError
+        No such file (and no such dataset).
     ValueError
-        The dataset has no map ``KEY``; and the errors of :meth:`Grid.from_netcdf`.
+        The dataset has no map ``KEY`` (or no uncertainty); a file that is not a 2-D
+        geographic NetCDF grid (see :func:`~jaxgrav.grid_files.read_netcdf`); missing
+        nodes without ``allow_nan``; an uncertainty that is negative or on another grid.
     """
     name, _, key = str(path).partition(":")
     if name in available() and not Path(path).exists():
+        if error_var is not None:
+            raise ValueError(f"the shipped map {str(path)!r} has no uncertainty variable; "
+                             f"error_var={error_var!r} needs a NetCDF file")
         maps = load(name)
         key = key or dataset_default
         if key not in maps:
             raise ValueError(f"dataset {name!r} has no map {key!r}; it has {sorted(maps)}")
         return maps[key]
-    return Grid.from_netcdf(path, var=var)
+    label = f"map {str(path)!r}"
+    exclude = () if error_var is None else (error_var,)
+    arrays = read_netcdf(path, var, ndim=2, exclude=exclude)
+    grid = _grid_with_mask(arrays, label, allow_nan)
+    if error_var is None:
+        return grid
+    err = read_netcdf(path, error_var, ndim=2)
+    if not (np.array_equal(err.lat, arrays.lat) and np.array_equal(err.lon, arrays.lon)):
+        raise ValueError(f"the uncertainty {error_var!r} of {label} is not on the grid of "
+                         f"{arrays.name!r}")
+    negative = np.asarray(err.values) < 0
+    if negative.any():
+        i = np.unravel_index(int(np.flatnonzero(negative)[0]), negative.shape)
+        raise ValueError(f"the uncertainty {error_var!r} of {label} must be >= 0 (1-sigma, "
+                         f"{err.units or 'map units'}); found {float(err.values[i]):g} at lat "
+                         f"{float(err.lat[i[0]]):g}, lon {float(err.lon[i[1]]):g} "
+                         f"({int(negative.sum())} negative node(s))")
+    return grid, _grid_with_mask(err, f"the uncertainty {error_var!r} of {label}", allow_nan)
+
+
+def map_for_track(path, var, lat, lon, margin_m, *, max_missing=0.0, option="--map"):
+    """The map a track needs: :func:`load_map` keeping NaN nodes, then its region.
+
+    One call for the commands: the file (or shipped map) is read with missing nodes
+    kept, and :meth:`Grid.finite_region` returns the map recentred when it is global and
+    its seam cuts the track's region, cut to the region when it has missing nodes
+    anywhere, and refused when the region itself has missing nodes (more than
+    ``max_missing`` of them).
+
+    Parameters
+    ----------
+    path, var
+        As :func:`load_map`.
+    lat, lon : array_like
+        The track (degrees).
+    margin_m : float
+        How far (m) the method reaches from the track, e.g. a matcher's drift radius.
+    max_missing : float
+        Fraction of missing nodes accepted in the region (0 until the method masks them).
+    option : str
+        The command's option, for messages.
+
+    Returns
+    -------
+    Grid
+    """
+    grid = load_map(path, var, allow_nan=True)
+    return grid.finite_region(lat, lon, margin_m, max_missing=max_missing,
+                              source=f"{option} {str(path)!r}")
+
+
+def _grid_with_mask(arrays, label, allow_nan):
+    """A Grid from read_netcdf's arrays, missing nodes kept as NaN (or refused)."""
+    lat, lon, values, name, units = arrays
+    missing = ~np.isfinite(values)
+    n = int(missing.sum())
+    if n and not allow_nan:
+        i = np.unravel_index(int(np.flatnonzero(missing)[0]), missing.shape)
+        raise ValueError(f"{label} has {n} missing (NaN or fill-value) node(s) of {missing.size}, "
+                         f"the first at lat {float(lat[i[0]]):g}, lon {float(lon[i[1]]):g}; "
+                         "this needs a complete map")
+    grid = Grid.from_arrays(lat, lon, np.where(missing, 0.0, values).astype(values.dtype),
+                            name=name, units=units)
+    if not n:
+        return grid
+    if lat[1] < lat[0]:
+        missing = missing[..., ::-1, :]
+    if lon[1] < lon[0]:
+        missing = missing[..., ::-1]
+    nan = jnp.asarray(np.nan, dtype=grid.values.dtype)
+    return dataclasses.replace(grid, values=jnp.where(jnp.asarray(missing), nan, grid.values))

@@ -1,0 +1,234 @@
+"""Text tables of tracks and logs: decoding, delimiter sniffing, rows and numeric cells.
+
+:func:`read_table` turns a track or log file into a header and rows of text cells with
+their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
+
+- encodings: UTF-8 with or without a byte-order mark, UTF-16 with a BOM (spreadsheet
+  "Unicode text"), else Latin-1; a binary file (NetCDF, HDF5, ...) is refused;
+- line ends: LF, CRLF or CR; blank lines and ``#`` comment lines (GMT headers) skipped;
+- the delimiter is sniffed from the header line: a tab, else ``;`` when it has at least
+  as many as ``,``, else ``,``, else runs of whitespace (``.xyz``, ``.txt``; GMT ``>``
+  segment lines skipped); quoted fields may hold the delimiter;
+- a first line that is all numbers is data, not a header: the columns are then named
+  ``lon``, ``lat``, ``z`` for ``.xyz``/``.xy`` files (GMT's order) and ``1``, ``2``, ...
+  otherwise.
+
+:func:`parse_numbers` reads one column of cells as float64 (empty, ``nan``, ``NA``,
+``N/A``, ``null`` as NaN; a decimal comma accepted when the delimiter is not a comma).
+"""
+
+import csv
+import io
+import re
+import shlex
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = ["NA_TOKENS", "Table", "column_key", "parse_numbers", "read_table"]
+
+NA_TOKENS = frozenset({"", "nan", "na", "n/a", "null", "none"})
+"""Cells (lower case) read as a missing value (NaN)."""
+
+_BINARY = {b"CDF": "a NetCDF-3 file", b"\x89HDF": "a NetCDF-4/HDF5 file",
+           b"PK": "a zip/xlsx archive", b"\xd0\xcf\x11\xe0": "an old Excel/Office file"}
+_UNITS = re.compile(r"\s*[(\[][^()\[\]]*[)\]]\s*$")
+_DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
+_DELIMITER_NAMES = {",": "comma", ";": "semicolon", "\t": "tab", " ": "whitespace"}
+
+
+class Table(NamedTuple):
+    """A text table read by :func:`read_table`.
+
+    Attributes
+    ----------
+    header : list of str
+        Column names as written (trimmed; generated names for a header-less file).
+    rows : list of list of str
+        Data cells, each row as long as the header (short rows padded with ``""``).
+    lines : list of int
+        The file line number (1-based) of each row.
+    delimiter : str
+        ``","``, ``";"``, ``"\\t"`` or ``" "`` (runs of whitespace).
+    has_header : bool
+        False when the first line was data.
+    """
+
+    header: list
+    rows: list
+    lines: list
+    delimiter: str
+    has_header: bool
+
+    @property
+    def delimiter_name(self):
+        """``"comma"``, ``"semicolon"``, ``"tab"`` or ``"whitespace"``."""
+        return _DELIMITER_NAMES[self.delimiter]
+
+
+def column_key(name):
+    """How a header matches a column name: trimmed, lower case, a ``(unit)``/``[unit]``
+    suffix dropped (``"Gravity [mGal]"`` → ``"gravity"``)."""
+    return _UNITS.sub("", str(name).strip()).strip().lower()
+
+
+def _decode(data, label):
+    head = data[:4096]
+    for magic, what in _BINARY.items():
+        if head.startswith(magic):
+            raise ValueError(f"{label} is {what}, not a text table; a track is a CSV (or "
+                             "whitespace-separated) text file with a header row")
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return data.decode("utf-16")
+    if b"\0" in head:
+        raise ValueError(f"{label} is a binary file, not a text table; a track is a CSV "
+                         "(or whitespace-separated) text file with a header row")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
+
+
+def _sniff(line):
+    if "\t" in line:
+        return "\t"
+    if ";" in line and line.count(";") >= line.count(","):
+        return ";"
+    return "," if "," in line else " "
+
+
+def _skip(cells):
+    first = cells[0].lstrip() if cells else ""
+    return not any(c.strip() for c in cells) or first.startswith("#")
+
+
+def _whitespace_rows(text, label):
+    for n, line in enumerate(io.StringIO(text, newline=None), start=1):
+        s = line.strip()
+        if not s or s.startswith(("#", ">")):
+            continue
+        try:
+            yield n, (shlex.split(s) if ('"' in s or "'" in s) else s.split())
+        except ValueError as err:
+            raise ValueError(f"{label}, line {n}: {err} (unbalanced quotes?)") from None
+
+
+def _delimited_rows(text, delimiter, label):
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter,
+                        skipinitialspace=True)
+    while True:
+        try:
+            cells = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as err:
+            raise ValueError(f"{label}, line {reader.line_num}: {err}") from None
+        yield reader.line_num, cells
+
+
+def _is_number(cell):
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+def read_table(path, label=None):
+    """Read a track or log file as a header and rows of text cells (see the module notes).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    label : str, optional
+        How the file is named in messages (default ``"track file 'PATH'"``).
+
+    Returns
+    -------
+    Table
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        A folder, a binary file, no header, a row with more cells than the header, an
+        unclosed quote or a repeated column name (the line or the columns are named).
+    """
+    path = Path(path)
+    label = label or f"track file {str(path)!r}"
+    if not path.exists():
+        raise FileNotFoundError(f"{label} does not exist")
+    if path.is_dir():
+        raise ValueError(f"{label} is a folder; expected a CSV file")
+    text = _decode(path.read_bytes(), label)
+    first = next((s for s in (ln.strip() for ln in text.splitlines())
+                  if s and not s.startswith(("#", ">"))), None)
+    if first is None:
+        raise ValueError(f"{label} is empty; expected a header row (e.g. t,lat,lon,gravity)")
+    delimiter = _sniff(first)
+    rows = (_whitespace_rows(text, label) if delimiter == " "
+            else _delimited_rows(text, delimiter, label))
+    rows = [(n, [c.strip() for c in cells]) for n, cells in rows if not _skip(cells)]
+    n_head, header = rows[0]
+    has_header = not all(_is_number(c) for c in header if c)
+    if has_header:
+        rows = rows[1:]
+    elif path.suffix.lower() in (".xyz", ".xy"):
+        header = ["lon", "lat", "z", *(str(j + 1) for j in range(3, len(header)))]
+    else:
+        header = [str(j + 1) for j in range(len(header))]
+    while len(header) > 1 and not header[-1] and all(len(r) < len(header) or not r[-1]
+                                                       for _, r in rows):
+        header = header[:-1]  # a trailing delimiter on every line
+    header = [h or f"column{j + 1}" for j, h in enumerate(header)]
+    seen = {}
+    for j, h in enumerate(header):
+        if h in seen:
+            raise ValueError(f"{label}: column {h!r} appears twice (columns {seen[h] + 1} and "
+                             f"{j + 1} of line {n_head}); rename one")
+        seen[h] = j
+    out, lines = [], []
+    for n, cells in rows:
+        if len(cells) > len(header) and any(cells[len(header):]):
+            raise ValueError(
+                f"{label}, line {n} has {len(cells)} cells but the header has {len(header)} "
+                f"columns ({_DELIMITER_NAMES[delimiter]}-separated); a quote missing around "
+                "a cell that holds the delimiter?")
+        out.append(cells[:len(header)] + [""] * (len(header) - len(cells)))
+        lines.append(n)
+    return Table(header, out, lines, delimiter, has_header)
+
+
+def parse_numbers(cells, decimal_comma=False):
+    """Cells of one column as float64; the index of the first cell that is not a number.
+
+    Parameters
+    ----------
+    cells : sequence of str
+        Trimmed cells.
+    decimal_comma : bool
+        Also accept ``1,5`` for 1.5 (files whose delimiter is not a comma).
+
+    Returns
+    -------
+    values : numpy.ndarray, shape ``(n,)``
+        NaN for missing cells (:data:`NA_TOKENS`); undefined from the first bad cell on.
+    bad : int or None
+        Index of the first cell that is neither a number nor missing, else None.
+    """
+    values = np.empty(len(cells))
+    for i, cell in enumerate(cells):
+        if cell.lower() in NA_TOKENS:
+            values[i] = np.nan
+            continue
+        try:
+            values[i] = float(cell)
+        except ValueError:
+            if decimal_comma and _DECIMAL_COMMA.fullmatch(cell):
+                values[i] = float(cell.replace(",", "."))
+            else:
+                return values, i
+    return values, None
