@@ -30,7 +30,7 @@ def concrete(x):
 
 def _first_bad(values, bad):
     idx = np.flatnonzero(bad)
-    return values.reshape(-1)[idx[0]], int(idx.size)
+    return values.reshape(-1)[idx[0]].item(), int(idx.size)  # a Python number in messages
 
 
 def check_latitude(lat, name="lat"):

@@ -42,3 +42,16 @@ def smooth_grid():
     v = (40 * np.sin(45 * x + 2) * np.cos(35 * y) + 25 * np.cos(60 * x * y + 50 * y)
          + 20 * np.sin(70 * x - 30 * y) + 15 * x)
     return jg.Grid.from_arrays(lat, lon, v, units="mGal")
+
+
+def _check_clear_message(msg, path, phrases=()):
+    """A bad-input message: one line, naming the file, no library syntax, with phrases."""
+    assert str(path) in msg and "\n" not in msg and "np." not in msg, msg
+    for phrase in phrases:
+        assert phrase in msg, (phrase, msg)
+
+
+@pytest.fixture(scope="session")
+def clear_message():
+    """``clear_message(msg, path, phrases)`` asserts a one-line error naming ``path``."""
+    return _check_clear_message

@@ -7,8 +7,9 @@ function is :func:`cmd_dov`.
 import numpy as np
 
 from jaxgrav import dov
+from jaxgrav.cli.inputs import add_columns_option, read_track
 from jaxgrav.dov import DEFAULT_METHOD, METHODS
-from jaxgrav.tracks import read_track_csv, write_track_csv
+from jaxgrav.tracks import write_track_csv
 
 __all__ = ["add_parser", "cmd_dov"]
 
@@ -17,6 +18,7 @@ def add_parser(subparsers):
     """Add the ``dov`` sub-command to an ``argparse`` sub-parser set."""
     d = subparsers.add_parser("dov", help="interpolate layered DOV along a track (paper C)")
     d.add_argument("--track", required=True, help="CSV with lat, lon (degrees) and h (m)")
+    add_columns_option(d)
     d.add_argument("--out", required=True, help="output CSV: the track columns + xi, eta (arcsec)")
     d.add_argument("--layers", default=None,
                    help="comma-separated layer heights in m (default: the grid's; other "
@@ -45,7 +47,7 @@ def _parse_heights(text):
 
 def cmd_dov(args):
     """Run ``jaxgrav dov`` (x64 is enabled by the CLI entry point)."""
-    track = read_track_csv(args.track, required=("lat", "lon", "h"))
+    track = read_track(args, required=("lat", "lon", "h"))
     heights = _parse_heights(args.layers) if args.layers else None
     if args.grid:
         layers = dov.LayeredGrid.from_netcdf(args.grid)
@@ -58,7 +60,7 @@ def cmd_dov(args):
         layers = dov.paper_c_layers(heights if heights is not None else dov.PAPER_HEIGHTS)
     res = dov.interpolate(layers, track["lat"], track["lon"], track["h"], args.method,
                           strict=True)
-    cols = dict(track)
+    cols = track.columns()
     vals = np.asarray(res.values)
     for i, name in enumerate(layers.channels):
         cols[name] = vals[i]

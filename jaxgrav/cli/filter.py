@@ -35,16 +35,17 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from jaxgrav.cli.inputs import add_columns_option, read_track, track_map
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
 from jaxgrav.filters import STATUS_FILTER, status_messages_filter
-from jaxgrav.filters.api import FILTER_METHODS, filter_track, reading_stride
+from jaxgrav.filters.api import FILTER_METHODS, PMF_SPAN_SIGMA, filter_track, reading_stride
 from jaxgrav.filters.map_state import map_error_state
 from jaxgrav.scenarios import FilterScenario, filter_scenario
 from jaxgrav.sim import DEG_ARC_M
-from jaxgrav.tracks import csv_line, read_track_csv, write_track_csv
+from jaxgrav.tracks import csv_line, write_track_csv
 
 __all__ = ["add_parsers", "cmd_filter", "cmd_simulate_filter"]
 
@@ -78,6 +79,7 @@ def add_parsers(subparsers):
                    help="CSV: t (s, uniform step), lat, lon (INS, degrees), gravity "
                         "(Eötvös-corrected anomaly, mGal; empty where no reading); "
                         "optional v_east, v_north (m/s; not used)")
+    add_columns_option(f)
     f.add_argument("--method", choices=FILTER_METHODS, default="ukf",
                    help="ukf (default), ekf (jacfwd Jacobian), gsf (Gaussian sum of 3 x 3 "
                         "UKFs, for multi-modal priors), pmf (grid point-mass filter)")
@@ -173,15 +175,20 @@ def _check_sigma(name, value):
         raise ValueError(f"{name} must be a positive, finite standard deviation; got {value!r}")
 
 
-def _field(args):
-    """The map, its name for messages, and the model's constant offset (mGal)."""
+_FILTER_MARGIN_M = 20e3
+"""Reach of a filter beyond its point-mass grid (m): the INS drift over a few hours."""
+
+
+def _field(args, track):
+    """The map (cut to the track's reach), its name for messages, and the model's offset."""
     if args.point_masses == "paper-d":
         return paper_d(), "point masses paper-d", 0.0
     if args.point_masses is not None:
         masses, offset = load_point_masses(args.point_masses)
         return (masses, f"point masses {args.point_masses} (K = {masses.size}, offset "
                 f"{offset:+.3f} mGal)", offset)
-    return load_map(args.map, args.var), f"map {args.map}", 0.0
+    margin_m = PMF_SPAN_SIGMA * args.sigma_pos + _FILTER_MARGIN_M
+    return track_map(args, track, margin_m), f"map {args.map}", 0.0
 
 
 def _check_on_map(grid, lat, lon, where, name):
@@ -207,8 +214,7 @@ def cmd_filter(args):
                         ("--sigma-gravity", args.sigma_gravity)):
         _check_sigma(name, value)
     where = f"--track {str(args.track)!r}"
-    track = read_track_csv(args.track, required=("t", "lat", "lon", "gravity"),
-                           allow_nan=("gravity",))
+    track = read_track(args, required=("t", "lat", "lon", "gravity"), allow_nan=("gravity",))
     t, lat, lon, g = (track[k] for k in ("t", "lat", "lon", "gravity"))
     _uniform_dt(t, where)
     if np.any(np.abs(lat) > 90):
@@ -228,7 +234,7 @@ def cmd_filter(args):
         reading_stride(np.flatnonzero(np.isfinite(g)), where)
     me_sigma, me_length = _map_error_args(args)
     fogm = map_error_state(me_sigma, me_length) if me_sigma > 0 else None
-    field, field_name, offset = _field(args)
+    field, field_name, offset = _field(args, track)
     if args.map is not None:
         _check_on_map(field, lat, lon, where, args.map)
     # the model is masses + offset: z − (masses + offset + bias) = (z − offset) − (masses + bias)

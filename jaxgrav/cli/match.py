@@ -10,11 +10,11 @@ import sys
 import numpy as np
 
 from jaxgrav._io import atomic_output
-from jaxgrav.datasets import load_map
+from jaxgrav.cli.inputs import add_columns_option, read_track, track_map
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match import ENTROPY_HALF_SIZE, METHODS, match_track, status_messages
 from jaxgrav.sim import DEG_ARC_M
-from jaxgrav.tracks import read_track_csv, write_track_csv
+from jaxgrav.tracks import write_track_csv
 
 __all__ = ["CONTOUR_METHODS", "ENTROPY_HALF_SIZE", "add_parsers"]
 
@@ -32,6 +32,7 @@ def add_parsers(sub):
     m.add_argument("--track", required=True,
                    help="CSV: t (s), lat, lon (INS, degrees), gravity (mGal) or magnetic "
                         "(nT); optional v_east, v_north (m/s), drift_radius (degrees)")
+    add_columns_option(m)
     m.add_argument("--out", required=True, help="result JSON")
     m.add_argument("--method", choices=METHODS, default="dense",
                    help="dense (default, most accurate), chains (paper A's constrained "
@@ -69,6 +70,7 @@ def add_parsers(sub):
     s.add_argument("--map", required=True, help="NetCDF grid with lat/lon coordinates")
     s.add_argument("--var", default=None, help="variable to read when the file has several")
     s.add_argument("--track", required=True, help="CSV with lat, lon columns (degrees)")
+    add_columns_option(s)
     s.add_argument("--out", required=True, help="output CSV (track columns + sampled column)")
     s.add_argument("--method", choices=("bilinear", "bicubic"), default="bicubic")
     s.add_argument("--column", default="map", help="name of the added column (default map)")
@@ -77,10 +79,10 @@ def add_parsers(sub):
 
 
 def _cmd_sample(args):
-    grid = load_map(args.map, args.var)
-    track = read_track_csv(args.track, required=("lat", "lon"))
+    track = read_track(args, required=("lat", "lon"))
+    grid = track_map(args, track, 0.0)
     values = np.asarray(grid.sample(track["lat"], track["lon"], args.method, strict=True))
-    cols = dict(track)
+    cols = track.columns()
     cols[args.column] = values
     write_track_csv(args.out, cols, force=args.force)
     print(f"wrote {args.out}: {values.size} samples of {grid.name or 'map'} ({args.method})")
@@ -88,8 +90,7 @@ def _cmd_sample(args):
 
 def _cmd_match(args):
     _check_match_args(args)
-    grid = load_map(args.map, args.var)
-    track = read_track_csv(args.track, required=("t", "lat", "lon"))
+    track = read_track(args, required=("t", "lat", "lon"))
     field = "magnetic" if "magnetic" in track else "gravity"
     if field not in track:
         raise ValueError(f"track file {str(args.track)!r} needs a 'gravity' (mGal) or "
@@ -100,6 +101,7 @@ def _cmd_match(args):
         radius_deg = float(np.nanmax(track["drift_radius"]))
     else:
         radius_deg = 0.05
+    grid = track_map(args, track, radius_deg * DEG_ARC_M)
     if args.refine > 1:
         grid = grid.refine(args.refine)
     has_v = (field == "gravity" and "v_east" in track and "v_north" in track

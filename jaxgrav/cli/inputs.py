@@ -1,0 +1,62 @@
+"""What every command reads: the track file (with ``--columns``) and the map a track needs.
+
+One reader for tracks (:func:`jaxgrav.tracks.read_track_csv`) and one for maps
+(:func:`jaxgrav.datasets.map_for_track`) behind the commands ``match``, ``sample``,
+``filter`` and ``dov``: the same column aliases, ``--columns NAME=COLUMN`` mapping, ISO
+times and text columns everywhere; maps with missing (NaN) nodes are usable as long as
+the track's own region is complete, and global 0–360 maps are recentred when their seam
+cuts the track.
+"""
+
+from jaxgrav.datasets import map_for_track
+from jaxgrav.tracks import parse_columns, read_track_csv
+
+__all__ = ["add_columns_option", "read_track", "track_map"]
+
+
+def add_columns_option(parser):
+    """Add ``--columns NAME=COLUMN,...`` to a command's parser."""
+    parser.add_argument(
+        "--columns", default=None, metavar="NAME=COLUMN,...",
+        help="which file columns hold the names the command reads, by header (any case) "
+             "or 1-based number, e.g. --columns lat=LAT,lon=LON,gravity=FAA (headers t/time, "
+             "lat/latitude, lon/longitude, h/height are found without it)")
+
+
+def read_track(args, required, optional=(), allow_nan=()):
+    """The ``--track`` file of a command, read with its ``--columns`` mapping.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``track`` and ``columns``.
+    required, optional, allow_nan : sequence of str
+        As :func:`jaxgrav.tracks.read_track_csv`.
+
+    Returns
+    -------
+    TrackTable
+    """
+    return read_track_csv(args.track, required, optional, allow_nan=allow_nan,
+                          columns=parse_columns(args.columns))
+
+
+def track_map(args, track, margin_m):
+    """The ``--map`` of a command, cut to what ``track`` needs.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``map`` and ``var``.
+    track : mapping
+        With ``lat`` and ``lon`` (degrees).
+    margin_m : float
+        How far (m) the command's method reaches from the track.
+
+    Returns
+    -------
+    Grid
+        Missing nodes are refused only inside the track's region (plus margin).
+    """
+    return map_for_track(args.map, args.var, track["lat"], track["lon"], margin_m,
+                         option="--map")

@@ -1,0 +1,106 @@
+"""The commands read the files users have: aliased and ``--columns``-mapped headers,
+semicolon files with ISO times and text columns, maps with missing nodes away from the
+track (``jaxgrav.cli.inputs``)."""
+
+import json
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from jaxgrav import datasets
+from jaxgrav.cli import main
+from jaxgrav.tracks import read_track_csv
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    d = tmp_path_factory.mktemp("inputs")
+    assert main(["simulate", "--out", str(d / "t.csv"), "--truth", str(d / "truth.csv"),
+                 "--n", "20", "--seed", "5"]) == 0
+    return d, read_track_csv(d / "t.csv", required=("t", "lat", "lon", "gravity"))
+
+
+def _user_log(path, track):
+    """The simulated track as a user's log: semicolons, ISO times, other header names,
+    a text column and the gravity under a name no alias covers."""
+    rows = ["Time;Latitude;Longitude;ship;FAA;v_east;v_north"]
+    for i in range(track["t"].size):
+        s = int(track["t"][i])
+        rows.append(f"2024-05-01T{s // 3600:02d}:{s // 60 % 60:02d}:{s % 60:02d}Z;"
+                    f"{track['lat'][i]:.9f};{track['lon'][i]:.9f};Hakuho Maru;"
+                    f"{track['gravity'][i]:.6f};{track['v_east'][i]:.6f};"
+                    f"{track['v_north'][i]:.6f}")
+    path.write_text("\n".join(rows) + "\n")
+
+
+def test_match_reads_a_user_log_with_columns(sim, tmp_path):
+    d, track = sim
+    _user_log(tmp_path / "log.csv", track)
+    ref, out = tmp_path / "ref.json", tmp_path / "r.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(d / "t.csv"),
+                 "--out", str(ref)]) == 0
+    # without --columns the gravity column is not found, and the message says how
+    assert main(["match", "--map", "ryukyu", "--track", str(tmp_path / "log.csv"),
+                 "--out", str(out)]) == 2
+    assert main(["match", "--map", "ryukyu", "--track", str(tmp_path / "log.csv"),
+                 "--columns", "gravity=FAA", "--out", str(out)]) == 0
+    a, b = json.loads(ref.read_text()), json.loads(out.read_text())
+    np.testing.assert_allclose(b["lat"], a["lat"], atol=1e-7)
+    np.testing.assert_allclose(b["lon"], a["lon"], atol=1e-7)
+    assert b["eotvos_corrected"] is True
+
+
+def test_columns_option_errors_are_one_line(sim, tmp_path, capsys):
+    d, _ = sim
+    for columns, message in (("gravity", "NAME=COLUMN pairs"),
+                             ("gravity=NOPE", "has no column 'NOPE'")):
+        assert main(["match", "--map", "ryukyu", "--track", str(d / "t.csv"),
+                     "--columns", columns, "--out", str(tmp_path / "r.json")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and "\n" not in err and "Traceback" not in err
+
+
+def _holey_map(path, hole):
+    """The shipped map with a block of NaN nodes (a land mask) at ``hole``."""
+    grid = datasets.load("ryukyu")["anomaly_2p5min"]
+    v = np.array(grid.values)
+    v[hole] = np.nan
+    xr.Dataset({"anomaly": (("lat", "lon"), v, {"units": "mGal"})},
+               coords={"lat": np.asarray(grid.lat), "lon": np.asarray(grid.lon)}).to_netcdf(path)
+
+
+def test_sample_and_match_use_a_map_with_missing_nodes_away_from_the_track(sim, tmp_path,
+                                                                           capsys):
+    d, track = sim
+    _holey_map(tmp_path / "far.nc", (slice(0, 40), slice(0, 40)))  # far SW corner
+    out = tmp_path / "s.csv"
+    assert main(["sample", "--map", str(tmp_path / "far.nc"), "--track", str(d / "t.csv"),
+                 "--out", str(out)]) == 0
+    sampled = read_track_csv(out, required=("lat", "map"))
+    full = datasets.load("ryukyu")["anomaly_2p5min"]
+    np.testing.assert_allclose(sampled["map"],
+                               np.asarray(full.sample(track["lat"], track["lon"], "bicubic")),
+                               atol=1e-4)  # a cut map's bicubic: ~5e-5 mGal
+    assert main(["match", "--map", str(tmp_path / "far.nc"), "--track", str(d / "t.csv"),
+                 "--out", str(tmp_path / "r.json")]) == 0
+    # a hole under the track is refused in one line naming the file
+    grid = full
+    i = int(np.searchsorted(np.asarray(grid.lat), track["lat"][10]))
+    j = int(np.searchsorted(np.asarray(grid.lon), track["lon"][10]))
+    _holey_map(tmp_path / "near.nc", (slice(i - 2, i + 2), slice(j - 2, j + 2)))
+    capsys.readouterr()
+    assert main(["sample", "--map", str(tmp_path / "near.nc"), "--track", str(d / "t.csv"),
+                 "--out", str(tmp_path / "s2.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "near.nc" in err and "\n" not in err and not (tmp_path / "s2.csv").exists()
+
+
+def test_sample_passes_text_columns_through(sim, tmp_path):
+    _, track = sim
+    _user_log(tmp_path / "log.csv", track)
+    out = tmp_path / "s.csv"
+    assert main(["sample", "--map", "ryukyu", "--track", str(tmp_path / "log.csv"),
+                 "--out", str(out)]) == 0
+    lines = out.read_text().splitlines()
+    assert "ship" in lines[0] and "Hakuho Maru" in lines[1] and "map" in lines[0]
