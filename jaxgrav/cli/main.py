@@ -15,7 +15,9 @@ Sub-commands
 
 Errors in user input are reported as one line on stderr with exit code 2; a failure
 while running (anything else that goes wrong) as one line with exit code 1. ``--debug``
-shows the traceback instead. ``--version`` prints the installed version.
+shows the traceback instead. ``--version`` prints the installed version. Compiled programs
+are cached between calls (:mod:`jaxgrav.cli.cache`; ``--no-cache`` or
+``JAXGRAV_CACHE=off`` to turn it off).
 """
 
 import argparse
@@ -28,6 +30,7 @@ import jax
 
 from jaxgrav.cli import bench, demo, dov, match, montecarlo, simulate
 from jaxgrav.cli import filter as filtering
+from jaxgrav.cli.cache import enable_cache
 from jaxgrav.fields import egm2008
 
 __all__ = ["build_parser", "main"]
@@ -56,6 +59,10 @@ def build_parser():
     p.add_argument("--version", action="version", version=f"jaxgrav {_version()}")
     p.add_argument("--debug", action="store_true",
                    help="show the Python traceback of an error instead of one line")
+    p.add_argument("--no-cache", action="store_true",
+                   help="do not keep compiled programs in the cache folder (default "
+                        "~/.cache/jaxgrav/xla, or $JAXGRAV_CACHE_DIR; JAXGRAV_CACHE=off "
+                        "turns it off too)")
     sub = p.add_subparsers(dest="command", required=True)
 
     demo.add_parser(sub)
@@ -80,6 +87,7 @@ def main(argv=None):
     """Entry point of the ``jaxgrav`` command; returns the exit code."""
     args = build_parser().parse_args(argv)
     _enable_x64()
+    enable_cache(off=args.no_cache)
     try:
         args.func(args)
     except (ValueError, FileExistsError, FileNotFoundError, ImportError) as err:

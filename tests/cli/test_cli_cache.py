@@ -1,0 +1,44 @@
+"""The command line's persistent compilation cache (``jaxgrav.cli.cache``)."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from jaxgrav.cli import main
+from jaxgrav.cli.cache import cache_dir
+
+
+def test_cache_dir_from_the_environment(tmp_path):
+    assert cache_dir({"XDG_CACHE_HOME": str(tmp_path)}) == tmp_path / "jaxgrav" / "xla"
+    assert cache_dir({"JAXGRAV_CACHE_DIR": str(tmp_path / "c")}) == tmp_path / "c"
+    assert cache_dir({}) == Path.home() / ".cache" / "jaxgrav" / "xla"
+    for off in ("off", "OFF", "0", "no", "false"):
+        assert cache_dir({"JAXGRAV_CACHE": off, "JAXGRAV_CACHE_DIR": str(tmp_path)}) is None
+
+
+def _jaxgrav(args, env):
+    return subprocess.run([sys.executable, "-m", "jaxgrav.cli", *args], env=env,
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_a_second_call_loads_the_compiled_programs(tmp_path):
+    env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_")}
+    env["JAXGRAV_CACHE_DIR"] = str(tmp_path / "xla")
+    track = tmp_path / "t.csv"
+    assert main(["simulate", "--out", str(track), "--n", "8", "--seed", "1"]) == 0
+    args = ["sample", "--map", "ryukyu", "--track", str(track), "--force",
+            "--out", str(tmp_path / "s.csv")]
+    first = _jaxgrav(args, env)
+    assert first.returncode == 0, first.stderr
+    entries = sorted(p.name for p in (tmp_path / "xla").iterdir())
+    assert entries, "the first call cached nothing"
+    second = _jaxgrav(args, env)
+    assert second.returncode == 0, second.stderr
+    assert second.stdout == first.stdout  # same result from the loaded programs
+    assert sorted(p.name for p in (tmp_path / "xla").iterdir()) == entries  # nothing new
+    # turned off: no folder
+    env["JAXGRAV_CACHE_DIR"] = str(tmp_path / "none")
+    off = _jaxgrav(["--no-cache", *args], env)
+    assert off.returncode == 0, off.stderr
+    assert not (tmp_path / "none").exists()
