@@ -46,6 +46,18 @@ skipped if the whole grid is off the map).
 
 The estimate is the posterior mean; its position covariance is the grid's (plus
 the cell's own variance ``cell²/12``), so NEES can be computed.
+
+**Map-error state** (Rao–Blackwellised, like the bias). When the prior and the
+dynamics carry one more state after the 13 INS error states — a first-order
+Gauss–Markov map error appended by :func:`~jaxgrav.filters.map_state.augment` with
+``order=1`` — each cell carries a joint Gaussian of (bias, map error): means, variances
+and their covariance. The reading's likelihood in a cell is
+``N(z − Δg_M(cell) − b_c − ε_c; 0, s_b + s_ε + 2 c_bε + r)`` with the cell's predicted
+moments; each cell's pair is then updated by its own two-state Kalman gain. In the
+prediction, each cell's map error goes through ``ε ← Φ ε + w`` (``Φ``, ``Var w`` from
+the dynamics' last row) and the pair's moments are mixed through the same kernel
+(moment matching). A map-error state of order 2 is refused (ValueError). Without it
+(13 states) the filter is exactly the one above.
 """
 
 import warnings
@@ -80,7 +92,7 @@ _TINY = 1e-13  # cells below this fraction of the peak weight take the global bi
 
 
 class PMFState(NamedTuple):
-    """Point-mass filter state.
+    """Point-mass filter state (the last three fields None without a map-error state).
 
     Attributes
     ----------
@@ -94,6 +106,10 @@ class PMFState(NamedTuple):
         Mean of the whole error state; its position block is the grid's mean.
     p : Array, shape ``(13, 13)``
         Its covariance; the position block is the grid's covariance.
+    err_mean, err_var : Array, shape ``(G, G)``, or None
+        Per-cell Gaussian of the map error (mGal, mGal²).
+    err_cross : Array, shape ``(G, G)``, or None
+        Per-cell covariance of the bias and the map error (mGal²).
     """
 
     w: jax.Array
@@ -102,6 +118,9 @@ class PMFState(NamedTuple):
     centre: jax.Array
     x: jax.Array
     p: jax.Array
+    err_mean: jax.Array | None = None
+    err_var: jax.Array | None = None
+    err_cross: jax.Array | None = None
 
 
 PMFDynamics = Dynamics
@@ -166,6 +185,29 @@ def _moments(w, dn, de, cell_m):
     cne = jnp.sum(w * cn * ce)
     cov = jnp.array([[jnp.sum(w * cn * cn), cne], [cne, jnp.sum(w * ce * ce)]])
     return mean, cov + jnp.eye(2) * cell_m**2 / 12.0
+
+
+def _cell_fields(state):
+    """The per-cell arrays: bias mean, var, then (map error mean, var, cross) if present."""
+    extra = () if state.err_mean is None else (state.err_mean, state.err_var, state.err_cross)
+    return (state.bias_mean, state.bias_var, *extra)
+
+
+def _global_moments(w, cell):
+    """Mixture moments of the per-cell Gaussians (:func:`_cell_fields` order)."""
+    gm = jnp.sum(w * cell[0])
+    out = [gm, jnp.sum(w * (cell[1] + (cell[0] - gm) ** 2))]
+    if len(cell) > 2:
+        em = jnp.sum(w * cell[2])
+        out += [em, jnp.sum(w * (cell[3] + (cell[2] - em) ** 2)),
+                jnp.sum(w * (cell[4] + (cell[0] - gm) * (cell[2] - em)))]
+    return out
+
+
+def _with_cells(state, cell):
+    """``state`` with the per-cell arrays of :func:`_cell_fields` replaced."""
+    names = ("bias_mean", "bias_var", "err_mean", "err_var", "err_cross")
+    return state._replace(**dict(zip(names, cell, strict=False)))
 
 
 def _shift_axis(a, k, fill, axis):
@@ -241,9 +283,25 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         w = jnp.exp(logw - logw.max())
         w = w / w.sum()
         shape = (n_cells, n_cells)
+        n = _n_map_states(x0.shape[0])
+        extra = ()
+        if n:
+            e = N_STATES
+            extra = (jnp.full(shape, x0[e]), jnp.full(shape, p0[e, e]),
+                     jnp.full(shape, p0[GRAV, e]))
         state = PMFState(w, jnp.full(shape, x0[GRAV]), jnp.full(shape, p0[GRAV, GRAV]), centre,
-                         x0, p0)
+                         x0[:N_STATES], p0[:N_STATES, :N_STATES], *extra)
         return _sync(state, *_moments(w, dn, de, cell_m))
+
+    def _n_map_states(n):
+        if n == N_STATES:
+            return 0
+        if n == N_STATES + 1:
+            return 1
+        raise ValueError(f"the point-mass filter takes the {N_STATES} INS error states, plus "
+                         "one first-order map-error state (augment with map_error_state(..., "
+                         f"order=1)); got {n} states (a second-order map-error state is not "
+                         "available in the point-mass filter)")
 
     def dynamics(lat, dt):
         if ins is None:
@@ -260,20 +318,18 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         mean = state.x[:2]
         k = jnp.round((mean - state.centre) / cell_m).astype(jnp.int32)
         k = jnp.clip(k, -(n_cells - 1), n_cells - 1)
-        gm = jnp.sum(state.w * state.bias_mean)
-        gv = jnp.sum(state.w * (state.bias_var + (state.bias_mean - gm) ** 2))
-        arrays = (state.w, state.bias_mean, state.bias_var)
-        fills = (0.0, gm, gv)
+        cell = _cell_fields(state)
+        arrays = (state.w, *cell)
+        fills = (0.0, *_global_moments(state.w, cell))
         for axis in (0, 1):
             arrays = tuple(_shift_axis(a, k[axis], fill, axis)
                            for a, fill in zip(arrays, fills, strict=True))
         kept = arrays[0].sum()
         ok = kept > 1.0 - RECENTRE_LOSS
-        w, m, s = (jnp.where(ok, a, b) for a, b in zip(arrays, (state.w, state.bias_mean,
-                                                                   state.bias_var), strict=True))
+        w, *cell = (jnp.where(ok, a, b) for a, b in zip(arrays, (state.w, *cell), strict=True))
         w = jnp.where(ok, w / kept, w)
         centre = jnp.where(ok, state.centre + k * cell_m, state.centre)
-        return state._replace(w=w, bias_mean=m, bias_var=s, centre=centre)
+        return _with_cells(state._replace(w=w, centre=centre), cell)
 
     def _predict(state, dyn):
         if not isinstance(dyn, Dynamics):
@@ -281,8 +337,16 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         if dyn.dt is None:
             raise ValueError("the point-mass filter needs the step length: pass "
                              "Dynamics(f, q, dt), e.g. from its dynamics(lat, dt)")
+        has_err = state.err_mean is not None
+        if _n_map_states(dyn.f.shape[0]) != int(has_err):
+            raise ValueError(f"the point-mass filter's dynamics have {dyn.f.shape[0]} states "
+                             f"but its state {N_STATES + int(has_err)}: augment the dynamics "
+                             "and the prior with the same map-error state")
+        e = N_STATES
+        phi, qe = (dyn.f[e, e], dyn.q[e, e]) if has_err else (None, None)
         state = _recentre(state)
-        x, p, f, q = state.x, state.p, dyn.f, dyn.q
+        x, p = state.x, state.p
+        f, q = dyn.f[:N_STATES, :N_STATES], dyn.q[:N_STATES, :N_STATES]
         x_new = f @ x
         p_new = f @ p @ f.T + q
         # the grid spreads by the growth of the position variance that the error model
@@ -295,16 +359,30 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         # per-cell bias: its own (scalar) error model, then moment matching through the kernel
         fb, qb = f[GRAV, GRAV], q[GRAV, GRAV]
         m0, s0 = fb * m0, fb**2 * s0 + qb
-        stack = jnp.stack([w0, w0 * m0, w0 * (s0 + m0**2)])
-        w, wm, wm2 = jnp.einsum("ij,cjk,lk->cil", a_n, stack, a_e)
-        gm = jnp.sum(w0 * m0)
-        gv = jnp.sum(w0 * (s0 + (m0 - gm) ** 2))
+        chans = [w0, w0 * m0, w0 * (s0 + m0**2)]
+        cell0 = [m0, s0]
+        if has_err:
+            em, ev, ec = state.err_mean, state.err_var, state.err_cross
+            em, ev, ec = phi * em, phi**2 * ev + qe, fb * phi * ec
+            chans += [w0 * em, w0 * (ev + em**2), w0 * (ec + m0 * em)]
+            cell0 += [em, ev, ec]
+        w, wm, wm2, *we = jnp.einsum("ij,cjk,lk->cil", a_n, jnp.stack(chans), a_e)
+        glob = _global_moments(w0, cell0)
         tiny = w <= _TINY * w.max()
         safe = jnp.where(tiny, 1.0, w)
-        m = jnp.where(tiny, gm, wm / safe)
-        s = jnp.where(tiny, gv, jnp.clip(wm2 / safe - m**2, 1e-12, None))
+        m = jnp.where(tiny, glob[0], wm / safe)
+        s = jnp.where(tiny, glob[1], jnp.clip(wm2 / safe - m**2, 1e-12, None))
+        cell = [m, s]
+        if has_err:
+            em = jnp.where(tiny, glob[2], we[0] / safe)
+            ev = jnp.where(tiny, glob[3], jnp.clip(we[1] / safe - em**2, 1e-12, None))
+            ec = jnp.where(tiny, glob[4], we[2] / safe - m * em)
+            # keep each cell's 2 x 2 covariance positive semi-definite after round-off
+            lim = jnp.sqrt(s * ev)
+            cell += [em, ev, jnp.clip(ec, -lim, lim)]
         w = w / w.sum()
-        return PMFState(w, m, s, centre, x_new, 0.5 * (p_new + p_new.T))
+        state = PMFState(w, m, s, centre, x_new, 0.5 * (p_new + p_new.T))
+        return _with_cells(state, cell)
 
     def _sync(state, mean, cov, prior_mean=None):
         """Gaussian position block := the grid's moments; the rest moves by regression."""
@@ -318,10 +396,13 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return state._replace(x=x, p=0.5 * (p + p.T))
 
     def _info(state, mean, cov, innovation, innovation_var, flags):
-        bias = jnp.sum(state.w * state.bias_mean)
-        bias_var = jnp.sum(state.w * (state.bias_var + (state.bias_mean - bias) ** 2))
-        x = state.x.at[GRAV].set(bias)
-        sigma = jnp.sqrt(jnp.maximum(jnp.diagonal(state.p), 0.0)).at[GRAV].set(jnp.sqrt(bias_var))
+        glob = _global_moments(state.w, _cell_fields(state))
+        x = state.x.at[GRAV].set(glob[0])
+        sigma = jnp.sqrt(jnp.maximum(jnp.diagonal(state.p), 0.0)).at[GRAV].set(
+            jnp.sqrt(glob[1]))
+        if state.err_mean is not None:  # the map error appended, as the Kalman filters do
+            x = jnp.append(x, glob[2])
+            sigma = jnp.append(sigma, jnp.sqrt(glob[3]))
         w = state.w
         edge = (w[0].sum() + w[-1].sum() + w[1:-1, 0].sum() + w[1:-1, -1].sum()) > EDGE_MASS
         flags = flags | jnp.where(edge, STATUS_FILTER["grid_edge"], 0)
@@ -360,8 +441,14 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         has = jnp.isfinite(step.z)
         g = _cell_values(field, step, dn, de)
         on_map = jnp.isfinite(g)
-        nu = jnp.where(has & on_map, step.z - g - m, 0.0)
-        var = s + step.r
+        has_err = state.err_mean is not None
+        if has_err:
+            em, ev, ec = state.err_mean, state.err_var, state.err_cross
+            pred_m, pred_v, cross_b, cross_e = m + em, s + ev + 2.0 * ec, s + ec, ec + ev
+        else:
+            pred_m, pred_v, cross_b = m, s, s
+        nu = jnp.where(has & on_map, step.z - g - pred_m, 0.0)
+        var = pred_v + step.r
         loglik = jnp.where(on_map, -0.5 * (nu**2 / var + jnp.log(var)), -jnp.inf)
         any_on = jnp.any(on_map)
         loglik = loglik - jnp.max(jnp.where(on_map, loglik, -jnp.inf))
@@ -370,16 +457,21 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         total = w_new.sum()
         do = do & (total > 0)
         w_new = jnp.where(do, w_new / jnp.where(total > 0, total, 1.0), w)
-        gain = s / var
+        gain = cross_b / var
         m_new = jnp.where(do, m + gain * nu, m)
-        s_new = jnp.where(do, s - gain * s, s)
+        s_new = jnp.where(do, s - gain * cross_b, s)
         state = state._replace(w=w_new, bias_mean=m_new, bias_var=s_new)
+        if has_err:
+            gain_e = cross_e / var
+            state = state._replace(err_mean=jnp.where(do, em + gain_e * nu, em),
+                                   err_var=jnp.where(do, ev - gain_e * cross_e, ev),
+                                   err_cross=jnp.where(do, ec - gain * cross_e, ec))
         mean, cov = _moments(w_new, dn, de, cell_m)
         state = _sync(state, mean, cov, prior_mean)
 
         g_safe = jnp.where(on_map, g, 0.0)
-        z_hat = jnp.sum(w * (g_safe + m))
-        z_var = jnp.sum(w * (var + (g_safe + m - z_hat) ** 2))
+        z_hat = jnp.sum(w * (g_safe + pred_m))
+        z_var = jnp.sum(w * (var + (g_safe + pred_m - z_hat) ** 2))
         flags = (
             jnp.where(~has, STATUS_FILTER["no_reading"], 0)
             | jnp.where(has & ~jnp.all(on_map), STATUS_FILTER["off_map"], 0)
