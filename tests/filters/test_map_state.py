@@ -146,7 +146,7 @@ def test_bad_map_error_input_names_the_option():
                        map_error=map_error(1.0, 1e4), map_error_told="loud")
     with pytest.raises(ValueError, match="point-mass filter"):
         filter_builder(datasets.load("ryukyu")["anomaly_2p5min"], kind="pmf",
-                       map_error=map_error(1.0, 1e4), map_error_told="fogm")
+                       map_error=map_error(1.0, 1e4), map_error_told="sogm")
     with pytest.raises(TypeError, match="map_error must be"):
         filter_builder(datasets.load("ryukyu")["anomaly_2p5min"], kind="ukf", map_error=3.0)
 
