@@ -256,8 +256,9 @@ def cmd_filter(args):
     stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""
     stride += f", no-harm guard {args.guard:g}" if args.guard is not None else ""
     if fogm is not None:
-        stride += (f", map-error state (order {args.map_error_order}) {me_sigma:g} mGal over "
-                   f"{me_length:g} m" + (" per cell" if args.method == "pmf" else ""))
+        stride += (f", map-error state {me_sigma:g} mGal over {me_length:g} m"
+                   + (" per cell" if args.method == "pmf" else "")
+                   + (", second order" if args.map_error_order == 2 else ""))
     print(f"wrote {args.out}: {args.method} over {t.size} rows ({n_read} readings{stride}) "
           f"on {field_name}; final 1-sigma {res['sigma_north'][-1]:.0f} m north, "
           f"{res['sigma_east'][-1]:.0f} m east")
