@@ -1,8 +1,7 @@
 """Grid point-mass filter over the INS position error, with the other error states marginalised.
 
-The standard terrain-navigation baseline (Bergman 1999), with the INS error model
-in it. The posterior of the horizontal position error ``(d_n, d_e)`` lives on a
-``G × G`` grid of cells; everything else is Gaussian:
+The terrain-navigation baseline (Bergman 1999) with the INS error model in it. The
+posterior of the position error ``(d_n, d_e)`` is on ``G × G`` cells; the rest is Gaussian:
 
 * each cell carries a Gaussian for the gravimeter bias δg_a (a one-state Kalman
   filter per cell, Rao–Blackwellised), so an unknown bias is not gridded;
@@ -53,11 +52,9 @@ Gauss–Markov map error appended by :func:`~jaxgrav.filters.map_state.augment` 
 ``order=1`` — each cell carries a joint Gaussian of (bias, map error): means, variances
 and their covariance. The reading's likelihood in a cell is
 ``N(z − Δg_M(cell) − b_c − ε_c; 0, s_b + s_ε + 2 c_bε + r)`` with the cell's predicted
-moments; each cell's pair is then updated by its own two-state Kalman gain. In the
-prediction, each cell's map error goes through ``ε ← Φ ε + w`` (``Φ``, ``Var w`` from
-the dynamics' last row) and the pair's moments are mixed through the same kernel
-(moment matching). A map-error state of order 2 is refused (ValueError). Without it
-(13 states) the filter is exactly the one above.
+moments, then each cell's pair takes its own two-state Kalman update. The prediction
+takes each cell's ``ε ← Φ ε + w`` (from the dynamics' last row) and mixes the pair's
+moments through the kernel. Order 2 is refused (ValueError); 13 states: as above.
 """
 
 import warnings
@@ -67,7 +64,6 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from jaxgrav import constants
 from jaxgrav._linalg import inv_2x2
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import PointMasses
@@ -78,7 +74,16 @@ from jaxgrav.filters.model import (
     gravity_measurement,
     run_filter,
 )
-from jaxgrav.geodesy import enu_basis, geodetic_to_ecef, meridian_radius, prime_vertical_radius
+from jaxgrav.filters.pmf_cells import (
+    cell_fields,
+    diffusion_kernel,
+    global_moments,
+    grid_moments,
+    point_mass_cells,
+    shift_axis,
+    with_cells,
+)
+from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import GRAV, N_STATES, INSErrorModel, transition
 
 __all__ = ["PMFDynamics", "PMFFilter", "PMFState", "diffusion_kernel", "pmf", "run_pmf"]
@@ -148,95 +153,6 @@ class PMFFilter(NamedTuple):
     dynamics: Callable
 
 
-def _neumann_basis(n):
-    """Orthonormal cosine basis and eigenvalues of the zero-flux second difference on n cells."""
-    i = jnp.arange(n)[:, None] + 0.5
-    k = jnp.arange(n)[None, :]
-    v = jnp.cos(jnp.pi * k * i / n) * jnp.where(k == 0, jnp.sqrt(1.0 / n), jnp.sqrt(2.0 / n))
-    lam = -4.0 * jnp.sin(jnp.pi * jnp.arange(n) / (2 * n)) ** 2
-    return v, lam
-
-
-def diffusion_kernel(n, v):
-    """Diffusion kernel ``exp(v/2 · L)`` on ``n`` cells with zero-flux edges.
-
-    Parameters
-    ----------
-    n : int
-        Cells (static).
-    v : Array, shape ``()``
-        Variance of the spread in cells² (any ``v ≥ 0``).
-
-    Returns
-    -------
-    Array, shape ``(n, n)``
-        ``A[i, j]``: share of cell ``j``'s mass that moves to cell ``i``. Entries
-        are ``≥ 0`` (round-off negatives clipped) and each column sums to 1.
-    """
-    basis, lam = _neumann_basis(n)
-    a = (basis * jnp.exp(0.5 * jnp.maximum(v, 0.0) * lam)) @ basis.T
-    a = jnp.maximum(a, 0.0)
-    return a / a.sum(0, keepdims=True)
-
-
-def _moments(w, dn, de, cell_m):
-    mean = jnp.array([jnp.sum(w * dn), jnp.sum(w * de)])
-    cn, ce = dn - mean[0], de - mean[1]
-    cne = jnp.sum(w * cn * ce)
-    cov = jnp.array([[jnp.sum(w * cn * cn), cne], [cne, jnp.sum(w * ce * ce)]])
-    return mean, cov + jnp.eye(2) * cell_m**2 / 12.0
-
-
-def _cell_fields(state):
-    """The per-cell arrays: bias mean, var, then (map error mean, var, cross) if present."""
-    extra = () if state.err_mean is None else (state.err_mean, state.err_var, state.err_cross)
-    return (state.bias_mean, state.bias_var, *extra)
-
-
-def _global_moments(w, cell):
-    """Mixture moments of the per-cell Gaussians (:func:`_cell_fields` order)."""
-    gm = jnp.sum(w * cell[0])
-    out = [gm, jnp.sum(w * (cell[1] + (cell[0] - gm) ** 2))]
-    if len(cell) > 2:
-        em = jnp.sum(w * cell[2])
-        out += [em, jnp.sum(w * (cell[3] + (cell[2] - em) ** 2)),
-                jnp.sum(w * (cell[4] + (cell[0] - gm) * (cell[2] - em)))]
-    return out
-
-
-def _with_cells(state, cell):
-    """``state`` with the per-cell arrays of :func:`_cell_fields` replaced."""
-    names = ("bias_mean", "bias_var", "err_mean", "err_var", "err_cross")
-    return state._replace(**dict(zip(names, cell, strict=False)))
-
-
-def _shift_axis(a, k, fill, axis):
-    """``a`` shifted by ``k`` cells along ``axis`` (``out[i] = a[i + k]``), ``fill`` outside."""
-    n = a.shape[axis]
-    idx = jnp.arange(n) + k
-    ok = (idx >= 0) & (idx < n)
-    out = jnp.take(a, jnp.clip(idx, 0, n - 1), axis=axis)
-    ok = ok[:, None] if axis == 0 else ok[None, :]
-    return jnp.where(ok, out, fill)
-
-
-def _point_mass_cells(masses, lat, lon):
-    """Anomaly (mGal) of point masses on the separable cell grid ``lat (G, 1) × lon (1, G)``.
-
-    The same physics as :func:`~jaxgrav.fields.pointmass.gravity_anomaly`, with the
-    trigonometry of the cells' latitudes and longitudes done per row and per column
-    (``2G`` instead of ``G²`` evaluations).
-    """
-    dtype = jnp.result_type(float)
-    xp = geodetic_to_ecef(lat, lon, 0.0)
-    xm = geodetic_to_ecef(masses.lat, masses.lon, -jnp.asarray(masses.depth, dtype=dtype))
-    d = [a[..., None] - b for a, b in zip(xp, xm, strict=True)]
-    inv_l = jax.lax.rsqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
-    k = constants.G_NEWTON * jnp.asarray(masses.mass, dtype=dtype) * inv_l**3
-    _, _, up = enu_basis(lat, lon)
-    return sum(jnp.sum(k * di, axis=-1) * u for di, u in zip(d, up, strict=True)) / constants.MGAL
-
-
 def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         measurement=gravity_measurement):
     """Grid point-mass filter with the INS error model's drift.
@@ -291,7 +207,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
                      jnp.full(shape, p0[GRAV, e]))
         state = PMFState(w, jnp.full(shape, x0[GRAV]), jnp.full(shape, p0[GRAV, GRAV]), centre,
                          x0[:N_STATES], p0[:N_STATES, :N_STATES], *extra)
-        return _sync(state, *_moments(w, dn, de, cell_m))
+        return _sync(state, *grid_moments(w, dn, de, cell_m))
 
     def _n_map_states(n):
         if n == N_STATES:
@@ -318,18 +234,18 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         mean = state.x[:2]
         k = jnp.round((mean - state.centre) / cell_m).astype(jnp.int32)
         k = jnp.clip(k, -(n_cells - 1), n_cells - 1)
-        cell = _cell_fields(state)
+        cell = cell_fields(state)
         arrays = (state.w, *cell)
-        fills = (0.0, *_global_moments(state.w, cell))
+        fills = (0.0, *global_moments(state.w, cell))
         for axis in (0, 1):
-            arrays = tuple(_shift_axis(a, k[axis], fill, axis)
+            arrays = tuple(shift_axis(a, k[axis], fill, axis)
                            for a, fill in zip(arrays, fills, strict=True))
         kept = arrays[0].sum()
         ok = kept > 1.0 - RECENTRE_LOSS
         w, *cell = (jnp.where(ok, a, b) for a, b in zip(arrays, (state.w, *cell), strict=True))
         w = jnp.where(ok, w / kept, w)
         centre = jnp.where(ok, state.centre + k * cell_m, state.centre)
-        return _with_cells(state._replace(w=w, centre=centre), cell)
+        return with_cells(state._replace(w=w, centre=centre), cell)
 
     def _predict(state, dyn):
         if not isinstance(dyn, Dynamics):
@@ -367,7 +283,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
             chans += [w0 * em, w0 * (ev + em**2), w0 * (ec + m0 * em)]
             cell0 += [em, ev, ec]
         w, wm, wm2, *we = jnp.einsum("ij,cjk,lk->cil", a_n, jnp.stack(chans), a_e)
-        glob = _global_moments(w0, cell0)
+        glob = global_moments(w0, cell0)
         tiny = w <= _TINY * w.max()
         safe = jnp.where(tiny, 1.0, w)
         m = jnp.where(tiny, glob[0], wm / safe)
@@ -382,7 +298,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
             cell += [em, ev, jnp.clip(ec, -lim, lim)]
         w = w / w.sum()
         state = PMFState(w, m, s, centre, x_new, 0.5 * (p_new + p_new.T))
-        return _with_cells(state, cell)
+        return with_cells(state, cell)
 
     def _sync(state, mean, cov, prior_mean=None):
         """Gaussian position block := the grid's moments; the rest moves by regression."""
@@ -396,7 +312,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return state._replace(x=x, p=0.5 * (p + p.T))
 
     def _info(state, mean, cov, innovation, innovation_var, flags):
-        glob = _global_moments(state.w, _cell_fields(state))
+        glob = global_moments(state.w, cell_fields(state))
         x = state.x.at[GRAV].set(glob[0])
         sigma = jnp.sqrt(jnp.maximum(jnp.diagonal(state.p), 0.0)).at[GRAV].set(
             jnp.sqrt(glob[1]))
@@ -412,7 +328,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         del field
         state = _predict(state, dynamics)
         dn, de = cells(state.centre)
-        mean, cov = _moments(state.w, dn, de, cell_m)
+        mean, cov = grid_moments(state.w, dn, de, cell_m)
         state = _sync(state, mean, cov, mean)  # the grid's own edge effects move no velocity
         nan = jnp.full((), jnp.nan, state.x.dtype)
         flags = STATUS_FILTER["no_reading"] | jnp.where(
@@ -424,7 +340,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
             # the cells' true latitudes depend on the row only, longitudes on the column only
             lat = step.lat - dn[:, :1] / meridian_radius(step.lat) / DEG
             east = prime_vertical_radius(step.lat) * jnp.cos(step.lat * DEG)
-            return _point_mass_cells(field, lat, step.lon - de[:1, :] / east / DEG)
+            return point_mass_cells(field, lat, step.lon - de[:1, :] / east / DEG)
         x = jnp.zeros(N_STATES, dn.dtype)
 
         def one(a, b):
@@ -436,7 +352,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         state = _predict(state, dynamics)
         w, m, s = state.w, state.bias_mean, state.bias_var
         dn, de = cells(state.centre)
-        prior_mean, _ = _moments(w, dn, de, cell_m)
+        prior_mean, _ = grid_moments(w, dn, de, cell_m)
 
         has = jnp.isfinite(step.z)
         g = _cell_values(field, step, dn, de)
@@ -466,7 +382,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
             state = state._replace(err_mean=jnp.where(do, em + gain_e * nu, em),
                                    err_var=jnp.where(do, ev - gain_e * cross_e, ev),
                                    err_cross=jnp.where(do, ec - gain * cross_e, ec))
-        mean, cov = _moments(w_new, dn, de, cell_m)
+        mean, cov = grid_moments(w_new, dn, de, cell_m)
         state = _sync(state, mean, cov, prior_mean)
 
         g_safe = jnp.where(on_map, g, 0.0)
