@@ -25,7 +25,8 @@ readings).
 (:func:`~jaxgrav.scenarios.filter_scenario`) over its three point masses, or over a
 map (``--map``) whose readings may see a drawn map error (``--map-error SIGMA
 --map-error-length L``). ``filter --map-error SIGMA --map-error-length L`` tells the
-filter the map is wrong (:mod:`jaxgrav.filters.map_state`).
+filter the map is wrong (:mod:`jaxgrav.filters.map_state`; ``--map-error-order 2``: a
+second-order Gauss–Markov state, matched to the default map-error model).
 """
 
 import dataclasses
@@ -100,13 +101,18 @@ def add_parsers(subparsers):
                         "(default 0.2 when given without a value; chosen on paper D's "
                         "experiment); elsewhere the output stays the INS with its own 1-σ")
     f.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
-                   help="the map's error, 1-sigma (mGal): ukf, ekf, gsf add a first-order "
-                        "Gauss-Markov map-error state over the distance travelled; pmf adds "
-                        "SIGMA^2 to the reading variance. Default 0: the map is the truth")
+                   help="the map's error, 1-sigma (mGal): ukf, ekf, gsf add a Gauss-Markov "
+                        "map-error state over the distance travelled (--map-error-order); pmf "
+                        "a first-order one per grid cell. Default 0: the map is the truth")
     f.add_argument("--map-error-length", type=float, default=10e3, metavar="L",
                    help="correlation length of that state over the distance travelled (m, "
                         "default 10000; time constant L / ground speed). For a map error "
-                        "with covariance s^2 (1 + r/L) e^(-r/L) use 2 L")
+                        "with covariance s^2 (1 + r/L) e^(-r/L) use order 2 with L, or order "
+                        "1 with 2 L")
+    f.add_argument("--map-error-order", type=int, default=1, choices=(1, 2),
+                   help="order of the map-error state: 1 first-order Gauss-Markov (default), "
+                        "2 second-order (value and rate; covariance s^2 (1 + r/L) e^(-r/L), "
+                        "the model of simulate-filter --map-error); pmf: 1 only")
     f.add_argument("--force", action="store_true", help="overwrite an existing output")
     f.set_defaults(func=cmd_filter)
 
@@ -167,6 +173,12 @@ def _map_error_args(args):
     if not (np.isfinite(args.map_error_length) and args.map_error_length > 0):
         raise ValueError(f"--map-error-length must be a finite correlation length > 0 (m); "
                          f"got {args.map_error_length!r}")
+    order = getattr(args, "map_error_order", 1)
+    if order not in (1, 2):
+        raise ValueError(f"--map-error-order must be 1 or 2; got {order!r}")
+    if order == 2 and getattr(args, "method", None) == "pmf":
+        raise ValueError("--map-error-order 2 is not available with --method pmf (its per-cell "
+                         "map-error state is first order); use --map-error-order 1 with 2 L")
     return args.map_error, args.map_error_length
 
 
@@ -233,7 +245,8 @@ def cmd_filter(args):
     if args.method == "pmf":
         reading_stride(np.flatnonzero(np.isfinite(g)), where)
     me_sigma, me_length = _map_error_args(args)
-    fogm = map_error_state(me_sigma, me_length) if me_sigma > 0 else None
+    fogm = (map_error_state(me_sigma, me_length, args.map_error_order) if me_sigma > 0
+            else None)
     field, field_name, offset = _field(args, track)
     if args.map is not None:
         _check_on_map(field, lat, lon, where, args.map)
@@ -249,8 +262,9 @@ def cmd_filter(args):
     stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""
     stride += f", no-harm guard {args.guard:g}" if args.guard is not None else ""
     if fogm is not None:
-        stride += (f", map error {me_sigma:g} mGal white" if args.method == "pmf" else
-                   f", map-error state {me_sigma:g} mGal over {me_length:g} m")
+        stride += (f", map-error state {me_sigma:g} mGal over {me_length:g} m"
+                   + (" per cell" if args.method == "pmf" else "")
+                   + (", second order" if args.map_error_order == 2 else ""))
     print(f"wrote {args.out}: {args.method} over {t.size} rows ({n_read} readings{stride}) "
           f"on {field_name}; final 1-sigma {res['sigma_north'][-1]:.0f} m north, "
           f"{res['sigma_east'][-1]:.0f} m east")

@@ -76,6 +76,15 @@ def add_parser(subparsers):
                    help="results NetCDF (one value per run); a PNG of the errors is written "
                         "next to it with suffix .png")
     add_map_error_options(m)
+    m.add_argument("--map-error-told", choices=("state", "white", "none"), default=None,
+                   help="filters only: what the filter is told about --map-error: a "
+                        "Gauss-Markov map-error state (default; the point-mass filter's is "
+                        "per cell), white noise of the same sigma, or nothing")
+    m.add_argument("--map-error-order", type=int, default=None, metavar="{1,2}",
+                   help="filters only: order of the map-error state, 1 (first-order "
+                        "Gauss-Markov, length 2 L for the second-order map error) or 2 "
+                        "(second order, matched exactly); default the map error's own order "
+                        "(2), 1 for pmf (which has no order 2)")
     m.add_argument("--no-progress", action="store_true", help="no progress bar")
     m.add_argument("--force", action="store_true", help="overwrite existing outputs")
     m.set_defaults(func=cmd_montecarlo)
@@ -186,7 +195,8 @@ def _command(args):
             ("--seed", args.seed), ("--devices", args.devices), ("--map", args.map),
             ("--drift", args.drift), ("--noise", args.noise), ("--fixes", args.fixes),
             ("--map-error", args.map_error), ("--map-error-length", args.map_error_length),
-            ("--truth-map", args.truth_map)]
+            ("--truth-map", args.truth_map), ("--map-error-told", args.map_error_told),
+            ("--map-error-order", args.map_error_order)]
     return "jaxgrav montecarlo " + " ".join(f"{k} {v}" for k, v in opts if v is not None)
 
 
@@ -224,8 +234,15 @@ def cmd_montecarlo(args):
         raise ValueError(f"--map-error and --truth-map need --map MAP with --method "
                          f"{args.method}: paper D's point masses have no grid to draw a map "
                          "error on")
+    told = {k: v for k, v in (("map_error_told", args.map_error_told),
+                              ("map_error_order", args.map_error_order)) if v is not None}
+    if told and kind != "filter":
+        raise ValueError(f"--map-error-told and --map-error-order are filter options; got "
+                         f"--method {args.method}")
+    if args.map_error_order not in (None, 1, 2):
+        raise ValueError(f"--map-error-order must be 1 or 2; got {args.map_error_order}")
     spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes,
-                 map_error=model)
+                 map_error=model, **told)
     n_dev = args.devices or len(jax.devices())
     setting = describe_map_error(args)
     print(f"jaxgrav montecarlo: {args.method} ({spec.settings['description']}), {args.runs} "

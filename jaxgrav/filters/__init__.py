@@ -8,8 +8,9 @@ a fixed stride; :func:`pad_to_stride` puts a run's readings there) and vmapped o
 runs. The map is prepared once per run (:func:`prepare_field`). :func:`guard_run` holds
 back the position corrections in weakly observed directions (paper D's "no harm").
 :func:`filter_track` is the validated single-track entry point. When the map is not
-the truth, :func:`augment` appends a first-order Gauss–Markov map-error state
-(:mod:`jaxgrav.filters.map_state`) that the UKF, EKF and Gaussian sum carry unchanged.
+the truth, :func:`augment` appends a first- or second-order Gauss–Markov map-error
+state (:mod:`jaxgrav.filters.map_state`) that the UKF, EKF and Gaussian sum carry
+unchanged; the point-mass filter carries a first-order one per grid cell.
 """
 
 from jaxgrav.filters.api import FILTER_METHODS, filter_track, pad_to_stride
@@ -23,6 +24,8 @@ from jaxgrav.filters.map_state import (
     fogm_transition,
     map_error_measurement,
     map_error_state,
+    matched_state,
+    sogm_transition,
 )
 from jaxgrav.filters.model import (
     STATUS_FILTER,
@@ -70,6 +73,7 @@ __all__ = [
     "map_at_error",
     "map_error_measurement",
     "map_error_state",
+    "matched_state",
     "pad_to_stride",
     "pmf",
     "predict",
@@ -78,6 +82,7 @@ __all__ = [
     "run_filter",
     "run_pmf",
     "sigma_weights",
+    "sogm_transition",
     "split_prior",
     "status_messages_filter",
     "ukf",

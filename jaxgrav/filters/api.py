@@ -130,10 +130,11 @@ def _gaussian_run(kind, field, dynamics, p0, steps, guard, meas):
 
 
 @functools.partial(jax.jit, static_argnames=("every",))
-def _pmf_run(field, dt, p0, cell_m, q_pos, steps, every):
+def _pmf_run(field, dt, p0, cell_m, q_pos, steps, every, map_error=None, speed=0.0):
     filt = pmf(PMF_CELLS, cell_m, q_pos=q_pos)
     dynamics = filt.dynamics(jnp.mean(steps.lat), dt)
-    _, infos = run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps, every)
+    dynamics, x0, p0, _ = augment(map_error, dynamics, jnp.zeros(p0.shape[0]), p0, speed)
+    _, infos = run_filter(filt, field, dynamics, x0, p0, steps, every)
     return infos
 
 
@@ -164,9 +165,9 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         None: the filter's own output.
     map_error : MapErrorState, optional
         The map's error (:func:`~jaxgrav.filters.map_state.map_error_state`: σ mGal,
-        L m). ``ukf``, ``ekf``, ``gsf``: a FOGM map-error state over the distance
-        travelled, ``τ = L / speed`` with the track's median ground speed (from the
-        INS positions); ``pmf`` (no such state): σ² added to the reading variance.
+        L m, order). A Gauss–Markov map-error state over the distance travelled,
+        ``τ = L / speed`` with the track's median ground speed (from the INS
+        positions); ``pmf``: first order only, per grid cell.
         None or σ = 0: today's filters.
     where : str
         How error messages name the track.
@@ -189,13 +190,13 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     p0, dynamics = _prior_and_dynamics(float(np.mean(lat)), dt, sigma_pos, sigma_vel)
     every = None
     meas = gravity_measurement
-    if map_error is not None and method == "pmf":
-        r = r + float(map_error.sigma) ** 2
-    elif map_error is not None:
+    speed = 0.0
+    if map_error is not None:
         dn = np.diff(lat) * DEG * np.asarray(meridian_radius(lat[1:]))
         de = (np.diff(lon) * DEG * np.asarray(prime_vertical_radius(lat[1:]))
               * np.cos(lat[1:] * DEG))
         speed = float(np.median(np.hypot(dn, de))) / dt if n > 1 else 0.0
+    if map_error is not None and method != "pmf":
         dynamics = dynamics._replace(dt=jnp.asarray(dt))
         dynamics, _, p0, meas = augment(map_error, dynamics, jnp.zeros(p0.shape[0]), p0, speed)
     steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r))
@@ -205,7 +206,8 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         cell_m = 2.0 * PMF_SPAN_SIGMA * sigma_pos / (PMF_CELLS - 1)
         q_pos = PMF_Q_POS * (sigma_vel / 0.1414) ** 2
         padded, start = pad_to_stride(steps, every, rows[0])
-        infos = _pmf_run(field, dt, p0, cell_m, q_pos, padded, every=every)
+        infos = _pmf_run(field, dt, p0, cell_m, q_pos, padded, every=every,
+                         map_error=map_error, speed=speed)
         # causal: rows between readings show the prediction
         x, sigma, status = (np.asarray(a)[start:start + n]
                             for a in (infos.x, infos.sigma, infos.status))

@@ -1,4 +1,4 @@
-"""A first-order Gauss–Markov (FOGM) map-error state for the gravity/INS filters.
+"""A Gauss–Markov map-error state (first or second order) for the gravity/INS filters.
 
 When the map is not the truth, the reading is ``z = Δg_M(true position) + ε_map +
 δg_a + noise``: the map error ``ε_map`` along the track is correlated over the
@@ -14,6 +14,15 @@ stationary with variance σ² and correlation ``e^{−r/L}`` at a distance r alo
 straight track at constant speed (exact for a ``markov1`` map error; for the
 default ``markov2`` field ``σ²(1 + r/L)e^{−r/L}`` the FOGM with length ``2 L``
 has the same integral scale — :func:`fogm_length` gives the filter's length).
+
+``order=2`` is the second-order Gauss–Markov (SOGM) state matched exactly to a
+``markov2`` map error: two states, the error ``ε`` and its rate ``ε̇`` (mGal/s),
+``dε̇/dt = −β² ε − 2β ε̇ + w`` with ``β = speed / L`` and white ``w`` of density
+``4 β³ σ²``, whose autocovariance along a straight track at constant speed is the
+field's own ``σ² (1 + r/L) e^{−r/L}``. It is discretised exactly
+(:func:`sogm_transition`: the matrix exponential in closed form, the process noise
+``P∞ − Φ P∞ Φᵀ`` from the stationary covariance ``P∞ = diag(σ², β² σ²)``, equal to Van
+Loan's). Only ``ε`` enters the reading.
 
 The state is appended after the INS error states (index ``n``, 13 for
 :mod:`jaxgrav.sim.ins`) and enters the reading additively like the gravimeter
@@ -31,7 +40,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrav._pytree import pytree_dataclass
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import concrete
 from jaxgrav.filters.model import Dynamics, MapPlusBias, gravity_measurement
 
@@ -42,14 +51,20 @@ __all__ = [
     "fogm_transition",
     "map_error_measurement",
     "map_error_state",
+    "matched_state",
+    "sogm_transition",
 ]
+
+ORDERS = (1, 2)
+"""Gauss–Markov orders of the map-error state."""
 
 
 @pytree_dataclass
 class MapErrorState:
-    """The filters' map-error model: a FOGM state of σ (mGal) and length L (m).
+    """The filters' map-error model: a Gauss–Markov state of σ (mGal) and length L (m).
 
-    Build with :func:`map_error_state` (validates). Both fields are pytree data.
+    Build with :func:`map_error_state` (validates). ``sigma`` and ``length_m`` are
+    pytree data; ``order`` is static.
 
     Attributes
     ----------
@@ -57,10 +72,19 @@ class MapErrorState:
         Stationary standard deviation of the map error (mGal), ≥ 0.
     length_m : Array, scalar
         Correlation length over distance travelled (m), > 0.
+    order : {1, 2}
+        1: FOGM, one state, correlation ``e^{−r/L}``; 2: SOGM, two states (value,
+        rate), correlation ``(1 + r/L) e^{−r/L}`` (static).
     """
 
     sigma: jnp.ndarray
     length_m: jnp.ndarray
+    order: int = static_field(1)
+
+    @property
+    def n_states(self):
+        """Number of filter states the map error adds (= ``order``)."""
+        return self.order
 
 
 def _check(x, name, unit, allow_zero):
@@ -75,7 +99,7 @@ def _check(x, name, unit, allow_zero):
         raise ValueError(f"{name} must be finite and {rule} ({unit}); got {v!r}")
 
 
-def map_error_state(sigma, length_m):
+def map_error_state(sigma, length_m, order=1):
     """A validated :class:`MapErrorState`.
 
     Parameters
@@ -84,18 +108,44 @@ def map_error_state(sigma, length_m):
         Map-error σ (mGal), finite, ≥ 0 (0: no map-error state, today's filters).
     length_m : float
         Correlation length L (m), finite, > 0.
+    order : {1, 2}
+        Gauss–Markov order: 1 FOGM (one state), 2 SOGM (value and rate).
 
     Returns
     -------
     MapErrorState
 
     Raises TypeError for a non-real or non-scalar value, ValueError for a negative σ,
-    a non-positive L, NaN or inf (concrete values; traced ones pass).
+    a non-positive L, NaN or inf (concrete values; traced ones pass), or an order
+    other than 1 or 2.
     """
     _check(sigma, "map-error sigma", "mGal", True)
     _check(length_m, "map-error length_m", "m", False)
+    if isinstance(order, bool) or order not in ORDERS:
+        raise ValueError(f"map-error order must be 1 (FOGM) or 2 (SOGM); got {order!r}")
     dtype = jnp.result_type(float)
-    return MapErrorState(jnp.asarray(sigma, dtype), jnp.asarray(length_m, dtype))
+    return MapErrorState(jnp.asarray(sigma, dtype), jnp.asarray(length_m, dtype), int(order))
+
+
+def matched_state(model, order=None):
+    """The filter's map-error state matched to a map-error model.
+
+    Parameters
+    ----------
+    model : CorrelatedMapError
+        The map error's σ, L and family.
+    order : {1, 2}, optional
+        Default: the family's own order (``markov1`` → 1, ``markov2`` → 2), the
+        exact match. Order 1 on a ``markov2`` model takes :func:`fogm_length`
+        (2 L); order 2 always takes L.
+
+    Returns
+    -------
+    MapErrorState
+    """
+    order = model.order if order is None else order
+    length = fogm_length(model) if order == 1 else model.length_m
+    return map_error_state(model.sigma, length, order)
 
 
 def fogm_length(model):
@@ -138,6 +188,54 @@ def fogm_transition(sigma, length_m, speed, dt):
     return phi, jnp.square(sigma) * -jnp.expm1(-2.0 * a)
 
 
+def sogm_transition(sigma, length_m, speed, dt):
+    """Exact discretisation of the SOGM (value, rate) over one step.
+
+    Continuous model ``ẋ = A x + (0, 1)ᵀ w``, ``A = [[0, 1], [−β², −2β]]``,
+    ``β = speed / length_m``, ``E w w = 4 β³ σ²``: stationary covariance
+    ``P∞ = diag(σ², β² σ²)`` and autocorrelation ``(1 + β|t|) e^{−β|t|}`` of the value.
+
+    Parameters
+    ----------
+    sigma : float or Array
+        Stationary σ of the value (mGal).
+    length_m : float or Array
+        Correlation length over distance (m), > 0.
+    speed : float or Array
+        Speed over ground (m/s), > 0.
+    dt : float or Array
+        Step (s).
+
+    Returns
+    -------
+    phi : Array, shape ``(2, 2)``
+        ``exp(A Δt) = e^{−βΔt} [[1 + βΔt, Δt], [−β²Δt, 1 − βΔt]]``.
+    q : Array, shape ``(2, 2)``
+        ``P∞ − Φ P∞ Φᵀ`` (mGal², mGal²/s, mGal²/s²), the exact process noise.
+    """
+    beta = jnp.asarray(speed) / jnp.asarray(length_m)
+    dt = jnp.asarray(dt)
+    bt = beta * dt
+    e = jnp.exp(-bt)
+    phi = e * jnp.stack([jnp.stack([1.0 + bt, dt]),
+                         jnp.stack([-beta * bt, 1.0 - bt])])
+    s2 = jnp.square(sigma)
+    p_inf = jnp.diag(jnp.stack([s2, jnp.square(beta) * s2]))
+    q = p_inf - phi @ p_inf @ phi.T
+    return phi, 0.5 * (q + q.T)
+
+
+def _transition(config, speed, dt):
+    """``(Φ, Q, P∞)`` of the map-error block, shapes ``(m, m)`` with ``m = config.order``."""
+    s2 = jnp.square(config.sigma)
+    if config.order == 1:
+        phi, q = fogm_transition(config.sigma, config.length_m, speed, dt)
+        return phi[None, None], q[None, None], s2[None, None]
+    phi, q = sogm_transition(config.sigma, config.length_m, speed, dt)
+    beta = jnp.asarray(speed) / jnp.asarray(config.length_m)
+    return phi, q, jnp.diag(jnp.stack([s2, jnp.square(beta) * s2]))
+
+
 def map_error_measurement(base=gravity_measurement, index=None):
     """``base`` with one more additive state: the map error (index ``index``).
 
@@ -167,7 +265,7 @@ def _is_off(config):
 
 
 def augment(config, dynamics, x0, p0, speed, measurement=gravity_measurement):
-    """Append the FOGM map-error state to a filter's dynamics, prior and measurement.
+    """Append the map-error state(s) to a filter's dynamics, prior and measurement.
 
     Parameters
     ----------
@@ -185,13 +283,15 @@ def augment(config, dynamics, x0, p0, speed, measurement=gravity_measurement):
     Returns
     -------
     dynamics : Dynamics
-        ``(n + 1, n + 1)`` block-diagonal with ``Φ`` and ``Q_m`` (:func:`fogm_transition`).
-    x0 : Array, shape ``(n + 1,)``
+        ``(n + m, n + m)`` (``m = config.order``) block-diagonal with ``Φ`` and ``Q_m``
+        (:func:`fogm_transition` or :func:`sogm_transition`).
+    x0 : Array, shape ``(n + m,)``
         The map error's prior mean 0.
-    p0 : Array, shape ``(n + 1, n + 1)``
-        Its prior variance σ² (the stationary one).
+    p0 : Array, shape ``(n + m, n + m)``
+        Its prior covariance, the stationary one (σ²; SOGM ``diag(σ², β² σ²)``).
     measurement : MapPlusBias
-        ``measurement`` plus the new state (:func:`map_error_measurement`).
+        ``measurement`` plus the value state, index ``n`` (:func:`map_error_measurement`);
+        the SOGM's rate (index ``n + 1``) does not enter the reading.
     """
     if _is_off(config):
         return dynamics, x0, p0, measurement
@@ -201,11 +301,12 @@ def augment(config, dynamics, x0, p0, speed, measurement=gravity_measurement):
     if dynamics.dt is None:
         raise ValueError("augment needs dynamics.dt (the step, s) to discretise the FOGM")
     n = dynamics.f.shape[0]
-    phi, qm = fogm_transition(config.sigma, config.length_m, speed, dynamics.dt)
+    m = config.order
+    phi, qm, p_inf = _transition(config, speed, dynamics.dt)
     dtype = dynamics.f.dtype
-    f = jnp.zeros((n + 1, n + 1), dtype).at[:n, :n].set(dynamics.f).at[n, n].set(phi)
-    q = jnp.zeros((n + 1, n + 1), dtype).at[:n, :n].set(dynamics.q).at[n, n].set(qm)
-    x0 = jnp.concatenate([jnp.asarray(x0, dtype), jnp.zeros(1, dtype)])
-    p0 = (jnp.zeros((n + 1, n + 1), dtype).at[:n, :n].set(p0)
-          .at[n, n].set(jnp.square(config.sigma)))
+    z = jnp.zeros((n + m, n + m), dtype)
+    f = z.at[:n, :n].set(dynamics.f).at[n:, n:].set(phi)
+    q = z.at[:n, :n].set(dynamics.q).at[n:, n:].set(qm)
+    x0 = jnp.concatenate([jnp.asarray(x0, dtype), jnp.zeros(m, dtype)])
+    p0 = z.at[:n, :n].set(p0).at[n:, n:].set(p_inf)
     return Dynamics(f, q, dynamics.dt), x0, p0, map_error_measurement(measurement, n)

@@ -1,8 +1,7 @@
 """Grid point-mass filter over the INS position error, with the other error states marginalised.
 
-The standard terrain-navigation baseline (Bergman 1999), with the INS error model
-in it. The posterior of the horizontal position error ``(d_n, d_e)`` lives on a
-``G × G`` grid of cells; everything else is Gaussian:
+The terrain-navigation baseline (Bergman 1999) with the INS error model in it. The
+posterior of the position error ``(d_n, d_e)`` is on ``G × G`` cells; the rest is Gaussian:
 
 * each cell carries a Gaussian for the gravimeter bias δg_a (a one-state Kalman
   filter per cell, Rao–Blackwellised), so an unknown bias is not gridded;
@@ -46,6 +45,16 @@ skipped if the whole grid is off the map).
 
 The estimate is the posterior mean; its position covariance is the grid's (plus
 the cell's own variance ``cell²/12``), so NEES can be computed.
+
+**Map-error state** (Rao–Blackwellised, like the bias). When the prior and the
+dynamics carry one more state after the 13 INS error states — a first-order
+Gauss–Markov map error appended by :func:`~jaxgrav.filters.map_state.augment` with
+``order=1`` — each cell carries a joint Gaussian of (bias, map error): means, variances
+and their covariance. The reading's likelihood in a cell is
+``N(z − Δg_M(cell) − b_c − ε_c; 0, s_b + s_ε + 2 c_bε + r)`` with the cell's predicted
+moments, then each cell's pair takes its own two-state Kalman update. The prediction
+takes each cell's ``ε ← Φ ε + w`` (from the dynamics' last row) and mixes the pair's
+moments through the kernel. Order 2 is refused (ValueError); 13 states: as above.
 """
 
 import warnings
@@ -55,7 +64,6 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from jaxgrav import constants
 from jaxgrav._linalg import inv_2x2
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import PointMasses
@@ -66,7 +74,16 @@ from jaxgrav.filters.model import (
     gravity_measurement,
     run_filter,
 )
-from jaxgrav.geodesy import enu_basis, geodetic_to_ecef, meridian_radius, prime_vertical_radius
+from jaxgrav.filters.pmf_cells import (
+    cell_fields,
+    diffusion_kernel,
+    global_moments,
+    grid_moments,
+    point_mass_cells,
+    shift_axis,
+    with_cells,
+)
+from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import GRAV, N_STATES, INSErrorModel, transition
 
 __all__ = ["PMFDynamics", "PMFFilter", "PMFState", "diffusion_kernel", "pmf", "run_pmf"]
@@ -80,7 +97,7 @@ _TINY = 1e-13  # cells below this fraction of the peak weight take the global bi
 
 
 class PMFState(NamedTuple):
-    """Point-mass filter state.
+    """Point-mass filter state (the last three fields None without a map-error state).
 
     Attributes
     ----------
@@ -94,6 +111,10 @@ class PMFState(NamedTuple):
         Mean of the whole error state; its position block is the grid's mean.
     p : Array, shape ``(13, 13)``
         Its covariance; the position block is the grid's covariance.
+    err_mean, err_var : Array, shape ``(G, G)``, or None
+        Per-cell Gaussian of the map error (mGal, mGal²).
+    err_cross : Array, shape ``(G, G)``, or None
+        Per-cell covariance of the bias and the map error (mGal²).
     """
 
     w: jax.Array
@@ -102,6 +123,9 @@ class PMFState(NamedTuple):
     centre: jax.Array
     x: jax.Array
     p: jax.Array
+    err_mean: jax.Array | None = None
+    err_var: jax.Array | None = None
+    err_cross: jax.Array | None = None
 
 
 PMFDynamics = Dynamics
@@ -127,72 +151,6 @@ class PMFFilter(NamedTuple):
     update: Callable
     predict: Callable
     dynamics: Callable
-
-
-def _neumann_basis(n):
-    """Orthonormal cosine basis and eigenvalues of the zero-flux second difference on n cells."""
-    i = jnp.arange(n)[:, None] + 0.5
-    k = jnp.arange(n)[None, :]
-    v = jnp.cos(jnp.pi * k * i / n) * jnp.where(k == 0, jnp.sqrt(1.0 / n), jnp.sqrt(2.0 / n))
-    lam = -4.0 * jnp.sin(jnp.pi * jnp.arange(n) / (2 * n)) ** 2
-    return v, lam
-
-
-def diffusion_kernel(n, v):
-    """Diffusion kernel ``exp(v/2 · L)`` on ``n`` cells with zero-flux edges.
-
-    Parameters
-    ----------
-    n : int
-        Cells (static).
-    v : Array, shape ``()``
-        Variance of the spread in cells² (any ``v ≥ 0``).
-
-    Returns
-    -------
-    Array, shape ``(n, n)``
-        ``A[i, j]``: share of cell ``j``'s mass that moves to cell ``i``. Entries
-        are ``≥ 0`` (round-off negatives clipped) and each column sums to 1.
-    """
-    basis, lam = _neumann_basis(n)
-    a = (basis * jnp.exp(0.5 * jnp.maximum(v, 0.0) * lam)) @ basis.T
-    a = jnp.maximum(a, 0.0)
-    return a / a.sum(0, keepdims=True)
-
-
-def _moments(w, dn, de, cell_m):
-    mean = jnp.array([jnp.sum(w * dn), jnp.sum(w * de)])
-    cn, ce = dn - mean[0], de - mean[1]
-    cne = jnp.sum(w * cn * ce)
-    cov = jnp.array([[jnp.sum(w * cn * cn), cne], [cne, jnp.sum(w * ce * ce)]])
-    return mean, cov + jnp.eye(2) * cell_m**2 / 12.0
-
-
-def _shift_axis(a, k, fill, axis):
-    """``a`` shifted by ``k`` cells along ``axis`` (``out[i] = a[i + k]``), ``fill`` outside."""
-    n = a.shape[axis]
-    idx = jnp.arange(n) + k
-    ok = (idx >= 0) & (idx < n)
-    out = jnp.take(a, jnp.clip(idx, 0, n - 1), axis=axis)
-    ok = ok[:, None] if axis == 0 else ok[None, :]
-    return jnp.where(ok, out, fill)
-
-
-def _point_mass_cells(masses, lat, lon):
-    """Anomaly (mGal) of point masses on the separable cell grid ``lat (G, 1) × lon (1, G)``.
-
-    The same physics as :func:`~jaxgrav.fields.pointmass.gravity_anomaly`, with the
-    trigonometry of the cells' latitudes and longitudes done per row and per column
-    (``2G`` instead of ``G²`` evaluations).
-    """
-    dtype = jnp.result_type(float)
-    xp = geodetic_to_ecef(lat, lon, 0.0)
-    xm = geodetic_to_ecef(masses.lat, masses.lon, -jnp.asarray(masses.depth, dtype=dtype))
-    d = [a[..., None] - b for a, b in zip(xp, xm, strict=True)]
-    inv_l = jax.lax.rsqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
-    k = constants.G_NEWTON * jnp.asarray(masses.mass, dtype=dtype) * inv_l**3
-    _, _, up = enu_basis(lat, lon)
-    return sum(jnp.sum(k * di, axis=-1) * u for di, u in zip(d, up, strict=True)) / constants.MGAL
 
 
 def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
@@ -241,9 +199,25 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         w = jnp.exp(logw - logw.max())
         w = w / w.sum()
         shape = (n_cells, n_cells)
+        n = _n_map_states(x0.shape[0])
+        extra = ()
+        if n:
+            e = N_STATES
+            extra = (jnp.full(shape, x0[e]), jnp.full(shape, p0[e, e]),
+                     jnp.full(shape, p0[GRAV, e]))
         state = PMFState(w, jnp.full(shape, x0[GRAV]), jnp.full(shape, p0[GRAV, GRAV]), centre,
-                         x0, p0)
-        return _sync(state, *_moments(w, dn, de, cell_m))
+                         x0[:N_STATES], p0[:N_STATES, :N_STATES], *extra)
+        return _sync(state, *grid_moments(w, dn, de, cell_m))
+
+    def _n_map_states(n):
+        if n == N_STATES:
+            return 0
+        if n == N_STATES + 1:
+            return 1
+        raise ValueError(f"the point-mass filter takes the {N_STATES} INS error states, plus "
+                         "one first-order map-error state (augment with map_error_state(..., "
+                         f"order=1)); got {n} states (a second-order map-error state is not "
+                         "available in the point-mass filter)")
 
     def dynamics(lat, dt):
         if ins is None:
@@ -260,20 +234,18 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         mean = state.x[:2]
         k = jnp.round((mean - state.centre) / cell_m).astype(jnp.int32)
         k = jnp.clip(k, -(n_cells - 1), n_cells - 1)
-        gm = jnp.sum(state.w * state.bias_mean)
-        gv = jnp.sum(state.w * (state.bias_var + (state.bias_mean - gm) ** 2))
-        arrays = (state.w, state.bias_mean, state.bias_var)
-        fills = (0.0, gm, gv)
+        cell = cell_fields(state)
+        arrays = (state.w, *cell)
+        fills = (0.0, *global_moments(state.w, cell))
         for axis in (0, 1):
-            arrays = tuple(_shift_axis(a, k[axis], fill, axis)
+            arrays = tuple(shift_axis(a, k[axis], fill, axis)
                            for a, fill in zip(arrays, fills, strict=True))
         kept = arrays[0].sum()
         ok = kept > 1.0 - RECENTRE_LOSS
-        w, m, s = (jnp.where(ok, a, b) for a, b in zip(arrays, (state.w, state.bias_mean,
-                                                                   state.bias_var), strict=True))
+        w, *cell = (jnp.where(ok, a, b) for a, b in zip(arrays, (state.w, *cell), strict=True))
         w = jnp.where(ok, w / kept, w)
         centre = jnp.where(ok, state.centre + k * cell_m, state.centre)
-        return state._replace(w=w, bias_mean=m, bias_var=s, centre=centre)
+        return with_cells(state._replace(w=w, centre=centre), cell)
 
     def _predict(state, dyn):
         if not isinstance(dyn, Dynamics):
@@ -281,8 +253,16 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         if dyn.dt is None:
             raise ValueError("the point-mass filter needs the step length: pass "
                              "Dynamics(f, q, dt), e.g. from its dynamics(lat, dt)")
+        has_err = state.err_mean is not None
+        if _n_map_states(dyn.f.shape[0]) != int(has_err):
+            raise ValueError(f"the point-mass filter's dynamics have {dyn.f.shape[0]} states "
+                             f"but its state {N_STATES + int(has_err)}: augment the dynamics "
+                             "and the prior with the same map-error state")
+        e = N_STATES
+        phi, qe = (dyn.f[e, e], dyn.q[e, e]) if has_err else (None, None)
         state = _recentre(state)
-        x, p, f, q = state.x, state.p, dyn.f, dyn.q
+        x, p = state.x, state.p
+        f, q = dyn.f[:N_STATES, :N_STATES], dyn.q[:N_STATES, :N_STATES]
         x_new = f @ x
         p_new = f @ p @ f.T + q
         # the grid spreads by the growth of the position variance that the error model
@@ -295,16 +275,30 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         # per-cell bias: its own (scalar) error model, then moment matching through the kernel
         fb, qb = f[GRAV, GRAV], q[GRAV, GRAV]
         m0, s0 = fb * m0, fb**2 * s0 + qb
-        stack = jnp.stack([w0, w0 * m0, w0 * (s0 + m0**2)])
-        w, wm, wm2 = jnp.einsum("ij,cjk,lk->cil", a_n, stack, a_e)
-        gm = jnp.sum(w0 * m0)
-        gv = jnp.sum(w0 * (s0 + (m0 - gm) ** 2))
+        chans = [w0, w0 * m0, w0 * (s0 + m0**2)]
+        cell0 = [m0, s0]
+        if has_err:
+            em, ev, ec = state.err_mean, state.err_var, state.err_cross
+            em, ev, ec = phi * em, phi**2 * ev + qe, fb * phi * ec
+            chans += [w0 * em, w0 * (ev + em**2), w0 * (ec + m0 * em)]
+            cell0 += [em, ev, ec]
+        w, wm, wm2, *we = jnp.einsum("ij,cjk,lk->cil", a_n, jnp.stack(chans), a_e)
+        glob = global_moments(w0, cell0)
         tiny = w <= _TINY * w.max()
         safe = jnp.where(tiny, 1.0, w)
-        m = jnp.where(tiny, gm, wm / safe)
-        s = jnp.where(tiny, gv, jnp.clip(wm2 / safe - m**2, 1e-12, None))
+        m = jnp.where(tiny, glob[0], wm / safe)
+        s = jnp.where(tiny, glob[1], jnp.clip(wm2 / safe - m**2, 1e-12, None))
+        cell = [m, s]
+        if has_err:
+            em = jnp.where(tiny, glob[2], we[0] / safe)
+            ev = jnp.where(tiny, glob[3], jnp.clip(we[1] / safe - em**2, 1e-12, None))
+            ec = jnp.where(tiny, glob[4], we[2] / safe - m * em)
+            # keep each cell's 2 x 2 covariance positive semi-definite after round-off
+            lim = jnp.sqrt(s * ev)
+            cell += [em, ev, jnp.clip(ec, -lim, lim)]
         w = w / w.sum()
-        return PMFState(w, m, s, centre, x_new, 0.5 * (p_new + p_new.T))
+        state = PMFState(w, m, s, centre, x_new, 0.5 * (p_new + p_new.T))
+        return with_cells(state, cell)
 
     def _sync(state, mean, cov, prior_mean=None):
         """Gaussian position block := the grid's moments; the rest moves by regression."""
@@ -318,10 +312,13 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return state._replace(x=x, p=0.5 * (p + p.T))
 
     def _info(state, mean, cov, innovation, innovation_var, flags):
-        bias = jnp.sum(state.w * state.bias_mean)
-        bias_var = jnp.sum(state.w * (state.bias_var + (state.bias_mean - bias) ** 2))
-        x = state.x.at[GRAV].set(bias)
-        sigma = jnp.sqrt(jnp.maximum(jnp.diagonal(state.p), 0.0)).at[GRAV].set(jnp.sqrt(bias_var))
+        glob = global_moments(state.w, cell_fields(state))
+        x = state.x.at[GRAV].set(glob[0])
+        sigma = jnp.sqrt(jnp.maximum(jnp.diagonal(state.p), 0.0)).at[GRAV].set(
+            jnp.sqrt(glob[1]))
+        if state.err_mean is not None:  # the map error appended, as the Kalman filters do
+            x = jnp.append(x, glob[2])
+            sigma = jnp.append(sigma, jnp.sqrt(glob[3]))
         w = state.w
         edge = (w[0].sum() + w[-1].sum() + w[1:-1, 0].sum() + w[1:-1, -1].sum()) > EDGE_MASS
         flags = flags | jnp.where(edge, STATUS_FILTER["grid_edge"], 0)
@@ -331,7 +328,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         del field
         state = _predict(state, dynamics)
         dn, de = cells(state.centre)
-        mean, cov = _moments(state.w, dn, de, cell_m)
+        mean, cov = grid_moments(state.w, dn, de, cell_m)
         state = _sync(state, mean, cov, mean)  # the grid's own edge effects move no velocity
         nan = jnp.full((), jnp.nan, state.x.dtype)
         flags = STATUS_FILTER["no_reading"] | jnp.where(
@@ -343,7 +340,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
             # the cells' true latitudes depend on the row only, longitudes on the column only
             lat = step.lat - dn[:, :1] / meridian_radius(step.lat) / DEG
             east = prime_vertical_radius(step.lat) * jnp.cos(step.lat * DEG)
-            return _point_mass_cells(field, lat, step.lon - de[:1, :] / east / DEG)
+            return point_mass_cells(field, lat, step.lon - de[:1, :] / east / DEG)
         x = jnp.zeros(N_STATES, dn.dtype)
 
         def one(a, b):
@@ -355,13 +352,19 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         state = _predict(state, dynamics)
         w, m, s = state.w, state.bias_mean, state.bias_var
         dn, de = cells(state.centre)
-        prior_mean, _ = _moments(w, dn, de, cell_m)
+        prior_mean, _ = grid_moments(w, dn, de, cell_m)
 
         has = jnp.isfinite(step.z)
         g = _cell_values(field, step, dn, de)
         on_map = jnp.isfinite(g)
-        nu = jnp.where(has & on_map, step.z - g - m, 0.0)
-        var = s + step.r
+        has_err = state.err_mean is not None
+        if has_err:
+            em, ev, ec = state.err_mean, state.err_var, state.err_cross
+            pred_m, pred_v, cross_b, cross_e = m + em, s + ev + 2.0 * ec, s + ec, ec + ev
+        else:
+            pred_m, pred_v, cross_b = m, s, s
+        nu = jnp.where(has & on_map, step.z - g - pred_m, 0.0)
+        var = pred_v + step.r
         loglik = jnp.where(on_map, -0.5 * (nu**2 / var + jnp.log(var)), -jnp.inf)
         any_on = jnp.any(on_map)
         loglik = loglik - jnp.max(jnp.where(on_map, loglik, -jnp.inf))
@@ -370,16 +373,21 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         total = w_new.sum()
         do = do & (total > 0)
         w_new = jnp.where(do, w_new / jnp.where(total > 0, total, 1.0), w)
-        gain = s / var
+        gain = cross_b / var
         m_new = jnp.where(do, m + gain * nu, m)
-        s_new = jnp.where(do, s - gain * s, s)
+        s_new = jnp.where(do, s - gain * cross_b, s)
         state = state._replace(w=w_new, bias_mean=m_new, bias_var=s_new)
-        mean, cov = _moments(w_new, dn, de, cell_m)
+        if has_err:
+            gain_e = cross_e / var
+            state = state._replace(err_mean=jnp.where(do, em + gain_e * nu, em),
+                                   err_var=jnp.where(do, ev - gain_e * cross_e, ev),
+                                   err_cross=jnp.where(do, ec - gain * cross_e, ec))
+        mean, cov = grid_moments(w_new, dn, de, cell_m)
         state = _sync(state, mean, cov, prior_mean)
 
         g_safe = jnp.where(on_map, g, 0.0)
-        z_hat = jnp.sum(w * (g_safe + m))
-        z_var = jnp.sum(w * (var + (g_safe + m - z_hat) ** 2))
+        z_hat = jnp.sum(w * (g_safe + pred_m))
+        z_var = jnp.sum(w * (var + (g_safe + pred_m - z_hat) ** 2))
         flags = (
             jnp.where(~has, STATUS_FILTER["no_reading"], 0)
             | jnp.where(has & ~jnp.all(on_map), STATUS_FILTER["off_map"], 0)

@@ -27,7 +27,7 @@ from jaxgrav.filters import (
     run_filter,
     ukf,
 )
-from jaxgrav.filters.map_state import MapErrorState, augment, fogm_length, map_error_state
+from jaxgrav.filters.map_state import ORDERS, MapErrorState, augment, matched_state
 
 __all__ = [
     "FILTER_METHODS",
@@ -152,13 +152,10 @@ def pmf_run(key, field, scenario, map_error=None, told=None):
     The filter updates at every reading (``run_filter`` with ``every =
     scenario.reading_every``, the run padded to whole strides); between readings the
     estimate is predicted. Its error model is taken at the mean INS latitude of the
-    padded run. Map error: ``told.white_var`` is added to the reading variance; a
-    FOGM state is not implemented in the point-mass filter (``told.state`` must be
-    None, ValueError). Returns as :func:`ukf_run`.
+    padded run. Map error: ``told.white_var`` is added to the reading variance;
+    ``told.state`` (first order only) is the per-cell Rao–Blackwellised map-error
+    state of :func:`~jaxgrav.filters.pmf`. Returns as :func:`ukf_run`.
     """
-    if told is not None and told.state is not None:
-        raise ValueError("the point-mass filter has no FOGM map-error state; tell it the map "
-                         "error as white noise (map_error_told='white') instead")
     run = filter_scenario(key, field, scenario, map_error)
     _, steps = run_steps(run, scenario)
     if told is not None:
@@ -168,6 +165,8 @@ def pmf_run(key, field, scenario, map_error=None, told=None):
     padded, _ = pad_to_stride(steps, every)  # readings already on steps every-1, 2 every-1, …
     filt = pmf()
     dynamics = filt.dynamics(jnp.mean(padded.lat), scenario.dt)
+    if told is not None:
+        dynamics, x0, p0, _ = augment(told.state, dynamics, x0, p0, scenario.speed)
     _, infos = run_filter(filt, field, dynamics, x0, p0, padded, every)
     t = steps.z.shape[0]
     return run_metrics(run, jax.tree.map(lambda a: a[:t], infos))
@@ -183,18 +182,28 @@ _FILTER_RUNS = {
 }
 
 
-MAP_ERROR_TOLD = ("none", "white", "fogm")
-"""What :func:`filter_builder`'s filters are told about the map error."""
+MAP_ERROR_TOLD = ("none", "white", "state", "fogm", "sogm")
+"""What :func:`filter_builder`'s filters are told about the map error: nothing, white
+noise, a Gauss–Markov state of ``map_error_order`` (default the model's own), or the
+state of order 1 (``"fogm"``) or 2 (``"sogm"``)."""
 
 
-def _told(map_error, told, kind):
+def _told(map_error, told, kind, order=None):
     """The :class:`ToldMapError` of a builder's map-error settings (None: told nothing)."""
+    if order is not None and (isinstance(order, bool) or order not in ORDERS):
+        raise ValueError(f"map_error_order must be 1 (FOGM), 2 (SOGM) or None (the map-error "
+                         f"model's own order); got {order!r}")
     if told is None:
-        told = "white" if kind == "pmf" else "fogm"
+        told = "state"
         if isinstance(map_error, TruthGrid) and map_error.error is None:
             told = "none"
     if told not in MAP_ERROR_TOLD:
         raise ValueError(f"map_error_told must be one of {MAP_ERROR_TOLD}; got {told!r}")
+    if told in ("fogm", "sogm"):
+        forced = 1 if told == "fogm" else 2
+        if order is not None and order != forced:
+            raise ValueError(f"map_error_told={told!r} contradicts map_error_order={order!r}")
+        told, order = "state", forced
     if map_error is None or told == "none":
         return None, "none"
     model = map_error.error if isinstance(map_error, TruthGrid) else map_error
@@ -202,17 +211,20 @@ def _told(map_error, told, kind):
         raise ValueError("map_error is a TruthGrid without an error description (sigma, L), so "
                          "the filter cannot be told it: use map_error_told='none' or "
                          "truth_grid(grid, error=map_error(sigma, length_m))")
-    if told == "fogm" and kind == "pmf":
-        raise ValueError("map_error_told='fogm' is not available for the point-mass filter "
-                         "(kind 'pmf'); use 'white' or 'none'")
     if told == "white":
         return ToldMapError(jnp.square(model.sigma)), told
-    state = map_error_state(model.sigma, fogm_length(model))
-    return ToldMapError(jnp.zeros_like(model.sigma), state), told
+    if kind == "pmf":
+        order = 1 if order is None else order
+        if order != 1:
+            raise ValueError("the point-mass filter's per-cell map-error state is first order "
+                             "only: use map_error_order=1 (a FOGM of length 2 L for a markov2 "
+                             f"map error), 'white' or 'none'; got map_error_order={order!r}")
+    state = matched_state(model, order)
+    return ToldMapError(jnp.zeros_like(model.sigma), state), f"{told} order {state.order}"
 
 
 def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None, map_error=None,
-                   map_error_told=None):
+                   map_error_told=None, map_error_order=None):
     """Paper D: gravity/INS filtering over ``paper_d()``'s three point masses or a map.
 
     The scenario is :class:`~jaxgrav.scenarios.FilterScenario` at 5 m/s, stepping
@@ -244,12 +256,16 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None, map_
         The map is not the truth: each run's readings come from
         ``truth_field(map_error_key(key), grid, map_error)`` (one error field per run);
         needs a ``grid``. None: the map is the truth (today).
-    map_error_told : {"fogm", "white", "none"}, optional
-        What the filters are told: ``"fogm"`` (default for the Kalman filters) a
-        first-order Gauss–Markov map-error state with the model's σ and length
-        :func:`~jaxgrav.filters.map_state.fogm_length` (L for ``markov1``, 2 L for
-        ``markov2``); ``"white"`` (default for ``pmf``, which has no FOGM state) σ²
-        added to the reading variance; ``"none"`` nothing.
+    map_error_told : {"state", "fogm", "sogm", "white", "none"}, optional
+        What the filters are told: ``"state"`` (default) a Gauss–Markov map-error
+        state with the model's σ (:func:`~jaxgrav.filters.map_state.matched_state`) of
+        order ``map_error_order``; ``"fogm"`` / ``"sogm"`` the same with order 1 / 2;
+        ``"white"`` σ² added to the reading variance; ``"none"`` nothing.
+    map_error_order : {1, 2}, optional
+        Order of the state: 1 FOGM (length L for ``markov1``, 2 L for ``markov2``),
+        2 SOGM (length L; exact for ``markov2``); default the model's own order
+        (matched: 2 for the default ``markov2`` map error). ``pmf``: per-cell FOGM
+        only (default 1; 2 is a ValueError).
 
     Returns
     -------
@@ -259,7 +275,8 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None, map_
     ------
     ValueError
         A map too small for the tracks (smaller than twice the margin above); a
-        ``map_error`` without a map; an unknown ``map_error_told``.
+        ``map_error`` without a map; an unknown ``map_error_told``; a
+        ``map_error_order`` not 1, 2 or None, or 2 for ``pmf``.
     TypeError
         A ``map_error`` that is not a CorrelatedMapError, TruthGrid or None.
     """
@@ -271,7 +288,7 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None, map_
         if grid is None:
             raise ValueError("map_error needs a map (grid): paper D's point masses have no grid "
                              "to draw the map error on")
-    told, told_name = _told(map_error, map_error_told, kind)
+    told, told_name = _told(map_error, map_error_told, kind, map_error_order)
     pos_error = 2000.0 if drift_deg is None else float(drift_deg) * DEG_ARC_M
     noise = 1.0 if noise is None else float(noise)
     n = 721 if n_fixes is None else int(n_fixes)

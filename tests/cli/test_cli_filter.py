@@ -337,6 +337,12 @@ def test_map_error_on_a_map_end_to_end(tmp_path, capsys):
     o0, o1 = read_track_csv(d / "o0.csv"), read_track_csv(d / "o1.csv")
     assert np.all(np.isfinite(o1["lat"])) and np.all(o1["sigma_north"] > 0)
     assert o1["sigma_north"][-1] > o0["sigma_north"][-1]
+    # the second-order state (the simulated error's own model)
+    assert main([*base, "--out", str(d / "o3.csv"), "--map-error", "3",
+                 "--map-error-length", "10000", "--map-error-order", "2"]) == 0
+    assert "map-error state 3 mGal over 10000 m, second order" in capsys.readouterr().out
+    o3 = read_track_csv(d / "o3.csv")
+    assert np.all(np.isfinite(o3["lat"])) and o3["sigma_north"][-1] > o0["sigma_north"][-1]
     # 0 is today's filter, bit for bit
     assert main([*base, "--out", str(d / "o2.csv"), "--map-error", "0"]) == 0
     o2 = read_track_csv(d / "o2.csv")

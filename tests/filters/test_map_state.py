@@ -146,19 +146,20 @@ def test_bad_map_error_input_names_the_option():
                        map_error=map_error(1.0, 1e4), map_error_told="loud")
     with pytest.raises(ValueError, match="point-mass filter"):
         filter_builder(datasets.load("ryukyu")["anomaly_2p5min"], kind="pmf",
-                       map_error=map_error(1.0, 1e4), map_error_told="fogm")
+                       map_error=map_error(1.0, 1e4), map_error_told="sogm")
     with pytest.raises(TypeError, match="map_error must be"):
         filter_builder(datasets.load("ryukyu")["anomaly_2p5min"], kind="ukf", map_error=3.0)
 
 
-def test_nees_is_honest_with_the_fogm_state_and_not_without(grid):
-    """A small Monte Carlo (24 runs, 1 h) with a 3 mGal, 10 km markov1 map error."""
-    truth = map_error(3.0, 10e3, family="markov1")
+def test_nees_is_honest_with_the_matched_state_and_not_without(grid):
+    """A small Monte Carlo (24 runs, 1 h) with a 3 mGal, 10 km markov2 map error; the
+    default state is the matched second-order one."""
+    truth = map_error(3.0, 10e3)
     nees = {}
-    for told in ("fogm", "none"):
+    for told in ("state", "none"):
         spec = filter_builder(grid, kind="ukf", n_fixes=361, map_error=truth,
                               map_error_told=told)
         out = run(spec.fn, jax.random.key(11), 24, args=spec.args, progress=False)
         nees[told] = float(np.mean(out["nees"]))
-    assert abs(nees["fogm"] - 2.0) <= 2.0, nees
-    assert nees["none"] > 2 * nees["fogm"], nees
+    assert abs(nees["state"] - 2.0) <= 2.0, nees
+    assert nees["none"] > 2 * nees["state"], nees

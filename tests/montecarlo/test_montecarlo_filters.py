@@ -98,20 +98,25 @@ def test_filters_on_a_map_start_far_enough_inside():
     assert "over the map gravity_anomaly" in spec.settings["description"]
 
 
-@pytest.mark.parametrize(("kind", "told"), [("ukf", "fogm"), ("pmf", "white")])
+@pytest.mark.parametrize(("kind", "told"), [("ukf", "state order 2"), ("pmf", "state order 1")])
 def test_filter_builder_with_map_error(kind, told):
     """map_error=: readings from map + a drawn error per run; the filters are told by default
-    (FOGM state for the Kalman filters, white for pmf); map_error=None is today's spec."""
+    (the matched SOGM state for the Kalman filters, a per-cell FOGM for pmf);
+    map_error=None is today's spec."""
     grid = montecarlo_methods.default_grid()
     assert len(filter_builder(grid, kind=kind, n_fixes=N_FIXES).args) == 2
     spec = filter_builder(grid, kind=kind, n_fixes=N_FIXES, map_error=map_error(3.0, 10e3))
     assert spec.settings["map_error_told"] == told
     assert spec.settings["map_error"] == "markov2 sigma 3 mGal, L 10000 m"
     told_args = spec.args[3]
-    if told == "fogm":
-        assert float(told_args.state.length_m) == 20e3 and float(told_args.white_var) == 0
+    assert float(told_args.white_var) == 0
+    if kind == "ukf":
+        assert float(told_args.state.length_m) == 10e3 and told_args.state.order == 2
     else:
-        assert told_args.state is None and float(told_args.white_var) == 9.0
+        assert float(told_args.state.length_m) == 20e3 and told_args.state.order == 1
+    white = filter_builder(grid, kind=kind, n_fixes=N_FIXES, map_error=map_error(3.0, 10e3),
+                           map_error_told="white")
+    assert white.args[3].state is None and float(white.args[3].white_var) == 9.0
     r = montecarlo.run(spec.fn, jax.random.key(1), 2, chunk=2, args=spec.args, progress=False)
     for k in ("ins_err_m", "err_m", "nees"):
         assert np.all(np.isfinite(r[k])) and np.all(r[k] > 0), (k, r)
