@@ -5,6 +5,7 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``; the command function is
 """
 
 import json
+import math
 import os
 import sys
 import time
@@ -21,6 +22,8 @@ from jaxgrav.cli.simulate import (
     map_error_from_args,
 )
 from jaxgrav.datasets import load_map
+from jaxgrav.fields.map_error import map_error
+from jaxgrav.montecarlo.fix_metrics import FIX_METRIC_ATTRS, fix_summary
 from jaxgrav.montecarlo.methods import (
     BUILDERS,
     DEPRECATED_METHODS,
@@ -32,7 +35,7 @@ from jaxgrav.montecarlo.methods import (
 )
 from jaxgrav.plot import plot_error_summary, save_figure
 
-__all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize"]
+__all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize", "told_from_args"]
 
 PERCENTILES = (5, 25, 50, 75, 95)
 
@@ -76,6 +79,13 @@ def add_parser(subparsers):
                    help="results NetCDF (one value per run); a PNG of the errors is written "
                         "next to it with suffix .png")
     add_map_error_options(m)
+    m.add_argument("--told-map-error", default=None, metavar="SIGMA[,L]",
+                   help="dense only: the map error the matcher is told (GLS score, "
+                        "posterior-mean fix, fixes with a 1-sigma above 3 km rejected); "
+                        "SIGMA in map units, L in m (default --map-error-length or 10000); "
+                        "0 = the white-noise matcher. Default: the --map-error model "
+                        "itself, or for --truth-map an estimate from --map alone "
+                        "(fields.map_error_estimate)")
     m.add_argument("--no-progress", action="store_true", help="no progress bar")
     m.add_argument("--force", action="store_true", help="overwrite existing outputs")
     m.set_defaults(func=cmd_montecarlo)
@@ -186,8 +196,52 @@ def _command(args):
             ("--seed", args.seed), ("--devices", args.devices), ("--map", args.map),
             ("--drift", args.drift), ("--noise", args.noise), ("--fixes", args.fixes),
             ("--map-error", args.map_error), ("--map-error-length", args.map_error_length),
-            ("--truth-map", args.truth_map)]
+            ("--truth-map", args.truth_map), ("--told-map-error", args.told_map_error)]
     return "jaxgrav montecarlo " + " ".join(f"{k} {v}" for k, v in opts if v is not None)
+
+
+def told_from_args(args):
+    """The ``map_error_told`` of ``--told-map-error SIGMA[,L]``: ``"auto"`` when absent,
+    None for σ = 0, else a CorrelatedMapError. ValueError naming the option for a value
+    that is not one or two numbers, σ negative, NaN or inf, L not finite and > 0."""
+    text = args.told_map_error
+    if text is None:
+        return "auto"
+    parts = str(text).split(",")
+    try:
+        nums = [float(p) for p in parts]
+    except ValueError:
+        nums = None
+    if nums is None or len(nums) not in (1, 2):
+        raise ValueError(f"--told-map-error must be SIGMA or SIGMA,L (numbers: map units, m); "
+                         f"got {text!r}")
+    sigma = nums[0]
+    if not (math.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"--told-map-error SIGMA must be a finite standard deviation >= 0 "
+                         f"(map units, 0 = white-noise matcher); got {sigma!r}")
+    length = nums[1] if len(nums) == 2 else (
+        DEFAULT_MAP_ERROR_LENGTH_M if args.map_error_length is None else args.map_error_length)
+    if sigma > 0 and not (math.isfinite(length) and length > 0):
+        raise ValueError(f"--told-map-error L must be a finite correlation length > 0 (m); "
+                         f"got {length!r}")
+    return None if sigma == 0 else map_error(sigma, length)
+
+
+def _fix_lines(results):
+    fs = fix_summary(results)
+    if not fs:
+        return []
+    cov = fs["coverage95_accepted"]
+    return [f"accepted fixes: {100 * fs['accepted_rate']:.1f} % (a rejected fix keeps the INS "
+            "track); 95 % ellipse covers the truth on accepted fixes: "
+            + ("n/a (no covariance)" if not np.isfinite(cov) else f"{100 * cov:.1f} %")
+            + f"; worse than the INS: {100 * _worse_rate(results):.1f} %"]
+
+
+def _worse_rate(results):
+    """Share of runs whose error exceeds the INS's (a returned INS track is not worse)."""
+    err, ins = (np.asarray(results[k], float) for k in ("err_m", "ins_err_m"))
+    return float(np.mean(~np.isfinite(err) | (err > ins * (1 + 1e-9))))
 
 
 def cmd_montecarlo(args):
@@ -224,8 +278,15 @@ def cmd_montecarlo(args):
         raise ValueError(f"--map-error and --truth-map need --map MAP with --method "
                          f"{args.method}: paper D's point masses have no grid to draw a map "
                          "error on")
+    told = told_from_args(args)
+    extra = {}
+    if args.told_map_error is not None:
+        if args.method != "dense":
+            raise ValueError(f"--told-map-error is used by --method dense only; got --method "
+                             f"{args.method}")
+        extra["map_error_told"] = told
     spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes,
-                 map_error=model)
+                 map_error=model, **extra)
     n_dev = args.devices or len(jax.devices())
     setting = describe_map_error(args)
     print(f"jaxgrav montecarlo: {args.method} ({spec.settings['description']}), {args.runs} "
@@ -243,6 +304,14 @@ def cmd_montecarlo(args):
     summary = summarize(results, kind)
     print(f"readings: {setting}")
     print(format_summary(summary))
+    if "told_map_error_sigma" in spec.settings:
+        told_sigma = spec.settings["told_map_error_sigma"]
+        print("matcher told: " + ("no map error (white-noise score)" if not told_sigma else
+                                  f"map error {told_sigma:.3g} (map units), L = "
+                                  f"{spec.settings['told_map_error_length_m'] / 1000:.3g} km")
+              + f" ({spec.settings['told_map_error_source']})")
+    for line in _fix_lines(results):
+        print(line)
     print(f"{args.runs} runs in {seconds:.1f} s ({args.runs / seconds:.1f} runs/s, "
           "compilation included)")
     attrs = dict(
@@ -259,10 +328,15 @@ def cmd_montecarlo(args):
         status_bits=json.dumps({str(k): v for k, v in spec.status_bits.items()}),
         **{f"setting_{k}": v for k, v in spec.settings.items()},
         **{f"summary_{k}": v for k, v in summary.items() if not isinstance(v, dict)},
+        **{f"summary_{k}": v for k, v in fix_summary(results).items()},
         **{f"summary_{k}_{c}": v for k, d in summary.items() if isinstance(d, dict)
            for c, v in d.items()},
     )
-    montecarlo.write_netcdf(results, out, attrs=attrs, force=args.force)
+    ds = montecarlo.to_dataset(results)
+    for name, var_attrs in FIX_METRIC_ATTRS.items():
+        if name in ds:
+            ds[name].attrs.update(var_attrs)
+    montecarlo.write_netcdf(ds, out, attrs=attrs, force=args.force)
     if kind == "filter":
         _plot_errors(results, summary, f"{args.method}: {args.runs} runs, {setting}", png,
                      args.force, label="filtered",
