@@ -117,7 +117,8 @@ def summarize(results, kind="matcher"):
         ``runs``; ``ins_err_m``, ``err_m`` and ``ratio`` (error / INS error, per run),
         each a dict of ``mean`` and ``p5 … p95`` over finite values; ``failure_ratio``
         and ``failure_rate`` (error > failure_ratio × INS, or not finite),
-        ``flagged_rate`` (status ≠ 0), ``improved_rate`` (error < INS), ``nonfinite``
+        ``flagged_rate`` (status ≠ 0), ``improved_rate`` (error < INS; a returned INS
+        track, equal to it up to rounding, is not improved), ``nonfinite``
         (count); with ``nees`` in ``results`` also ``nees`` (its statistics).
     """
     if kind not in FAILURE_RATIO:
@@ -145,7 +146,7 @@ def summarize(results, kind="matcher"):
         failure_ratio=float(limit),
         failure_rate=float(np.mean(~finite | (err > limit * ins))),
         flagged_rate=float(np.mean(status != 0)),
-        improved_rate=float(np.mean(finite & (err < ins))),
+        improved_rate=float(np.mean(finite & (err < ins * (1 - 1e-9)))),  # INS track: not
         nonfinite=int((~finite).sum()),
     )
     if "nees" in results:
@@ -232,9 +233,11 @@ def _fix_lines(results):
     if not fs:
         return []
     cov = fs["coverage95_accepted"]
+    none = ("no accepted fix" if not np.any(np.asarray(results["accepted"])) else
+            "no covariance")
     return [f"accepted fixes: {100 * fs['accepted_rate']:.1f} % (a rejected fix keeps the INS "
             "track); 95 % ellipse covers the truth on accepted fixes: "
-            + ("n/a (no covariance)" if not np.isfinite(cov) else f"{100 * cov:.1f} %")
+            + (f"n/a ({none})" if not np.isfinite(cov) else f"{100 * cov:.1f} %")
             + f"; worse than the INS: {100 * _worse_rate(results):.1f} %"]
 
 
