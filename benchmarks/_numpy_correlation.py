@@ -333,13 +333,14 @@ def match_dense_np(m, lat, lon, readings, config, sampling="auto"):
     if config.refine_steps:
         p = _refine(m, lat, lon, g, w, config.score, prior, p, free, step_max,
                     float(config.damping), config.refine_steps)
+    reach = h * spacing
+    p[:2] = np.clip(p[:2], -reach, reach)  # the refinement stays in the searched square
     if not found:
         p = np.zeros_like(p)
     m_lat, m_lon = shifted_tracks(lat, lon, p[0], p[1], p[2])
     final_score, final_bias = score_track(g, sample_bicubic(m, m_lat, m_lon), w, config.score,
                                           prior)
     off_n, off_e = local_offsets_m(m_lat, m_lon, lat, lon)
-    reach = h * spacing
     edge = abs(p[0]) >= reach or abs(p[1]) >= reach
     n_off = float(scores.shape[0])
     return NpMatch(

@@ -5,6 +5,7 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``; the command function is
 """
 
 import json
+import math
 import os
 import sys
 import time
@@ -21,6 +22,9 @@ from jaxgrav.cli.simulate import (
     map_error_from_args,
 )
 from jaxgrav.datasets import load_map
+from jaxgrav.fields.map_error import map_error
+from jaxgrav.montecarlo.filter_runs import MAP_ERROR_TOLD
+from jaxgrav.montecarlo.fix_metrics import FIX_METRIC_ATTRS, fix_summary
 from jaxgrav.montecarlo.methods import (
     BUILDERS,
     DEPRECATED_METHODS,
@@ -32,7 +36,7 @@ from jaxgrav.montecarlo.methods import (
 )
 from jaxgrav.plot import plot_error_summary, save_figure
 
-__all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize"]
+__all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize", "told_from_args"]
 
 PERCENTILES = (5, 25, 50, 75, 95)
 
@@ -76,10 +80,15 @@ def add_parser(subparsers):
                    help="results NetCDF (one value per run); a PNG of the errors is written "
                         "next to it with suffix .png")
     add_map_error_options(m)
-    m.add_argument("--map-error-told", choices=("state", "white", "none"), default=None,
-                   help="filters only: what the filter is told about --map-error: a "
-                        "Gauss-Markov map-error state (default; the point-mass filter's is "
-                        "per cell), white noise of the same sigma, or nothing")
+    m.add_argument("--told-map-error", default=None, metavar="WHAT",
+                   help="what the method is told about --map-error / --truth-map. Filters: "
+                        "state (default: a Gauss-Markov map-error state; the point-mass "
+                        "filter's is per cell), white (white noise of the same sigma) or none. "
+                        "dense: SIGMA[,L] (GLS score, posterior-mean fix, fixes with a 1-sigma "
+                        "above 3 km rejected; SIGMA in map units, L in m, default "
+                        "--map-error-length or 10000) or 0 / none (the white-noise matcher); "
+                        "default the --map-error model itself, or for --truth-map an estimate "
+                        "from --map alone (fields.map_error_estimate)")
     m.add_argument("--map-error-order", type=int, default=None, metavar="{1,2}",
                    help="filters only: order of the map-error state, 1 (first-order "
                         "Gauss-Markov, length 2 L for the second-order map error) or 2 "
@@ -116,7 +125,8 @@ def summarize(results, kind="matcher"):
         ``runs``; ``ins_err_m``, ``err_m`` and ``ratio`` (error / INS error, per run),
         each a dict of ``mean`` and ``p5 … p95`` over finite values; ``failure_ratio``
         and ``failure_rate`` (error > failure_ratio × INS, or not finite),
-        ``flagged_rate`` (status ≠ 0), ``improved_rate`` (error < INS), ``nonfinite``
+        ``flagged_rate`` (status ≠ 0), ``improved_rate`` (error < INS; a returned INS
+        track, equal to it up to rounding, is not improved), ``nonfinite``
         (count); with ``nees`` in ``results`` also ``nees`` (its statistics).
     """
     if kind not in FAILURE_RATIO:
@@ -144,7 +154,7 @@ def summarize(results, kind="matcher"):
         failure_ratio=float(limit),
         failure_rate=float(np.mean(~finite | (err > limit * ins))),
         flagged_rate=float(np.mean(status != 0)),
-        improved_rate=float(np.mean(finite & (err < ins))),
+        improved_rate=float(np.mean(finite & (err < ins * (1 - 1e-9)))),  # INS track: not
         nonfinite=int((~finite).sum()),
     )
     if "nees" in results:
@@ -195,9 +205,57 @@ def _command(args):
             ("--seed", args.seed), ("--devices", args.devices), ("--map", args.map),
             ("--drift", args.drift), ("--noise", args.noise), ("--fixes", args.fixes),
             ("--map-error", args.map_error), ("--map-error-length", args.map_error_length),
-            ("--truth-map", args.truth_map), ("--map-error-told", args.map_error_told),
+            ("--truth-map", args.truth_map), ("--told-map-error", args.told_map_error),
             ("--map-error-order", args.map_error_order)]
     return "jaxgrav montecarlo " + " ".join(f"{k} {v}" for k, v in opts if v is not None)
+
+
+def told_from_args(args):
+    """The ``map_error_told`` of ``--told-map-error SIGMA[,L]``: ``"auto"`` when absent,
+    None for σ = 0, else a CorrelatedMapError. ValueError naming the option for a value
+    that is not one or two numbers, σ negative, NaN or inf, L not finite and > 0."""
+    text = args.told_map_error
+    if text is None:
+        return "auto"
+    if str(text).strip().lower() == "none":
+        return None
+    parts = str(text).split(",")
+    try:
+        nums = [float(p) for p in parts]
+    except ValueError:
+        nums = None
+    if nums is None or len(nums) not in (1, 2):
+        raise ValueError(f"--told-map-error must be SIGMA or SIGMA,L (numbers: map units, m) "
+                         f"or none for --method dense; got {text!r}")
+    sigma = nums[0]
+    if not (math.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"--told-map-error SIGMA must be a finite standard deviation >= 0 "
+                         f"(map units, 0 = white-noise matcher); got {sigma!r}")
+    length = nums[1] if len(nums) == 2 else (
+        DEFAULT_MAP_ERROR_LENGTH_M if args.map_error_length is None else args.map_error_length)
+    if sigma > 0 and not (math.isfinite(length) and length > 0):
+        raise ValueError(f"--told-map-error L must be a finite correlation length > 0 (m); "
+                         f"got {length!r}")
+    return None if sigma == 0 else map_error(sigma, length)
+
+
+def _fix_lines(results):
+    fs = fix_summary(results)
+    if not fs:
+        return []
+    cov = fs["coverage95_accepted"]
+    none = ("no accepted fix" if not np.any(np.asarray(results["accepted"])) else
+            "no covariance")
+    return [f"accepted fixes: {100 * fs['accepted_rate']:.1f} % (a rejected fix keeps the INS "
+            "track); 95 % ellipse covers the truth on accepted fixes: "
+            + (f"n/a ({none})" if not np.isfinite(cov) else f"{100 * cov:.1f} %")
+            + f"; worse than the INS: {100 * _worse_rate(results):.1f} %"]
+
+
+def _worse_rate(results):
+    """Share of runs whose error exceeds the INS's (a returned INS track is not worse)."""
+    err, ins = (np.asarray(results[k], float) for k in ("err_m", "ins_err_m"))
+    return float(np.mean(~np.isfinite(err) | (err > ins * (1 + 1e-9))))
 
 
 def cmd_montecarlo(args):
@@ -234,15 +292,27 @@ def cmd_montecarlo(args):
         raise ValueError(f"--map-error and --truth-map need --map MAP with --method "
                          f"{args.method}: paper D's point masses have no grid to draw a map "
                          "error on")
-    told = {k: v for k, v in (("map_error_told", args.map_error_told),
-                              ("map_error_order", args.map_error_order)) if v is not None}
-    if told and kind != "filter":
-        raise ValueError(f"--map-error-told and --map-error-order are filter options; got "
-                         f"--method {args.method}")
-    if args.map_error_order not in (None, 1, 2):
-        raise ValueError(f"--map-error-order must be 1 or 2; got {args.map_error_order}")
+    extra = {}
+    if kind == "filter":
+        if args.told_map_error is not None:
+            if args.told_map_error not in MAP_ERROR_TOLD:
+                raise ValueError(f"--told-map-error must be one of {', '.join(MAP_ERROR_TOLD)} "
+                                 f"with --method {args.method}; got {args.told_map_error!r}")
+            extra["map_error_told"] = args.told_map_error
+        if args.map_error_order not in (None, 1, 2):
+            raise ValueError(f"--map-error-order must be 1 or 2; got {args.map_error_order}")
+        if args.map_error_order is not None:
+            extra["map_error_order"] = args.map_error_order
+    else:
+        if args.map_error_order is not None:
+            raise ValueError(f"--map-error-order is a filter option; got --method {args.method}")
+        if args.told_map_error is not None:
+            if args.method != "dense":
+                raise ValueError(f"--told-map-error is used by the filters and --method dense "
+                                 f"only; got --method {args.method}")
+            extra["map_error_told"] = told_from_args(args)
     spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes,
-                 map_error=model, **told)
+                 map_error=model, **extra)
     n_dev = args.devices or len(jax.devices())
     setting = describe_map_error(args)
     print(f"jaxgrav montecarlo: {args.method} ({spec.settings['description']}), {args.runs} "
@@ -260,6 +330,14 @@ def cmd_montecarlo(args):
     summary = summarize(results, kind)
     print(f"readings: {setting}")
     print(format_summary(summary))
+    if "told_map_error_sigma" in spec.settings:
+        told_sigma = spec.settings["told_map_error_sigma"]
+        print("matcher told: " + ("no map error (white-noise score)" if not told_sigma else
+                                  f"map error {told_sigma:.3g} (map units), L = "
+                                  f"{spec.settings['told_map_error_length_m'] / 1000:.3g} km")
+              + f" ({spec.settings['told_map_error_source']})")
+    for line in _fix_lines(results):
+        print(line)
     print(f"{args.runs} runs in {seconds:.1f} s ({args.runs / seconds:.1f} runs/s, "
           "compilation included)")
     attrs = dict(
@@ -276,10 +354,15 @@ def cmd_montecarlo(args):
         status_bits=json.dumps({str(k): v for k, v in spec.status_bits.items()}),
         **{f"setting_{k}": v for k, v in spec.settings.items()},
         **{f"summary_{k}": v for k, v in summary.items() if not isinstance(v, dict)},
+        **{f"summary_{k}": v for k, v in fix_summary(results).items()},
         **{f"summary_{k}_{c}": v for k, d in summary.items() if isinstance(d, dict)
            for c, v in d.items()},
     )
-    montecarlo.write_netcdf(results, out, attrs=attrs, force=args.force)
+    ds = montecarlo.to_dataset(results)
+    for name, var_attrs in FIX_METRIC_ATTRS.items():
+        if name in ds:
+            ds[name].attrs.update(var_attrs)
+    montecarlo.write_netcdf(ds, out, attrs=attrs, force=args.force)
     if kind == "filter":
         _plot_errors(results, summary, f"{args.method}: {args.runs} runs, {setting}", png,
                      args.force, label="filtered",

@@ -9,7 +9,8 @@ one tensor operation with the same weighted least-squares scores as the chain pa
 shifted fixes (no node quantisation). The best candidates are ranked, one is
 selected (least score, or paper A's nearest-to-INS rule among the top k), and its
 offset, heading error and bias are then refined below the offset spacing by a few
-damped Gauss–Newton steps on the differentiable (bicubic) map.
+damped Gauss–Newton steps on the differentiable (bicubic) map; the refined offset is
+clamped to the searched square (``±half_size · spacing_m`` per axis).
 
 Work is done in local metres about the track's centroid and in fractional map
 indices, which keeps float32 accurate. For one fix the shifted positions form a
@@ -115,8 +116,9 @@ class DenseConfig:
         without this field; > 0: candidates are scored by the GLS likelihood with
         covariance ``σ_n² I + C_map`` along the track (:mod:`~jaxgrav.match.gls`,
         the bias marginalised; ``score="absolute"`` has no bias, ``"difference"``
-        a flat-prior one), the refinement whitened the same way and clamped to the
-        searched region. Traced: changing it never recompiles.
+        a flat-prior one), the refinement whitened the same way. Either way the
+        refined offset is clamped to the searched region. Traced: changing it never
+        recompiles.
     map_error_length_m : float
         Correlation length L of the map error (m), traced.
     map_error_order : {1, 2}
@@ -320,8 +322,9 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
                                         config.method)
             p = (gauss_newton(res, p0, free, step_max, config.damping, config.refine_steps)
                  if config.refine_steps else p0)
-            if use_gls:  # the refinement may not leave the searched region
-                p = p.at[:2].set(jnp.clip(p[:2], -reach, reach))
+            # the refinement may not leave the searched region (its steps are capped
+            # one by one, not in total: on a coarse map it walked far outside)
+            p = p.at[:2].set(jnp.clip(p[:2], -reach, reach))
             p = jnp.where(found, p, jnp.zeros_like(p))
             iy_c, ix_c, ky, kx, north, east = frame
             c, s = jnp.cos(p[2]), jnp.sin(p[2])

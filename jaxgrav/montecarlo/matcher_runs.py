@@ -21,6 +21,7 @@ from jaxgrav.match.iccp import match_iccp
 from jaxgrav.match.result import CORRELATION_STATUS
 from jaxgrav.match.result import STATUS as ALL_STATUS
 from jaxgrav.match.sizing import config_for, iccp_config_for
+from jaxgrav.montecarlo.fix_metrics import fix_metrics
 from jaxgrav.montecarlo.spec import (
     MethodSpec,
     check_map_error,
@@ -28,6 +29,8 @@ from jaxgrav.montecarlo.spec import (
     default_grid,
     map_error_settings,
     region_of,
+    told_map_error,
+    told_settings,
 )
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
 from jaxgrav.scenarios.paper_b import PaperBScenario, paper_b_scenario
@@ -79,14 +82,17 @@ def matcher_record(run, r, **extra):
     -------
     dict
         ``ins_err_m`` (:func:`ins_error_m`, m), ``err_m`` (mean distance of the
-        matched track from the truth, m), ``status`` (int32), ``score`` (the
-        matcher's), and ``extra``.
+        returned track from the truth, m; a rejected fix returns the INS track),
+        ``status`` (int32), ``score`` (the matcher's), the fix metrics ``accepted``,
+        ``sigma_max_m``, ``covered95``
+        (:func:`~jaxgrav.montecarlo.fix_metrics.fix_metrics`) and ``extra``.
     """
     return dict(
         ins_err_m=ins_error_m(run),
         err_m=track_error_m(r.lat, r.lon, run.truth),
         status=jnp.asarray(r.status, jnp.int32),
         score=r.score,
+        **fix_metrics(run, r),
         **extra,
     )
 
@@ -160,7 +166,8 @@ def _paper_a_settings(grid, drift_deg, noise, n_fixes, map_error):
     return grid, map_error, drift, noise, n, scen
 
 
-def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=None):
+def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=None,
+                  map_error_told="auto"):
     """Paper A, dense-offset matcher (the ``jaxgrav demo`` realistic setting).
 
     Defaults: INS drift 0.035° (fixed radius, random direction), 1 mGal noise, 30
@@ -174,15 +181,29 @@ def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=N
     which must cover ``grid``'s area). The matcher always uses ``grid``; the spec's
     settings record σ and L (``map_error_sigma``, ``map_error_length_m``) or the truth
     grid's name (``truth_map``).
+
+    ``map_error_told``: the map-error model the *matcher* is told
+    (:func:`~jaxgrav.match.sizing.config_for`'s ``map_error``: GLS score, posterior-mean
+    fix, fixes with a 1-σ above 3 km rejected). ``"auto"`` (default): the readings'
+    CorrelatedMapError itself (the user knows their map's error level); for a
+    TruthGrid its ``error`` if stated, else
+    :func:`~jaxgrav.fields.map_error_estimate.estimate_map_error` of ``grid`` (from the
+    map alone, never the truth); none for a perfect map. None or σ = 0: the
+    white-noise matcher (exactly the runs without this option). A CorrelatedMapError:
+    that model, which may differ from the truth's (mis-told studies). The settings
+    record ``told_map_error_sigma``, ``told_map_error_length_m`` and
+    ``told_map_error_source``.
     """
     grid, map_error, drift, noise, n, scen = _paper_a_settings(grid, drift_deg, noise, n_fixes,
                                                              map_error)
+    told, source = told_map_error(map_error_told, map_error, grid)
     cfg = config_for("dense", grid, 1.2 * drift * DEG_ARC_M, noise_mgal=max(noise, 0.1),
-                     bias_sigma_mgal=3.0)
-    settings = dict(description="paper A: dense-offset matcher, fixed INS drift",
+                     bias_sigma_mgal=3.0, map_error=told)
+    settings = dict(description="paper A: dense-offset matcher, fixed INS drift"
+                                + ("" if told is None else ", told the map error (GLS)"),
                     drift_deg=drift, noise_mgal=noise, n_fixes=n, dt_s=scen.dt,
                     search_half_size=cfg.half_size, search_spacing_m=cfg.spacing_m,
-                    **map_error_settings(map_error))
+                    **map_error_settings(map_error), **told_settings(told, source))
     return MethodSpec(dense_run, (grid, scen, cfg, map_error), settings,
                       dict(CORRELATION_STATUS))
 

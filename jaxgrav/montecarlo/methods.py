@@ -147,7 +147,10 @@ def build(method, grid=None, **options):
         ``TruthGrid`` or None): the readings' map error, drawn per run (see
         :func:`~jaxgrav.montecarlo.matcher_runs.dense_builder`); passed to the builder
         only when not None, so builders without the keyword still build the
-        perfect-map case.
+        perfect-map case. ``map_error_told`` (``dense`` only): the map error the matcher
+        is told; default ``"auto"`` (the readings' model, or for a truth grid an
+        estimate from the map), None for the white-noise matcher
+        (:func:`~jaxgrav.montecarlo.matcher_runs.dense_builder`).
 
     Returns
     -------

@@ -19,6 +19,7 @@ from jaxgrav.match.api import config_for
 from jaxgrav.match.correlation import match_chains
 from jaxgrav.match.dense import match_dense
 from jaxgrav.match.scoring import bias_precision, decreasing_weights, score_track
+from jaxgrav.montecarlo.fix_metrics import fix_summary
 from jaxgrav.montecarlo.matcher_runs import matcher_record, paper_a_match
 from jaxgrav.montecarlo.runner import run
 from jaxgrav.scenarios import MatchingScenario
@@ -145,7 +146,9 @@ def summarize(out, success_deg=0.01):
         Medians and means of INS and matched errors, their ratio, the success rate
         ``error < success_deg``, the fractions of tracks improved over the INS and made
         worse than it, the fraction of fixes accepted (no integrity bit, see
-        :data:`REJECTED_BITS`; a rejected fix is the INS track), the
+        :data:`REJECTED_BITS`; a rejected fix is the INS track), the share of
+        accepted fixes whose 95 % ellipse covers the truth (``coverage95_accepted``, NaN
+        for a matcher without covariance, :mod:`~jaxgrav.montecarlo.fix_metrics`), the
         failure rate (error above a third of the INS error) overall and by mean map
         slope along the track, and among failures the fraction whose chosen track
         scores no worse than the true one (ambiguity, not a search failure).
@@ -176,6 +179,7 @@ def summarize(out, success_deg=0.01):
         improved_rate=float(np.mean(err < ins)),
         worse_rate=float(np.mean(err > ins * (1 + 1e-9))),  # a returned INS track: not worse
         accepted_rate=float(np.mean((np.asarray(out["status"]) & REJECTED_BITS) == 0)),
+        coverage95_accepted=fix_summary(out).get("coverage95_accepted", float("nan")),
         flagged_rate=float(np.mean(out["status"] != 0)),
         work_unconstrained_median=float(np.median(wu)),
         work_constrained_median=float(np.median(wc)),
@@ -210,16 +214,21 @@ def format_table(rows, title):
     """Markdown table of Table-1-like rows."""
     head = ("| INS drift (°) | INS error (°) | matched error (°), mean | median error (m) | "
             "median ÷ INS median | worse than INS | error < 0.01° | ∏N_i (median) | "
-            "constrained (median) | runs |")
-    lines = [f"**{title}**", "", head, "|" + "---|" * 10]
+            "constrained (median) | accepted | 95 % ellipse covers (accepted) | runs |")
+    lines = [f"**{title}**", "", head, "|" + "---|" * 12]
     for r in rows:
         lines.append(
             f"| {r['drift_deg']:.4f} | {r['ins_error_deg_mean']:.4f} | {r['error_deg_mean']:.4f} "
             f"| {r['error_m_median']:.0f} | {r['median_ratio']:.2f} "
             f"| {100 * r['worse_rate']:.0f} % | {100 * r['success_rate']:.0f} % "
             f"| {_sci(r['work_unconstrained_median'])} | {_sci(r['work_constrained_median'])} "
+            f"| {100 * r['accepted_rate']:.0f} % | {_percent(r.get('coverage95_accepted'))} "
             f"| {r['runs']} |")
     return "\n".join(lines)
+
+
+def _percent(x):
+    return "n/a" if x is None or not np.isfinite(x) else f"{100 * x:.0f} %"
 
 
 def _sci(x):

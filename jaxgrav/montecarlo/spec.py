@@ -7,10 +7,11 @@ import numpy as np
 from jaxgrav import datasets
 from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.fields.map_error import CorrelatedMapError, TruthGrid
+from jaxgrav.fields.map_error_estimate import estimate_map_error
 from jaxgrav.scenarios.paper_a import check_region_covered
 
 __all__ = ["METRICS", "MethodSpec", "check_map_error", "check_settings", "default_grid",
-           "map_error_settings", "region_of"]
+           "map_error_settings", "region_of", "told_map_error", "told_settings"]
 
 METRICS = ("ins_err_m", "err_m", "status")
 """Metrics every method returns per run."""
@@ -114,3 +115,60 @@ def map_error_settings(map_error):
                map_error_length_m=float(map_error.length_m),
                map_error_family=map_error.family)
     return out
+
+
+def told_map_error(told, map_error, grid):
+    """The map-error model a matcher is told, and where it comes from.
+
+    Parameters
+    ----------
+    told : "auto", CorrelatedMapError or None
+        ``"auto"``: ``map_error`` itself if it is a CorrelatedMapError; for a TruthGrid
+        its stated ``error``, else
+        :func:`~jaxgrav.fields.map_error_estimate.estimate_map_error` of ``grid`` (the
+        map alone); None for a perfect map. None or σ = 0: none (white-noise matcher).
+        A CorrelatedMapError: itself (scalar σ and L, validated by
+        :func:`~jaxgrav.fields.map_error.map_error`).
+    map_error : CorrelatedMapError, TruthGrid or None
+        The readings' map error (:func:`check_map_error`'s result).
+    grid : Grid
+        The map the matcher uses.
+
+    Returns
+    -------
+    model : CorrelatedMapError or None
+    source : str
+        ``"none"``, ``"same as the readings"``, ``"truth map's stated error"``,
+        ``"estimated from the map"`` or ``"given"``.
+    """
+    if isinstance(told, str):
+        if told != "auto":
+            raise ValueError(f"map_error_told must be 'auto', a CorrelatedMapError or None; "
+                             f"got {told!r}")
+        if map_error is None:
+            return None, "none"
+        if isinstance(map_error, TruthGrid):
+            if map_error.error is not None and float(map_error.error.sigma) > 0:
+                return map_error.error, "truth map's stated error"
+            return estimate_map_error(grid).model, "estimated from the map"
+        return map_error, "same as the readings"
+    if told is None:
+        return None, "none"
+    if not isinstance(told, CorrelatedMapError):
+        raise TypeError("map_error_told must be 'auto', a CorrelatedMapError "
+                        "(fields.map_error.map_error(sigma, length_m)) or None; got "
+                        f"{type(told).__name__}")
+    if np.ndim(told.sigma) or np.ndim(told.length_m):
+        raise ValueError("map_error_told.sigma and .length_m must be scalars; got shapes "
+                         f"{np.shape(told.sigma)}, {np.shape(told.length_m)}")
+    return (None, "none") if float(told.sigma) == 0 else (told, "given")
+
+
+def told_settings(told, source):
+    """Settings entries of the told model: ``told_map_error_sigma`` (0: white-noise
+    matcher), ``told_map_error_length_m`` (when σ > 0), ``told_map_error_source``."""
+    if told is None:
+        return dict(told_map_error_sigma=0.0, told_map_error_source=source)
+    return dict(told_map_error_sigma=float(told.sigma),
+                told_map_error_length_m=float(told.length_m),
+                told_map_error_family=told.family, told_map_error_source=source)

@@ -49,6 +49,11 @@ def test_montecarlo_writes_netcdf_png_and_summary(mc_run, capsys):
         assert a["summary_err_m_p50"] == pytest.approx(float(np.median(ds["err_m"])))
         assert "--runs 8 --chunk 4" in a["command"]
         assert json.loads(a["status_bits"])["8"].startswith("the best candidate")
+        # fix metrics with units; a perfect map: the white-noise matcher, not told
+        assert ds["accepted"].dtype == bool and ds["accepted"].attrs["units"] == "1"
+        assert ds["sigma_max_m"].attrs["units"] == "m" and "95 %" in ds["covered95"].attrs[
+            "long_name"]
+        assert a["setting_told_map_error_sigma"] == 0.0 and a["summary_accepted_rate"] == 1.0
         # the same keys through the library give the same numbers
         spec = montecarlo_methods.build("dense", drift_deg=0.03, n_fixes=20)
         lib = montecarlo.run(spec.fn, jax.random.key(3), 8, chunk=4, args=spec.args,
@@ -342,3 +347,51 @@ def test_montecarlo_bad_map_error(tmp_path, capsys, args, match):
     assert code == 2
     assert match in capsys.readouterr().err
     assert not (tmp_path / "x.nc").exists()
+
+
+@pytest.mark.parametrize("told, match", [
+    ("-1", "--told-map-error SIGMA must be a finite standard deviation >= 0"),
+    ("nan", "--told-map-error SIGMA must be a finite"),
+    ("inf", "--told-map-error SIGMA must be a finite"),
+    ("3,0", "--told-map-error L must be a finite correlation length > 0 (m); got 0.0"),
+    ("3,-5", "--told-map-error L must be a finite correlation length > 0"),
+    ("3,inf", "--told-map-error L must be a finite correlation length > 0"),
+    ("abc", "--told-map-error must be SIGMA or SIGMA,L"),
+    ("1,2,3", "--told-map-error must be SIGMA or SIGMA,L"),
+])
+def test_montecarlo_told_map_error_bad_input(tmp_path, capsys, told, match):
+    code = main(["montecarlo", "--method", "dense", "--runs", "2", "--map-error", "3",
+                 "--told-map-error", told, "--out", str(tmp_path / "x.nc")])
+    assert code == 2
+    assert match in capsys.readouterr().err
+    assert not (tmp_path / "x.nc").exists()
+
+
+def test_montecarlo_told_map_error_parsing(tmp_path, capsys):
+    import argparse
+
+    from jaxgrav.cli.montecarlo import told_from_args
+
+    def told(text, length=None):
+        return told_from_args(argparse.Namespace(told_map_error=text, map_error_length=length))
+
+    assert told(None) == "auto" and told("0") is None and told("0,0") is None
+    m = told("2.5")
+    assert (float(m.sigma), float(m.length_m)) == (2.5, 10000.0)
+    m = told("2.5", 7000.0)
+    assert float(m.length_m) == 7000.0
+    m = told("4,3000")
+    assert (float(m.sigma), float(m.length_m)) == (4.0, 3000.0)
+    code = main(["montecarlo", "--method", "chains", "--runs", "2", "--told-map-error", "3",
+                 "--out", str(tmp_path / "c.nc")])
+    assert code == 2
+    assert "--told-map-error is used by the filters and --method dense only" in (
+        capsys.readouterr().err)
+    code = main(["montecarlo", "--method", "ukf", "--map", "ryukyu", "--runs", "2",
+                 "--map-error", "3", "--told-map-error", "3", "--out", str(tmp_path / "u.nc")])
+    assert code == 2
+    assert "--told-map-error must be one of none, white, state" in capsys.readouterr().err
+    code = main(["montecarlo", "--method", "dense", "--runs", "2", "--map-error-order", "2",
+                 "--out", str(tmp_path / "d.nc")])
+    assert code == 2
+    assert "--map-error-order is a filter option" in capsys.readouterr().err
