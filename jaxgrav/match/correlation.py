@@ -14,6 +14,18 @@ Paper A's pipeline, one step per function (each testable on its own):
    (:mod:`~jaxgrav.match.scoring`);
 6. the ``k_best`` (5) best chains, of which the one nearest the INS track is taken.
 
+Every match also reports the covariance of its fix and an integrity decision. The
+``k_posterior`` best chains are scored by the GLS likelihood of
+:mod:`~jaxgrav.match.gls` (covariance ``σ_n² I + C_map`` along the INS track, bias
+marginalised; ``σ_m = 0`` gives the white-noise model of the weighted score): the
+covariance is the likelihood-weighted spread of their mean offsets about the fix,
+plus the Gauss–Newton curvature of the GLS misfit at the chosen chain (map gradient
+at its nodes), plus the node quantisation ``cell²/12`` (:mod:`~jaxgrav.match.fix_covariance`).
+With a map error (``ChainConfig.map_error_mgal`` > 0) the chains are ranked by that
+GLS score instead of the white one. The dynamic programme itself still runs on the
+paper's per-step (difference or absolute) costs: a GLS score with correlated errors
+is not a sum of per-step terms, so it only re-scores the programme's best chains.
+
 :func:`match_chains` handles one track; batch it with ``jax.vmap`` over tracks
 (the map is shared). The dense-offset fast path is :mod:`jaxgrav.match.dense`.
 """
@@ -21,8 +33,10 @@ Paper A's pipeline, one step per function (each testable on its own):
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav._validate import concrete
 from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.candidates import iso_candidates, lattice_candidates
 from jaxgrav.match.chains import (
@@ -32,6 +46,15 @@ from jaxgrav.match.chains import (
     kbest_chains,
     step_compatibility,
 )
+from jaxgrav.match.dense import shifted_tracks
+from jaxgrav.match.fix_covariance import (
+    gauss_newton_information,
+    integrity_status,
+    offset_covariance,
+    second_mode_ratio,
+    spread_about,
+)
+from jaxgrav.match.gls import gls_dof, gls_score, gls_whitener, track_covariance
 from jaxgrav.match.lattice_chains import (
     count_chains_lattice,
     eliminate_lattice,
@@ -105,6 +128,30 @@ class ChainConfig:
         unless ``"absolute"``.
     selection : {"nearest", "best"}
         Paper A's nearest-to-INS rule, or the least score (static).
+    noise_mgal : float
+        Reading noise σ_n (mGal) of the GLS likelihood behind the fix's covariance.
+    map_error_mgal : float
+        σ of the map's error (mGal), traced. 0 (default): chains ranked as without
+        this field, the covariance from the white-noise likelihood; > 0: the
+        ``k_posterior`` best chains ranked by the GLS score (covariance
+        ``σ_n² I + C_map`` along the track, bias marginalised; none for
+        ``score="absolute"``), ``score`` then in mGal² (χ² × ``σ_n² Σμ²``).
+    map_error_length_m : float
+        Correlation length L of the map error (m), traced.
+    map_error_order : {1, 2}
+        Gauss–Markov order of the map-error covariance (static).
+    k_posterior : int
+        Chains of the dynamic programme scored for the posterior of the fix (static;
+        the programme keeps at least this many).
+    fix : {"chain", "posterior"}
+        The returned track (static): the selected chain, or the selected chain shifted
+        to the likelihood-weighted mean offset of the ``k_posterior`` chains.
+    max_sigma_m, max_second_mode, max_chi2_per_dof : float
+        Integrity thresholds (traced): the fix is rejected (INS track returned, status
+        512, 1024, 2048) when the largest 1-σ of its covariance (m), the likelihood
+        ratio of the best chain whose mean offset lies outside the 3-σ curvature
+        ellipse of the best, or the chosen chain's GLS χ² per degree of freedom
+        exceeds it. Defaults ``inf``: every found fix is accepted.
     """
 
     delta: float = 1.0
@@ -120,8 +167,28 @@ class ChainConfig:
     k_best: int = static_field(5)
     score: str = static_field("difference")
     selection: str = static_field("nearest")
+    noise_mgal: float = 1.0
+    map_error_mgal: float = 0.0
+    map_error_length_m: float = 10000.0
+    map_error_order: int = static_field(2)
+    k_posterior: int = static_field(16)
+    fix: str = static_field("chain")
+    max_sigma_m: float = float("inf")
+    max_second_mode: float = float("inf")
+    max_chi2_per_dof: float = float("inf")
 
     def __post_init__(self):
+        if isinstance(self.fix, str) and self.fix not in ("chain", "posterior"):
+            raise ValueError(f"fix must be 'chain' or 'posterior'; got {self.fix!r}")
+        if self.map_error_order not in (1, 2):
+            raise ValueError(f"map_error_order must be 1 or 2; got {self.map_error_order!r}")
+        if isinstance(self.k_posterior, int) and self.k_posterior < 1:
+            raise ValueError(f"k_posterior must be >= 1; got {self.k_posterior!r}")
+        for name in ("map_error_mgal", "map_error_length_m", "noise_mgal"):
+            arr = concrete(getattr(self, name))
+            if arr is not None and arr.dtype != object and not (
+                    np.all(np.isfinite(arr)) and np.all(arr >= 0)):
+                raise ValueError(f"{name} must be finite and >= 0; got {arr}")
         if isinstance(self.score, str) and self.score not in SCORES:
             raise ValueError(f"score must be one of {SCORES}; got {self.score!r}")
         if isinstance(self.selection, str) and self.selection not in ("nearest", "best"):
@@ -190,16 +257,28 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
     fix = jnp.arange(n)[None, :]
     values = cands.value[fix, search.index]  # (K_dp, N)
     rescored, bias = score_track(readings, values, w, config.score)
-    rescored = jnp.where(jnp.isfinite(search.score), rescored, jnp.inf)
-    order = jnp.argsort(rescored)[: config.k_best]
+    alive_chain = jnp.isfinite(search.score)
+    rescored = jnp.where(alive_chain, rescored, jnp.inf)
+    wh, j_gls, b_gls, sigma_b, scale = _gls_scores(lat, lon, readings, values, w, config, dtype)
+    j_gls = jnp.where(alive_chain, j_gls, jnp.inf)
+    told = jnp.asarray(config.map_error_mgal) > 0
+    rank = jnp.where(told, j_gls * scale, rescored)
+    bias = jnp.where(told, b_gls, bias)
+    order = jnp.argsort(rank)[: config.k_best]
     idx = search.index[order]
-    topk_score = rescored[order]
+    topk_score = rank[order]
     north, east = cands.north_m[fix, idx], cands.east_m[fix, idx]  # (K, N)
     distance = jnp.sum(jnp.hypot(north, east), axis=1)
     chosen = nearest_to_ins(topk_score, distance, config.selection)
     found = jnp.isfinite(topk_score[chosen])
 
     topk_lat, topk_lon = cands.lat[fix, idx], cands.lon[fix, idx]
+    q = _chain_quality(grid, cands, search.index, order[chosen], j_gls, wh, sigma_b, n, config)
+    accepted = found & (q["status"] == 0)
+    m_lat, m_lon = topk_lat[chosen], topk_lon[chosen]
+    if config.fix == "posterior":
+        m_lat, m_lon = shifted_tracks(m_lat, m_lon, q["shift"][0], q["shift"][1],
+                                      jnp.zeros((), dtype))
     edge = _on_window_edge(grid, cands, idx[chosen], lat, lon, config.half_size)
     status = (
         jnp.where(found, 0, 1)
@@ -207,12 +286,13 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
         | jnp.where(jnp.all(complete), 0, 4)
         | jnp.where(found & edge, 8, 0)
         | jnp.where(stencil_overflow, 256, 0)
+        | jnp.where(found, q["status"], 0)
     )
     return MatchResult(
-        lat=jnp.where(found, topk_lat[chosen], lat),
-        lon=jnp.where(found, topk_lon[chosen], lon),
-        offset_north_m=jnp.where(found, jnp.mean(north[chosen]), 0.0),
-        offset_east_m=jnp.where(found, jnp.mean(east[chosen]), 0.0),
+        lat=jnp.where(accepted, m_lat, lat),
+        lon=jnp.where(accepted, m_lon, lon),
+        offset_north_m=jnp.where(accepted, q["fix"][0], 0.0),
+        offset_east_m=jnp.where(accepted, q["fix"][1], 0.0),
         rotation_deg=jnp.zeros((), dtype),
         score=topk_score[chosen],
         bias=bias[order][chosen],
@@ -225,7 +305,67 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
         work_constrained=work_constrained,
         work_pairs=work_pairs.astype(dtype),
         status=status,
+        covariance_m2=q["covariance"].astype(dtype),
+        accepted=accepted,
+        n_effective=q["n_effective"].astype(dtype),
+        second_mode_ratio=q["second_mode"].astype(dtype),
+        edge_mass=jnp.asarray(jnp.nan, dtype),
+        chi2_per_dof=q["chi2_per_dof"].astype(dtype),
     )
+
+
+def _gls_scores(lat, lon, readings, values, w, config, dtype):
+    """GLS scores (χ²) and biases of chains' map values ``(K, N)``, and the whitener."""
+    north, east = local_offsets_m(lat, lon, lat[0], lon[0])
+    cov = track_covariance(north.astype(dtype), east.astype(dtype),
+                           jnp.maximum(jnp.asarray(config.noise_mgal, dtype), 1e-6),
+                           config.map_error_mgal, config.map_error_length_m,
+                           config.map_error_order, weights=w)
+    wh = gls_whitener(cov)
+    sigma_b = jnp.asarray(0.0 if config.score == "absolute" else jnp.inf, dtype)
+    j, b = gls_score(wh, readings - values, sigma_b)
+    mu = w / jnp.sum(w)
+    scale = jnp.asarray(config.noise_mgal, dtype) ** 2 * jnp.sum(mu**2)  # mGal² per χ²
+    return wh, j, b, sigma_b, scale
+
+
+def _node_gradient(grid, lat, lon):
+    """Map gradient (mGal/m, north and east) at map nodes, by central differences."""
+    iy, ix = grid.fractional_index(lat, lon)
+    r, c = jnp.round(iy).astype(jnp.int32), jnp.round(ix).astype(jnp.int32)
+    ny, nx = grid.values.shape
+    rp, rm = jnp.clip(r + 1, 0, ny - 1), jnp.clip(r - 1, 0, ny - 1)
+    cp, cm = jnp.clip(c + 1, 0, nx - 1), jnp.clip(c - 1, 0, nx - 1)
+    r, c = jnp.clip(r, 0, ny - 1), jnp.clip(c, 0, nx - 1)
+    dy, dx = grid.spacing_m(lat)
+    v = grid.values
+    g_n = (v[rp, c] - v[rm, c]) / ((rp - rm) * dy) * jnp.sign(grid.dlat)
+    g_e = (v[r, cp] - v[r, cm]) / ((cp - cm) * dx) * jnp.sign(grid.dlon)
+    return jnp.stack([g_n, g_e], axis=-1)
+
+
+def _chain_quality(grid, cands, index, best, j_gls, wh, sigma_b, n, config):
+    """Fix, covariance and integrity of the chain ``best`` among the programme's chains."""
+    fix = jnp.arange(n)[None, :]
+    off_n = jnp.mean(cands.north_m[fix, index], axis=1)  # (K_dp,)
+    off_e = jnp.mean(cands.east_m[fix, index], axis=1)
+    chain_fix = jnp.stack([off_n[best], off_e[best]])
+    _, _, p = spread_about(j_gls, off_n, off_e, chain_fix[0], chain_fix[1])
+    post = jnp.stack([p @ jnp.where(jnp.isfinite(j_gls), off_n, 0.0),
+                      p @ jnp.where(jnp.isfinite(j_gls), off_e, 0.0)])
+    the_fix = post if config.fix == "posterior" else chain_fix
+    spread, n_eff, _ = spread_about(j_gls, off_n, off_e, the_fix[0], the_fix[1])
+    lat_b, lon_b = cands.lat[jnp.arange(n), index[best]], cands.lon[jnp.arange(n), index[best]]
+    info = gauss_newton_information(wh, _node_gradient(grid, lat_b, lon_b), sigma_b)
+    local = offset_covariance(info)
+    dy, dx = grid.spacing_m(jnp.mean(lat_b))
+    cov = spread + local + jnp.diag(jnp.stack([dy, dx]) ** 2 / 12.0)
+    second = second_mode_ratio(j_gls, off_n, off_e, jnp.argmin(j_gls), local)
+    chi2 = j_gls[best] / gls_dof(n, sigma_b)
+    status = integrity_status(cov, second, chi2, jnp.nan, config)
+    return {"fix": the_fix, "shift": the_fix - chain_fix, "covariance": cov,
+            "n_effective": n_eff, "second_mode": second, "chi2_per_dof": chi2,
+            "status": status}
 
 
 def chain_tolerances(grid, lat, config):
@@ -241,7 +381,7 @@ def chain_tolerances(grid, lat, config):
 
 def _k_dp(config):
     """Chains the programme keeps: re-scoring (bias form) needs more than it returns."""
-    return config.k_dp if config.score == "bias" else config.k_best
+    return max(config.k_dp if config.score == "bias" else config.k_best, config.k_posterior)
 
 
 def _candidates_args(config):

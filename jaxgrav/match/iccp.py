@@ -30,8 +30,10 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav._validate import concrete
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
 from jaxgrav.match.contour import local_field, project_to_contours, value_grad_ne
@@ -101,6 +103,30 @@ class IccpConfig:
         the gradient under reading noise.
     method : {"bicubic"}
         Map interpolation (static); projection needs a smooth gradient.
+    map_error_mgal : float
+        σ of the map's error (map units), traced; used by the combined matcher
+        (:func:`~jaxgrav.match.combined.match_entropy_iccp`) only. 0 (default): its
+        fine-vs-coarse test as above and the fix's covariance from white noise
+        ``noise``; > 0: the GLS likelihood with covariance ``noise² I + C_map`` along
+        the track (:mod:`~jaxgrav.match.gls`, no bias) picks the best ICCP start and
+        makes the fine-vs-coarse test (``J_coarse − J_fine ≥ accept_chi2``).
+    map_error_length_m : float
+        Correlation length L of the map error (m), traced.
+    map_error_order : {1, 2}
+        Gauss–Markov order of the map-error covariance (static).
+    fix : {"coarse", "posterior"}
+        Combined matcher (static): the coarse fix is the entropy stage's offset (the
+        paper), or the GLS-likelihood-weighted mean over the entropy stage's offsets
+        (also an ICCP start).
+    resolved_n_effective : float
+        Combined matcher: with at least this many offsets sharing the posterior, the
+        covariance is the posterior's spread about the fix; otherwise the
+        Gauss–Newton one.
+    max_sigma_m, max_second_mode, max_chi2_per_dof, max_edge_mass : float
+        Combined matcher's integrity thresholds (traced): the fix is rejected (INS
+        track, status 512, 1024, 2048, 4096) when the largest 1-σ of its covariance
+        (m), the posterior's second-mode ratio, the fix's GLS χ² per fix or the
+        posterior mass on the outermost offsets exceeds it. Defaults ``inf``.
     """
 
     window_m: float = 3000.0
@@ -115,8 +141,26 @@ class IccpConfig:
     refine_steps: int = static_field(0)
     weights: str = static_field("uniform")
     method: str = static_field("bicubic")
+    map_error_mgal: float = 0.0
+    map_error_length_m: float = 10000.0
+    map_error_order: int = static_field(2)
+    fix: str = static_field("coarse")
+    resolved_n_effective: float = 3.0
+    max_sigma_m: float = float("inf")
+    max_second_mode: float = float("inf")
+    max_chi2_per_dof: float = float("inf")
+    max_edge_mass: float = float("inf")
 
     def __post_init__(self):
+        if isinstance(self.fix, str) and self.fix not in ("coarse", "posterior"):
+            raise ValueError(f"fix must be 'coarse' or 'posterior'; got {self.fix!r}")
+        if self.map_error_order not in (1, 2):
+            raise ValueError(f"map_error_order must be 1 or 2; got {self.map_error_order!r}")
+        for name in ("map_error_mgal", "map_error_length_m"):
+            arr = concrete(getattr(self, name))
+            if arr is not None and arr.dtype != object and not (
+                    np.all(np.isfinite(arr)) and np.all(arr >= 0)):
+                raise ValueError(f"{name} must be finite and >= 0; got {arr}")
         if isinstance(self.max_iter, int) and self.max_iter < 1:
             raise ValueError(f"max_iter must be >= 1; got {self.max_iter!r}")
         if isinstance(self.newton_steps, int) and self.newton_steps < 1:
