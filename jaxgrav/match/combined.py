@@ -81,7 +81,10 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     -------
     MatchResult
         ``score`` is the mean squared misfit (map units²); ``topk_*`` hold the coarse
-        and the fine track (in that order), ``chosen`` which one was returned.
+        and the fine track (in that order), ``chosen`` which one was returned;
+        ``covariance_m2``, ``accepted`` (a rejected fix is the INS track) and the test
+        statistics as the module docstring says, ``chi2_per_dof`` the fix's GLS
+        score per fix.
     """
     lat, lon, readings = (jnp.asarray(x) for x in (lat, lon, readings))
     n = readings.shape[0]
@@ -192,4 +195,5 @@ def _fix_covariance(field, p0, wh, rotation, translation, j_fix, fine, post, j_g
     cell = jnp.asarray(entropy.spacing_m, spread.dtype) ** 2 / 12.0
     resolved = post.n_effective >= iccp.resolved_n_effective
     cov = jnp.where(resolved, spread + cell * jnp.eye(2, dtype=spread.dtype), spread + gn)
+    cov = 0.5 * (cov + cov.T)  # exactly symmetric
     return cov.astype(p0.dtype), chi2.astype(p0.dtype)

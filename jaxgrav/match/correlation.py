@@ -360,6 +360,7 @@ def _chain_quality(grid, cands, index, best, j_gls, wh, sigma_b, n, config):
     local = offset_covariance(info)
     dy, dx = grid.spacing_m(jnp.mean(lat_b))
     cov = spread + local + jnp.diag(jnp.stack([dy, dx]) ** 2 / 12.0)
+    cov = 0.5 * (cov + cov.T)  # exactly symmetric
     second = second_mode_ratio(j_gls, off_n, off_e, jnp.argmin(j_gls), local)
     chi2 = j_gls[best] / gls_dof(n, sigma_b)
     status = integrity_status(cov, second, chi2, jnp.nan, config)
