@@ -15,12 +15,12 @@ offset of the entropy stage's grid gives a posterior over the offsets
 (:func:`~jaxgrav.match.gls.offset_posterior`), and the Gauss–Newton curvature of the
 whitened misfit at the returned transform (rotation marginalised) gives the local
 covariance, scaled by the whitened misfit per degree of freedom when above 1. The
-covariance is the posterior's spread about the fix (plus the offset cell's
-quantisation) when the grid resolves the posterior, else that spread plus the
-Gauss–Newton covariance. With a map error (``iccp.map_error_mgal`` > 0) the same GLS
-score also picks the best ICCP start and makes the fine-vs-coarse test;
-``iccp.fix="posterior"`` takes the posterior mean over the offsets as the coarse fix
-(and as one more ICCP start).
+covariance of an ICCP (fine) fix is that Gauss–Newton one; of a coarse fix, the
+posterior's spread about the fix (plus the offset cell's quantisation) when the grid
+resolves the posterior, else that spread plus the Gauss–Newton covariance. With a map
+error (``iccp.map_error_mgal`` > 0) the same GLS score also picks the best ICCP start
+and makes the fine-vs-coarse test; ``iccp.fix="posterior"`` takes the posterior mean
+over the offsets as the coarse fix (and as one more ICCP start).
 """
 
 import jax
@@ -33,11 +33,12 @@ from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.entropy import EntropyConfig, coarse_offsets, offset_grid
 from jaxgrav.match.fix_covariance import (
     gauss_newton_information,
+    gls_whitener_scan,
     integrity_status,
     offset_covariance,
     spread_about,
 )
-from jaxgrav.match.gls import gls_score, gls_whitener, offset_posterior, track_covariance
+from jaxgrav.match.gls import gls_score, offset_posterior, track_covariance
 from jaxgrav.match.iccp import IccpConfig, iccp_fit, local_track_frame
 from jaxgrav.match.result import STATUS, MatchResult
 from jaxgrav.prepared import prepare_map
@@ -97,7 +98,7 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     zero = jnp.zeros((), dtype)
     told = jnp.asarray(iccp.map_error_mgal) > 0
     noise = jnp.asarray(iccp.noise, dtype)
-    wh = gls_whitener(track_covariance(p0[:, 0], p0[:, 1], jnp.where(noise > 0, noise, 1.0),
+    wh = gls_whitener_scan(track_covariance(p0[:, 0], p0[:, 1], jnp.where(noise > 0, noise, 1.0),
                                        iccp.map_error_mgal, iccp.map_error_length_m,
                                        iccp.map_error_order))
     gls = lambda f: gls_score(wh, z - f, zero)[0]  # noqa: E731
@@ -194,6 +195,7 @@ def _fix_covariance(field, p0, wh, rotation, translation, j_fix, fine, post, j_g
     spread, _, _ = spread_about(j_grid, g_n, g_e, translation[0], translation[1])
     cell = jnp.asarray(entropy.spacing_m, spread.dtype) ** 2 / 12.0
     resolved = post.n_effective >= iccp.resolved_n_effective
-    cov = jnp.where(resolved, spread + cell * jnp.eye(2, dtype=spread.dtype), spread + gn)
+    coarse = jnp.where(resolved, spread + cell * jnp.eye(2, dtype=spread.dtype), spread + gn)
+    cov = jnp.where(fine, gn, coarse)
     cov = 0.5 * (cov + cov.T)  # exactly symmetric
     return cov.astype(p0.dtype), chi2.astype(p0.dtype)

@@ -14,13 +14,18 @@ Paper A's pipeline, one step per function (each testable on its own):
    (:mod:`~jaxgrav.match.scoring`);
 6. the ``k_best`` (5) best chains, of which the one nearest the INS track is taken.
 
-Every match also reports the covariance of its fix and an integrity decision. The
-``k_posterior`` best chains are scored by the GLS likelihood of
-:mod:`~jaxgrav.match.gls` (covariance ``σ_n² I + C_map`` along the INS track, bias
-marginalised; ``σ_m = 0`` gives the white-noise model of the weighted score): the
-covariance is the likelihood-weighted spread of their mean offsets about the fix,
-plus the Gauss–Newton curvature of the GLS misfit at the chosen chain (map gradient
-at its nodes), plus the node quantisation ``cell²/12`` (:mod:`~jaxgrav.match.fix_covariance`).
+Every match also reports the covariance of its fix and an integrity decision, from the
+GLS likelihood of :mod:`~jaxgrav.match.gls` (covariance ``σ_n² I + C_map`` along the
+INS track, bias marginalised; ``σ_m = 0`` gives the white-noise model of the weighted
+score). With the displacement stencil (``stencil_size`` > 0, as :func:`config_for`
+sizes it) the posterior is over the window's rigid chains (the INS track shifted by
+every node displacement of the window, all scored); otherwise over the programme's
+``k_posterior`` best chains. The covariance is the likelihood-weighted spread of their
+mean offsets about the fix plus the node quantisation ``cell²/12``, plus the
+Gauss–Newton curvature of the GLS misfit at the chosen chain (map gradient at its
+nodes) when the posterior sits on fewer than 3 of them
+(:mod:`~jaxgrav.match.fix_covariance`); ``fix="posterior"`` returns the INS track
+shifted to the posterior mean.
 With a map error (``ChainConfig.map_error_mgal`` > 0) the chains are ranked by that
 GLS score instead of the white one. The dynamic programme itself still runs on the
 paper's per-step (difference or absolute) costs: a GLS score with correlated errors
@@ -49,12 +54,18 @@ from jaxgrav.match.chains import (
 from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.fix_covariance import (
     gauss_newton_information,
+    gls_whitener_scan,
     integrity_status,
     offset_covariance,
     second_mode_ratio,
     spread_about,
 )
-from jaxgrav.match.gls import gls_dof, gls_score, gls_whitener, track_covariance
+from jaxgrav.match.gls import (
+    gls_dof,
+    gls_score,
+    offset_posterior,
+    track_covariance,
+)
 from jaxgrav.match.lattice_chains import (
     count_chains_lattice,
     eliminate_lattice,
@@ -144,14 +155,15 @@ class ChainConfig:
         Chains of the dynamic programme scored for the posterior of the fix (static;
         the programme keeps at least this many).
     fix : {"chain", "posterior"}
-        The returned track (static): the selected chain, or the selected chain shifted
-        to the likelihood-weighted mean offset of the ``k_posterior`` chains.
+        The returned track (static): the selected chain, or the INS track shifted to
+        the posterior mean offset (module docstring).
     max_sigma_m, max_second_mode, max_chi2_per_dof : float
         Integrity thresholds (traced): the fix is rejected (INS track returned, status
-        512, 1024, 2048) when the largest 1-σ of its covariance (m), the likelihood
-        ratio of the best chain whose mean offset lies outside the 3-σ curvature
-        ellipse of the best, or the chosen chain's GLS χ² per degree of freedom
-        exceeds it. Defaults ``inf``: every found fix is accepted.
+        512, 1024, 2048) when the largest 1-σ of its covariance (m), the posterior's
+        second-mode likelihood ratio (:func:`~jaxgrav.match.gls.offset_posterior`; for
+        the pairwise search, of the best chain outside the 3-σ curvature ellipse of the
+        best), or the chosen chain's GLS χ² per degree of freedom exceeds it.
+        Defaults ``inf``: every found fix is accepted.
     """
 
     delta: float = 1.0
@@ -273,12 +285,12 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
     found = jnp.isfinite(topk_score[chosen])
 
     topk_lat, topk_lon = cands.lat[fix, idx], cands.lon[fix, idx]
-    q = _chain_quality(grid, cands, search.index, order[chosen], j_gls, wh, sigma_b, n, config)
+    q = _chain_quality(grid, cands, search.index, order[chosen], j_gls, wh, sigma_b, readings,
+                       config)
     accepted = found & (q["status"] == 0)
     m_lat, m_lon = topk_lat[chosen], topk_lon[chosen]
-    if config.fix == "posterior":
-        m_lat, m_lon = shifted_tracks(m_lat, m_lon, q["shift"][0], q["shift"][1],
-                                      jnp.zeros((), dtype))
+    if config.fix == "posterior":  # the INS track shifted to the posterior mean
+        m_lat, m_lon = shifted_tracks(lat, lon, q["fix"][0], q["fix"][1], jnp.zeros((), dtype))
     edge = _on_window_edge(grid, cands, idx[chosen], lat, lon, config.half_size)
     status = (
         jnp.where(found, 0, 1)
@@ -309,7 +321,7 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
         accepted=accepted,
         n_effective=q["n_effective"].astype(dtype),
         second_mode_ratio=q["second_mode"].astype(dtype),
-        edge_mass=jnp.asarray(jnp.nan, dtype),
+        edge_mass=q["edge_mass"].astype(dtype),
         chi2_per_dof=q["chi2_per_dof"].astype(dtype),
     )
 
@@ -321,7 +333,7 @@ def _gls_scores(lat, lon, readings, values, w, config, dtype):
                            jnp.maximum(jnp.asarray(config.noise_mgal, dtype), 1e-6),
                            config.map_error_mgal, config.map_error_length_m,
                            config.map_error_order, weights=w)
-    wh = gls_whitener(cov)
+    wh = gls_whitener_scan(cov)
     sigma_b = jnp.asarray(0.0 if config.score == "absolute" else jnp.inf, dtype)
     j, b = gls_score(wh, readings - values, sigma_b)
     mu = w / jnp.sum(w)
@@ -344,29 +356,47 @@ def _node_gradient(grid, lat, lon):
     return jnp.stack([g_n, g_e], axis=-1)
 
 
-def _chain_quality(grid, cands, index, best, j_gls, wh, sigma_b, n, config):
-    """Fix, covariance and integrity of the chain ``best`` among the programme's chains."""
+def _chain_quality(grid, cands, index, best, j_gls, wh, sigma_b, readings, config):
+    """Fix, covariance and integrity of the chain ``best`` among the programme's chains.
+
+    With the displacement stencil (every window node a slot, the same slot the same node
+    displacement at every fix) the posterior is taken over the window's rigid chains
+    (slot j at every fix: the INS track shifted by a node displacement), which spans
+    the whole search region; otherwise over the programme's ``k_posterior`` chains.
+    """
+    n = readings.shape[0]
     fix = jnp.arange(n)[None, :]
+    dof = gls_dof(n, sigma_b)
     off_n = jnp.mean(cands.north_m[fix, index], axis=1)  # (K_dp,)
     off_e = jnp.mean(cands.east_m[fix, index], axis=1)
     chain_fix = jnp.stack([off_n[best], off_e[best]])
-    _, _, p = spread_about(j_gls, off_n, off_e, chain_fix[0], chain_fix[1])
-    post = jnp.stack([p @ jnp.where(jnp.isfinite(j_gls), off_n, 0.0),
-                      p @ jnp.where(jnp.isfinite(j_gls), off_e, 0.0)])
-    the_fix = post if config.fix == "posterior" else chain_fix
-    spread, n_eff, _ = spread_about(j_gls, off_n, off_e, the_fix[0], the_fix[1])
     lat_b, lon_b = cands.lat[jnp.arange(n), index[best]], cands.lon[jnp.arange(n), index[best]]
     info = gauss_newton_information(wh, _node_gradient(grid, lat_b, lon_b), sigma_b)
     local = offset_covariance(info)
     dy, dx = grid.spacing_m(jnp.mean(lat_b))
-    cov = spread + local + jnp.diag(jnp.stack([dy, dx]) ** 2 / 12.0)
+    cell = jnp.diag(jnp.stack([dy, dx]) ** 2 / 12.0)
+    if config.stencil_size > 0:  # rigid chains over the window
+        j = gls_score(wh, readings[None, :] - cands.value.T, sigma_b)[0]
+        on, oe = jnp.mean(cands.north_m, axis=0), jnp.mean(cands.east_m, axis=0)
+        post = offset_posterior(j, on, oe, 0.0, dof=dof)
+        mean = jnp.stack([post.mean_north_m, post.mean_east_m])
+        second, edge, resolved = (post.second_mode_ratio, post.edge_mass,
+                                  post.n_effective >= 3.0)
+    else:
+        j, on, oe = j_gls, off_n, off_e
+        _, _, p = spread_about(j, on, oe, chain_fix[0], chain_fix[1])
+        ok = jnp.isfinite(j)
+        mean = jnp.stack([p @ jnp.where(ok, on, 0.0), p @ jnp.where(ok, oe, 0.0)])
+        second = second_mode_ratio(j, on, oe, jnp.argmin(j), local)
+        edge, resolved = jnp.asarray(jnp.nan, j.dtype), jnp.asarray(False)
+    the_fix = mean if config.fix == "posterior" else chain_fix
+    spread, n_eff, _ = spread_about(j, on, oe, the_fix[0], the_fix[1])
+    cov = spread + cell + jnp.where(resolved, 0.0, local)
     cov = 0.5 * (cov + cov.T)  # exactly symmetric
-    second = second_mode_ratio(j_gls, off_n, off_e, jnp.argmin(j_gls), local)
-    chi2 = j_gls[best] / gls_dof(n, sigma_b)
-    status = integrity_status(cov, second, chi2, jnp.nan, config)
-    return {"fix": the_fix, "shift": the_fix - chain_fix, "covariance": cov,
-            "n_effective": n_eff, "second_mode": second, "chi2_per_dof": chi2,
-            "status": status}
+    chi2 = j_gls[best] / dof
+    status = integrity_status(cov, second, chi2, edge, config)
+    return {"fix": the_fix, "covariance": cov, "n_effective": n_eff, "second_mode": second,
+            "edge_mass": edge, "chi2_per_dof": chi2, "status": status}
 
 
 def chain_tolerances(grid, lat, config):

@@ -13,6 +13,8 @@ from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import match_chains
 from jaxgrav.match.entropy import entropy_config_for
+from jaxgrav.match.fix_covariance import gls_whitener_scan
+from jaxgrav.match.gls import gls_whitener
 from jaxgrav.match.sizing import config_for, iccp_config_for
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
@@ -55,6 +57,13 @@ def _iccp_cfgs(grid, sigma=SIGMA, length=LENGTH, **kw):
     fine = iccp_config_for(grid, drift, stage="fine", noise=1.0, max_rotation_deg=1.5,
                            map_error=map_error(sigma, length))
     return ent, dataclasses.replace(fine, **kw)
+
+
+def test_scan_whitener_equals_the_lapack_one():
+    m = np.random.default_rng(0).normal(size=(12, 12))
+    cov = m @ m.T + 12 * np.eye(12)
+    for got, want in zip(gls_whitener_scan(cov), gls_whitener(cov), strict=True):
+        np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-10, atol=1e-12)
 
 
 def test_chain_gls_score_equals_brute_force_numpy_and_covariance_is_pd(smooth_grid):
