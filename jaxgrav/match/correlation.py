@@ -15,24 +15,24 @@ Paper A's pipeline, one step per function (each testable on its own):
 6. the ``k_best`` (5) best chains, of which the one nearest the INS track is taken.
 
 Every match also reports the covariance of its fix and an integrity decision, from the
-GLS likelihood of :mod:`~jaxgrav.match.gls` (covariance ``σ_n² I + C_map`` along the
-INS track, bias marginalised; ``σ_m = 0`` gives the white-noise model of the weighted
-score). With the displacement stencil (``stencil_size`` > 0, as :func:`config_for`
-sizes it) the posterior is over the window's rigid chains (the INS track shifted by
-every node displacement of the window, all scored); otherwise over the programme's
-``k_posterior`` best chains. The covariance is the likelihood-weighted spread of their
-mean offsets about the fix plus the node quantisation ``cell²/12``, plus the
-Gauss–Newton curvature of the GLS misfit at the chosen chain (map gradient at its
-nodes) when the posterior sits on fewer than 3 of them
-(:mod:`~jaxgrav.match.fix_covariance`); ``fix="posterior"`` returns the INS track
-shifted to the posterior mean.
-With a map error (``ChainConfig.map_error_mgal`` > 0) the chains are ranked by that
-GLS score instead of the white one. The dynamic programme itself still runs on the
-paper's per-step (difference or absolute) costs: a GLS score with correlated errors
-is not a sum of per-step terms, so it only re-scores the programme's best chains.
+GLS likelihood of :mod:`~jaxgrav.match.gls` (covariance ``σ_n² I + C_map`` along the INS
+track, bias marginalised; ``σ_m = 0`` gives the white-noise model of the weighted
+score), σ_n² grown by the node quantisation of the map values (``node_allowance``). With
+the displacement stencil (``stencil_size`` > 0, as :func:`config_for` sizes it) the
+posterior is over the window's rigid chains (the INS track shifted by every node
+displacement of the window, all scored); otherwise over the programme's ``k_posterior``
+best chains. The covariance is the likelihood-weighted spread of their mean offsets
+about the fix plus the node quantisation ``cell²/12``, plus the Gauss–Newton curvature
+of the GLS misfit at the chosen chain (map gradient at its nodes) when the posterior
+sits on fewer than 3 of them (:mod:`~jaxgrav.match.fix_covariance`); ``fix="posterior"``
+returns the INS track shifted to the posterior mean. With a map error
+(``ChainConfig.map_error_mgal`` > 0) the chains are ranked by that GLS score instead of
+the white one. The dynamic programme itself still runs on the paper's per-step
+(difference or absolute) costs: a GLS score with correlated errors is not a sum of
+per-step terms, so it only re-scores the programme's best chains.
 
-:func:`match_chains` handles one track; batch it with ``jax.vmap`` over tracks
-(the map is shared). The dense-offset fast path is :mod:`jaxgrav.match.dense`.
+:func:`match_chains` handles one track; batch it with ``jax.vmap`` over tracks (the map
+is shared). The dense-offset fast path is :mod:`jaxgrav.match.dense`.
 """
 
 
@@ -271,7 +271,8 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
     rescored, bias = score_track(readings, values, w, config.score)
     alive_chain = jnp.isfinite(search.score)
     rescored = jnp.where(alive_chain, rescored, jnp.inf)
-    wh, j_gls, b_gls, sigma_b, scale = _gls_scores(lat, lon, readings, values, w, config, dtype)
+    wh, j_gls, b_gls, sigma_b, scale = _gls_scores(grid, lat, lon, readings, values, w,
+                                                    config, dtype)
     j_gls = jnp.where(alive_chain, j_gls, jnp.inf)
     told = jnp.asarray(config.map_error_mgal) > 0
     rank = jnp.where(told, j_gls * scale, rescored)
@@ -326,11 +327,19 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
     )
 
 
-def _gls_scores(lat, lon, readings, values, w, config, dtype):
-    """GLS scores (χ²) and biases of chains' map values ``(K, N)``, and the whitener."""
+def _gls_scores(grid, lat, lon, readings, values, w, config, dtype):
+    """GLS scores (χ²) and biases of chains' map values ``(K, N)``, and the whitener.
+
+    Map values are read at nodes, up to half a cell from the positions they stand
+    for: the noise of fix i gets ``node_allowance² · (g_n² dy² + g_e² dx²)/12`` more
+    variance, g the map gradient at the node nearest the INS fix.
+    """
     north, east = local_offsets_m(lat, lon, lat[0], lon[0])
-    cov = track_covariance(north.astype(dtype), east.astype(dtype),
-                           jnp.maximum(jnp.asarray(config.noise_mgal, dtype), 1e-6),
+    grad = _node_gradient(grid, lat, lon)
+    dy, dx = grid.spacing_m(lat)
+    quant = config.node_allowance**2 * ((grad[:, 0] * dy) ** 2 + (grad[:, 1] * dx) ** 2) / 12.0
+    noise = jnp.sqrt(jnp.maximum(jnp.asarray(config.noise_mgal, dtype), 1e-6) ** 2 + quant)
+    cov = track_covariance(north.astype(dtype), east.astype(dtype), noise.astype(dtype),
                            config.map_error_mgal, config.map_error_length_m,
                            config.map_error_order, weights=w)
     wh = gls_whitener_scan(cov)

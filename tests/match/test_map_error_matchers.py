@@ -76,7 +76,14 @@ def test_chain_gls_score_equals_brute_force_numpy_and_covariance_is_pd(smooth_gr
     iy, ix = (np.rint(np.asarray(a)).astype(int) for a in grid.fractional_index(r.lat, r.lon))
     v = np.asarray(grid.values)[iy, ix]  # the chosen chain sits on map nodes
     w = np.exp(-cfg.weight_decay * np.arange(lat.size) / (lat.size - 1))
-    p = np.linalg.inv(_numpy_cov(lat, lon, cfg.noise_mgal, w))
+    # node quantisation noise: central-difference gradient at the INS fixes' nodes
+    vals = np.asarray(grid.values)
+    jy, jx = (np.rint(np.asarray(a)).astype(int) for a in grid.fractional_index(lat, lon))
+    dy, dx = (np.asarray(a) for a in grid.spacing_m(jnp.asarray(lat)))
+    g_n = (vals[jy + 1, jx] - vals[jy - 1, jx]) / (2 * dy)
+    g_e = (vals[jy, jx + 1] - vals[jy, jx - 1]) / (2 * dx)
+    noise = np.sqrt(cfg.noise_mgal**2 + ((g_n * dy) ** 2 + (g_e * dx) ** 2) / 12.0)
+    p = np.linalg.inv(_numpy_cov(lat, lon, noise, w))
     one, res = np.ones(lat.size), g - v
     chi2 = res @ p @ res - (one @ p @ res) ** 2 / (one @ p @ one)
     mu = w / w.sum()
