@@ -103,30 +103,10 @@ class IccpConfig:
         the gradient under reading noise.
     method : {"bicubic"}
         Map interpolation (static); projection needs a smooth gradient.
-    map_error_mgal : float
-        σ of the map's error (map units), traced; used by the combined matcher
-        (:func:`~jaxgrav.match.combined.match_entropy_iccp`) only. 0 (default): its
-        fine-vs-coarse test as above and the fix's covariance from white noise
-        ``noise``; > 0: the GLS likelihood with covariance ``noise² I + C_map`` along
-        the track (:mod:`~jaxgrav.match.gls`, no bias) picks the best ICCP start and
-        makes the fine-vs-coarse test (``J_coarse − J_fine ≥ accept_chi2``).
-    map_error_length_m : float
-        Correlation length L of the map error (m), traced.
-    map_error_order : {1, 2}
-        Gauss–Markov order of the map-error covariance (static).
-    fix : {"coarse", "posterior"}
-        Combined matcher (static): the coarse fix is the entropy stage's offset (the
-        paper), or the GLS-likelihood-weighted mean over the entropy stage's offsets
-        (also an ICCP start).
-    resolved_n_effective : float
-        Combined matcher: with at least this many offsets sharing the posterior, the
-        covariance is the posterior's spread about the fix; otherwise the
-        Gauss–Newton one.
-    max_sigma_m, max_second_mode, max_chi2_per_dof, max_edge_mass : float
-        Combined matcher's integrity thresholds (traced): the fix is rejected (INS
-        track, status 512, 1024, 2048, 4096) when the largest 1-σ of its covariance
-        (m), the posterior's second-mode ratio, the fix's GLS χ² per fix or the
-        posterior mass on the outermost offsets exceeds it. Defaults ``inf``.
+    map_error_mgal, map_error_length_m, map_error_order, fix, resolved_n_effective, max_*
+        :func:`~jaxgrav.match.combined.match_entropy_iccp` only (its docstring): map error
+        σ (map units), L (m) of its GLS score (σ = 0: white ``noise``), the coarse fix
+        (entropy's, or the GLS posterior mean), integrity thresholds (status 512–4096).
     """
 
     window_m: float = 3000.0
@@ -154,8 +134,6 @@ class IccpConfig:
     def __post_init__(self):
         if isinstance(self.fix, str) and self.fix not in ("coarse", "posterior"):
             raise ValueError(f"fix must be 'coarse' or 'posterior'; got {self.fix!r}")
-        if self.map_error_order not in (1, 2):
-            raise ValueError(f"map_error_order must be 1 or 2; got {self.map_error_order!r}")
         for name in ("map_error_mgal", "map_error_length_m"):
             arr = concrete(getattr(self, name))
             if arr is not None and arr.dtype != object and not (
