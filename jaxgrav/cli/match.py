@@ -13,6 +13,7 @@ from jaxgrav._io import atomic_output
 from jaxgrav.cli.inputs import add_columns_option, read_track, track_map
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match import ENTROPY_HALF_SIZE, METHODS, match_track, status_messages
+from jaxgrav.match.api import MAP_ERROR_METHODS
 from jaxgrav.sim import DEG_ARC_M
 from jaxgrav.tracks import write_track_csv
 
@@ -57,10 +58,12 @@ def add_parsers(sub):
     m.add_argument("--refine", type=int, default=1,
                    help="refine the map by this factor first (chains: paper A used 100)")
     m.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
-                   help="dense: σ of the map's error (mGal, default 0 = white-noise score); "
+                   help="dense, chains, entropy+iccp: σ of the map's error (map units, default "
+                        "0 = white-noise score); "
                         "> 0 scores by GLS, returns the posterior fix and tests its integrity")
     m.add_argument("--map-error-length", type=float, default=10000.0, metavar="L",
-                   help="dense: correlation length of the map's error (m, default 10000)")
+                   help="dense, chains, entropy+iccp: correlation length of the map's error "
+                        "(m, default 10000)")
     m.add_argument("--no-eotvos", action="store_true",
                    help="do not Eötvös-correct the readings even if velocities are given")
     m.add_argument("--force", action="store_true", help="overwrite an existing output")
@@ -163,9 +166,9 @@ def _check_match_args(args):
         bad("--map-error", args.map_error, "a finite standard deviation >= 0 (mGal)")
     if not (math.isfinite(args.map_error_length) and args.map_error_length > 0):
         bad("--map-error-length", args.map_error_length, "a finite correlation length > 0 (m)")
-    if args.map_error > 0 and args.method != "dense":
-        raise ValueError(f"--map-error is used by --method dense only; got --method "
-                         f"{args.method}")
+    if args.map_error > 0 and args.method not in MAP_ERROR_METHODS:
+        raise ValueError(f"--map-error is used by --method {', '.join(MAP_ERROR_METHODS)} "
+                         f"only; got --method {args.method}")
     if args.max_rotation is not None:
         if args.method not in ("iccp", "entropy+iccp"):
             raise ValueError(f"--max-rotation bounds ICCP's rotation; it has no effect with "

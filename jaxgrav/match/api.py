@@ -29,13 +29,17 @@ from jaxgrav.match.result import status_messages
 from jaxgrav.match.sizing import config_for, iccp_config_for
 from jaxgrav.prepared import as_grid, prepare_map
 
-__all__ = ["ENTROPY_HALF_SIZE", "METHODS", "MIN_FIXES", "match_track", "validate_track"]
+__all__ = ["ENTROPY_HALF_SIZE", "MAP_ERROR_METHODS", "METHODS", "MIN_FIXES", "match_track",
+           "validate_track"]
 
 METHODS = ("dense", "chains", "entropy", "iccp", "entropy+iccp")
 """``dense``: offset grid + Gauss–Newton (default, most accurate on real maps);
 ``chains``: paper A's iso-point chains with constraint elimination; ``entropy``:
 difference-entropy coarse match; ``iccp``: iterative closest contour point;
 ``entropy+iccp``: entropy coarse then ICCP fine (paper B)."""
+
+MAP_ERROR_METHODS = ("dense", "chains", "entropy+iccp")
+"""Methods that take ``map_error`` (a GLS score, a covariance and an integrity test)."""
 
 MIN_FIXES = 5
 """Fewest fixes a track may have (paper A uses N ≥ 10)."""
@@ -183,9 +187,10 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
     noise_mgal : float, optional
         Deprecated spelling of ``noise``.
     map_error : CorrelatedMapError, optional
-        ``dense``: the map's error model (:func:`~jaxgrav.fields.map_error.map_error`):
-        GLS score, posterior fix and integrity test (:func:`config_for`); None
-        (default) or σ = 0: today's white-noise score.
+        ``dense``, ``chains``, ``entropy+iccp``: the map's error model
+        (:func:`~jaxgrav.fields.map_error.map_error`): GLS score, posterior fix and
+        integrity test (:func:`config_for`, :func:`iccp_config_for`); None (default)
+        or σ = 0: today's white-noise score. Ignored with an explicit ``config``.
 
     Returns
     -------
@@ -203,8 +208,9 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
                       DeprecationWarning, stacklevel=2)
         noise = noise_mgal
     _check_options(method, noise, bias_sigma_mgal, max_rotation_deg, entropy_half_size, config)
-    if map_error is not None and method != "dense":
-        raise ValueError(f"map_error is used by method 'dense' only; got method {method!r}")
+    if map_error is not None and method not in MAP_ERROR_METHODS:
+        raise ValueError(f"map_error is used by methods {MAP_ERROR_METHODS} only; got method "
+                         f"{method!r}")
     lat, lon, readings = validate_track(grid, lat, lon, readings)
     corrected = v_east is not None and v_north is not None
     if corrected:
@@ -217,7 +223,7 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
                                     bias_sigma_mgal, corrected, config, map_error)
     else:
         result = _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise,
-                                max_rotation_deg, entropy_half_size, config)
+                                max_rotation_deg, entropy_half_size, config, map_error)
     if warn:
         for msg in status_messages(int(result.status)):
             warnings.warn(f"match_track: {msg}", RuntimeWarning, stacklevel=2)
@@ -244,7 +250,7 @@ def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
 
 
 def _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise, max_rotation_deg,
-                   entropy_half_size, config):
+                   entropy_half_size, config, map_error=None):
     """``entropy``, ``iccp`` or ``entropy+iccp`` on checked inputs."""
     entropy = iccp = None
     if method == "entropy":
@@ -260,7 +266,7 @@ def _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise, max_
         stage = "alone" if method == "iccp" else "fine"
         iccp = iccp_config_for(grid, drift_radius_m, stage=stage, noise=noise,
                                max_rotation_deg=90.0 if max_rotation_deg is None
-                               else max_rotation_deg)
+                               else max_rotation_deg, map_error=map_error)
     pm = prepare_map(grid)
     if method == "entropy":
         return match_entropy(pm, lat, lon, readings, entropy)

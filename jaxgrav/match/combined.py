@@ -6,6 +6,21 @@ coarse one only if it fits *significantly* better (a likelihood-ratio test again
 the reading noise, see :class:`~jaxgrav.match.iccp.IccpConfig`), otherwise status
 bit 128 is raised and the coarse track is kept. Where the data cannot tell the two
 apart, the combined match therefore does not move away from the coarse one.
+
+Every match reports the covariance of its fix and an integrity decision. The entropy
+score (a difference of sequence entropies) is no likelihood, so GLS does not apply to
+it; the quality comes from what does: the GLS likelihood (:mod:`~jaxgrav.match.gls`,
+covariance ``σ_n² I + C_map`` along the track, ``σ_n = iccp.noise``, no bias) of every
+offset of the entropy stage's grid gives a posterior over the offsets
+(:func:`~jaxgrav.match.gls.offset_posterior`), and the Gauss–Newton curvature of the
+whitened misfit at the returned transform (rotation marginalised) gives the local
+covariance, scaled by the whitened misfit per degree of freedom when above 1. The
+covariance of an ICCP (fine) fix is that Gauss–Newton one; of a coarse fix, the
+posterior's spread about the fix (plus the offset cell's quantisation) when the grid
+resolves the posterior, else that spread plus the Gauss–Newton covariance. With a map
+error (``iccp.map_error_mgal`` > 0) the same GLS score also picks the best ICCP start
+and makes the fine-vs-coarse test; ``iccp.fix="posterior"`` takes the posterior mean
+over the offsets as the coarse fix (and as one more ICCP start).
 """
 
 import jax
@@ -15,7 +30,15 @@ from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.contour import value_grad
 from jaxgrav.match.dense import shifted_tracks
-from jaxgrav.match.entropy import EntropyConfig, coarse_offsets
+from jaxgrav.match.entropy import EntropyConfig, coarse_offsets, offset_grid
+from jaxgrav.match.fix_covariance import (
+    gauss_newton_information,
+    gls_whitener_scan,
+    integrity_status,
+    offset_covariance,
+    spread_about,
+)
+from jaxgrav.match.gls import gls_score, offset_posterior, track_covariance
 from jaxgrav.match.iccp import IccpConfig, iccp_fit, local_track_frame
 from jaxgrav.match.result import STATUS, MatchResult
 from jaxgrav.prepared import prepare_map
@@ -59,7 +82,10 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     -------
     MatchResult
         ``score`` is the mean squared misfit (map units²); ``topk_*`` hold the coarse
-        and the fine track (in that order), ``chosen`` which one was returned.
+        and the fine track (in that order), ``chosen`` which one was returned;
+        ``covariance_m2``, ``accepted`` (a rejected fix is the INS track) and the test
+        statistics as the module docstring says, ``chi2_per_dof`` the fix's GLS
+        score per fix.
     """
     lat, lon, readings = (jnp.asarray(x) for x in (lat, lon, readings))
     n = readings.shape[0]
@@ -69,33 +95,66 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     p0, field = local_track_frame(pm.patches(), pm.grid, lat, lon)
     dtype = p0.dtype
     z = readings.astype(dtype)
-    starts = jnp.stack([jnp.append(top_n, 0.0), jnp.append(top_e, 0.0)], -1).astype(dtype)
+    zero = jnp.zeros((), dtype)
+    told = jnp.asarray(iccp.map_error_mgal) > 0
+    noise = jnp.asarray(iccp.noise, dtype)
+    wh = gls_whitener_scan(track_covariance(p0[:, 0], p0[:, 1], jnp.where(noise > 0, noise, 1.0),
+                                       iccp.map_error_mgal, iccp.map_error_length_m,
+                                       iccp.map_error_order))
+    gls = lambda f: gls_score(wh, z - f, zero)[0]  # noqa: E731
+    g_n, g_e = offset_grid(entropy, dtype)
+    j_grid = gls(value_grad(field, p0 + jnp.stack([g_n, g_e], -1)[:, None, :])[0])
+    post = offset_posterior(j_grid, g_n, g_e, entropy.spacing_m, dof=n)
+    if iccp.fix == "posterior":
+        d_n = jnp.where(post.valid, post.mean_north_m, d_n).astype(d_n.dtype)
+        d_e = jnp.where(post.valid, post.mean_east_m, d_e).astype(d_e.dtype)
+    starts = jnp.stack([jnp.concatenate([top_n, jnp.stack([zero, d_n])]),
+                        jnp.concatenate([top_e, jnp.stack([zero, d_e])])], -1).astype(dtype)
     fits = jax.vmap(lambda t0: iccp_fit(field, p0, z, iccp, t0=t0))(starts)
     misfits = jnp.where(jnp.isfinite(fits.misfit), fits.misfit, jnp.inf)
-    best = jnp.argmin(misfits)
+    j_fits = gls(value_grad(field, _moved(p0, fits.rotation, fits.translation))[0])
+    best = jnp.argmin(jnp.where(told, jnp.where(jnp.isfinite(j_fits), j_fits, jnp.inf),
+                                misfits))
     st = jax.tree.map(lambda x: x[best], fits)
     f_c, _ = value_grad(field, p0 + jnp.stack([d_n, d_e]).astype(dtype))
     coarse_misfit = jnp.mean((z - f_c) ** 2)
+    j_coarse = gls(f_c)
     gain = n * (coarse_misfit - st.misfit)
-    use_fine = jnp.isfinite(st.misfit) & ~(gain < iccp.accept_chi2 * iccp.noise**2)
+    use_fine = jnp.isfinite(st.misfit) & jnp.where(
+        told, ~(j_coarse - j_fits[best] < iccp.accept_chi2),
+        ~(gain < iccp.accept_chi2 * iccp.noise**2))
     rot = jnp.arctan2(st.rotation[1, 0], st.rotation[0, 0])
+    if iccp.fix == "posterior":
+        coarse_lat, coarse_lon = shifted_tracks(lat, lon, d_n, d_e, zero)
+        c_n, c_e = local_offsets_m(coarse_lat, coarse_lon, lat, lon)
+        coarse = coarse._replace(lat=coarse_lat, lon=coarse_lon, offset_north_m=jnp.mean(c_n),
+                                 offset_east_m=jnp.mean(c_e))
     f_lat, f_lon = shifted_tracks(lat, lon, st.translation[0], st.translation[1], rot)
     f_n, f_e = local_offsets_m(f_lat, f_lon, lat, lon)
     pick = lambda a, b: jnp.where(use_fine, a, b)  # noqa: E731
+    found = jnp.isfinite(st.misfit) | jnp.isfinite(coarse_misfit)
+    t_fix = pick(st.translation, jnp.stack([d_n, d_e]).astype(dtype))
+    j_fix = pick(j_fits[best], j_coarse)
+    cov, chi2 = _fix_covariance(field, p0, wh, pick(st.rotation, jnp.eye(2, dtype=dtype)),
+                                t_fix, j_fix, use_fine, post, j_grid, g_n, g_e, entropy, iccp)
+    reject = integrity_status(cov, post.second_mode_ratio, chi2, post.edge_mass, iccp)
+    accepted = found & (reject == 0)
+    keep = lambda a, b: jnp.where(accepted, pick(a, b), jnp.zeros_like(a))  # noqa: E731
     status = (
         (coarse.status & ~1)
-        | jnp.where(jnp.isfinite(st.misfit) | jnp.isfinite(coarse_misfit), 0, 1)
+        | jnp.where(found, 0, 1)
         | jnp.where(use_fine & ~st.converged, 16, 0)
         | jnp.where(st.starved, 64, 0)
         | jnp.where(use_fine, 0, 128)
+        | jnp.where(found, reject, 0)
     ).astype(jnp.int32)
     iters = jnp.sum(fits.n_iter).astype(dtype)
     return MatchResult(
-        lat=pick(f_lat, coarse.lat),
-        lon=pick(f_lon, coarse.lon),
-        offset_north_m=pick(jnp.mean(f_n), coarse.offset_north_m),
-        offset_east_m=pick(jnp.mean(f_e), coarse.offset_east_m),
-        rotation_deg=pick(rot / DEG, coarse.rotation_deg),
+        lat=jnp.where(accepted, pick(f_lat, coarse.lat), lat),
+        lon=jnp.where(accepted, pick(f_lon, coarse.lon), lon),
+        offset_north_m=keep(jnp.mean(f_n), coarse.offset_north_m),
+        offset_east_m=keep(jnp.mean(f_e), coarse.offset_east_m),
+        rotation_deg=keep(rot / DEG, coarse.rotation_deg),
         score=pick(st.misfit, coarse_misfit),
         bias=coarse.bias,
         topk_lat=jnp.stack([coarse.lat, f_lat]),
@@ -107,4 +166,36 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
         work_constrained=coarse.work_constrained + iters,
         work_pairs=coarse.work_pairs + iters * n * (iccp.newton_steps + 1),
         status=status,
+        covariance_m2=cov,
+        accepted=accepted,
+        n_effective=post.n_effective.astype(dtype),
+        second_mode_ratio=post.second_mode_ratio.astype(dtype),
+        edge_mass=post.edge_mass.astype(dtype),
+        chi2_per_dof=chi2,
     )
+
+
+def _moved(p0, rotation, translation):
+    """Points ``R p0 + t`` ``(..., N, 2)`` for transforms ``(..., 2, 2)``, ``(..., 2)``."""
+    return jnp.einsum("...ij,nj->...ni", rotation, p0) + translation[..., None, :]
+
+
+def _fix_covariance(field, p0, wh, rotation, translation, j_fix, fine, post, j_grid, g_n,
+                    g_e, entropy, iccp):
+    """2 × 2 covariance (m²) of the fix and its GLS χ² per fix."""
+    n = p0.shape[0]
+    _, g = value_grad(field, _moved(p0, rotation, translation))
+    turned = p0 @ rotation.T
+    d_theta = jnp.sum(g * jnp.stack([-turned[:, 1], turned[:, 0]], -1), axis=-1)
+    info = gauss_newton_information(wh, jnp.concatenate([d_theta[:, None], g], -1), 0.0)
+    gn_fine, gn_coarse = offset_covariance(info), offset_covariance(info[1:, 1:])
+    chi2 = j_fix / n
+    dof = jnp.where(fine, n - 3, n - 2)
+    gn = jnp.where(fine, gn_fine, gn_coarse) * jnp.maximum(1.0, j_fix / jnp.maximum(dof, 1))
+    spread, _, _ = spread_about(j_grid, g_n, g_e, translation[0], translation[1])
+    cell = jnp.asarray(entropy.spacing_m, spread.dtype) ** 2 / 12.0
+    resolved = post.n_effective >= iccp.resolved_n_effective
+    coarse = jnp.where(resolved, spread + cell * jnp.eye(2, dtype=spread.dtype), spread + gn)
+    cov = jnp.where(fine, gn, coarse)
+    cov = 0.5 * (cov + cov.T)  # exactly symmetric
+    return cov.astype(p0.dtype), chi2.astype(p0.dtype)

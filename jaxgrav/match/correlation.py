@@ -14,17 +14,37 @@ Paper A's pipeline, one step per function (each testable on its own):
    (:mod:`~jaxgrav.match.scoring`);
 6. the ``k_best`` (5) best chains, of which the one nearest the INS track is taken.
 
-:func:`match_chains` handles one track; batch it with ``jax.vmap`` over tracks
-(the map is shared). The dense-offset fast path is :mod:`jaxgrav.match.dense`.
+Every match also reports the covariance of its fix and an integrity decision, from the
+GLS likelihood of :mod:`~jaxgrav.match.gls` (covariance ``σ_n² I + C_map`` along the INS
+track, bias marginalised; ``σ_m = 0`` gives the white-noise model of the weighted
+score), σ_n² grown by the node quantisation of the map values (``node_allowance``). With
+the displacement stencil (``stencil_size`` > 0, as :func:`config_for` sizes it) the
+posterior is over the window's rigid chains (the INS track shifted by every node
+displacement of the window, all scored); otherwise over the programme's ``k_posterior``
+best chains. The covariance is the likelihood-weighted spread of their mean offsets
+about the fix plus the node quantisation ``cell²/12``, plus the Gauss–Newton curvature
+of the GLS misfit at the chosen chain (map gradient at its nodes) when the posterior
+sits on fewer than 3 of them (:mod:`~jaxgrav.match.fix_covariance`); ``fix="posterior"``
+returns the INS track shifted to the posterior mean. With a map error
+(``ChainConfig.map_error_mgal`` > 0) the chains are ranked by that GLS score instead of
+the white one. The dynamic programme itself still runs on the paper's per-step
+(difference or absolute) costs: a GLS score with correlated errors is not a sum of
+per-step terms, so it only re-scores the programme's best chains.
+
+:func:`match_chains` handles one track; batch it with ``jax.vmap`` over tracks (the map
+is shared). The dense-offset fast path is :mod:`jaxgrav.match.dense`.
 """
 
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav._validate import concrete
 from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.candidates import iso_candidates, lattice_candidates
+from jaxgrav.match.chain_quality import chain_gls_scores, chain_quality
 from jaxgrav.match.chains import (
     compact,
     count_chains,
@@ -32,6 +52,7 @@ from jaxgrav.match.chains import (
     kbest_chains,
     step_compatibility,
 )
+from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.lattice_chains import (
     count_chains_lattice,
     eliminate_lattice,
@@ -105,6 +126,31 @@ class ChainConfig:
         unless ``"absolute"``.
     selection : {"nearest", "best"}
         Paper A's nearest-to-INS rule, or the least score (static).
+    noise_mgal : float
+        Reading noise σ_n (mGal) of the GLS likelihood behind the fix's covariance.
+    map_error_mgal : float
+        σ of the map's error (mGal), traced. 0 (default): chains ranked as without
+        this field, the covariance from the white-noise likelihood; > 0: the
+        ``k_posterior`` best chains ranked by the GLS score (covariance
+        ``σ_n² I + C_map`` along the track, bias marginalised; none for
+        ``score="absolute"``), ``score`` then in mGal² (χ² × ``σ_n² Σμ²``).
+    map_error_length_m : float
+        Correlation length L of the map error (m), traced.
+    map_error_order : {1, 2}
+        Gauss–Markov order of the map-error covariance (static).
+    k_posterior : int
+        Chains of the dynamic programme scored for the posterior of the fix (static;
+        the programme keeps at least this many).
+    fix : {"chain", "posterior"}
+        The returned track (static): the selected chain, or the INS track shifted to
+        the posterior mean offset (module docstring).
+    max_sigma_m, max_second_mode, max_chi2_per_dof : float
+        Integrity thresholds (traced): the fix is rejected (INS track returned, status
+        512, 1024, 2048) when the largest 1-σ of its covariance (m), the posterior's
+        second-mode likelihood ratio (:func:`~jaxgrav.match.gls.offset_posterior`; for
+        the pairwise search, of the best chain outside the 3-σ curvature ellipse of the
+        best), or the chosen chain's GLS χ² per degree of freedom exceeds it.
+        Defaults ``inf``: every found fix is accepted.
     """
 
     delta: float = 1.0
@@ -120,8 +166,28 @@ class ChainConfig:
     k_best: int = static_field(5)
     score: str = static_field("difference")
     selection: str = static_field("nearest")
+    noise_mgal: float = 1.0
+    map_error_mgal: float = 0.0
+    map_error_length_m: float = 10000.0
+    map_error_order: int = static_field(2)
+    k_posterior: int = static_field(16)
+    fix: str = static_field("chain")
+    max_sigma_m: float = float("inf")
+    max_second_mode: float = float("inf")
+    max_chi2_per_dof: float = float("inf")
 
     def __post_init__(self):
+        if isinstance(self.fix, str) and self.fix not in ("chain", "posterior"):
+            raise ValueError(f"fix must be 'chain' or 'posterior'; got {self.fix!r}")
+        if self.map_error_order not in (1, 2):
+            raise ValueError(f"map_error_order must be 1 or 2; got {self.map_error_order!r}")
+        if isinstance(self.k_posterior, int) and self.k_posterior < 1:
+            raise ValueError(f"k_posterior must be >= 1; got {self.k_posterior!r}")
+        for name in ("map_error_mgal", "map_error_length_m", "noise_mgal"):
+            arr = concrete(getattr(self, name))
+            if arr is not None and arr.dtype != object and not (
+                    np.all(np.isfinite(arr)) and np.all(arr >= 0)):
+                raise ValueError(f"{name} must be finite and >= 0; got {arr}")
         if isinstance(self.score, str) and self.score not in SCORES:
             raise ValueError(f"score must be one of {SCORES}; got {self.score!r}")
         if isinstance(self.selection, str) and self.selection not in ("nearest", "best"):
@@ -190,16 +256,29 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
     fix = jnp.arange(n)[None, :]
     values = cands.value[fix, search.index]  # (K_dp, N)
     rescored, bias = score_track(readings, values, w, config.score)
-    rescored = jnp.where(jnp.isfinite(search.score), rescored, jnp.inf)
-    order = jnp.argsort(rescored)[: config.k_best]
+    alive_chain = jnp.isfinite(search.score)
+    rescored = jnp.where(alive_chain, rescored, jnp.inf)
+    wh, j_gls, b_gls, sigma_b, scale = chain_gls_scores(grid, lat, lon, readings, values, w,
+                                                    config, dtype)
+    j_gls = jnp.where(alive_chain, j_gls, jnp.inf)
+    told = jnp.asarray(config.map_error_mgal) > 0
+    rank = jnp.where(told, j_gls * scale, rescored)
+    bias = jnp.where(told, b_gls, bias)
+    order = jnp.argsort(rank)[: config.k_best]
     idx = search.index[order]
-    topk_score = rescored[order]
+    topk_score = rank[order]
     north, east = cands.north_m[fix, idx], cands.east_m[fix, idx]  # (K, N)
     distance = jnp.sum(jnp.hypot(north, east), axis=1)
     chosen = nearest_to_ins(topk_score, distance, config.selection)
     found = jnp.isfinite(topk_score[chosen])
 
     topk_lat, topk_lon = cands.lat[fix, idx], cands.lon[fix, idx]
+    q = chain_quality(grid, cands, search.index, order[chosen], j_gls, wh, sigma_b, readings,
+                       config)
+    accepted = found & (q["status"] == 0)
+    m_lat, m_lon = topk_lat[chosen], topk_lon[chosen]
+    if config.fix == "posterior":  # the INS track shifted to the posterior mean
+        m_lat, m_lon = shifted_tracks(lat, lon, q["fix"][0], q["fix"][1], jnp.zeros((), dtype))
     edge = _on_window_edge(grid, cands, idx[chosen], lat, lon, config.half_size)
     status = (
         jnp.where(found, 0, 1)
@@ -207,12 +286,13 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
         | jnp.where(jnp.all(complete), 0, 4)
         | jnp.where(found & edge, 8, 0)
         | jnp.where(stencil_overflow, 256, 0)
+        | jnp.where(found, q["status"], 0)
     )
     return MatchResult(
-        lat=jnp.where(found, topk_lat[chosen], lat),
-        lon=jnp.where(found, topk_lon[chosen], lon),
-        offset_north_m=jnp.where(found, jnp.mean(north[chosen]), 0.0),
-        offset_east_m=jnp.where(found, jnp.mean(east[chosen]), 0.0),
+        lat=jnp.where(accepted, m_lat, lat),
+        lon=jnp.where(accepted, m_lon, lon),
+        offset_north_m=jnp.where(accepted, q["fix"][0], 0.0),
+        offset_east_m=jnp.where(accepted, q["fix"][1], 0.0),
         rotation_deg=jnp.zeros((), dtype),
         score=topk_score[chosen],
         bias=bias[order][chosen],
@@ -225,6 +305,12 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
         work_constrained=work_constrained,
         work_pairs=work_pairs.astype(dtype),
         status=status,
+        covariance_m2=q["covariance"].astype(dtype),
+        accepted=accepted,
+        n_effective=q["n_effective"].astype(dtype),
+        second_mode_ratio=q["second_mode"].astype(dtype),
+        edge_mass=q["edge_mass"].astype(dtype),
+        chi2_per_dof=q["chi2_per_dof"].astype(dtype),
     )
 
 
@@ -241,7 +327,7 @@ def chain_tolerances(grid, lat, config):
 
 def _k_dp(config):
     """Chains the programme keeps: re-scoring (bias form) needs more than it returns."""
-    return config.k_dp if config.score == "bias" else config.k_best
+    return max(config.k_dp if config.score == "bias" else config.k_best, config.k_posterior)
 
 
 def _candidates_args(config):

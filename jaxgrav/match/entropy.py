@@ -53,6 +53,7 @@ __all__ = [
     "entropy_config_for",
     "information_entropy",
     "match_entropy",
+    "offset_grid",
     "sequence_entropy",
 ]
 
@@ -229,7 +230,8 @@ def entropy_config_for(grid, drift_radius_m, *, kind="difference", max_half_size
     return EntropyConfig(spacing_m=spacing, half_size=half, kind=kind, **kw)
 
 
-def _offset_grid(config, dtype):
+def offset_grid(config, dtype=float):
+    """The coarse stage's offsets ``(north, east)``, each ``((2h+1)²,)`` (m), row-major."""
     h = config.half_size
     g = jnp.arange(-h, h + 1, dtype=dtype) * config.spacing_m
     on, oe = jnp.meshgrid(g, g, indexing="ij")
@@ -271,7 +273,7 @@ def coarse_offsets(sample, lat, lon, readings, config):
     lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
     n = lat.shape[0]
     dtype = jnp.result_type(lat.dtype, float)
-    d_n, d_e = _offset_grid(config, dtype)
+    d_n, d_e = offset_grid(config, dtype)
     la, lo = shifted_tracks(lat, lon, d_n, d_e, jnp.zeros_like(d_n))  # (S, N)
     vals = sample(la, lo)
     h_meas = sequence_entropy(readings, config.kind, config.shift)

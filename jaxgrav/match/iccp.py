@@ -30,8 +30,10 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav._validate import concrete
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
 from jaxgrav.match.contour import local_field, project_to_contours, value_grad_ne
@@ -101,6 +103,10 @@ class IccpConfig:
         the gradient under reading noise.
     method : {"bicubic"}
         Map interpolation (static); projection needs a smooth gradient.
+    map_error_mgal, map_error_length_m, map_error_order, fix, resolved_n_effective, max_*
+        :func:`~jaxgrav.match.combined.match_entropy_iccp` only (its docstring): map error
+        σ (map units), L (m) of its GLS score (σ = 0: white ``noise``), the coarse fix
+        (entropy's, or the GLS posterior mean), integrity thresholds (status 512–4096).
     """
 
     window_m: float = 3000.0
@@ -115,8 +121,24 @@ class IccpConfig:
     refine_steps: int = static_field(0)
     weights: str = static_field("uniform")
     method: str = static_field("bicubic")
+    map_error_mgal: float = 0.0
+    map_error_length_m: float = 10000.0
+    map_error_order: int = static_field(2)
+    fix: str = static_field("coarse")
+    resolved_n_effective: float = 3.0
+    max_sigma_m: float = float("inf")
+    max_second_mode: float = float("inf")
+    max_chi2_per_dof: float = float("inf")
+    max_edge_mass: float = float("inf")
 
     def __post_init__(self):
+        if isinstance(self.fix, str) and self.fix not in ("coarse", "posterior"):
+            raise ValueError(f"fix must be 'coarse' or 'posterior'; got {self.fix!r}")
+        for name in ("map_error_mgal", "map_error_length_m"):
+            arr = concrete(getattr(self, name))
+            if arr is not None and arr.dtype != object and not (
+                    np.all(np.isfinite(arr)) and np.all(arr >= 0)):
+                raise ValueError(f"{name} must be finite and >= 0; got {arr}")
         if isinstance(self.max_iter, int) and self.max_iter < 1:
             raise ValueError(f"max_iter must be >= 1; got {self.max_iter!r}")
         if isinstance(self.newton_steps, int) and self.newton_steps < 1:

@@ -31,9 +31,10 @@ STATUS = {
 """Bit flags of :attr:`MatchResult.status`, for every method (one table).
 
 ``dense`` raises 1 and 8, and the integrity bits 512, 1024, 2048 and 4096 (a
-rejected fix: :attr:`MatchResult.accepted` false); ``chains`` 1, 2, 4, 8 and 256;
-``entropy`` 1, 8 and 32;
-``iccp`` 1, 16 and 64; ``entropy+iccp`` those of entropy and ICCP and 128.
+rejected fix: :attr:`MatchResult.accepted` false); ``chains`` 1, 2, 4, 8, 256 and the
+integrity bits 512, 1024, 2048; ``entropy`` 1, 8 and 32;
+``iccp`` 1, 16 and 64; ``entropy+iccp`` those of entropy and ICCP, 128 and the
+integrity bits 512–4096.
 """
 
 CORRELATION_STATUS = {bit: STATUS[bit] for bit in (1, 2, 4, 8, 256, 512, 1024, 2048, 4096)}
@@ -78,20 +79,27 @@ class MatchResult(NamedTuple):
     covariance_m2 : Array, shape ``(2, 2)``
         Covariance of the mean-track position error (m², north/east). ``dense``: from
         the likelihood-weighted posterior over the offsets (or the Gauss–Newton
-        curvature when the posterior is narrower than the offset grid); the other
-        matchers: NaN (not estimated).
+        curvature when the posterior is narrower than the offset grid); ``chains``:
+        the GLS-likelihood-weighted spread of the best chains' mean offsets plus the
+        Gauss–Newton curvature at the chosen chain (:mod:`~jaxgrav.match.correlation`);
+        ``entropy+iccp``: the GLS posterior over the entropy offsets and the
+        Gauss–Newton curvature at the fix (:mod:`~jaxgrav.match.combined`); ``entropy``
+        and ``iccp`` alone: NaN (not estimated).
     accepted : Array of bool
         Integrity decision; a rejected fix returns the INS track (status bits 512–4096).
-        True for the matchers without a test.
+        True for the matchers without a test (``entropy``, ``iccp`` alone).
     n_effective : Array
-        ``dense``: offsets sharing the posterior mass (``1/Σp²``); NaN otherwise.
+        ``dense``, ``entropy+iccp``: offsets sharing the posterior mass (``1/Σp²``);
+        ``chains``: chains sharing it; NaN otherwise.
     second_mode_ratio : Array
-        ``dense``: likelihood ratio of the best offset outside the mode to the best.
+        ``dense``, ``entropy+iccp``: likelihood ratio of the best offset outside the
+        mode to the best; ``chains``: of the best chain outside it.
     edge_mass : Array
-        ``dense``: posterior mass on the outermost offsets.
+        ``dense``, ``entropy+iccp``: posterior mass on the outermost offsets.
     chi2_per_dof : Array
-        ``dense``: best score over its degrees of freedom (χ², about 1 when the error
-        model is right).
+        ``dense``, ``chains``, ``entropy+iccp``: GLS score of the fix over its degrees
+        of freedom (χ², about 1 when the error model is right; ``entropy+iccp``: per
+        fix).
     """
 
     lat: jax.Array

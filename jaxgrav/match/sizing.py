@@ -14,11 +14,25 @@ from jaxgrav.match.iccp import IccpConfig
 from jaxgrav.match.lattice_chains import stencil_size_for_step
 from jaxgrav.prepared import as_grid
 
-__all__ = ["MAP_ERROR_INTEGRITY", "config_for", "iccp_config_for"]
+__all__ = [
+    "CHAIN_MAP_ERROR_INTEGRITY",
+    "ICCP_MAP_ERROR_INTEGRITY",
+    "MAP_ERROR_INTEGRITY",
+    "config_for",
+    "iccp_config_for",
+]
 
 MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
 """DenseConfig fields :func:`config_for` sets with a map error (σ > 0): the fix and the
 integrity thresholds chosen by ``examples/map_error_dense.py`` (see the README)."""
+
+CHAIN_MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
+"""ChainConfig fields :func:`config_for` sets with a map error (σ > 0), measured with
+``examples/map_error_matchers.py`` (see the README)."""
+
+ICCP_MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
+"""IccpConfig fields :func:`iccp_config_for` sets with a map error (σ > 0), measured
+with ``examples/map_error_matchers.py`` (see the README)."""
 
 
 def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=math.inf,
@@ -46,11 +60,12 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         (:attr:`~jaxgrav.match.correlation.ChainConfig.stencil_size`) sized for such
         steps in any direction; otherwise the pairwise search on ``capacity`` slots.
     map_error : CorrelatedMapError, optional
-        ``dense``: the map's error model
-        (:func:`~jaxgrav.fields.map_error.map_error`); fills ``map_error_mgal``,
-        ``map_error_length_m`` and ``map_error_order``, and when σ > 0 the integrity
-        thresholds of :data:`MAP_ERROR_INTEGRITY` (measured with
-        ``examples/map_error_dense.py``). None: the white-noise score.
+        The map's error model (:func:`~jaxgrav.fields.map_error.map_error`); fills
+        ``map_error_mgal``, ``map_error_length_m`` and ``map_error_order``, and when
+        σ > 0 the fix and integrity thresholds of :data:`MAP_ERROR_INTEGRITY`
+        (``dense``, measured with ``examples/map_error_dense.py``) or
+        :data:`CHAIN_MAP_ERROR_INTEGRITY` (``chains``, whose iso-value tolerance
+        then grows to ``2·√(noise² + σ²)``). None: the white-noise score.
 
     Returns
     -------
@@ -71,22 +86,18 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         config = DenseConfig(spacing_m=spacing, half_size=half, noise_mgal=noise_mgal,
                              bias_sigma_mgal=bias_sigma_mgal, n_rotations=n_rotations,
                              score=score or "bias")
-        if map_error is None:
-            return config
-        sigma = float(map_error.sigma)
-        kw = dict(MAP_ERROR_INTEGRITY) if sigma > 0 else {}
-        return dataclasses.replace(config, map_error_mgal=sigma,
-                                   map_error_length_m=float(map_error.length_m),
-                                   map_error_order=map_error.order, **kw)
-    if map_error is not None:
-        raise ValueError("map_error is used by method 'dense' only")
+        return _with_map_error(config, map_error, MAP_ERROR_INTEGRITY)
     half = math.ceil(reach / min(dy, dx))
     if 2 * half + 1 > min(grid.ny, grid.nx):
         raise ValueError(
             f"drift_radius_m={drift_radius_m!r} needs a search window of {2 * half + 1} nodes, "
             f"larger than the {grid.ny}x{grid.nx} map")
+    # told a map error, the iso-value tolerance covers it too (readings − map carry both)
+    sigma_m = 0.0 if map_error is None else float(map_error.sigma)
     config = ChainConfig(half_size=half, capacity=min((2 * half + 1) ** 2, 384),
-                         delta=2.0 * noise_mgal, score=score or "difference")
+                         delta=2.0 * math.hypot(noise_mgal, sigma_m),
+                         score=score or "difference", noise_mgal=noise_mgal)
+    config = _with_map_error(config, map_error, CHAIN_MAP_ERROR_INTEGRITY)
     if step_m is None:
         return config
     if not step_m >= 0:
@@ -98,8 +109,19 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
     return dataclasses.replace(config, stencil_size=size)
 
 
+def _with_map_error(config, map_error, integrity):
+    """``config`` told the map error (None: unchanged), with ``integrity`` when σ > 0."""
+    if map_error is None:
+        return config
+    sigma = float(map_error.sigma)
+    kw = dict(integrity) if sigma > 0 else {}
+    return dataclasses.replace(config, map_error_mgal=sigma,
+                               map_error_length_m=float(map_error.length_m),
+                               map_error_order=map_error.order, **kw)
+
+
 def iccp_config_for(grid, drift_radius_m, *, stage="alone", noise=1.0, max_rotation_deg=90.0,
-                    **kw):
+                    map_error=None, **kw):
     """An :class:`IccpConfig` sized to the expected error.
 
     Parameters
@@ -117,6 +139,10 @@ def iccp_config_for(grid, drift_radius_m, *, stage="alone", noise=1.0, max_rotat
         the combined matcher's acceptance test uses it.
     max_rotation_deg : float
         Largest expected INS heading error (degrees): ICCP's rotation bound.
+    map_error : CorrelatedMapError, optional
+        The map's error model, for the combined matcher's GLS score, covariance and
+        integrity test (:func:`~jaxgrav.match.combined.match_entropy_iccp`): fills the
+        ``map_error_*`` fields and, when σ > 0, :data:`ICCP_MAP_ERROR_INTEGRITY`.
     **kw
         Other :class:`IccpConfig` fields.
 
@@ -136,4 +162,5 @@ def iccp_config_for(grid, drift_radius_m, *, stage="alone", noise=1.0, max_rotat
     kw.setdefault("contour_tol", 3.0 * float(noise) + 1e-6)
     kw.setdefault("noise", float(noise))
     kw.setdefault("refine_steps", 10 if stage == "fine" else 0)
-    return IccpConfig(max_rotation_deg=max_rotation_deg, **kw)
+    config = IccpConfig(max_rotation_deg=max_rotation_deg, **kw)
+    return _with_map_error(config, map_error, ICCP_MAP_ERROR_INTEGRITY)

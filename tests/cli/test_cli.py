@@ -211,3 +211,16 @@ def test_match_map_error_options_and_result_fields(track, tmp_path, capsys):
                      "--out", str(tmp_path / "bad.json"), opt, val])
         assert code == 2
         assert opt in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("method", ["chains", "entropy+iccp"])
+def test_match_map_error_with_chains_and_entropy_iccp(track, tmp_path, method):
+    out = tmp_path / "gls.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"), "--out", str(out),
+                 "--method", method, "--map-error", "3", "--map-error-length", "10000"]) == 0
+    r = json.loads(out.read_text())
+    cov = np.asarray(r["covariance_m2"])
+    assert cov.shape == (2, 2) and isinstance(r["accepted"], bool)
+    assert np.all(np.isfinite(cov)) and cov[0, 1] == cov[1, 0] and np.linalg.det(cov) > 0
+    assert r["sigma_north_m"] == pytest.approx(np.sqrt(cov[0, 0]))
+    assert r["sigma_east_m"] == pytest.approx(np.sqrt(cov[1, 1]))
