@@ -217,7 +217,7 @@ def test_bad_order_is_refused_everywhere(tmp_path, capsys):
             (["montecarlo", "--method", "ukf", "--map", "ryukyu", "--map-error", "3",
               "--map-error-order", "3", "--runs", "2", "--out", out], "--map-error-order"),
             (["montecarlo", "--method", "dense", "--map-error", "3", "--map-error-order", "2",
-              "--runs", "2", "--out", out], "filter options"),
+              "--runs", "2", "--out", out], "is a filter option"),
             (["montecarlo", "--method", "ukf", "--map", "ryukyu", "--map-error", "-3",
               "--runs", "2", "--out", out], "--map-error")):
         assert main(argv) != 0

@@ -136,7 +136,7 @@ def test_config_validation_and_other_matchers_neutral_quality(grid):
         DenseConfig(map_error_mgal=-1.0)
     with pytest.raises(ValueError, match="fix"):
         DenseConfig(fix="mean")
-    with pytest.raises(ValueError, match="dense"):
-        config_for("chains", grid, 1500.0, map_error=map_error(1.0, 1e4))
+    told = config_for("chains", grid, 1500.0, map_error=map_error(1.0, 1e4))
+    assert (float(told.map_error_mgal), float(told.map_error_length_m)) == (1.0, 1e4)
     cov = track_covariance(np.arange(3.0), np.zeros(3), 1.0, 0.0, 1e4)
     np.testing.assert_allclose(np.asarray(cov), np.eye(3))
