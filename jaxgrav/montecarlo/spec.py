@@ -86,13 +86,9 @@ def check_map_error(map_error, grid):
     if isinstance(map_error, TruthGrid):
         check_region_covered(map_error.grid, region_of(grid), "the truth map (map_error.grid)")
         return map_error
-    if not isinstance(map_error, CorrelatedMapError):
-        raise TypeError("map_error must be a CorrelatedMapError (fields.map_error.map_error"
-                        "(sigma, length_m)), a TruthGrid or None; got "
-                        f"{type(map_error).__name__}")
-    if np.ndim(map_error.sigma) or np.ndim(map_error.length_m):
-        raise ValueError("map_error.sigma and map_error.length_m must be scalars; got shapes "
-                         f"{np.shape(map_error.sigma)}, {np.shape(map_error.length_m)}")
+    _check_scalar_model(map_error, "map_error must be a CorrelatedMapError (fields.map_error."
+                        "map_error(sigma, length_m)), a TruthGrid or None",
+                        "map_error.sigma and map_error.length_m")
     return None if float(map_error.sigma) == 0 else map_error
 
 
@@ -154,13 +150,9 @@ def told_map_error(told, map_error, grid):
         return map_error, "same as the readings"
     if told is None:
         return None, "none"
-    if not isinstance(told, CorrelatedMapError):
-        raise TypeError("map_error_told must be 'auto', a CorrelatedMapError "
-                        "(fields.map_error.map_error(sigma, length_m)) or None; got "
-                        f"{type(told).__name__}")
-    if np.ndim(told.sigma) or np.ndim(told.length_m):
-        raise ValueError("map_error_told.sigma and .length_m must be scalars; got shapes "
-                         f"{np.shape(told.sigma)}, {np.shape(told.length_m)}")
+    _check_scalar_model(told, "map_error_told must be 'auto', a CorrelatedMapError "
+                        "(fields.map_error.map_error(sigma, length_m)) or None",
+                        "map_error_told.sigma and .length_m")
     return (None, "none") if float(told.sigma) == 0 else (told, "given")
 
 
@@ -172,3 +164,15 @@ def told_settings(told, source):
     return dict(told_map_error_sigma=float(told.sigma),
                 told_map_error_length_m=float(told.length_m),
                 told_map_error_family=told.family, told_map_error_source=source)
+
+
+def _check_scalar_model(model, expected, fields):
+    """TypeError unless ``model`` is a CorrelatedMapError; ValueError unless σ, L scalar.
+
+    ``expected`` is the message's "<name> must be ..." part, ``fields`` names σ and L.
+    """
+    if not isinstance(model, CorrelatedMapError):
+        raise TypeError(f"{expected}; got {type(model).__name__}")
+    if np.ndim(model.sigma) or np.ndim(model.length_m):
+        raise ValueError(f"{fields} must be scalars; got shapes {np.shape(model.sigma)}, "
+                         f"{np.shape(model.length_m)}")
