@@ -21,7 +21,7 @@ LAYERS = {
     "fields": 2, "sim": 2,
     "datasets": 3,
     "match": 4, "filters": 4, "dov": 4,
-    "scenarios": 5,
+    "scenarios": 5, "navigate": 5,
     "montecarlo": 6,
     "cli": 7,
 }
