@@ -10,7 +10,14 @@ INS error model of :mod:`jaxgrav.sim.ins` and writes the filtered track::
                Eötvös-corrected anomaly, mGal; empty where there is no reading),
                optional v_east, v_north (INS, m/s; not used by the error-state filter)
     OUT.csv    t, lat, lon (INS position − estimated INS error, degrees),
-               sigma_north, sigma_east (posterior 1-σ of the position, m)
+               sigma_north, sigma_east (posterior 1-σ of the position, m),
+               cov_north_east (m²), v_east, v_north (INS velocity − estimated error,
+               m/s; only when the track has them), v_north_error, v_east_error and
+               their sigma_v_north, sigma_v_east (m/s), gravimeter_bias and
+               sigma_gravimeter_bias (mGal), map_error and sigma_map_error (mGal; with
+               --map-error), innovation and innovation_sigma (reading − prediction
+               and its predicted 1-σ, mGal; empty without a reading), status (bit
+               flags of jaxgrav.filters.STATUS_FILTER, 0 = a normal update)
 
 The prior is the INS error at one step before the first row (zero mean, the
 ``--sigma-*`` standard deviations); every row's reading updates the estimate, and
@@ -85,7 +92,8 @@ def add_parsers(subparsers):
                    help="ukf (default), ekf (jacfwd Jacobian), gsf (Gaussian sum of 3 x 3 "
                         "UKFs, for multi-modal priors), pmf (grid point-mass filter)")
     f.add_argument("--out", required=True,
-                   help="output CSV: t, lat, lon, sigma_north, sigma_east (m)")
+                   help="output CSV: t, lat, lon, sigma_north, sigma_east (m), covariance, "
+                        "velocity, biases, innovations and status per row")
     f.add_argument("--sigma-pos", type=float, default=1414.2,
                    help="initial INS position error, 1-σ per axis (m); default 1414 m, "
                         "i.e. 2 km RMS horizontal")
@@ -182,6 +190,20 @@ def _map_error_args(args):
     return args.map_error, args.map_error_length
 
 
+def _output_columns(t, track, res):
+    """The output CSV's columns: position and its covariance, velocity, biases, status."""
+    cols = {"t": t, "lat": res["lat"], "lon": res["lon"]}
+    cols.update({k: res[k] for k in ("sigma_north", "sigma_east", "cov_north_east")})
+    if "v_east" in track and "v_north" in track:  # the INS velocity, corrected
+        cols.update(v_east=track["v_east"] - res["v_east_error"],
+                    v_north=track["v_north"] - res["v_north_error"])
+    keys = ["v_north_error", "v_east_error", "sigma_v_north", "sigma_v_east",
+            "gravimeter_bias", "sigma_gravimeter_bias"]
+    keys += ["map_error", "sigma_map_error"] if "map_error" in res else []
+    cols.update({k: res[k] for k in (*keys, "innovation", "innovation_sigma", "status")})
+    return cols
+
+
 def _check_sigma(name, value):
     if not (np.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be a positive, finite standard deviation; got {value!r}")
@@ -254,10 +276,7 @@ def cmd_filter(args):
     res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
                        guard=args.guard, map_error=fogm, where=where)
-    write_track_csv(args.out, {"t": t, "lat": res["lat"], "lon": res["lon"],
-                               "sigma_north": res["sigma_north"],
-                               "sigma_east": res["sigma_east"]},
-                    force=args.force, precision=12)
+    write_track_csv(args.out, _output_columns(t, track, res), force=args.force, precision=12)
     n_read = int(np.isfinite(g).sum())
     stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""
     stride += f", no-harm guard {args.guard:g}" if args.guard is not None else ""

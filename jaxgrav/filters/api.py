@@ -21,7 +21,7 @@ from jaxgrav.filters.map_state import augment
 from jaxgrav.filters.model import Dynamics, Step, gravity_measurement, run_filter
 from jaxgrav.filters.pmf import pmf
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-from jaxgrav.sim.ins import INSErrorModel, initial_covariance, transition
+from jaxgrav.sim.ins import GRAV, N_STATES, VEL, INSErrorModel, initial_covariance, transition
 from jaxgrav.tracks import csv_line
 
 __all__ = ["FILTER_METHODS", "PMF_CELLS", "PMF_Q_POS", "PMF_SPAN_SIGMA", "filter_track",
@@ -175,9 +175,15 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     Returns
     -------
     dict
-        ``lat``, ``lon`` (filtered, degrees), ``sigma_north``, ``sigma_east`` (m),
-        ``status`` (int32 flags of :data:`~jaxgrav.filters.STATUS_FILTER` per row),
-        all shape ``(T,)``, and ``pmf_every`` (the point-mass filter's update stride).
+        Each shape ``(T,)``, the causal posterior after each row: ``lat``, ``lon``
+        (filtered, degrees), ``sigma_north``, ``sigma_east`` (m), ``cov_north_east``
+        (m²), ``v_north_error``, ``v_east_error`` (estimated INS velocity error, m/s),
+        ``sigma_v_north``, ``sigma_v_east`` (m/s), ``gravimeter_bias`` and
+        ``sigma_gravimeter_bias`` (mGal), ``innovation`` and ``innovation_sigma``
+        (mGal; NaN on rows without a reading), ``status`` (int32 flags of
+        :data:`~jaxgrav.filters.STATUS_FILTER`), with ``map_error`` and
+        ``sigma_map_error`` (mGal) when the map-error state is carried; and
+        ``pmf_every`` (the point-mass filter's update stride, else None).
 
     Raises
     ------
@@ -209,14 +215,23 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         infos = _pmf_run(field, dt, p0, cell_m, q_pos, padded, every=every,
                          map_error=map_error, speed=speed)
         # causal: rows between readings show the prediction
-        x, sigma, status = (np.asarray(a)[start:start + n]
-                            for a in (infos.x, infos.sigma, infos.status))
+        infos = jax.tree.map(lambda a: np.asarray(a)[start:start + n], infos)
     else:
         ratio = np.inf if guard is None else float(guard)
         infos = _gaussian_run(method, field, dynamics, p0, steps, ratio, meas)
-        x, sigma, status = (np.asarray(a) for a in (infos.x, infos.sigma, infos.status))
+        infos = jax.tree.map(np.asarray, infos)
+    x, sigma = infos.x, infos.sigma
     m = np.asarray(meridian_radius(lat))
     e = np.asarray(prime_vertical_radius(lat)) * np.cos(lat * DEG)
-    return dict(lat=lat - x[:, 0] / m / DEG, lon=lon - x[:, 1] / e / DEG,
-                sigma_north=sigma[:, 0], sigma_east=sigma[:, 1],
-                status=status.astype(np.int32), pmf_every=every)
+    out = dict(lat=lat - x[:, 0] / m / DEG, lon=lon - x[:, 1] / e / DEG,
+               sigma_north=sigma[:, 0], sigma_east=sigma[:, 1],
+               cov_north_east=infos.p_pos[:, 0, 1],
+               v_north_error=x[:, VEL.start], v_east_error=x[:, VEL.start + 1],
+               sigma_v_north=sigma[:, VEL.start], sigma_v_east=sigma[:, VEL.start + 1],
+               gravimeter_bias=x[:, GRAV], sigma_gravimeter_bias=sigma[:, GRAV],
+               innovation=infos.innovation,
+               innovation_sigma=np.sqrt(np.maximum(infos.innovation_var, 0.0)),
+               status=infos.status.astype(np.int32), pmf_every=every)
+    if x.shape[1] > N_STATES:  # the map-error state, appended last
+        out.update(map_error=x[:, N_STATES], sigma_map_error=sigma[:, N_STATES])
+    return out

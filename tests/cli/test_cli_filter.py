@@ -20,7 +20,10 @@ from jaxgrav.fields.pointmass_fit import save_point_masses
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.tracks import read_track_csv, write_track_csv
 
-OUT_COLUMNS = ["t", "lat", "lon", "sigma_north", "sigma_east"]
+OUT_COLUMNS = ["t", "lat", "lon", "sigma_north", "sigma_east", "cov_north_east", "v_east",
+               "v_north", "v_north_error", "v_east_error", "sigma_v_north", "sigma_v_east",
+               "gravimeter_bias", "sigma_gravimeter_bias", "innovation", "innovation_sigma",
+               "status"]
 slow = pytest.mark.skipif(
     os.environ.get("JAXGRAV_SLOW") != "1", reason="slow: set JAXGRAV_SLOW=1 to run"
 )
@@ -80,6 +83,17 @@ def test_ukf_beats_the_ins_on_an_east_west_track(sim, tmp_path, capsys):
     # 1-σ shrinks from the prior (1414 m per axis) and is honest to a factor of 3
     assert np.all(res["sigma_north"][-10:] < 1000) and np.all(res["sigma_east"] <= 1415)
     assert err < 3 * np.hypot(res["sigma_north"][-1], res["sigma_east"][-1])
+    # the rest of the state: the corrected velocity is nearer the truth than the INS's,
+    # the position covariance is a valid 2 x 2, innovations are whitened to ~1, status 0
+    dv_ins = np.hypot(track["v_east"] - truth["v_east"], track["v_north"] - truth["v_north"])
+    dv_out = np.hypot(res["v_east"] - truth["v_east"], res["v_north"] - truth["v_north"])
+    assert np.sqrt(np.mean(dv_out[-30:] ** 2)) < np.sqrt(np.mean(dv_ins[-30:] ** 2))
+    np.testing.assert_allclose(res["v_east"], track["v_east"] - res["v_east_error"], atol=1e-9)
+    assert np.all(res["cov_north_east"] ** 2 <= (res["sigma_north"] * res["sigma_east"]) ** 2)
+    assert np.all(res["sigma_v_north"] > 0) and np.all(res["sigma_gravimeter_bias"] > 0)
+    nis = (res["innovation"] / res["innovation_sigma"]) ** 2
+    assert np.isfinite(nis).all() and 0.3 < nis.mean() < 3.0, nis.mean()
+    assert np.all(res["status"] == 0)
 
 
 def test_guard_holds_back_weak_directions(sim, tmp_path, capsys):
