@@ -45,20 +45,22 @@ def simulate(grid, scen, sigma, length, keys):
     """Per-run truth (map + error) and readings: INS fixes, readings, mean drift (m)."""
     model = map_error(sigma, length)
 
-    def one(key):
+    def one(grid, key):
         truth = truth_field(map_error_key(key), grid, model)
         run = matching_scenario(key, truth, scen)
         return run.ins_lat, run.ins_lon, run.readings, jnp.stack(
             [jnp.mean(run.drift_north_m), jnp.mean(run.drift_east_m)])
 
-    return jax.lax.map(one, keys, batch_size=16)
+    # the map is an argument of the compiled program, not a constant baked into it
+    return jax.jit(lambda g, k: jax.lax.map(lambda kk: one(g, kk), k, batch_size=16))(
+        grid, keys)
 
 
 def evaluate(prepared, table, sims, config):
     """Per-track error ratio, worse-than-INS, accepted, inside-95 % and statistics."""
     lat, lon, g, drift = sims
-    r = jax.lax.map(lambda x: match_dense(prepared, *x, config, table), (lat, lon, g),
-                    batch_size=64)
+    r = jax.jit(lambda p, t, xs: jax.lax.map(lambda x: match_dense(p, *x, config, t), xs,
+                                             batch_size=64))(prepared, table, (lat, lon, g))
     err = np.stack([np.asarray(r.offset_north_m), np.asarray(r.offset_east_m)], -1) + drift
     ins = np.hypot(drift[:, 0], drift[:, 1])
     e = np.hypot(err[:, 0], err[:, 1])

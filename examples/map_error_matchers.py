@@ -60,13 +60,13 @@ def chain_runs(grid, sigma, length, keys, fixes=30):
     scen = MatchingScenario(n_fixes=fixes)
     model = map_error(sigma, length) if sigma > 0 else None
 
-    def one(key):
+    def one(grid, key):
         truth = truth_field(map_error_key(key), grid, model) if model is not None else grid
         run = matching_scenario(key, truth, scen)
         g = run.readings + eotvos(run.ins_lat, run.truth.v_east, run.truth.v_north)
         return run.ins_lat, run.ins_lon, g, run.truth.lat, run.truth.lon
 
-    return scen, tuple(np.asarray(x) for x in jax.lax.map(one, keys, batch_size=8))
+    return scen, tuple(np.asarray(x) for x in _map_runs(one, grid, keys))
 
 
 def iccp_runs(grid, sigma, length, keys):
@@ -75,11 +75,18 @@ def iccp_runs(grid, sigma, length, keys):
     scen = PaperBScenario(region=(s, n, w, e), rotation_deg=ROTATION_DEG, noise=1.0)
     model = map_error(sigma, length) if sigma > 0 else None
 
-    def one(key):
+    def one(grid, key):
         run = paper_b_scenario(key, grid, scen, map_error=model)
         return run.ins_lat, run.ins_lon, run.readings, run.truth.lat, run.truth.lon
 
-    return scen, tuple(np.asarray(x) for x in jax.lax.map(one, keys, batch_size=8))
+    return scen, tuple(np.asarray(x) for x in _map_runs(one, grid, keys))
+
+
+def _map_runs(one, grid, xs):
+    """``one(grid, x)`` over ``xs`` in batches of 8, with the map an argument of the
+    compiled program: closed over, it would be baked into the executable as a constant
+    (tens of MB for a refined map, slow to compile and to load from the cache)."""
+    return jax.jit(lambda g, xs: jax.lax.map(lambda x: one(g, x), xs, batch_size=8))(grid, xs)
 
 
 SWEEP = (500.0, 750.0, 1000.0, 1500.0, 2000.0, 3000.0, np.inf)
@@ -134,8 +141,8 @@ def run_chains(sigma, length, n, seed):
     out = {}
     for name, cfg in (("white", white), ("told", told)):
         t0 = time.perf_counter()
-        f = jax.jit(lambda a, b, c, cfg=cfg: match_chains(fine8, a, b, c, cfg))
-        res = jax.lax.map(lambda x, f=f: f(*x), tuple(jnp.asarray(a) for a in runs[:3]))
+        res = _map_runs(lambda g, x, cfg=cfg: match_chains(g, *x, cfg), fine8,
+                        tuple(jnp.asarray(a) for a in runs[:3]))
         out[name] = summarise(res, runs, limit[name])
         out[name]["seconds"] = time.perf_counter() - t0
     return out
@@ -156,8 +163,8 @@ def run_entropy_iccp(sigma, length, n, seed):
     out = {}
     for name, cfg in (("white", white), ("told", told)):
         t0 = time.perf_counter()
-        res = jax.lax.map(lambda x, cfg=cfg: match_entropy_iccp(pm, *x, ent, cfg),
-                          tuple(jnp.asarray(a) for a in runs[:3]))
+        res = _map_runs(lambda p, x, cfg=cfg: match_entropy_iccp(p, *x, ent, cfg), pm,
+                        tuple(jnp.asarray(a) for a in runs[:3]))
         out[name] = summarise(res, runs, limit[name])
         out[name]["seconds"] = time.perf_counter() - t0
     return out

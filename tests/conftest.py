@@ -14,10 +14,13 @@ import pytest
 # is the folder (default: the user's cache folder). A size bound turns on JAX's file
 # lock around every cache read and write (needs `filelock`): without it two processes
 # (the xdist workers, the two-process Monte Carlo test) can read an entry while another
-# writes it, and deserialising a torn executable aborts the process.
+# writes it, and deserialising a torn executable aborts the process. Entries above
+# jaxgrav.cli.cache.MAX_ENTRY_BYTES are removed first: a program that closed over a map had
+# it baked in (20 MB entries), and loading one crashed an xdist worker (segfault in XLA's
+# deserialiser) and hung a CI run; the folder name changed with that fix ("-v2").
 _CACHE = os.environ.get("JAXGRAV_TEST_CACHE",
                         str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-                            / "jaxgrav" / "xla-tests-locked"))
+                            / "jaxgrav" / "xla-tests-v2"))
 if _CACHE != "off":
     os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", _CACHE)
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
@@ -31,6 +34,10 @@ if _CACHE != "off":
 jax.config.update("jax_enable_x64", True)
 
 import jaxgrav as jg  # noqa: E402
+from jaxgrav.cli.cache import prune_large_entries  # noqa: E402
+
+if _CACHE != "off":
+    prune_large_entries(os.environ["JAX_COMPILATION_CACHE_DIR"])
 
 
 @pytest.fixture(scope="module")

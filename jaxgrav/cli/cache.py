@@ -9,20 +9,28 @@ so that a second call with the same shapes loads them instead. ``JAXGRAV_CACHE=o
 :func:`jaxgrav.cli.main`) is kept as it is. Entries are read and written under JAX's
 file lock (the ``filelock`` package), so concurrent commands never read a half-written
 program; the folder is bounded to :data:`MAX_BYTES` (least recently used entries go).
+Entries larger than :data:`MAX_ENTRY_BYTES` are removed when the cache is turned on
+(:func:`prune_large_entries`): such an executable carries a large array baked in as a
+constant, and XLA:CPU has crashed (segmentation fault) deserialising one.
 """
 
 import os
 from pathlib import Path
 
 import jax
+from filelock import FileLock
 
-__all__ = ["MAX_BYTES", "MIN_COMPILE_SECONDS", "cache_dir", "enable_cache"]
+__all__ = ["MAX_BYTES", "MAX_ENTRY_BYTES", "MIN_COMPILE_SECONDS", "cache_dir",
+           "enable_cache", "prune_large_entries"]
 
 MAX_BYTES = 2 * 2**30
 """Size bound of the cache folder (bytes); also what turns JAX's file lock on."""
 MIN_COMPILE_SECONDS = 0.0
 """Programs that compile faster than this are not cached (s): 0, since a matcher call
 compiles some 40 small programs of ~0.1 s each, which add up to seconds."""
+MAX_ENTRY_BYTES = 8 * 2**20
+"""Largest cache entry kept (bytes, compressed): jaxgrav's own programs take the map as an
+argument and stay well below it (the largest of the test suite's is about 1 MB)."""
 
 
 def cache_dir(environ=None):
@@ -65,7 +73,46 @@ def enable_cache(off=False):
     folder = None if off else cache_dir()
     if folder is None:
         return None
+    prune_large_entries(folder)
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_SECONDS)
     jax.config.update("jax_compilation_cache_max_size", MAX_BYTES)
     return str(folder)
+
+
+def prune_large_entries(folder, max_entry_bytes=MAX_ENTRY_BYTES):
+    """Remove the entries of a JAX compilation cache folder above a size.
+
+    A program that closes over a large array (a refined map) is compiled with the array as
+    a constant; its cache entry runs to tens of MB and loading it has crashed XLA:CPU.
+    Runs under the cache's own file lock, so a concurrent process never loses an entry it
+    is reading.
+
+    Parameters
+    ----------
+    folder : str or pathlib.Path
+        The cache folder (need not exist).
+    max_entry_bytes : int
+        Entries larger than this (bytes, as stored) are removed.
+
+    Returns
+    -------
+    list of str
+        The names of the removed entries.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    with FileLock(str(folder / ".lockfile"), timeout=60):
+        removed = []
+        for entry in folder.glob("*-cache"):
+            try:
+                if entry.stat().st_size <= max_entry_bytes:
+                    continue
+                entry.unlink()
+                folder.joinpath(entry.name.removesuffix("-cache") + "-atime").unlink(
+                    missing_ok=True)
+            except FileNotFoundError:  # removed by the cache's own eviction meanwhile
+                continue
+            removed.append(entry.name)
+    return removed

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from jaxgrav.cli import main
-from jaxgrav.cli.cache import cache_dir
+from jaxgrav.cli.cache import cache_dir, prune_large_entries
 
 
 def test_cache_dir_from_the_environment(tmp_path):
@@ -42,3 +42,15 @@ def test_a_second_call_loads_the_compiled_programs(tmp_path):
     off = _jaxgrav(["--no-cache", *args], env)
     assert off.returncode == 0, off.stderr
     assert not (tmp_path / "none").exists()
+
+
+def test_prune_large_entries_removes_only_oversized_entries(tmp_path):
+    """Entries above the bound go with their access-time file; the rest stay."""
+    (tmp_path / "big-cache").write_bytes(b"x" * 2048)
+    (tmp_path / "big-atime").write_bytes(b"1")
+    (tmp_path / "small-cache").write_bytes(b"x" * 16)
+    (tmp_path / "small-atime").write_bytes(b"1")
+    assert prune_large_entries(tmp_path, max_entry_bytes=1024) == ["big-cache"]
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name != ".lockfile") == [
+        "small-atime", "small-cache"]
+    assert prune_large_entries(tmp_path / "missing") == []

@@ -85,11 +85,12 @@ def test_no_retrace_when_map_error_changes_and_vmap_equals_loop(grid):
     traces = []
 
     @jax.jit
-    def batch(cfg):
+    def batch(grid, lat, lon, g, cfg):  # data as arguments, not executable constants
         traces.append(1)
         return jax.vmap(lambda a, b, c: match_dense(grid, a, b, c, cfg))(lat, lon, g)
 
-    out = [batch(_gls_config(grid, s, length)) for s, length in ((3.0, 8000.0), (1.0, 12000.0))]
+    out = [batch(grid, lat, lon, g, _gls_config(grid, s, length))
+           for s, length in ((3.0, 8000.0), (1.0, 12000.0))]
     assert len(traces) == 1
     for i in range(3):
         one = match_dense(grid, lat[i], lon[i], g[i], _gls_config(grid, 1.0, 12000.0))
@@ -106,7 +107,7 @@ def test_covariance_95_ellipse_coverage_with_a_correlated_map_error(grid):
     cfg = dataclasses.replace(_gls_config(grid), max_sigma_m=float("inf"))
     keys = jax.random.split(jax.random.key(15), 60)
 
-    def one(key):
+    def one(grid, key):
         truth = truth_field(jax.random.fold_in(key, 1), grid, model)
         run = matching_scenario(key, truth, scen)
         r = match_dense(grid, run.ins_lat, run.ins_lon, run.readings, cfg)
@@ -114,7 +115,7 @@ def test_covariance_95_ellipse_coverage_with_a_correlated_map_error(grid):
                          r.offset_east_m + jnp.mean(run.drift_east_m)])
         return err @ jnp.linalg.solve(r.covariance_m2, err), r.accepted
 
-    maha, acc = jax.jit(lambda k: jax.lax.map(one, k))(keys)
+    maha, acc = jax.jit(lambda g, k: jax.lax.map(lambda kk: one(g, kk), k))(grid, keys)
     maha, acc = np.asarray(maha), np.asarray(acc)
     assert acc.all()
     coverage = np.mean(maha <= 5.991)

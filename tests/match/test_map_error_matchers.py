@@ -128,7 +128,7 @@ def test_no_retrace_when_map_error_changes_and_vmap_equals_loop(smooth_grid):
     traces = []
 
     @jax.jit
-    def batch(cc, ent, ic):
+    def batch(grid, a, b, cc, ent, ic):  # data as arguments, not executable constants
         traces.append(1)
         ra = jax.vmap(lambda x, y, z: match_chains(grid, x, y, z, cc))(*a)
         rb = jax.vmap(lambda x, y, z: match_entropy_iccp(grid, x, y, z, ent, ic))(*b)
@@ -137,7 +137,7 @@ def test_no_retrace_when_map_error_changes_and_vmap_equals_loop(smooth_grid):
     outs = []
     for s, length in ((3.0, 8000.0), (1.0, 12000.0)):
         cc = dataclasses.replace(_chain_cfg(grid), map_error_mgal=s, map_error_length_m=length)
-        outs.append(batch(cc, *_iccp_cfgs(grid, s, length)))
+        outs.append(batch(grid, a, b, cc, *_iccp_cfgs(grid, s, length)))
     assert len(traces) == 1
     ra, rb = outs[1]
     cc = dataclasses.replace(_chain_cfg(grid), map_error_mgal=1.0, map_error_length_m=12000.0)
@@ -160,7 +160,7 @@ def test_covariance_coverage_on_a_small_monte_carlo(smooth_grid, method):
     cc = _chain_cfg(grid)
     ent, ic = _iccp_cfgs(grid)
 
-    def one(key):
+    def one(grid, key):
         truth = truth_field(jax.random.fold_in(key, 1), grid, model)
         if method == "chains":
             run = matching_scenario(key, truth, SCEN_A)
@@ -178,7 +178,9 @@ def test_covariance_coverage_on_a_small_monte_carlo(smooth_grid, method):
         return maha, r.accepted, jnp.hypot(*err), jnp.hypot(jnp.mean(i_n), jnp.mean(i_e))
 
     keys = jax.random.split(jax.random.key(21), 32)
-    maha, acc, err, ins = (np.asarray(x) for x in jax.jit(lambda k: jax.lax.map(one, k))(keys))
+    # the map is an argument: closed over, it would be a constant of the executable
+    runs = jax.jit(lambda g, k: jax.lax.map(lambda kk: one(g, kk), k))(grid, keys)
+    maha, acc, err, ins = (np.asarray(x) for x in runs)
     assert acc.sum() >= 8, acc.sum()
     coverage = np.mean(maha[acc] <= 5.991)
     assert 0.75 <= coverage <= 1.0, coverage
