@@ -67,6 +67,12 @@ from jaxgrav.sim.gravimeter import (
     tilt_kalman,
 )
 
+# --- voyages: routes sailed by an autopilot, INS drift and readings over hours
+from jaxgrav.sim.route import Route, great_circle, sail
+from jaxgrav.sim.voyage import indicated_track, simulate_voyage
+from jaxgrav.sim.voyage_log import Voyage
+
+__all__ += ["Route", "Voyage", "great_circle", "indicated_track", "sail", "simulate_voyage"]
 __all__ += [
     "PAPER_CUTOFF_RANGE",
     "Disturbances",
