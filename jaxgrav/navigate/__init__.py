@@ -1,8 +1,32 @@
 """Voyage navigation: map-aided INS over hours.
 
-Loosely coupled (matcher fixes as position measurements of the INS error Kalman
-filter) and tightly coupled (the gravity filters on the readings directly) navigation
-over a :class:`~jaxgrav.sim.voyage_log.Voyage`.
+Loosely coupled (:func:`navigate_loose`: matcher fixes as position measurements of the
+INS error Kalman filter) and tightly coupled (the gravity filters on the readings
+directly) navigation over a :class:`~jaxgrav.sim.voyage_log.Voyage`, and the voyage
+figures (:func:`voyage_errors`, :func:`hourly_rms`).
 """
 
-__all__: list[str] = []
+from jaxgrav.navigate.error_kf import ErrorKFTables, error_kf_tables, fix_update, spread
+from jaxgrav.navigate.loose import (
+    FIX_EVENTS,
+    LooseConfig,
+    LooseResult,
+    eotvos_sigma,
+    navigate_loose,
+)
+from jaxgrav.navigate.metrics import VoyageErrors, hourly_rms, voyage_errors
+
+__all__ = [
+    "FIX_EVENTS",
+    "ErrorKFTables",
+    "LooseConfig",
+    "LooseResult",
+    "VoyageErrors",
+    "eotvos_sigma",
+    "error_kf_tables",
+    "fix_update",
+    "hourly_rms",
+    "navigate_loose",
+    "spread",
+    "voyage_errors",
+]

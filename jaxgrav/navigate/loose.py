@@ -1,0 +1,268 @@
+"""Loosely coupled navigation: matcher fixes as position measurements of the INS error KF.
+
+Every ``stride`` fixes (``stride = n_fixes``: consecutive segments; less: sliding), the
+segment of the last ``n_fixes`` fixes is matched. Each fix is the mean of
+``fix_every`` INS steps (positions, readings), so the matcher sees a low-passed
+reading every ``fix_every · dt`` seconds. What the loop does at each segment end:
+
+1. the INS error KF (:mod:`~jaxgrav.navigate.error_kf`) is predicted to now;
+2. its estimate is put back on the segment's steps: the *corrected* track (INS − the
+   estimated error) is what the matcher's search is centred on, and the readings are
+   Eötvös-corrected with the corrected velocity (a real system knows no other);
+3. the search reaches the ``window_p`` quantile of the Rayleigh law of the filter's
+   own position σ along the segment (paper A's window, sized by the filter): the dense
+   offset grid's spacing is ``reach / half_size``, within ``[min_spacing_m,
+   max_spacing_m]``;
+4. an accepted fix (matcher integrity, then the innovation gate) updates the filter
+   with the fix's own covariance; a rejected one is skipped and its reason recorded
+   (:data:`FIX_EVENTS`); a segment with a missing reading or off the map is not matched.
+
+With sliding segments (``stride < n_fixes``) consecutive fixes share readings; their
+covariance is inflated by ``n_fixes / stride`` so the filter does not count them twice.
+The whole voyage is one ``lax.scan`` over segment ends; ``vmap`` it over voyages.
+"""
+
+import dataclasses
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav.constants import DEG
+from jaxgrav.geodesy import eotvos, meridian_radius, prime_vertical_radius
+from jaxgrav.match.dense import DenseConfig, match_dense
+from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, spread
+from jaxgrav.sim.drift import rayleigh_quantile
+from jaxgrav.sim.ins import INSErrorModel, initial_covariance
+from jaxgrav.sim.trajectory import Track
+
+__all__ = ["FIX_EVENTS", "LooseConfig", "LooseResult", "eotvos_sigma", "navigate_loose"]
+
+FIX_EVENTS = {
+    0: "accepted",
+    1: "no fix yet: the first segment is not complete",
+    2: "not matched: a reading is missing or the segment leaves the map",
+    3: "rejected by the matcher's integrity test",
+    4: "rejected by the innovation gate (the fix disagrees with the filter)",
+}
+"""What happened at each segment end (``LooseResult.fix_event``)."""
+
+
+@pytree_dataclass
+class LooseConfig:
+    """Settings of the loosely coupled loop.
+
+    Attributes
+    ----------
+    matcher : DenseConfig
+        The dense matcher's settings (``spacing_m`` is set per segment from the window).
+    ins : INSErrorModel
+        The filter's INS error model.
+    sigma_pos_m, sigma_vel : float
+        Initial 1-σ position (m) and velocity (m/s) error per axis.
+    window_p : float
+        Rayleigh quantile the search reaches.
+    min_spacing_m, max_spacing_m : float
+        Bounds of the offset grid's spacing (m).
+    gate : float
+        Innovation gate on ``νᵀ S⁻¹ ν`` (2 degrees of freedom; 13.8 is the 99.9 % point).
+    fix_sigma_floor_m : float
+        Added in quadrature to each axis of a fix's covariance (m).
+    fix_cov_scale : float
+        The matcher's covariance is multiplied by this before the update: a segment is
+        not a rigid shift of the truth (the filter's residual velocity error stretches
+        and bends it) and its Eötvös error varies along it, which the rigid-offset
+        matcher does not model (see ``examples/voyage_loose.py --calibrate``).
+    fix_every : int
+        INS steps averaged into one fix (static).
+    n_fixes : int
+        Fixes per segment (static, >= 5).
+    stride : int
+        Fixes between segment ends (static; ``n_fixes`` = consecutive segments).
+    """
+
+    matcher: DenseConfig = DenseConfig()
+    ins: INSErrorModel = INSErrorModel()
+    sigma_pos_m: float = 354.0
+    sigma_vel: float = 0.035
+    window_p: float = 0.999
+    min_spacing_m: float = 100.0
+    max_spacing_m: float = 1500.0
+    gate: float = 13.8
+    fix_sigma_floor_m: float = 50.0
+    fix_cov_scale: float = 3.0
+    fix_every: int = static_field(12)
+    n_fixes: int = static_field(30)
+    stride: int = static_field(30)
+
+    def __post_init__(self):
+        if not (isinstance(self.n_fixes, int) and self.n_fixes >= 5):
+            raise ValueError(f"n_fixes must be an integer >= 5 (a shorter segment cannot be "
+                             f"matched reliably); got {self.n_fixes!r}")
+        for name in ("fix_every", "stride"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= 1):
+                raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
+        if self.stride > self.n_fixes:
+            raise ValueError(f"stride must be at most n_fixes = {self.n_fixes} (segments may "
+                             f"overlap, not leave gaps); got {self.stride}")
+
+
+class LooseResult(NamedTuple):
+    """The navigation solution of one voyage.
+
+    Attributes
+    ----------
+    nav : Track
+        Corrected trajectory at every INS step (positions in degrees, velocity in m/s).
+    cov_north_east : Array, shape ``(N, 2, 2)``
+        Covariance of the position error (m², north/east).
+    error_estimate : Array, shape ``(N, 13)``
+        The filter's INS error estimate at every step.
+    fix_time : Array, shape ``(C,)``
+        Time of each segment end (s).
+    fix_event : Array of int, shape ``(C,)``
+        What happened there, see :data:`FIX_EVENTS`.
+    fix_status : Array of int, shape ``(C,)``
+        The matcher's status bits (0 where it did not run).
+    fix_offset_m : Array, shape ``(C, 2)``
+        The fix's correction of the corrected segment (north, east; m).
+    fix_cov_m2 : Array, shape ``(C, 2, 2)``
+        The fix's covariance as given to the filter (m²).
+    reach_m : Array, shape ``(C,)``
+        Search reach of the segment (m).
+    nis : Array, shape ``(C,)``
+        Normalised innovation squared of the fix (NaN where not matched).
+    """
+
+    nav: Track
+    cov_north_east: jax.Array
+    error_estimate: jax.Array
+    fix_time: jax.Array
+    fix_event: jax.Array
+    fix_status: jax.Array
+    fix_offset_m: jax.Array
+    fix_cov_m2: jax.Array
+    reach_m: jax.Array
+    nis: jax.Array
+
+
+def _shift(lat, lon, d_n, d_e):
+    """Positions moved by ``(−d_n, −d_e)`` metres (the INS minus an error estimate)."""
+    return (lat - d_n / meridian_radius(lat) / DEG,
+            lon - d_e / (prime_vertical_radius(lat) * jnp.cos(lat * DEG)) / DEG)
+
+
+def _blocks(a, m):
+    """Means of consecutive blocks of ``m`` samples (NaN if any sample is)."""
+    return jnp.mean(a.reshape(-1, m), axis=1)
+
+
+def _segment(cfg, tables, ins, gravity, x, end):
+    """The corrected segment ending at INS step ``end``: fix positions and readings."""
+    w = cfg.n_fixes * cfg.fix_every
+    start = jnp.maximum(end - w, 0)
+    take = lambda a: jax.lax.dynamic_slice_in_dim(a, start, w)  # noqa: E731
+    err = jnp.einsum("kij,j->ki", tables.backward, x)
+    lat, lon = _shift(take(ins.lat), take(ins.lon), err[:, 0], err[:, 1])
+    v_e, v_n = take(ins.v_east) - err[:, 3], take(ins.v_north) - err[:, 2]
+    g = take(gravity) + eotvos(lat, v_e, v_n)
+    return (_blocks(lat, cfg.fix_every), _blocks(lon, cfg.fix_every),
+            _blocks(g, cfg.fix_every), end - w >= 0)
+
+
+def eotvos_sigma(lat, v_east, v_north, vel_cov):
+    """σ (mGal) of the Eötvös correction from a velocity of covariance ``vel_cov``.
+
+    Parameters
+    ----------
+    lat, v_east, v_north : Array
+        Position (degrees) and velocity (m/s).
+    vel_cov : Array, shape ``(2, 2)``
+        Covariance of the velocity error, north then east (m²/s²).
+    """
+    jac = jax.jacfwd(lambda v: eotvos(lat, v[1], v[0]))(jnp.stack([v_north, v_east]))
+    return jnp.sqrt(jac @ vel_cov @ jac)
+
+
+def _match(cfg, grid, lat, lon, g, reach, sigma_eotvos):
+    """The dense matcher, its offset grid spread over the reach and the Eötvös error of
+    the filter's velocity told as a correlated error beside the map's."""
+    h = cfg.matcher.half_size
+    spacing = jnp.clip(reach / h, cfg.min_spacing_m, cfg.max_spacing_m)
+    told = jnp.sqrt(cfg.matcher.map_error_mgal**2 + sigma_eotvos**2)
+    return match_dense(grid, lat, lon, g, dataclasses.replace(
+        cfg.matcher, spacing_m=spacing, map_error_mgal=told))
+
+
+def _fix(cfg, tables, grid, ins, gravity, x, p, end):
+    """Match the segment ending at ``end`` and update the filter with the fix."""
+    h_mean = tables.h_mean
+    lat, lon, g, complete = _segment(cfg, tables, ins, gravity, x, end)
+    sigma = jnp.sqrt(jnp.max(jnp.linalg.eigvalsh(h_mean @ p @ h_mean.T)))
+    reach = rayleigh_quantile(sigma, cfg.window_p)
+    usable = complete & jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(grid.sample(lat, lon)))
+    sig_e = eotvos_sigma(jnp.mean(lat), ins.v_east[end], ins.v_north[end], p[2:4, 2:4])
+    res = _match(cfg, grid, lat, lon, jnp.where(jnp.isfinite(g), g, 0.0), reach, sig_e)
+    offset = jnp.stack([res.offset_north_m, res.offset_east_m])
+    inflate = cfg.fix_cov_scale * cfg.n_fixes / cfg.stride
+    r = (res.covariance_m2 * inflate + cfg.fix_sigma_floor_m**2 * jnp.eye(2)).astype(p.dtype)
+    good = usable & res.accepted & jnp.all(jnp.isfinite(r))
+    r = jnp.where(jnp.isfinite(r), r, jnp.eye(2))
+    x_new, p_new, nis = fix_update(x, p, -offset, r, h_mean, good)
+    gated = good & (nis <= cfg.gate)
+    x_new, p_new = jnp.where(gated, x_new, x), jnp.where(gated, p_new, p)
+    event = jnp.select([~complete, ~usable, ~res.accepted, ~gated], [1, 2, 3, 4], 0)
+    status = jnp.where(usable, res.status, 0)
+    return x_new, p_new, (event, status, offset, r, reach, jnp.where(usable, nis, jnp.nan))
+
+
+@jax.jit
+def navigate_loose(grid, voyage, config):
+    """Loosely coupled map-aided navigation over one voyage (see the module notes).
+
+    Parameters
+    ----------
+    grid : Grid or PreparedMap
+        The anomaly map (mGal); a PreparedMap computes the spline once.
+    voyage : Voyage
+        The INS log and the raw readings (Eötvös not corrected); ``truth`` is not used.
+        ``N − 1`` need not be a multiple of the fix interval: the last fix interval is
+        cut short.
+    config : LooseConfig
+
+    Returns
+    -------
+    LooseResult
+    """
+    cfg = config
+    ins, n = voyage.ins, voyage.ins.t.shape[0]
+    m = cfg.fix_every
+    steps_between = cfg.stride * m
+    n_seg = -(-(n - 1) // steps_between)
+    pad = n_seg * steps_between + 1 - n
+    ins_p = Track(*(jnp.concatenate([a, jnp.repeat(a[-1:], pad)]) for a in ins))
+    grav_p = jnp.concatenate([voyage.gravity, jnp.full((pad,), jnp.nan, voyage.gravity.dtype)])
+    dt = ins.t[1] - ins.t[0]
+    tables = error_kf_tables(cfg.ins, jnp.mean(ins.lat), dt, steps_between, cfg.n_fixes * m)
+    p0 = initial_covariance(cfg.ins, cfg.sigma_pos_m, cfg.sigma_vel)
+    x0 = jnp.zeros(p0.shape[0], p0.dtype)
+
+    def step(carry, j):
+        x, p = carry
+        xs, pos_cov = spread(tables, x, p)
+        x_pred = tables.step_f @ x
+        p_pred = tables.step_f @ p @ tables.step_f.T + tables.step_q
+        end = (j + 1) * steps_between
+        x_new, p_new, events = _fix(cfg, tables, grid, ins_p, grav_p, x_pred, p_pred, end)
+        return (x_new, p_new), (xs, pos_cov, events)
+
+    (x_end, p_end), (xs, pos_cov, events) = jax.lax.scan(step, (x0, p0), jnp.arange(n_seg))
+    xs = jnp.concatenate([xs.reshape(-1, x0.shape[0]), x_end[None]])[:n]
+    pos_cov = jnp.concatenate([pos_cov.reshape(-1, 2, 2), p_end[None, :2, :2]])[:n]
+    lat, lon = _shift(ins.lat, ins.lon, xs[:, 0], xs[:, 1])
+    nav = Track(ins.t, lat, lon, ins.v_east - xs[:, 3], ins.v_north - xs[:, 2])
+    event, status, offset, r, reach, nis = events
+    fix_time = ins_p.t[0] + (jnp.arange(n_seg) + 1) * steps_between * dt
+    return LooseResult(nav, pos_cov, xs, fix_time, event, status, offset, r, reach, nis)

@@ -1,0 +1,20 @@
+"""Smoke run of examples/voyage_loose.py (2 voyages of 2 h)."""
+
+import importlib.util
+import pathlib
+
+import numpy as np
+
+SCRIPT = pathlib.Path(__file__).parents[2] / "examples" / "voyage_loose.py"
+
+
+def test_voyage_loose_smoke(capsys):
+    spec = importlib.util.spec_from_file_location("voyage_loose_example", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rows = mod.main(["--smoke"])
+    assert set(rows) == {"perfect map", "map error, told"}
+    for r in rows.values():
+        assert len(r["hourly_rms_nav_m"]) == 2 and np.isfinite(r["nees"])
+        assert sum(r["fix_events"].values()) == 2 * 2  # 2 voyages x 2 segment ends
+    assert '"setting": "perfect map"' in capsys.readouterr().out
