@@ -1,0 +1,87 @@
+"""``jaxgrav simulate-voyage``: write a voyage's INS log and truth from a preset.
+
+Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
+
+::
+
+    LOG.csv    t (s), lat, lon (INS-indicated, degrees), v_east, v_north (INS, m/s),
+               gravity (raw gravimeter anomaly, mGal: Eötvös NOT corrected, as a
+               navigation system receives it; it must correct it with its own velocity)
+    TRUTH.csv  t, lat, lon, v_east, v_north (the true trajectory), and the true INS
+               position error d_north, d_east (m, INS − true)
+
+The voyage is :func:`~jaxgrav.scenarios.voyage_scenario` of the preset
+(:data:`~jaxgrav.scenarios.PRESETS`: ``patrol-12h``, ``transit-24h``) on ``--map``,
+the readings seeing the map plus ``--map-error`` (or ``--truth-map``).
+"""
+
+import math
+
+import jax
+import numpy as np
+
+from jaxgrav._io import check_outputs
+from jaxgrav.cli.simulate import add_map_error_options, describe_map_error, map_error_from_args
+from jaxgrav.datasets import load_map
+from jaxgrav.scenarios import PRESETS, voyage_preset, voyage_scenario
+from jaxgrav.scenarios.paper_a import check_region_covered
+from jaxgrav.tracks import write_track_csv
+
+__all__ = ["add_parser", "cmd_simulate_voyage"]
+
+MAX_HOURS = 240.0
+"""Longest voyage ``--hours`` accepts (h)."""
+
+
+def add_parser(sub):
+    """Add the ``simulate-voyage`` sub-command to an ``argparse`` sub-parser set."""
+    p = sub.add_parser("simulate-voyage",
+                       help="write a voyage's INS log (raw readings) and truth from a preset")
+    p.add_argument("--preset", default="patrol-12h", help=f"one of {sorted(PRESETS)}")
+    p.add_argument("--map", default="ryukyu",
+                   help="map the readings are simulated from: NetCDF grid or shipped map "
+                        "(default ryukyu, 2.5')")
+    p.add_argument("--var", default=None)
+    p.add_argument("--hours", type=float, default=None,
+                   help="length of the voyage (h; default the preset's)")
+    p.add_argument("--out", required=True, help="INS log CSV")
+    p.add_argument("--truth", default=None, help="also write the truth here")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--force", action="store_true", help="overwrite existing files")
+    add_map_error_options(p)
+    p.set_defaults(func=cmd_simulate_voyage)
+    return p
+
+
+def cmd_simulate_voyage(args):
+    """Run ``simulate-voyage`` (see the module notes)."""
+    if args.hours is not None and not (math.isfinite(args.hours) and 0 < args.hours <= MAX_HOURS):
+        raise ValueError(f"--hours must be a positive length of at most {MAX_HOURS:g} h; "
+                         f"got {args.hours!r}")
+    changes = {} if args.hours is None else {"hours": args.hours}
+    try:
+        scenario = voyage_preset(args.preset, **changes)
+    except ValueError as err:
+        raise ValueError(f"--preset {args.preset!r}: {err}") from None
+    check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"])
+    grid = load_map(args.map, args.var)
+    check_region_covered(grid, scenario.region, f"--map {args.map}")
+    model = map_error_from_args(args, grid)
+    voyage = voyage_scenario(jax.random.key(args.seed), grid, scenario, model)
+    if not np.all(np.isfinite(np.asarray(voyage.gravity))):
+        raise ValueError(f"--map {args.map} has missing values along the simulated route; "
+                         "choose another --seed or a complete map")
+    ins, truth = voyage.ins, voyage.truth
+    write_track_csv(args.out, {"t": ins.t, "lat": ins.lat, "lon": ins.lon,
+                               "v_east": ins.v_east, "v_north": ins.v_north,
+                               "gravity": voyage.gravity}, force=args.force)
+    if args.truth:
+        write_track_csv(args.truth, {"t": truth.t, "lat": truth.lat, "lon": truth.lon,
+                                     "v_east": truth.v_east, "v_north": truth.v_north,
+                                     "d_north": voyage.ins_error[:, 0],
+                                     "d_east": voyage.ins_error[:, 1]}, force=args.force)
+    end = float(np.hypot(voyage.ins_error[-1, 0], voyage.ins_error[-1, 1]))
+    also = f" and {args.truth}" if args.truth else ""
+    print(f"wrote {args.out}{also}: {args.preset}, {scenario.hours:g} h, "
+          f"{ins.t.shape[0]} rows every {scenario.dt:g} s, free INS error at the end "
+          f"{end / 1000:.1f} km, {describe_map_error(args)}")
