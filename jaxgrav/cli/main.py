@@ -28,7 +28,7 @@ from pathlib import Path
 
 import jax
 
-from jaxgrav.cli import bench, demo, dov, match, montecarlo, simulate, voyage
+from jaxgrav.cli import bench, demo, dov, match, montecarlo, navigate, simulate, voyage
 from jaxgrav.cli import filter as filtering
 from jaxgrav.cli.cache import enable_cache
 from jaxgrav.fields import egm2008
@@ -69,6 +69,7 @@ def build_parser():
     match.add_parsers(sub)
     simulate.add_parser(sub)
     voyage.add_parser(sub)
+    navigate.add_parser(sub)
     dov.add_parser(sub)
     filtering.add_parsers(sub)
     montecarlo.add_parser(sub)

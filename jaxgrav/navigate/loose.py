@@ -69,6 +69,10 @@ class LooseConfig:
         Innovation gate on ``νᵀ S⁻¹ ν`` (2 degrees of freedom; 13.8 is the 99.9 % point).
     fix_sigma_floor_m : float
         Added in quadrature to each axis of a fix's covariance (m).
+    robust_nis : float
+        A fix whose normalised innovation squared exceeds this has its covariance scaled
+        by ``nis / robust_nis`` before the update (a Huber-like down-weighting: a fix far
+        from the filter moves it less and leaves it less sure); ``inf``: plain update.
     fix_cov_scale : float
         The matcher's covariance is multiplied by this before the update: a segment is
         not a rigid shift of the truth (the filter's residual velocity error stretches
@@ -92,6 +96,7 @@ class LooseConfig:
     gate: float = 13.8
     fix_sigma_floor_m: float = 50.0
     fix_cov_scale: float = 3.0
+    robust_nis: float = 5.99
     fix_every: int = static_field(12)
     n_fixes: int = static_field(30)
     stride: int = static_field(30)
@@ -210,7 +215,9 @@ def _fix(cfg, tables, grid, ins, gravity, x, p, end):
     r = (res.covariance_m2 * inflate + cfg.fix_sigma_floor_m**2 * jnp.eye(2)).astype(p.dtype)
     good = usable & res.accepted & jnp.all(jnp.isfinite(r))
     r = jnp.where(jnp.isfinite(r), r, jnp.eye(2))
-    x_new, p_new, nis = fix_update(x, p, -offset, r, h_mean, good)
+    _, _, nis = fix_update(x, p, -offset, r, h_mean, good)
+    r = r * jnp.maximum(1.0, nis / cfg.robust_nis)
+    x_new, p_new, _ = fix_update(x, p, -offset, r, h_mean, good)
     gated = good & (nis <= cfg.gate)
     x_new, p_new = jnp.where(gated, x_new, x), jnp.where(gated, p_new, p)
     event = jnp.select([~complete, ~usable, ~res.accepted, ~gated], [1, 2, 3, 4], 0)

@@ -1,0 +1,197 @@
+"""``jaxgrav navigate``: map-aided navigation of a user's INS log (loosely coupled).
+
+Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
+
+::
+
+    LOG.csv   t (s, a uniform step), lat, lon (INS, degrees), v_east, v_north (INS,
+              m/s), gravity (the gravimeter's anomaly, mGal, RAW: Eötvös not corrected,
+              unless --eotvos-corrected says it was, with the INS velocity; empty where
+              there is no reading: skipped and counted)
+    NAV.csv   t, lat, lon (corrected, degrees), sigma_north, sigma_east (1-σ, m),
+              cov_north_east (m²), v_east, v_north (corrected, m/s), fix_event (at the
+              rows that end a segment: 0 accepted, 1 first segment incomplete, 2 not
+              matched: missing reading or off the map, 3 rejected by the matcher's
+              integrity test, 4 rejected by the innovation gate; empty elsewhere),
+              fix_status (the matcher's status bits), fix_north, fix_east (the fix's
+              correction of the segment, m)
+
+Every ``--stride`` fixes the last ``--n-fixes`` fixes (each the mean of ``--fix-every``
+rows) are matched with the dense matcher on the filter-corrected track; accepted fixes
+update the 13-state INS error Kalman filter (:func:`jaxgrav.navigate.navigate_loose`).
+The readings are Eötvös-corrected with the filter's velocity, the one rule of the
+navigation loop. Where the log leaves the map, the fixes stop (event 2) and the
+solution continues on the INS with a growing σ.
+"""
+
+import math
+
+import numpy as np
+
+from jaxgrav._io import check_outputs
+from jaxgrav.cli.inputs import add_columns_option, read_track
+from jaxgrav.datasets import load_map
+from jaxgrav.geodesy import eotvos
+from jaxgrav.match.dense import DenseConfig
+from jaxgrav.navigate import FIX_EVENTS, LooseConfig, navigate_loose
+from jaxgrav.prepared import prepare_map
+from jaxgrav.scenarios import NAVIGATION_GRADE
+from jaxgrav.sim.ins import INSErrorModel
+from jaxgrav.sim.trajectory import Track
+from jaxgrav.sim.voyage_log import Voyage
+from jaxgrav.tracks import csv_line, write_track_csv
+
+__all__ = ["METHODS", "add_parser", "check_log", "cmd_navigate"]
+
+METHODS = ("dense",)
+"""Navigation methods of the command (loosely coupled with the dense matcher)."""
+
+_INS = {"navigation": NAVIGATION_GRADE, "strategic": INSErrorModel()}
+
+
+def add_parser(sub):
+    """Add the ``navigate`` sub-command to an ``argparse`` sub-parser set."""
+    p = sub.add_parser("navigate", help="map-aided navigation of an INS log (loosely coupled)")
+    p.add_argument("--map", default="ryukyu", help="anomaly map: NetCDF grid or shipped map")
+    p.add_argument("--var", default=None)
+    p.add_argument("--track", required=True,
+                   help="INS log CSV: t, lat, lon, v_east, v_north, gravity (raw, mGal)")
+    add_columns_option(p)
+    p.add_argument("--method", choices=METHODS, default="dense")
+    p.add_argument("--out", required=True, help="navigation CSV (see jaxgrav navigate docs)")
+    p.add_argument("--eotvos-corrected", action="store_true",
+                   help="the gravity column is already Eötvös-corrected with the INS velocity")
+    p.add_argument("--ins", choices=sorted(_INS), default="navigation",
+                   help="the filter's INS error model: navigation (0.01 deg/h, 25 ug, "
+                        "default) or strategic (0.001 deg/h, 10 ug)")
+    p.add_argument("--sigma-pos", type=float, default=354.0,
+                   help="initial position error, 1-σ per axis (m)")
+    p.add_argument("--sigma-vel", type=float, default=0.035,
+                   help="initial velocity error, 1-σ per axis (m/s)")
+    p.add_argument("--noise", type=float, default=1.0, help="reading noise, 1-σ (mGal)")
+    p.add_argument("--map-error", type=float, default=3.0, metavar="SIGMA",
+                   help="the map's error told to the matcher, 1-σ (mGal, default 3)")
+    p.add_argument("--map-error-length", type=float, default=10000.0, metavar="L",
+                   help="its correlation length (m, default 10000)")
+    p.add_argument("--fix-every", type=int, default=12, help="rows per fix (default 12)")
+    p.add_argument("--n-fixes", type=int, default=30, help="fixes per segment (>= 5)")
+    p.add_argument("--stride", type=int, default=30,
+                   help="fixes between segment ends (default = --n-fixes: consecutive)")
+    p.add_argument("--max-gap", type=float, default=60.0,
+                   help="longest allowed step between rows (s); the step must be uniform")
+    p.add_argument("--max-speed", type=float, default=30.0,
+                   help="largest plausible speed of the platform (m/s, default 30)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=cmd_navigate)
+    return p
+
+
+def _positive(name, value, unit, allow_zero=False):
+    ok = math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
+    if not ok:
+        sign = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name} must be a finite value {sign} ({unit}); got {value!r}")
+
+
+def check_log(track, grid, max_gap, max_speed):
+    """Check an INS log for navigation; returns ``(dt, n_missing, n_off_map)``.
+
+    Raises ValueError naming the file, the line and the value: a step longer than
+    ``max_gap`` or not uniform (within 0.1 %), a speed above ``max_speed``, a log with
+    no row on the map.
+    """
+    label = f"track file {track.path!r}"
+    t = np.asarray(track["t"])
+    if t.size < 2:
+        raise ValueError(f"{label} has {t.size} row; navigation needs at least 2")
+    d = np.diff(t)
+    long = np.flatnonzero(d > max_gap)
+    if long.size:
+        i = int(long[0])
+        raise ValueError(f"{label}: a gap of {d[i]:g} s between lines {csv_line(i)} and "
+                         f"{csv_line(i + 1)} (t {t[i]:g} -> {t[i + 1]:g}); --max-gap is "
+                         f"{max_gap:g} s ({long.size} such gap(s))")
+    dt = float(np.median(d))
+    bad = np.flatnonzero(np.abs(d - dt) > 1e-3 * dt)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"{label}: column t must have a uniform step; step {d[i]:g} s on "
+                         f"lines {csv_line(i)}-{csv_line(i + 1)}, expected {dt:g} s (the "
+                         f"median) within 0.1 %")
+    speed = np.hypot(track["v_east"], track["v_north"])
+    fast = np.flatnonzero(~(speed <= max_speed))
+    if fast.size:
+        i = int(fast[0])
+        raise ValueError(f"{label}, line {csv_line(i)}: speed {speed[i]:.3g} m/s is "
+                         f"implausible for the platform (--max-speed {max_speed:g} m/s; "
+                         f"{fast.size} such row(s))")
+    on_map = np.isfinite(np.asarray(grid.sample(track["lat"], track["lon"])))
+    if not on_map.any():
+        raise ValueError(f"{label}: no row lies on the map (extent {grid.extent})")
+    return dt, int(np.sum(~np.isfinite(track["gravity"]))), int(np.sum(~on_map))
+
+
+def cmd_navigate(args):
+    """Run ``navigate`` (see the module notes)."""
+    _positive("--sigma-pos", args.sigma_pos, "m")
+    _positive("--sigma-vel", args.sigma_vel, "m/s")
+    _positive("--noise", args.noise, "mGal")
+    _positive("--map-error", args.map_error, "mGal", allow_zero=True)
+    _positive("--map-error-length", args.map_error_length, "m")
+    _positive("--max-gap", args.max_gap, "s")
+    _positive("--max-speed", args.max_speed, "m/s")
+    for name, value in (("--fix-every", args.fix_every), ("--n-fixes", args.n_fixes),
+                        ("--stride", args.stride)):
+        if value < 1:
+            raise ValueError(f"{name} must be a positive number of fixes/rows; got {value}")
+    if args.n_fixes < 5:
+        raise ValueError(f"--n-fixes must be at least 5 (a shorter segment cannot be matched "
+                         f"reliably); got {args.n_fixes}")
+    if args.stride > args.n_fixes:
+        raise ValueError(f"--stride must be at most --n-fixes {args.n_fixes}; got {args.stride}")
+    check_outputs([args.out], force=args.force, names=["--out"])
+    track = read_track(args, ("t", "lat", "lon", "v_east", "v_north", "gravity"),
+                       allow_nan=("gravity",))
+    grid = load_map(args.map, args.var)
+    _, n_missing, n_off = check_log(track, grid, args.max_gap, args.max_speed)
+    segment_rows = args.n_fixes * args.fix_every
+    if len(track["t"]) <= segment_rows:
+        raise ValueError(f"track file {track.path!r} has {len(track['t'])} rows; one segment "
+                         f"of --n-fixes {args.n_fixes} x --fix-every {args.fix_every} needs "
+                         f"more than {segment_rows}")
+    ins = Track(*(np.asarray(track[k]) for k in ("t", "lat", "lon", "v_east", "v_north")))
+    gravity = np.asarray(track["gravity"])
+    if args.eotvos_corrected:  # back to the raw reading: the loop corrects it itself
+        gravity = gravity - np.asarray(eotvos(ins.lat, ins.v_east, ins.v_north))
+    matcher = DenseConfig(noise_mgal=args.noise / math.sqrt(args.fix_every),
+                          map_error_mgal=args.map_error,
+                          map_error_length_m=args.map_error_length, fix="posterior",
+                          max_sigma_m=3000.0, max_edge_mass=0.2, n_rotations=5,
+                          max_rotation_deg=3.0)
+    cfg = LooseConfig(matcher=matcher, ins=_INS[args.ins], sigma_pos_m=args.sigma_pos,
+                      sigma_vel=args.sigma_vel, fix_every=args.fix_every,
+                      n_fixes=args.n_fixes, stride=args.stride)
+    res = navigate_loose(prepare_map(grid), Voyage(ins, gravity), cfg)
+    _write(args, ins, res, cfg)
+    events = np.asarray(res.fix_event)
+    counts = ", ".join(f"{int(np.sum(events == k))} {FIX_EVENTS[k].split(':')[0]}"
+                       for k in FIX_EVENTS if np.any(events == k))
+    print(f"wrote {args.out}: {len(ins.t)} rows, {events.size} segment ends ({counts}); "
+          f"{n_missing} missing reading(s) skipped, {n_off} row(s) off the map (not aided)")
+
+
+def _write(args, ins, res, cfg):
+    """The navigation CSV: every row, fix columns on the rows that end a segment."""
+    n = len(ins.t)
+    sd = np.sqrt(np.diagonal(np.asarray(res.cov_north_east), axis1=1, axis2=2))
+    rows = (np.arange(res.fix_event.shape[0]) + 1) * cfg.stride * cfg.fix_every
+    keep = rows < n
+    fix = {k: np.full(n, np.nan) for k in ("fix_event", "fix_status", "fix_north", "fix_east")}
+    fix["fix_event"][rows[keep]] = np.asarray(res.fix_event)[keep]
+    fix["fix_status"][rows[keep]] = np.asarray(res.fix_status)[keep]
+    fix["fix_north"][rows[keep]] = np.asarray(res.fix_offset_m)[keep, 0]
+    fix["fix_east"][rows[keep]] = np.asarray(res.fix_offset_m)[keep, 1]
+    write_track_csv(args.out, {
+        "t": ins.t, "lat": res.nav.lat, "lon": res.nav.lon, "sigma_north": sd[:, 0],
+        "sigma_east": sd[:, 1], "cov_north_east": np.asarray(res.cov_north_east)[:, 0, 1],
+        "v_east": res.nav.v_east, "v_north": res.nav.v_north, **fix}, force=args.force)

@@ -1,0 +1,101 @@
+"""``jaxgrav navigate``: a simulated log navigated end to end, and every bad input named."""
+
+import numpy as np
+import pytest
+
+from jaxgrav.cli import main
+from jaxgrav.tracks import read_track_csv, write_track_csv
+
+SHORT = ["--fix-every", "6", "--n-fixes", "10", "--stride", "10"]
+
+
+@pytest.fixture(scope="module")
+def voyage_log(tmp_path_factory):
+    d = tmp_path_factory.mktemp("voyage")
+    log, truth = d / "log.csv", d / "truth.csv"
+    assert main(["simulate-voyage", "--out", str(log), "--truth", str(truth), "--hours", "1.5",
+                 "--seed", "4", "--map-error", "3"]) == 0
+    return log, truth
+
+
+def test_navigate_writes_every_row_with_sigma_and_fix_events(voyage_log, tmp_path, capsys):
+    log, _ = voyage_log
+    out = tmp_path / "nav.csv"
+    assert main(["navigate", "--track", str(log), "--out", str(out), *SHORT]) == 0
+    said = capsys.readouterr().out
+    assert "541 rows, 9 segment ends" in said and "0 missing reading(s)" in said
+    nav = read_track_csv(out, ("t", "lat", "lon", "sigma_north", "sigma_east", "v_east",
+                               "v_north", "fix_event"), allow_nan=("fix_event",))
+    assert len(nav["t"]) == 541 and np.all(nav["sigma_north"] > 0)
+    ends = np.flatnonzero(np.isfinite(nav["fix_event"]))
+    np.testing.assert_array_equal(ends, np.arange(1, 10) * 60)
+    assert set(nav["fix_event"][ends].astype(int)) <= {0, 1, 2, 3, 4}
+    assert main(["navigate", "--track", str(log), "--out", str(out), *SHORT]) == 2
+    assert "pass --force" in capsys.readouterr().err
+
+
+def test_missing_readings_are_counted_not_fatal(voyage_log, tmp_path, capsys):
+    log, _ = voyage_log
+    track = read_track_csv(log, ("t", "lat", "lon", "v_east", "v_north", "gravity"))
+    g = np.asarray(track["gravity"]).copy()
+    g[100:103] = np.nan
+    holed = tmp_path / "holed.csv"
+    write_track_csv(holed, {**{k: track[k] for k in ("t", "lat", "lon", "v_east", "v_north")},
+                            "gravity": g})
+    assert main(["navigate", "--track", str(holed), "--out", str(tmp_path / "n.csv"),
+                 *SHORT]) == 0
+    assert "3 missing reading(s) skipped" in capsys.readouterr().out
+
+
+def _edited(log, tmp_path, edit):
+    track = read_track_csv(log, ("t", "lat", "lon", "v_east", "v_north", "gravity"))
+    cols = {k: np.asarray(track[k]).copy() for k in ("t", "lat", "lon", "v_east", "v_north",
+                                                      "gravity")}
+    edit(cols)
+    path = tmp_path / "bad.csv"
+    write_track_csv(path, cols)
+    return path
+
+
+def _gap(c):
+    c["t"][200:] += 120.0
+
+
+def _uneven(c):
+    c["t"][200:] += 3.0
+
+
+def _fast(c):
+    c["v_east"][50] = 80.0
+
+
+def _off_map(c):
+    c["lat"][:] = -60.0
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (_gap, "a gap of 130 s between lines"),
+    (_uneven, "column t must have a uniform step"),
+    (_fast, "is implausible for the platform"),
+    (_off_map, "no row lies on the map"),
+])
+def test_bad_logs_are_named(voyage_log, tmp_path, capsys, edit, message):
+    path = _edited(voyage_log[0], tmp_path, edit)
+    out = tmp_path / "n.csv"
+    assert main(["navigate", "--track", str(path), "--out", str(out), *SHORT]) == 2
+    err = capsys.readouterr().err
+    assert message in err and str(path) in err and not out.exists()
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--n-fixes", "4", "--stride", "4"], "--n-fixes must be at least 5"),
+    (["--stride", "40"], "--stride must be at most --n-fixes"),
+    (["--sigma-pos", "-1"], "--sigma-pos must be a finite value > 0"),
+    (["--map-error", "nan"], "--map-error must be a finite value >= 0"),
+    (["--n-fixes", "100", "--stride", "100"], "one segment of --n-fixes 100"),
+])
+def test_bad_options_are_named(voyage_log, tmp_path, capsys, args, message):
+    out = tmp_path / "n.csv"
+    assert main(["navigate", "--track", str(voyage_log[0]), "--out", str(out),
+                 "--fix-every", "6", *args]) == 2
+    assert message in capsys.readouterr().err and not out.exists()
