@@ -12,8 +12,14 @@ and of the free INS (m), the last-hour ratio nav/free and last/second hour, the 
 of voyages worse than the free INS in some hour from the second on, the worst such
 ratio, the position NEES (2 expected), the fix events and runs per second.
 
+``--calibrate`` measures the fixes alone instead: on each voyage an ideal filter (fed
+honest 500 m fixes of the true segment-mean error every hour) gives the state a good
+loop would have; each hour's segment, corrected with it, is matched as the loop does
+and the fix compared with the true residual: error, fix NEES (2 expected), by quartile
+of the matcher's edge mass; and the ideal filter's own hourly RMS error and NEES.
+
 Run: ``python examples/voyage_loose.py [--runs 100] [--sigma 3] [--length 10000]
-[--ins navigation|strategic] [--smoke]``.
+[--ins navigation|strategic] [--calibrate] [--smoke]``.
 """
 
 import argparse
@@ -21,15 +27,25 @@ import json
 import time
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import datasets
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match.dense import DenseConfig
-from jaxgrav.navigate import FIX_EVENTS, LooseConfig, hourly_rms, navigate_loose, voyage_errors
+from jaxgrav.navigate import (
+    FIX_EVENTS,
+    LooseConfig,
+    error_kf_tables,
+    fix_segment,
+    fix_update,
+    hourly_rms,
+    navigate_loose,
+    voyage_errors,
+)
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
-from jaxgrav.sim.ins import INSErrorModel
+from jaxgrav.sim.ins import INSErrorModel, initial_covariance
 
 
 def loose_config(ins, sigma, length, fix_every=12):
@@ -48,8 +64,10 @@ def _one(pm, grid, key, scenario, model, config):
             err.nees.mean(), res.fix_event)
 
 
-def run(grid, scenario, model, config, keys, batch=8):
-    """Simulate and navigate voyages in batches; per-voyage hourly errors, NEES, events."""
+def run(grid, scenario, model, config, keys, batch=1):
+    """Simulate and navigate voyages, one after another inside one compiled call
+    (``vmap`` runs both sides of the matcher's branches: slower on a CPU, see
+    ``benchmarks/voyage_loose.py``); per-voyage hourly errors, NEES, fix events."""
     pm = prepare_map(grid)
     f = jax.jit(lambda pm, grid, ks: jax.lax.map(
         lambda k: _one(pm, grid, k, scenario, model, config), ks, batch_size=batch))
@@ -71,6 +89,52 @@ def summarise(nav, free, nees, events):
     return out
 
 
+def calibrate(grid, scenario, model, config, keys, fix_sigma=500.0):
+    """Fix errors and NEES against the truth along an ideal filter's states (see notes)."""
+    pm = prepare_map(grid)
+    steps = config.stride * config.fix_every
+    n_seg = (scenario.n_steps - 1) // steps
+
+    def one(pm, grid, key):
+        voyage = voyage_scenario(key, grid, scenario, model)
+        tables = error_kf_tables(config.ins, voyage.ins.lat.mean(), scenario.dt, steps,
+                                 config.n_fixes * config.fix_every)
+        p0 = initial_covariance(config.ins, config.sigma_pos_m, config.sigma_vel)
+        noise = fix_sigma * jax.random.normal(jax.random.fold_in(key, 1), (n_seg, 2))
+
+        def body(carry, j):
+            x, p = carry
+            x = tables.step_f @ x
+            p = tables.step_f @ p @ tables.step_f.T + tables.step_q
+            end = (j + 1) * steps
+            res, _, _ = fix_segment(config, tables, pm, voyage.ins, voyage.gravity, x, p, end)
+            truth = tables.h_mean @ voyage.ins_error[end]
+            resid = truth - tables.h_mean @ x
+            e = -jnp.stack([res.offset_north_m, res.offset_east_m]) - resid
+            fix_nees = e @ jnp.linalg.solve(res.covariance_m2, e)
+            z = truth + noise[j] - tables.h_mean @ x
+            x, p, _ = fix_update(x, p, z, fix_sigma**2 * jnp.eye(2), tables.h_mean, True)
+            d = voyage.ins_error[end, :2] - x[:2]
+            return (x, p), (jnp.hypot(*e), fix_nees, res.edge_mass, res.accepted,
+                            jnp.hypot(*d), d @ jnp.linalg.solve(p[:2, :2], d))
+
+        _, out = jax.lax.scan(body, (jnp.zeros(p0.shape[0]), p0), jnp.arange(n_seg))
+        return out
+
+    f = jax.jit(lambda pm, grid, ks: jax.lax.map(lambda k: one(pm, grid, k), ks))
+    err, nees, edge, accepted, kf_err, kf_nees = (np.asarray(a) for a in f(pm, grid, keys))
+    quart = np.quantile(edge, [0.25, 0.5, 0.75])
+    bins = np.digitize(edge, quart)
+    by_edge = [{"edge_mass_upto": float(q),
+                "fix_err_rms_m": float(np.sqrt(np.mean(err[bins == b] ** 2))),
+                "fix_nees_median": float(np.median(nees[bins == b]))}
+               for b, q in enumerate([*quart, edge.max()])]
+    return {"fix_err_median_m": float(np.median(err)), "fix_nees_median": float(np.median(nees)),
+            "accepted": float(np.mean(accepted)), "by_edge_mass": by_edge,
+            "ideal_filter_hourly_rms_m": np.sqrt(np.mean(kf_err**2, 0)).round(0).tolist(),
+            "ideal_filter_nees": float(np.mean(kf_nees))}
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--runs", type=int, default=100)
@@ -78,6 +142,7 @@ def main(argv=None):
     p.add_argument("--length", type=float, default=10000.0, help="map error L (m)")
     p.add_argument("--ins", choices=("navigation", "strategic"), default="navigation")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--calibrate", action="store_true", help="measure the fixes alone")
     p.add_argument("--smoke", action="store_true", help="2 voyages of 2 h")
     a = p.parse_args(argv)
     runs, hours = (2, 2.0) if a.smoke else (a.runs, 12.0)
@@ -90,6 +155,12 @@ def main(argv=None):
         model = map_error(a.sigma, a.length) if sigma > 0 else None
         cfg = loose_config(ins, sigma, a.length)
         t0 = time.perf_counter()
+        if a.calibrate:
+            row = {"setting": name, "ins": a.ins, "runs": runs, "calibrate": True,
+                   **calibrate(grid, scenario, model, cfg, keys)}
+            print(json.dumps(row))
+            rows[name] = row
+            continue
         out = run(grid, scenario, model, cfg, keys)
         seconds = time.perf_counter() - t0
         row = {"setting": name, "ins": a.ins, "runs": runs, "hours": hours,

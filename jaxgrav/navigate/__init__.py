@@ -12,6 +12,7 @@ from jaxgrav.navigate.loose import (
     LooseConfig,
     LooseResult,
     eotvos_sigma,
+    fix_segment,
     navigate_loose,
 )
 from jaxgrav.navigate.metrics import VoyageErrors, hourly_rms, voyage_errors
@@ -24,6 +25,7 @@ __all__ = [
     "VoyageErrors",
     "eotvos_sigma",
     "error_kf_tables",
+    "fix_segment",
     "fix_update",
     "hourly_rms",
     "navigate_loose",

@@ -37,7 +37,8 @@ from jaxgrav.sim.drift import rayleigh_quantile
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance
 from jaxgrav.sim.trajectory import Track
 
-__all__ = ["FIX_EVENTS", "LooseConfig", "LooseResult", "eotvos_sigma", "navigate_loose"]
+__all__ = ["FIX_EVENTS", "LooseConfig", "LooseResult", "eotvos_sigma", "fix_segment",
+           "navigate_loose"]
 
 FIX_EVENTS = {
     0: "accepted",
@@ -201,8 +202,34 @@ def _match(cfg, grid, lat, lon, g, reach, sigma_eotvos):
         cfg.matcher, spacing_m=spacing, map_error_mgal=told))
 
 
-def _fix(cfg, tables, grid, ins, gravity, x, p, end):
-    """Match the segment ending at ``end`` and update the filter with the fix."""
+def fix_segment(config, tables, grid, ins, gravity, x, p, end):
+    """Match the segment that ends at INS step ``end``, as the loop does.
+
+    Parameters
+    ----------
+    config : LooseConfig
+    tables : ErrorKFTables
+        Of the voyage (:func:`~jaxgrav.navigate.error_kf.error_kf_tables`).
+    grid : Grid or PreparedMap
+    ins : Track
+        The INS-indicated track, shape ``(N,)`` per field.
+    gravity : Array, shape ``(N,)``
+        Raw readings (mGal).
+    x, p : Array, shapes ``(13,)``, ``(13, 13)``
+        The filter's predicted state and covariance at ``end``.
+    end : int or Array
+        INS step the segment ends at (exclusive).
+
+    Returns
+    -------
+    result : MatchResult
+        The fix: its offset corrects the corrected segment (matched − corrected).
+    reach : Array
+        Search reach (m).
+    usable : Array of bool
+        The segment was complete, every reading present and every fix on the map.
+    """
+    cfg = config
     h_mean = tables.h_mean
     lat, lon, g, complete = _segment(cfg, tables, ins, gravity, x, end)
     sigma = jnp.sqrt(jnp.max(jnp.linalg.eigvalsh(h_mean @ p @ h_mean.T)))
@@ -210,6 +237,14 @@ def _fix(cfg, tables, grid, ins, gravity, x, p, end):
     usable = complete & jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(grid.sample(lat, lon)))
     sig_e = eotvos_sigma(jnp.mean(lat), ins.v_east[end], ins.v_north[end], p[2:4, 2:4])
     res = _match(cfg, grid, lat, lon, jnp.where(jnp.isfinite(g), g, 0.0), reach, sig_e)
+    return res, reach, usable
+
+
+def _fix(cfg, tables, grid, ins, gravity, x, p, end):
+    """Match the segment ending at ``end`` and update the filter with the fix."""
+    h_mean = tables.h_mean
+    res, reach, usable = fix_segment(cfg, tables, grid, ins, gravity, x, p, end)
+    complete = end - cfg.n_fixes * cfg.fix_every >= 0
     offset = jnp.stack([res.offset_north_m, res.offset_east_m])
     inflate = cfg.fix_cov_scale * cfg.n_fixes / cfg.stride
     r = (res.covariance_m2 * inflate + cfg.fix_sigma_floor_m**2 * jnp.eye(2)).astype(p.dtype)

@@ -18,3 +18,13 @@ def test_voyage_loose_smoke(capsys):
         assert len(r["hourly_rms_nav_m"]) == 2 and np.isfinite(r["nees"])
         assert sum(r["fix_events"].values()) == 2 * 2  # 2 voyages x 2 segment ends
     assert '"setting": "perfect map"' in capsys.readouterr().out
+
+
+def test_voyage_loose_calibrate_smoke():
+    spec = importlib.util.spec_from_file_location("voyage_loose_example_c", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rows = mod.main(["--smoke", "--calibrate"])
+    for r in rows.values():
+        assert r["calibrate"] and len(r["by_edge_mass"]) == 4
+        assert len(r["ideal_filter_hourly_rms_m"]) == 2 and np.isfinite(r["fix_nees_median"])
