@@ -43,6 +43,7 @@ from jaxgrav.navigate import (
     navigate_loose,
     voyage_errors,
 )
+from jaxgrav.plot import plot_voyage_errors, save_figure
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance
@@ -56,12 +57,18 @@ def loose_config(ins, sigma, length, fix_every=12):
     return LooseConfig(matcher=matcher, ins=ins, fix_every=fix_every)
 
 
+EVERY = 60
+"""Steps between the samples of the error series kept for the figure (10 min)."""
+
+
 def _one(pm, grid, key, scenario, model, config):
     voyage = voyage_scenario(key, grid, scenario, model)
     res = navigate_loose(pm, voyage, config)
     err = voyage_errors(voyage, res.nav, res.cov_north_east)
+    sigma = jnp.sqrt(jnp.trace(res.cov_north_east, axis1=1, axis2=2))
+    series = (err.nav_m[::EVERY], err.free_m[::EVERY], sigma[::EVERY])
     return (hourly_rms(err.nav_m, scenario.dt), hourly_rms(err.free_m, scenario.dt),
-            err.nees.mean(), res.fix_event)
+            err.nees.mean(), res.fix_event, series, res.fix_time)
 
 
 def run(grid, scenario, model, config, keys, batch=1):
@@ -74,7 +81,16 @@ def run(grid, scenario, model, config, keys, batch=1):
     return tuple(np.asarray(a) for a in f(pm, grid, keys))
 
 
-def summarise(nav, free, nees, events):
+def figure(path, out, scenario, title, force):
+    """The error-against-time figure of one setting."""
+    *_, events, (nav, free, sigma), fix_time = out
+    t_h = np.arange(nav.shape[1]) * EVERY * scenario.dt / 3600.0
+    fig = plot_voyage_errors(t_h, nav, free, sigma, title=title, fix_t_h=fix_time[0] / 3600.0,
+                             fix_accepted=events == 0)
+    save_figure(fig, path, force=force)
+
+
+def summarise(nav, free, nees, events, *_):
     """The figures of one setting (see the module notes)."""
     rms_nav, rms_free = np.sqrt(np.mean(nav**2, 0)), np.sqrt(np.mean(free**2, 0))
     ratio = nav / free
@@ -143,6 +159,8 @@ def main(argv=None):
     p.add_argument("--ins", choices=("navigation", "strategic"), default="navigation")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--calibrate", action="store_true", help="measure the fixes alone")
+    p.add_argument("--png", default=None, help="error-against-time figure of the map-error runs")
+    p.add_argument("--force", action="store_true", help="overwrite --png")
     p.add_argument("--smoke", action="store_true", help="2 voyages of 2 h")
     a = p.parse_args(argv)
     runs, hours = (2, 2.0) if a.smoke else (a.runs, 12.0)
@@ -168,6 +186,10 @@ def main(argv=None):
                "seconds": round(seconds, 1), "runs_per_s": round(runs / seconds, 2)}
         print(json.dumps(row))
         rows[name] = row
+        if a.png and sigma > 0:
+            figure(a.png, out, scenario, f"loosely coupled, {runs} patrols of {hours:g} h, "
+                   f"{a.ins} INS, map error {a.sigma:g} mGal / {a.length / 1e3:g} km told",
+                   a.force)
     return rows
 
 

@@ -12,7 +12,7 @@ from matplotlib.ticker import LogFormatterSciNotation, MaxNLocator
 
 from jaxgrav._io import atomic_output
 
-__all__ = ["add_scale_bar", "plot_error_summary", "plot_map", "save_figure"]
+__all__ = ["add_scale_bar", "plot_error_summary", "plot_map", "plot_voyage_errors", "save_figure"]
 
 
 def _nice_length_km(width_km):
@@ -184,6 +184,52 @@ def plot_error_summary(ins_err, err, *, title, label="matched",
     ax1.legend(loc="lower right", fontsize=8)
     bad = int((~ok).sum())
     fig.suptitle(title + (f" ({bad} runs non-finite, left out)" if bad else ""), fontsize=10)
+    return fig
+
+
+def plot_voyage_errors(t_h, nav_err, free_err, sigma, *, title, fix_t_h=None,
+                       fix_accepted=None):
+    """Position error against time over many voyages: median and 90 % band.
+
+    Parameters
+    ----------
+    t_h : array_like, shape ``(T,)``
+        Time (h).
+    nav_err, free_err : array_like, shape ``(runs, T)``
+        Radial error of the navigation solution and of the free INS (m).
+    sigma : array_like, shape ``(runs, T)``
+        The navigation solution's stated radial 1-σ (m): ``√(σ_n² + σ_e²)``.
+    title : str
+    fix_t_h : array_like, shape ``(C,)``, optional
+        Times of the segment ends (h).
+    fix_accepted : array_like, shape ``(runs, C)``, optional
+        Whether each voyage's fix there was accepted; the share is drawn on a second axis.
+
+    Returns
+    -------
+    matplotlib Figure
+    """
+    t = np.asarray(t_h, float)
+    fig, ax = plt.subplots(figsize=(10, 4.8), layout="constrained")
+    for name, e, c in (("free INS", free_err, "k"), ("navigation", nav_err, "C1")):
+        lo, med, hi = np.nanpercentile(np.asarray(e, float), [5, 50, 95], axis=0)
+        ax.fill_between(t, lo / 1e3, hi / 1e3, color=c, alpha=0.15, lw=0)
+        ax.plot(t, med / 1e3, color=c, label=f"{name}: median, 90 % band")
+    ax.plot(t, np.nanmedian(np.asarray(sigma, float), axis=0) / 1e3, color="C0", ls="--",
+            label="navigation: median stated 1-σ")
+    ax.set_xlabel("time (h)")
+    ax.set_ylabel("radial position error (km)")
+    ax.set_yscale("log")
+    ax.grid(True, which="both", alpha=0.3)
+    if fix_t_h is not None and fix_accepted is not None:
+        ax2 = ax.twinx()
+        share = np.mean(np.asarray(fix_accepted, float), axis=0)
+        ax2.plot(np.asarray(fix_t_h, float), share, "v", color="C2", label="fixes accepted")
+        ax2.set_ylim(0, 1.05)
+        ax2.set_ylabel("share of voyages whose fix was accepted", color="C2")
+        ax2.legend(loc="lower right", fontsize=8)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(title, fontsize=10)
     return fig
 
 

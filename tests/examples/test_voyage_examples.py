@@ -8,11 +8,13 @@ import numpy as np
 SCRIPT = pathlib.Path(__file__).parents[2] / "examples" / "voyage_loose.py"
 
 
-def test_voyage_loose_smoke(capsys):
+def test_voyage_loose_smoke(capsys, tmp_path):
     spec = importlib.util.spec_from_file_location("voyage_loose_example", SCRIPT)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    rows = mod.main(["--smoke"])
+    png = tmp_path / "errors.png"
+    rows = mod.main(["--smoke", "--png", str(png)])
+    assert png.stat().st_size > 10_000
     assert set(rows) == {"perfect map", "map error, told"}
     for r in rows.values():
         assert len(r["hourly_rms_nav_m"]) == 2 and np.isfinite(r["nees"])
