@@ -6,7 +6,13 @@ directly) navigation over a :class:`~jaxgrav.sim.voyage_log.Voyage`, and the voy
 figures (:func:`voyage_errors`, :func:`hourly_rms`).
 """
 
-from jaxgrav.navigate.error_kf import ErrorKFTables, error_kf_tables, fix_update, spread
+from jaxgrav.navigate.error_kf import (
+    ErrorKFTables,
+    error_kf_tables,
+    fix_update,
+    innovation_nis,
+    spread,
+)
 from jaxgrav.navigate.loose import (
     FIX_EVENTS,
     LooseConfig,
@@ -28,6 +34,7 @@ __all__ = [
     "fix_segment",
     "fix_update",
     "hourly_rms",
+    "innovation_nis",
     "navigate_loose",
     "spread",
     "voyage_errors",

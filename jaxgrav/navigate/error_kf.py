@@ -20,7 +20,7 @@ import jax.numpy as jnp
 from jaxgrav._linalg import inv_2x2
 from jaxgrav.sim.ins import transition
 
-__all__ = ["ErrorKFTables", "error_kf_tables", "fix_update", "spread"]
+__all__ = ["ErrorKFTables", "error_kf_tables", "fix_update", "innovation_nis", "spread"]
 
 
 class ErrorKFTables(NamedTuple):
@@ -106,6 +106,27 @@ def spread(tables, x, p):
     return xs, pos_cov
 
 
+def _innovation_inverse(p, r, h):
+    """``S⁻¹`` of a position fix, ``S = H P Hᵀ + R`` symmetrised."""
+    s = h @ p @ h.T + r
+    return inv_2x2(0.5 * (s + s.T))
+
+
+def innovation_nis(p, innovation, r, h):
+    """Normalised innovation squared ``νᵀ S⁻¹ ν`` of a position fix (2 degrees of freedom).
+
+    Parameters
+    ----------
+    p : Array, shape ``(13, 13)``
+    innovation : Array, shape ``(2,)``
+        Fix minus predicted measurement (m).
+    r : Array, shape ``(2, 2)``
+        Fix covariance (m²).
+    h : Array, shape ``(2, 13)``
+    """
+    return innovation @ _innovation_inverse(p, r, h) @ innovation
+
+
 def fix_update(x, p, innovation, r, h, accept):
     """Kalman update with a position fix (Joseph form), applied where ``accept``.
 
@@ -126,8 +147,7 @@ def fix_update(x, p, innovation, r, h, accept):
     nis : Array
         Normalised innovation squared ``νᵀ S⁻¹ ν`` (2 degrees of freedom).
     """
-    s = h @ p @ h.T + r
-    s_inv = inv_2x2(0.5 * (s + s.T))
+    s_inv = _innovation_inverse(p, r, h)
     k = p @ h.T @ s_inv
     nis = innovation @ s_inv @ innovation
     a = jnp.eye(x.shape[0], dtype=p.dtype) - k @ h

@@ -29,11 +29,10 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._pytree import pytree_dataclass, static_field
-from jaxgrav.constants import DEG
-from jaxgrav.geodesy import eotvos, meridian_radius, prime_vertical_radius
+from jaxgrav.geodesy import eotvos
 from jaxgrav.match.dense import DenseConfig, match_dense
-from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, spread
-from jaxgrav.sim.drift import rayleigh_quantile
+from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, innovation_nis, spread
+from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance
 from jaxgrav.sim.trajectory import Track
 
@@ -156,8 +155,7 @@ class LooseResult(NamedTuple):
 
 def _shift(lat, lon, d_n, d_e):
     """Positions moved by ``(−d_n, −d_e)`` metres (the INS minus an error estimate)."""
-    return (lat - d_n / meridian_radius(lat) / DEG,
-            lon - d_e / (prime_vertical_radius(lat) * jnp.cos(lat * DEG)) / DEG)
+    return apply_drift(lat, lon, -d_n, -d_e)
 
 
 def _blocks(a, m):
@@ -250,7 +248,7 @@ def _fix(cfg, tables, grid, ins, gravity, x, p, end):
     r = (res.covariance_m2 * inflate + cfg.fix_sigma_floor_m**2 * jnp.eye(2)).astype(p.dtype)
     good = usable & res.accepted & jnp.all(jnp.isfinite(r))
     r = jnp.where(jnp.isfinite(r), r, jnp.eye(2))
-    _, _, nis = fix_update(x, p, -offset, r, h_mean, good)
+    nis = innovation_nis(p, -offset, r, h_mean)
     r = r * jnp.maximum(1.0, nis / cfg.robust_nis)
     x_new, p_new, _ = fix_update(x, p, -offset, r, h_mean, good)
     gated = good & (nis <= cfg.gate)

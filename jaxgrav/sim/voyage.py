@@ -17,8 +17,8 @@
 import jax
 import jax.numpy as jnp
 
-from jaxgrav.constants import DEG
-from jaxgrav.geodesy import eotvos, meridian_radius, prime_vertical_radius
+from jaxgrav.geodesy import eotvos
+from jaxgrav.sim.drift import apply_drift
 from jaxgrav.sim.ins import sample_initial_error, simulate_errors, transition
 from jaxgrav.sim.readings import field_along
 from jaxgrav.sim.route import sail
@@ -43,9 +43,7 @@ def indicated_track(truth, error):
     -------
     Track
     """
-    lat = truth.lat + error[:, 0] / meridian_radius(truth.lat) / DEG
-    lon = truth.lon + error[:, 1] / (prime_vertical_radius(truth.lat)
-                                     * jnp.cos(truth.lat * DEG)) / DEG
+    lat, lon = apply_drift(truth.lat, truth.lon, error[:, 0], error[:, 1])
     return Track(truth.t, lat, lon, truth.v_east + error[:, 3], truth.v_north + error[:, 2])
 
 
