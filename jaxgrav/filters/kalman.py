@@ -2,7 +2,11 @@
 
 Both predict with the linear INS error model exactly (``x ← F x``, ``P ← F P Fᵀ + Q``;
 the unscented transform of a linear map is exact, so sigma-point prediction would
-give the same numbers at 2n+1 times the cost) and differ only in the update:
+give the same numbers at 2n+1 times the cost) and differ only in the update. A step's known linear measurement part
+(:attr:`~jaxgrav.filters.model.Step.h_lin`) is added to ``h`` at every sigma point
+(UKF) or to ``h`` and its Jacobian (EKF).
+
+Updates:
 
 * :func:`ukf` — scaled symmetric sigma points (Julier 2002; paper D):
   ``λ = α²(n + κ) − n``, ``W₀ᵐ = λ/(n+λ)``, ``W₀ᶜ = λ/(n+λ) + 1 − α² + β``,
@@ -185,6 +189,8 @@ def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate
         delta = jnp.sqrt(scale) * chol.T  # rows are the sigma offsets
         points = jnp.concatenate([pred.x[None], pred.x + delta, pred.x - delta])
         zs = _sigma_measurements(measurement, field, step, pred.x, delta)
+        if step.h_lin is not None:  # the step's known linear part, at every point
+            zs = zs + points @ step.h_lin
         off_map = ~jnp.all(jnp.isfinite(zs))
         zs = jnp.where(jnp.isfinite(zs), zs, 0.0)  # double-where: no NaN into the algebra
         z_hat = wm @ zs
@@ -238,6 +244,8 @@ def ekf(measurement=gravity_measurement, *, gate=jnp.inf, check_covariance=True)
             repaired = failed = jnp.zeros((), bool)
         z_hat = measurement(field, pred.x, step.lat, step.lon)
         h = jax.jacfwd(measurement, argnums=1)(field, pred.x, step.lat, step.lon)
+        if step.h_lin is not None:  # the step's known linear part
+            z_hat, h = z_hat + step.h_lin @ pred.x, h + step.h_lin
         off_map = ~(jnp.isfinite(z_hat) & jnp.all(jnp.isfinite(h)))
         z_hat = jnp.where(off_map, 0.0, z_hat)
         h = jnp.where(off_map, 0.0, h)

@@ -83,12 +83,19 @@ class Step(NamedTuple):
         Gravimeter reading (mGal), NaN if none.
     r : Array, shape ``()``
         Reading noise variance (mGal²).
+    h_lin : Array, shape ``(n,)``, or None
+        A part of the measurement that is linear in the state and known at this step:
+        the predicted reading is ``h(x) + h_lin · x`` (mGal). Used for the Eötvös
+        error of readings corrected with the INS velocity, ``∂E/∂v · δv``
+        (:mod:`jaxgrav.navigate.tight`). None (default): no linear part. The UKF,
+        EKF and Gaussian sum take it; the point-mass filter refuses it.
     """
 
     lat: jax.Array
     lon: jax.Array
     z: jax.Array
     r: jax.Array
+    h_lin: jax.Array | None = None
 
 
 class Dynamics(NamedTuple):

@@ -349,6 +349,10 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return jax.vmap(jax.vmap(one))(dn, de)
 
     def update(state, step, field, dynamics):
+        if step.h_lin is not None:
+            raise ValueError(
+                "the point-mass filter takes no linear measurement part (Step.h_lin, e.g. the "
+                "Eötvös effect of the velocity error); use the UKF, EKF or Gaussian sum")
         state = _predict(state, dynamics)
         w, m, s = state.w, state.bias_mean, state.bias_var
         dn, de = cells(state.centre)

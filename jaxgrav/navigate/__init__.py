@@ -22,13 +22,24 @@ from jaxgrav.navigate.loose import (
     navigate_loose,
 )
 from jaxgrav.navigate.metrics import VoyageErrors, hourly_rms, voyage_errors
+from jaxgrav.navigate.tight import (
+    TIGHT_METHODS,
+    TightConfig,
+    TightResult,
+    eotvos_jacobian,
+    navigate_tight,
+)
 
 __all__ = [
     "FIX_EVENTS",
+    "TIGHT_METHODS",
     "ErrorKFTables",
     "LooseConfig",
     "LooseResult",
+    "TightConfig",
+    "TightResult",
     "VoyageErrors",
+    "eotvos_jacobian",
     "eotvos_sigma",
     "error_kf_tables",
     "fix_segment",
@@ -36,6 +47,7 @@ __all__ = [
     "hourly_rms",
     "innovation_nis",
     "navigate_loose",
+    "navigate_tight",
     "spread",
     "voyage_errors",
 ]

@@ -224,6 +224,79 @@ def test_ukf_equals_filterpy_on_the_gravity_measurement(dynamics, prior, runs):
     assert np.sqrt(ps[-1, 0, 0]) < 0.5 * np.sqrt(float(p0[0, 0]))
 
 
+H_LIN = np.zeros(ins.N_STATES)
+H_LIN[[2, 3]] = [0.4, 12.6]  # an Eötvös-like velocity-error part (mGal per m/s)
+
+
+def _with_h_lin(steps):
+    """The steps with a known linear part that changes from step to step."""
+    scale = 1.0 + 0.1 * np.sin(np.arange(steps.z.shape[0]))
+    return steps._replace(h_lin=jnp.asarray(scale[:, None] * H_LIN))
+
+
+def test_ukf_linear_part_equals_filterpy_with_it_in_hx(dynamics, prior, runs):
+    """Step.h_lin: the structured UKF adds h_lin·x at every sigma point, as filterpy's
+    full 27-point UKF does with it written into hx."""
+    steps = _with_h_lin(_one(runs[0], 0))
+    x0, p0 = prior
+    final, infos = run_one(UKF, FIELD, dynamics, x0, p0, steps)
+    h_lin = np.asarray(steps.h_lin)
+
+    class Hx:  # filterpy passes the update's keyword arguments to hx
+        def __call__(self, x, lat, lon, k):
+            return np.atleast_1d(np.asarray(measure(FIELD, x, lat, lon)) + h_lin[k] @ x)
+
+    hx = Hx()
+    f, q = np.asarray(dynamics.f), np.asarray(dynamics.q)
+    points = MerweScaledSigmaPoints(ins.N_STATES, alpha=0.5, beta=2.0, kappa=0.0)
+    u = UnscentedKalmanFilter(ins.N_STATES, 1, DT, hx=hx, fx=lambda x, dt: f @ x, points=points)
+    u.x, u.P, u.Q = np.array(x0, dtype=float), np.array(p0, dtype=float), q
+    xs, ps = [], []
+    for k in range(steps.z.shape[0]):
+        u.predict()
+        if np.isfinite(float(steps.z[k])):
+            u.update(np.array([float(steps.z[k])]), R=np.array([[1.0]]),
+                     lat=float(steps.lat[k]), lon=float(steps.lon[k]), k=k)
+        xs.append(u.x.copy())
+        ps.append(u.P.copy())
+    xs, ps = np.array(xs), np.array(ps)
+    sd = np.sqrt(np.einsum("kii->ki", ps))
+    assert (np.abs(np.asarray(infos.x) - xs) / sd).max() < 1e-8
+    np.testing.assert_allclose(np.asarray(infos.sigma), sd, rtol=1e-8)
+    # the linear part made a difference: the velocity error is now observed
+    _, plain = run_one(UKF, FIELD, dynamics, x0, p0, steps._replace(h_lin=None))
+    assert float(infos.sigma[-1, 3]) < 0.8 * float(plain.sigma[-1, 3])
+    assert np.all(np.isfinite(np.asarray(final.p)))
+
+
+def _linear_part_generic(field, x, lat, lon):
+    return fl.gravity_measurement(field, x, lat, lon) + jnp.asarray(H_LIN, x.dtype) @ x
+
+
+EKF_H_LIN = fl.ekf(_linear_part_generic)
+
+
+def test_ekf_linear_part_equals_the_measurement_written_with_it(dynamics, prior, runs):
+    steps = _one(runs[0], 2)
+    x0, p0 = prior
+    with_part = steps._replace(h_lin=jnp.broadcast_to(jnp.asarray(H_LIN), (N_STEPS, 13)))
+    _, infos = run_one(EKF, FIELD, dynamics, x0, p0, with_part)
+    _, ref = run_one(EKF_H_LIN, FIELD, dynamics, x0, p0, steps)
+    np.testing.assert_allclose(np.asarray(infos.x), np.asarray(ref.x), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(infos.sigma), np.asarray(ref.sigma), rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(infos.innovation_var),
+                               np.asarray(ref.innovation_var), rtol=1e-9)
+
+
+def test_pmf_refuses_a_linear_part(dynamics, prior, runs):
+    steps = _with_h_lin(_one(runs[0], 0))
+    x0, p0 = prior
+    state = PMF.init(x0, p0)
+    dyn = PMF.dynamics(LAT_REF, DT)
+    with pytest.raises(ValueError, match="point-mass filter takes no linear measurement part"):
+        PMF.update(state, _one(steps, 0), FIELD, dyn)
+
+
 LIN_A = np.zeros(ins.N_STATES)
 LIN_A[[0, 1, 2, 12]] = [2e-3, -1.5e-3, 0.3, 1.0]
 LIN_C = 5.0

@@ -1,0 +1,122 @@
+"""Tightly coupled voyage navigation (navigate.tight): the Eötvös Jacobian against finite
+differences, the filter on an information-rich map (with and without the Eötvös part of
+the measurement, with a map-error state), missing readings and leaving the map, jit
+without retrace, vmap against a loop, bad settings."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgrav.filters import STATUS_FILTER, map_error_state
+from jaxgrav.geodesy import eotvos
+from jaxgrav.navigate import TightConfig, eotvos_jacobian, navigate_tight, voyage_errors
+from jaxgrav.prepared import prepare_map
+from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
+
+
+def test_eotvos_jacobian_against_finite_differences():
+    lat, ve, vn = np.array([10.0, 30.0, 60.0]), np.array([4.0, -6.0, 0.5]), np.array([3, 1, -8.0])
+    h = 1e-4
+    d_n = (eotvos(lat, ve, vn + h) - eotvos(lat, ve, vn - h)) / (2 * h)
+    d_e = (eotvos(lat, ve + h, vn) - eotvos(lat, ve - h, vn)) / (2 * h)
+    jac = eotvos_jacobian(jnp.asarray(lat), jnp.asarray(ve), jnp.asarray(vn))
+    np.testing.assert_allclose(jac, np.stack([d_n, d_e], axis=1), rtol=1e-6)
+    # 2 Ω cos φ: about 12.6 mGal per m/s east at 30° N
+    assert float(jac[1, 1]) == pytest.approx(12.6, abs=0.2)
+
+
+@pytest.fixture(scope="module")
+def voyages(smooth_grid):
+    """Two 2 h voyages on the information-rich synthetic map, navigation-grade INS."""
+    sc = voyage_preset("patrol-12h", ins=NAVIGATION_GRADE, hours=2.0,
+                       region=(29.6, 30.4, 129.6, 130.4), leg_m=20000.0, margin_deg=0.1,
+                       pos_error_m=1000.0, vel_error=0.3)
+    keys = jax.random.split(jax.random.key(7), 2)
+    return jax.vmap(lambda g, k: voyage_scenario(k, g, sc), in_axes=(None, 0))(smooth_grid, keys)
+
+
+CONFIG = TightConfig(ins=NAVIGATION_GRADE, sigma_pos_m=710.0, sigma_vel=0.2)
+
+
+def _first(voyages):
+    return jax.tree.map(lambda a: a[0], voyages)
+
+
+def test_the_filter_holds_the_ins_and_the_eotvos_part_matters(smooth_grid, voyages):
+    pm = prepare_map(smooth_grid)
+    v = _first(voyages)
+    res = navigate_tight(pm, v, CONFIG)
+    n = v.ins.t.shape[0]
+    assert res.nav.lat.shape == (n,) and res.cov_north_east.shape == (n, 2, 2)
+    assert res.error_estimate.shape == (n, 13) and np.all(np.asarray(res.status) == 0)
+    err = voyage_errors(v, res.nav, res.cov_north_east)
+    free, nav = np.asarray(err.free_m), np.asarray(err.nav_m)
+    assert free[-1] > 1000.0 and np.sqrt(np.mean(nav[n // 2:] ** 2)) < 150.0
+    assert 0.5 < float(jnp.mean(err.nees[n // 2:])) < 5.0
+    # the velocity error is estimated (the INS is 0.3 m/s off at the start)
+    true_v = np.asarray(v.ins_error[n // 2:, 2:4])
+    est_v = np.asarray(res.error_estimate[n // 2:, 2:4])
+    assert np.sqrt(np.mean((est_v - true_v) ** 2)) < 0.5 * np.sqrt(np.mean(true_v**2))
+    # ignoring the Eötvös effect of the velocity error: worse, and it does not know it
+    blind = navigate_tight(pm, v, dataclasses.replace(CONFIG, eotvos_velocity=False))
+    err_b = voyage_errors(v, blind.nav, blind.cov_north_east)
+    assert np.sqrt(np.mean(np.asarray(err_b.nav_m[n // 2:]) ** 2)) > 2.0 * np.sqrt(
+        np.mean(nav[n // 2:] ** 2))
+    assert float(jnp.mean(err_b.nees[n // 2:])) > 2.0 * float(jnp.mean(err.nees[n // 2:]))
+
+
+def test_a_map_error_state_is_appended(smooth_grid, voyages):
+    v = _first(voyages)
+    cfg = dataclasses.replace(CONFIG, map_error=map_error_state(2.0, 20000.0))
+    res = navigate_tight(prepare_map(smooth_grid), v, cfg)
+    assert res.error_estimate.shape[1] == 14 and res.sigma.shape[1] == 14
+    sig = np.asarray(res.sigma[:, 13])
+    # stationary prior σ = 2 mGal, which the readings inform
+    assert sig.max() <= 2.0 + 1e-9 and sig.min() < 1.99
+    err = voyage_errors(v, res.nav, res.cov_north_east)
+    assert np.all(np.isfinite(np.asarray(err.nav_m))) and float(err.nav_m[-1]) < float(
+        err.free_m[-1])
+
+
+def test_missing_readings_and_leaving_the_map_are_flagged(smooth_grid, voyages):
+    pm = prepare_map(smooth_grid)
+    v = _first(voyages)
+    n = v.ins.t.shape[0]
+    v = v._replace(gravity=v.gravity.at[100:110].set(jnp.nan))
+    # the last quarter of the INS log lies 2° east: off the 1° map
+    far = jnp.where(jnp.arange(n) >= 3 * n // 4, 2.0, 0.0)
+    v = v._replace(ins=v.ins._replace(lon=v.ins.lon + far))
+    res = navigate_tight(pm, v, CONFIG)
+    status = np.asarray(res.status)
+    assert np.all(status[100:110] & STATUS_FILTER["no_reading"])
+    assert np.all(status[3 * n // 4 + 1:] & STATUS_FILTER["off_map"])
+    assert np.all(np.isnan(np.asarray(res.innovation[100:110])))
+    # off the map the filter goes on predicting: finite, its σ growing
+    sig = np.asarray(jnp.sqrt(res.cov_north_east[:, 0, 0]))
+    assert np.all(np.isfinite(np.asarray(res.nav.lat))) and sig[-1] > sig[3 * n // 4]
+
+
+def test_jit_without_retrace_and_vmap_equals_loop(smooth_grid, voyages):
+    pm = prepare_map(smooth_grid)
+    batch = jax.vmap(navigate_tight, in_axes=(None, 0, None))(pm, voyages, CONFIG)
+    for i in range(2):
+        v = jax.tree.map(lambda a, i=i: a[i], voyages)
+        one = navigate_tight(pm, v, CONFIG)
+        np.testing.assert_allclose(batch.nav.lat[i], one.nav.lat, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(batch.cov_north_east[i], one.cov_north_east, rtol=1e-6)
+    before = navigate_tight._cache_size()
+    navigate_tight(pm, v, dataclasses.replace(CONFIG, gate=25.0, noise_mgal=2.0,
+                                              sigma_pos_m=500.0))
+    assert navigate_tight._cache_size() == before
+
+
+@pytest.mark.parametrize(("change", "error", "message"), [
+    ({"method": "pmf"}, ValueError, "method must be one of ukf, ekf, gsf"),
+    ({"map_error": 3.0}, TypeError, "map_error must be a MapErrorState"),
+])
+def test_bad_settings_get_clear_errors(change, error, message):
+    with pytest.raises(error, match=message):
+        TightConfig(**change)
