@@ -2,9 +2,9 @@
 
 Both predict with the linear INS error model exactly (``x ← F x``, ``P ← F P Fᵀ + Q``;
 the unscented transform of a linear map is exact, so sigma-point prediction would
-give the same numbers at 2n+1 times the cost) and differ only in the update. A step's known linear measurement part
-(:attr:`~jaxgrav.filters.model.Step.h_lin`) is added to ``h`` at every sigma point
-(UKF) or to ``h`` and its Jacobian (EKF).
+give the same numbers at 2n+1 times the cost) and differ only in the update. A
+step's known linear measurement part (:attr:`~jaxgrav.filters.model.Step.h_lin`) is
+added to ``h`` at every sigma point (UKF) or to ``h`` and its Jacobian (EKF).
 
 Updates:
 
