@@ -42,6 +42,7 @@ from jaxgrav.navigate import (
     hourly_rms,
     navigate_loose,
     voyage_errors,
+    voyage_summary,
 )
 from jaxgrav.plot import plot_voyage_errors, save_figure
 from jaxgrav.prepared import prepare_map
@@ -92,17 +93,8 @@ def figure(path, out, scenario, title, force):
 
 def summarise(nav, free, nees, events, *_):
     """The figures of one setting (see the module notes)."""
-    rms_nav, rms_free = np.sqrt(np.mean(nav**2, 0)), np.sqrt(np.mean(free**2, 0))
-    ratio = nav / free
-    later = ratio[:, 1:] if ratio.shape[1] > 1 else ratio
-    out = {"hourly_rms_nav_m": rms_nav.round(0).tolist(),
-           "hourly_rms_free_m": rms_free.round(0).tolist(),
-           "last_hour_ratio": float(rms_nav[-1] / rms_free[-1]),
-           "last_over_second_hour": float(rms_nav[-1] / rms_nav[min(1, len(rms_nav) - 1)]),
-           "share_worse_than_free_some_hour": float(np.mean(np.any(later > 1.0, axis=1))),
-           "worst_hourly_ratio": float(later.max()), "nees": float(np.mean(nees)),
-           "fix_events": {FIX_EVENTS[k]: int(np.sum(events == k)) for k in FIX_EVENTS}}
-    return out
+    return {**voyage_summary(nav, free, nees),
+            "fix_events": {FIX_EVENTS[k]: int(np.sum(events == k)) for k in FIX_EVENTS}}
 
 
 def calibrate(grid, scenario, model, config, keys, fix_sigma=500.0):

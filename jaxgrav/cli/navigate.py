@@ -1,4 +1,4 @@
-"""``jaxgrav navigate``: map-aided navigation of a user's INS log (loosely coupled).
+"""``jaxgrav navigate``: map-aided navigation of a user's INS log (loosely or tightly coupled).
 
 Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
 
@@ -14,14 +14,25 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
               matched: missing reading or off the map, 3 rejected by the matcher's
               integrity test, 4 rejected by the innovation gate; empty elsewhere),
               fix_status (the matcher's status bits), fix_north, fix_east (the fix's
-              correction of the segment, m)
+              correction of the segment, m); with ``--method ukf|ekf|gsf`` instead:
+              status (the filter's bits of jaxgrav.filters.STATUS_FILTER: 0 the
+              reading was used, 1 no reading, 2 off the map, 16 gated ...),
+              innovation and innovation_sigma (mGal), gravimeter_bias and
+              sigma_gravimeter_bias (mGal)
 
-Every ``--stride`` fixes the last ``--n-fixes`` fixes (each the mean of ``--fix-every``
-rows) are matched with the dense matcher on the filter-corrected track; accepted fixes
-update the 13-state INS error Kalman filter (:func:`jaxgrav.navigate.navigate_loose`).
+``--method dense`` (loosely coupled): every ``--stride`` fixes the last ``--n-fixes``
+fixes (each the mean of ``--fix-every`` rows) are matched with the dense matcher on the
+filter-corrected track; accepted fixes update the 13-state INS error Kalman filter
+(:func:`jaxgrav.navigate.navigate_loose`).
 The readings are Eötvös-corrected with the filter's velocity, the one rule of the
 navigation loop. Where the log leaves the map, the fixes stop (event 2) and the
 solution continues on the INS with a growing σ.
+
+``--method ukf|ekf|gsf`` (tightly coupled, :func:`jaxgrav.navigate.navigate_tight`):
+every reading updates the INS error filter; the readings are Eötvös-corrected with the
+INS velocity and the Eötvös effect of its velocity error is part of the measurement;
+``--map-error`` adds a second-order Gauss–Markov map-error state of that σ and L.
+Readings that are missing or off the map are skipped and flagged row by row.
 """
 
 import math
@@ -31,33 +42,45 @@ import numpy as np
 from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import add_columns_option, read_track
 from jaxgrav.datasets import load_map
+from jaxgrav.filters import map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos
 from jaxgrav.match.dense import DenseConfig
-from jaxgrav.navigate import FIX_EVENTS, LooseConfig, navigate_loose
+from jaxgrav.navigate import (
+    FIX_EVENTS,
+    TIGHT_METHODS,
+    LooseConfig,
+    TightConfig,
+    navigate_loose,
+    navigate_tight,
+)
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import NAVIGATION_GRADE
-from jaxgrav.sim.ins import INSErrorModel
+from jaxgrav.sim.ins import GRAV, INSErrorModel
 from jaxgrav.sim.trajectory import Track
 from jaxgrav.sim.voyage_log import Voyage
 from jaxgrav.tracks import csv_line, write_track_csv
 
 __all__ = ["METHODS", "add_parser", "check_log", "cmd_navigate"]
 
-METHODS = ("dense",)
-"""Navigation methods of the command (loosely coupled with the dense matcher)."""
+METHODS = ("dense", *TIGHT_METHODS)
+"""Navigation methods of the command: loosely coupled with the dense matcher, or tightly
+coupled with a filter of :data:`jaxgrav.navigate.TIGHT_METHODS`."""
 
 _INS = {"navigation": NAVIGATION_GRADE, "strategic": INSErrorModel()}
 
 
 def add_parser(sub):
     """Add the ``navigate`` sub-command to an ``argparse`` sub-parser set."""
-    p = sub.add_parser("navigate", help="map-aided navigation of an INS log (loosely coupled)")
+    p = sub.add_parser("navigate",
+                       help="map-aided navigation of an INS log (loosely or tightly coupled)")
     p.add_argument("--map", default="ryukyu", help="anomaly map: NetCDF grid or shipped map")
     p.add_argument("--var", default=None)
     p.add_argument("--track", required=True,
                    help="INS log CSV: t, lat, lon, v_east, v_north, gravity (raw, mGal)")
     add_columns_option(p)
-    p.add_argument("--method", choices=METHODS, default="dense")
+    p.add_argument("--method", choices=METHODS, default="dense",
+                   help="dense: hourly matcher fixes into the INS error filter (loosely "
+                        "coupled); ukf, ekf, gsf: every reading into the filter (tightly)")
     p.add_argument("--out", required=True, help="navigation CSV (see jaxgrav navigate docs)")
     p.add_argument("--eotvos-corrected", action="store_true",
                    help="the gravity column is already Eötvös-corrected with the INS velocity")
@@ -70,7 +93,7 @@ def add_parser(sub):
                    help="initial velocity error, 1-σ per axis (m/s)")
     p.add_argument("--noise", type=float, default=1.0, help="reading noise, 1-σ (mGal)")
     p.add_argument("--map-error", type=float, default=3.0, metavar="SIGMA",
-                   help="the map's error told to the matcher, 1-σ (mGal, default 3)")
+                   help="the map's error told to the matcher or filter, 1-σ (mGal, default 3)")
     p.add_argument("--map-error-length", type=float, default=10000.0, metavar="L",
                    help="its correlation length (m, default 10000)")
     p.add_argument("--fix-every", type=int, default=12, help="rows per fix (default 12)")
@@ -155,7 +178,7 @@ def cmd_navigate(args):
     grid = load_map(args.map, args.var)
     _, n_missing, n_off = check_log(track, grid, args.max_gap, args.max_speed)
     segment_rows = args.n_fixes * args.fix_every
-    if len(track["t"]) <= segment_rows:
+    if args.method == "dense" and len(track["t"]) <= segment_rows:
         raise ValueError(f"track file {track.path!r} has {len(track['t'])} rows; one segment "
                          f"of --n-fixes {args.n_fixes} x --fix-every {args.fix_every} needs "
                          f"more than {segment_rows}")
@@ -163,6 +186,10 @@ def cmd_navigate(args):
     gravity = np.asarray(track["gravity"])
     if args.eotvos_corrected:  # back to the raw reading: the loop corrects it itself
         gravity = gravity - np.asarray(eotvos(ins.lat, ins.v_east, ins.v_north))
+    voyage = Voyage(ins, gravity)
+    if args.method in TIGHT_METHODS:
+        _tight(args, voyage, grid, n_missing, n_off)
+        return
     matcher = DenseConfig(noise_mgal=args.noise / math.sqrt(args.fix_every),
                           map_error_mgal=args.map_error,
                           map_error_length_m=args.map_error_length, fix="posterior",
@@ -171,13 +198,38 @@ def cmd_navigate(args):
     cfg = LooseConfig(matcher=matcher, ins=_INS[args.ins], sigma_pos_m=args.sigma_pos,
                       sigma_vel=args.sigma_vel, fix_every=args.fix_every,
                       n_fixes=args.n_fixes, stride=args.stride)
-    res = navigate_loose(prepare_map(grid), Voyage(ins, gravity), cfg)
+    res = navigate_loose(prepare_map(grid), voyage, cfg)
     _write(args, ins, res, cfg)
     events = np.asarray(res.fix_event)
     counts = ", ".join(f"{int(np.sum(events == k))} {FIX_EVENTS[k].split(':')[0]}"
                        for k in FIX_EVENTS if np.any(events == k))
     print(f"wrote {args.out}: {len(ins.t)} rows, {events.size} segment ends ({counts}); "
           f"{n_missing} missing reading(s) skipped, {n_off} row(s) off the map (not aided)")
+
+
+def _tight(args, voyage, grid, n_missing, n_off):
+    """Tightly coupled: the filter on every reading, and its CSV."""
+    told = (map_error_state(args.map_error, args.map_error_length, order=2)
+            if args.map_error > 0 else None)
+    cfg = TightConfig(ins=_INS[args.ins], sigma_pos_m=args.sigma_pos, sigma_vel=args.sigma_vel,
+                      noise_mgal=args.noise, map_error=told, method=args.method)
+    res = navigate_tight(prepare_map(grid), voyage, cfg)
+    cov = np.asarray(res.cov_north_east)
+    sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+    x, sigma = np.asarray(res.error_estimate), np.asarray(res.sigma)
+    status = np.asarray(res.status)
+    write_track_csv(args.out, {
+        "t": voyage.ins.t, "lat": res.nav.lat, "lon": res.nav.lon, "sigma_north": sd[:, 0],
+        "sigma_east": sd[:, 1], "cov_north_east": cov[:, 0, 1], "v_east": res.nav.v_east,
+        "v_north": res.nav.v_north, "status": status, "innovation": res.innovation,
+        "innovation_sigma": np.sqrt(np.asarray(res.innovation_var)),
+        "gravimeter_bias": x[:, GRAV], "sigma_gravimeter_bias": sigma[:, GRAV]},
+        force=args.force)
+    flags = np.bitwise_or.reduce(status)
+    print(f"wrote {args.out}: {status.size} rows, {int(np.sum(status == 0))} reading(s) used "
+          f"by the {args.method} filter; {n_missing} missing reading(s) skipped, {n_off} "
+          f"row(s) off the map (not aided); flags seen: "
+          f"{', '.join(status_messages_filter(flags)) or 'none'}")
 
 
 def _write(args, ins, res, cfg):

@@ -21,7 +21,7 @@ from jaxgrav.navigate.loose import (
     fix_segment,
     navigate_loose,
 )
-from jaxgrav.navigate.metrics import VoyageErrors, hourly_rms, voyage_errors
+from jaxgrav.navigate.metrics import VoyageErrors, hourly_rms, voyage_errors, voyage_summary
 from jaxgrav.navigate.tight import (
     TIGHT_METHODS,
     TightConfig,
@@ -50,4 +50,5 @@ __all__ = [
     "navigate_tight",
     "spread",
     "voyage_errors",
+    "voyage_summary",
 ]

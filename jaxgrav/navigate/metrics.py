@@ -11,10 +11,11 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrav.geodesy import local_offsets_m
 
-__all__ = ["VoyageErrors", "hourly_rms", "voyage_errors"]
+__all__ = ["VoyageErrors", "hourly_rms", "voyage_errors", "voyage_summary"]
 
 
 class VoyageErrors(NamedTuple):
@@ -80,3 +81,38 @@ def hourly_rms(error_m, dt, period_s=3600.0):
     h = (error_m.shape[-1] - 1) // k
     blocks = error_m[..., 1:h * k + 1].reshape(*error_m.shape[:-1], h, k)
     return jnp.sqrt(jnp.mean(blocks**2, axis=-1))
+
+
+def voyage_summary(nav_hourly, free_hourly, nees):
+    """The voyage issue's figures over many voyages, as plain numbers.
+
+    Parameters
+    ----------
+    nav_hourly, free_hourly : array_like, shape ``(runs, H)``
+        Hourly RMS radial error (m) of the navigation solution and of the free INS
+        (:func:`hourly_rms`).
+    nees : array_like, shape ``(runs,)``
+        Each voyage's mean position NEES.
+
+    Returns
+    -------
+    dict
+        ``hourly_rms_nav_m``, ``hourly_rms_free_m`` (RMS over voyages per hour, m),
+        ``last_hour_ratio`` (nav / free, last hour; goal ≤ 0.1),
+        ``last_over_second_hour`` (goal ≤ 1.5), ``share_worse_than_free_some_hour``
+        (voyages whose hourly RMS exceeds the free INS's in some hour from the second
+        on; goal 0), ``worst_hourly_ratio``, ``nees`` (mean over voyages; 2 expected)
+        and ``nees_median`` (median of the voyages' means).
+    """
+    nav, free = np.asarray(nav_hourly, float), np.asarray(free_hourly, float)
+    nees = np.asarray(nees, float)
+    rms_nav, rms_free = np.sqrt(np.mean(nav**2, 0)), np.sqrt(np.mean(free**2, 0))
+    ratio = nav / free
+    later = ratio[:, 1:] if ratio.shape[1] > 1 else ratio
+    return {"hourly_rms_nav_m": rms_nav.round(0).tolist(),
+            "hourly_rms_free_m": rms_free.round(0).tolist(),
+            "last_hour_ratio": float(rms_nav[-1] / rms_free[-1]),
+            "last_over_second_hour": float(rms_nav[-1] / rms_nav[min(1, len(rms_nav) - 1)]),
+            "share_worse_than_free_some_hour": float(np.mean(np.any(later > 1.0, axis=1))),
+            "worst_hourly_ratio": float(later.max()), "nees": float(np.mean(nees)),
+            "nees_median": float(np.median(nees))}

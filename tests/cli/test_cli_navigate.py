@@ -34,6 +34,31 @@ def test_navigate_writes_every_row_with_sigma_and_fix_events(voyage_log, tmp_pat
     assert "pass --force" in capsys.readouterr().err
 
 
+def test_tight_ukf_beats_the_ins_against_the_truth(voyage_log, tmp_path, capsys):
+    """--method ukf: every row with the filter's status, innovation and bias, and a solution
+    closer to the written truth than the INS log in the last half hour."""
+    log, truth_csv = voyage_log
+    out = tmp_path / "tight.csv"
+    assert main(["navigate", "--track", str(log), "--out", str(out), "--method", "ukf"]) == 0
+    said = capsys.readouterr().out
+    assert "541 rows" in said and "used by the ukf filter" in said
+    cols = ("t", "lat", "lon", "sigma_north", "sigma_east", "status", "innovation",
+            "innovation_sigma", "gravimeter_bias", "sigma_gravimeter_bias")
+    nav = read_track_csv(out, cols, allow_nan=("innovation", "innovation_sigma"))
+    assert np.all(np.asarray(nav["status"]) == 0)  # every reading used, on the map
+    assert np.all(np.isfinite(nav["innovation"][1:]))
+    ins = read_track_csv(log, ("t", "lat", "lon"))
+    truth = read_track_csv(truth_csv, ("t", "lat", "lon"))
+    km = 111.0 * np.cos(np.deg2rad(np.asarray(truth["lat"])))
+
+    def err(track):
+        d_n = (np.asarray(track["lat"]) - truth["lat"]) * 111.0
+        d_e = (np.asarray(track["lon"]) - truth["lon"]) * km
+        return np.sqrt(np.mean((d_n**2 + d_e**2)[-180:]))
+
+    assert err(nav) < 0.7 * err(ins), (err(nav), err(ins))
+
+
 def test_missing_readings_are_counted_not_fatal(voyage_log, tmp_path, capsys):
     log, _ = voyage_log
     track = read_track_csv(log, ("t", "lat", "lon", "v_east", "v_north", "gravity"))

@@ -30,3 +30,19 @@ def test_voyage_loose_calibrate_smoke():
     for r in rows.values():
         assert r["calibrate"] and len(r["by_edge_mass"]) == 4
         assert len(r["ideal_filter_hourly_rms_m"]) == 2 and np.isfinite(r["fix_nees_median"])
+
+
+TIGHT = pathlib.Path(__file__).parents[2] / "examples" / "voyage_tight.py"
+
+
+def test_voyage_tight_smoke(capsys, tmp_path):
+    spec = importlib.util.spec_from_file_location("voyage_tight_example", TIGHT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    png = tmp_path / "tight.png"
+    rows = mod.main(["--smoke", "--settings", "map error, told", "--png", str(png)])
+    assert png.stat().st_size > 10_000 and set(rows) == {"map error, told"}
+    r = rows["map error, told"]
+    assert len(r["hourly_rms_nav_m"]) == 2 and np.isfinite(r["nees"])
+    assert r["readings_used"] > 0.9 and r["runs"] == 2
+    assert '"setting": "map error, told"' in capsys.readouterr().out
