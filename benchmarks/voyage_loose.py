@@ -2,7 +2,8 @@
 
 ``patrol-12h`` voyages (navigation-grade INS, map error 3 mGal / 10 km) on the shipped
 2.5′ ``ryukyu`` map, navigated by :func:`jaxgrav.navigate.navigate_loose` with the
-settings of ``examples/voyage_loose.py`` (a 30-fix dense match every hour).
+settings of ``examples/voyage_loose.py`` (:func:`jaxgrav.navigate.loose_config`: a
+30-fix dense match every hour).
 
 Lines (JSON, ``_common.emit``):
 
@@ -23,7 +24,6 @@ Voyages are simulated before timing; timed calls exclude compilation. Run
 are noise, compare within one run.
 """
 
-import importlib.util
 import pathlib
 import sys
 
@@ -33,7 +33,7 @@ import jax.numpy as jnp
 from jaxgrav import datasets
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match.dense import match_dense
-from jaxgrav.navigate import navigate_loose
+from jaxgrav.navigate import loose_config, navigate_loose
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import voyage_preset, voyage_scenario
 
@@ -42,10 +42,6 @@ from _common import best_time, emit, parse_args
 
 jax.config.update("jax_enable_x64", True)  # a script, not the library: geodesy in float64
 
-_EX = pathlib.Path(__file__).parents[1] / "examples" / "voyage_loose.py"
-_spec = importlib.util.spec_from_file_location("voyage_loose_example", _EX)
-example = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(example)
 
 
 def main():
@@ -55,7 +51,7 @@ def main():
     pm = prepare_map(grid)
     scenario = voyage_preset("patrol-12h", hours=hours)
     model = map_error(3.0, 10000.0)
-    cfg = example.loose_config(scenario.ins, 3.0, 10000.0)
+    cfg = loose_config(scenario.ins, 3.0, 10000.0)
     keys = jax.random.split(jax.random.key(0), n)
     voyages = jax.jit(jax.vmap(lambda g, k: voyage_scenario(k, g, scenario, model),
                                in_axes=(None, 0)))(grid, keys)

@@ -32,14 +32,13 @@ import numpy as np
 
 from jaxgrav import datasets
 from jaxgrav.fields.map_error import map_error
-from jaxgrav.match.dense import DenseConfig
 from jaxgrav.navigate import (
     FIX_EVENTS,
-    LooseConfig,
     error_kf_tables,
     fix_segment,
     fix_update,
     hourly_rms,
+    loose_config,
     navigate_loose,
     voyage_errors,
     voyage_summary,
@@ -48,15 +47,6 @@ from jaxgrav.plot import plot_voyage_errors, save_figure
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance
-
-
-def loose_config(ins, sigma, length, fix_every=12):
-    """The loop's settings: the dense matcher told the map error, hourly 1 h segments."""
-    matcher = DenseConfig(noise_mgal=1.0 / np.sqrt(fix_every), map_error_mgal=sigma,
-                          map_error_length_m=length, fix="posterior", max_sigma_m=3000.0,
-                          max_edge_mass=0.2, n_rotations=5, max_rotation_deg=3.0)
-    return LooseConfig(matcher=matcher, ins=ins, fix_every=fix_every)
-
 
 EVERY = 60
 """Steps between the samples of the error series kept for the figure (10 min)."""
@@ -163,7 +153,7 @@ def main(argv=None):
     rows = {}
     for name, sigma in (("perfect map", 0.0), ("map error, told", a.sigma)):
         model = map_error(a.sigma, a.length) if sigma > 0 else None
-        cfg = loose_config(ins, sigma, a.length)
+        cfg = loose_config(ins, sigma, a.length)  # the matcher told the map error
         t0 = time.perf_counter()
         if a.calibrate:
             row = {"setting": name, "ins": a.ins, "runs": runs, "calibrate": True,

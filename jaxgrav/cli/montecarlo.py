@@ -15,6 +15,7 @@ import jax
 import numpy as np
 
 from jaxgrav import __version__, montecarlo
+from jaxgrav.cli.montecarlo_voyage import VOYAGE_INS, plot_voyages, voyage_lines, voyage_options
 from jaxgrav.cli.simulate import (
     DEFAULT_MAP_ERROR_LENGTH_M,
     add_map_error_options,
@@ -30,6 +31,7 @@ from jaxgrav.montecarlo.methods import (
     DEPRECATED_METHODS,
     FILTER_METHODS,
     METRICS,
+    VOYAGE_METHODS,
     build,
     default_grid,
     resolve_method,
@@ -52,7 +54,9 @@ def add_parser(subparsers):
                         "entropy+iccp: paper B's stages alone and combined; ukf, ekf, gsf "
                         "(Gaussian-sum UKF), pmf (grid point-mass filter) and the guarded "
                         "ukf-guard, gsf-guard: paper D's filters (over its three point "
-                        "masses, or over --map)")
+                        "masses, or over --map); voyage-dense (loosely coupled, hourly dense "
+                        "fixes), voyage-ukf, voyage-ekf, voyage-gsf (tightly coupled): 12 h "
+                        "patrols (--hours) navigated with a navigation-grade INS (--ins)")
     m.add_argument("--runs", type=int, required=True, help="number of simulated runs")
     m.add_argument("--chunk", type=int, default=None,
                    help="runs per compiled call (bounds memory; default 256)")
@@ -94,6 +98,11 @@ def add_parser(subparsers):
                         "Gauss-Markov, length 2 L for the second-order map error) or 2 "
                         "(second order, matched exactly); default the map error's own order "
                         "(2), 1 for pmf (which has no order 2)")
+    m.add_argument("--hours", type=float, default=None,
+                   help="voyage methods: length of each patrol (h, default 12)")
+    m.add_argument("--ins", choices=sorted(VOYAGE_INS), default=None,
+                   help="voyage methods: the INS, navigation (0.01 deg/h, 25 ug, default) or "
+                        "strategic (jaxgrav's default INSErrorModel)")
     m.add_argument("--no-progress", action="store_true", help="no progress bar")
     m.add_argument("--force", action="store_true", help="overwrite existing outputs")
     m.set_defaults(func=cmd_montecarlo)
@@ -102,10 +111,10 @@ def add_parser(subparsers):
 
 
 # ----------------------------------------------------------------------- montecarlo
-FAILURE_RATIO = {"matcher": 1.0 / 3.0, "filter": 1.05}
+FAILURE_RATIO = {"matcher": 1.0 / 3.0, "filter": 1.05, "voyage": 1.0}
 """A run fails when its error exceeds this multiple of the INS error: a matcher
 must cut the error to a third (paper A's goal), a filter must do no harm (paper D's
-"at most 1.05x the INS")."""
+"at most 1.05x the INS"), a voyage's last hour must not be worse than the free INS's."""
 
 
 def summarize(results, kind="matcher"):
@@ -206,7 +215,8 @@ def _command(args):
             ("--drift", args.drift), ("--noise", args.noise), ("--fixes", args.fixes),
             ("--map-error", args.map_error), ("--map-error-length", args.map_error_length),
             ("--truth-map", args.truth_map), ("--told-map-error", args.told_map_error),
-            ("--map-error-order", args.map_error_order)]
+            ("--map-error-order", args.map_error_order), ("--hours", args.hours),
+            ("--ins", args.ins)]
     return "jaxgrav montecarlo " + " ".join(f"{k} {v}" for k, v in opts if v is not None)
 
 
@@ -278,14 +288,15 @@ def cmd_montecarlo(args):
     for name, value in (("--runs", args.runs), ("--chunk", args.chunk)):
         if value is not None and value < 1:
             raise ValueError(f"{name} must be a positive number of runs; got {value}")
-    kind = "filter" if args.method in FILTER_METHODS else "matcher"
+    kind = ("filter" if args.method in FILTER_METHODS else
+            "voyage" if args.method in VOYAGE_METHODS else "matcher")
     if args.map is not None:
         map_name = str(args.map)
     else:  # the method's default (jaxgrav.montecarlo.build)
         map_name = "paper-d" if kind == "filter" else "ryukyu"
     grid = (None if args.map is None or (kind == "filter" and args.map == "paper-d")
             else load_map(args.map, None))
-    if kind == "matcher" and grid is None and args.truth_map is not None:
+    if grid is None and (kind == "voyage" or (kind == "matcher" and args.truth_map)):
         grid = default_grid()
     model = map_error_from_args(args, grid)
     if model is not None and grid is None and kind == "filter":
@@ -293,7 +304,13 @@ def cmd_montecarlo(args):
                          f"{args.method}: paper D's point masses have no grid to draw a map "
                          "error on")
     extra = {}
-    if kind == "filter":
+    for name, value in (("--hours", args.hours), ("--ins", args.ins)):
+        if value is not None and kind != "voyage":
+            raise ValueError(f"{name} is an option of the voyage methods "
+                             f"({', '.join(VOYAGE_METHODS)}); got --method {args.method}")
+    if kind == "voyage":
+        extra.update(voyage_options(args))
+    elif kind == "filter":
         if args.told_map_error is not None:
             if args.told_map_error not in MAP_ERROR_TOLD:
                 raise ValueError(f"--told-map-error must be one of {', '.join(MAP_ERROR_TOLD)} "
@@ -338,6 +355,8 @@ def cmd_montecarlo(args):
               + f" ({spec.settings['told_map_error_source']})")
     for line in _fix_lines(results):
         print(line)
+    if kind == "voyage":
+        print(voyage_lines(results))
     print(f"{args.runs} runs in {seconds:.1f} s ({args.runs / seconds:.1f} runs/s, "
           "compilation included)")
     attrs = dict(
@@ -363,7 +382,9 @@ def cmd_montecarlo(args):
         if name in ds:
             ds[name].attrs.update(var_attrs)
     montecarlo.write_netcdf(ds, out, attrs=attrs, force=args.force)
-    if kind == "filter":
+    if kind == "voyage":
+        plot_voyages(results, f"{args.method}: {args.runs} voyages, {setting}", png, args.force)
+    elif kind == "filter":
         _plot_errors(results, summary, f"{args.method}: {args.runs} runs, {setting}", png,
                      args.force, label="filtered",
                      xlabel="RMS position error, second half of the run (m)")

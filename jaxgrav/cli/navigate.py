@@ -44,12 +44,11 @@ from jaxgrav.cli.inputs import add_columns_option, read_track
 from jaxgrav.datasets import load_map
 from jaxgrav.filters import map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos
-from jaxgrav.match.dense import DenseConfig
 from jaxgrav.navigate import (
     FIX_EVENTS,
     TIGHT_METHODS,
-    LooseConfig,
     TightConfig,
+    loose_config,
     navigate_loose,
     navigate_tight,
 )
@@ -190,14 +189,9 @@ def cmd_navigate(args):
     if args.method in TIGHT_METHODS:
         _tight(args, voyage, grid, n_missing, n_off)
         return
-    matcher = DenseConfig(noise_mgal=args.noise / math.sqrt(args.fix_every),
-                          map_error_mgal=args.map_error,
-                          map_error_length_m=args.map_error_length, fix="posterior",
-                          max_sigma_m=3000.0, max_edge_mass=0.2, n_rotations=5,
-                          max_rotation_deg=3.0)
-    cfg = LooseConfig(matcher=matcher, ins=_INS[args.ins], sigma_pos_m=args.sigma_pos,
-                      sigma_vel=args.sigma_vel, fix_every=args.fix_every,
-                      n_fixes=args.n_fixes, stride=args.stride)
+    cfg = loose_config(_INS[args.ins], args.map_error, args.map_error_length, args.noise,
+                       sigma_pos_m=args.sigma_pos, sigma_vel=args.sigma_vel,
+                       fix_every=args.fix_every, n_fixes=args.n_fixes, stride=args.stride)
     res = navigate_loose(prepare_map(grid), voyage, cfg)
     _write(args, ins, res, cfg)
     events = np.asarray(res.fix_event)

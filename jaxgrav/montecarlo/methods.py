@@ -25,6 +25,11 @@ The paper-D filters (``ukf``, ``ekf``, ``gsf``, ``pmf`` and the guarded ``ukf-gu
 run (expected value 2); they run over paper D's point masses, or over a map (straight
 tracks in random directions).
 
+Voyages (:mod:`~jaxgrav.montecarlo.voyage_runs`): ``voyage-dense`` (loosely coupled,
+hourly dense fixes) and ``voyage-ukf``, ``voyage-ekf``, ``voyage-gsf`` (tightly
+coupled) navigate 12 h patrols; ``ins_err_m`` and ``err_m`` are the last hour's RMS, and
+they return the hourly RMS and error series too.
+
 ``fn`` must be a module-level function (not a fresh closure), so that repeated runs
 reuse the compiled code; everything a user may sweep goes into ``args``.
 
@@ -59,12 +64,15 @@ from jaxgrav.montecarlo.matcher_runs import (
     paper_b_builder,
 )
 from jaxgrav.montecarlo.spec import METRICS, MethodSpec, default_grid
+from jaxgrav.montecarlo.voyage_runs import BUILDERS as VOYAGE_BUILDERS
+from jaxgrav.montecarlo.voyage_runs import VOYAGE_METHODS, voyage_dense_run, voyage_tight_run
 
 __all__ = [
     "BUILDERS",
     "DEPRECATED_METHODS",
     "FILTER_METHODS",
     "METRICS",
+    "VOYAGE_METHODS",
     "MethodSpec",
     "build",
     "chains_run",
@@ -82,6 +90,8 @@ __all__ = [
     "resolve_method",
     "ukf_guard_run",
     "ukf_run",
+    "voyage_dense_run",
+    "voyage_tight_run",
 ]
 
 BUILDERS = {
@@ -91,6 +101,7 @@ BUILDERS = {
     "iccp": functools.partial(paper_b_builder, stage="iccp"),
     "entropy+iccp": entropy_iccp_builder,
     **{k: functools.partial(filter_builder, kind=k) for k in FILTER_METHODS},
+    **VOYAGE_BUILDERS,
 }
 """Method name -> builder."""
 

@@ -19,6 +19,7 @@ from jaxgrav.navigate.loose import (
     LooseResult,
     eotvos_sigma,
     fix_segment,
+    loose_config,
     navigate_loose,
 )
 from jaxgrav.navigate.metrics import VoyageErrors, hourly_rms, voyage_errors, voyage_summary
@@ -46,6 +47,7 @@ __all__ = [
     "fix_update",
     "hourly_rms",
     "innovation_nis",
+    "loose_config",
     "navigate_loose",
     "navigate_tight",
     "spread",

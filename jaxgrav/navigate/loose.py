@@ -23,6 +23,7 @@ The whole voyage is one ``lax.scan`` over segment ends; ``vmap`` it over voyages
 """
 
 import dataclasses
+import math
 from typing import NamedTuple
 
 import jax
@@ -37,7 +38,7 @@ from jaxgrav.sim.ins import INSErrorModel, initial_covariance
 from jaxgrav.sim.trajectory import Track
 
 __all__ = ["FIX_EVENTS", "LooseConfig", "LooseResult", "eotvos_sigma", "fix_segment",
-           "navigate_loose"]
+           "loose_config", "navigate_loose"]
 
 FIX_EVENTS = {
     0: "accepted",
@@ -112,6 +113,39 @@ class LooseConfig:
         if self.stride > self.n_fixes:
             raise ValueError(f"stride must be at most n_fixes = {self.n_fixes} (segments may "
                              f"overlap, not leave gaps); got {self.stride}")
+
+
+def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=10000.0,  # noqa: B008
+                 noise_mgal=1.0, **changes):
+    """The loop's settings used by the examples, ``navigate`` and ``montecarlo``.
+
+    The dense matcher told the map error (GLS score), a posterior-mean fix, fixes with
+    a 1-σ above 3 km or more than 20 % of the posterior mass on the search edge
+    rejected, five rotations within ±3°; its reading noise is ``noise_mgal / √fix_every``
+    (a fix averages ``fix_every`` readings).
+
+    Parameters
+    ----------
+    ins : INSErrorModel
+        The filter's INS error model.
+    map_error_mgal, map_error_length_m : float
+        The map error told to the matcher (mGal, m); 0: the white-noise matcher.
+    noise_mgal : float
+        1-σ of one reading (mGal).
+    **changes
+        Other :class:`LooseConfig` fields (``fix_every``, ``n_fixes``, ``stride``,
+        ``sigma_pos_m`` …).
+
+    Returns
+    -------
+    LooseConfig
+    """
+    fix_every = changes.get("fix_every", LooseConfig.fix_every)
+    matcher = DenseConfig(noise_mgal=noise_mgal / math.sqrt(fix_every),
+                          map_error_mgal=map_error_mgal, map_error_length_m=map_error_length_m,
+                          fix="posterior", max_sigma_m=3000.0, max_edge_mass=0.2, n_rotations=5,
+                          max_rotation_deg=3.0)
+    return LooseConfig(matcher=matcher, ins=ins, **changes)
 
 
 class LooseResult(NamedTuple):

@@ -1,0 +1,59 @@
+"""The voyage methods of ``jaxgrav montecarlo``: their options, summary lines and figure."""
+
+import math
+
+import numpy as np
+
+from jaxgrav.cli.voyage import MAX_HOURS
+from jaxgrav.montecarlo.voyage_runs import SERIES_EVERY_S, TOLD
+from jaxgrav.navigate import voyage_summary
+from jaxgrav.plot import plot_voyage_errors, save_figure
+from jaxgrav.scenarios import NAVIGATION_GRADE
+from jaxgrav.sim.ins import INSErrorModel
+
+__all__ = ["VOYAGE_INS", "plot_voyages", "voyage_lines", "voyage_options"]
+
+VOYAGE_INS = {"navigation": NAVIGATION_GRADE, "strategic": INSErrorModel()}
+"""``--ins``: the INS simulated and told to the navigator."""
+
+
+def voyage_options(args):
+    """Builder options of a voyage method from the command line (ValueError naming the
+    option for ``--fixes``, a bad ``--hours``, ``--told-map-error`` or ``--map-error-order``)."""
+    if args.fixes is not None:
+        raise ValueError(f"--fixes is not an option of {args.method}: a voyage runs over "
+                         "--hours (default 12)")
+    if args.hours is not None and not (math.isfinite(args.hours) and 0 < args.hours <= MAX_HOURS):
+        raise ValueError(f"--hours must be a positive length of at most {MAX_HOURS:g} h; got "
+                         f"{args.hours!r}")
+    told = args.told_map_error or "state"
+    if told not in TOLD:
+        raise ValueError(f"--told-map-error must be one of {', '.join(TOLD)} with --method "
+                         f"{args.method}; got {told!r}")
+    if args.map_error_order not in (None, 1, 2):
+        raise ValueError(f"--map-error-order must be 1 or 2; got {args.map_error_order}")
+    return dict(map_error_told=told, map_error_order=args.map_error_order, hours=args.hours,
+                ins=VOYAGE_INS[args.ins or "navigation"])
+
+
+def _km(values):
+    return " ".join(f"{v / 1000:.1f}" for v in values)
+
+
+def voyage_lines(results):
+    """The voyage figures of :func:`~jaxgrav.navigate.voyage_summary`, as two lines."""
+    vs = voyage_summary(results["hourly_err_m"], results["hourly_ins_err_m"], results["nees"])
+    return (f"hourly RMS (km) navigation: {_km(vs['hourly_rms_nav_m'])}; free INS: "
+            f"{_km(vs['hourly_rms_free_m'])}\n"
+            f"last hour / free INS {vs['last_hour_ratio']:.3f}, last / second hour "
+            f"{vs['last_over_second_hour']:.2f}, worse than the free INS in some hour from "
+            f"the second: {100 * vs['share_worse_than_free_some_hour']:.0f} % of voyages, NEES "
+            f"mean {vs['nees']:.2f} (median {vs['nees_median']:.2f}, 2 expected)")
+
+
+def plot_voyages(results, title, path, force):
+    """Error against time (median and 90 % band, free INS alongside, stated 1-σ) as a PNG."""
+    series = [np.asarray(results[k]) for k in ("err_series_m", "ins_err_series_m",
+                                               "sigma_series_m")]
+    t_h = np.arange(series[0].shape[1]) * SERIES_EVERY_S / 3600.0
+    save_figure(plot_voyage_errors(t_h, *series, title=title), path, force=force)

@@ -1,0 +1,192 @@
+"""Monte Carlo methods over voyages: simulate a patrol, navigate it, measure against the truth.
+
+``voyage-dense`` is the loosely coupled loop (:func:`~jaxgrav.navigate.navigate_loose`,
+hourly dense-matcher fixes, :func:`~jaxgrav.navigate.loose_config`); ``voyage-ukf``,
+``voyage-ekf`` and ``voyage-gsf`` the tightly coupled filters
+(:func:`~jaxgrav.navigate.navigate_tight`). Each run draws a ``patrol-12h`` voyage
+(:func:`~jaxgrav.scenarios.voyage_scenario`; navigation-grade INS unless told
+otherwise) whose readings see the map plus the run's map error, and returns, besides
+:data:`~jaxgrav.montecarlo.spec.METRICS`:
+
+``ins_err_m``, ``err_m``   RMS radial error of the free INS and of the navigation solution
+                           over the last hour (m)
+``nees``                   mean position NEES over the voyage (2 expected)
+``hourly_err_m``, ``hourly_ins_err_m``   RMS per hour (m), shape ``(H,)``
+``err_series_m``, ``ins_err_series_m``, ``sigma_series_m``   every 10 min: radial error
+                           of the solution, of the free INS, and the stated radial 1-σ (m)
+``status``                 tightly coupled: the filter's status bits OR-ed over the voyage;
+                           loosely coupled: bit ``k`` set when a fix event ``k`` of
+                           :data:`~jaxgrav.navigate.FIX_EVENTS` happened (bit 0: accepted)
+"""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+
+from jaxgrav.fields.map_error import CorrelatedMapError
+from jaxgrav.filters import STATUS_FILTER, matched_state
+from jaxgrav.montecarlo.spec import (
+    MethodSpec,
+    check_map_error,
+    default_grid,
+    map_error_settings,
+    region_of,
+)
+from jaxgrav.navigate import (
+    FIX_EVENTS,
+    TIGHT_METHODS,
+    TightConfig,
+    hourly_rms,
+    loose_config,
+    navigate_loose,
+    navigate_tight,
+    voyage_errors,
+)
+from jaxgrav.prepared import prepare_map
+from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
+from jaxgrav.scenarios.paper_a import check_region_covered
+
+__all__ = ["SERIES_EVERY_S", "VOYAGE_METHODS", "voyage_builder", "voyage_dense_run",
+           "voyage_tight_run"]
+
+VOYAGE_METHODS = ("voyage-dense", *(f"voyage-{m}" for m in TIGHT_METHODS))
+"""The voyage methods of :data:`~jaxgrav.montecarlo.methods.BUILDERS`."""
+
+SERIES_EVERY_S = 600.0
+"""Spacing of the error series kept per run (s)."""
+
+TOLD = ("state", "none")
+"""What a voyage method may be told of the map error: the matched model (a map-error
+state for the filters, the GLS score for the matcher) or nothing."""
+
+
+def _metrics(voyage, nav, cov, dt, status):
+    err = voyage_errors(voyage, nav, cov)
+    every = round(SERIES_EVERY_S / dt)
+    last = round(3600.0 / dt)
+    sigma = jnp.sqrt(jnp.trace(cov, axis1=1, axis2=2))
+    return dict(
+        ins_err_m=jnp.sqrt(jnp.mean(err.free_m[-last:] ** 2)),
+        err_m=jnp.sqrt(jnp.mean(err.nav_m[-last:] ** 2)),
+        status=status.astype(jnp.int32), nees=jnp.mean(err.nees),
+        hourly_err_m=hourly_rms(err.nav_m, dt), hourly_ins_err_m=hourly_rms(err.free_m, dt),
+        err_series_m=err.nav_m[::every], ins_err_series_m=err.free_m[::every],
+        sigma_series_m=sigma[::every])
+
+
+def voyage_tight_run(key, pm, grid, scenario, model, config):
+    """One voyage navigated by the tightly coupled filter (see the module notes).
+
+    Parameters
+    ----------
+    key : PRNG key
+    pm : PreparedMap
+        The map as the filter samples it.
+    grid : Grid
+        The same map, for the truth (map + the run's error).
+    scenario : VoyageScenario
+    model : CorrelatedMapError or TruthGrid or None
+        The readings' map error.
+    config : TightConfig
+    """
+    voyage = voyage_scenario(key, grid, scenario, model)
+    res = navigate_tight(pm, voyage, config)
+    status = jax.lax.reduce(res.status, jnp.int32(0), jax.lax.bitwise_or, (0,))
+    return _metrics(voyage, res.nav, res.cov_north_east, scenario.dt, status)
+
+
+def voyage_dense_run(key, pm, grid, scenario, model, config):
+    """One voyage navigated by the loosely coupled loop (arguments as :func:`voyage_tight_run`,
+    ``config`` a :class:`~jaxgrav.navigate.LooseConfig`); also returns ``fix_event``."""
+    voyage = voyage_scenario(key, grid, scenario, model)
+    res = navigate_loose(pm, voyage, config)
+    bits = jnp.sum(jnp.stack([jnp.any(res.fix_event == k) * (1 << k) for k in FIX_EVENTS]))
+    out = _metrics(voyage, res.nav, res.cov_north_east, scenario.dt, bits)
+    return {**out, "fix_event": res.fix_event}
+
+
+def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None, map_error=None,
+                   map_error_told="state", map_error_order=None, hours=None,
+                   ins=NAVIGATION_GRADE):
+    """The :class:`~jaxgrav.montecarlo.spec.MethodSpec` of a voyage method.
+
+    Parameters
+    ----------
+    grid : Grid, optional
+        The map (default the shipped 2.5′ ``ryukyu``). The preset's region (25–35° N,
+        125–135° E) is used if the map covers it, else the map's own extent.
+    kind : {"voyage-dense", "voyage-ukf", "voyage-ekf", "voyage-gsf"}
+    drift_deg : float, optional
+        Initial INS position error (degrees of arc; default 500 m).
+    noise : float, optional
+        Reading noise 1-σ (mGal, default 1).
+    n_fixes : None
+        Not a voyage setting (ValueError otherwise; see ``hours``).
+    map_error : CorrelatedMapError, TruthGrid or None
+        The readings' map error, drawn per run.
+    map_error_told : {"state", "none"}
+        ``state``: the filters carry a map-error state matched to ``map_error`` (of
+        order ``map_error_order``, default 2), the dense matcher is told its σ and L;
+        ``none``: neither is told.
+    map_error_order : {1, 2}, optional
+        Order of the filters' map-error state.
+    hours : float, optional
+        Length of each voyage (default 12).
+    ins : INSErrorModel
+        The INS (simulated and told to the navigator); default navigation grade.
+    """
+    if kind not in VOYAGE_METHODS:
+        raise ValueError(f"kind must be one of {', '.join(VOYAGE_METHODS)}; got {kind!r}")
+    if n_fixes is not None:
+        raise ValueError("fixes per track is not a voyage setting: a voyage method runs over "
+                         f"--hours (default 12); got {n_fixes}")
+    if map_error_told not in TOLD:
+        raise ValueError(f"map_error_told must be one of {', '.join(TOLD)} for {kind}; got "
+                         f"{map_error_told!r}")
+    if map_error_order not in (None, 1, 2):
+        raise ValueError(f"map_error_order must be 1 or 2; got {map_error_order!r}")
+    grid = default_grid() if grid is None else grid
+    changes = {"ins": ins}
+    if hours is not None:
+        changes["hours"] = float(hours)
+    if noise is not None:
+        if not noise > 0:
+            raise ValueError(f"noise must be a positive reading 1-σ (mGal); got {noise!r}")
+        changes["noise_mgal"] = float(noise)
+    if drift_deg is not None:
+        if not drift_deg > 0:
+            raise ValueError(f"drift must be a positive initial position error (degrees of "
+                             f"arc); got {drift_deg!r}")
+        changes["pos_error_m"] = float(drift_deg) * 111_195.0
+    scenario = voyage_preset("patrol-12h", **changes)
+    try:
+        check_region_covered(grid, scenario.region, "the map")
+    except ValueError:
+        scenario = voyage_preset("patrol-12h", region=region_of(grid), **changes)
+    model = check_map_error(map_error, grid)
+    told = model if isinstance(model, CorrelatedMapError) and map_error_told == "state" else None
+    sigma_pos = scenario.pos_error_m / 2**0.5
+    if kind == "voyage-dense":
+        sigma = 0.0 if told is None else float(told.sigma)
+        length = 10000.0 if told is None else float(told.length_m)
+        config = loose_config(scenario.ins, sigma, length, scenario.noise_mgal,
+                              sigma_pos_m=sigma_pos)
+        fn, bits = voyage_dense_run, {1 << k: v for k, v in FIX_EVENTS.items()}
+    else:
+        state = None if told is None else matched_state(told, map_error_order or told.order)
+        config = TightConfig(ins=scenario.ins, sigma_pos_m=sigma_pos,
+                             noise_mgal=scenario.noise_mgal, map_error=state,
+                             method=kind.removeprefix("voyage-"))
+        fn, bits = voyage_tight_run, {v: k for k, v in STATUS_FILTER.items() if v}
+    settings = dict(description=f"{scenario.hours:g} h patrols, navigated "
+                    + ("loosely coupled (hourly dense fixes)" if kind == "voyage-dense" else
+                       f"tightly coupled ({kind.removeprefix('voyage-')})"),
+                    hours=scenario.hours, dt=scenario.dt, noise_mgal=scenario.noise_mgal,
+                    pos_error_m=scenario.pos_error_m, map_error_told=map_error_told,
+                    series_every_s=SERIES_EVERY_S, **map_error_settings(model))
+    return MethodSpec(fn, (prepare_map(grid), grid, scenario, model, config), settings, bits)
+
+
+BUILDERS = {k: functools.partial(voyage_builder, kind=k) for k in VOYAGE_METHODS}
+"""Voyage method name -> builder (merged into :data:`~jaxgrav.montecarlo.methods.BUILDERS`)."""

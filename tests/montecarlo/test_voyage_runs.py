@@ -1,0 +1,92 @@
+"""Voyage methods of the Monte Carlo runner (montecarlo.voyage_runs): a run equals the
+navigator called directly on the same voyage, the metrics are what they say, bad options
+are named; and ``jaxgrav montecarlo --method voyage-*`` end to end."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import xarray as xr
+
+from jaxgrav import montecarlo
+from jaxgrav.cli import main
+from jaxgrav.fields.map_error import map_error
+from jaxgrav.montecarlo.voyage_runs import voyage_builder
+from jaxgrav.navigate import hourly_rms, navigate_tight, voyage_errors
+from jaxgrav.scenarios import voyage_scenario
+
+MODEL = map_error(3.0, 10000.0)
+
+
+@pytest.fixture(scope="module")
+def tight():
+    spec = montecarlo.build("voyage-ukf", None, map_error=MODEL, hours=1.0)
+    return spec, montecarlo.run(spec.fn, jax.random.key(3), 2, args=spec.args, progress=False)
+
+
+def test_a_run_is_the_navigator_on_the_same_voyage(tight):
+    spec, res = tight
+    pm, grid, scenario, model, config = spec.args
+    assert config.map_error is not None and config.map_error.order == 2  # matched, told
+    key = jax.random.split(jax.random.key(3), 2)[1]
+    voyage = voyage_scenario(key, grid, scenario, model)
+    nav = navigate_tight(pm, voyage, config)
+    err = voyage_errors(voyage, nav.nav, nav.cov_north_east)
+    last = round(3600.0 / scenario.dt)
+    assert float(res["err_m"][1]) == pytest.approx(
+        float(jnp.sqrt(jnp.mean(err.nav_m[-last:] ** 2))), rel=1e-6)
+    assert float(res["ins_err_m"][1]) == pytest.approx(
+        float(jnp.sqrt(jnp.mean(err.free_m[-last:] ** 2))), rel=1e-6)
+    np.testing.assert_allclose(res["hourly_err_m"][1], hourly_rms(err.nav_m, scenario.dt),
+                               rtol=1e-6)
+    assert float(res["nees"][1]) == pytest.approx(float(jnp.mean(err.nees)), rel=1e-6)
+    assert res["err_series_m"].shape == (2, 7)  # every 10 min over 1 h, start included
+    assert np.all(res["status"] == 0)
+
+
+def test_dense_runs_record_their_fix_events():
+    spec = montecarlo.build("voyage-dense", None, map_error=MODEL, hours=1.0)
+    res = montecarlo.run(spec.fn, jax.random.key(0), 1, args=spec.args, progress=False)
+    events = res["fix_event"][0]
+    assert events.shape == (1,)
+    assert int(res["status"][0]) == 1 << int(events[0])  # bit k: event k happened
+    assert spec.args[-1].matcher.map_error_mgal == 3.0  # told
+
+
+@pytest.mark.parametrize(("options", "error", "message"), [
+    ({"n_fixes": 30}, ValueError, "fixes per track is not a voyage setting"),
+    ({"map_error_told": "white"}, ValueError, "map_error_told must be one of state, none"),
+    ({"map_error_order": 3}, ValueError, "map_error_order must be 1 or 2"),
+    ({"noise": -1.0}, ValueError, "noise must be a positive reading"),
+    ({"kind": "voyage-pmf"}, ValueError, "kind must be one of voyage-dense"),
+])
+def test_bad_builder_options_are_named(options, error, message):
+    kw = {"kind": "voyage-ukf", **options}
+    with pytest.raises(error, match=message):
+        voyage_builder(None, **kw)
+
+
+def test_cli_voyage_method_writes_results_and_figure(tmp_path, capsys):
+    out = tmp_path / "v.nc"
+    assert main(["montecarlo", "--method", "voyage-ukf", "--runs", "2", "--hours", "1",
+                 "--map-error", "3", "--no-progress", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "last hour / free INS" in said and "NEES mean" in said
+    ds = xr.open_dataset(out)
+    assert ds["hourly_err_m"].shape == (2, 1) and ds.attrs["method"] == "voyage-ukf"
+    assert "--hours 1" in ds.attrs["command"]
+    ds.close()
+    assert out.with_suffix(".png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--method", "voyage-ukf", "--fixes", "30"], "--fixes is not an option of voyage-ukf"),
+    (["--method", "voyage-ukf", "--hours", "-2"], "--hours must be a positive length"),
+    (["--method", "ukf", "--hours", "2"], "--hours is an option of the voyage methods"),
+    (["--method", "voyage-ekf", "--told-map-error", "white"],
+     "--told-map-error must be one of state, none"),
+])
+def test_cli_bad_voyage_options_are_named(tmp_path, capsys, args, message):
+    out = tmp_path / "v.nc"
+    assert main(["montecarlo", *args, "--runs", "2", "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err and not out.exists()
