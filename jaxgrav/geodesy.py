@@ -6,6 +6,7 @@ arguments, and take degrees, metres and m/s at the interface. Work in float64
 sub-millimetre or sub-µGal results; float32 is fine for mGal-level work.
 """
 
+import jax
 import jax.numpy as jnp
 
 from jaxgrav import constants as c
@@ -16,6 +17,7 @@ __all__ = [
     "enu_basis",
     "enu_to_geodetic",
     "eotvos",
+    "eotvos_jacobian",
     "geodetic_to_ecef",
     "geodetic_to_enu",
     "local_offsets_m",
@@ -181,6 +183,32 @@ def eotvos(lat_deg, v_east, v_north, h=0.0, form="full"):
     else:
         raise ValueError(f"form must be 'full' or 'simple', got {form!r}")
     return e / c.MGAL
+
+
+def eotvos_jacobian(lat_deg, v_east, v_north, h=0.0, form="full"):
+    """``∂E/∂v``: the Eötvös effect's sensitivity to the velocity, north then east.
+
+    A reading corrected with a velocity that is ``δv`` off keeps an Eötvös error of
+    ``∂E/∂v · δv`` (to first order): about 12.6 mGal per m/s east at 30° N, ``2 v / R``
+    (~0.16 mGal per m/s at 5 m/s) north. The derivative of :func:`eotvos` itself
+    (``jax.grad``), so the two never disagree.
+
+    Parameters
+    ----------
+    lat_deg, v_east, v_north, h, form
+        As :func:`eotvos`, broadcast together.
+
+    Returns
+    -------
+    Array, shape ``(..., 2)``
+        mGal per m/s: ``[∂E/∂v_north, ∂E/∂v_east]``.
+    """
+    grad = jax.grad(lambda vn, ve, la, hh: eotvos(la, ve, vn, hh, form), argnums=(0, 1))
+    one = jnp.vectorize(lambda la, ve, vn, hh: jnp.stack(grad(vn, ve, la, hh)),
+                        signature="(),(),(),()->(2)")
+    lat, ve, vn, hh = jnp.broadcast_arrays(*(jnp.asarray(a, float) for a in
+                                             (lat_deg, v_east, v_north, h)))
+    return one(lat, ve, vn, hh)
 
 
 def geodetic_to_ecef(lat_deg, lon_deg, h_m=0.0):

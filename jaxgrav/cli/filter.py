@@ -6,9 +6,9 @@ Wire into :mod:`jaxgrav.cli` with ``cli_filter.add_parsers(sub)``.
 anomaly readings, runs a filter of :mod:`jaxgrav.filters` over the 13-state
 INS error model of :mod:`jaxgrav.sim.ins` and writes the filtered track::
 
-    TRACK.csv  t (s, uniform step), lat, lon (INS, degrees), gravity (measured,
-               Eötvös-corrected anomaly, mGal; empty where there is no reading),
-               optional v_east, v_north (INS, m/s; not used by the error-state filter)
+    TRACK.csv  t (s, uniform step), lat, lon (INS, degrees), gravity (the
+               gravimeter's anomaly, mGal; empty where there is no reading),
+               optional v_east, v_north (INS, m/s)
     OUT.csv    t, lat, lon (INS position − estimated INS error, degrees),
                sigma_north, sigma_east (posterior 1-σ of the position, m),
                cov_north_east (m²), v_east, v_north (INS velocity − estimated error,
@@ -19,6 +19,13 @@ INS error model of :mod:`jaxgrav.sim.ins` and writes the filtered track::
                and its predicted 1-σ, mGal; empty without a reading), status (bit
                flags of jaxgrav.filters.STATUS_FILTER, 0 = a normal update)
 
+Eötvös, the one rule of ``match``, ``filter`` and ``navigate``: with ``v_east`` and
+``v_north`` the gravity column is the **raw** reading, which the command corrects with
+the INS velocity (``--eotvos-corrected``: it already was, with that velocity); the
+UKF, EKF and Gaussian sum then carry the Eötvös error of the INS velocity error,
+``∂E/∂v · δv``, in their measurement (the point-mass filter does not, and says so).
+Without velocity columns the gravity column must be Eötvös-corrected already.
+
 The prior is the INS error at one step before the first row (zero mean, the
 ``--sigma-*`` standard deviations); every row's reading updates the estimate, and
 row ``k`` of the output is the causal posterior after row ``k``.
@@ -28,7 +35,8 @@ paper-d``) or a fitted point-mass model file (``--point-masses MODEL.json``, see
 :func:`~jaxgrav.fields.pointmass_fit.save_point_masses`; its offset is taken off the
 readings).
 
-``simulate-filter`` writes such a track from paper D's scenario
+``simulate-filter`` writes such a track (raw readings: the Eötvös effect of the true
+velocity taken off, as a gravimeter reads) from paper D's scenario
 (:func:`~jaxgrav.scenarios.filter_scenario`) over its three point masses, or over a
 map (``--map``) whose readings may see a drawn map error (``--map-error SIGMA
 --map-error-length L``). ``filter --map-error SIGMA --map-error-length L`` tells the
@@ -51,6 +59,7 @@ from jaxgrav.fields.pointmass_fit import load_point_masses
 from jaxgrav.filters import STATUS_FILTER, status_messages_filter
 from jaxgrav.filters.api import FILTER_METHODS, PMF_SPAN_SIGMA, filter_track, reading_stride
 from jaxgrav.filters.map_state import map_error_state
+from jaxgrav.geodesy import eotvos, eotvos_jacobian
 from jaxgrav.scenarios import FilterScenario, filter_scenario
 from jaxgrav.sim import DEG_ARC_M
 from jaxgrav.tracks import csv_line, write_track_csv
@@ -85,8 +94,8 @@ def add_parsers(subparsers):
     f.add_argument("--var", default=None, help="variable to read when the file has several")
     f.add_argument("--track", required=True,
                    help="CSV: t (s, uniform step), lat, lon (INS, degrees), gravity "
-                        "(Eötvös-corrected anomaly, mGal; empty where no reading); "
-                        "optional v_east, v_north (m/s; not used)")
+                        "(mGal; empty where no reading; raw when v_east, v_north are given, "
+                        "else Eötvös-corrected); optional v_east, v_north (INS, m/s)")
     add_columns_option(f)
     f.add_argument("--method", choices=FILTER_METHODS, default="ukf",
                    help="ukf (default), ekf (jacfwd Jacobian), gsf (Gaussian sum of 3 x 3 "
@@ -121,6 +130,9 @@ def add_parsers(subparsers):
                    help="order of the map-error state: 1 first-order Gauss-Markov (default), "
                         "2 second-order (value and rate; covariance s^2 (1 + r/L) e^(-r/L), "
                         "the model of simulate-filter --map-error); pmf: 1 only")
+    f.add_argument("--eotvos-corrected", action="store_true",
+                   help="the gravity column is already Eötvös-corrected with the INS velocity "
+                        "of v_east, v_north (default: raw, corrected here)")
     f.add_argument("--force", action="store_true", help="overwrite an existing output")
     f.set_defaults(func=cmd_filter)
 
@@ -225,6 +237,24 @@ def _field(args, track):
     return track_map(args, track, margin_m), f"map {args.map}", 0.0
 
 
+def _eotvos(args, track, g):
+    """The readings Eötvös-corrected by the one rule (module notes), the filter's ``∂E/∂v``
+    (None: not carried) and a note for the summary line."""
+    if "v_east" not in track or "v_north" not in track:
+        if args.eotvos_corrected:
+            raise ValueError(f"--eotvos-corrected needs the INS velocity columns v_east, "
+                             f"v_north in --track {str(args.track)!r}")
+        return g, None, "no velocity columns: gravity taken as Eötvös-corrected"
+    lat, ve, vn = (np.asarray(track[k]) for k in ("lat", "v_east", "v_north"))
+    if not args.eotvos_corrected:
+        g = g + np.asarray(eotvos(lat, ve, vn))
+    how = "given corrected" if args.eotvos_corrected else "Eötvös-corrected here"
+    if args.method == "pmf":
+        return g, None, f"readings {how} with the INS velocity (pmf: its error not modelled)"
+    jac = np.asarray(eotvos_jacobian(lat, ve, vn))
+    return g, jac, f"readings {how} with the INS velocity, its error in the filter"
+
+
 def _check_on_map(grid, lat, lon, where, name):
     inside = np.asarray(grid.contains(lat, lon))
     if not inside.all():
@@ -272,10 +302,11 @@ def cmd_filter(args):
     field, field_name, offset = _field(args, track)
     if args.map is not None:
         _check_on_map(field, lat, lon, where, args.map)
+    g, jac, eotvos_note = _eotvos(args, track, g)
     # the model is masses + offset: z − (masses + offset + bias) = (z − offset) − (masses + bias)
     res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
-                       guard=args.guard, map_error=fogm, where=where)
+                       guard=args.guard, map_error=fogm, eotvos_velocity=jac, where=where)
     write_track_csv(args.out, _output_columns(t, track, res), force=args.force, precision=12)
     n_read = int(np.isfinite(g).sum())
     stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""
@@ -286,7 +317,7 @@ def cmd_filter(args):
                    + (", second order" if args.map_error_order == 2 else ""))
     print(f"wrote {args.out}: {args.method} over {t.size} rows ({n_read} readings{stride}) "
           f"on {field_name}; final 1-sigma {res['sigma_north'][-1]:.0f} m north, "
-          f"{res['sigma_east'][-1]:.0f} m east")
+          f"{res['sigma_east'][-1]:.0f} m east; {eotvos_note}")
     status = res["status"]
     for name in status_messages_filter(int(np.bitwise_or.reduce(status))):
         if name == "no_reading":
@@ -354,11 +385,13 @@ def cmd_simulate_filter(args):
             over += f" (map error {me_sigma:g} mGal, L {me_length:g} m)"
     truth = run.truth
     err = np.asarray(run.errors)
+    # the raw reading, as a gravimeter gives it: minus the Eötvös effect of the true velocity
+    raw = np.asarray(run.readings) - np.asarray(eotvos(truth.lat, truth.v_east, truth.v_north))
     write_track_csv(args.out, {
         "t": truth.t, "lat": run.ins_lat, "lon": run.ins_lon,
         "v_east": np.asarray(truth.v_east) + err[:, 3],
         "v_north": np.asarray(truth.v_north) + err[:, 2],
-        "gravity": run.readings,
+        "gravity": raw,
     }, force=args.force, precision=12)
     if args.truth:
         write_track_csv(args.truth, {"t": truth.t, "lat": truth.lat, "lon": truth.lon,

@@ -64,8 +64,11 @@ def add_parsers(sub):
     m.add_argument("--map-error-length", type=float, default=10000.0, metavar="L",
                    help="dense, chains, entropy+iccp: correlation length of the map's error "
                         "(m, default 10000)")
-    m.add_argument("--no-eotvos", action="store_true",
-                   help="do not Eötvös-correct the readings even if velocities are given")
+    m.add_argument("--eotvos-corrected", "--no-eotvos", dest="no_eotvos", action="store_true",
+                   help="the gravity column is already Eötvös-corrected (with velocities "
+                        "v_east, v_north the column is otherwise taken as raw and corrected "
+                        "here; the rule of match, filter and navigate); --no-eotvos is its "
+                        "older name")
     m.add_argument("--force", action="store_true", help="overwrite an existing output")
     m.set_defaults(func=_cmd_match)
 

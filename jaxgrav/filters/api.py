@@ -140,7 +140,7 @@ def _pmf_run(field, dt, p0, cell_m, q_pos, steps, every, map_error=None, speed=0
 
 def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
                  sigma_vel=0.1414, sigma_gravity=1.0, guard=None, map_error=None,
-                 where="track"):
+                 eotvos_velocity=None, where="track"):
     """Filter one track; the engine of ``jaxgrav filter`` (inputs already validated).
 
     Run with x64 enabled (the CLI does): positions are in degrees.
@@ -169,6 +169,13 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         ``τ = L / speed`` with the track's median ground speed (from the INS
         positions); ``pmf``: first order only, per grid cell.
         None or σ = 0: today's filters.
+    eotvos_velocity : numpy.ndarray, shape ``(T, 2)``, optional
+        ``∂E/∂v`` (mGal per m/s, north then east;
+        :func:`~jaxgrav.geodesy.eotvos_jacobian`) at the velocity the readings were
+        Eötvös-corrected with: the filter carries the Eötvös error of the INS velocity
+        error, ``∂E/∂v · δv``, in its measurement (:attr:`~jaxgrav.filters.Step.h_lin`).
+        ``ukf``, ``ekf``, ``gsf`` only (ValueError for ``pmf``). None: the readings are
+        taken as exactly corrected.
     where : str
         How error messages name the track.
 
@@ -205,7 +212,16 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     if map_error is not None and method != "pmf":
         dynamics = dynamics._replace(dt=jnp.asarray(dt))
         dynamics, _, p0, meas = augment(map_error, dynamics, jnp.zeros(p0.shape[0]), p0, speed)
-    steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r))
+    h_lin = None
+    if eotvos_velocity is not None:
+        if method == "pmf":
+            raise ValueError(f"{where}: the point-mass filter does not carry the Eötvös error "
+                             "of the velocity; use ukf, ekf or gsf, or pass "
+                             "eotvos_velocity=None")
+        h_lin = jnp.zeros((n, p0.shape[0]), p0.dtype).at[:, VEL].set(
+            jnp.asarray(eotvos_velocity, p0.dtype))
+    steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r),
+                 h_lin)
     if method == "pmf":
         rows = np.flatnonzero(np.isfinite(gravity))
         every = reading_stride(rows, where)

@@ -27,7 +27,6 @@ from jaxgrav.navigate.tight import (
     TIGHT_METHODS,
     TightConfig,
     TightResult,
-    eotvos_jacobian,
     navigate_tight,
 )
 
@@ -40,7 +39,6 @@ __all__ = [
     "TightConfig",
     "TightResult",
     "VoyageErrors",
-    "eotvos_jacobian",
     "eotvos_sigma",
     "error_kf_tables",
     "fix_segment",

@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._pytree import pytree_dataclass, static_field
-from jaxgrav.geodesy import eotvos
+from jaxgrav.geodesy import eotvos, eotvos_jacobian
 from jaxgrav.match.dense import DenseConfig, match_dense
 from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, innovation_nis, spread
 from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
@@ -220,7 +220,7 @@ def eotvos_sigma(lat, v_east, v_north, vel_cov):
     vel_cov : Array, shape ``(2, 2)``
         Covariance of the velocity error, north then east (m²/s²).
     """
-    jac = jax.jacfwd(lambda v: eotvos(lat, v[1], v[0]))(jnp.stack([v_north, v_east]))
+    jac = eotvos_jacobian(lat, v_east, v_north)
     return jnp.sqrt(jac @ vel_cov @ jac)
 
 

@@ -12,7 +12,7 @@ INS velocity, ``z = g_raw + E(v_INS)``. What is left is the Eötvös effect of t
 velocity error, ``E(v_INS) − E(v_true) ≈ ∂E/∂v · δv`` — 12.6 mGal per m/s east at
 30° N, more than the map error for a navigation-grade INS. The measurement carries it
 as a known linear part (:attr:`~jaxgrav.filters.Step.h_lin`, the Jacobian of
-:func:`~jaxgrav.geodesy.eotvos` at the INS velocity in the velocity-error columns), so
+:func:`~jaxgrav.geodesy.eotvos_jacobian` at the INS velocity, in the velocity-error columns), so
 the filter estimates the velocity error from it instead of taking it for map or bias:
 
     z = Δg_M(p_INS − δp) + δg_a + ε_map + ∂E/∂v · δv + noise.
@@ -43,12 +43,12 @@ from jaxgrav.filters import (
     run_filter,
     ukf,
 )
-from jaxgrav.geodesy import eotvos
+from jaxgrav.geodesy import eotvos, eotvos_jacobian
 from jaxgrav.sim.drift import apply_drift
 from jaxgrav.sim.ins import VEL, INSErrorModel, initial_covariance, transition
 from jaxgrav.sim.trajectory import Track
 
-__all__ = ["TIGHT_METHODS", "TightConfig", "TightResult", "eotvos_jacobian", "navigate_tight"]
+__all__ = ["TIGHT_METHODS", "TightConfig", "TightResult", "navigate_tight"]
 
 TIGHT_METHODS = ("ukf", "ekf", "gsf")
 """The filters :func:`navigate_tight` runs (``gsf``: a 3 × 3 Gaussian sum of UKFs)."""
@@ -125,24 +125,6 @@ class TightResult(NamedTuple):
     innovation: jax.Array
     innovation_var: jax.Array
     status: jax.Array
-
-
-def eotvos_jacobian(lat, v_east, v_north):
-    """``∂E/∂v`` (mGal per m/s) of :func:`~jaxgrav.geodesy.eotvos`, north then east.
-
-    Parameters
-    ----------
-    lat, v_east, v_north : Array, shape ``(N,)``
-        Position (degrees) and velocity (m/s).
-
-    Returns
-    -------
-    Array, shape ``(N, 2)``
-    """
-    def one(la, ve, vn):
-        return jax.grad(lambda v: eotvos(la, v[1], v[0]))(jnp.stack([vn, ve]))
-
-    return jax.vmap(one)(lat, v_east, v_north)
 
 
 def _filter(method, measurement, gate):

@@ -25,6 +25,15 @@ def track(tmp_path_factory):
     return d
 
 
+def test_match_eotvos_corrected_takes_the_column_as_is(track):
+    """--eotvos-corrected (older name --no-eotvos): the same rule as filter and navigate."""
+    for flag in ("--eotvos-corrected", "--no-eotvos"):
+        out = track / f"r{flag}.json"
+        assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"),
+                     "--out", str(out), flag]) == 0
+        assert json.loads(out.read_text())["eotvos_corrected"] is False
+
+
 def test_simulate_then_match_beats_ins(track):
     out = track / "r.json"
     assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"),

@@ -17,7 +17,7 @@ from jaxgrav.cli import main
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
 from jaxgrav.fields.pointmass_fit import save_point_masses
-from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.geodesy import eotvos, meridian_radius, prime_vertical_radius
 from jaxgrav.tracks import read_track_csv, write_track_csv
 
 OUT_COLUMNS = ["t", "lat", "lon", "sigma_north", "sigma_east", "cov_north_east", "v_east",
@@ -71,6 +71,9 @@ def test_ukf_beats_the_ins_on_an_east_west_track(sim, tmp_path, capsys):
     assert _filter(sim / "track.csv", out, "--method", "ukf") == 0
     cap = capsys.readouterr()
     assert f"wrote {out}: ukf over 121 rows (121 readings)" in cap.out
+    # the one Eötvös rule: raw readings with velocities, corrected here, the error modelled
+    assert "readings Eötvös-corrected here with the INS velocity, its error in the filter" in (
+        cap.out)
     assert cap.err == ""  # no status warnings on a clean run
     res = read_track_csv(out)
     track = read_track_csv(sim / "track.csv")
@@ -181,9 +184,14 @@ def test_gsf_runs(sim, tmp_path):
 
 @pytest.fixture(scope="module")
 def stride_track(sim):
+    """A reading every 3rd row, Eötvös-corrected with the true velocity (exact), no velocity
+    columns: the point-mass filter's tests see readings without an Eötvös error."""
     cols = read_track_csv(sim / "track.csv")
+    truth = read_track_csv(sim / "truth.csv")
+    exact = cols["gravity"] + np.asarray(eotvos(truth["lat"], truth["v_east"], truth["v_north"]))
     g = np.full_like(cols["gravity"], np.nan)
-    g[2::3] = cols["gravity"][2::3]  # a reading every 3rd row, from row 2
+    g[2::3] = exact[2::3]  # a reading every 3rd row, from row 2
+    cols = {k: cols[k] for k in ("t", "lat", "lon")}
     cols["gravity"] = g
     write_track_csv(sim / "stride.csv", cols)
     return sim / "stride.csv"
@@ -195,7 +203,8 @@ def test_pmf_on_a_reading_stride_is_causal(sim, stride_track, tmp_path, capsys):
     assert _filter(stride_track, out, "--method", "pmf") == 0
     assert "(40 readings, updates every 3 rows)" in capsys.readouterr().out
     res = read_track_csv(out)
-    assert list(res) == OUT_COLUMNS and res["t"].size == 121
+    no_velocity = [c for c in OUT_COLUMNS if c not in ("v_east", "v_north")]
+    assert list(res) == no_velocity and res["t"].size == 121
     # rows before the first reading: the prior predicted (zero mean error, σ ≥ the prior's)
     np.testing.assert_allclose(res["lat"][:2], cols["lat"][:2], rtol=0, atol=1e-9)
     assert np.all(res["sigma_north"][:2] >= 1414.2 * (1 - 1e-3))
@@ -367,3 +376,13 @@ def test_simulate_filter_map_error_needs_a_map(tmp_path, capsys):
     code = main(["simulate-filter", "--out", str(tmp_path / "t.csv"), "--map-error", "2"])
     assert code == 2
     assert "--map-error needs --map" in capsys.readouterr().err
+
+
+def test_eotvos_corrected_needs_the_velocity_columns(stride_track, tmp_path, capsys):
+    out = tmp_path / "o.csv"
+    assert _filter(stride_track, out, "--eotvos-corrected") == 2
+    err = capsys.readouterr().err
+    assert "--eotvos-corrected needs the INS velocity columns v_east, v_north" in err
+    assert not out.exists()
+    assert _filter(stride_track, out) == 0
+    assert "no velocity columns: gravity taken as Eötvös-corrected" in capsys.readouterr().out

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from jaxgrav.filters import STATUS_FILTER, map_error_state
-from jaxgrav.geodesy import eotvos
-from jaxgrav.navigate import TightConfig, eotvos_jacobian, navigate_tight, voyage_errors
+from jaxgrav.geodesy import eotvos, eotvos_jacobian
+from jaxgrav.navigate import TightConfig, navigate_tight, voyage_errors
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
 
@@ -26,6 +26,9 @@ def test_eotvos_jacobian_against_finite_differences():
     np.testing.assert_allclose(jac, np.stack([d_n, d_e], axis=1), rtol=1e-6)
     # 2 Ω cos φ: about 12.6 mGal per m/s east at 30° N
     assert float(jac[1, 1]) == pytest.approx(12.6, abs=0.2)
+    # any broadcast shape, a scalar too
+    assert eotvos_jacobian(30.0, 4.0, 3.0).shape == (2,)
+    assert eotvos_jacobian(jnp.zeros((2, 3)), 1.0, 0.0).shape == (2, 3, 2)
 
 
 @pytest.fixture(scope="module")
