@@ -23,7 +23,8 @@ the free INS, last-hour ratio, last over second hour, share of voyages worse tha
 free INS in some hour from the second on, NEES), the share of readings used, runs/s.
 
 Run: ``python examples/voyage_tight.py [--runs 100] [--method ukf|ekf|gsf] [--order 1|2]
-[--sigma 3] [--length 10000] [--ins navigation|strategic] [--png FILE] [--smoke]``.
+[--sigma 3] [--length 10000] [--ins navigation|strategic] [--png FILE] [--tracks-png FILE]
+[--smoke]``.
 """
 
 import argparse
@@ -33,6 +34,7 @@ import time
 
 import jax
 import jax.numpy as jnp
+import matplotlib.pyplot as plt
 import numpy as np
 
 from jaxgrav import datasets
@@ -46,7 +48,7 @@ from jaxgrav.navigate import (
     voyage_errors,
     voyage_summary,
 )
-from jaxgrav.plot import plot_voyage_errors, save_figure
+from jaxgrav.plot import plot_map, plot_voyage_errors, save_figure
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
 from jaxgrav.sim.ins import INSErrorModel
@@ -77,6 +79,22 @@ def run(grid, scenario, model, config, keys):
     return jax.tree.map(np.asarray, f(pm, grid, keys))
 
 
+def tracks_figure(grid, scenario, model, config, key, path, title, force):
+    """One voyage on the map: the truth, the free INS and the tightly coupled solution."""
+    voyage = voyage_scenario(key, grid, scenario, model)
+    res = navigate_tight(prepare_map(grid), voyage, config)
+    tracks = {"truth": (voyage.truth.lat, voyage.truth.lon),
+              "free INS": (voyage.ins.lat, voyage.ins.lon),
+              "navigation": (res.nav.lat, res.nav.lon)}
+    lats = np.concatenate([np.asarray(a) for a, _ in tracks.values()])
+    lons = np.concatenate([np.asarray(b) for _, b in tracks.values()])
+    pad = 0.05
+    window = (lats.min() - pad, lats.max() + pad, lons.min() - pad, lons.max() + pad)
+    fig, ax = plt.subplots(figsize=(7, 6), layout="constrained")
+    plot_map(grid, ax, tracks=tracks, window=window, scale_bar=True, title=title)
+    save_figure(fig, path, force=force)
+
+
 def config_for(setting, ins, model, method, order):
     """The filter of one setting (see the module notes)."""
     cfg = TightConfig(ins=ins, method=method)
@@ -100,7 +118,10 @@ def main(argv=None):
     p.add_argument("--settings", nargs="+", choices=SETTINGS, default=list(SETTINGS))
     p.add_argument("--png", default=None,
                    help="error-against-time figure of the 'map error, told' runs")
-    p.add_argument("--force", action="store_true", help="overwrite --png")
+    p.add_argument("--tracks-png", default=None,
+                   help="the first voyage of 'map error, told' on the map: truth, free INS, "
+                        "navigation")
+    p.add_argument("--force", action="store_true", help="overwrite --png and --tracks-png")
     p.add_argument("--smoke", action="store_true", help="2 voyages of 2 h")
     a = p.parse_args(argv)
     runs, hours = (2, 2.0) if a.smoke else (a.runs, 12.0)
@@ -131,6 +152,10 @@ def main(argv=None):
                 f"{hours:g} h, {a.ins} INS, map error {a.sigma:g} mGal / "
                 f"{a.length / 1e3:g} km told")
             save_figure(fig, a.png, force=a.force)
+        if a.tracks_png and setting == "map error, told":
+            tracks_figure(grid, scenario, truth, cfg, keys[0], a.tracks_png,
+                          f"voyage 1: tightly coupled ({a.method}), {hours:g} h, map error "
+                          f"{a.sigma:g} mGal told", a.force)
     return rows
 
 

@@ -40,8 +40,11 @@ def test_voyage_tight_smoke(capsys, tmp_path):
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     png = tmp_path / "tight.png"
-    rows = mod.main(["--smoke", "--settings", "map error, told", "--png", str(png)])
+    tracks = tmp_path / "tracks.png"
+    rows = mod.main(["--smoke", "--settings", "map error, told", "--png", str(png),
+                     "--tracks-png", str(tracks)])
     assert png.stat().st_size > 10_000 and set(rows) == {"map error, told"}
+    assert tracks.stat().st_size > 10_000
     r = rows["map error, told"]
     assert len(r["hourly_rms_nav_m"]) == 2 and np.isfinite(r["nees"])
     assert r["readings_used"] > 0.9 and r["runs"] == 2
