@@ -1,7 +1,8 @@
 """Tightly coupled voyage navigation (navigate.tight): the Eötvös Jacobian against finite
-differences, the filter on an information-rich map (with and without the Eötvös part of
-the measurement, with a map-error state), missing readings and leaving the map, jit
-without retrace, vmap against a loop, bad settings."""
+differences, the filter against filterpy's UKF with a SciPy spline map, the filter on an
+information-rich map (with and without the Eötvös part of the measurement, with a
+map-error state), missing readings and leaving the map, jit without retrace, vmap against
+a loop, bad settings."""
 
 import dataclasses
 
@@ -9,12 +10,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+from scipy.interpolate import RectBivariateSpline
 
-from jaxgrav.filters import STATUS_FILTER, map_error_state
-from jaxgrav.geodesy import eotvos, eotvos_jacobian
+from jaxgrav.constants import DEG
+from jaxgrav.filters import STATUS_FILTER, Dynamics, augment, map_error_state
+from jaxgrav.geodesy import eotvos, eotvos_jacobian, meridian_radius, prime_vertical_radius
 from jaxgrav.navigate import TightConfig, navigate_tight, voyage_errors
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
+from jaxgrav.sim.ins import initial_covariance, transition
 
 
 def test_eotvos_jacobian_against_finite_differences():
@@ -123,3 +128,42 @@ def test_jit_without_retrace_and_vmap_equals_loop(smooth_grid, voyages):
 def test_bad_settings_get_clear_errors(change, error, message):
     with pytest.raises(error, match=message):
         TightConfig(**change)
+
+
+def test_the_filter_equals_filterpy_with_scipy_spline_map(smooth_grid, voyages):
+    """An independent UKF: filterpy's, with the map as SciPy's bicubic spline, the same
+    15-state model (13 INS states and a second-order map-error state), prior, Eötvös term."""
+    v = jax.tree.map(lambda a: a[:241], _first(voyages))  # 40 min
+    cfg = dataclasses.replace(CONFIG, map_error=map_error_state(2.0, 20000.0, order=2))
+    ours = np.asarray(navigate_tight(prepare_map(smooth_grid), v, cfg).error_estimate)
+    lat, lon, ve, vn = (np.asarray(a) for a in (v.ins.lat, v.ins.lon, v.ins.v_east,
+                                                 v.ins.v_north))
+    dt = float(v.ins.t[1] - v.ins.t[0])
+    f, q = transition(NAVIGATION_GRADE, float(lat.mean()), dt)
+    p0 = initial_covariance(NAVIGATION_GRADE, CONFIG.sigma_pos_m, CONFIG.sigma_vel)
+    speed = float(np.median(np.hypot(ve, vn)))
+    dyn, x0, p0, _ = augment(cfg.map_error, Dynamics(f, q, dt), np.zeros(13), p0, speed)
+    spline = RectBivariateSpline(np.asarray(smooth_grid.lat), np.asarray(smooth_grid.lon),
+                                 np.asarray(smooth_grid.values), kx=3, ky=3)
+    m_rad = np.asarray(meridian_radius(lat))
+    e_rad = np.asarray(prime_vertical_radius(lat)) * np.cos(lat * DEG)
+    jac = np.asarray(eotvos_jacobian(lat, ve, vn))
+    z = np.asarray(v.gravity) + np.asarray(eotvos(lat, ve, vn))
+
+    def hx(x, k):
+        true_lat, true_lon = lat[k] - x[0] / m_rad[k] / DEG, lon[k] - x[1] / e_rad[k] / DEG
+        return np.array([spline(true_lat, true_lon, grid=False) + x[12] + x[13]
+                         + jac[k] @ x[2:4]])
+
+    fm, n = np.asarray(dyn.f), dyn.f.shape[0]
+    ukf = UnscentedKalmanFilter(n, 1, dt, hx=hx, fx=lambda x, dt: fm @ x,
+                                points=MerweScaledSigmaPoints(n, alpha=0.5, beta=2.0, kappa=0.0))
+    ukf.x, ukf.P, ukf.Q, ukf.R = np.asarray(x0), np.asarray(p0), np.asarray(dyn.q), np.eye(1)
+    ref = np.empty((z.size, n))
+    for k in range(z.size):
+        ukf.predict()
+        ukf.update(np.array([z[k]]), k=k)
+        ref[k] = ukf.x
+    sd = np.sqrt(np.diag(ukf.P))
+    assert np.max(np.abs(ours[-1] - ref[-1]) / sd) < 1e-4
+    assert np.max(np.abs(ours[:, :2] - ref[:, :2])) < 0.5  # metres, at every step
