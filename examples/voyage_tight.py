@@ -71,11 +71,12 @@ def _one(pm, grid, key, scenario, model, config):
             err.nees.mean(), used, series)
 
 
-def run(grid, scenario, model, config, keys):
-    """Simulate and filter voyages in one compiled call (``lax.map`` over the keys)."""
+def run(grid, scenario, model, config, keys, batch=50):
+    """Simulate and filter voyages in one compiled call, ``batch`` voyages at a time
+    batched with ``vmap`` (4 × a loop on the 2-core machine, ``benchmarks/voyage_tight.py``)."""
     pm = prepare_map(grid)
     f = jax.jit(lambda pm, grid, ks: jax.lax.map(
-        lambda k: _one(pm, grid, k, scenario, model, config), ks))
+        lambda k: _one(pm, grid, k, scenario, model, config), ks, batch_size=batch))
     return jax.tree.map(np.asarray, f(pm, grid, keys))
 
 
