@@ -41,10 +41,8 @@ multiplies each cell by the likelihood of the reading given the cell's map value
 and bias, ``N(z − Δg_M(cell) − b_c; 0, s_c + r)``; then the Gaussian states move
 by the regression, ``m_o ← m_o + K (d̄⁺ − d̄⁻)``, ``C`` unchanged. A missing
 reading skips the update; cells off a Grid map get zero likelihood (the update is
-skipped if the whole grid is off the map).
-
-The estimate is the posterior mean; its position covariance is the grid's (plus
-the cell's own variance ``cell²/12``), so NEES can be computed.
+skipped if the whole grid is off the map). The estimate is the posterior mean; its
+position covariance is the grid's plus the cell's own ``cell²/12`` (for NEES).
 
 **Map-error state** (Rao–Blackwellised, like the bias). When the prior and the
 dynamics carry one more state after the 13 INS error states — a first-order
@@ -349,10 +347,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return jax.vmap(jax.vmap(one))(dn, de)
 
     def update(state, step, field, dynamics):
-        if step.h_lin is not None:
-            raise ValueError(
-                "the point-mass filter takes no linear measurement part (Step.h_lin, e.g. the "
-                "Eötvös effect of the velocity error); use the UKF, EKF or Gaussian sum")
+        if step.h_lin is not None:  # e.g. the Eötvös effect of the velocity error
+            raise ValueError("the point-mass filter takes no Step.h_lin; use a Kalman filter")
         state = _predict(state, dynamics)
         w, m, s = state.w, state.bias_mean, state.bias_var
         dn, de = cells(state.centre)

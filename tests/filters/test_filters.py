@@ -293,7 +293,7 @@ def test_pmf_refuses_a_linear_part(dynamics, prior, runs):
     x0, p0 = prior
     state = PMF.init(x0, p0)
     dyn = PMF.dynamics(LAT_REF, DT)
-    with pytest.raises(ValueError, match="point-mass filter takes no linear measurement part"):
+    with pytest.raises(ValueError, match=r"point-mass filter takes no Step\.h_lin"):
         PMF.update(state, _one(steps, 0), FIELD, dyn)
 
 
