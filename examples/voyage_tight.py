@@ -125,6 +125,7 @@ def main(argv=None):
     p.add_argument("--force", action="store_true", help="overwrite --png and --tracks-png")
     p.add_argument("--smoke", action="store_true", help="2 voyages of 2 h")
     a = p.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)  # geodesy and 12 h of INS error in float64
     runs, hours = (2, 2.0) if a.smoke else (a.runs, 12.0)
     ins = NAVIGATION_GRADE if a.ins == "navigation" else INSErrorModel()
     grid = datasets.load("ryukyu")["anomaly_2p5min"]

@@ -150,7 +150,27 @@ def _flags(z, s, nu, gate, off_map, repaired, failed):
     return flags, no_reading | off_map | gated | failed
 
 
-def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate=jnp.inf):
+def _curvature_variance(measurement, field, step, x, p):
+    """``½ tr((∇²h P)²)``: the variance of the map's second-order term over ``N(x, P)``.
+
+    The Hessian is taken of the map part of a :class:`MapPlusBias` over its position
+    states (of the whole measurement otherwise) at the mean; 0 where it is not finite
+    (off the map).
+    """
+    if isinstance(measurement, MapPlusBias):
+        m = measurement.n_position
+        hess = jax.hessian(lambda d: measurement.map_part(field, d, step.lat, step.lon))(x[:m])
+        pp = p[:m, :m]
+    else:
+        hess = jax.hessian(lambda xi: measurement(field, xi, step.lat, step.lon))(x)
+        pp = p  # the step's linear part (h_lin) has no curvature
+    hp = hess @ pp
+    v = 0.5 * jnp.trace(hp @ hp)
+    return jnp.where(jnp.isfinite(v), v, 0.0)
+
+
+def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate=jnp.inf,
+        curvature_count=0.0):
     """Unscented Kalman filter for a scalar reading.
 
     Parameters
@@ -170,6 +190,13 @@ def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate
         Secondary scaling, 0 (paper D) or ``3 − n``.
     gate : float
         Skip updates whose normalised innovation squared exceeds this (default: never).
+    curvature_count : float or Array
+        Add ``curvature_count · ½ tr((∇²h P)²)`` to the reading variance: the map's
+        second-order (linearisation) error over the predicted position covariance,
+        counted as many times as consecutive readings share it (readings per map cell
+        along the track; :func:`~jaxgrav.navigate.navigate_tight`). It vanishes when
+        the position is known to much better than the map's curvature scale.
+        Default 0: off.
 
     Returns
     -------
@@ -195,7 +222,11 @@ def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate
         zs = jnp.where(jnp.isfinite(zs), zs, 0.0)  # double-where: no NaN into the algebra
         z_hat = wm @ zs
         dz = zs - z_hat
-        s = wc @ dz**2 + step.r
+        r = step.r
+        if not (isinstance(curvature_count, (int, float)) and curvature_count == 0):
+            r = r + curvature_count * _curvature_variance(measurement, field, step, pred.x,
+                                                          pred.p)
+        s = wc @ dz**2 + r
         pxz = (wc * dz) @ (points - pred.x)
         z = jnp.where(jnp.isfinite(step.z), step.z, z_hat)
         nu = z - z_hat

@@ -288,6 +288,40 @@ def test_ekf_linear_part_equals_the_measurement_written_with_it(dynamics, prior,
                                np.asarray(ref.innovation_var), rtol=1e-9)
 
 
+UKF_CURVED = fl.ukf(curvature_count=40.0)
+
+
+def test_ukf_curvature_count_adds_the_map_second_order_variance(dynamics, prior, runs):
+    """curvature_count · ½ tr((∇²h P)²), with the Hessian by central differences in NumPy,
+    is what the curvature term adds to the reading variance."""
+    x0, p0 = prior
+    step = _one(_one(runs[0], 0), 0)
+    state = init(UKF, x0, p0)
+    pred = fl.predict(state, dynamics.f, dynamics.q)
+    x, p = np.asarray(pred.x), np.asarray(pred.p)
+
+    def g(d):
+        return float(measure(FIELD, jnp.asarray(np.concatenate([d, x[2:]])), step.lat,
+                             step.lon)) - x[12]
+
+    h = 5.0  # m
+    hess = np.empty((2, 2))
+    for i in range(2):
+        for j in range(2):
+            ei, ej = np.eye(2)[i] * h, np.eye(2)[j] * h
+            hess[i, j] = (g(x[:2] + ei + ej) - g(x[:2] + ei - ej) - g(x[:2] - ei + ej)
+                          + g(x[:2] - ei - ej)) / (4 * h * h)
+    hp = hess @ p[:2, :2]
+    extra = 40.0 * 0.5 * np.trace(hp @ hp)
+    assert extra > 0.05 * float(step.r)  # the prior is wide: the term matters here
+    _, curved = update(UKF_CURVED, state, step, FIELD, dynamics)
+    _, inflated = update(UKF, state, step._replace(r=step.r + extra), FIELD, dynamics)
+    assert float(curved.innovation_var) == pytest.approx(float(inflated.innovation_var),
+                                                         rel=1e-5)
+    np.testing.assert_allclose(np.asarray(curved.x), np.asarray(inflated.x), rtol=1e-5,
+                               atol=1e-6)
+
+
 def test_pmf_refuses_a_linear_part(dynamics, prior, runs):
     steps = _with_h_lin(_one(runs[0], 0))
     x0, p0 = prior
