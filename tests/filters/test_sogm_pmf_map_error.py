@@ -125,7 +125,7 @@ def _np_step(state, step, dyn):
     w1 = w1 / w1.sum()
     offsets = (np.arange(G) - (G - 1) / 2) * CELL
     dn, de = np.meshgrid(centre[0] + offsets, centre[1] + offsets, indexing="ij")
-    lat, lon, z, r = (float(v) for v in step)
+    lat, lon, z, r = (float(v) for v in (step.lat, step.lon, step.z, step.r))
     rm = 6378137.0 * (1 - 6.69437999014e-3) / (1 - 6.69437999014e-3 * np.sin(lat * DEG)**2)**1.5
     rn = 6378137.0 / np.sqrt(1 - 6.69437999014e-3 * np.sin(lat * DEG) ** 2)
     g = np.asarray(gravity_anomaly(FIELD, lat - dn / rm / DEG,
