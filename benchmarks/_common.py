@@ -6,6 +6,8 @@ import os
 import platform
 import time
 
+import jax
+
 
 def parse_args(description):
     """Standard benchmark arguments: ``--quick`` for a CI-sized run."""
@@ -38,3 +40,31 @@ def emit(bench, case, n, jaxgrav_s, baseline, baseline_s, **extra):
         **extra,
     }
     print(json.dumps(row), flush=True)
+
+
+def batch_timings(entry, pm, voyages, cfg, repeats):
+    """Best times (s) of a navigation entry point over a batch of voyages, three ways.
+
+    ``entry(pm, voyage, cfg)`` is a jitted single-voyage function; ``voyages`` has a
+    leading voyage axis. Returns ``(vmap, loop, lax_map)``: one call batched with
+    ``jax.vmap``, a Python loop of compiled single-voyage calls, one call running the
+    voyages one after another with ``lax.map``; each is called once before timing.
+    """
+    n = jax.tree.leaves(voyages)[0].shape[0]
+    batch = jax.jit(jax.vmap(entry, in_axes=(None, 0, None)))
+    seq = jax.jit(lambda pm, vs, cfg: jax.lax.map(lambda v: entry(pm, v, cfg), vs))
+    one = [jax.tree.map(lambda a, i=i: a[i], voyages) for i in range(n)]
+
+    def run_batch():
+        jax.block_until_ready(batch(pm, voyages, cfg))
+
+    def run_loop():
+        for v in one:
+            jax.block_until_ready(entry(pm, v, cfg))
+
+    def run_seq():
+        jax.block_until_ready(seq(pm, voyages, cfg))
+
+    for f in (run_batch, run_loop, run_seq):
+        f()
+    return tuple(best_time(f, repeats) for f in (run_batch, run_loop, run_seq))

@@ -45,7 +45,7 @@ from jaxgrav.scenarios import voyage_preset, voyage_scenario
 from jaxgrav.sim.ins import initial_covariance, transition
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
-from _common import best_time, emit, parse_args
+from _common import batch_timings, emit, parse_args
 
 jax.config.update("jax_enable_x64", True)  # a script, not the library: geodesy in float64
 
@@ -95,25 +95,8 @@ def main():
     voyages = jax.jit(jax.vmap(lambda g, k: voyage_scenario(k, g, scenario, model),
                                in_axes=(None, 0)))(grid, keys)
     jax.block_until_ready(voyages)
-    batch = jax.jit(jax.vmap(navigate_tight, in_axes=(None, 0, None)))
-    seq = jax.jit(lambda pm, vs, cfg: jax.lax.map(lambda v: navigate_tight(pm, v, cfg), vs))
-    one = [jax.tree.map(lambda a, i=i: a[i], voyages) for i in range(n)]
-
-    def run_batch():
-        jax.block_until_ready(batch(pm, voyages, cfg))
-
-    def run_loop():
-        for v in one:
-            jax.block_until_ready(navigate_tight(pm, v, cfg))
-
-    def run_seq():
-        jax.block_until_ready(seq(pm, voyages, cfg))
-
-    run_batch()
-    run_loop()
-    run_seq()
-    t_batch, t_loop = best_time(run_batch, repeats), best_time(run_loop, repeats)
-    t_seq = best_time(run_seq, repeats)
+    t_batch, t_loop, t_seq = batch_timings(navigate_tight, pm, voyages, cfg, repeats)
+    one = [jax.tree.map(lambda a, i=i: a[i], voyages) for i in range(n_ref)]
     for case, t in (("vmap", t_batch), ("lax.map", t_seq)):
         emit("voyage_tight", f"patrol {hours:g} h, {case} vs loop", n, t,
              "python loop of compiled single-voyage calls", t_loop,

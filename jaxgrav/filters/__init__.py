@@ -13,7 +13,7 @@ state (:mod:`jaxgrav.filters.map_state`) that the UKF, EKF and Gaussian sum carr
 unchanged; the point-mass filter carries a first-order one per grid cell.
 """
 
-from jaxgrav.filters.api import FILTER_METHODS, filter_track, pad_to_stride
+from jaxgrav.filters.api import FILTER_METHODS, eotvos_part, filter_track, pad_to_stride
 from jaxgrav.filters.gaussian_sum import GaussianSumState, gaussian_sum, split_prior
 from jaxgrav.filters.guard import GuardConfig, free_covariance, guard_infos, guard_run
 from jaxgrav.filters.kalman import ekf, predict, sigma_weights, ukf
@@ -61,6 +61,7 @@ __all__ = [
     "StepInfo",
     "augment",
     "ekf",
+    "eotvos_part",
     "filter_track",
     "fogm_length",
     "fogm_transition",

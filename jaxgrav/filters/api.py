@@ -24,8 +24,16 @@ from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import GRAV, N_STATES, VEL, INSErrorModel, initial_covariance, transition
 from jaxgrav.tracks import csv_line
 
-__all__ = ["FILTER_METHODS", "PMF_CELLS", "PMF_Q_POS", "PMF_SPAN_SIGMA", "filter_track",
-           "pad_to_stride", "reading_stride"]
+__all__ = [
+    "FILTER_METHODS",
+    "PMF_CELLS",
+    "PMF_Q_POS",
+    "PMF_SPAN_SIGMA",
+    "eotvos_part",
+    "filter_track",
+    "pad_to_stride",
+    "reading_stride",
+]
 
 FILTER_METHODS = ("ukf", "ekf", "gsf", "pmf")
 """The filters :func:`filter_track` runs."""
@@ -110,6 +118,26 @@ def reading_stride(rows, where):
             f"the next reading after line {csv_line(rows[i])} is on line {csv_line(rows[i + 1])} "
             "(use ukf, ekf or gsf for irregular readings)")
     return every
+
+
+def eotvos_part(jacobian, n_states):
+    """The Eötvös error of the velocity error as a step's :attr:`Step.h_lin`.
+
+    Parameters
+    ----------
+    jacobian : Array, shape ``(T, 2)``
+        ``∂E/∂v`` (mGal per m/s, north then east; :func:`~jaxgrav.geodesy.eotvos_jacobian`)
+        at the velocity the readings were Eötvös-corrected with.
+    n_states : int
+        The filter's state size (13 INS error states, plus any map-error states).
+
+    Returns
+    -------
+    Array, shape ``(T, n_states)``
+        The Jacobian in the velocity-error columns, zeros elsewhere.
+    """
+    jacobian = jnp.asarray(jacobian)
+    return jnp.zeros((jacobian.shape[0], n_states), jacobian.dtype).at[:, VEL].set(jacobian)
 
 
 @jax.jit
@@ -218,8 +246,7 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
             raise ValueError(f"{where}: the point-mass filter does not carry the Eötvös error "
                              "of the velocity; use ukf, ekf or gsf, or pass "
                              "eotvos_velocity=None")
-        h_lin = jnp.zeros((n, p0.shape[0]), p0.dtype).at[:, VEL].set(
-            jnp.asarray(eotvos_velocity, p0.dtype))
+        h_lin = eotvos_part(jnp.asarray(eotvos_velocity, p0.dtype), p0.shape[0])
     steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r),
                  h_lin)
     if method == "pmf":

@@ -50,6 +50,7 @@ from jaxgrav.filters import (
     Step,
     augment,
     ekf,
+    eotvos_part,
     gaussian_sum,
     gravity_measurement,
     run_filter,
@@ -190,12 +191,10 @@ def navigate_tight(grid, voyage, config):
     z = voyage.gravity + eotvos(ins.lat, ins.v_east, ins.v_north)
     h_lin = None
     if cfg.eotvos_velocity:
-        jac = eotvos_jacobian(ins.lat, ins.v_east, ins.v_north)
-        h_lin = jnp.zeros((z.shape[0], n_state), z.dtype).at[:, VEL].set(jac)
+        h_lin = eotvos_part(eotvos_jacobian(ins.lat, ins.v_east, ins.v_north), n_state)
     r = jnp.full(z.shape, jnp.asarray(cfg.noise_mgal, z.dtype) ** 2)
     steps = Step(ins.lat, ins.lon, z, r, h_lin)
-    step_m = jnp.median(jnp.hypot(ins.v_east, ins.v_north)) * dt
-    count = cfg.curvature_cells * _cell_m(grid) / jnp.maximum(step_m, 1e-9)
+    count = cfg.curvature_cells * _cell_m(grid) / jnp.maximum(speed * dt, 1e-9)
     filt = _filter(cfg.method, meas, cfg.gate, count)
     _, infos = run_filter(filt, grid, dynamics, x0, p0, steps)
     xs = infos.x
