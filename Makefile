@@ -22,15 +22,22 @@ demo: $(STAMP)
 	$(BIN)/jaxgrav demo --out demo_output --force
 
 # --max-worker-restart 0: pytest-xdist (--dist loadfile) hangs for ever, workers idle, when a
-# worker dies and is restarted (seen with rare XLA:CPU aborts while compiling); without a
-# restart the run ends, failed, and the whole suite runs once more.
+# worker dies and is restarted; without a restart the run ends, failed.
 XDIST  := -n 2 --dist loadfile --max-worker-restart 0
+# The suite runs in groups, each in fresh workers: in one 20-minute session, XLA:CPU
+# aborted or segfaulted while compiling late in a worker's life (three full runs, ~93 %,
+# two different tests; each passes alone). A group that fails runs once more; a real
+# failure fails both times. tests/test_layout.py checks that the groups cover every test.
+TEST_GROUPS := tests/match|tests/cli|tests/examples tests/navigate|tests/filters tests/montecarlo|tests/fields tests/dov tests/sim tests/scenarios tests/test_*.py
 
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q $(XDIST) tests || { \
-	  echo "make test: the run failed; running the whole suite once more (a worker crash ends a run)"; \
-	  $(BIN)/python -m pytest -q $(XDIST) tests; }
+	@groups='$(TEST_GROUPS)'; IFS='|'; for group in $$groups; do IFS=' '; \
+	  echo "make test: $$group"; \
+	  $(BIN)/python -m pytest -q $(XDIST) $$group || { \
+	    echo "make test: $$group failed; running it once more (a worker crash ends a run)"; \
+	    $(BIN)/python -m pytest -q $(XDIST) $$group || exit 1; }; \
+	done
 
 # the edit loop: the suite without the example scripts' smoke runs
 test-fast: $(STAMP)

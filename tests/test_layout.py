@@ -169,3 +169,19 @@ def test_deprecated_module_paths_warn_and_give_the_same_objects(old, new):
         if hasattr(shim, name):
             assert getattr(shim, name) is getattr(target, name), name
     assert set(target.__all__) <= set(shim.__all__)
+
+
+def test_make_test_groups_cover_every_test_file_once():
+    """``make test`` runs the suite in groups (Makefile TEST_GROUPS): every test file must be
+    in exactly one, or it would silently not run."""
+    project = ROOT.parent
+    line = next(x for x in (project / "Makefile").read_text().splitlines()
+                if x.startswith("TEST_GROUPS"))
+    covered = []
+    for group in line.split(":=", 1)[1].strip().split("|"):
+        for item in group.split():
+            paths = sorted(project.glob(item)) if "*" in item else [project / item]
+            for p in paths:
+                covered += sorted(p.rglob("test_*.py")) if p.is_dir() else [p]
+    every = sorted((project / "tests").rglob("test_*.py"))
+    assert sorted(covered) == every, set(every) ^ set(covered)
