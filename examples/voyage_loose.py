@@ -45,8 +45,8 @@ from jaxgrav.navigate import (
 )
 from jaxgrav.plot import plot_voyage_errors, save_figure
 from jaxgrav.prepared import prepare_map
-from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
-from jaxgrav.sim.ins import INSErrorModel, initial_covariance
+from jaxgrav.scenarios import INS_GRADES, voyage_preset, voyage_scenario
+from jaxgrav.sim.ins import initial_covariance
 
 EVERY = 60
 """Steps between the samples of the error series kept for the figure (10 min)."""
@@ -138,7 +138,7 @@ def main(argv=None):
     p.add_argument("--runs", type=int, default=100)
     p.add_argument("--sigma", type=float, default=3.0, help="map error sigma (mGal)")
     p.add_argument("--length", type=float, default=10000.0, help="map error L (m)")
-    p.add_argument("--ins", choices=("navigation", "strategic"), default="navigation")
+    p.add_argument("--ins", choices=sorted(INS_GRADES), default="navigation")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--calibrate", action="store_true", help="measure the fixes alone")
     p.add_argument("--png", default=None, help="error-against-time figure of the map-error runs")
@@ -147,7 +147,7 @@ def main(argv=None):
     a = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # geodesy and 12 h of INS error in float64
     runs, hours = (2, 2.0) if a.smoke else (a.runs, 12.0)
-    ins = NAVIGATION_GRADE if a.ins == "navigation" else INSErrorModel()
+    ins = INS_GRADES[a.ins]
     grid = datasets.load("ryukyu")["anomaly_2p5min"]
     scenario = voyage_preset("patrol-12h", ins=ins, hours=hours)
     keys = jax.random.split(jax.random.key(a.seed), runs)

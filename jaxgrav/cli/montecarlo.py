@@ -15,7 +15,7 @@ import jax
 import numpy as np
 
 from jaxgrav import __version__, montecarlo
-from jaxgrav.cli.montecarlo_voyage import VOYAGE_INS, plot_voyages, voyage_lines, voyage_options
+from jaxgrav.cli.montecarlo_voyage import plot_voyages, voyage_lines, voyage_options
 from jaxgrav.cli.simulate import (
     DEFAULT_MAP_ERROR_LENGTH_M,
     add_map_error_options,
@@ -37,6 +37,7 @@ from jaxgrav.montecarlo.methods import (
     resolve_method,
 )
 from jaxgrav.plot import plot_error_summary, save_figure
+from jaxgrav.scenarios import INS_GRADES
 
 __all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize", "told_from_args"]
 
@@ -100,7 +101,7 @@ def add_parser(subparsers):
                         "(2), 1 for pmf (which has no order 2)")
     m.add_argument("--hours", type=float, default=None,
                    help="voyage methods: length of each patrol (h, default 12)")
-    m.add_argument("--ins", choices=sorted(VOYAGE_INS), default=None,
+    m.add_argument("--ins", choices=sorted(INS_GRADES), default=None,
                    help="voyage methods: the INS, navigation (0.01 deg/h, 25 ug, default) or "
                         "strategic (jaxgrav's default INSErrorModel)")
     m.add_argument("--no-progress", action="store_true", help="no progress bar")

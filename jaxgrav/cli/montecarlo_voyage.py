@@ -8,13 +8,10 @@ from jaxgrav.cli.voyage import MAX_HOURS
 from jaxgrav.montecarlo.voyage_runs import SERIES_EVERY_S, TOLD
 from jaxgrav.navigate import voyage_summary
 from jaxgrav.plot import plot_voyage_errors, save_figure
-from jaxgrav.scenarios import NAVIGATION_GRADE
-from jaxgrav.sim.ins import INSErrorModel
+from jaxgrav.scenarios import INS_GRADES
 
-__all__ = ["VOYAGE_INS", "plot_voyages", "voyage_lines", "voyage_options"]
+__all__ = ["plot_voyages", "voyage_lines", "voyage_options"]
 
-VOYAGE_INS = {"navigation": NAVIGATION_GRADE, "strategic": INSErrorModel()}
-"""``--ins``: the INS simulated and told to the navigator."""
 
 
 def voyage_options(args):
@@ -33,7 +30,7 @@ def voyage_options(args):
     if args.map_error_order not in (None, 1, 2):
         raise ValueError(f"--map-error-order must be 1 or 2; got {args.map_error_order}")
     return dict(map_error_told=told, map_error_order=args.map_error_order, hours=args.hours,
-                ins=VOYAGE_INS[args.ins or "navigation"])
+                ins=INS_GRADES[args.ins or "navigation"])
 
 
 def _km(values):

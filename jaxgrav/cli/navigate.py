@@ -53,8 +53,8 @@ from jaxgrav.navigate import (
     navigate_tight,
 )
 from jaxgrav.prepared import prepare_map
-from jaxgrav.scenarios import NAVIGATION_GRADE
-from jaxgrav.sim.ins import GRAV, INSErrorModel
+from jaxgrav.scenarios import INS_GRADES
+from jaxgrav.sim.ins import GRAV
 from jaxgrav.sim.trajectory import Track
 from jaxgrav.sim.voyage_log import Voyage
 from jaxgrav.tracks import csv_line, write_track_csv
@@ -65,7 +65,6 @@ METHODS = ("dense", *TIGHT_METHODS)
 """Navigation methods of the command: loosely coupled with the dense matcher, or tightly
 coupled with a filter of :data:`jaxgrav.navigate.TIGHT_METHODS`."""
 
-_INS = {"navigation": NAVIGATION_GRADE, "strategic": INSErrorModel()}
 
 
 def add_parser(sub):
@@ -83,7 +82,7 @@ def add_parser(sub):
     p.add_argument("--out", required=True, help="navigation CSV (see jaxgrav navigate docs)")
     p.add_argument("--eotvos-corrected", action="store_true",
                    help="the gravity column is already Eötvös-corrected with the INS velocity")
-    p.add_argument("--ins", choices=sorted(_INS), default="navigation",
+    p.add_argument("--ins", choices=sorted(INS_GRADES), default="navigation",
                    help="the filter's INS error model: navigation (0.01 deg/h, 25 ug, "
                         "default) or strategic (0.001 deg/h, 10 ug)")
     p.add_argument("--sigma-pos", type=float, default=354.0,
@@ -189,7 +188,7 @@ def cmd_navigate(args):
     if args.method in TIGHT_METHODS:
         _tight(args, voyage, grid, n_missing, n_off)
         return
-    cfg = loose_config(_INS[args.ins], args.map_error, args.map_error_length, args.noise,
+    cfg = loose_config(INS_GRADES[args.ins], args.map_error, args.map_error_length, args.noise,
                        sigma_pos_m=args.sigma_pos, sigma_vel=args.sigma_vel,
                        fix_every=args.fix_every, n_fixes=args.n_fixes, stride=args.stride)
     res = navigate_loose(prepare_map(grid), voyage, cfg)
@@ -205,8 +204,9 @@ def _tight(args, voyage, grid, n_missing, n_off):
     """Tightly coupled: the filter on every reading, and its CSV."""
     told = (map_error_state(args.map_error, args.map_error_length, order=2)
             if args.map_error > 0 else None)
-    cfg = TightConfig(ins=_INS[args.ins], sigma_pos_m=args.sigma_pos, sigma_vel=args.sigma_vel,
-                      noise_mgal=args.noise, map_error=told, method=args.method)
+    cfg = TightConfig(ins=INS_GRADES[args.ins], sigma_pos_m=args.sigma_pos,
+                      sigma_vel=args.sigma_vel, noise_mgal=args.noise, map_error=told,
+                      method=args.method)
     res = navigate_tight(prepare_map(grid), voyage, cfg)
     cov = np.asarray(res.cov_north_east)
     sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))

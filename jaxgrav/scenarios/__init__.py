@@ -24,6 +24,7 @@ from jaxgrav.scenarios.paper_d import (
     run_steps,
 )
 from jaxgrav.scenarios.voyage import (
+    INS_GRADES,
     NAVIGATION_GRADE,
     PRESETS,
     VoyageScenario,
@@ -33,6 +34,7 @@ from jaxgrav.scenarios.voyage import (
 from jaxgrav.sim.trajectory import track_error_m
 
 __all__ = [
+    "INS_GRADES",
     "NAVIGATION_GRADE",
     "PRESETS",
     "FilterRun",

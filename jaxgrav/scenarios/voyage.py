@@ -28,13 +28,17 @@ from jaxgrav.sim.ins import INSErrorModel
 from jaxgrav.sim.route import Route
 from jaxgrav.sim.voyage import simulate_voyage
 
-__all__ = ["NAVIGATION_GRADE", "PRESETS", "VoyageScenario", "voyage_preset", "voyage_route",
-           "voyage_scenario"]
+__all__ = ["INS_GRADES", "NAVIGATION_GRADE", "PRESETS", "VoyageScenario", "voyage_preset",
+           "voyage_route", "voyage_scenario"]
 
 NAVIGATION_GRADE = INSErrorModel(gyro_sigma=0.01 * DEG / 3600.0, gyro_tau=float("inf"),
                                  accel_sigma=25 * 9.80665e-6, accel_tau=float("inf"))
 """A navigation-grade INS: 0.01 °/h gyro and 25 µg accelerometer biases, random constants
 (the voyage issue's goal setting); the rest as :class:`~jaxgrav.sim.ins.INSErrorModel`."""
+
+INS_GRADES = {"navigation": NAVIGATION_GRADE, "strategic": INSErrorModel()}
+"""The INS grades the voyage commands and examples name (``--ins``): navigation grade, and
+the strategic grade of the default :class:`~jaxgrav.sim.ins.INSErrorModel`."""
 
 
 @pytree_dataclass
