@@ -1,6 +1,6 @@
-"""``jaxgrav filter`` and ``jaxgrav simulate-filter``: gravity/INS filtering of a track (paper D).
+"""``jaxgrav filter``: gravity/INS filtering of a track (paper D).
 
-Wire into :mod:`jaxgrav.cli` with ``cli_filter.add_parsers(sub)``.
+Wire into :mod:`jaxgrav.cli` with ``cli_filter.add_parser(sub)``.
 
 ``filter`` reads a track CSV with the INS-indicated position and the gravimeter's
 anomaly readings, runs a filter of :mod:`jaxgrav.filters` over the 13-state
@@ -35,43 +35,40 @@ paper-d``) or a fitted point-mass model file (``--point-masses MODEL.json``, see
 :func:`~jaxgrav.fields.pointmass_fit.save_point_masses`; its offset is taken off the
 readings).
 
-``simulate-filter`` writes such a track (raw readings: the Eötvös effect of the true
-velocity taken off, as a gravimeter reads) from paper D's scenario
-(:func:`~jaxgrav.scenarios.filter_scenario`) over its three point masses, or over a
-map (``--map``) whose readings may see a drawn map error (``--map-error SIGMA
---map-error-length L``). ``filter --map-error SIGMA --map-error-length L`` tells the
-filter the map is wrong (:mod:`jaxgrav.filters.map_state`; ``--map-error-order 2``: a
-second-order Gauss–Markov state, matched to the default map-error model).
+``filter --map-error SIGMA --map-error-length L`` tells the filter the map is wrong
+(:mod:`jaxgrav.filters.map_state`; ``--map-error-order 2``: a second-order
+Gauss–Markov state, matched to the default map-error model). Tracks to try it on:
+``jaxgrav simulate-filter`` (:mod:`jaxgrav.cli.simulate_filter`).
 """
 
-import dataclasses
 import sys
 from pathlib import Path
 
-import jax
 import numpy as np
 
-from jaxgrav.cli.inputs import add_columns_option, read_track, track_map
-from jaxgrav.datasets import load_map
-from jaxgrav.fields.map_error import map_error
+from jaxgrav.cli.inputs import add_columns_option, map_error_args, read_track, track_map
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
 from jaxgrav.filters import STATUS_FILTER, status_messages_filter
-from jaxgrav.filters.api import FILTER_METHODS, PMF_SPAN_SIGMA, filter_track, reading_stride
+from jaxgrav.filters.api import (
+    FILTER_METHODS,
+    PARTICLES,
+    PMF_SPAN_SIGMA,
+    filter_track,
+    reading_stride,
+)
 from jaxgrav.filters.map_state import map_error_state
 from jaxgrav.geodesy import eotvos, eotvos_jacobian
-from jaxgrav.scenarios import FilterScenario, filter_scenario
-from jaxgrav.sim import DEG_ARC_M
 from jaxgrav.tracks import csv_line, write_track_csv
 
-__all__ = ["add_parsers", "cmd_filter", "cmd_simulate_filter"]
+__all__ = ["add_parser", "cmd_filter"]
 
 DT_RTOL = 1e-3
 """Relative tolerance of a uniform time step."""
 
 _WARN = {
-    "off_map": "the estimate or its sigma points left the map, update skipped (pmf: grid "
-               "cells off the map, left out of the update)",
+    "off_map": "the estimate, its sigma points or a particle left the map, update skipped "
+               "(pmf: grid cells off the map, left out of the update)",
     "covariance_repaired": "the covariance was not positive definite; jitter added",
     "covariance_failed": "the covariance could not be repaired, or the innovation variance "
                          "was not positive; update skipped",
@@ -80,8 +77,8 @@ _WARN = {
 }
 
 
-def add_parsers(subparsers):
-    """Add the ``filter`` and ``simulate-filter`` sub-commands to an ``argparse`` set."""
+def add_parser(subparsers):
+    """Add the ``filter`` sub-command to an ``argparse`` sub-parser set."""
     f = subparsers.add_parser("filter", help="gravity/INS filtering of a track CSV (paper D)")
     f.add_argument("--map", default=None,
                    help="anomaly map: NetCDF grid with lat/lon coordinates (mGal) or a "
@@ -99,7 +96,13 @@ def add_parsers(subparsers):
     add_columns_option(f)
     f.add_argument("--method", choices=FILTER_METHODS, default="ukf",
                    help="ukf (default), ekf (jacfwd Jacobian), gsf (Gaussian sum of 3 x 3 "
-                        "UKFs, for multi-modal priors), pmf (grid point-mass filter)")
+                        "UKFs, for multi-modal priors), pmf (grid point-mass filter), pf (SIR "
+                        "particle filter), rbpf (Rao-Blackwellised particle filter: particles "
+                        "in position, a Kalman filter for the rest)")
+    f.add_argument("--particles", type=int, default=None, metavar="N",
+                   help="pf, rbpf: number of particles (default 2000 for pf, 1000 for rbpf)")
+    f.add_argument("--seed", type=int, default=0,
+                   help="pf, rbpf: seed of the particles' random numbers (default 0)")
     f.add_argument("--out", required=True,
                    help="output CSV: t, lat, lon, sigma_north, sigma_east (m), covariance, "
                         "velocity, biases, innovations and status per row")
@@ -135,34 +138,7 @@ def add_parsers(subparsers):
                         "of v_east, v_north (default: raw, corrected here)")
     f.add_argument("--force", action="store_true", help="overwrite an existing output")
     f.set_defaults(func=cmd_filter)
-
-    s = subparsers.add_parser("simulate-filter",
-                              help="write a track CSV from paper D's filtering scenario")
-    s.add_argument("--out", required=True, help="track CSV for jaxgrav filter")
-    s.add_argument("--truth", default=None,
-                   help="also write the true track (t, lat, lon, v_east, v_north) here")
-    s.add_argument("--geometry", choices=("east-west", "north-east"), default="east-west",
-                   help="east-west across the masses (default) or north along the mass "
-                        "line for half the run, then east")
-    s.add_argument("--minutes", type=float, default=120.0, help="duration (default 120)")
-    s.add_argument("--dt", type=float, default=2.0, help="row interval (s, default 2)")
-    s.add_argument("--reading-every", type=int, default=5,
-                   help="a gravity reading every this many rows (default 5: every 10 s)")
-    s.add_argument("--map", default=None,
-                   help="simulate over this anomaly map (NetCDF or a shipped map, e.g. "
-                        "ryukyu) instead of paper D's point masses: straight tracks from a "
-                        "random start at least the track length + 16 km inside the map, "
-                        "random heading (--geometry is then not used)")
-    s.add_argument("--var", default=None, help="variable of --map when the file has several")
-    s.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
-                   help="with --map: the readings see the map + a drawn error field of this "
-                        "1-sigma (mGal), covariance s^2 (1 + r/L) e^(-r/L) (default 0)")
-    s.add_argument("--map-error-length", type=float, default=10e3, metavar="L",
-                   help="the map error's correlation length L (m, default 10000)")
-    s.add_argument("--seed", type=int, default=0, help="PRNG seed")
-    s.add_argument("--force", action="store_true", help="overwrite existing outputs")
-    s.set_defaults(func=cmd_simulate_filter)
-    return f, s
+    return f
 
 
 # ------------------------------------------------------------------------ checks
@@ -183,23 +159,6 @@ def _uniform_dt(t, where):
             f"(step {d[i]:g} s) on lines {csv_line(i)}-{csv_line(i + 1)}, expected {dt:g} s "
             f"(the median) within {DT_RTOL:.1%}; {bad.size} bad step(s)")
     return dt
-
-
-def _map_error_args(args):
-    """Validated ``--map-error`` / ``--map-error-length`` (a ValueError naming the option)."""
-    if not (np.isfinite(args.map_error) and args.map_error >= 0):
-        raise ValueError(f"--map-error must be a finite map-error sigma >= 0 (mGal); got "
-                         f"{args.map_error!r}")
-    if not (np.isfinite(args.map_error_length) and args.map_error_length > 0):
-        raise ValueError(f"--map-error-length must be a finite correlation length > 0 (m); "
-                         f"got {args.map_error_length!r}")
-    order = getattr(args, "map_error_order", 1)
-    if order not in (1, 2):
-        raise ValueError(f"--map-error-order must be 1 or 2; got {order!r}")
-    if order == 2 and getattr(args, "method", None) == "pmf":
-        raise ValueError("--map-error-order 2 is not available with --method pmf (its per-cell "
-                         "map-error state is first order); use --map-error-order 1 with 2 L")
-    return args.map_error, args.map_error_length
 
 
 def _output_columns(t, track, res):
@@ -266,6 +225,16 @@ def _check_on_map(grid, lat, lon, where, name):
             f"(lat {lat[i]:g}, lon {lon[i]:g})")
 
 
+def _particle_options(args):
+    """``filter_track``'s particle settings from the arguments (empty for other methods)."""
+    if args.method not in PARTICLES:
+        return {}
+    opts = dict(seed=args.seed)
+    if args.particles is not None:
+        opts["n_particles"] = args.particles
+    return opts
+
+
 def cmd_filter(args):
     """Run ``jaxgrav filter`` (x64 is enabled by the CLI entry point)."""
     if (args.map is None) == (args.point_masses is None):
@@ -290,13 +259,19 @@ def cmd_filter(args):
                          "empty or NaN); the filter needs at least one (mGal)")
     if args.guard is not None:
         if args.method == "pmf":
-            raise ValueError("--guard applies to ukf, ekf and gsf; got --method pmf")
+            raise ValueError("--guard applies to ukf, ekf, gsf, pf and rbpf; got --method pmf")
         if not (np.isfinite(args.guard) and args.guard > 0):
             raise ValueError(f"--guard must be a positive variance ratio (posterior / free "
                              f"INS, e.g. 0.2); got {args.guard!r}")
     if args.method == "pmf":
         reading_stride(np.flatnonzero(np.isfinite(g)), where)
-    me_sigma, me_length = _map_error_args(args)
+    if args.particles is not None:
+        if args.method not in PARTICLES:
+            raise ValueError(f"--particles is for --method pf or rbpf; got --method "
+                             f"{args.method}")
+        if args.particles < 2:
+            raise ValueError(f"--particles must be an integer >= 2; got {args.particles}")
+    me_sigma, me_length = map_error_args(args)
     fogm = (map_error_state(me_sigma, me_length, args.map_error_order) if me_sigma > 0
             else None)
     field, field_name, offset = _field(args, track)
@@ -306,11 +281,16 @@ def cmd_filter(args):
     # the model is masses + offset: z − (masses + offset + bias) = (z − offset) − (masses + bias)
     res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
-                       guard=args.guard, map_error=fogm, eotvos_velocity=jac, where=where)
+                       guard=args.guard, map_error=fogm, eotvos_velocity=jac, where=where,
+                       **_particle_options(args))
     write_track_csv(args.out, _output_columns(t, track, res), force=args.force, precision=12)
     n_read = int(np.isfinite(g).sum())
     stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""
     stride += f", no-harm guard {args.guard:g}" if args.guard is not None else ""
+    if args.method in PARTICLES:
+        opts = _particle_options(args)
+        stride += (f", {opts.get('n_particles', PARTICLES[args.method])} particles, "
+                   f"seed {args.seed}")
     if fogm is not None:
         stride += (f", map-error state {me_sigma:g} mGal over {me_length:g} m"
                    + (" per cell" if args.method == "pmf" else "")
@@ -325,81 +305,3 @@ def cmd_filter(args):
         count = int(np.count_nonzero(status & STATUS_FILTER[name]))
         print(f"warning: {name} on {count} of {t.size} rows: {_WARN.get(name, name)}",
               file=sys.stderr)
-
-
-# ---------------------------------------------------------------------- simulate
-_simulate = jax.jit(filter_scenario)
-_SIM_MARGIN_M = 16e3  # 3 x 2 km initial error + 10 km: the INS track stays on the map
-
-
-def _inner_region(grid, margin_m, name):
-    """``(lat_min, lat_max, lon_min, lon_max)`` of ``grid`` shrunk by ``margin_m`` (m)."""
-    w, e, s, n = (float(v) for v in grid.extent)
-    dlat = margin_m / DEG_ARC_M
-    dlon = margin_m / (DEG_ARC_M * np.cos(np.radians(min(max(abs(s), abs(n)), 89.0))))
-    region = (s + dlat, n - dlat, w + dlon, e - dlon)
-    if not (region[0] < region[1] and region[2] < region[3]):
-        raise ValueError(f"--map {name} (lat {s:g}..{n:g}, lon {w:g}..{e:g}) is too small for "
-                         f"the run: starts must lie {margin_m / 1e3:.0f} km inside it; use "
-                         "fewer --minutes or a larger map")
-    return region
-"""Paper D's scenario, compiled once per process and scenario shape."""
-
-
-def cmd_simulate_filter(args):
-    """Run ``jaxgrav simulate-filter``: paper D's scenario over its three point masses."""
-    outs = [p for p in (args.out, args.truth) if p is not None]
-    existing = [str(p) for p in outs if Path(p).exists()]
-    if existing and not args.force:
-        raise FileExistsError(f"{existing} exist(s); pass --force to overwrite")
-    if args.truth is not None and Path(args.truth).resolve() == Path(args.out).resolve():
-        raise ValueError(f"--truth must differ from --out; both are {args.out!r}")
-    if not (np.isfinite(args.dt) and args.dt > 0):
-        raise ValueError(f"--dt must be a positive step (s); got {args.dt!r}")
-    if args.reading_every < 1:
-        raise ValueError(f"--reading-every must be a positive number of rows; got "
-                         f"{args.reading_every}")
-    n = round(args.minutes * 60.0 / args.dt) + 1 if np.isfinite(args.minutes) else 0
-    if n < 2:
-        raise ValueError(f"--minutes must cover at least one --dt step ({args.dt:g} s); got "
-                         f"{args.minutes!r}")
-    me_sigma, me_length = _map_error_args(args)
-    if args.map is None:
-        if me_sigma > 0:
-            raise ValueError("--map-error needs --map (paper D's point masses have no grid to "
-                             "draw the map error on)")
-        scen = FilterScenario(dt=args.dt, reading_every=args.reading_every, n_steps=n,
-                              geometry=args.geometry)
-        run = _simulate(jax.random.key(args.seed), paper_d(), scen)
-        over = f"{args.geometry} over paper D's point masses"
-    else:
-        grid = load_map(args.map, args.var)
-        scen = FilterScenario(dt=args.dt, reading_every=args.reading_every, n_steps=n)
-        margin = scen.speed * args.dt * (n - 1) + _SIM_MARGIN_M
-        scen = dataclasses.replace(scen, geometry="random",
-                                   region=_inner_region(grid, margin, args.map))
-        me = map_error(me_sigma, me_length) if me_sigma > 0 else None
-        run = _simulate(jax.random.key(args.seed), grid, scen, me)
-        over = f"a random straight track over --map {args.map}"
-        if me is not None:
-            over += f" (map error {me_sigma:g} mGal, L {me_length:g} m)"
-    truth = run.truth
-    err = np.asarray(run.errors)
-    # the raw reading, as a gravimeter gives it: minus the Eötvös effect of the true velocity
-    raw = np.asarray(run.readings) - np.asarray(eotvos(truth.lat, truth.v_east, truth.v_north))
-    write_track_csv(args.out, {
-        "t": truth.t, "lat": run.ins_lat, "lon": run.ins_lon,
-        "v_east": np.asarray(truth.v_east) + err[:, 3],
-        "v_north": np.asarray(truth.v_north) + err[:, 2],
-        "gravity": raw,
-    }, force=args.force, precision=12)
-    if args.truth:
-        write_track_csv(args.truth, {"t": truth.t, "lat": truth.lat, "lon": truth.lon,
-                                     "v_east": truth.v_east, "v_north": truth.v_north},
-                        force=args.force, precision=12)
-    drift = np.hypot(err[:, 0], err[:, 1])
-    also = f" and {args.truth}" if args.truth else ""
-    print(f"wrote {args.out}{also}: {n} rows every {args.dt:g} s, "
-          f"{int(np.isfinite(np.asarray(run.readings)).sum())} readings, {over}; INS error "
-          f"{drift[0]:.0f} m at the start, RMS "
-          f"{np.sqrt(np.mean(drift**2)):.0f} m")

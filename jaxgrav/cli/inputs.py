@@ -8,10 +8,12 @@ the track's own region is complete, and global 0–360 maps are recentred when t
 cuts the track.
 """
 
+import numpy as np
+
 from jaxgrav.datasets import map_for_track
 from jaxgrav.tracks import parse_columns, read_track_csv
 
-__all__ = ["add_columns_option", "read_track", "track_map"]
+__all__ = ["add_columns_option", "map_error_args", "read_track", "track_map"]
 
 
 def add_columns_option(parser):
@@ -60,3 +62,20 @@ def track_map(args, track, margin_m):
     """
     return map_for_track(args.map, args.var, track["lat"], track["lon"], margin_m,
                          option="--map")
+
+
+def map_error_args(args):
+    """Validated ``--map-error`` / ``--map-error-length`` (a ValueError naming the option)."""
+    if not (np.isfinite(args.map_error) and args.map_error >= 0):
+        raise ValueError(f"--map-error must be a finite map-error sigma >= 0 (mGal); got "
+                         f"{args.map_error!r}")
+    if not (np.isfinite(args.map_error_length) and args.map_error_length > 0):
+        raise ValueError(f"--map-error-length must be a finite correlation length > 0 (m); "
+                         f"got {args.map_error_length!r}")
+    order = getattr(args, "map_error_order", 1)
+    if order not in (1, 2):
+        raise ValueError(f"--map-error-order must be 1 or 2; got {order!r}")
+    if order == 2 and getattr(args, "method", None) == "pmf":
+        raise ValueError("--map-error-order 2 is not available with --method pmf (its per-cell "
+                         "map-error state is first order); use --map-error-order 1 with 2 L")
+    return args.map_error, args.map_error_length

@@ -28,7 +28,17 @@ from pathlib import Path
 
 import jax
 
-from jaxgrav.cli import bench, demo, dov, match, montecarlo, navigate, simulate, voyage
+from jaxgrav.cli import (
+    bench,
+    demo,
+    dov,
+    match,
+    montecarlo,
+    navigate,
+    simulate,
+    simulate_filter,
+    voyage,
+)
 from jaxgrav.cli import filter as filtering
 from jaxgrav.cli.cache import enable_cache
 from jaxgrav.fields import egm2008
@@ -71,7 +81,8 @@ def build_parser():
     voyage.add_parser(sub)
     navigate.add_parser(sub)
     dov.add_parser(sub)
-    filtering.add_parsers(sub)
+    filtering.add_parser(sub)
+    simulate_filter.add_parser(sub)
     montecarlo.add_parser(sub)
     bench.add_parser(sub)
 

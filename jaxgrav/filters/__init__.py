@@ -1,4 +1,4 @@
-"""Gravity/INS filtering: UKF, EKF, Gaussian sum and a grid point-mass filter.
+"""Gravity/INS filtering: UKF, EKF, Gaussian sum, grid point-mass and particle filters.
 
 All filters share the measurement of :mod:`jaxgrav.filters.model` and the
 INS error model of :mod:`jaxgrav.sim.ins`; each is an optax-style ``init`` /
@@ -11,9 +11,18 @@ back the position corrections in weakly observed directions (paper D's "no harm"
 the truth, :func:`augment` appends a first- or second-order Gauss–Markov map-error
 state (:mod:`jaxgrav.filters.map_state`) that the UKF, EKF and Gaussian sum carry
 unchanged; the point-mass filter carries a first-order one per grid cell.
+The particle filters — :func:`pf` (SIR over the whole state) and :func:`rbpf`
+(particles over the position error, one shared Kalman covariance for the rest) — take
+the same protocol and runner; ``run_filter(..., key=k)`` seeds them.
 """
 
-from jaxgrav.filters.api import FILTER_METHODS, eotvos_part, filter_track, pad_to_stride
+from jaxgrav.filters.api import (
+    FILTER_METHODS,
+    PARTICLES,
+    eotvos_part,
+    filter_track,
+    pad_to_stride,
+)
 from jaxgrav.filters.gaussian_sum import GaussianSumState, gaussian_sum, split_prior
 from jaxgrav.filters.guard import GuardConfig, free_covariance, guard_infos, guard_run
 from jaxgrav.filters.kalman import ekf, predict, sigma_weights, ukf
@@ -43,10 +52,20 @@ from jaxgrav.filters.model import (
     run_filter,
     status_messages_filter,
 )
+from jaxgrav.filters.particles import (
+    RESAMPLERS,
+    effective_sample_size,
+    residual_resample,
+    systematic_resample,
+)
+from jaxgrav.filters.pf import ParticleState, pf
 from jaxgrav.filters.pmf import PMFFilter, PMFState, pmf, run_pmf
+from jaxgrav.filters.rbpf import RBPFState, rbpf
 
 __all__ = [
     "FILTER_METHODS",
+    "PARTICLES",
+    "RESAMPLERS",
     "STATUS_FILTER",
     "Dynamics",
     "Filter",
@@ -57,9 +76,12 @@ __all__ = [
     "MapPlusBias",
     "PMFFilter",
     "PMFState",
+    "ParticleState",
+    "RBPFState",
     "Step",
     "StepInfo",
     "augment",
+    "effective_sample_size",
     "ekf",
     "eotvos_part",
     "filter_track",
@@ -76,15 +98,19 @@ __all__ = [
     "map_error_state",
     "matched_state",
     "pad_to_stride",
+    "pf",
     "pmf",
     "predict",
     "predict_only",
     "prepare_field",
+    "rbpf",
+    "residual_resample",
     "run_filter",
     "run_pmf",
     "sigma_weights",
     "sogm_transition",
     "split_prior",
     "status_messages_filter",
+    "systematic_resample",
     "ukf",
 ]

@@ -2,9 +2,10 @@
 
 As :mod:`jaxgrav.match.api` is for matching: the entry point takes one track in
 degrees, builds the INS error model's prior and dynamics, runs a filter of this
-package (UKF, EKF, Gaussian sum or point-mass) once jitted, and returns the
-corrected positions with their 1-σ and per-row status. The jitted runners are module
-functions: one compilation per process, filter and track shape.
+package (UKF, EKF, Gaussian sum, point-mass, SIR or Rao–Blackwellised particle filter)
+once jitted, and returns the corrected positions with their 1-σ and per-row status.
+The jitted runners are module functions: one compilation per process, filter and
+track shape.
 """
 
 import functools
@@ -19,13 +20,16 @@ from jaxgrav.filters.guard import GuardConfig, guard_run
 from jaxgrav.filters.kalman import ekf, ukf
 from jaxgrav.filters.map_state import augment
 from jaxgrav.filters.model import Dynamics, Step, gravity_measurement, run_filter
+from jaxgrav.filters.pf import pf
 from jaxgrav.filters.pmf import pmf
+from jaxgrav.filters.rbpf import rbpf
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import GRAV, N_STATES, VEL, INSErrorModel, initial_covariance, transition
 from jaxgrav.tracks import csv_line
 
 __all__ = [
     "FILTER_METHODS",
+    "PARTICLES",
     "PMF_CELLS",
     "PMF_Q_POS",
     "PMF_SPAN_SIGMA",
@@ -35,8 +39,10 @@ __all__ = [
     "reading_stride",
 ]
 
-FILTER_METHODS = ("ukf", "ekf", "gsf", "pmf")
+FILTER_METHODS = ("ukf", "ekf", "gsf", "pmf", "pf", "rbpf")
 """The filters :func:`filter_track` runs."""
+PARTICLES = {"pf": 2000, "rbpf": 1000}
+"""Default particle counts of the SIR and Rao–Blackwellised particle filters."""
 PMF_CELLS = 61
 """Cells per axis of the point-mass filter's grid."""
 PMF_SPAN_SIGMA = 4.0
@@ -147,11 +153,12 @@ def _prior_and_dynamics(lat_mean, dt, sigma_pos, sigma_vel):
                                                                                lat_mean, dt))
 
 
-@functools.partial(jax.jit, static_argnames=("kind",))
-def _gaussian_run(kind, field, dynamics, p0, steps, guard, meas):
+@functools.partial(jax.jit, static_argnames=("kind", "n_particles"))
+def _gaussian_run(kind, field, dynamics, p0, steps, guard, meas, key=None, n_particles=0):
     # meas: a MapPlusBias (a pytree without leaves: its layout is part of the compiled code)
-    filt = {"ukf": ukf, "ekf": ekf, "gsf": lambda m: gaussian_sum(ukf(m), 3)}[kind](meas)
-    _, infos = run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps)
+    filt = {"ukf": ukf, "ekf": ekf, "gsf": lambda m: gaussian_sum(ukf(m), 3),
+            "pf": lambda m: pf(n_particles, m), "rbpf": lambda m: rbpf(n_particles, m)}[kind](meas)
+    _, infos = run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps, key=key)
     # guard: a traced ratio (inf = off), so one compilation serves both
     guarded = guard_run(infos, dynamics, p0, GuardConfig(guard, guard))
     return jax.tree.map(lambda g, a: jnp.where(jnp.isfinite(guard), g, a), guarded, infos)
@@ -168,7 +175,7 @@ def _pmf_run(field, dt, p0, cell_m, q_pos, steps, every, map_error=None, speed=0
 
 def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
                  sigma_vel=0.1414, sigma_gravity=1.0, guard=None, map_error=None,
-                 eotvos_velocity=None, where="track"):
+                 eotvos_velocity=None, where="track", n_particles=None, seed=0):
     """Filter one track; the engine of ``jaxgrav filter`` (inputs already validated).
 
     Run with x64 enabled (the CLI does): positions are in degrees.
@@ -183,12 +190,12 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         INS-indicated position (degrees).
     gravity : numpy.ndarray, shape ``(T,)``
         Eötvös-corrected anomaly readings (mGal), NaN where none.
-    method : {"ukf", "ekf", "gsf", "pmf"}
+    method : {"ukf", "ekf", "gsf", "pmf", "pf", "rbpf"}
     sigma_pos, sigma_vel, sigma_gravity : float
         Prior 1-σ per axis of the INS position (m) and velocity (m/s) errors; reading
         noise 1-σ (mGal).
     guard : float, optional
-        No-harm guard ratio for ``ukf``, ``ekf``, ``gsf``
+        No-harm guard ratio for ``ukf``, ``ekf``, ``gsf``, ``pf``, ``rbpf``
         (:func:`~jaxgrav.filters.guard_run` with ``GuardConfig(guard, guard)``);
         None: the filter's own output.
     map_error : MapErrorState, optional
@@ -202,10 +209,13 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         :func:`~jaxgrav.geodesy.eotvos_jacobian`) at the velocity the readings were
         Eötvös-corrected with: the filter carries the Eötvös error of the INS velocity
         error, ``∂E/∂v · δv``, in its measurement (:attr:`~jaxgrav.filters.Step.h_lin`).
-        ``ukf``, ``ekf``, ``gsf`` only (ValueError for ``pmf``). None: the readings are
-        taken as exactly corrected.
+        All but ``pmf`` (ValueError). None: the readings are taken as exactly corrected.
     where : str
         How error messages name the track.
+    n_particles : int, optional
+        ``pf``, ``rbpf``: the particle count (default :data:`PARTICLES`).
+    seed : int
+        ``pf``, ``rbpf``: the seed of the filter's PRNG key (the run is reproducible).
 
     Returns
     -------
@@ -223,8 +233,12 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     Raises
     ------
     ValueError
-        For ``pmf``: readings not on a fixed row stride.
+        For ``pmf``: readings not on a fixed row stride; ``n_particles`` for a filter
+        without particles, or not an int >= 2.
     """
+    if n_particles is not None and method not in PARTICLES:
+        raise ValueError(f"n_particles is for the particle filters {tuple(PARTICLES)}; got "
+                         f"method={method!r}")
     dt = float(np.median(np.diff(t)))
     n = t.size
     r = float(sigma_gravity) ** 2
@@ -261,7 +275,11 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         infos = jax.tree.map(lambda a: np.asarray(a)[start:start + n], infos)
     else:
         ratio = np.inf if guard is None else float(guard)
-        infos = _gaussian_run(method, field, dynamics, p0, steps, ratio, meas)
+        extra = {}
+        if method in PARTICLES:
+            count = PARTICLES[method] if n_particles is None else n_particles
+            extra = dict(key=jax.random.PRNGKey(seed), n_particles=count)
+        infos = _gaussian_run(method, field, dynamics, p0, steps, ratio, meas, **extra)
         infos = jax.tree.map(np.asarray, infos)
     x, sigma = infos.x, infos.sigma
     m = np.asarray(meridian_radius(lat))

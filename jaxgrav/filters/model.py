@@ -26,6 +26,7 @@ an additive bias state — which the UKF recognises to evaluate the map at the
 callable ``h(field, x, lat, lon)`` still works (the generic path).
 """
 
+import inspect
 import operator
 from collections.abc import Callable
 from typing import NamedTuple
@@ -326,7 +327,7 @@ def predict_only(filt):
     return predict
 
 
-def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
+def run_filter(filt, field, dynamics, x0, p0, steps, every=1, key=None):
     """Run a filter over one track with ``lax.scan``.
 
     Parameters
@@ -354,13 +355,25 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
         gets its :class:`StepInfo`, causally: a step before a reading shows the
         prediction, never the coming update; its innovation and innovation
         variance are NaN. Default 1: ``update`` on every step.
+    key : PRNG key, optional
+        For the particle filters (:func:`~jaxgrav.filters.pf`,
+        :func:`~jaxgrav.filters.rbpf`): passed to their ``init`` (default there:
+        ``PRNGKey(0)``). The Kalman filters take none.
 
     Returns
     -------
     final : FilterState
     infos : StepInfo
         Leading axis ``T``.
+
+    Raises
+    ------
+    ValueError
+        A bad ``every``; a ``key`` for a filter whose ``init`` takes none.
     """
+    if key is not None and "key" not in inspect.signature(filt.init).parameters:
+        raise ValueError("key is for the particle filters (pf, rbpf); this filter's init takes "
+                         "no key: leave key=None")
     try:
         k = operator.index(every)
     except TypeError:
@@ -369,7 +382,7 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1):
         raise ValueError(f"every must be a positive int (steps per reading); got {every!r}")
     every = k
     field = prepare_field(field)
-    state = filt.init(x0, p0)
+    state = filt.init(x0, p0) if key is None else filt.init(x0, p0, key)
 
     def body(state, step):
         return filt.update(state, step, field, dynamics)

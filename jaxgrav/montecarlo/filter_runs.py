@@ -1,4 +1,4 @@
-"""Filters as Monte Carlo methods: paper D's UKF, EKF, Gaussian sum, point-mass filter.
+"""Filters as Monte Carlo methods: paper D's Kalman, point-mass and particle filters.
 
 Each ``*_run(key, field, scenario)`` simulates one run of
 :func:`~jaxgrav.scenarios.filter_scenario` and filters it; :func:`filter_builder`
@@ -16,6 +16,7 @@ from jaxgrav._pytree import pytree_dataclass
 from jaxgrav.fields.map_error import CorrelatedMapError, TruthGrid
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.filters import (
+    PARTICLES,
     STATUS_FILTER,
     GuardConfig,
     ekf,
@@ -23,7 +24,9 @@ from jaxgrav.filters import (
     gravity_measurement,
     guard_run,
     pad_to_stride,
+    pf,
     pmf,
+    rbpf,
     run_filter,
     ukf,
 )
@@ -37,7 +40,9 @@ __all__ = [
     "filter_builder",
     "gsf_guard_run",
     "gsf_run",
+    "pf_run",
     "pmf_run",
+    "rbpf_run",
     "ukf_guard_run",
     "ukf_run",
 ]
@@ -51,6 +56,9 @@ from jaxgrav.scenarios import (
     run_steps,
 )
 from jaxgrav.sim import DEG_ARC_M
+
+_FILTER_KEY = 1
+"""``fold_in(run key, _FILTER_KEY)`` seeds a particle filter."""
 
 
 # ----------------------------------------------------------------- paper-D filters (D)
@@ -80,11 +88,15 @@ def _told_steps(run, scenario, told):
     return dynamics, steps, x0, p0, meas
 
 
-def _kalman_run(key, field, scenario, make, guard=False, map_error=None, told=None):
+def _kalman_run(key, field, scenario, make, guard=False, map_error=None, told=None,
+                particles=False):
     run = filter_scenario(key, field, scenario, map_error)
     dynamics, steps, x0, p0, meas = _told_steps(run, scenario, told)
+    # a particle filter's own random numbers: a key apart from the run's simulation
+    fkey = jax.random.fold_in(key, _FILTER_KEY) if particles else None
     # readings sit on steps every-1, 2 every-1, …: update only there, predict in between
-    _, infos = run_filter(make(meas), field, dynamics, x0, p0, steps, scenario.reading_every)
+    _, infos = run_filter(make(meas), field, dynamics, x0, p0, steps, scenario.reading_every,
+                          key=fkey)
     if guard:
         infos = guard_run(infos, dynamics, p0, GuardConfig())
     return run_metrics(run, infos)
@@ -128,6 +140,22 @@ def _gsf(meas):
 def gsf_run(key, field, scenario, map_error=None, told=None):
     """One paper-D run filtered by a Gaussian sum of 3 × 3 UKFs; as :func:`ukf_run`."""
     return _kalman_run(key, field, scenario, _gsf, False, map_error, told)
+
+
+def pf_run(key, field, scenario, map_error=None, told=None):
+    """One paper-D run filtered by the SIR particle filter (2000 particles); as :func:`ukf_run`.
+
+    The filter's key is ``fold_in(key, 1)``: apart from the simulation's.
+    """
+    return _kalman_run(key, field, scenario, lambda m: pf(PARTICLES["pf"], m), False, map_error,
+                       told, particles=True)
+
+
+def rbpf_run(key, field, scenario, map_error=None, told=None):
+    """One paper-D run filtered by the Rao–Blackwellised particle filter (1000 particles in
+    position, a shared Kalman covariance for the other states); as :func:`pf_run`."""
+    return _kalman_run(key, field, scenario, lambda m: rbpf(PARTICLES["rbpf"], m), False,
+                       map_error, told, particles=True)
 
 
 def ukf_guard_run(key, field, scenario, map_error=None, told=None):
@@ -179,6 +207,8 @@ _FILTER_RUNS = {
     "ukf-guard": (ukf_guard_run, "UKF, no-harm guard (corrections where variance < 0.2 of INS)"),
     "gsf-guard": (gsf_guard_run, "Gaussian sum of 3 x 3 UKFs, no-harm guard"),
     "pmf": (pmf_run, "grid point-mass filter, 61 x 61 cells of 200 m"),
+    "pf": (pf_run, f"SIR particle filter, {PARTICLES['pf']} particles"),
+    "rbpf": (rbpf_run, f"Rao-Blackwellised particle filter, {PARTICLES['rbpf']} particles"),
 }
 
 
@@ -244,7 +274,7 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None, map_
     grid : Grid or None
         Anomaly map (mGal), sampled bicubically; None: paper D's point masses
         (23.9–24.6°N, 122.6–123.3°E).
-    kind : {"ukf", "ekf", "gsf", "pmf", "ukf-guard", "gsf-guard"}
+    kind : {"ukf", "ekf", "gsf", "pmf", "pf", "rbpf", "ukf-guard", "gsf-guard"}
     drift_deg : float, optional
         Size of the initial INS position error (degrees of arc; default 2 km =
         0.01797°); the velocity error is 0.2 m/s.

@@ -99,6 +99,32 @@ def test_ukf_beats_the_ins_on_an_east_west_track(sim, tmp_path, capsys):
     assert np.all(res["status"] == 0)
 
 
+def test_rbpf_beats_the_ins_reproducibly_and_pf_runs(sim, tmp_path, capsys):
+    """The particle filters through the CLI: same columns, honest-ish 1-σ, seeds matter."""
+    track, truth = read_track_csv(sim / "track.csv"), read_track_csv(sim / "truth.csv")
+    ins = _rms_error_m(track["lat"], track["lon"], truth)
+    a, b, c = tmp_path / "a.csv", tmp_path / "b.csv", tmp_path / "c.csv"
+    assert _filter(sim / "track.csv", a, "--method", "rbpf", "--particles", "300") == 0
+    assert "rbpf over 121 rows (121 readings, 300 particles, seed 0)" in capsys.readouterr().out
+    assert _filter(sim / "track.csv", b, "--method", "rbpf", "--particles", "300") == 0
+    assert _filter(sim / "track.csv", c, "--method", "rbpf", "--particles", "300",
+                   "--seed", "1") == 0
+    ra, rb, rc = read_track_csv(a), read_track_csv(b), read_track_csv(c)
+    assert list(ra) == OUT_COLUMNS
+    np.testing.assert_array_equal(ra["lat"], rb["lat"])  # reproducible
+    assert not np.array_equal(ra["lat"], rc["lat"])  # the seed matters
+    err = _rms_error_m(ra["lat"], ra["lon"], truth)
+    assert err < 0.7 * ins, (err, ins)
+    assert err < 3 * np.hypot(ra["sigma_north"][-1], ra["sigma_east"][-1])
+    nis = (ra["innovation"] / ra["innovation_sigma"]) ** 2
+    assert np.isfinite(nis).all() and 0.3 < nis.mean() < 3.0, nis.mean()
+    p = tmp_path / "pf.csv"
+    assert _filter(sim / "track.csv", p, "--method", "pf", "--particles", "500") == 0
+    res = read_track_csv(p)
+    assert np.all(np.isfinite(res["lat"])) and np.all(res["sigma_north"] > 0)
+    assert _rms_error_m(res["lat"], res["lon"], truth) < ins
+
+
 def test_guard_holds_back_weak_directions(sim, tmp_path, capsys):
     plain, guarded = tmp_path / "ukf.csv", tmp_path / "ukf_guard.csv"
     assert _filter(sim / "track.csv", plain, "--method", "ukf") == 0
@@ -275,7 +301,11 @@ def _bad(kind, cols):
      "give exactly one of --map MAP.nc and --point-masses paper-d|MODEL.json; got both"),
     ("ok", ("--sigma-pos", "-1"), "--sigma-pos must be a positive, finite standard deviation"),
     ("ok", ("--sigma-gravity", "nan"), "--sigma-gravity must be a positive"),
-    ("ok", ("--method", "pmf", "--guard"), "--guard applies to ukf, ekf and gsf; got --method pmf"),
+    ("ok", ("--method", "pmf", "--guard"),
+     "--guard applies to ukf, ekf, gsf, pf and rbpf; got --method pmf"),
+    ("ok", ("--method", "ukf", "--particles", "100"),
+     "--particles is for --method pf or rbpf; got --method ukf"),
+    ("ok", ("--method", "rbpf", "--particles", "1"), "--particles must be an integer >= 2; got 1"),
     ("ok", ("--guard", "-0.5"), "--guard must be a positive variance ratio"),
     ("ok", ("--map-error", "-1"), "--map-error must be a finite map-error sigma >= 0 (mGal); "
                                   "got -1.0"),

@@ -1,8 +1,8 @@
 """The paper-D filters in the Monte Carlo registry: tiny runs, and the ``montecarlo`` command.
 
 Each method compiles a whole simulated run (~20 s of CPU), so the quick suite runs
-``ukf`` only (through the runner and the command: one compilation); ``ekf``, ``gsf``,
-``pmf`` and the guarded ``ukf-guard``, ``gsf-guard`` run with ``JAXGRAV_SLOW=1`` (their
+``ukf`` and ``rbpf`` only (through the runner and the command); ``ekf``, ``gsf``,
+``pmf``, ``pf`` and the guarded ``ukf-guard``, ``gsf-guard`` run with ``JAXGRAV_SLOW=1`` (their
 filters are tested quickly in ``test_cli_filter.py`` and ``test_guard.py``).
 """
 
@@ -22,7 +22,7 @@ from jaxgrav.montecarlo.filter_runs import filter_builder
 from jaxgrav.scenarios import FilterScenario
 from jaxgrav.sim import DEG_ARC_M
 
-FILTERS = ("ukf", "ekf", "gsf", "pmf", "ukf-guard", "gsf-guard")
+FILTERS = ("ukf", "rbpf", "ekf", "gsf", "pmf", "pf", "ukf-guard", "gsf-guard")
 slow = pytest.mark.skipif(
     os.environ.get("JAXGRAV_SLOW") != "1", reason="slow: set JAXGRAV_SLOW=1 to run"
 )
@@ -50,8 +50,8 @@ def test_filters_are_registered_with_paper_d_defaults():
         montecarlo_methods.build("ekf", n_fixes=3)
 
 
-@pytest.mark.parametrize("kind", ["ukf", *(pytest.param(k, marks=slow)
-                                           for k in FILTERS[1:])])
+@pytest.mark.parametrize("kind", ["ukf", "rbpf", *(pytest.param(k, marks=slow)
+                                                   for k in FILTERS[2:])])
 def test_every_filter_runs_in_the_monte_carlo_runner(kind):
     spec = montecarlo_methods.build(kind, n_fixes=N_FIXES)
     r = montecarlo.run(spec.fn, jax.random.key(1), 2, chunk=2, args=spec.args, progress=False)
@@ -98,7 +98,8 @@ def test_filters_on_a_map_start_far_enough_inside():
     assert "over the map gravity_anomaly" in spec.settings["description"]
 
 
-@pytest.mark.parametrize(("kind", "told"), [("ukf", "state order 2"), ("pmf", "state order 1")])
+@pytest.mark.parametrize(("kind", "told"), [("ukf", "state order 2"), ("pmf", "state order 1"),
+                                            ("rbpf", "state order 2")])
 def test_filter_builder_with_map_error(kind, told):
     """map_error=: readings from map + a drawn error per run; the filters are told by default
     (the matched SOGM state for the Kalman filters, a per-cell FOGM for pmf);
@@ -110,7 +111,7 @@ def test_filter_builder_with_map_error(kind, told):
     assert spec.settings["map_error"] == "markov2 sigma 3 mGal, L 10000 m"
     told_args = spec.args[3]
     assert float(told_args.white_var) == 0
-    if kind == "ukf":
+    if kind != "pmf":
         assert float(told_args.state.length_m) == 10e3 and told_args.state.order == 2
     else:
         assert float(told_args.state.length_m) == 20e3 and told_args.state.order == 1

@@ -1,0 +1,132 @@
+"""``jaxgrav simulate-filter``: a track CSV (and its truth) from paper D's filtering scenario.
+
+Writes the input of ``jaxgrav filter`` (:mod:`jaxgrav.cli.filter`): raw readings (the
+Eötvös effect of the true velocity taken off, as a gravimeter reads) from paper D's
+scenario (:func:`~jaxgrav.scenarios.filter_scenario`) over its three point masses, or
+over a map (``--map``) whose readings may see a drawn map error (``--map-error SIGMA
+--map-error-length L``).
+"""
+
+import dataclasses
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from jaxgrav.cli.inputs import map_error_args
+from jaxgrav.datasets import load_map
+from jaxgrav.fields.map_error import map_error
+from jaxgrav.fields.pointmass import paper_d
+from jaxgrav.geodesy import eotvos
+from jaxgrav.scenarios import FilterScenario, filter_scenario
+from jaxgrav.sim import DEG_ARC_M
+from jaxgrav.tracks import write_track_csv
+
+__all__ = ["add_parser", "cmd_simulate_filter"]
+
+
+def add_parser(subparsers):
+    """Add the ``simulate-filter`` sub-command to an ``argparse`` sub-parser set."""
+    s = subparsers.add_parser("simulate-filter",
+                              help="write a track CSV from paper D's filtering scenario")
+    s.add_argument("--out", required=True, help="track CSV for jaxgrav filter")
+    s.add_argument("--truth", default=None,
+                   help="also write the true track (t, lat, lon, v_east, v_north) here")
+    s.add_argument("--geometry", choices=("east-west", "north-east"), default="east-west",
+                   help="east-west across the masses (default) or north along the mass "
+                        "line for half the run, then east")
+    s.add_argument("--minutes", type=float, default=120.0, help="duration (default 120)")
+    s.add_argument("--dt", type=float, default=2.0, help="row interval (s, default 2)")
+    s.add_argument("--reading-every", type=int, default=5,
+                   help="a gravity reading every this many rows (default 5: every 10 s)")
+    s.add_argument("--map", default=None,
+                   help="simulate over this anomaly map (NetCDF or a shipped map, e.g. "
+                        "ryukyu) instead of paper D's point masses: straight tracks from a "
+                        "random start at least the track length + 16 km inside the map, "
+                        "random heading (--geometry is then not used)")
+    s.add_argument("--var", default=None, help="variable of --map when the file has several")
+    s.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
+                   help="with --map: the readings see the map + a drawn error field of this "
+                        "1-sigma (mGal), covariance s^2 (1 + r/L) e^(-r/L) (default 0)")
+    s.add_argument("--map-error-length", type=float, default=10e3, metavar="L",
+                   help="the map error's correlation length L (m, default 10000)")
+    s.add_argument("--seed", type=int, default=0, help="PRNG seed")
+    s.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    s.set_defaults(func=cmd_simulate_filter)
+
+
+_simulate = jax.jit(filter_scenario)
+_SIM_MARGIN_M = 16e3  # 3 x 2 km initial error + 10 km: the INS track stays on the map
+
+
+def _inner_region(grid, margin_m, name):
+    """``(lat_min, lat_max, lon_min, lon_max)`` of ``grid`` shrunk by ``margin_m`` (m)."""
+    w, e, s, n = (float(v) for v in grid.extent)
+    dlat = margin_m / DEG_ARC_M
+    dlon = margin_m / (DEG_ARC_M * np.cos(np.radians(min(max(abs(s), abs(n)), 89.0))))
+    region = (s + dlat, n - dlat, w + dlon, e - dlon)
+    if not (region[0] < region[1] and region[2] < region[3]):
+        raise ValueError(f"--map {name} (lat {s:g}..{n:g}, lon {w:g}..{e:g}) is too small for "
+                         f"the run: starts must lie {margin_m / 1e3:.0f} km inside it; use "
+                         "fewer --minutes or a larger map")
+    return region
+"""Paper D's scenario, compiled once per process and scenario shape."""
+
+
+def cmd_simulate_filter(args):
+    """Run ``jaxgrav simulate-filter``: paper D's scenario over its three point masses."""
+    outs = [p for p in (args.out, args.truth) if p is not None]
+    existing = [str(p) for p in outs if Path(p).exists()]
+    if existing and not args.force:
+        raise FileExistsError(f"{existing} exist(s); pass --force to overwrite")
+    if args.truth is not None and Path(args.truth).resolve() == Path(args.out).resolve():
+        raise ValueError(f"--truth must differ from --out; both are {args.out!r}")
+    if not (np.isfinite(args.dt) and args.dt > 0):
+        raise ValueError(f"--dt must be a positive step (s); got {args.dt!r}")
+    if args.reading_every < 1:
+        raise ValueError(f"--reading-every must be a positive number of rows; got "
+                         f"{args.reading_every}")
+    n = round(args.minutes * 60.0 / args.dt) + 1 if np.isfinite(args.minutes) else 0
+    if n < 2:
+        raise ValueError(f"--minutes must cover at least one --dt step ({args.dt:g} s); got "
+                         f"{args.minutes!r}")
+    me_sigma, me_length = map_error_args(args)
+    if args.map is None:
+        if me_sigma > 0:
+            raise ValueError("--map-error needs --map (paper D's point masses have no grid to "
+                             "draw the map error on)")
+        scen = FilterScenario(dt=args.dt, reading_every=args.reading_every, n_steps=n,
+                              geometry=args.geometry)
+        run = _simulate(jax.random.key(args.seed), paper_d(), scen)
+        over = f"{args.geometry} over paper D's point masses"
+    else:
+        grid = load_map(args.map, args.var)
+        scen = FilterScenario(dt=args.dt, reading_every=args.reading_every, n_steps=n)
+        margin = scen.speed * args.dt * (n - 1) + _SIM_MARGIN_M
+        scen = dataclasses.replace(scen, geometry="random",
+                                   region=_inner_region(grid, margin, args.map))
+        me = map_error(me_sigma, me_length) if me_sigma > 0 else None
+        run = _simulate(jax.random.key(args.seed), grid, scen, me)
+        over = f"a random straight track over --map {args.map}"
+        if me is not None:
+            over += f" (map error {me_sigma:g} mGal, L {me_length:g} m)"
+    truth = run.truth
+    err = np.asarray(run.errors)
+    # the raw reading, as a gravimeter gives it: minus the Eötvös effect of the true velocity
+    raw = np.asarray(run.readings) - np.asarray(eotvos(truth.lat, truth.v_east, truth.v_north))
+    write_track_csv(args.out, {
+        "t": truth.t, "lat": run.ins_lat, "lon": run.ins_lon,
+        "v_east": np.asarray(truth.v_east) + err[:, 3],
+        "v_north": np.asarray(truth.v_north) + err[:, 2],
+        "gravity": raw,
+    }, force=args.force, precision=12)
+    if args.truth:
+        write_track_csv(args.truth, {"t": truth.t, "lat": truth.lat, "lon": truth.lon,
+                                     "v_east": truth.v_east, "v_north": truth.v_north},
+                        force=args.force, precision=12)
+    drift = np.hypot(err[:, 0], err[:, 1])
+    also = f" and {args.truth}" if args.truth else ""
+    print(f"wrote {args.out}{also}: {n} rows every {args.dt:g} s, "
+          f"{int(np.isfinite(np.asarray(run.readings)).sum())} readings, {over}; INS error "
+          f"{drift[0]:.0f} m at the start, RMS "
+          f"{np.sqrt(np.mean(drift**2)):.0f} m")

@@ -1,0 +1,164 @@
+"""Particle machinery shared by the particle filters: weights, resampling, roughening.
+
+Weights are kept as normalised log-weights (``logsumexp = 0``) so that a reading far
+in a particle's tail underflows no weight to an exact zero that a later reading could
+not revive. Resampling is triggered by the effective sample size and draws a fixed
+number of indices (static), so it runs under ``jit``/``vmap`` without Python loops:
+
+* :func:`systematic_resample` — one uniform offset, ``N`` equally spaced positions on
+  the cumulative weights (Kitagawa 1996; filterpy's ``systematic_resample``);
+* :func:`residual_resample` — ``⌊N wᵢ⌋`` copies of each particle, the remaining
+  draws multinomial on the residual weights (Liu & Chen 1998; filterpy's
+  ``residual_resample``).
+
+After resampling, :func:`roughen` spreads the copies with a Gaussian kernel of the
+particles' own weighted covariance (the regularised particle filter of Musso, Oudjane
+& Le Gland 2001, bandwidth a multiple of their optimal :func:`kernel_bandwidth`),
+shrunk towards the mean so that the mean and covariance are kept (Liu & West 2001).
+"""
+
+import jax
+import jax.numpy as jnp
+
+from jaxgrav._linalg import psd_sqrt
+
+__all__ = [
+    "RESAMPLERS",
+    "effective_sample_size",
+    "kernel_bandwidth",
+    "normalise_log_weights",
+    "residual_resample",
+    "roughen",
+    "systematic_resample",
+    "weighted_moments",
+]
+
+
+def normalise_log_weights(log_w):
+    """Log-weights shifted so that their exponentials sum to one.
+
+    Parameters
+    ----------
+    log_w : Array, shape ``(N,)``
+
+    Returns
+    -------
+    Array, shape ``(N,)``
+        NaN everywhere if no weight is finite and positive (all ``−inf`` or NaN).
+    """
+    return log_w - jax.nn.logsumexp(log_w)
+
+
+def effective_sample_size(log_w):
+    """``1 / Σ wᵢ²`` of normalised log-weights: ``N`` for equal weights, 1 for one particle."""
+    return jnp.exp(-jax.nn.logsumexp(2.0 * log_w))
+
+
+def systematic_resample(key, log_w):
+    """Indices of a systematic resampling.
+
+    Parameters
+    ----------
+    key : PRNG key
+    log_w : Array, shape ``(N,)``
+        Normalised log-weights.
+
+    Returns
+    -------
+    Array, shape ``(N,)``, int32
+        Particle ``i`` appears ``⌊N wᵢ⌋`` or ``⌈N wᵢ⌉`` times; the positions are
+        ``(u + j) / N`` with one ``u ~ U[0, 1)``, as filterpy's ``systematic_resample``.
+    """
+    n = log_w.shape[0]
+    cum = jnp.cumsum(jnp.exp(log_w))
+    positions = (jax.random.uniform(key, (), cum.dtype) + jnp.arange(n, dtype=cum.dtype)) / n
+    idx = jnp.searchsorted(cum / cum[-1], positions, side="right")
+    return jnp.minimum(idx, n - 1).astype(jnp.int32)  # a rounding of cum[-1] below 1
+
+
+def residual_resample(key, log_w):
+    """Indices of a residual resampling (deterministic copies, multinomial remainder).
+
+    Parameters
+    ----------
+    key : PRNG key
+    log_w : Array, shape ``(N,)``
+        Normalised log-weights.
+
+    Returns
+    -------
+    Array, shape ``(N,)``, int32
+        The first ``Σ ⌊N wᵢ⌋`` entries hold ``⌊N wᵢ⌋`` copies of each ``i`` in order;
+        the rest are drawn with probabilities ``∝ N wᵢ − ⌊N wᵢ⌋``.
+    """
+    n = log_w.shape[0]
+    nw = n * jnp.exp(log_w)
+    copies = jnp.floor(nw).astype(jnp.int32)
+    fixed = jnp.repeat(jnp.arange(n, dtype=jnp.int32), copies, total_repeat_length=n)
+    rest = nw - copies
+    # all residuals zero (k = N) leaves no draw to make: any valid logits do
+    logits = jnp.where(jnp.sum(rest) > 0.0, jnp.log(rest), 0.0)
+    drawn = jax.random.categorical(key, logits, shape=(n,)).astype(jnp.int32)
+    return jnp.where(jnp.arange(n) < jnp.sum(copies), fixed, drawn)
+
+
+RESAMPLERS = {"systematic": systematic_resample, "residual": residual_resample}
+"""Resampling schemes by name: ``(key, log_w) -> indices``."""
+
+
+def weighted_moments(log_w, x):
+    """Weighted mean and covariance of particles.
+
+    Parameters
+    ----------
+    log_w : Array, shape ``(N,)``
+        Normalised log-weights.
+    x : Array, shape ``(N, d)``
+
+    Returns
+    -------
+    mean : Array, shape ``(d,)``
+    cov : Array, shape ``(d, d)``
+        ``Σ wᵢ (xᵢ − x̄)(xᵢ − x̄)ᵀ`` (symmetric).
+    """
+    w = jnp.exp(log_w)
+    mean = w @ x
+    dx = x - mean
+    cov = (w[:, None] * dx).T @ dx
+    return mean, 0.5 * (cov + cov.T)
+
+
+def kernel_bandwidth(n, d):
+    """Musso et al. (2001)'s optimal Gaussian-kernel bandwidth ``(4 / (N (d + 2)))^(1/(d+4))``."""
+    return (4.0 / (n * (d + 2.0))) ** (1.0 / (d + 4.0))
+
+
+def roughen(key, x, mean, cov, bandwidth):
+    """Regularise resampled particles with a moment-preserving Gaussian kernel.
+
+    ``xᵢ ← a xᵢ + (1 − a) x̄ + h L εᵢ`` with ``a = √(1 − h²)``, ``L Lᵀ = Σ`` (Liu & West
+    2001's shrinkage): the copies that resampling made are spread apart while the
+    particles' mean and covariance are kept, so repeated resampling does not inflate
+    the spread as plain roughening does.
+
+    Parameters
+    ----------
+    key : PRNG key
+    x : Array, shape ``(N, d)``
+        Resampled particles.
+    mean, cov : Array, shapes ``(d,)``, ``(d, d)``
+        The particles' weighted mean and covariance before resampling
+        (:func:`weighted_moments`); ``cov`` positive semi-definite (a zero direction
+        gets no spread).
+    bandwidth : float
+        ``h`` in ``[0, 1)``; 0 returns the particles unchanged.
+
+    Returns
+    -------
+    Array, shape ``(N, d)``
+    """
+    if isinstance(bandwidth, (int, float)) and bandwidth == 0:
+        return x
+    a = jnp.sqrt(1.0 - bandwidth**2)
+    eps = jax.random.normal(key, x.shape, x.dtype)
+    return a * x + (1.0 - a) * mean + bandwidth * eps @ psd_sqrt(cov).T

@@ -1,0 +1,221 @@
+"""Rao–Blackwellised (marginalised) particle filter: particles in position, Kalman elsewhere.
+
+The gravity reading is non-linear only in the horizontal position error; it is linear
+in every other state (the gravimeter bias, the map-error state, the Eötvös error of the
+velocity through :attr:`~jaxgrav.filters.model.Step.h_lin`), and the INS error model is
+linear. So the marginalised particle filter (Schön, Gustafsson & Nordlund 2005; the
+filter of MagNav.jl and of terrain-aided navigation) carries particles ``ξᵢ`` over the
+position error (north, east; ``N × 2``) and, per particle, the Gaussian of the other
+``n − 2`` states given that particle's position history: a mean ``mᵢ`` and a
+covariance ``P``.
+
+Both the reading's linear part ``C`` (the bias and map-error rows, plus ``h_lin``)
+and the dynamics ``F``, ``Q`` are the same for every particle, so the Riccati recursion
+of ``P`` does not depend on the particle: ``P`` is **one** ``(n − 2) × (n − 2)`` matrix
+shared by all particles, and a particle costs a mean update only. Per step:
+
+* **time update** — for each particle the next state is Gaussian,
+  ``μᵢ = F[:, pos] ξᵢ + F[:, lin] mᵢ``, ``Σ = F[:, lin] P F[:, lin]ᵀ + Q``; the new
+  position is drawn from its position block, ``ξᵢ' ~ N(μᵢ[pos], Σ_pp)``, and the
+  linear states are conditioned on it: ``mᵢ' = μᵢ[lin] + G (ξᵢ' − μᵢ[pos])``,
+  ``P' = Σ_ll − G Σ_pl`` with ``G = Σ_lp Σ_pp⁻¹`` (the "measurement" of the linear
+  states by the sampled position step);
+* **reading** — ``ẑᵢ = map(ξᵢ) + h_lin[pos] · ξᵢ + C · mᵢ``, ``s = C P Cᵀ + r``;
+  weights ``× N(z; ẑᵢ, s)``, means ``mᵢ += K (z − ẑᵢ)`` with one gain ``K = P Cᵀ / s``,
+  ``P −= s K Kᵀ``;
+* **resampling** when the effective sample size is low, positions and means together,
+  then roughening of the positions (:mod:`jaxgrav.filters.particles`).
+
+The measurement must be a :class:`~jaxgrav.filters.model.MapPlusBias` with two
+position states (the default :data:`~jaxgrav.filters.gravity_measurement`, with or
+without :func:`~jaxgrav.filters.augment`'s map-error state). The reported state is the
+mixture's mean and covariance (``P`` plus the spread of the means); flags as
+:func:`~jaxgrav.filters.pf`'s.
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from jaxgrav._linalg import cholesky, inv_2x2
+from jaxgrav.filters.model import STATUS_FILTER, Filter, MapPlusBias, StepInfo, gravity_measurement
+from jaxgrav.filters.particles import (
+    effective_sample_size,
+    kernel_bandwidth,
+    normalise_log_weights,
+    roughen,
+    weighted_moments,
+)
+from jaxgrav.filters.pf import check_particle_settings, particle_flags
+
+__all__ = ["RBPFState", "rbpf"]
+
+_POS = 2  # position states, first in the error state
+
+
+class RBPFState(NamedTuple):
+    """Marginalised particle filter state.
+
+    Attributes
+    ----------
+    position : Array, shape ``(N, 2)``
+        Position-error particles (m, north/east).
+    mean : Array, shape ``(N, n − 2)``
+        Each particle's mean of the other states.
+    p : Array, shape ``(n − 2, n − 2)``
+        Their covariance, shared by all particles.
+    log_w : Array, shape ``(N,)``
+        Normalised log-weights.
+    key : PRNG key
+    """
+
+    position: jax.Array
+    mean: jax.Array
+    p: jax.Array
+    log_w: jax.Array
+    key: jax.Array
+
+
+def _condition(mean, cov, pos):
+    """Gaussian ``N(mean, cov)`` over ``n`` states conditioned on its first two at ``pos``.
+
+    ``mean`` (N, n) or (n,), ``pos`` (N, 2); returns the linear states' means
+    ``(N, n − 2)`` and their covariance, and the position block's factor.
+    """
+    s_pp, s_lp = cov[:_POS, :_POS], cov[_POS:, :_POS]
+    gain = s_lp @ inv_2x2(s_pp)
+    m = mean[..., _POS:] + (pos - mean[..., :_POS]) @ gain.T
+    p = cov[_POS:, _POS:] - gain @ s_lp.T
+    return m, 0.5 * (p + p.T), cholesky(s_pp)
+
+
+def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systematic",
+         ess_threshold=0.5, roughening=0.5, gate=jnp.inf):
+    """Rao–Blackwellised particle filter over the position error.
+
+    Parameters
+    ----------
+    n_particles : int
+        Particles ``N`` (static).
+    measurement : MapPlusBias
+        With ``n_position = 2``; default :data:`~jaxgrav.filters.gravity_measurement`.
+    resample : {"systematic", "residual"}
+    ess_threshold : float
+        Resample after a reading when the effective sample size is below this share
+        of ``N``.
+    roughening : float
+        The regularisation kernel's bandwidth for the position particles after each
+        resampling (:func:`~jaxgrav.filters.particles.roughen`) as a share of the
+        optimal one (:func:`~jaxgrav.filters.particles.kernel_bandwidth`), in
+        ``[0, 1]``; 0: off. With ``N = 500`` and 2 position states the optimal
+        bandwidth is 0.35.
+    gate : float
+        Skip readings whose normalised innovation squared exceeds this.
+
+    Returns
+    -------
+    Filter
+        ``init(x0, P0, key=None)`` (``key`` default ``PRNGKey(0)``: positions drawn from
+        the prior's position block, each particle's other states conditioned on it),
+        ``update`` and ``predict`` as the Kalman filters', returning
+        :class:`RBPFState`.
+
+    Raises
+    ------
+    ValueError
+        Bad settings; a measurement that is not a MapPlusBias with two position states.
+    """
+    resampler = check_particle_settings(n_particles, resample, ess_threshold, roughening)
+    if not isinstance(measurement, MapPlusBias) or measurement.n_position != _POS:
+        raise ValueError("rbpf needs a MapPlusBias measurement with n_position=2 (the map part "
+                         "non-linear in the position error only, the rest additive); got "
+                         f"{measurement!r}")
+
+    def init(x0, p0, key=None):
+        key = jax.random.PRNGKey(0) if key is None else key
+        x0, p0 = jnp.asarray(x0), jnp.asarray(p0)
+        key, sub = jax.random.split(key)
+        eps = jax.random.normal(sub, (n_particles, _POS), p0.dtype)
+        chol = cholesky(p0[:_POS, :_POS])
+        pos = x0[:_POS] + eps @ chol.T
+        m, p, _ = _condition(x0, p0, pos)
+        log_w = jnp.full(n_particles, -jnp.log(n_particles), p0.dtype)
+        return RBPFState(pos, m, p, log_w, key)
+
+    def _move(state, dynamics):
+        f, q = dynamics.f, dynamics.q
+        f_pos, f_lin = f[:, :_POS], f[:, _POS:]
+        mu = state.position @ f_pos.T + state.mean @ f_lin.T  # (N, n)
+        cov = f_lin @ state.p @ f_lin.T + q
+        key, sub = jax.random.split(state.key)
+        eps = jax.random.normal(sub, state.position.shape, state.position.dtype)
+        _, _, chol = _condition(mu[:1], cov, mu[:1, :_POS])
+        pos = mu[:, :_POS] + eps @ chol.T
+        m, p, _ = _condition(mu, cov, pos)
+        return RBPFState(pos, m, p, state.log_w, key)
+
+    def _linear_row(step, mean):
+        """``C`` over the linear states and the position part of ``h_lin``."""
+        additive = [i - _POS for i in measurement.additive]
+        c = jnp.zeros(mean.shape[1], mean.dtype).at[jnp.asarray(additive)].set(1.0)
+        if step.h_lin is None:
+            return c, jnp.zeros(_POS, c.dtype)
+        return c + step.h_lin[_POS:], step.h_lin[:_POS]
+
+    def _info(state, nu, s, flags):
+        x = jnp.concatenate([state.position, state.mean], axis=1)
+        mean, cov = weighted_moments(state.log_w, x)
+        cov = cov.at[_POS:, _POS:].add(state.p)
+        sigma = jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0, None))
+        return StepInfo(mean, sigma, cov[:_POS, :_POS], nu, s, flags), cov
+
+    def predict(state, step, field, dynamics):
+        del field
+        state = _move(state, dynamics)
+        nan = jnp.full_like(step.z, jnp.nan)
+        flags = STATUS_FILTER["no_reading"] | jnp.where(
+            jnp.isfinite(step.z), STATUS_FILTER["reading_ignored"], 0)
+        return state, _info(state, nan, nan, flags.astype(jnp.int32))[0]
+
+    def update(state, step, field, dynamics):
+        state = _move(state, dynamics)
+        c, c_pos = _linear_row(step, state.mean)
+        g = jax.vmap(lambda d: measurement.map_part(field, d, step.lat, step.lon))(state.position)
+        zs = g + state.position @ c_pos + state.mean @ c
+        off_map = ~jnp.all(jnp.isfinite(zs))
+        zs = jnp.where(jnp.isfinite(zs), zs, 0.0)  # double-where: no NaN into the weights
+        pc = state.p @ c
+        s_lin = c @ pc + step.r  # each particle's innovation variance
+        w = jnp.exp(state.log_w)
+        z_hat = w @ zs
+        s = w @ (zs - z_hat) ** 2 + s_lin
+        z = jnp.where(jnp.isfinite(step.z), step.z, z_hat)
+        nu = z - z_hat
+        flags, skip = particle_flags(step.z, s_lin, s, nu, gate, off_map)
+        s_safe = jnp.where(s_lin > 0.0, s_lin, 1.0)
+        resid = z - zs
+        gain = pc / s_safe
+        log_w = normalise_log_weights(state.log_w - 0.5 * resid**2 / s_safe)
+        mean = state.mean + resid[:, None] * gain
+        p = state.p - s_safe * jnp.outer(gain, gain)
+        new = RBPFState(state.position, jnp.where(skip, state.mean, mean),
+                        jnp.where(skip, state.p, 0.5 * (p + p.T)),
+                        jnp.where(skip, state.log_w, log_w), state.key)
+        nu_out = jnp.where(jnp.isfinite(step.z), nu, jnp.nan)
+        info, _ = _info(new, nu_out, s, flags)  # the posterior, before resampling
+        return resample_if_degenerate(new), info
+
+    def resample_if_degenerate(state):
+        key, k_idx, k_rough = jax.random.split(state.key, 3)
+        idx = resampler(k_idx, state.log_w)
+        mean, cov = weighted_moments(state.log_w, state.position)
+        h = roughening * kernel_bandwidth(n_particles, _POS)
+        pos = roughen(k_rough, state.position[idx], mean, cov, h)
+        do = effective_sample_size(state.log_w) < ess_threshold * n_particles
+        flat = jnp.full_like(state.log_w, -jnp.log(n_particles))
+        return RBPFState(jnp.where(do, pos, state.position),
+                         jnp.where(do, state.mean[idx], state.mean), state.p,
+                         jnp.where(do, flat, state.log_w), key)
+
+    return Filter(init, update, predict)

@@ -1,0 +1,217 @@
+"""Particle filters: resampling against filterpy, the SIR and Rao–Blackwellised filters
+against the exact Kalman filter on a linear map, transformations, flags and bad settings."""
+
+import filterpy.monte_carlo.resampling as fp_resampling
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgrav.filters import (
+    STATUS_FILTER,
+    Step,
+    augment,
+    effective_sample_size,
+    ekf,
+    map_error_state,
+    pf,
+    rbpf,
+    residual_resample,
+    run_filter,
+    systematic_resample,
+    ukf,
+)
+from jaxgrav.filters.model import Dynamics
+from jaxgrav.filters.particles import kernel_bandwidth, roughen, weighted_moments
+from jaxgrav.scenarios import FilterScenario, initial_state
+from jaxgrav.sim.ins import transition
+
+LAT0, LON0 = 24.0, 123.0
+
+
+def _log_w(seed, n=50):
+    w = np.random.default_rng(seed).gamma(0.3, size=n)
+    return jnp.log(w / w.sum())
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_systematic_resample_equals_filterpy(seed, monkeypatch):
+    key = jax.random.PRNGKey(seed)
+    log_w = _log_w(seed)
+    u = float(jax.random.uniform(key, (), jnp.float64))
+    monkeypatch.setattr(fp_resampling, "random", lambda: u)
+    expected = fp_resampling.systematic_resample(np.exp(np.asarray(log_w)))
+    np.testing.assert_array_equal(np.asarray(systematic_resample(key, log_w)), expected)
+
+
+def test_residual_resample_copies_and_is_unbiased():
+    log_w = _log_w(4, 40)
+    n = log_w.shape[0]
+    nw = n * np.exp(np.asarray(log_w))
+    idx = np.asarray(jax.vmap(residual_resample, (0, None))(
+        jax.random.split(jax.random.PRNGKey(0), 4000), log_w))
+    counts = np.stack([np.bincount(i, minlength=n) for i in idx])
+    assert np.all(counts >= np.floor(nw)[None])  # the deterministic copies, every draw
+    assert np.all(idx >= 0) and np.all(idx < n)
+    se = counts.std(0) / np.sqrt(len(counts)) + 1e-3
+    assert np.all(np.abs(counts.mean(0) - nw) < 5 * se)  # E[copies] = N w
+
+
+def test_systematic_counts_are_floor_or_ceil():
+    log_w = _log_w(5, 64)
+    nw = 64 * np.exp(np.asarray(log_w))
+    for k in jax.random.split(jax.random.PRNGKey(1), 20):
+        c = np.bincount(np.asarray(systematic_resample(k, log_w)), minlength=64)
+        assert np.all((c >= np.floor(nw) - 1e-9) & (c <= np.ceil(nw) + 1e-9))
+
+
+def test_effective_sample_size_and_moments():
+    n = 10
+    flat = jnp.full(n, -jnp.log(n))
+    assert float(effective_sample_size(flat)) == pytest.approx(n)
+    one = jnp.full(n, -jnp.inf).at[3].set(0.0)
+    assert float(effective_sample_size(one)) == pytest.approx(1.0)
+    x = np.random.default_rng(0).normal(size=(n, 3))
+    w = np.exp(np.asarray(_log_w(7, n)))
+    mean, cov = weighted_moments(jnp.log(w), jnp.asarray(x))
+    np.testing.assert_allclose(mean, w @ x, rtol=1e-12)
+    np.testing.assert_allclose(cov, np.cov(x.T, aweights=w, bias=True), rtol=1e-10)
+
+
+def test_roughen_keeps_mean_and_covariance_and_spreads_copies():
+    cov = jnp.array([[4.0, 1.0], [1.0, 1.0]])
+    mean = jnp.array([10.0, -3.0])
+    k1, k2 = jax.random.split(jax.random.PRNGKey(0))
+    x = mean + jax.random.normal(k1, (40000, 2)) @ jnp.linalg.cholesky(cov).T
+    copies = jnp.repeat(x[:20000], 2, axis=0)  # what resampling makes
+    out = np.asarray(roughen(k2, copies, mean, cov, 0.5))
+    np.testing.assert_allclose(out.mean(0), mean, atol=0.05)
+    np.testing.assert_allclose(np.cov(out.T), cov, rtol=0.05, atol=0.03)
+    assert np.unique(out[:, 0]).size == out.shape[0]
+    assert roughen(k2, copies, mean, cov, 0.0) is copies
+    assert kernel_bandwidth(1000, 13) == pytest.approx((4 / 15000) ** (1 / 17))
+
+
+# --------------------------------------------------------- linear map: the exact answer
+def _linear_field(lat, lon):
+    """A plane (mGal): 40 mGal per 0.1° north, −25 per 0.1° east — the measurement is linear."""
+    return 400.0 * (lat - LAT0) - 250.0 * (lon - LON0)
+
+
+def _linear_problem(t=60, seed=0):
+    scen = FilterScenario()
+    x0, p0 = initial_state(scen)
+    f, q = transition(scen.ins, LAT0, 10.0)
+    dyn = Dynamics(f, q, jnp.asarray(10.0))
+    rng = np.random.default_rng(seed)
+    lat = LAT0 + 0.0005 * np.arange(t)
+    lon = LON0 + 0.0003 * np.arange(t)
+    z = _linear_field(lat, lon) + rng.normal(0.0, 1.0, t) + 12.0
+    if t > 5:
+        z[5] = np.nan  # a missing reading
+    steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(z), jnp.full(t, 1.0))
+    return dyn, x0, p0, steps
+
+
+@pytest.mark.parametrize("kind", ["rbpf", "pf"])
+def test_particle_filters_match_the_kalman_filter_on_a_linear_map(kind):
+    """With a plane map the EKF is the exact posterior; both particle filters approach it."""
+    dyn, x0, p0, steps = _linear_problem()
+    _, kf = run_filter(ekf(), _linear_field, dyn, x0, p0, steps)
+    filt = rbpf(4000) if kind == "rbpf" else pf(20000, roughening=0.0)
+    _, got = jax.jit(lambda k: run_filter(filt, _linear_field, dyn, x0, p0, steps, key=k))(
+        jax.random.PRNGKey(1))
+    sig = np.asarray(kf.sigma)
+    # position and bias means within a fifth of the exact posterior's σ at every step
+    for i in (0, 1, 12):
+        err = np.abs(np.asarray(got.x[:, i]) - np.asarray(kf.x[:, i])) / sig[:, i]
+        assert err.max() < (0.2 if kind == "rbpf" else 0.35), (i, err.max())
+        np.testing.assert_allclose(np.asarray(got.sigma[-10:, i]), sig[-10:, i],
+                                   rtol=0.15 if kind == "rbpf" else 0.3)
+    assert np.asarray(got.status)[5] == STATUS_FILTER["no_reading"]
+    assert np.isnan(np.asarray(got.innovation)[5])
+    fin = np.isfinite(np.asarray(kf.innovation))
+    np.testing.assert_allclose(np.asarray(got.innovation_var)[fin],
+                               np.asarray(kf.innovation_var)[fin], rtol=0.25)
+
+
+def test_rbpf_shared_covariance_equals_the_kalman_one_on_a_linear_map():
+    """The RBPF's Riccati part: with one particle-free direction it is the KF's exactly."""
+    dyn, x0, p0, steps = _linear_problem(20)
+    kf_final, _ = run_filter(ekf(), _linear_field, dyn, x0, p0, steps)
+    st, _ = run_filter(rbpf(4000, ess_threshold=0.0), _linear_field, dyn, x0, p0, steps,
+                       key=jax.random.PRNGKey(0))
+    # mixture covariance of the linear states = shared P + spread of the means
+    x = jnp.concatenate([st.position, st.mean], 1)
+    _, cov = weighted_moments(st.log_w, x)
+    cov = np.asarray(cov.at[2:, 2:].add(st.p))
+    np.testing.assert_allclose(np.sqrt(np.diag(cov)), np.sqrt(np.diag(kf_final.p)), rtol=0.1)
+
+
+# ------------------------------------------------------------ transformations, settings
+def _small(kind, n=64):
+    return rbpf(n) if kind == "rbpf" else pf(n)
+
+
+@pytest.mark.parametrize("kind", ["rbpf", "pf"])
+def test_vmap_equals_loop_and_no_retrace(kind):
+    dyn, x0, p0, steps = _linear_problem(15)
+    traces = []
+
+    def run(key):
+        traces.append(1)
+        return run_filter(_small(kind), _linear_field, dyn, x0, p0, steps, key=key)[1].x
+
+    fn = jax.jit(run)
+    keys = jax.random.split(jax.random.PRNGKey(0), 3)
+    loop = np.stack([np.asarray(fn(k)) for k in keys])
+    assert len(traces) == 1
+    batched = np.asarray(jax.vmap(run)(keys))
+    np.testing.assert_allclose(batched, loop, rtol=1e-9, atol=1e-6)
+    assert not np.allclose(loop[0], loop[1])  # the key matters
+    np.testing.assert_array_equal(np.asarray(fn(keys[0])), loop[0])  # and reproduces
+
+
+def test_every_stride_and_map_error_state():
+    dyn, x0, p0, steps = _linear_problem(30)
+    cfg = map_error_state(2.0, 10e3, 1)
+    dyn2, x1, p1, meas = augment(cfg, dyn, x0, p0, 5.0)
+    for filt in (rbpf(64, meas), pf(64, meas)):
+        _, infos = run_filter(filt, _linear_field, dyn2, x1, p1, steps, every=3,
+                              key=jax.random.PRNGKey(2))
+        assert infos.x.shape == (30, 14)
+        st = np.asarray(infos.status)
+        assert np.all(st[0::3] & STATUS_FILTER["no_reading"])  # predicted only
+        assert np.all(np.isfinite(np.asarray(infos.x)))
+
+
+def test_off_map_particles_skip_the_reading():
+    dyn, x0, p0, steps = _linear_problem(5)
+
+    def edge(lat, lon):  # "map" that ends 1 km north of the track start
+        return jnp.where(lat < LAT0 + 0.009, _linear_field(lat, lon), jnp.nan)
+
+    for filt in (rbpf(256), pf(256)):
+        _, infos = run_filter(filt, edge, dyn, x0, p0, steps, key=jax.random.PRNGKey(0))
+        st = np.asarray(infos.status)
+        assert np.all((st & STATUS_FILTER["off_map"]) | (st & STATUS_FILTER["no_reading"]))
+        assert np.all(np.isfinite(np.asarray(infos.x)))
+
+
+def test_bad_settings_are_clear_errors():
+    with pytest.raises(ValueError, match="n_particles"):
+        pf(1)
+    with pytest.raises(ValueError, match="resample"):
+        rbpf(10, resample="stratified-ish")
+    with pytest.raises(ValueError, match="ess_threshold"):
+        pf(10, ess_threshold=1.5)
+    with pytest.raises(ValueError, match="roughening"):
+        rbpf(10, roughening=1.5)
+    with pytest.raises(ValueError, match="MapPlusBias"):
+        rbpf(10, lambda field, x, lat, lon: x[0])
+    dyn, x0, p0, steps = _linear_problem(3)
+    with pytest.raises(ValueError, match="key is for the particle filters"):
+        run_filter(ukf(), _linear_field, dyn, x0, p0, steps, key=jax.random.PRNGKey(0))
+    _, infos = run_filter(pf(16), _linear_field, dyn, x0, p0,
+                          steps._replace(r=jnp.zeros(3)), key=jax.random.PRNGKey(0))
+    assert np.all(np.asarray(infos.status)[[0, 2]] & STATUS_FILTER["covariance_failed"])
