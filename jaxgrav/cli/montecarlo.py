@@ -139,7 +139,9 @@ def summarize(results, kind="matcher"):
         and ``failure_rate`` (error > failure_ratio × INS, or not finite),
         ``flagged_rate`` (status ≠ 0), ``improved_rate`` (error < INS; a returned INS
         track, equal to it up to rounding, is not improved), ``nonfinite``
-        (count); with ``nees`` in ``results`` also ``nees`` (its statistics).
+        (count); with ``nees`` in ``results`` also ``nees`` (its statistics); with
+        ``bound_m`` (the PCRLB) its statistics and ``rms_to_bound``, the RMS error over
+        runs divided by the RMS bound (≥ 1 up to Monte Carlo noise; 1 is efficient).
     """
     if kind not in FAILURE_RATIO:
         raise ValueError(f"kind must be one of {sorted(FAILURE_RATIO)}; got {kind!r}")
@@ -171,6 +173,12 @@ def summarize(results, kind="matcher"):
     )
     if "nees" in results:
         out["nees"] = stats(np.asarray(results["nees"], float))
+    if "bound_m" in results:
+        bound = np.asarray(results["bound_m"], float)
+        out["bound_m"] = stats(bound)
+        ok = np.isfinite(err) & np.isfinite(bound)
+        out["rms_to_bound"] = (float(np.sqrt(np.mean(err[ok] ** 2) / np.mean(bound[ok] ** 2)))
+                               if ok.any() else float("nan"))
     return out
 
 
@@ -186,6 +194,9 @@ def format_summary(s):
     if "nees" in s:
         rows.append(f"{'position NEES':<16}" + "".join(f"{s['nees'][c]:>10.2f}" for c in cols)
                     + "   (2 expected)")
+    if "bound_m" in s:
+        rows.append(f"{'PCRLB (m)':<16}" + "".join(f"{s['bound_m'][c]:>10.0f}" for c in cols)
+                    + f"   (RMS error / RMS bound {s['rms_to_bound']:.2f})")
     limit = s["failure_ratio"]
     bound = "INS/3" if abs(limit - 1 / 3) < 1e-12 else f"{limit:g} x INS"
     rows.append(f"failure rate (error > {bound} or not finite): {100 * s['failure_rate']:.1f} %; "

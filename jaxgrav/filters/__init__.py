@@ -13,7 +13,8 @@ state (:mod:`jaxgrav.filters.map_state`) that the UKF, EKF and Gaussian sum carr
 unchanged; the point-mass filter carries a first-order one per grid cell.
 The particle filters — :func:`pf` (SIR over the whole state) and :func:`rbpf`
 (particles over the position error, one shared Kalman covariance for the rest) — take
-the same protocol and runner; ``run_filter(..., key=k)`` seeds them.
+the same protocol and runner; ``run_filter(..., key=k)`` seeds them. :func:`pcrlb`
+is the posterior Cramér–Rao bound any of them can be held against.
 """
 
 from jaxgrav.filters.api import (
@@ -58,6 +59,7 @@ from jaxgrav.filters.particles import (
     residual_resample,
     systematic_resample,
 )
+from jaxgrav.filters.pcrlb import PCRLBResult, pcrlb
 from jaxgrav.filters.pf import ParticleState, pf
 from jaxgrav.filters.pmf import PMFFilter, PMFState, pmf, run_pmf
 from jaxgrav.filters.rbpf import RBPFState, rbpf
@@ -74,6 +76,7 @@ __all__ = [
     "GuardConfig",
     "MapErrorState",
     "MapPlusBias",
+    "PCRLBResult",
     "PMFFilter",
     "PMFState",
     "ParticleState",
@@ -98,6 +101,7 @@ __all__ = [
     "map_error_state",
     "matched_state",
     "pad_to_stride",
+    "pcrlb",
     "pf",
     "pmf",
     "predict",

@@ -27,6 +27,7 @@ __all__ = [
     "effective_sample_size",
     "kernel_bandwidth",
     "normalise_log_weights",
+    "particle_summary",
     "residual_resample",
     "roughen",
     "systematic_resample",
@@ -131,6 +132,35 @@ def weighted_moments(log_w, x):
 def kernel_bandwidth(n, d):
     """Musso et al. (2001)'s optimal Gaussian-kernel bandwidth ``(4 / (N (d + 2)))^(1/(d+4))``."""
     return (4.0 / (n * (d + 2.0))) ** (1.0 / (d + 4.0))
+
+
+def particle_summary(log_w, x, extra_var=None):
+    """The per-step summary of weighted particles: mean, 1-σ per state, position covariance.
+
+    Cheaper than :func:`weighted_moments` of all states (only the diagonal and the
+    leading 2 × 2 block), which a filter needs every step.
+
+    Parameters
+    ----------
+    log_w : Array, shape ``(N,)``
+    x : Array, shape ``(N, d)``
+        Particles (position error first).
+    extra_var : Array, shape ``(d,)``, optional
+        Added to the variances (a Rao–Blackwellised filter's shared Kalman part).
+
+    Returns
+    -------
+    mean, sigma : Array, shape ``(d,)``
+    p_pos : Array, shape ``(2, 2)``
+    """
+    w = jnp.exp(log_w)
+    mean = w @ x
+    dx = x - mean
+    var = w @ dx**2
+    if extra_var is not None:
+        var = var + extra_var
+    p_pos = (w[:, None] * dx[:, :2]).T @ dx[:, :2]
+    return mean, jnp.sqrt(jnp.clip(var, 0.0, None)), 0.5 * (p_pos + p_pos.T)
 
 
 def roughen(key, x, mean, cov, bandwidth):

@@ -32,6 +32,7 @@ from jaxgrav.filters.particles import (
     effective_sample_size,
     kernel_bandwidth,
     normalise_log_weights,
+    particle_summary,
     roughen,
     weighted_moments,
 )
@@ -164,9 +165,8 @@ def pf(n_particles=1000, measurement=gravity_measurement, *, resample="systemati
         return ParticleState(moved, state.log_w, key)
 
     def _info(state, nu, s, flags):
-        mean, cov = weighted_moments(state.log_w, state.particles)
-        sigma = jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0, None))
-        return StepInfo(mean, sigma, cov[:2, :2], nu, s, flags), cov
+        mean, sigma, p_pos = particle_summary(state.log_w, state.particles)
+        return StepInfo(mean, sigma, p_pos, nu, s, flags)
 
     def predict(state, step, field, dynamics):
         del field
@@ -174,7 +174,7 @@ def pf(n_particles=1000, measurement=gravity_measurement, *, resample="systemati
         nan = jnp.full_like(step.z, jnp.nan)
         flags = STATUS_FILTER["no_reading"] | jnp.where(
             jnp.isfinite(step.z), STATUS_FILTER["reading_ignored"], 0)
-        return state, _info(state, nan, nan, flags.astype(jnp.int32))[0]
+        return state, _info(state, nan, nan, flags.astype(jnp.int32))
 
     def update(state, step, field, dynamics):
         state = _move(state, dynamics)
@@ -195,12 +195,13 @@ def pf(n_particles=1000, measurement=gravity_measurement, *, resample="systemati
         log_w = jnp.where(skip, state.log_w, log_w)
         weighted = ParticleState(x, log_w, state.key)
         nu_out = jnp.where(jnp.isfinite(step.z), nu, jnp.nan)
-        info, cov = _info(weighted, nu_out, s, flags)  # the posterior, before resampling
-        return resample_if_degenerate(weighted, info.x, cov), info
+        info = _info(weighted, nu_out, s, flags)  # the posterior, before resampling
+        return resample_if_degenerate(weighted), info
 
-    def resample_if_degenerate(state, mean, cov):
+    def resample_if_degenerate(state):
         key, k_idx, k_rough = jax.random.split(state.key, 3)
         idx = resampler(k_idx, state.log_w)
+        mean, cov = weighted_moments(state.log_w, state.particles)
         h = roughening * kernel_bandwidth(n_particles, state.particles.shape[1])
         moved = roughen(k_rough, state.particles[idx], mean, cov, h)
         do = effective_sample_size(state.log_w) < ess_threshold * n_particles

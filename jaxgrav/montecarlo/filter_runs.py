@@ -24,6 +24,7 @@ from jaxgrav.filters import (
     gravity_measurement,
     guard_run,
     pad_to_stride,
+    pcrlb,
     pf,
     pmf,
     rbpf,
@@ -88,6 +89,15 @@ def _told_steps(run, scenario, told):
     return dynamics, steps, x0, p0, meas
 
 
+def _with_bound(metrics, run, field, scenario, told):
+    """``metrics`` plus ``bound_m``: the PCRLB of the horizontal position error, RMS over
+    the second half of the run (as ``err_m``), of the model the filter is told."""
+    dynamics, steps, _, p0, meas = _told_steps(run, scenario, told)
+    rms = pcrlb(field, dynamics, p0, steps, run.errors[1:, :2], meas).position_rms
+    half = rms.shape[0] // 2
+    return dict(metrics, bound_m=jnp.sqrt(jnp.mean(rms[half:] ** 2)))
+
+
 def _kalman_run(key, field, scenario, make, guard=False, map_error=None, told=None,
                 particles=False):
     run = filter_scenario(key, field, scenario, map_error)
@@ -99,7 +109,7 @@ def _kalman_run(key, field, scenario, make, guard=False, map_error=None, told=No
                           key=fkey)
     if guard:
         infos = guard_run(infos, dynamics, p0, GuardConfig())
-    return run_metrics(run, infos)
+    return _with_bound(run_metrics(run, infos), run, field, scenario, told)
 
 
 def ukf_run(key, field, scenario, map_error=None, told=None):
@@ -123,7 +133,9 @@ def ukf_run(key, field, scenario, map_error=None, told=None):
         ``ins_err_m``, ``err_m`` (RMS position error over the second half of the
         run, m), ``status`` (OR of the steps' :data:`~jaxgrav.filters.STATUS_FILTER`
         flags without ``no_reading``; int32), ``nees`` (mean position NEES over the
-        second half; 2 for a consistent filter).
+        second half; 2 for a consistent filter), ``bound_m`` (the posterior
+        Cramér–Rao bound of the position error, :func:`~jaxgrav.filters.pcrlb` with the
+        model the filter is told, RMS over the second half, m).
     """
     return _kalman_run(key, field, scenario, ukf, False, map_error, told)
 
@@ -197,7 +209,8 @@ def pmf_run(key, field, scenario, map_error=None, told=None):
         dynamics, x0, p0, _ = augment(told.state, dynamics, x0, p0, scenario.speed)
     _, infos = run_filter(filt, field, dynamics, x0, p0, padded, every)
     t = steps.z.shape[0]
-    return run_metrics(run, jax.tree.map(lambda a: a[:t], infos))
+    return _with_bound(run_metrics(run, jax.tree.map(lambda a: a[:t], infos)), run, field,
+                       scenario, told)
 
 
 _FILTER_RUNS = {

@@ -28,6 +28,10 @@ FIX_METRIC_ATTRS = {
                                            "ellipse (chi2(2) <= 5.991); NaN: no covariance"),
     "ins_err_m": dict(units="m", long_name="mean horizontal error of the INS track"),
     "err_m": dict(units="m", long_name="mean horizontal error of the returned track"),
+    "nees": dict(units="1", long_name="mean position NEES over the second half (filters; 2 "
+                                      "expected)"),
+    "bound_m": dict(units="m", long_name="posterior Cramer-Rao bound of the horizontal "
+                                         "position error, RMS over the second half (filters)"),
 }
 """NetCDF variable attributes of the per-run metrics."""
 

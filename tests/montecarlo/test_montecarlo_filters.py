@@ -55,10 +55,11 @@ def test_filters_are_registered_with_paper_d_defaults():
 def test_every_filter_runs_in_the_monte_carlo_runner(kind):
     spec = montecarlo_methods.build(kind, n_fixes=N_FIXES)
     r = montecarlo.run(spec.fn, jax.random.key(1), 2, chunk=2, args=spec.args, progress=False)
-    assert set(r) == {*montecarlo_methods.METRICS, "nees"}
-    for k in ("ins_err_m", "err_m", "nees"):
+    assert set(r) == {*montecarlo_methods.METRICS, "nees", "bound_m"}
+    for k in ("ins_err_m", "err_m", "nees", "bound_m"):
         assert r[k].shape == (2,) and np.all(np.isfinite(r[k])) and np.all(r[k] > 0), (k, r)
     assert r["status"].dtype == np.int32
+    assert np.all(r["bound_m"] < r["ins_err_m"])  # the PCRLB: below the INS's own error
     # 2 km start, 0.2 m/s: the INS stays near 2 km over 5 min; no filter explodes
     assert np.all((r["ins_err_m"] > 1500) & (r["ins_err_m"] < 2500))
     assert np.all(r["err_m"] < 2.0 * r["ins_err_m"])
@@ -70,10 +71,13 @@ def test_montecarlo_command_with_a_filter(tmp_path, capsys):
     assert main(["montecarlo", "--method", "ukf", "--runs", "2", "--chunk", "2", "--seed", "1",
                  "--fixes", str(N_FIXES), "--out", str(out), "--no-progress"]) == 0
     text = capsys.readouterr().out
-    for s in ("paper D: UKF", "INS error (m)", "error / INS", f"wrote {out}"):
+    for s in ("paper D: UKF", "INS error (m)", "error / INS", "PCRLB (m)",
+              "(RMS error / RMS bound ", f"wrote {out}"):
         assert s in text
     with xr.open_dataset(out) as ds:
         assert ds.sizes["run"] == 2 and ds["nees"].dims == ("run",)
+        assert ds["bound_m"].attrs["units"] == "m" and "Cramer-Rao" in ds["bound_m"].attrs[
+            "long_name"]
         assert ds.attrs["setting_field"] == "paper-d point masses"
         assert ds.attrs["setting_n_steps"] == N_FIXES
         spec = montecarlo_methods.build("ukf", n_fixes=N_FIXES)
