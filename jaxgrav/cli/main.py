@@ -5,8 +5,10 @@ Sub-commands
 ``demo``            the main job on the shipped data (README quick start)
 ``match``           match a track CSV against a map (papers A and B), write JSON
 ``simulate``        write a track CSV (and its truth) from a matching scenario
-``filter``          gravity/INS filtering of a track CSV: UKF, EKF, Gaussian sum, PMF (paper D)
+``filter``          gravity/INS filtering of a track CSV: UKF, EKF, Gaussian sum, PMF, PF,
+                    RBPF (paper D)
 ``simulate-filter`` write a track CSV (and its truth) from paper D's filtering scenario
+``suitability``     predicted matching precision (CRLB) and descriptors on every map node
 ``sample``          sample a map along a track CSV
 ``dov``             deflection of the vertical along a track (paper C)
 ``montecarlo``      Monte Carlo runs of a method over all devices; NetCDF, summary, PNG
@@ -37,6 +39,7 @@ from jaxgrav.cli import (
     navigate,
     simulate,
     simulate_filter,
+    suitability,
     voyage,
 )
 from jaxgrav.cli import filter as filtering
@@ -83,6 +86,7 @@ def build_parser():
     dov.add_parser(sub)
     filtering.add_parser(sub)
     simulate_filter.add_parser(sub)
+    suitability.add_parser(sub)
     montecarlo.add_parser(sub)
     bench.add_parser(sub)
 

@@ -31,9 +31,11 @@ from jaxgrav.match.iccp import IccpConfig, kabsch_2d, match_iccp, match_iccp_bat
 from jaxgrav.match.result import STATUS, MatchResult, status_messages
 from jaxgrav.match.scoring import SCORES, bias_precision, decreasing_weights, score_track
 from jaxgrav.match.sizing import config_for, iccp_config_for
+from jaxgrav.match.suitability import DESCRIPTORS, Suitability, suitability
 from jaxgrav.prepared import PreparedMap, prepare_map
 
 __all__ = [
+    "DESCRIPTORS",
     "ENTROPY_HALF_SIZE",
     "METHODS",
     "MIN_FIXES",
@@ -45,6 +47,7 @@ __all__ = [
     "IccpConfig",
     "MatchResult",
     "PreparedMap",
+    "Suitability",
     "bias_precision",
     "config_for",
     "decreasing_weights",
@@ -68,6 +71,7 @@ __all__ = [
     "shifted_tracks",
     "status_messages",
     "status_messages_b",
+    "suitability",
     "validate_track",
 ]
 

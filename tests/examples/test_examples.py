@@ -66,3 +66,14 @@ def test_paper_d_gravimeter_smoke():
     for _, f_ratio, _, no_tilt, tilt_kf in rows:
         if float(f_ratio) <= 1.0:  # below the speed bound the tilt filter helps
             assert float(tilt_kf) < float(no_tilt)
+
+
+def test_suitability_validation_smoke():
+    """Two settings, each a JSON line with the CRLB's and the std descriptor's ranking."""
+    lines = [json.loads(s) for s in run_example("suitability_validation.py").splitlines()
+             if s.startswith("{")]
+    assert [r["setting"] for r in lines] == ["perfect map", "map error"]
+    for r in lines:
+        assert r["crlb"]["runs"] == 40 and (r["heading_deg"], r["n_fixes"]) == (45.0, 30)
+        assert -1 <= r["crlb"]["spearman"] <= 1 and r["crlb"]["cut"] > 0
+        assert r["std_descriptor"]["runs"] > 30
