@@ -121,11 +121,15 @@ def _plot(grid, suit, args, png):
     p = suit.precision_m
     finite = p[np.isfinite(p) & (p > 0)]
     norm = LogNorm(*np.percentile(finite, [2, 98])) if finite.size else None
-    im = axes[0].pcolormesh(lon, lat, p, norm=norm, cmap="viridis_r", shading="nearest")
+    extent = (lon[0] - grid.dlon / 2, lon[-1] + grid.dlon / 2, lat[0] - grid.dlat / 2,
+              lat[-1] + grid.dlat / 2)
+    im = axes[0].imshow(p, origin="lower", extent=extent, norm=norm, cmap="viridis_r",
+                        interpolation="nearest")
     fig.colorbar(im, ax=axes[0], label="predicted precision (m, CRLB)")
     axes[0].set_title(f"{args.fixes} fixes {args.spacing:g} m apart, heading {args.heading:g}°,"
                       f"\nnoise {args.noise:g} mGal, map error {args.map_error:g} mGal")
-    im = axes[1].pcolormesh(lon, lat, suit.descriptors["std"], cmap="magma", shading="nearest")
+    im = axes[1].imshow(suit.descriptors["std"], origin="lower", extent=extent, cmap="magma",
+                        interpolation="nearest")
     fig.colorbar(im, ax=axes[1], label="window std (mGal)")
     axes[1].set_title("map standard deviation over the window")
     for ax in axes:

@@ -28,6 +28,8 @@ __all__ = [
     "kernel_bandwidth",
     "normalise_log_weights",
     "particle_summary",
+    "reading_moments",
+    "resample_regularised",
     "residual_resample",
     "roughen",
     "systematic_resample",
@@ -161,6 +163,68 @@ def particle_summary(log_w, x, extra_var=None):
         var = var + extra_var
     p_pos = (w[:, None] * dx[:, :2]).T @ dx[:, :2]
     return mean, jnp.sqrt(jnp.clip(var, 0.0, None)), 0.5 * (p_pos + p_pos.T)
+
+
+def reading_moments(log_w, zs, var, z):
+    """The predicted reading of weighted particles and the innovation.
+
+    Parameters
+    ----------
+    log_w : Array, shape ``(N,)``
+    zs : Array, shape ``(N,)``
+        Each particle's predicted reading (mGal; finite).
+    var : Array, shape ``()``
+        The reading variance about a particle's prediction (mGal²).
+    z : Array, shape ``()``
+        The reading (NaN: none).
+
+    Returns
+    -------
+    s : Array, shape ``()``
+        Innovation variance: the particles' spread of predictions plus ``var``.
+    nu : Array, shape ``()``
+        ``z − Σ wᵢ zsᵢ`` (0 without a reading).
+    z_used : Array, shape ``()``
+        ``z``, or the predicted mean where there is no reading.
+    """
+    w = jnp.exp(log_w)
+    z_hat = w @ zs
+    s = w @ (zs - z_hat) ** 2 + var
+    z_used = jnp.where(jnp.isfinite(z), z, z_hat)
+    return s, z_used - z_hat, z_used
+
+
+def resample_regularised(keys, log_w, x, resampler, roughening, ess_threshold):
+    """Resample and regularise particles when their effective sample size is low.
+
+    Parameters
+    ----------
+    keys : tuple of two PRNG keys
+        For the resampling and for the regularisation.
+    log_w : Array, shape ``(N,)``
+        Normalised log-weights.
+    x : Array, shape ``(N, d)``
+        The particles (all the states that are copied and spread together).
+    resampler : callable
+        ``(key, log_w) -> indices`` (:data:`RESAMPLERS`).
+    roughening : float
+        The kernel bandwidth as a share of :func:`kernel_bandwidth` ``(N, d)``.
+    ess_threshold : float
+        Resample when the effective sample size is below this share of ``N``.
+
+    Returns
+    -------
+    x : Array, shape ``(N, d)``
+    log_w : Array, shape ``(N,)``
+        Equal weights where resampled, else the inputs unchanged.
+    """
+    n, d = x.shape
+    k_idx, k_rough = keys
+    mean, cov = weighted_moments(log_w, x)
+    moved = roughen(k_rough, x[resampler(k_idx, log_w)], mean, cov,
+                    roughening * kernel_bandwidth(n, d))
+    do = effective_sample_size(log_w) < ess_threshold * n
+    return jnp.where(do, moved, x), jnp.where(do, jnp.full_like(log_w, -jnp.log(n)), log_w)
 
 
 def roughen(key, x, mean, cov, bandwidth):

@@ -29,12 +29,10 @@ from jaxgrav._linalg import psd_sqrt
 from jaxgrav.filters.model import STATUS_FILTER, Filter, StepInfo, gravity_measurement
 from jaxgrav.filters.particles import (
     RESAMPLERS,
-    effective_sample_size,
-    kernel_bandwidth,
     normalise_log_weights,
     particle_summary,
-    roughen,
-    weighted_moments,
+    reading_moments,
+    resample_regularised,
 )
 
 __all__ = ["ParticleState", "check_particle_settings", "particle_flags", "pf"]
@@ -184,11 +182,7 @@ def pf(n_particles=1000, measurement=gravity_measurement, *, resample="systemati
             zs = zs + x @ step.h_lin
         off_map = ~jnp.all(jnp.isfinite(zs))
         zs = jnp.where(jnp.isfinite(zs), zs, 0.0)  # double-where: no NaN into the weights
-        w = jnp.exp(state.log_w)
-        z_hat = w @ zs
-        s = w @ (zs - z_hat) ** 2 + step.r
-        z = jnp.where(jnp.isfinite(step.z), step.z, z_hat)
-        nu = z - z_hat
+        s, nu, z = reading_moments(state.log_w, zs, step.r, step.z)
         flags, skip = particle_flags(step.z, step.r, s, nu, gate, off_map)
         r = jnp.where(step.r > 0.0, step.r, 1.0)
         log_w = normalise_log_weights(state.log_w - 0.5 * (z - zs) ** 2 / r)
@@ -200,13 +194,8 @@ def pf(n_particles=1000, measurement=gravity_measurement, *, resample="systemati
 
     def resample_if_degenerate(state):
         key, k_idx, k_rough = jax.random.split(state.key, 3)
-        idx = resampler(k_idx, state.log_w)
-        mean, cov = weighted_moments(state.log_w, state.particles)
-        h = roughening * kernel_bandwidth(n_particles, state.particles.shape[1])
-        moved = roughen(k_rough, state.particles[idx], mean, cov, h)
-        do = effective_sample_size(state.log_w) < ess_threshold * n_particles
-        flat = jnp.full_like(state.log_w, -jnp.log(n_particles))
-        return ParticleState(jnp.where(do, moved, state.particles),
-                             jnp.where(do, flat, state.log_w), key)
+        x, log_w = resample_regularised((k_idx, k_rough), state.log_w, state.particles, resampler,
+                                        roughening, ess_threshold)
+        return ParticleState(x, log_w, key)
 
     return Filter(init, update, predict)

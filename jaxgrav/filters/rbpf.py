@@ -43,12 +43,10 @@ import jax.numpy as jnp
 from jaxgrav._linalg import inv_2x2, psd_sqrt
 from jaxgrav.filters.model import STATUS_FILTER, Filter, MapPlusBias, StepInfo, gravity_measurement
 from jaxgrav.filters.particles import (
-    effective_sample_size,
-    kernel_bandwidth,
     normalise_log_weights,
     particle_summary,
-    roughen,
-    weighted_moments,
+    reading_moments,
+    resample_regularised,
 )
 from jaxgrav.filters.pf import check_particle_settings, particle_flags
 
@@ -201,11 +199,7 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
         zs = jnp.where(jnp.isfinite(zs), zs, 0.0)  # double-where: no NaN into the weights
         pc = state.p @ c
         s_lin = c @ pc + step.r  # each particle's innovation variance
-        w = jnp.exp(state.log_w)
-        z_hat = w @ zs
-        s = w @ (zs - z_hat) ** 2 + s_lin
-        z = jnp.where(jnp.isfinite(step.z), step.z, z_hat)
-        nu = z - z_hat
+        s, nu, z = reading_moments(state.log_w, zs, s_lin, step.z)
         flags, skip = particle_flags(step.z, s_lin, s, nu, gate, off_map)
         s_safe = jnp.where(s_lin > 0.0, s_lin, 1.0)
         resid = z - zs
@@ -222,18 +216,12 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
 
     def resample_if_degenerate(state):
         key, k_idx, k_rough = jax.random.split(state.key, 3)
-        idx = resampler(k_idx, state.log_w)
         # the positions and the means together: each particle's velocity (and tilt …) is
         # pinned by its own trajectory (the position noise is tiny), so copies must be
         # spread in those too, or the cloud loses its velocity diversity
         x = jnp.concatenate([state.position, state.mean], axis=1)
-        mean, cov = weighted_moments(state.log_w, x)
-        h = roughening * kernel_bandwidth(n_particles, x.shape[1])
-        x = roughen(k_rough, x[idx], mean, cov, h)
-        do = effective_sample_size(state.log_w) < ess_threshold * n_particles
-        flat = jnp.full_like(state.log_w, -jnp.log(n_particles))
-        return RBPFState(jnp.where(do, x[:, :_POS], state.position),
-                         jnp.where(do, x[:, _POS:], state.mean), state.p,
-                         jnp.where(do, flat, state.log_w), key)
+        x, log_w = resample_regularised((k_idx, k_rough), state.log_w, x, resampler, roughening,
+                                        ess_threshold)
+        return RBPFState(x[:, :_POS], x[:, _POS:], state.p, log_w, key)
 
     return Filter(init, update, predict)
