@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import psd_sqrt
+from jaxgrav.filters.model import STATUS_FILTER
 
 __all__ = [
     "RESAMPLERS",
@@ -28,6 +29,7 @@ __all__ = [
     "kernel_bandwidth",
     "normalise_log_weights",
     "particle_summary",
+    "prediction_flags",
     "reading_moments",
     "resample_regularised",
     "residual_resample",
@@ -163,6 +165,14 @@ def particle_summary(log_w, x, extra_var=None):
         var = var + extra_var
     p_pos = (w[:, None] * dx[:, :2]).T @ dx[:, :2]
     return mean, jnp.sqrt(jnp.clip(var, 0.0, None)), 0.5 * (p_pos + p_pos.T)
+
+
+def prediction_flags(z):
+    """Status of a prediction-only step: ``no_reading``, plus ``reading_ignored`` if ``z``
+    is finite (a reading off the update stride); int32."""
+    flags = STATUS_FILTER["no_reading"] | jnp.where(
+        jnp.isfinite(z), STATUS_FILTER["reading_ignored"], 0)
+    return flags.astype(jnp.int32)
 
 
 def reading_moments(log_w, zs, var, z):

@@ -31,6 +31,7 @@ from jaxgrav.filters.particles import (
     RESAMPLERS,
     normalise_log_weights,
     particle_summary,
+    prediction_flags,
     reading_moments,
     resample_regularised,
 )
@@ -170,9 +171,7 @@ def pf(n_particles=1000, measurement=gravity_measurement, *, resample="systemati
         del field
         state = _move(state, dynamics)
         nan = jnp.full_like(step.z, jnp.nan)
-        flags = STATUS_FILTER["no_reading"] | jnp.where(
-            jnp.isfinite(step.z), STATUS_FILTER["reading_ignored"], 0)
-        return state, _info(state, nan, nan, flags.astype(jnp.int32))
+        return state, _info(state, nan, nan, prediction_flags(step.z))
 
     def update(state, step, field, dynamics):
         state = _move(state, dynamics)

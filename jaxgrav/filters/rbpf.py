@@ -41,10 +41,11 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import inv_2x2, psd_sqrt
-from jaxgrav.filters.model import STATUS_FILTER, Filter, MapPlusBias, StepInfo, gravity_measurement
+from jaxgrav.filters.model import Filter, MapPlusBias, StepInfo, gravity_measurement
 from jaxgrav.filters.particles import (
     normalise_log_weights,
     particle_summary,
+    prediction_flags,
     reading_moments,
     resample_regularised,
 )
@@ -186,9 +187,7 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
         del field
         state = _move(state, dynamics)
         nan = jnp.full_like(step.z, jnp.nan)
-        flags = STATUS_FILTER["no_reading"] | jnp.where(
-            jnp.isfinite(step.z), STATUS_FILTER["reading_ignored"], 0)
-        return state, _info(state, nan, nan, flags.astype(jnp.int32))
+        return state, _info(state, nan, nan, prediction_flags(step.z))
 
     def update(state, step, field, dynamics):
         state = _move(state, dynamics)
