@@ -26,17 +26,18 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import psd_sqrt
-from jaxgrav.filters.model import STATUS_FILTER, Filter, StepInfo, gravity_measurement
+from jaxgrav.filters.model import Filter, StepInfo, gravity_measurement
 from jaxgrav.filters.particles import (
-    RESAMPLERS,
+    check_particle_settings,
     normalise_log_weights,
+    particle_flags,
     particle_summary,
     prediction_flags,
     reading_moments,
     resample_regularised,
 )
 
-__all__ = ["ParticleState", "check_particle_settings", "particle_flags", "pf"]
+__all__ = ["ParticleState", "pf"]
 
 
 class ParticleState(NamedTuple):
@@ -55,61 +56,6 @@ class ParticleState(NamedTuple):
     particles: jax.Array
     log_w: jax.Array
     key: jax.Array
-
-
-def check_particle_settings(n_particles, resample, ess_threshold, roughening):
-    """Validate a particle filter's settings; returns the resampling function.
-
-    Raises
-    ------
-    ValueError
-        ``n_particles`` not an int ≥ 2, an unknown ``resample``, ``ess_threshold``
-        or ``roughening`` outside ``[0, 1]``.
-    """
-    if isinstance(n_particles, bool) or not isinstance(n_particles, int) or n_particles < 2:
-        raise ValueError(f"n_particles must be an int >= 2; got {n_particles!r}")
-    if resample not in RESAMPLERS:
-        raise ValueError(f"resample must be one of {sorted(RESAMPLERS)}; got {resample!r}")
-    if not 0.0 <= float(ess_threshold) <= 1.0:
-        raise ValueError(f"ess_threshold must be in [0, 1] (a share of the particles); got "
-                         f"{ess_threshold!r}")
-    if not 0.0 <= float(roughening) <= 1.0:
-        raise ValueError(f"roughening must be in [0, 1] (a share of the optimal kernel "
-                         f"bandwidth); got {roughening!r}")
-    return RESAMPLERS[resample]
-
-
-def particle_flags(z, r, s, nu, gate, off_map):
-    """Status bits and the skip decision of a particle filter's weighting.
-
-    Parameters
-    ----------
-    z : Array, shape ``()``
-        The reading (NaN: none).
-    r : Array, shape ``()``
-        Reading variance (mGal²); not positive: ``covariance_failed``.
-    s, nu : Array, shape ``()``
-        Predicted innovation variance and innovation, for the gate.
-    gate : float
-        Skip a reading whose ``ν² / s`` exceeds it.
-    off_map : Array, shape ``()``, bool
-        A particle's predicted reading is not finite.
-
-    Returns
-    -------
-    flags : Array, shape ``()``, int32
-    skip : Array, shape ``()``, bool
-    """
-    no_reading = ~jnp.isfinite(z)
-    failed = (~no_reading) & (~off_map) & ~(r > 0.0)
-    gated = (~no_reading) & (~off_map) & (~failed) & (nu**2 > gate * s)
-    flags = (
-        jnp.where(no_reading, STATUS_FILTER["no_reading"], 0)
-        | jnp.where(off_map & ~no_reading, STATUS_FILTER["off_map"], 0)
-        | jnp.where(gated, STATUS_FILTER["gated"], 0)
-        | jnp.where(failed, STATUS_FILTER["covariance_failed"], 0)
-    )
-    return flags.astype(jnp.int32), no_reading | off_map | gated | failed
 
 
 def pf(n_particles=1000, measurement=gravity_measurement, *, resample="systematic",

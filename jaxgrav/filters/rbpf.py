@@ -43,13 +43,14 @@ import jax.numpy as jnp
 from jaxgrav._linalg import inv_2x2, psd_sqrt
 from jaxgrav.filters.model import Filter, MapPlusBias, StepInfo, gravity_measurement
 from jaxgrav.filters.particles import (
+    check_particle_settings,
     normalise_log_weights,
+    particle_flags,
     particle_summary,
     prediction_flags,
     reading_moments,
     resample_regularised,
 )
-from jaxgrav.filters.pf import check_particle_settings, particle_flags
 
 __all__ = ["RBPFState", "rbpf"]
 

@@ -89,10 +89,10 @@ def _told_steps(run, scenario, told):
     return dynamics, steps, x0, p0, meas
 
 
-def _with_bound(metrics, run, field, scenario, told):
+def _with_bound(metrics, run, field, dynamics, steps, p0, meas):
     """``metrics`` plus ``bound_m``: the PCRLB of the horizontal position error, RMS over
-    the second half of the run (as ``err_m``), of the model the filter is told."""
-    dynamics, steps, _, p0, meas = _told_steps(run, scenario, told)
+    the second half of the run (as ``err_m``), of the model the filter is told
+    (``dynamics, steps, p0, meas`` from :func:`_told_steps`)."""
     rms = pcrlb(field, dynamics, p0, steps, run.errors[1:, :2], meas).position_rms
     half = rms.shape[0] // 2
     return dict(metrics, bound_m=jnp.sqrt(jnp.mean(rms[half:] ** 2)))
@@ -109,7 +109,7 @@ def _kalman_run(key, field, scenario, make, guard=False, map_error=None, told=No
                           key=fkey)
     if guard:
         infos = guard_run(infos, dynamics, p0, GuardConfig())
-    return _with_bound(run_metrics(run, infos), run, field, scenario, told)
+    return _with_bound(run_metrics(run, infos), run, field, dynamics, steps, p0, meas)
 
 
 def ukf_run(key, field, scenario, map_error=None, told=None):
@@ -209,8 +209,10 @@ def pmf_run(key, field, scenario, map_error=None, told=None):
         dynamics, x0, p0, _ = augment(told.state, dynamics, x0, p0, scenario.speed)
     _, infos = run_filter(filt, field, dynamics, x0, p0, padded, every)
     t = steps.z.shape[0]
+    # the bound is of the 13-state model the other filters are told, not the PMF's grid
+    bound_dyn, bound_steps, _, bound_p0, meas = _told_steps(run, scenario, told)
     return _with_bound(run_metrics(run, jax.tree.map(lambda a: a[:t], infos)), run, field,
-                       scenario, told)
+                       bound_dyn, bound_steps, bound_p0, meas)
 
 
 _FILTER_RUNS = {
