@@ -11,10 +11,13 @@ import sys
 import time
 from pathlib import Path
 
+import jax
+import jax.numpy as jnp
+
 import jaxgrav
 from jaxgrav._io import atomic_output
 
-__all__ = ["add_parser", "cmd_bench", "default_bench_dir"]
+__all__ = ["add_parser", "cmd_bench", "default_bench_dir", "machine_info", "matmul_roofline"]
 
 
 def add_parser(subparsers):
@@ -41,13 +44,81 @@ def _fmt(v):
     return "" if v is None else str(v).replace("|", "\\|")
 
 
-def _report(command, rows, runs, failures):
+def cpu_model():
+    """The CPU's model name (``/proc/cpuinfo``; else :func:`platform.processor`)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def matmul_roofline(n=1024, repeats=5):
+    """Measured matrix-multiply throughput of the default device, the roofline ratios
+    are read against.
+
+    Parameters
+    ----------
+    n : int
+        Side of the square matrices (``2 n³`` flops a product).
+    repeats : int
+        Timed products; the best is kept.
+
+    Returns
+    -------
+    dict
+        ``float64_gflops``, ``float32_gflops`` (GFLOP/s of a jit-compiled ``n × n``
+        product, float64 enabled only inside this call) and ``n``.
+    """
+    out = {"n": n}
+    with jax.enable_x64(True):
+        for dtype in (jnp.float64, jnp.float32):
+            a = jnp.full((n, n), 1.0 / n, dtype)
+            f = jax.jit(jnp.dot)
+            f(a, a).block_until_ready()
+            best = float("inf")
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                f(a, a).block_until_ready()
+                best = min(best, time.perf_counter() - t0)
+            out[f"{jnp.dtype(dtype).name}_gflops"] = 2.0 * n**3 / best / 1e9
+    return out
+
+
+def machine_info():
+    """The machine a benchmark table was measured on: CPU model, cores, load average,
+    jax version, devices and the matmul roofline (:func:`matmul_roofline`)."""
+    return {"cpu": cpu_model(), "arch": platform.machine(), "cores": os.cpu_count(),
+            "load_average": [round(x, 2) for x in os.getloadavg()],
+            "jax": jax.__version__, "jaxgrav": jaxgrav.__version__,
+            "devices": [str(d) for d in jax.devices()], "roofline": matmul_roofline()}
+
+
+def _machine_lines(before, after):
+    roof = before["roofline"]
+    return [
+        "## Machine", "",
+        f"- CPU: {before['cpu']} ({before['arch']}), {before['cores']} cores; devices: "
+        f"{', '.join(before['devices'])}",
+        f"- jax {before['jax']}, jaxgrav {before['jaxgrav']}",
+        f"- load average (1, 5, 15 min): {before['load_average']} before, "
+        f"{after['load_average']} after",
+        f"- matmul roofline ({roof['n']}² jit, best of 5, measured before the scripts): "
+        f"float64 {roof['float64_gflops']:.1f} GFLOP/s, float32 "
+        f"{roof['float32_gflops']:.1f} GFLOP/s", "",
+    ]
+
+
+def _report(command, rows, runs, failures, before, after):
     lines = [
         "# jaxgrav benchmarks", "",
-        f"Command: `{command}` on {platform.machine()}, {os.cpu_count()} cores, "
-        f"{time.strftime('%Y-%m-%d %H:%M')}. `ratio` = baseline_s / jaxgrav_s "
-        "(> 1: jaxgrav is faster). Times on a shared machine are noisy; ratios are "
-        "measured within one run.", "",
+        f"Command: `{command}`, {time.strftime('%Y-%m-%d %H:%M')}. `ratio` = baseline_s / "
+        "jaxgrav_s (> 1: jaxgrav is faster). Times on a shared machine are noisy; ratios "
+        "are measured within one run; read them against the load and the roofline below.",
+        "", *_machine_lines(before, after),
+        "## Results", "",
         "| script | " + " | ".join(_COLS) + " | other fields |", "|" + "---|" * (len(_COLS) + 2),
     ]
     for script, row in rows:
@@ -65,7 +136,7 @@ def _report(command, rows, runs, failures):
             lines += [f"### {script}: {why}", "", "```", tail, "```", ""]
     lines += ["", "## Raw JSON lines", "", "```jsonl"]
     lines += [json.dumps(row) for _, row in rows]
-    lines += ["```", ""]
+    lines += ["```", "", "## Machine (JSON)", "", "```json", json.dumps(before), "```", ""]
     return "\n".join(lines)
 
 
@@ -102,6 +173,9 @@ def cmd_bench(args):
                          "with _)")
     if out.exists() and not args.force:
         raise FileExistsError(f"{str(out)!r} exists; pass --force to overwrite it")
+    before = machine_info()
+    print(f"machine: {before['cpu']}, {before['cores']} cores, load {before['load_average']}, "
+          f"roofline float64 {before['roofline']['float64_gflops']:.1f} GFLOP/s", flush=True)
     rows, runs, failures = [], [], []
     for i, script in enumerate(scripts, 1):
         cmd = [sys.executable, str(script), *(["--quick"] if args.quick else [])]
@@ -136,8 +210,9 @@ def cmd_bench(args):
             runs.append((script.name, "ok", sec, len(found)))
             print(f"ok ({len(found)} lines, {sec:.0f} s)")
     command = "jaxgrav bench" + (" --quick" if args.quick else "")
+    after = {"load_average": [round(x, 2) for x in os.getloadavg()]}
     with atomic_output(out, force=args.force) as tmp:
-        tmp.write_text(_report(command, rows, runs, failures))
+        tmp.write_text(_report(command, rows, runs, failures, before, after))
     print(f"wrote {out}: {len(rows)} results from {len(scripts) - len(failures)} of "
           f"{len(scripts)} scripts")
     if failures:

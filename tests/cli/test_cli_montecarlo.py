@@ -254,6 +254,11 @@ def test_bench_quick_writes_table(bench_dir, tmp_path, capsys):
     assert "| good.py | ok |" in md and "_common" not in md
     raw = md.split("```jsonl\n")[1].split("```")[0].splitlines()
     assert [json.loads(r)["n"] for r in raw] == [10, 100]
+    # the machine the ratios were measured on, with its measured roofline
+    assert "## Machine" in md and "load average (1, 5, 15 min)" in md and "jax " in md
+    machine = json.loads(md.split("```json\n")[1].split("```")[0])
+    assert machine["cores"] >= 1 and len(machine["load_average"]) == 3 and machine["devices"]
+    assert machine["roofline"]["float64_gflops"] > 0 and machine["roofline"]["float32_gflops"] > 0
     assert "wrote" in capsys.readouterr().out
     assert main(["bench", "--dir", str(bench_dir), "--out", str(out)]) == 2  # no --force
     assert main(["bench", "--dir", str(bench_dir), "--out", str(out), "--force"]) == 0
