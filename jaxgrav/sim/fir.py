@@ -30,7 +30,6 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.signal
 
 from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import check_finite
@@ -225,11 +224,19 @@ def _check_ripples(ripple_pass, ripple_stop):
             raise ValueError(f"{name} must be a linear ripple in (0, 1); got {val!r}")
 
 
+def _signal():
+    """``scipy.signal``, imported on first use: it takes ~1 s (half of the command line's
+    start-up on the 2-core machine) and only the filter design, run once, needs it."""
+    import scipy.signal  # deliberately here, not at the top: start-up cost (docstring)
+
+    return scipy.signal
+
+
 def _remez(m, fp, df, weight_stop):
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         try:
-            return scipy.signal.remez(
+            return _signal().remez(
                 m, [0.0, fp, fp + df, 0.5], [1.0, 0.0], weight=[1.0, weight_stop], fs=1.0,
                 maxiter=100,
             )
@@ -239,7 +246,7 @@ def _remez(m, fp, df, weight_stop):
 
 def _ripples(taps, f_pass, f_stop):
     """Measured pass band ``max | |H| − 1 |`` and stop band ``max |H|`` (linear)."""
-    f, h = scipy.signal.freqz(taps, worN=_N_FREQ, fs=1.0)
+    f, h = _signal().freqz(taps, worN=_N_FREQ, fs=1.0)
     mag = np.abs(h)
     return float(np.max(np.abs(mag[f <= f_pass] - 1.0))), float(np.max(mag[f >= f_stop]))
 
