@@ -15,7 +15,13 @@ import jax
 import numpy as np
 
 from jaxgrav import __version__, montecarlo
-from jaxgrav.cli.montecarlo_voyage import plot_voyages, voyage_lines, voyage_options
+from jaxgrav.cli.montecarlo_voyage import (
+    plot_voyage_tracks,
+    plot_voyages,
+    tracks_path,
+    voyage_lines,
+    voyage_options,
+)
 from jaxgrav.cli.simulate import (
     DEFAULT_MAP_ERROR_LENGTH_M,
     add_map_error_options,
@@ -296,14 +302,15 @@ def cmd_montecarlo(args):
     png = out.with_suffix(".png")
     if out.suffix == ".png":
         raise ValueError(f"--out must be a NetCDF file (the PNG goes next to it); got {out}")
-    existing = [str(p) for p in (out, png) if p.exists()]
+    kind = ("filter" if args.method in FILTER_METHODS else
+            "voyage" if args.method in VOYAGE_METHODS else "matcher")
+    targets = (out, png, *((tracks_path(out),) if kind == "voyage" else ()))
+    existing = [str(p) for p in targets if p.exists()]
     if existing and not args.force:
         raise FileExistsError(f"{existing} exist; pass --force to overwrite")
     for name, value in (("--runs", args.runs), ("--chunk", args.chunk)):
         if value is not None and value < 1:
             raise ValueError(f"{name} must be a positive number of runs; got {value}")
-    kind = ("filter" if args.method in FILTER_METHODS else
-            "voyage" if args.method in VOYAGE_METHODS else "matcher")
     if args.map is not None:
         map_name = str(args.map)
     else:  # the method's default (jaxgrav.montecarlo.build)
@@ -398,6 +405,10 @@ def cmd_montecarlo(args):
     montecarlo.write_netcdf(ds, out, attrs=attrs, force=args.force)
     if kind == "voyage":
         plot_voyages(results, f"{args.method}: {args.runs} voyages, {setting}", png, args.force)
+        plot_voyage_tracks(spec, jax.random.key(args.seed), args.runs,
+                           f"{args.method}: run 1 of {args.runs}, {setting}", tracks_path(out),
+                           args.force)
+        png = f"{png} and {tracks_path(out)}"
     elif kind == "filter":
         _plot_errors(results, summary, f"{args.method}: {args.runs} runs, {setting}", png,
                      args.force, label="filtered",

@@ -2,15 +2,18 @@
 
 import math
 
+import jax
+import matplotlib.pyplot as plt
 import numpy as np
 
 from jaxgrav.cli.voyage import MAX_HOURS
-from jaxgrav.montecarlo.voyage_runs import SERIES_EVERY_S, TOLD
+from jaxgrav.montecarlo.voyage_runs import SERIES_EVERY_S, TOLD, voyage_tracks
 from jaxgrav.navigate import voyage_summary
-from jaxgrav.plot import plot_voyage_errors, save_figure
+from jaxgrav.plot import plot_map, plot_voyage_errors, save_figure
 from jaxgrav.scenarios import INS_GRADES
 
-__all__ = ["plot_voyages", "voyage_lines", "voyage_options"]
+__all__ = ["plot_voyage_tracks", "plot_voyages", "tracks_path", "voyage_lines",
+           "voyage_options"]
 
 
 
@@ -54,3 +57,41 @@ def plot_voyages(results, title, path, force):
                                                "sigma_series_m")]
     t_h = np.arange(series[0].shape[1]) * SERIES_EVERY_S / 3600.0
     save_figure(plot_voyage_errors(t_h, *series, title=title), path, force=force)
+
+
+def tracks_path(out):
+    """The tracks figure next to ``--out``: ``V.nc`` -> ``V_tracks.png``."""
+    return out.with_name(out.stem + "_tracks.png")
+
+
+def plot_voyage_tracks(spec, key, runs, title, path, force):
+    """The first run's voyage on the map (truth, free INS, navigation) as a PNG.
+
+    Parameters
+    ----------
+    spec : MethodSpec
+        The voyage method that ran (its ``args``: prepared map, map, scenario, map-error
+        model, navigation settings).
+    key : PRNG key
+        The Monte Carlo key; run 0's key is ``split(key, runs)[0]``, as
+        :func:`jaxgrav.montecarlo.run` gives it, so the figure shows that run.
+    runs : int
+    title : str
+    path : Path
+    force : bool
+
+    Returns
+    -------
+    dict of str to (numpy.ndarray, numpy.ndarray)
+        The tracks drawn (degrees).
+    """
+    run_key = jax.random.split(key, runs)[0]
+    tracks = jax.tree.map(np.asarray, jax.jit(voyage_tracks)(run_key, *spec.args))
+    lats = np.concatenate([lat for lat, _ in tracks.values()])
+    lons = np.concatenate([lon for _, lon in tracks.values()])
+    pad = 0.05
+    window = (lats.min() - pad, lats.max() + pad, lons.min() - pad, lons.max() + pad)
+    fig, ax = plt.subplots(figsize=(7, 6), layout="constrained")
+    plot_map(spec.args[1], ax, tracks=tracks, window=window, scale_bar=True, title=title)
+    save_figure(fig, path, force=force)
+    return tracks

@@ -48,7 +48,7 @@ from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
 from jaxgrav.scenarios.paper_a import check_region_covered
 
 __all__ = ["SERIES_EVERY_S", "VOYAGE_METHODS", "voyage_builder", "voyage_dense_run",
-           "voyage_tight_run"]
+           "voyage_tight_run", "voyage_tracks"]
 
 VOYAGE_METHODS = ("voyage-dense", *(f"voyage-{m}" for m in TIGHT_METHODS))
 """The voyage methods of :data:`~jaxgrav.montecarlo.methods.BUILDERS`."""
@@ -104,6 +104,26 @@ def voyage_dense_run(key, pm, grid, scenario, model, config):
     bits = jnp.sum(jnp.stack([jnp.any(res.fix_event == k) * (1 << k) for k in FIX_EVENTS]))
     out = _metrics(voyage, res.nav, res.cov_north_east, scenario.dt, bits)
     return {**out, "fix_event": res.fix_event}
+
+
+def voyage_tracks(key, pm, grid, scenario, model, config):
+    """The tracks of one voyage as a voyage method runs it (arguments as
+    :func:`voyage_tight_run`; ``config`` a TightConfig or a LooseConfig).
+
+    Returns
+    -------
+    dict of str to (lat, lon)
+        ``truth``, ``free INS`` and ``navigation`` (the corrected track), each a pair of
+        arrays of shape ``(N,)`` in degrees, for :func:`~jaxgrav.plot.plot_map`.
+    """
+    voyage = voyage_scenario(key, grid, scenario, model)
+    if isinstance(config, TightConfig):
+        nav = navigate_tight(pm, voyage, config).nav
+    else:
+        nav = navigate_loose(pm, voyage, config).nav
+    return {"truth": (voyage.truth.lat, voyage.truth.lon),
+            "free INS": (voyage.ins.lat, voyage.ins.lon),
+            "navigation": (nav.lat, nav.lon)}
 
 
 def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None, map_error=None,

@@ -11,7 +11,7 @@ import xarray as xr
 from jaxgrav import montecarlo
 from jaxgrav.cli import main
 from jaxgrav.fields.map_error import map_error
-from jaxgrav.montecarlo.voyage_runs import voyage_builder
+from jaxgrav.montecarlo.voyage_runs import voyage_builder, voyage_tracks
 from jaxgrav.navigate import hourly_rms, navigate_tight, voyage_errors
 from jaxgrav.scenarios import voyage_scenario
 
@@ -42,6 +42,11 @@ def test_a_run_is_the_navigator_on_the_same_voyage(tight):
     assert float(res["nees"][1]) == pytest.approx(float(jnp.mean(err.nees)), rel=1e-6)
     assert res["err_series_m"].shape == (2, 7)  # every 10 min over 1 h, start included
     assert np.all(res["status"] == 0)
+    # the tracks of the figure are that run's: truth, free INS and the navigation solution
+    tracks = voyage_tracks(key, *spec.args)
+    np.testing.assert_allclose(tracks["navigation"][0], nav.nav.lat, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(tracks["truth"][1], voyage.truth.lon, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(tracks["free INS"][0], voyage.ins.lat, rtol=0, atol=1e-12)
 
 
 def test_dense_runs_record_their_fix_events():
@@ -77,6 +82,15 @@ def test_cli_voyage_method_writes_results_and_figure(tmp_path, capsys):
     assert "--hours 1" in ds.attrs["command"]
     ds.close()
     assert out.with_suffix(".png").stat().st_size > 10_000
+    tracks_png = tmp_path / "v_tracks.png"  # run 1 on the map
+    assert tracks_png.stat().st_size > 10_000 and "v_tracks.png" in said
+    # all or nothing: an existing tracks figure stops the run before anything is written
+    out.unlink()
+    out.with_suffix(".png").unlink()
+    assert main(["montecarlo", "--method", "voyage-ukf", "--runs", "2", "--hours", "1",
+                 "--no-progress", "--out", str(out)]) == 2
+    assert "v_tracks.png" in capsys.readouterr().err and not out.exists()
+    assert not out.with_suffix(".png").exists()
 
 
 @pytest.mark.parametrize(("args", "message"), [
