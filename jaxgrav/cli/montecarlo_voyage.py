@@ -52,11 +52,16 @@ def voyage_lines(results):
 
 
 def plot_voyages(results, title, path, force):
-    """Error against time (median and 90 % band, free INS alongside, stated 1-σ) as a PNG."""
+    """Error against time (median and 90 % band, free INS alongside, stated 1-σ; for the
+    loosely coupled method the share of fixes accepted at each segment end) as a PNG."""
     series = [np.asarray(results[k]) for k in ("err_series_m", "ins_err_series_m",
                                                "sigma_series_m")]
     t_h = np.arange(series[0].shape[1]) * SERIES_EVERY_S / 3600.0
-    save_figure(plot_voyage_errors(t_h, *series, title=title), path, force=force)
+    fixes = {}
+    if "fix_event" in results:  # loosely coupled: the share of fixes accepted at each end
+        fixes = dict(fix_t_h=np.asarray(results["fix_time_s"])[0] / 3600.0,
+                     fix_accepted=np.asarray(results["fix_event"]) == 0)
+    save_figure(plot_voyage_errors(t_h, *series, title=title, **fixes), path, force=force)
 
 
 def tracks_path(out):

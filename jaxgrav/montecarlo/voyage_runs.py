@@ -98,12 +98,14 @@ def voyage_tight_run(key, pm, grid, scenario, model, config):
 
 def voyage_dense_run(key, pm, grid, scenario, model, config):
     """One voyage navigated by the loosely coupled loop (arguments as :func:`voyage_tight_run`,
-    ``config`` a :class:`~jaxgrav.navigate.LooseConfig`); also returns ``fix_event``."""
+    ``config`` a :class:`~jaxgrav.navigate.LooseConfig`); also returns ``fix_event`` (per
+    segment end, :data:`~jaxgrav.navigate.FIX_EVENTS`) and ``fix_time_s`` (the segment
+    ends, s from the voyage's start)."""
     voyage = voyage_scenario(key, grid, scenario, model)
     res = navigate_loose(pm, voyage, config)
     bits = jnp.sum(jnp.stack([jnp.any(res.fix_event == k) * (1 << k) for k in FIX_EVENTS]))
     out = _metrics(voyage, res.nav, res.cov_north_east, scenario.dt, bits)
-    return {**out, "fix_event": res.fix_event}
+    return {**out, "fix_event": res.fix_event, "fix_time_s": res.fix_time - voyage.ins.t[0]}
 
 
 def voyage_tracks(key, pm, grid, scenario, model, config):

@@ -55,6 +55,7 @@ def test_dense_runs_record_their_fix_events():
     events = res["fix_event"][0]
     assert events.shape == (1,)
     assert int(res["status"][0]) == 1 << int(events[0])  # bit k: event k happened
+    assert float(res["fix_time_s"][0][0]) == pytest.approx(3600.0)  # the hour's segment end
     assert spec.args[-1].matcher.map_error_mgal == 3.0  # told
 
 
