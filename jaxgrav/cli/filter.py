@@ -44,12 +44,15 @@ Gauss–Markov state, matched to the default map-error model). Tracks to try it 
 import sys
 from pathlib import Path
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav.cli.inputs import add_columns_option, map_error_args, read_track, track_map
+from jaxgrav.cli.sanity import check_readings, innovation_check
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
-from jaxgrav.filters import STATUS_FILTER, status_messages_filter
+from jaxgrav.filters import STATUS_FILTER, map_at_error, status_messages_filter
 from jaxgrav.filters.api import (
     FILTER_METHODS,
     PARTICLES,
@@ -180,6 +183,13 @@ def _check_sigma(name, value):
         raise ValueError(f"{name} must be a positive, finite standard deviation; got {value!r}")
 
 
+def _map_at_ins(field, lat, lon):
+    """The map (or point-mass model) at the INS positions (mGal; NaN off a map)."""
+    zero = jnp.zeros(2)
+    return np.asarray(jax.vmap(lambda a, b: map_at_error(field, zero, a, b))(
+        jnp.asarray(lat), jnp.asarray(lon)))
+
+
 _FILTER_MARGIN_M = 20e3
 """Reach of a filter beyond its point-mass grid (m): the INS drift over a few hours."""
 
@@ -277,7 +287,10 @@ def cmd_filter(args):
     field, field_name, offset = _field(args, track)
     if args.map is not None:
         _check_on_map(field, lat, lon, where, args.map)
+    g_raw = g
     g, jac, eotvos_note = _eotvos(args, track, g)
+    check_readings(g_raw, _map_at_ins(field, lat, lon) + offset, args.sigma_gravity,
+                   column="gravity", where=where, correction=g - g_raw)
     # the model is masses + offset: z − (masses + offset + bias) = (z − offset) − (masses + bias)
     res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
@@ -298,6 +311,9 @@ def cmd_filter(args):
     print(f"wrote {args.out}: {args.method} over {t.size} rows ({n_read} readings{stride}) "
           f"on {field_name}; final 1-sigma {res['sigma_north'][-1]:.0f} m north, "
           f"{res['sigma_east'][-1]:.0f} m east; {eotvos_note}")
+    _, _, fit_warning = innovation_check(res["innovation"], res["innovation_sigma"])
+    if fit_warning is not None:
+        print(f"warning: {fit_warning}", file=sys.stderr)
     status = res["status"]
     for name in status_messages_filter(int(np.bitwise_or.reduce(status))):
         if name == "no_reading":

@@ -11,7 +11,9 @@ import numpy as np
 
 from jaxgrav._io import atomic_output
 from jaxgrav.cli.inputs import add_columns_option, read_track, track_map
+from jaxgrav.cli.sanity import check_readings, fit_check
 from jaxgrav.fields.map_error import map_error
+from jaxgrav.geodesy import eotvos
 from jaxgrav.match import ENTROPY_HALF_SIZE, METHODS, match_track, status_messages
 from jaxgrav.match.api import MAP_ERROR_METHODS
 from jaxgrav.sim import DEG_ARC_M
@@ -108,10 +110,18 @@ def _cmd_match(args):
     else:
         radius_deg = 0.05
     grid = track_map(args, track, radius_deg * DEG_ARC_M)
-    if args.refine > 1:
-        grid = grid.refine(args.refine)
     has_v = (field == "gravity" and "v_east" in track and "v_north" in track
              and not args.no_eotvos)
+    unit = "nT" if field == "magnetic" else "mGal"
+    # compared with the map as the matcher will: Eötvös-corrected
+    correction = (np.asarray(eotvos(track["lat"], track["v_east"], track["v_north"])) if has_v
+                  else 0.0)
+    check_readings(track[field], np.asarray(grid.sample(track["lat"], track["lon"], "bicubic")),
+                   args.noise, column=field, where=f"--track {str(args.track)!r}", unit=unit,
+                   correction=correction, missing_skipped=False)
+    _check_search(args, grid, radius_deg, track["lat"])
+    if args.refine > 1:
+        grid = grid.refine(args.refine)
     if field != "gravity" and args.method not in CONTOUR_METHODS:
         raise ValueError(f"--method {args.method} matches gravity; use entropy, iccp or "
                          "entropy+iccp for a magnetic track")
@@ -132,8 +142,14 @@ def _cmd_match(args):
         v_north=track["v_north"] if has_v else None, warn=False, **kw,
     )
     messages = status_messages(int(result.status))
-    r = {k: np.asarray(v).tolist() for k, v in result._asdict().items()}
-    r["status_messages"] = messages
+    n_fix = len(track["lat"])
+    p_fit, fit_warning = fit_check(result.chi2_per_dof, n_fix - 3, args.noise)
+    if fit_warning is not None:
+        messages = [*messages, fit_warning]
+    r = {"t": np.asarray(track["t"], float).tolist()}
+    r.update({k: np.asarray(v).tolist() for k, v in result._asdict().items()})
+    r.update(status_messages=messages, fit_p_value=p_fit, fit_plausible=fit_warning is None,
+             units=_units(args.method, unit))
     cov = np.asarray(result.covariance_m2, float)
     r.update(accepted=bool(result.accepted), covariance_m2=cov.tolist(),
              sigma_north_m=float(np.sqrt(cov[0, 0])), sigma_east_m=float(np.sqrt(cov[1, 1])),
@@ -144,13 +160,60 @@ def _cmd_match(args):
         r.update(max_rotation_deg=max_rotation, entropy_half_size=args.entropy_half_size)
     with atomic_output(args.out, force=args.force) as tmp:
         tmp.write_text(json.dumps(r, indent=1))
-    unit = "nT" if field == "magnetic" else "mGal"
-    print(f"wrote {args.out}: {args.method} match of {len(track['lat'])} fixes, offset "
+    score_unit = "" if args.method == "entropy" else f" {unit}^2"
+    print(f"wrote {args.out}: {args.method} match of {n_fix} fixes, offset "
           f"{float(result.offset_north_m):.0f} m north, {float(result.offset_east_m):.0f} m "
           f"east, rotation {float(result.rotation_deg):.2f} deg, score "
-          f"{float(result.score):.3g} {unit}^2")
+          f"{float(result.score):.3g}{score_unit}")
     for msg in r["status_messages"]:
         print(f"warning: {msg}", file=sys.stderr)
+
+
+_MAX_REFINED_NODES = 2e7
+"""Nodes of a refined map above which ``--refine`` is refused (160 MB in float64)."""
+
+
+def _check_search(args, grid, radius_deg, lat):
+    """The search region and ``--refine``: a region larger than the map, a refinement that
+    makes the result worse or cannot fit in memory are refused; chains on coarse cells
+    without ``--refine`` are warned."""
+    ny, nx = np.asarray(grid.values).shape[-2:]
+    height = (ny - 1) * grid.dlat
+    width = (nx - 1) * grid.dlon * math.cos(math.radians(float(np.mean(lat))))
+    if 2 * radius_deg > min(height, width):
+        raise ValueError(f"--drift-radius {radius_deg:g} degrees searches a region "
+                         f"{2 * radius_deg:g} degrees across, larger than the map around the "
+                         f"track ({height:.3g} x {width:.3g} degrees of arc); expected a drift "
+                         "radius well inside the map")
+    if args.refine <= 1:
+        if args.method == "chains" and min(grid.spacing_m()) > 1000.0:
+            print(f"warning: --method chains on a map of {min(grid.spacing_m()) / 1e3:.1f} km "
+                  "cells without --refine: the chains move from node to node, so the fix is "
+                  "no finer than a cell (paper A refines x8 to x100; try --refine 8)",
+                  file=sys.stderr)
+        return
+    if args.method != "chains":
+        raise ValueError(f"--refine {args.refine} is for --method chains (paper A's node "
+                         f"lattice); --method {args.method} samples the map continuously, and "
+                         "a refined (bilinear) map only smooths away its curvature and makes "
+                         "the fix worse")
+    ny, nx = np.asarray(grid.values).shape[-2:]
+    nodes = ((ny - 1) * args.refine + 1) * ((nx - 1) * args.refine + 1)
+    if nodes > _MAX_REFINED_NODES:
+        raise ValueError(f"--refine {args.refine} would make a {ny} x {nx} map region "
+                         f"{nodes:.3g} nodes ({nodes * 8 / 1e9:.2g} GB), more than the "
+                         f"{_MAX_REFINED_NODES:.0e} allowed; use a smaller factor")
+
+
+def _units(method, unit):
+    """The units block of the JSON result."""
+    return {"t": "s", "lat": "degrees_north", "lon": "degrees_east",
+            "offset_north_m": "m", "offset_east_m": "m", "rotation_deg": "degrees",
+            "score": ("nats (entropy of the readings-minus-map differences)"
+                      if method == "entropy" else f"{unit}^2 (weighted mean squared residual)"),
+            "bias": unit, "covariance_m2": "m^2 (north, east)", "sigma_north_m": "m",
+            "sigma_east_m": "m", "chi2_per_dof": "1", "drift_radius_deg": "degrees of arc",
+            "map_error_mgal": unit, "map_error_length_m": "m"}
 
 
 def _check_match_args(args):

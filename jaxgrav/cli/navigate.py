@@ -36,11 +36,13 @@ Readings that are missing or off the map are skipped and flagged row by row.
 """
 
 import math
+import sys
 
 import numpy as np
 
 from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import add_columns_option, read_track
+from jaxgrav.cli.sanity import check_readings, innovation_check
 from jaxgrav.datasets import load_map
 from jaxgrav.filters import map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos
@@ -182,8 +184,12 @@ def cmd_navigate(args):
                          f"more than {segment_rows}")
     ins = Track(*(np.asarray(track[k]) for k in ("t", "lat", "lon", "v_east", "v_north")))
     gravity = np.asarray(track["gravity"])
+    e_ins = np.asarray(eotvos(ins.lat, ins.v_east, ins.v_north))
+    check_readings(gravity, np.asarray(grid.sample(ins.lat, ins.lon, "bicubic")), args.noise,
+                   column="gravity", where=f"--track {track.path!r}",
+                   correction=0.0 if args.eotvos_corrected else e_ins)
     if args.eotvos_corrected:  # back to the raw reading: the loop corrects it itself
-        gravity = gravity - np.asarray(eotvos(ins.lat, ins.v_east, ins.v_north))
+        gravity = gravity - e_ins
     voyage = Voyage(ins, gravity)
     if args.method in TIGHT_METHODS:
         _tight(args, voyage, grid, n_missing, n_off)
@@ -224,6 +230,9 @@ def _tight(args, voyage, grid, n_missing, n_off):
           f"by the {args.method} filter; {n_missing} missing reading(s) skipped, {n_off} "
           f"row(s) off the map (not aided); flags seen: "
           f"{', '.join(status_messages_filter(flags)) or 'none'}")
+    _, _, fit_warning = innovation_check(res.innovation, np.sqrt(np.asarray(res.innovation_var)))
+    if fit_warning is not None:
+        print(f"warning: {fit_warning}", file=sys.stderr)
 
 
 def _write(args, ins, res, cfg):

@@ -1,0 +1,185 @@
+"""Readings that cannot be anomalies of the map are refused before a run, and a fit the
+stated noise cannot explain is flagged after it (``jaxgrav.cli.sanity``): the functions
+against SciPy's χ² distribution and synthetic columns, then ``match``, ``filter`` and
+``navigate`` in-process, one case per bad input of the issue, with the exit code, the
+message and no output left behind."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from jaxgrav.cli import main
+from jaxgrav.cli.sanity import check_readings, fit_check, innovation_check
+
+# ------------------------------------------------------------------ the functions
+
+
+def test_fit_and_innovation_checks_against_scipy_chi2():
+    for c, dof in ((0.6, 27), (1.0, 27), (2.2, 27), (3.0, 10), (900.0, 27)):
+        p, warning = fit_check(c, dof, 1.0)
+        assert p == pytest.approx(chi2.sf(c * dof, dof), rel=1e-9, abs=1e-300)
+        assert (warning is None) == (p >= 1e-3)
+    assert fit_check(float("nan"), 27, 1.0) == (pytest.approx(np.nan, nan_ok=True), None)
+    rng = np.random.default_rng(0)
+    s = np.full(500, 2.0)
+    nis, p, warning = innovation_check(rng.normal(0, 2.0, 500), s)  # consistent
+    assert nis == pytest.approx(1.0, abs=0.2) and warning is None
+    nis, p, warning = innovation_check(rng.normal(0, 6.0, 500), s)  # 3 x too large
+    assert nis == pytest.approx(9.0, rel=0.2) and p < 1e-3
+    assert "larger than the filter predicts" in warning
+    nu = rng.normal(0, 2.0, 500)
+    nu[::2] = np.nan  # readings not used do not count
+    assert innovation_check(nu, s)[0] == pytest.approx(
+        np.mean((nu[1::2] / 2.0) ** 2))
+
+
+@pytest.fixture
+def column():
+    """A plausible anomaly column and the map along its track (mGal)."""
+    rng = np.random.default_rng(1)
+    expected = 20.0 * np.sin(np.linspace(0.0, 6.0, 60)) - 15.0
+    return expected + rng.normal(0.0, 1.0, 60) + 2.0, expected
+
+
+@pytest.mark.parametrize(("change", "phrases"), [
+    (lambda z: np.where(np.arange(z.size) == 7, -9999.0, z), ["fill value", "-9999", "line 9"]),
+    (lambda z: np.where(np.arange(z.size) == 3, 99999.0, z), ["fill value", "99999"]),
+    (lambda z: z + 979_800.0, ["absolute gravity", "mGal"]),
+    (lambda z: (z + 979_800.0) * 1e-5, ["absolute gravity", "m/s²"]),
+    (lambda z: z * 1e-5, ["other units", "m/s²"]),
+    (lambda z: z * 1e3, ["other units", "µGal"]),
+    (lambda z: z + 5000.0, ["from the map", "datum"]),
+    (lambda z: np.where(np.arange(z.size) == 11, 4000.0, z), ["far outside", "line 13"]),
+])
+def test_check_readings_refuses_what_cannot_be_an_anomaly(column, change, phrases):
+    z, expected = column
+    check_readings(z, expected, 1.0, column="gravity", where="--track 'T.csv'")  # plausible
+    with pytest.raises(ValueError) as err:
+        check_readings(change(z), expected, 1.0, column="gravity", where="--track 'T.csv'")
+    msg = str(err.value)
+    assert "--track 'T.csv'" in msg and "'gravity'" in msg and "\n" not in msg
+    for phrase in phrases:
+        assert phrase in msg
+
+
+def test_check_readings_units_hints_and_what_passes(column):
+    z, expected = column
+    with pytest.raises(ValueError, match="µT"):  # a magnetic column in µT
+        check_readings(z * 1e-3, expected, 1.0, column="magnetic", where="w", unit="nT")
+    # a gravimeter bias of 30 mGal, missing readings and readings off the map pass
+    z2 = z + 30.0
+    z2[5] = np.nan
+    e2 = expected.copy()
+    e2[:10] = np.nan
+    check_readings(z2, e2, 1.0, column="gravity", where="w")
+    # raw readings with their Eötvös correction given: compared after it
+    check_readings(z - 40.0, expected, 1.0, column="gravity", where="w",
+                   correction=np.full(z.size, 40.0))
+    with pytest.raises(ValueError, match="remove the row"):
+        check_readings(np.where(np.arange(z.size) == 2, -9999.0, z), expected, 1.0,
+                       column="gravity", where="w", missing_skipped=False)
+
+
+# ------------------------------------------------------------------ the commands
+
+
+@pytest.fixture(scope="module")
+def tracks(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sanity")
+    assert main(["simulate", "--out", str(d / "t.csv"), "--n", "30", "--seed", "3"]) == 0
+    assert main(["simulate-filter", "--out", str(d / "f.csv"), "--minutes", "30"]) == 0
+    return d
+
+
+def _edited(src, dst, change):
+    rows = list(csv.DictReader(open(src, newline="")))
+    with open(dst, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        for i, row in enumerate(rows):
+            if row["gravity"]:
+                row["gravity"] = repr(change(i, float(row["gravity"])))
+            w.writerow(row)
+    return dst
+
+
+_MATCH_BAD = {
+    "fill": (lambda i, g: -9999.0 if i == 5 else g, [], ["fill value", "-9999", "remove the row"]),
+    "absolute": (lambda i, g: g + 979_741.0, [], ["absolute gravity"]),
+    "m/s2": (lambda i, g: g * 1e-5, [], ["other units", "m/s²"]),
+    "dense refined": (lambda i, g: g, ["--refine", "8"], ["--refine 8 is for --method chains",
+                                                          "worse"]),
+    "refine out of memory": (lambda i, g: g, ["--method", "chains", "--refine", "10000"],
+                             ["--refine 10000", "GB", "smaller factor"]),
+    "search wider than the map": (lambda i, g: g, ["--drift-radius", "20"],
+                                  ["--drift-radius 20", "larger than the map"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(_MATCH_BAD))
+def test_match_refuses_bad_readings_and_options(tracks, tmp_path, capsys, case):
+    change, options, phrases = _MATCH_BAD[case]
+    track = _edited(tracks / "t.csv", tmp_path / "bad.csv", change)
+    out = tmp_path / "r.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(track), "--out", str(out),
+                 *options]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "np." not in err
+    for phrase in phrases:
+        assert phrase in err
+    assert not out.exists()
+
+
+def test_match_flags_an_implausible_fit_and_writes_time_and_units(tracks, tmp_path, capsys):
+    out = tmp_path / "r.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(tracks / "t.csv"), "--out",
+                 str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["fit_plausible"] is True and r["fit_p_value"] > 1e-3
+    assert len(r["t"]) == 30 and r["t"][1] - r["t"][0] == pytest.approx(120.0)
+    assert r["units"]["bias"] == "mGal" and r["units"]["t"] == "s"
+    assert "mGal^2" in r["units"]["score"]
+    capsys.readouterr()
+    # ±30 mGal of noise stated as 1 mGal: the fix is flagged, not silently trusted
+    noisy = _edited(tracks / "t.csv", tmp_path / "noisy.csv",
+                    lambda i, g: g + (30.0 if i % 2 else -30.0))
+    assert main(["match", "--map", "ryukyu", "--track", str(noisy), "--out", str(out),
+                 "--force"]) == 0
+    r = json.loads(out.read_text())
+    assert r["fit_plausible"] is False and r["fit_p_value"] < 1e-3
+    assert any("far worse than the stated noise" in m for m in r["status_messages"])
+    assert "far worse than the stated noise" in capsys.readouterr().err
+
+
+def test_chains_without_refine_on_a_coarse_map_warns(tracks, tmp_path, capsys):
+    out = tmp_path / "r.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(tracks / "t.csv"), "--out",
+                 str(out), "--method", "chains"]) == 0
+    assert "without --refine" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("change", "phrases"), [
+    (lambda i, g: -9999.0 if i == 40 else g, ["fill value", "leave the cell empty"]),
+    (lambda i, g: g + 979_741.0, ["absolute gravity"]),
+    (lambda i, g: g * 1e-5, ["other units"]),
+])
+def test_filter_refuses_bad_readings(tracks, tmp_path, capsys, change, phrases):
+    track = _edited(tracks / "f.csv", tmp_path / "bad.csv", change)
+    out = tmp_path / "o.csv"
+    assert main(["filter", "--track", str(track), "--point-masses", "paper-d", "--out",
+                 str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and all(p in err for p in phrases) and not out.exists()
+
+
+def test_filter_warns_when_the_innovations_are_implausible(tracks, tmp_path, capsys):
+    noisy = _edited(tracks / "f.csv", tmp_path / "noisy.csv",
+                    lambda i, g: g + (8.0 if i % 2 else -8.0))
+    out = tmp_path / "o.csv"
+    assert main(["filter", "--track", str(noisy), "--point-masses", "paper-d", "--out",
+                 str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "innovations are" in err and "not trustworthy" in err
