@@ -30,8 +30,9 @@ from jaxgrav.cli.simulate import (
 )
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import map_error
+from jaxgrav.montecarlo.draws import variable_attrs
 from jaxgrav.montecarlo.filter_runs import MAP_ERROR_TOLD
-from jaxgrav.montecarlo.fix_metrics import FIX_METRIC_ATTRS, fix_summary
+from jaxgrav.montecarlo.fix_metrics import fix_summary
 from jaxgrav.montecarlo.methods import (
     BUILDERS,
     DEPRECATED_METHODS,
@@ -399,7 +400,7 @@ def cmd_montecarlo(args):
            for c, v in d.items()},
     )
     ds = montecarlo.to_dataset(results)
-    for name, var_attrs in FIX_METRIC_ATTRS.items():
+    for name, var_attrs in variable_attrs(kind).items():
         if name in ds:
             ds[name].attrs.update(var_attrs)
     montecarlo.write_netcdf(ds, out, attrs=attrs, force=args.force)

@@ -48,6 +48,7 @@ __all__ = [
     "ukf_run",
 ]
 
+from jaxgrav.montecarlo.draws import scenario_draws
 from jaxgrav.montecarlo.spec import MethodSpec, check_settings
 from jaxgrav.scenarios import (
     FilterScenario,
@@ -92,10 +93,12 @@ def _told_steps(run, scenario, told):
 def _with_bound(metrics, run, field, dynamics, steps, p0, meas):
     """``metrics`` plus ``bound_m``: the PCRLB of the horizontal position error, RMS over
     the second half of the run (as ``err_m``), of the model the filter is told
-    (``dynamics, steps, p0, meas`` from :func:`_told_steps`)."""
+    (``dynamics, steps, p0, meas`` from :func:`_told_steps`); and the run's draws
+    (:func:`~jaxgrav.montecarlo.draws.scenario_draws`)."""
     rms = pcrlb(field, dynamics, p0, steps, run.errors[1:, :2], meas).position_rms
     half = rms.shape[0] // 2
-    return dict(metrics, bound_m=jnp.sqrt(jnp.mean(rms[half:] ** 2)))
+    return dict(metrics, bound_m=jnp.sqrt(jnp.mean(rms[half:] ** 2)),
+                **scenario_draws(run.truth.lat, run.truth.lon, run.ins_lat, run.ins_lon))
 
 
 def _kalman_run(key, field, scenario, make, guard=False, map_error=None, told=None,

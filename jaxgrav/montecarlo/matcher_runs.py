@@ -21,6 +21,7 @@ from jaxgrav.match.iccp import match_iccp
 from jaxgrav.match.result import CORRELATION_STATUS
 from jaxgrav.match.result import STATUS as ALL_STATUS
 from jaxgrav.match.sizing import config_for, iccp_config_for
+from jaxgrav.montecarlo.draws import scenario_draws
 from jaxgrav.montecarlo.fix_metrics import fix_metrics
 from jaxgrav.montecarlo.spec import (
     MethodSpec,
@@ -85,7 +86,9 @@ def matcher_record(run, r, **extra):
         returned track from the truth, m; a rejected fix returns the INS track),
         ``status`` (int32), ``score`` (the matcher's), the fix metrics ``accepted``,
         ``sigma_max_m``, ``covered95``
-        (:func:`~jaxgrav.montecarlo.fix_metrics.fix_metrics`) and ``extra``.
+        (:func:`~jaxgrav.montecarlo.fix_metrics.fix_metrics`), the run's draws
+        (:func:`~jaxgrav.montecarlo.draws.scenario_draws`: start and INS offset) and
+        ``extra``.
     """
     return dict(
         ins_err_m=ins_error_m(run),
@@ -93,6 +96,7 @@ def matcher_record(run, r, **extra):
         status=jnp.asarray(r.status, jnp.int32),
         score=r.score,
         **fix_metrics(run, r),
+        **scenario_draws(run.truth.lat, run.truth.lon, run.ins_lat, run.ins_lon),
         **extra,
     )
 

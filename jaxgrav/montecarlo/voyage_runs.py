@@ -26,6 +26,7 @@ import jax.numpy as jnp
 
 from jaxgrav.fields.map_error import CorrelatedMapError
 from jaxgrav.filters import STATUS_FILTER, matched_state
+from jaxgrav.montecarlo.draws import scenario_draws
 from jaxgrav.montecarlo.spec import (
     MethodSpec,
     check_map_error,
@@ -72,7 +73,8 @@ def _metrics(voyage, nav, cov, dt, status):
         status=status.astype(jnp.int32), nees=jnp.mean(err.nees),
         hourly_err_m=hourly_rms(err.nav_m, dt), hourly_ins_err_m=hourly_rms(err.free_m, dt),
         err_series_m=err.nav_m[::every], ins_err_series_m=err.free_m[::every],
-        sigma_series_m=sigma[::every])
+        sigma_series_m=sigma[::every],
+        **scenario_draws(voyage.truth.lat, voyage.truth.lon, voyage.ins.lat, voyage.ins.lon))
 
 
 def voyage_tight_run(key, pm, grid, scenario, model, config):

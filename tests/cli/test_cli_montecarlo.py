@@ -23,6 +23,12 @@ slow = pytest.mark.skipif(
 )
 
 
+def _every_variable_described(ds):
+    """CF ``units`` and ``long_name`` on every per-run variable of a Monte Carlo file."""
+    bare = [v for v in ds.data_vars if not {"units", "long_name"} <= set(ds[v].attrs)]
+    assert not bare, f"variables without units/long_name: {bare}"
+
+
 @pytest.fixture(scope="module")
 def mc_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("mc") / "corr.nc"
@@ -48,6 +54,10 @@ def test_montecarlo_writes_netcdf_png_and_summary(mc_run, capsys):
         assert 0 <= a["summary_failure_rate"] <= 1
         assert a["summary_err_m_p50"] == pytest.approx(float(np.median(ds["err_m"])))
         assert "--runs 8 --chunk 4" in a["command"]
+        _every_variable_described(ds)
+        # each run's draws: where its true track starts and the INS offset there
+        assert np.all((ds["start_lat"] >= 24) & (ds["start_lat"] <= 36))
+        assert np.all(np.hypot(ds["ins_offset_north_m"], ds["ins_offset_east_m"]) > 0)
         assert json.loads(a["status_bits"])["8"].startswith("the best candidate")
         # fix metrics with units; a perfect map: the white-noise matcher, not told
         assert ds["accepted"].dtype == bool and ds["accepted"].attrs["units"] == "1"
@@ -131,6 +141,8 @@ def test_montecarlo_filter_summary_uses_no_harm_bound(tmp_path, capsys):
         assert a["summary_nees_mean"] == pytest.approx(float(ds["nees"].mean()))
         ratio = ds["err_m"].values / ds["ins_err_m"].values
         assert a["summary_failure_rate"] == pytest.approx(float(np.mean(ratio > 1.05)))
+        _every_variable_described(ds)
+        assert np.all(np.isfinite(ds["start_lat"])) and np.all(np.isfinite(ds["start_lon"]))
 
 
 def test_montecarlo_filter_on_a_map(tmp_path, capsys):
@@ -184,9 +196,12 @@ def test_montecarlo_more_matchers(tmp_path, capsys, method, fixes, drift):
         assert a["summary_err_m_p50"] == pytest.approx(float(np.median(err)))
         assert a["summary_ratio_mean"] == pytest.approx(float(np.mean(err / ins)))
         d = drift * DEG_ARC_M
+        _every_variable_described(ds)
         if method == "chains":  # fixed drift; the map refined 2.5' / 0.005 deg = x8
             assert a["setting_refine_factor"] == 8 and "chains" in a["setting_description"]
             np.testing.assert_allclose(ins, d, rtol=1e-6)
+            np.testing.assert_allclose(np.hypot(ds["ins_offset_north_m"],
+                                                ds["ins_offset_east_m"]), d, rtol=1e-3)
             assert "work_constrained" in ds
         else:  # offset in [2/3, 1] x drift; a 1.5 deg turn about the start moves the
             # fixes of the 11.4 km track by 150 m on average

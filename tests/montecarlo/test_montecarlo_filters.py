@@ -18,6 +18,7 @@ from jaxgrav.cli import main
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.fields.pointmass import PointMasses
 from jaxgrav.montecarlo import methods as montecarlo_methods
+from jaxgrav.montecarlo.draws import DRAW_ATTRS
 from jaxgrav.montecarlo.filter_runs import filter_builder
 from jaxgrav.scenarios import FilterScenario
 from jaxgrav.sim import DEG_ARC_M
@@ -55,7 +56,7 @@ def test_filters_are_registered_with_paper_d_defaults():
 def test_every_filter_runs_in_the_monte_carlo_runner(kind):
     spec = montecarlo_methods.build(kind, n_fixes=N_FIXES)
     r = montecarlo.run(spec.fn, jax.random.key(1), 2, chunk=2, args=spec.args, progress=False)
-    assert set(r) == {*montecarlo_methods.METRICS, "nees", "bound_m"}
+    assert set(r) == {*montecarlo_methods.METRICS, "nees", "bound_m", *DRAW_ATTRS}
     for k in ("ins_err_m", "err_m", "nees", "bound_m"):
         assert r[k].shape == (2,) and np.all(np.isfinite(r[k])) and np.all(r[k] > 0), (k, r)
     assert r["status"].dtype == np.int32

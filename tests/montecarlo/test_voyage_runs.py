@@ -81,6 +81,10 @@ def test_cli_voyage_method_writes_results_and_figure(tmp_path, capsys):
     ds = xr.open_dataset(out)
     assert ds["hourly_err_m"].shape == (2, 1) and ds.attrs["method"] == "voyage-ukf"
     assert "--hours 1" in ds.attrs["command"]
+    assert ds["start_lat"].attrs["units"] == "degrees_north"
+    assert "last hour" in ds["err_m"].attrs["long_name"]
+    bare = [v for v in ds.data_vars if not {"units", "long_name"} <= set(ds[v].attrs)]
+    assert not bare
     ds.close()
     assert out.with_suffix(".png").stat().st_size > 10_000
     tracks_png = tmp_path / "v_tracks.png"  # run 1 on the map
