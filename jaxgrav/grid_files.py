@@ -129,7 +129,7 @@ def _choose_var(ds, var, dims, label, exclude):
     if var is None:
         if len(gridded) != 1:
             raise ValueError(f"{label} holds {len(gridded)} gridded variables {gridded}; "
-                             "choose one with --var NAME (pass var=NAME in Python)")
+                             "choose one with --var NAME")
         return gridded[0]
     if var not in ds.variables:
         raise ValueError(f"{label} has no variable {var!r}; its gridded variables are "

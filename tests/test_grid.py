@@ -235,7 +235,7 @@ def test_reads_gmt_style_file(tmp_path, field):
         coords={"lat": LAT, "lon": LON},
     )
     ds2.to_netcdf(tmp_path / "two.nc")
-    with pytest.raises(ValueError, match="pass var="):
+    with pytest.raises(ValueError, match="choose one with --var NAME"):
         jg.Grid.from_netcdf(tmp_path / "two.nc")
     np.testing.assert_allclose(jg.Grid.from_netcdf(tmp_path / "two.nc", var="b").values, field)
     with pytest.raises(FileNotFoundError, match="does not exist"):

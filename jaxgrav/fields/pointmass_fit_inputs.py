@@ -66,7 +66,7 @@ def _check_finite(x, name):
     bad = ~np.isfinite(x)
     if np.any(bad):
         raise ValueError(
-            f"{name} must be finite; found {x[bad][0]!r} ({int(bad.sum())} non-finite "
+            f"{name} must be finite; found {float(x[bad][0])!r} ({int(bad.sum())} non-finite "
             f"value(s) of {x.size}) — cut the window to the valid part or fill the gaps"
         )
 
