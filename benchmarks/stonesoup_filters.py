@@ -35,8 +35,9 @@ noise. ``n`` runs (default 100, ``--quick`` 10). Reference: Stone Soup (PyPI
   its grid every step along the eigenvectors of the predicted covariance at ±4σ
   (``sFactor``), interpolates the density linearly onto it and convolves with the
   Gaussian transition density on the new points (FFT). The true INS error drifts
-  (Schuler), which neither filter models here, so both errors are larger than the
-  library's drift-aware ``pmf``.
+  (Schuler), which neither filter models here (the random walk stands in for it), so
+  these errors are not the library's drift-aware ``pmf``'s. The point-mass filters are
+  deterministic: on the same run their errors differ by the grids only.
 
 Stone Soup is timed on a few runs and scaled per run (field ``note``); both are scored
 on those runs: RMS position error over the second hour (``err_m``; different random
