@@ -148,7 +148,8 @@ def test_particle_filters_approach_the_kalman_posterior():
                              key=jax.random.PRNGKey(1))
     x_jg = np.asarray(infos.x[-1])
 
-    # Monte Carlo error ~ sd / sqrt(N_eff) with a few resamplings: 0.1 sd is > 10 of them
+    # Monte Carlo error ~ sd / sqrt(N_eff) (N_eff a few thousand after resampling): 0.1 sd is
+    # several of them
     np.testing.assert_array_less(np.abs(x_ss - x_kf) / sd, 0.1)
     np.testing.assert_array_less(np.abs(x_jg - x_kf) / sd, 0.1)
 
