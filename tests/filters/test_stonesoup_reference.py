@@ -18,29 +18,25 @@ import datetime
 import jax
 import jax.numpy as jnp
 import numpy as np
-import pytest
+from stonesoup.base import Property
+from stonesoup.functions import grid_creation
+from stonesoup.models.base import GaussianModel
+from stonesoup.models.measurement.base import MeasurementModel
+from stonesoup.models.measurement.linear import LinearGaussian
+from stonesoup.models.transition.linear import LinearGaussianTransitionModel
+from stonesoup.predictor.particle import ParticlePredictor
+from stonesoup.predictor.pointmass import PointMassPredictor
+from stonesoup.resampler.particle import ESSResampler, SystematicResampler
+from stonesoup.types.array import CovarianceMatrix, StateVector, StateVectors
+from stonesoup.types.detection import Detection
+from stonesoup.types.hypothesis import SingleHypothesis
+from stonesoup.types.state import ParticleState, PointMassState
+from stonesoup.updater.particle import ParticleUpdater
+from stonesoup.updater.pointmass import PointMassUpdater
 
-stonesoup = pytest.importorskip("stonesoup")
-
-from stonesoup.base import Property  # noqa: E402
-from stonesoup.functions import grid_creation  # noqa: E402
-from stonesoup.models.base import GaussianModel  # noqa: E402
-from stonesoup.models.measurement.base import MeasurementModel  # noqa: E402
-from stonesoup.models.measurement.linear import LinearGaussian  # noqa: E402
-from stonesoup.models.transition.linear import LinearGaussianTransitionModel  # noqa: E402
-from stonesoup.predictor.particle import ParticlePredictor  # noqa: E402
-from stonesoup.predictor.pointmass import PointMassPredictor  # noqa: E402
-from stonesoup.resampler.particle import ESSResampler, SystematicResampler  # noqa: E402
-from stonesoup.types.array import CovarianceMatrix, StateVector, StateVectors  # noqa: E402
-from stonesoup.types.detection import Detection  # noqa: E402
-from stonesoup.types.hypothesis import SingleHypothesis  # noqa: E402
-from stonesoup.types.state import ParticleState, PointMassState  # noqa: E402
-from stonesoup.updater.particle import ParticleUpdater  # noqa: E402
-from stonesoup.updater.pointmass import PointMassUpdater  # noqa: E402
-
-from jaxgrav import filters as fl  # noqa: E402
-from jaxgrav.filters.model import Dynamics, Step  # noqa: E402
-from jaxgrav.sim.ins import N_STATES  # noqa: E402
+from jaxgrav import filters as fl
+from jaxgrav.filters.model import Dynamics, Step
+from jaxgrav.sim.ins import N_STATES
 
 T0 = datetime.datetime(2020, 1, 1)
 
