@@ -73,7 +73,7 @@ class NumpyAnomaly:
         return np.sum(self.gm * inv_l3 * np.sum(d * up, -1), -1) / c.MGAL
 
 
-def _true_position(lat, lon, dn, de):
+def true_position(lat, lon, dn, de):
     sp = math.sin(math.radians(lat))
     w = 1.0 - c.WGS84_E2 * sp * sp
     m_rad = c.WGS84_A * (1.0 - c.WGS84_E2) / w**1.5
@@ -117,7 +117,7 @@ def numpy_rbpf(anomaly, f, q, x0, p0, lat, lon, z, r, n, rng):
         p = 0.5 * (p + p.T)
         pos = new
         if math.isfinite(z[k]):
-            tl, tn = _true_position(lat[k], lon[k], pos[:, 0], pos[:, 1])
+            tl, tn = true_position(lat[k], lon[k], pos[:, 0], pos[:, 1])
             resid = z[k] - (anomaly(tl, tn) + m @ cvec)
             pc = p @ cvec
             sv = cvec @ pc + r
@@ -153,7 +153,7 @@ def numpy_pf(anomaly, f, q, x0, p0, lat, lon, z, r, n, rng):
     for k in range(z.size):
         x = x @ f.T + rng.standard_normal(x.shape) @ q_root.T
         if math.isfinite(z[k]):
-            tl, tn = _true_position(lat[k], lon[k], x[:, 0], x[:, 1])
+            tl, tn = true_position(lat[k], lon[k], x[:, 0], x[:, 1])
             resid = z[k] - (anomaly(tl, tn) + x[:, GRAV])
             logw = logw - 0.5 * resid**2 / r
             logw -= np.logaddexp.reduce(logw)
@@ -172,13 +172,15 @@ def second_half_rms(est, truth):
     return float(np.sqrt(np.mean(np.sum((truth[half:] - est[half:]) ** 2, -1))))
 
 
-def main():
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true", help="10 runs, 1 NumPy run per filter")
-    p.add_argument("--runs", type=int, default=None, help="runs for jaxgrav (default 100)")
-    a = p.parse_args()
-    n_runs = a.runs or (10 if a.quick else 100)
-    n_np = 1 if a.quick else 3
+def paper_d_runs(n_runs):
+    """Paper D's ``n_runs`` runs (seed 0) as the benchmarks filter them.
+
+    Returns
+    -------
+    field, scen, dyn, steps, truth, x0, p0
+        The point masses, the scenario, the runs' dynamics and steps (leading axis:
+        run), the true position errors ``(n_runs, T − 1, 2)`` (m) and the filters' prior.
+    """
     field = paper_d()
     scen = sc.FilterScenario(dt=10.0, reading_every=1, n_steps=721)
     x0, p0 = sc.initial_state(scen)
@@ -194,8 +196,19 @@ def main():
 
     keys = jax.random.split(jax.random.key(0), n_runs)
     dyn, steps, truth = jax.block_until_ready(simulate(keys))
-    anomaly = NumpyAnomaly(field)
     progress(f"{n_runs} runs simulated")
+    return field, scen, dyn, steps, truth, x0, p0
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="10 runs, 1 NumPy run per filter")
+    p.add_argument("--runs", type=int, default=None, help="runs for jaxgrav (default 100)")
+    a = p.parse_args()
+    n_runs = a.runs or (10 if a.quick else 100)
+    n_np = 1 if a.quick else 3
+    field, _, dyn, steps, truth, x0, p0 = paper_d_runs(n_runs)
+    anomaly = NumpyAnomaly(field)
     for kind, make, ref in (("rbpf", fl.rbpf, numpy_rbpf), ("pf", fl.pf, numpy_pf)):
         bench_one(kind, make(N_PARTICLES), ref, field, anomaly, dyn, steps, truth, x0, p0,
                   n_np, 1 if a.quick else 2)

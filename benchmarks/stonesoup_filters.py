@@ -61,7 +61,12 @@ from _common import best_time, emit
 
 jax.config.update("jax_enable_x64", True)  # a script, not the library
 
-from particle_filters import NumpyAnomaly, _true_position, second_half_rms  # noqa: E402
+from particle_filters import (  # noqa: E402
+    NumpyAnomaly,
+    paper_d_runs,
+    second_half_rms,
+    true_position,
+)
 from stonesoup.base import Property  # noqa: E402
 from stonesoup.models.base import GaussianModel  # noqa: E402
 from stonesoup.models.measurement.base import MeasurementModel  # noqa: E402
@@ -77,8 +82,6 @@ from stonesoup.updater.particle import ParticleUpdater  # noqa: E402
 from stonesoup.updater.pointmass import PointMassUpdater  # noqa: E402
 
 from jaxgrav import filters as fl  # noqa: E402
-from jaxgrav import scenarios as sc  # noqa: E402
-from jaxgrav.fields.pointmass import paper_d  # noqa: E402
 from jaxgrav.sim.ins import GRAV  # noqa: E402
 
 BENCH = "stonesoup_filters"
@@ -134,7 +137,7 @@ class GravityMeasurement(MeasurementModel, GaussianModel):
 
     def function(self, state, noise=False, **kwargs):
         x = np.asarray(state.state_vector, float)
-        tl, tn = _true_position(self.lat, self.lon, x[0], x[1])
+        tl, tn = true_position(self.lat, self.lon, x[0], x[1])
         b = self.bias if self.bias_index is None else x[self.bias_index]
         z = self.anomaly(tl, tn) + b
         if noise is True:
@@ -208,23 +211,8 @@ def main():
     n_runs = a.runs or (10 if a.quick else 100)
     n_ss = 1 if a.quick else 3
     repeats = 1 if a.quick else 2
-    field = paper_d()
-    scen = sc.FilterScenario(dt=10.0, reading_every=1, n_steps=721)
-    x0, p0 = sc.initial_state(scen)
-
-    @jax.jit
-    def simulate(keys):
-        def one(key):
-            run = sc.filter_scenario(key, field, scen)
-            dyn, steps = sc.run_steps(run, scen)
-            return dyn, steps, run.errors[1:, :2]
-
-        return jax.vmap(one)(keys)
-
-    keys = jax.random.split(jax.random.key(0), n_runs)
-    dyn, steps, truth = jax.block_until_ready(simulate(keys))
+    field, scen, dyn, steps, truth, x0, p0 = paper_d_runs(n_runs)
     anomaly = NumpyAnomaly(field)
-    progress(f"{n_runs} runs simulated")
     ctx = (field, dyn, steps, truth, x0, p0, n_ss, repeats)
 
     # the Stone Soup particle filter is timed once and compared with both jaxgrav filters
