@@ -255,7 +255,9 @@ def sample(grid, lat, lon, method="bilinear", *, strict=False):
     Returns
     -------
     Array, shape ``(..., *P)``
-        Interpolated values, NaN off the grid (use :meth:`Grid.contains` for the mask).
+        Interpolated values, NaN off the grid (use :meth:`Grid.contains` for the mask)
+        and in cells with a missing (NaN) corner node, such as land on a marine grid
+        (missing nodes do not spread: :func:`jaxgrav.interp.bicubic_coefficients`).
         Differentiable in the points and in ``grid.values``.
     """
     interp.check_method(method)

@@ -358,8 +358,11 @@ class GeographicAxes:
             raise ValueError(
                 f"{source} has {int(missing.sum())} missing (NaN) node(s) among the "
                 f"{missing.size} within {margin_m / 1000:.3g} km (+{pad_nodes} nodes) of the "
-                f"track, the first at lat {la:.6g}, lon {lo:.6g}; the map must be complete "
-                f"there (missing nodes elsewhere are fine)")
+                f"track, the first at lat {la:.6g}, lon {lo:.6g}; "
+                + ("the map must be complete there (missing nodes elsewhere are fine)"
+                   if max_missing == 0 else
+                   f"more than {max_missing:.0%} missing leaves too little map to use "
+                   "(missing nodes elsewhere are fine)"))
         return region
 
 

@@ -101,7 +101,9 @@ def refined(grid, factor, method="bilinear"):
     Returns
     -------
     Grid
-        ``((ny−1)·factor + 1, (nx−1)·factor + 1)`` nodes over the same extent.
+        ``((ny−1)·factor + 1, (nx−1)·factor + 1)`` nodes over the same extent; a new
+        node that any missing (NaN) node weighs in is missing too (the mask is kept,
+        not spread).
     """
     if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
         raise ValueError(f"factor must be an integer >= 1; got {factor!r}")
@@ -114,5 +116,11 @@ def refined(grid, factor, method="bilinear"):
         grid.nx, np.arange((grid.nx - 1) * factor + 1) / factor, method
     )
     dtype = jnp.result_type(grid.values.dtype, float)
-    v = jnp.asarray(wy, dtype) @ grid.values.astype(dtype) @ jnp.asarray(wx.T, dtype)
+    values = jnp.asarray(grid.values).astype(dtype)
+    missing = ~jnp.isfinite(values)
+    v = jnp.asarray(wy, dtype) @ jnp.where(missing, 0.0, values) @ jnp.asarray(wx.T, dtype)
+    # a new node is missing when a missing node has weight in it (|w| > 0: exact)
+    touched = (jnp.asarray(np.abs(wy) > 0, dtype) @ missing.astype(dtype)
+               @ jnp.asarray(np.abs(wx.T) > 0, dtype))
+    v = jnp.where(touched > 0, jnp.nan, v)
     return dataclasses.replace(grid, values=v, dlat=grid.dlat / factor, dlon=grid.dlon / factor)

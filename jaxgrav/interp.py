@@ -21,6 +21,7 @@ Methods
 
 import functools
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -34,6 +35,7 @@ __all__ = [
     "cell",
     "check_method",
     "edge_eps",
+    "fill_missing",
     "hermite",
     "hermite_derivative",
     "interleave_coefficients",
@@ -148,8 +150,62 @@ def spline_slopes(values, axis):
     return jnp.moveaxis(moved @ s.T, -1, axis)
 
 
+def fill_missing(values):
+    """Missing (NaN) nodes filled by linear interpolation along rows, then columns.
+
+    Only for computing spline slopes next to holes in a map (land on a marine grid):
+    :func:`bicubic_coefficients` masks the filled nodes again. A node between two
+    present ones in its row takes the linear interpolant of the nearest of them; a node
+    with present ones on one side only takes the nearest value; a row with none is
+    filled along its column the same way, and a node with no present value in its row
+    or column is 0. Shapes are static (cumulative maxima of indices), so it runs under
+    ``jit`` and is differentiable in the present values.
+
+    Parameters
+    ----------
+    values : Array, shape ``(..., ny, nx)``
+
+    Returns
+    -------
+    Array, shape ``(..., ny, nx)``
+        ``values`` where finite, the fill elsewhere; no NaN or inf.
+    """
+    values = jnp.asarray(values)
+    row = _fill_along(values, -1)
+    col = _fill_along(values, -2)
+    out = jnp.where(jnp.isfinite(row), row, col)
+    return jnp.where(jnp.isfinite(out), out, jnp.zeros((), out.dtype))
+
+
+def _fill_along(values, axis):
+    """Linear fill of non-finite entries along ``axis`` from the nearest finite ones
+    (constant beyond the last); NaN where the whole line is non-finite."""
+    v = jnp.moveaxis(values, axis, -1)
+    n = v.shape[-1]
+    ok = jnp.isfinite(v)
+    safe = jnp.where(ok, v, jnp.zeros((), v.dtype))
+    idx = jnp.arange(n)
+    left = jax.lax.cummax(jnp.where(ok, idx, -1), axis=v.ndim - 1)
+    right = jax.lax.cummin(jnp.where(ok, idx, n), axis=v.ndim - 1, reverse=True)
+    has_l, has_r = left >= 0, right < n
+    lc, rc = jnp.clip(left, 0, n - 1), jnp.clip(right, 0, n - 1)
+    vl = jnp.take_along_axis(safe, lc, axis=-1)
+    vr = jnp.take_along_axis(safe, rc, axis=-1)
+    w = jnp.where(has_l & has_r, (idx - lc) / jnp.maximum(rc - lc, 1), 0.0).astype(v.dtype)
+    between = vl + w * (vr - vl)
+    fill = jnp.where(has_l & has_r, between, jnp.where(has_l, vl, jnp.where(has_r, vr,
+                                                                               jnp.nan)))
+    return jnp.moveaxis(jnp.where(ok, v, fill), -1, axis)
+
+
 def bicubic_coefficients(values):
     """Stack node values and spline derivatives for :func:`bicubic`.
+
+    Missing (NaN) nodes, such as land on a marine grid, do not spoil the rest of the
+    map: the spline slopes are computed with them filled (:func:`fill_missing`), and
+    then all four coefficients of a missing node are NaN again, so every cell with a
+    missing corner interpolates to NaN (masked) and every other cell keeps finite
+    values that equal the node values at the nodes.
 
     Parameters
     ----------
@@ -158,13 +214,17 @@ def bicubic_coefficients(values):
     Returns
     -------
     Array, shape ``(..., ny, nx, 4)``
-        ``[f, ∂f/∂ix, ∂f/∂iy, ∂²f/∂iy∂ix]`` at each node. Compute once per map and pass
-        to :func:`bicubic` when sampling the same map many times.
+        ``[f, ∂f/∂ix, ∂f/∂iy, ∂²f/∂iy∂ix]`` at each node (NaN at missing nodes). Compute
+        once per map and pass to :func:`bicubic` when sampling the same map many times.
     """
-    fx = spline_slopes(values, -1)
-    fy = spline_slopes(values, -2)
+    values = jnp.asarray(values)
+    missing = ~jnp.isfinite(values)
+    filled = fill_missing(values)
+    fx = spline_slopes(filled, -1)
+    fy = spline_slopes(filled, -2)
     fxy = spline_slopes(fx, -2)
-    return jnp.stack([values, fx, fy, fxy], axis=-1)
+    coefficients = jnp.stack([filled, fx, fy, fxy], axis=-1)
+    return jnp.where(missing[..., None], jnp.nan, coefficients)
 
 
 def _hermite_to_powers(v0, v1, s0, s1):
@@ -244,7 +304,8 @@ def bicubic(coefficients, iy, ix):
     Returns
     -------
     Array, shape ``(..., *P)``
-        Interpolated values; NaN where a point is outside the array.
+        Interpolated values; NaN where a point is outside the array or its cell has a
+        missing (NaN) corner.
     """
     ny, nx = coefficients.shape[-3:-1]
     iy, ix = jnp.broadcast_arrays(jnp.asarray(iy), jnp.asarray(ix))
@@ -255,16 +316,26 @@ def bicubic(coefficients, iy, ix):
     hy0, hy1, gy0, gy1 = hermite(ty)
     hx0, hx1, gx0, gx1 = hermite(tx)
     out = 0.0
+    valid = in_x & in_y
     for r, hy, gy in ((r0, hy0, gy0), (r0 + 1, hy1, gy1)):
         for col, hx, gx in ((c0, hx0, gx0), (c0 + 1, hx1, gx1)):
-            k = coefficients[..., r, col, :]
+            k, present = _corner(coefficients, r, col)
+            valid = valid & present
             out = out + (
                 k[..., 0] * hy * hx
                 + k[..., 1] * hy * gx
                 + k[..., 2] * gy * hx
                 + k[..., 3] * gy * gx
             )
-    return jnp.where(in_x & in_y, out, jnp.nan).astype(dtype)
+    return jnp.where(valid, out, jnp.nan).astype(dtype)
+
+
+def _corner(coefficients, r, col):
+    """A cell corner's four coefficients (0 at a missing node, so that gradients stay
+    finite: "double where") and whether the node is present."""
+    k = coefficients[..., r, col, :]
+    present = jnp.isfinite(k[..., 0])
+    return jnp.where(present[..., None], k, jnp.zeros((), k.dtype)), present
 
 
 def hermite_derivative(t):
@@ -289,8 +360,8 @@ def bicubic_value_and_gradient(coefficients, iy, ix):
     Returns
     -------
     value, d_iy, d_ix : Array, shape ``P``
-        Interpolated value (NaN off the array) and its derivatives per index step
-        along rows and columns (0 off the array).
+        Interpolated value (NaN off the array or in a cell with a missing corner) and
+        its derivatives per index step along rows and columns (0 there).
     """
     ny, nx = coefficients.shape[-3:-1]
     iy, ix = jnp.broadcast_arrays(jnp.asarray(iy), jnp.asarray(ix))
@@ -301,9 +372,11 @@ def bicubic_value_and_gradient(coefficients, iy, ix):
     hy, dhy = hermite(ty), hermite_derivative(ty)
     hx, dhx = hermite(tx), hermite_derivative(tx)
     val = d_y = d_x = 0.0
+    inside = in_x & in_y
     for j, r in enumerate((r0, r0 + 1)):
         for i, col in enumerate((c0, c0 + 1)):
-            k = coefficients[r, col, :]
+            k, present = _corner(coefficients, r, col)
+            inside = inside & present
             # value / slope weights: index j (or i) for the node, +2 for its slope
             a = k[..., 0] * hx[i] + k[..., 1] * hx[i + 2]  # rows' value part along x
             b = k[..., 2] * hx[i] + k[..., 3] * hx[i + 2]  # rows' slope part along x
@@ -312,7 +385,6 @@ def bicubic_value_and_gradient(coefficients, iy, ix):
             d_x = d_x + (k[..., 0] * dhx[i] + k[..., 1] * dhx[i + 2]) * hy[j] + (
                 k[..., 2] * dhx[i] + k[..., 3] * dhx[i + 2]
             ) * hy[j + 2]
-    inside = in_x & in_y
     zero = jnp.zeros((), dtype)
     return (
         jnp.where(inside, val, jnp.nan).astype(dtype),

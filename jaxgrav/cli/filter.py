@@ -70,7 +70,8 @@ DT_RTOL = 1e-3
 """Relative tolerance of a uniform time step."""
 
 _WARN = {
-    "off_map": "the estimate, its sigma points or a particle left the map, update skipped "
+    "off_map": "the estimate, its sigma points or a particle left the map or met a missing "
+               "(NaN) map cell, update skipped "
                "(pmf: grid cells off the map, left out of the update)",
     "covariance_repaired": "the covariance was not positive definite; jitter added",
     "covariance_failed": "the covariance could not be repaired, or the innovation variance "
@@ -183,11 +184,16 @@ def _check_sigma(name, value):
         raise ValueError(f"{name} must be a positive, finite standard deviation; got {value!r}")
 
 
+@jax.jit
+def _map_at_ins_jit(field, lat, lon):
+    zero = jnp.zeros(2, jnp.result_type(lat.dtype, float))
+    return jax.vmap(lambda a, b: map_at_error(field, zero, a, b))(lat, lon)
+
+
 def _map_at_ins(field, lat, lon):
-    """The map (or point-mass model) at the INS positions (mGal; NaN off a map)."""
-    zero = jnp.zeros(2)
-    return np.asarray(jax.vmap(lambda a, b: map_at_error(field, zero, a, b))(
-        jnp.asarray(lat), jnp.asarray(lon)))
+    """The map (or point-mass model) at the INS positions (mGal; NaN off a map or in a
+    cell with a missing node)."""
+    return np.asarray(_map_at_ins_jit(field, jnp.asarray(lat), jnp.asarray(lon)))
 
 
 _FILTER_MARGIN_M = 20e3

@@ -2,10 +2,15 @@
 
 One reader for tracks (:func:`jaxgrav.tracks.read_track_csv`) and one for maps
 (:func:`jaxgrav.datasets.map_for_track`) behind the commands ``match``, ``sample``,
-``filter`` and ``dov``: the same column aliases, ``--columns NAME=COLUMN`` mapping, ISO
-times and text columns everywhere; maps with missing (NaN) nodes are usable as long as
-the track's own region is complete, and global 0–360 maps are recentred when their seam
-cuts the track.
+``filter``, ``navigate`` and ``dov``: the same column aliases, ``--columns NAME=COLUMN``
+mapping, ISO times and text columns everywhere; global 0–360 maps are recentred when
+their seam cuts the track. Missing (NaN) map nodes, such as land on a marine grid, are a
+mask: every cell with a missing corner interpolates to NaN
+(:func:`jaxgrav.interp.bicubic_coefficients`), so candidate tracks, sigma points,
+particles and point-mass cells that touch one are masked and flagged by the methods
+(match status bit 8192, filter status ``off_map``), never a NaN result. The map is
+refused only when the track's own region is unusable: more than :data:`MAX_MISSING` of
+its nodes missing.
 """
 
 import numpy as np
@@ -13,7 +18,10 @@ import numpy as np
 from jaxgrav.datasets import map_for_track
 from jaxgrav.tracks import parse_columns, read_track_csv
 
-__all__ = ["add_columns_option", "map_error_args", "read_track", "track_map"]
+__all__ = ["MAX_MISSING", "add_columns_option", "map_error_args", "read_track", "track_map"]
+
+MAX_MISSING = 0.9
+"""Largest fraction of missing (NaN) nodes accepted in the map region a track needs."""
 
 
 def add_columns_option(parser):
@@ -58,10 +66,11 @@ def track_map(args, track, margin_m):
     Returns
     -------
     Grid
-        Missing nodes are refused only inside the track's region (plus margin).
+        The map or its region; missing (NaN) nodes kept as a mask, refused only when
+        they are more than :data:`MAX_MISSING` of the region's nodes.
     """
     return map_for_track(args.map, args.var, track["lat"], track["lon"], margin_m,
-                         option="--map")
+                         max_missing=MAX_MISSING, option="--map")
 
 
 def map_error_args(args):

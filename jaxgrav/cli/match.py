@@ -17,7 +17,7 @@ from jaxgrav.geodesy import eotvos
 from jaxgrav.match import ENTROPY_HALF_SIZE, METHODS, match_track, status_messages
 from jaxgrav.match.api import MAP_ERROR_METHODS
 from jaxgrav.sim import DEG_ARC_M
-from jaxgrav.tracks import write_track_csv
+from jaxgrav.tracks import csv_line, write_track_csv
 
 __all__ = ["CONTOUR_METHODS", "ENTROPY_HALF_SIZE", "add_parsers"]
 
@@ -94,6 +94,11 @@ def _cmd_sample(args):
     cols[args.column] = values
     write_track_csv(args.out, cols, force=args.force)
     print(f"wrote {args.out}: {values.size} samples of {grid.name or 'map'} ({args.method})")
+    masked = ~np.isfinite(values)
+    if masked.any():
+        print(f"warning: {int(masked.sum())} of {values.size} points lie in map cells with a "
+              f"missing (NaN) node (first on line {csv_line(int(np.flatnonzero(masked)[0]))}); "
+              f"their {args.column!r} cells are left empty", file=sys.stderr)
 
 
 def _cmd_match(args):
@@ -148,7 +153,8 @@ def _cmd_match(args):
         messages = [*messages, fit_warning]
     r = {"t": np.asarray(track["t"], float).tolist()}
     r.update({k: np.asarray(v).tolist() for k, v in result._asdict().items()})
-    r.update(status_messages=messages, fit_p_value=p_fit, fit_plausible=fit_warning is None,
+    r.update(status_messages=messages, fit_p_value=p_fit,
+             fit_plausible=None if math.isnan(p_fit) else fit_warning is None,
              units=_units(args.method, unit))
     cov = np.asarray(result.covariance_m2, float)
     r.update(accepted=bool(result.accepted), covariance_m2=cov.tolist(),
@@ -159,7 +165,7 @@ def _cmd_match(args):
     if args.method in CONTOUR_METHODS:
         r.update(max_rotation_deg=max_rotation, entropy_half_size=args.entropy_half_size)
     with atomic_output(args.out, force=args.force) as tmp:
-        tmp.write_text(json.dumps(r, indent=1))
+        tmp.write_text(json.dumps(_strict_json(r), indent=1, allow_nan=False))
     score_unit = "" if args.method == "entropy" else f" {unit}^2"
     print(f"wrote {args.out}: {args.method} match of {n_fix} fixes, offset "
           f"{float(result.offset_north_m):.0f} m north, {float(result.offset_east_m):.0f} m "
@@ -197,12 +203,23 @@ def _check_search(args, grid, radius_deg, lat):
                          f"lattice); --method {args.method} samples the map continuously, and "
                          "a refined (bilinear) map only smooths away its curvature and makes "
                          "the fix worse")
-    ny, nx = np.asarray(grid.values).shape[-2:]
     nodes = ((ny - 1) * args.refine + 1) * ((nx - 1) * args.refine + 1)
     if nodes > _MAX_REFINED_NODES:
         raise ValueError(f"--refine {args.refine} would make a {ny} x {nx} map region "
                          f"{nodes:.3g} nodes ({nodes * 8 / 1e9:.2g} GB), more than the "
                          f"{_MAX_REFINED_NODES:.0e} allowed; use a smaller factor")
+
+
+def _strict_json(value):
+    """``value`` with every NaN or infinite float as None: strict JSON (``null``: not
+    computed, e.g. the covariance of ``entropy`` alone or the p-value without a χ²)."""
+    if isinstance(value, dict):
+        return {k: _strict_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict_json(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def _units(method, unit):

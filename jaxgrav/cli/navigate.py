@@ -41,9 +41,8 @@ import sys
 import numpy as np
 
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import add_columns_option, read_track
+from jaxgrav.cli.inputs import add_columns_option, read_track, track_map
 from jaxgrav.cli.sanity import check_readings, innovation_check
-from jaxgrav.datasets import load_map
 from jaxgrav.filters import map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos
 from jaxgrav.navigate import (
@@ -67,6 +66,8 @@ METHODS = ("dense", *TIGHT_METHODS)
 """Navigation methods of the command: loosely coupled with the dense matcher, or tightly
 coupled with a filter of :data:`jaxgrav.navigate.TIGHT_METHODS`."""
 
+_MAP_MARGIN_M = 50e3
+"""Map kept around the INS log (m): the navigation error and the matchers' searches."""
 
 
 def add_parser(sub):
@@ -175,7 +176,7 @@ def cmd_navigate(args):
     check_outputs([args.out], force=args.force, names=["--out"])
     track = read_track(args, ("t", "lat", "lon", "v_east", "v_north", "gravity"),
                        allow_nan=("gravity",))
-    grid = load_map(args.map, args.var)
+    grid = track_map(args, track, _MAP_MARGIN_M)  # missing (NaN) nodes kept as a mask
     _, n_missing, n_off = check_log(track, grid, args.max_gap, args.max_speed)
     segment_rows = args.n_fixes * args.fix_every
     if args.method == "dense" and len(track["t"]) <= segment_rows:

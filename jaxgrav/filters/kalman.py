@@ -234,7 +234,7 @@ def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate
         x_new = pred.x + k * nu
         p_new = pred.p - s * jnp.outer(k, k)
         flags, skip = _flags(step.z, s, nu, gate, off_map, repaired, failed)
-        nu_out = jnp.where(jnp.isfinite(step.z), nu, jnp.nan)
+        nu_out = jnp.where(jnp.isfinite(step.z) & ~off_map, nu, jnp.nan)  # none off map
         return _finish(pred, x_new, p_new, nu_out, s, flags, skip)
 
     return Filter(init, update, _predict_step)
@@ -289,7 +289,7 @@ def ekf(measurement=gravity_measurement, *, gate=jnp.inf, check_covariance=True)
         ikh = jnp.eye(pred.x.shape[0], dtype=pred.p.dtype) - jnp.outer(k, h)
         p_new = ikh @ pred.p @ ikh.T + step.r * jnp.outer(k, k)  # Joseph form
         flags, skip = _flags(step.z, s, nu, gate, off_map, repaired, failed)
-        nu_out = jnp.where(jnp.isfinite(step.z), nu, jnp.nan)
+        nu_out = jnp.where(jnp.isfinite(step.z) & ~off_map, nu, jnp.nan)  # none off map
         return _finish(pred, x_new, p_new, nu_out, s, flags, skip)
 
     return Filter(init, update, _predict_step)

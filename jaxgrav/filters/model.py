@@ -63,7 +63,7 @@ __all__ = [
 STATUS_FILTER = {
     "ok": 0,
     "no_reading": 1,  # reading NaN: prediction only
-    "off_map": 2,  # a sigma point / the estimate left the map: update skipped
+    "off_map": 2,  # a sigma point / particle left the map or met a missing (NaN) cell: skipped
     "covariance_repaired": 4,  # P was not positive definite; jitter was added
     "covariance_failed": 8,  # even the jittered P failed; update skipped
     "gated": 16,  # innovation outside the gate: update skipped

@@ -133,7 +133,7 @@ def pf(n_particles=1000, measurement=gravity_measurement, *, resample="systemati
         log_w = normalise_log_weights(state.log_w - 0.5 * (z - zs) ** 2 / r)
         log_w = jnp.where(skip, state.log_w, log_w)
         weighted = ParticleState(x, log_w, state.key)
-        nu_out = jnp.where(jnp.isfinite(step.z), nu, jnp.nan)
+        nu_out = jnp.where(jnp.isfinite(step.z) & ~off_map, nu, jnp.nan)  # none off map
         info = _info(weighted, nu_out, s, flags)  # the posterior, before resampling
         return resample_if_degenerate(weighted), info
 

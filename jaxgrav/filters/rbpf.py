@@ -210,7 +210,7 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
         new = RBPFState(state.position, jnp.where(skip, state.mean, mean),
                         jnp.where(skip, state.p, 0.5 * (p + p.T)),
                         jnp.where(skip, state.log_w, log_w), state.key)
-        nu_out = jnp.where(jnp.isfinite(step.z), nu, jnp.nan)
+        nu_out = jnp.where(jnp.isfinite(step.z) & ~off_map, nu, jnp.nan)  # none off map
         info = _info(new, nu_out, s, flags)  # the posterior, before resampling
         return resample_if_degenerate(new), info
 

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav._validate import check_latitude
+from jaxgrav.constants import DEG, WGS84_MEAN_RADIUS
 from jaxgrav.geodesy import eotvos
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import ChainConfig, chain_tolerances, match_chains
@@ -29,8 +30,8 @@ from jaxgrav.match.result import status_messages
 from jaxgrav.match.sizing import config_for, iccp_config_for
 from jaxgrav.prepared import as_grid, prepare_map
 
-__all__ = ["ENTROPY_HALF_SIZE", "MAP_ERROR_METHODS", "METHODS", "MIN_FIXES", "match_track",
-           "validate_track"]
+__all__ = ["ENTROPY_HALF_SIZE", "MAP_ERROR_METHODS", "MASKED", "METHODS", "MIN_FIXES",
+           "match_track", "missing_in_reach", "validate_track"]
 
 METHODS = ("dense", "chains", "entropy", "iccp", "entropy+iccp")
 """``dense``: offset grid + Gauss–Newton (default, most accurate on real maps);
@@ -192,6 +193,15 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
         integrity test (:func:`config_for`, :func:`iccp_config_for`); None (default)
         or σ = 0: today's white-noise score. Ignored with an explicit ``config``.
 
+    Notes
+    -----
+    Missing (NaN) map nodes, such as land on a marine grid, are a mask: candidate
+    tracks with a fix in a cell that has a missing corner are dropped, the fix is the
+    best of the rest, and status bit :data:`MASKED` (8192) says the search region held
+    missing nodes. ``dense`` then scores each shifted fix on its own
+    (``lattice_block=0``, also with an explicit ``config``): the separable lattice
+    would spread one missing node over its whole block.
+
     Returns
     -------
     MatchResult
@@ -224,10 +234,44 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
     else:
         result = _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise,
                                 max_rotation_deg, entropy_half_size, config, map_error)
+    if missing_in_reach(grid, lat, lon, drift_radius_m):
+        result = result._replace(status=result.status | MASKED)
     if warn:
         for msg in status_messages(int(result.status)):
             warnings.warn(f"match_track: {msg}", RuntimeWarning, stacklevel=2)
     return result
+
+
+MASKED = 8192
+"""Status bit: the search region holds missing (NaN) map nodes (see :data:`STATUS`)."""
+
+
+def missing_in_reach(grid, lat, lon, reach_m):
+    """Number of missing (NaN) map nodes within ``reach_m`` (plus a cell) of a track's box.
+
+    Parameters
+    ----------
+    grid : Grid or PreparedMap
+    lat, lon : array_like, shape ``(N,)``
+        The track (degrees; longitudes in the map's convention).
+    reach_m : float
+        How far the search reaches (m), e.g. the drift radius.
+
+    Returns
+    -------
+    int
+    """
+    g = as_grid(grid)
+    if g.n_missing == 0:
+        return 0
+    lat, lon = np.asarray(lat, float), np.asarray(lon, float)
+    d_lat = reach_m / (WGS84_MEAN_RADIUS * DEG)
+    d_lon = d_lat / max(math.cos(math.radians(min(89.0, float(np.abs(lat).max())))), 1e-3)
+    # one more node each way: a cell with one missing corner is masked
+    rows = (g.lat >= lat.min() - d_lat - g.dlat) & (g.lat <= lat.max() + d_lat + g.dlat)
+    cols = (g.lon >= lon.min() - d_lon - g.dlon) & (g.lon <= lon.max() + d_lon + g.dlon)
+    values = np.asarray(g.values)[np.ix_(rows, cols)]
+    return int((~np.isfinite(values)).sum())
 
 
 def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
@@ -243,6 +287,11 @@ def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
             tol = (float(v) for v in chain_tolerances(as_grid(grid), lat, config))
             config = dataclasses.replace(
                 config, stencil_size=stencil_size_for(as_grid(grid), lat, lon, *tol))
+    if method == "dense" and config.lattice_block and missing_in_reach(grid, lat, lon,
+                                                                        drift_radius_m):
+        # the separable lattice spreads a missing node over its block: score each
+        # shifted fix on its own (same values elsewhere), masking only what touches it
+        config = dataclasses.replace(config, lattice_block=0)
     args = (jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(readings), config)
     if method == "dense":
         return match_dense(prepare_map(grid), *args)

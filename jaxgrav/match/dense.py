@@ -326,10 +326,10 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
             # one by one, not in total: on a coarse map it walked far outside)
             p = p.at[:2].set(jnp.clip(p[:2], -reach, reach))
             p = jnp.where(found, p, jnp.zeros_like(p))
-            iy_c, ix_c, ky, kx, north, east = frame
-            c, s = jnp.cos(p[2]), jnp.sin(p[2])
-            v = patch_values(table, iy_c + ky * (c * north - s * east + p[0]),
-                             ix_c + kx * (s * north + c * east + p[1]), config.method)
+            v = _track_values(table, frame, p, config.method)
+            # clipped into a cell with a missing (NaN) corner: back to the best candidate
+            p, v = jax.lax.cond(jnp.all(jnp.isfinite(v)), lambda: (p, v), lambda: (
+                p0, _track_values(table, frame, p0, config.method)))
             if use_gls:
                 final_score, final_bias = gls_score(wh, readings - v, gls[1])
                 final_score = final_score * scale
@@ -388,6 +388,14 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
         edge_mass=quality.edge_mass,
         chi2_per_dof=quality.chi2_per_dof,
     )
+
+
+def _track_values(table, frame, p, method):
+    """The map along the INS track shifted by ``p = (north, east, rotation, ·)``."""
+    iy_c, ix_c, ky, kx, north, east = frame
+    c, s = jnp.cos(p[2]), jnp.sin(p[2])
+    return patch_values(table, iy_c + ky * (c * north - s * east + p[0]),
+                        ix_c + kx * (s * north + c * east + p[1]), method)
 
 
 def _gls_bias_sigma(config, dtype):

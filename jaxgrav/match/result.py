@@ -9,7 +9,8 @@ import numpy as np
 __all__ = ["CORRELATION_STATUS", "STATUS", "MatchResult", "nearest_to_ins", "status_messages"]
 
 STATUS = {
-    1: "no candidate track survived (tolerances too tight, or the track is off the map)",
+    1: "no candidate track survived (tolerances too tight, the track off the map, or every "
+       "candidate touching missing map cells)",
     2: "candidate capacity overflowed in some window (best-fitting points kept)",
     4: "a search window met the map edge and was shifted inside",
     8: "the best candidate lies on the edge of the search region (drift may exceed it)",
@@ -27,6 +28,9 @@ STATUS = {
           "(max_chi2_per_dof); INS track kept",
     4096: "fix rejected: posterior mass at the edge of the search region (max_edge_mass); "
           "INS track kept",
+    8192: "the search region holds missing (NaN) map nodes: candidates touching them were "
+          "masked and the fix is the best of the rest (if the map is missing data there "
+          "rather than land, the truth may lie in the masked part)",
 }
 """Bit flags of :attr:`MatchResult.status`, for every method (one table).
 
@@ -34,7 +38,8 @@ STATUS = {
 rejected fix: :attr:`MatchResult.accepted` false); ``chains`` 1, 2, 4, 8, 256 and the
 integrity bits 512, 1024, 2048; ``entropy`` 1, 8 and 32;
 ``iccp`` 1, 16 and 64; ``entropy+iccp`` those of entropy and ICCP, 128 and the
-integrity bits 512–4096.
+integrity bits 512–4096. Every method, through :func:`~jaxgrav.match.match_track`:
+8192 when the map has missing nodes within the drift radius of the track.
 """
 
 CORRELATION_STATUS = {bit: STATUS[bit] for bit in (1, 2, 4, 8, 256, 512, 1024, 2048, 4096)}

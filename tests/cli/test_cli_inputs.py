@@ -84,16 +84,33 @@ def test_sample_and_match_use_a_map_with_missing_nodes_away_from_the_track(sim, 
                                atol=1e-4)  # a cut map's bicubic: ~5e-5 mGal
     assert main(["match", "--map", str(tmp_path / "far.nc"), "--track", str(d / "t.csv"),
                  "--out", str(tmp_path / "r.json")]) == 0
-    # a hole under the track is refused in one line naming the file
+    # a hole under the track is a mask: sample leaves those cells empty and says so,
+    # match masks the candidates touching it and sets status bit 8192
     grid = full
     i = int(np.searchsorted(np.asarray(grid.lat), track["lat"][10]))
     j = int(np.searchsorted(np.asarray(grid.lon), track["lon"][10]))
-    _holey_map(tmp_path / "near.nc", (slice(i - 2, i + 2), slice(j - 2, j + 2)))
+    _holey_map(tmp_path / "near.nc", (slice(i - 1, i + 1), slice(j - 1, j + 1)))
     capsys.readouterr()
     assert main(["sample", "--map", str(tmp_path / "near.nc"), "--track", str(d / "t.csv"),
-                 "--out", str(tmp_path / "s2.csv")]) == 2
+                 "--out", str(tmp_path / "s2.csv")]) == 0
+    assert "missing (NaN) node" in capsys.readouterr().err
+    holed = read_track_csv(tmp_path / "s2.csv", required=("lat",), allow_nan=("map",))["map"]
+    assert 0 < np.isnan(holed).sum() < len(holed)
+    np.testing.assert_allclose(holed[~np.isnan(holed)], sampled["map"][~np.isnan(holed)],
+                               atol=0.5)  # next to the hole, the fill's small effect
+    assert main(["match", "--map", str(tmp_path / "near.nc"), "--track", str(d / "t.csv"),
+                 "--out", str(tmp_path / "r2.json")]) == 0
+    r = json.loads((tmp_path / "r2.json").read_text())
+    assert r["status"] & 8192 and any("missing (NaN)" in m for m in r["status_messages"])
+    assert np.isfinite(r["lat"]).all()
+    # a region that is almost all hole is refused in one line naming the file
+    _holey_map(tmp_path / "sea.nc", (slice(i - 30, i + 30), slice(j - 30, j + 30)))
+    capsys.readouterr()
+    assert main(["match", "--map", str(tmp_path / "sea.nc"), "--track", str(d / "t.csv"),
+                 "--out", str(tmp_path / "r3.json")]) == 2
     err = capsys.readouterr().err.strip()
-    assert "near.nc" in err and "\n" not in err and not (tmp_path / "s2.csv").exists()
+    assert "sea.nc" in err and "too little map" in err and "\n" not in err
+    assert not (tmp_path / "r3.json").exists()
 
 
 def test_sample_passes_text_columns_through(sim, tmp_path):

@@ -77,3 +77,19 @@ def test_suitability_validation_smoke():
         assert r["crlb"]["runs"] == 40 and (r["heading_deg"], r["n_fixes"]) == (45.0, 30)
         assert -1 <= r["crlb"]["spearman"] <= 1 and r["crlb"]["cut"] > 0
         assert r["std_descriptor"]["runs"] > 30
+
+
+def test_missing_nodes_smoke():
+    rows = [json.loads(s) for s in run_example("missing_nodes.py").splitlines()
+            if s.startswith("{")]
+    interp_rows = [r for r in rows if r["part"] == "interpolant"]
+    assert [r["nodes_from_hole"] for r in interp_rows] == [1, 2, 3, 4, 5, 6]
+    rms = [r["rms_mgal"] for r in interp_rows]
+    assert all(a > b for a, b in zip(rms, rms[1:], strict=False))  # the hole's effect decays
+    assert rms[-1] < 0.01 * rms[0]
+    match_rows = [r for r in rows if r["part"] == "dense matcher"]
+    assert len(match_rows) == 4  # complete and holey map, perfect map and map error
+    for r in match_rows:
+        assert r["runs"] > 0 and 0 <= r["median_ratio"] < 10
+        if r["map"] == "holey":
+            assert r["flagged_8192"] == 1.0  # every holey search region is flagged
