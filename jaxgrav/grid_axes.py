@@ -224,6 +224,31 @@ class GeographicAxes:
         """Number of missing (NaN or infinite) node values, an ``int``."""
         return int(np.count_nonzero(~np.isfinite(np.asarray(self.values))))
 
+    def values_near(self, lat, lon, reach_m):
+        """Node values within ``reach_m`` (plus one node) of the points' bounding box.
+
+        Parameters
+        ----------
+        lat, lon : array_like
+            Points (degrees; longitudes in either convention, taken on the map's turn).
+        reach_m : float
+            Distance (m) beyond the box, e.g. a matcher's drift radius.
+
+        Returns
+        -------
+        numpy.ndarray, shape ``(rows, cols)``
+            The nodes' values (NaN kept), those of every cell a point within the reach
+            can fall in.
+        """
+        lat = np.asarray(lat, float).reshape(-1)
+        lon = _nearest_turn(np.asarray(lon, float).reshape(-1), self)
+        d_lat = reach_m / _EQUATOR_M_PER_DEG
+        d_lon = d_lat / max(np.cos(min(89.0, float(np.abs(lat).max())) * DEG), 1e-3)
+        la, lo = self.lat, self.lon
+        rows = (la >= lat.min() - d_lat - self.dlat) & (la <= lat.max() + d_lat + self.dlat)
+        cols = (lo >= lon.min() - d_lon - self.dlon) & (lo <= lon.max() + d_lon + self.dlon)
+        return np.asarray(self.values)[..., rows, :][..., cols]
+
     @property
     def is_global(self):
         """True when the columns go all the way round (``nx · dlon ≥ 360°``)."""

@@ -48,7 +48,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrav.cli.inputs import add_columns_option, map_error_args, read_track, track_map
+from jaxgrav.cli.inputs import (
+    add_columns_option,
+    add_map_error_var_option,
+    map_error_args,
+    map_error_from_var,
+    read_track,
+    track_map,
+)
 from jaxgrav.cli.sanity import check_readings, innovation_check
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
@@ -133,6 +140,7 @@ def add_parser(subparsers):
                         "default 10000; time constant L / ground speed). For a map error "
                         "with covariance s^2 (1 + r/L) e^(-r/L) use order 2 with L, or order "
                         "1 with 2 L")
+    add_map_error_var_option(f)
     f.add_argument("--map-error-order", type=int, default=1, choices=(1, 2),
                    help="order of the map-error state: 1 first-order Gauss-Markov (default), "
                         "2 second-order (value and rate; covariance s^2 (1 + r/L) e^(-r/L), "
@@ -288,6 +296,11 @@ def cmd_filter(args):
         if args.particles < 2:
             raise ValueError(f"--particles must be an integer >= 2; got {args.particles}")
     me_sigma, me_length = map_error_args(args)
+    if args.map_error_var is not None and args.map is None:
+        raise ValueError("--map-error-var needs --map (a point-mass model has no uncertainty "
+                         "grid)")
+    if args.map_error_var is not None:
+        me_sigma = map_error_from_var(args, track, _FILTER_MARGIN_M, sigma_given=me_sigma > 0)
     fogm = (map_error_state(me_sigma, me_length, args.map_error_order) if me_sigma > 0
             else None)
     field, field_name, offset = _field(args, track)

@@ -15,10 +15,11 @@ its nodes missing.
 
 import numpy as np
 
-from jaxgrav.datasets import map_for_track
+from jaxgrav.datasets import load_map, map_for_track
 from jaxgrav.tracks import parse_columns, read_track_csv
 
-__all__ = ["MAX_MISSING", "add_columns_option", "map_error_args", "read_track", "track_map"]
+__all__ = ["MAX_MISSING", "add_columns_option", "add_map_error_var_option", "map_error_args",
+           "map_error_from_var", "read_track", "track_map"]
 
 MAX_MISSING = 0.9
 """Largest fraction of missing (NaN) nodes accepted in the map region a track needs."""
@@ -88,3 +89,54 @@ def map_error_args(args):
         raise ValueError("--map-error-order 2 is not available with --method pmf (its per-cell "
                          "map-error state is first order); use --map-error-order 1 with 2 L")
     return args.map_error, args.map_error_length
+
+
+def add_map_error_var_option(parser):
+    """Add ``--map-error-var NAME`` to a command that takes ``--map-error``."""
+    parser.add_argument(
+        "--map-error-var", default=None, metavar="NAME",
+        help="a variable of the --map file holding the map's 1-sigma uncertainty on its "
+             "grid (map units, e.g. an error grid from the map's compilation): the "
+             "map-error sigma told to the method is its RMS over the track's region, "
+             "instead of --map-error (with --map-error-length as the correlation length)")
+
+
+def map_error_from_var(args, track, reach_m, *, sigma_given):
+    """The map-error σ from ``--map-error-var``: RMS of the uncertainty near the track.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``map``, ``var`` and ``map_error_var``.
+    track : mapping
+        With ``lat`` and ``lon`` (degrees).
+    reach_m : float
+        How far (m) the method reaches from the track (the nodes averaged over).
+    sigma_given : bool
+        ``--map-error`` was given too (refused: one source of σ).
+
+    Returns
+    -------
+    float or None
+        The RMS (map units) over the finite nodes within ``reach_m`` of the track's box;
+        None without ``--map-error-var``.
+
+    Raises
+    ------
+    ValueError
+        Both options given; a shipped map (no uncertainty); no such variable, another
+        grid or negative values (:func:`jaxgrav.datasets.load_map`); no finite
+        uncertainty near the track.
+    """
+    if args.map_error_var is None:
+        return None
+    if sigma_given:
+        raise ValueError("give either --map-error SIGMA or --map-error-var NAME (the map's "
+                         "own uncertainty), not both")
+    _, err = load_map(args.map, args.var, error_var=args.map_error_var, allow_nan=True)
+    near = err.values_near(track["lat"], track["lon"], reach_m)
+    finite = near[np.isfinite(near)]
+    if finite.size == 0:
+        raise ValueError(f"--map-error-var {args.map_error_var!r} of --map {str(args.map)!r} "
+                         f"has no value within {reach_m / 1000:.3g} km of the track")
+    return float(np.sqrt(np.mean(finite**2)))

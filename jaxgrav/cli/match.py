@@ -10,7 +10,13 @@ import sys
 import numpy as np
 
 from jaxgrav._io import atomic_output
-from jaxgrav.cli.inputs import add_columns_option, read_track, track_map
+from jaxgrav.cli.inputs import (
+    add_columns_option,
+    add_map_error_var_option,
+    map_error_from_var,
+    read_track,
+    track_map,
+)
 from jaxgrav.cli.sanity import check_readings, fit_check
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import eotvos
@@ -66,6 +72,7 @@ def add_parsers(sub):
     m.add_argument("--map-error-length", type=float, default=10000.0, metavar="L",
                    help="dense, chains, entropy+iccp: correlation length of the map's error "
                         "(m, default 10000)")
+    add_map_error_var_option(m)
     m.add_argument("--eotvos-corrected", "--no-eotvos", dest="no_eotvos", action="store_true",
                    help="the gravity column is already Eötvös-corrected (with velocities "
                         "v_east, v_north the column is otherwise taken as raw and corrected "
@@ -115,6 +122,13 @@ def _cmd_match(args):
     else:
         radius_deg = 0.05
     grid = track_map(args, track, radius_deg * DEG_ARC_M)
+    sigma_var = map_error_from_var(args, track, radius_deg * DEG_ARC_M,
+                                   sigma_given=args.map_error > 0)
+    if sigma_var is not None:
+        if args.method not in MAP_ERROR_METHODS:
+            raise ValueError(f"--map-error-var is used by --method {', '.join(MAP_ERROR_METHODS)}"
+                             f"; got --method {args.method}")
+        args.map_error = sigma_var
     has_v = (field == "gravity" and "v_east" in track and "v_north" in track
              and not args.no_eotvos)
     unit = "nT" if field == "magnetic" else "mGal"
@@ -159,7 +173,8 @@ def _cmd_match(args):
     cov = np.asarray(result.covariance_m2, float)
     r.update(accepted=bool(result.accepted), covariance_m2=cov.tolist(),
              sigma_north_m=float(np.sqrt(cov[0, 0])), sigma_east_m=float(np.sqrt(cov[1, 1])),
-             map_error_mgal=args.map_error, map_error_length_m=args.map_error_length)
+             map_error_mgal=args.map_error, map_error_length_m=args.map_error_length,
+             map_error_var=args.map_error_var)
     r.update(method=args.method, field=field, map=str(args.map), track=str(args.track),
              drift_radius_deg=radius_deg, eotvos_corrected=has_v)
     if args.method in CONTOUR_METHODS:

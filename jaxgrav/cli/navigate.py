@@ -41,7 +41,13 @@ import sys
 import numpy as np
 
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import add_columns_option, read_track, track_map
+from jaxgrav.cli.inputs import (
+    add_columns_option,
+    add_map_error_var_option,
+    map_error_from_var,
+    read_track,
+    track_map,
+)
 from jaxgrav.cli.sanity import check_readings, innovation_check
 from jaxgrav.filters import map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos
@@ -93,10 +99,12 @@ def add_parser(sub):
     p.add_argument("--sigma-vel", type=float, default=0.035,
                    help="initial velocity error, 1-σ per axis (m/s)")
     p.add_argument("--noise", type=float, default=1.0, help="reading noise, 1-σ (mGal)")
-    p.add_argument("--map-error", type=float, default=3.0, metavar="SIGMA",
-                   help="the map's error told to the matcher or filter, 1-σ (mGal, default 3)")
+    p.add_argument("--map-error", type=float, default=None, metavar="SIGMA",
+                   help="the map's error told to the matcher or filter, 1-σ (mGal, default 3 "
+                        "unless --map-error-var)")
     p.add_argument("--map-error-length", type=float, default=10000.0, metavar="L",
                    help="its correlation length (m, default 10000)")
+    add_map_error_var_option(p)
     p.add_argument("--fix-every", type=int, default=12, help="rows per fix (default 12)")
     p.add_argument("--n-fixes", type=int, default=30, help="fixes per segment (>= 5)")
     p.add_argument("--stride", type=int, default=30,
@@ -160,7 +168,8 @@ def cmd_navigate(args):
     _positive("--sigma-pos", args.sigma_pos, "m")
     _positive("--sigma-vel", args.sigma_vel, "m/s")
     _positive("--noise", args.noise, "mGal")
-    _positive("--map-error", args.map_error, "mGal", allow_zero=True)
+    if args.map_error is not None:
+        _positive("--map-error", args.map_error, "mGal", allow_zero=True)
     _positive("--map-error-length", args.map_error_length, "m")
     _positive("--max-gap", args.max_gap, "s")
     _positive("--max-speed", args.max_speed, "m/s")
@@ -177,6 +186,10 @@ def cmd_navigate(args):
     track = read_track(args, ("t", "lat", "lon", "v_east", "v_north", "gravity"),
                        allow_nan=("gravity",))
     grid = track_map(args, track, _MAP_MARGIN_M)  # missing (NaN) nodes kept as a mask
+    sigma_var = map_error_from_var(args, track, _MAP_MARGIN_M,
+                                   sigma_given=args.map_error is not None)
+    args.map_error = (sigma_var if sigma_var is not None
+                      else 3.0 if args.map_error is None else args.map_error)
     _, n_missing, n_off = check_log(track, grid, args.max_gap, args.max_speed)
     segment_rows = args.n_fixes * args.fix_every
     if args.method == "dense" and len(track["t"]) <= segment_rows:

@@ -227,8 +227,8 @@ def load_map(path, var=None, dataset_default="anomaly_2p5min", *, error_var=None
     name, _, key = str(path).partition(":")
     if name in available() and not Path(path).exists():
         if error_var is not None:
-            raise ValueError(f"the shipped map {str(path)!r} has no uncertainty variable; "
-                             f"error_var={error_var!r} needs a NetCDF file")
+            raise ValueError(f"the shipped map {str(path)!r} has no uncertainty variable "
+                             f"({error_var!r}); give a NetCDF map file that holds one")
         maps = load(name)
         key = key or dataset_default
         if key not in maps:

@@ -18,7 +18,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav._validate import check_latitude
-from jaxgrav.constants import DEG, WGS84_MEAN_RADIUS
 from jaxgrav.geodesy import eotvos
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import ChainConfig, chain_tolerances, match_chains
@@ -264,14 +263,7 @@ def missing_in_reach(grid, lat, lon, reach_m):
     g = as_grid(grid)
     if g.n_missing == 0:
         return 0
-    lat, lon = np.asarray(lat, float), np.asarray(lon, float)
-    d_lat = reach_m / (WGS84_MEAN_RADIUS * DEG)
-    d_lon = d_lat / max(math.cos(math.radians(min(89.0, float(np.abs(lat).max())))), 1e-3)
-    # one more node each way: a cell with one missing corner is masked
-    rows = (g.lat >= lat.min() - d_lat - g.dlat) & (g.lat <= lat.max() + d_lat + g.dlat)
-    cols = (g.lon >= lon.min() - d_lon - g.dlon) & (g.lon <= lon.max() + d_lon + g.dlon)
-    values = np.asarray(g.values)[np.ix_(rows, cols)]
-    return int((~np.isfinite(values)).sum())
+    return int((~np.isfinite(g.values_near(lat, lon, reach_m))).sum())
 
 
 def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,

@@ -11,6 +11,7 @@ import os
 import jax
 import numpy as np
 import pytest
+import xarray as xr
 
 import jaxgrav as jg
 from jaxgrav.cli import main
@@ -194,6 +195,21 @@ def test_ekf_on_a_netcdf_map(sim, tmp_path, capsys):
     assert np.all(res["sigma_north"] > 0) and np.all(res["sigma_east"] > 0)
     assert (_rms_error_m(res["lat"], res["lon"], truth)
             < 0.8 * _rms_error_m(track["lat"], track["lon"], truth))
+
+    # --map-error-var: the map file's own uncertainty, RMS near the track, is the sigma
+    with xr.open_dataset(nc) as ds:
+        ds = ds.load()
+    var = next(iter(ds.data_vars))
+    ds["err"] = xr.full_like(ds[var], 2.0)
+    ds.to_netcdf(tmp_path / "pd_err.nc")
+    src = ("--map", str(tmp_path / "pd_err.nc"), "--var", var)
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    assert _filter(sim / "track.csv", a, "--map-error-var", "err", source=src) == 0
+    assert "map-error state 2 mGal" in capsys.readouterr().out
+    assert _filter(sim / "track.csv", b, "--map-error", "2", source=src) == 0
+    np.testing.assert_allclose(read_track_csv(a)["lat"], read_track_csv(b)["lat"], rtol=1e-12)
+    assert _filter(sim / "track.csv", tmp_path / "c.csv", "--map-error-var", "err") == 2
+    assert "needs --map" in capsys.readouterr().err
 
 
 @slow

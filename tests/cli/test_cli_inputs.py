@@ -121,3 +121,40 @@ def test_sample_passes_text_columns_through(sim, tmp_path):
                  "--out", str(out)]) == 0
     lines = out.read_text().splitlines()
     assert "ship" in lines[0] and "Hakuho Maru" in lines[1] and "map" in lines[0]
+
+
+def _map_with_uncertainty(path, sigma):
+    """The shipped map with an uncertainty variable ``err`` (mGal) on its grid: ``sigma``
+    everywhere but 4 x ``sigma`` in the south-west quarter (far from the tracks)."""
+    grid = datasets.load("ryukyu")["anomaly_2p5min"]
+    err = np.full(np.shape(grid.values), sigma)
+    err[:100, :100] = 4 * sigma
+    xr.Dataset({"anomaly": (("lat", "lon"), np.asarray(grid.values), {"units": "mGal"}),
+                "err": (("lat", "lon"), err, {"units": "mGal"})},
+               coords={"lat": np.asarray(grid.lat), "lon": np.asarray(grid.lon)}).to_netcdf(path)
+
+
+def test_map_error_var_tells_the_method_the_maps_own_uncertainty(sim, tmp_path, capsys):
+    d, _ = sim
+    _map_with_uncertainty(tmp_path / "u.nc", 2.5)
+    base = ["match", "--track", str(d / "t.csv")]
+    assert main([*base, "--map", str(tmp_path / "u.nc"), "--var", "anomaly",
+                 "--map-error-var", "err", "--out", str(tmp_path / "a.json")]) == 0
+    assert main([*base, "--map", str(tmp_path / "u.nc"), "--var", "anomaly",
+                 "--map-error", "2.5", "--out", str(tmp_path / "b.json")]) == 0
+    a, b = (json.loads((tmp_path / f).read_text()) for f in ("a.json", "b.json"))
+    assert a["map_error_mgal"] == pytest.approx(2.5) and a["map_error_var"] == "err"
+    for k in ("lat", "lon", "covariance_m2", "score"):  # the same as --map-error 2.5
+        np.testing.assert_allclose(a[k], b[k], rtol=1e-9)
+    capsys.readouterr()
+    for extra, message in (
+            (["--map", str(tmp_path / "u.nc"), "--var", "anomaly", "--map-error-var", "err",
+              "--map-error", "1"], "not both"),
+            (["--map", "ryukyu", "--map-error-var", "err"], "no uncertainty variable"),
+            (["--map", str(tmp_path / "u.nc"), "--var", "anomaly", "--map-error-var", "nope"],
+             "nope"),
+            (["--map", str(tmp_path / "u.nc"), "--var", "anomaly", "--map-error-var", "err",
+              "--method", "entropy"], "--map-error-var is used by")):
+        assert main([*base, *extra, "--out", str(tmp_path / "c.json")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and "\n" not in err and not (tmp_path / "c.json").exists()

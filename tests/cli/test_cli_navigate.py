@@ -124,3 +124,29 @@ def test_bad_options_are_named(voyage_log, tmp_path, capsys, args, message):
     assert main(["navigate", "--track", str(voyage_log[0]), "--out", str(out),
                  "--fix-every", "6", *args]) == 2
     assert message in capsys.readouterr().err and not out.exists()
+
+
+def test_navigate_on_a_map_with_missing_nodes_by_the_track(voyage_log, tmp_path, capsys):
+    """Land next to the voyage: a hole of 2 x 2 nodes beside its middle is a mask, and both
+    couplings run through it without a NaN."""
+    xr = pytest.importorskip("xarray")
+    from jaxgrav import datasets
+
+    log, _ = voyage_log
+    track = read_track_csv(log, ("t", "lat", "lon"))
+    grid = datasets.load("ryukyu")["anomaly_2p5min"]
+    v = np.array(grid.values)
+    mid = len(track["t"]) // 2
+    i = int(np.searchsorted(np.asarray(grid.lat), track["lat"][mid]))
+    j = int(np.searchsorted(np.asarray(grid.lon), track["lon"][mid]))
+    v[i + 1:i + 3, j - 1:j + 1] = np.nan
+    xr.Dataset({"anomaly": (("lat", "lon"), v, {"units": "mGal"})},
+               coords={"lat": np.asarray(grid.lat), "lon": np.asarray(grid.lon)}).to_netcdf(
+        tmp_path / "holey.nc")
+    for method in ("dense", "ukf"):
+        out = tmp_path / f"{method}.csv"
+        assert main(["navigate", "--map", str(tmp_path / "holey.nc"), "--track", str(log),
+                     "--out", str(out), "--method", method, *SHORT]) == 0
+        nav = read_track_csv(out, ("t", "lat", "lon", "sigma_north", "sigma_east"))
+        for k in ("lat", "lon", "sigma_north", "sigma_east"):
+            assert np.isfinite(nav[k]).all(), (method, k)
