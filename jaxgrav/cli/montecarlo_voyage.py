@@ -23,9 +23,9 @@ def voyage_options(args):
     if args.fixes is not None:
         raise ValueError(f"--fixes is not an option of {args.method}: a voyage runs over "
                          "--hours (default 12)")
-    if args.hours is not None and not (math.isfinite(args.hours) and 0 < args.hours <= MAX_HOURS):
-        raise ValueError(f"--hours must be a positive length of at most {MAX_HOURS:g} h; got "
-                         f"{args.hours!r}")
+    if args.hours is not None and not (math.isfinite(args.hours) and 1 <= args.hours <= MAX_HOURS):
+        raise ValueError(f"--hours must be a patrol length from 1 h (the errors are reported "
+                         f"per hour) to {MAX_HOURS:g} h; got {args.hours!r}")
     told = args.told_map_error or "state"
     if told not in TOLD:
         raise ValueError(f"--told-map-error must be one of {', '.join(TOLD)} with --method "

@@ -100,7 +100,9 @@ def test_cli_voyage_method_writes_results_and_figure(tmp_path, capsys):
 
 @pytest.mark.parametrize(("args", "message"), [
     (["--method", "voyage-ukf", "--fixes", "30"], "--fixes is not an option of voyage-ukf"),
-    (["--method", "voyage-ukf", "--hours", "-2"], "--hours must be a positive length"),
+    (["--method", "voyage-ukf", "--hours", "-2"], "--hours must be a patrol length from 1 h"),
+    # shorter than the hour the errors are reported over: refused, not an IndexError
+    (["--method", "voyage-dense", "--hours", "0.5"], "--hours must be a patrol length from 1 h"),
     (["--method", "ukf", "--hours", "2"], "--hours is an option of the voyage methods"),
     (["--method", "voyage-ekf", "--told-map-error", "white"],
      "--told-map-error must be one of state, none"),
