@@ -274,11 +274,9 @@ def test_generated_grids_read_back_node_for_node(tmp_path, g):
     assert np.all(np.diff(grid.lon) > 0) and np.all(np.diff(grid.lat) > 0)
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                 HealthCheck.function_scoped_fixture])
-@given(small_grids(), st.sampled_from(["repeat", "swap", "irregular", "depth"]))
-def test_generated_bad_grids_are_refused_by_name(tmp_path, g, fault):
-    lat, lon, values, (ny_name, nx_name), *_ = g
+def bad_grid(g, fault):
+    """A generated grid broken by ``fault``: ``(values, lat, lon, extra, phrase)``."""
+    lat, lon, values, (ny_name, _), *_ = g
     extra = None
     if fault == "depth":
         extra = {"depth": [0.0, 5.0]}
@@ -298,12 +296,60 @@ def test_generated_bad_grids_are_refused_by_name(tmp_path, g, fault):
         else:
             lat[k] += 0.3 * (lat[1] - lat[0])
             phrase = "not the regular"
-    path = write(tmp_path / "bad.nc", values=values, lat=lat, lon=lon, lat_name=ny_name,
-                 lon_name=nx_name, extra=extra)
+    return values, lat, lon, extra, phrase
+
+
+GRID_FAULTS = ["repeat", "swap", "irregular", "depth"]
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                 HealthCheck.function_scoped_fixture])
+@given(small_grids(), st.sampled_from(GRID_FAULTS))
+def test_generated_bad_grids_are_refused_by_name(tmp_path, g, fault):
+    values, lat, lon, extra, phrase = bad_grid(g, fault)
+    path = write(tmp_path / "bad.nc", values=values, lat=lat, lon=lon, lat_name=g[3][0],
+                 lon_name=g[3][1], extra=extra)
     with pytest.raises(ValueError) as info:
         load_map(path)
     msg = str(info.value)
     assert phrase in msg and str(path) in msg and "np." not in msg, msg
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                 HealthCheck.function_scoped_fixture])
+@given(small_grids(), st.one_of(st.none(), st.sampled_from(GRID_FAULTS)))
+def test_generated_grids_through_the_sample_command(tmp_path, capsys, g, fault):
+    """``jaxgrav sample`` in-process on generated NetCDF grids: at the file's nodes a
+    valid grid gives its node values (any axis names, order, singleton dimension, 0–360
+    longitudes); a broken one exits 2 with one line naming the file, writing nothing."""
+    lat, lon, values, (ny_name, nx_name), flip_lat, flip_lon, singleton = g
+    out = tmp_path / "s.csv"
+    out.unlink(missing_ok=True)
+    if fault is None:
+        la, lo = np.meshgrid(lat, lon, indexing="ij")
+        want = values  # at the nodes (la, lo), whatever order the file stores them in
+        if flip_lat:
+            lat, values = lat[::-1], values[::-1]
+        if flip_lon:
+            lon, values = lon[::-1], values[:, ::-1]
+        extra = {singleton: [0.0]} if singleton else None
+    else:
+        values, lat, lon, extra, phrase = bad_grid(g, fault)
+        la, lo = np.meshgrid(lat[:2], lon[:2], indexing="ij")
+    path = write(tmp_path / "g.nc", values=values, lat=lat, lon=lon, lat_name=ny_name,
+                 lon_name=nx_name, extra=extra)
+    write_track_csv(tmp_path / "t.csv", {"lat": la.ravel(), "lon": lo.ravel()}, force=True)
+    capsys.readouterr()
+    code = main(["sample", "--map", str(path), "--track", str(tmp_path / "t.csv"),
+                 "--out", str(out), "--method", "bilinear"])
+    if fault is not None:
+        err = capsys.readouterr().err
+        assert code == 2 and phrase in err and str(path) in err and err.count("\n") == 1
+        assert not out.exists()
+        return
+    assert code == 0
+    got = np.genfromtxt(out, delimiter=",", names=True)["map"]
+    np.testing.assert_allclose(got, want.ravel(), atol=1e-9 * (1 + np.abs(want).max()))
 
 
 # ---------------------------------------------------------------------- through the command

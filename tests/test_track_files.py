@@ -6,9 +6,11 @@ import datetime as dt
 
 import numpy as np
 import pytest
+import xarray as xr
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from jaxgrav.cli import main
 from jaxgrav.tracks import parse_columns, read_track_csv, write_track_csv
 
 BASE = {"t": [0.0, 10.0, 20.0], "lat": [30.0, 30.1, 30.2], "lon": [130.0, 130.1, 130.2],
@@ -248,13 +250,9 @@ def test_generated_valid_tracks_parse_to_their_values(tmp_path, tr):
     assert list(got.lines) == list(range(2, len(tr["t"]) + 2))
 
 
-@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                 HealthCheck.function_scoped_fixture])
-@given(tracks(), st.sampled_from(["repeat", "backward", "text", "latitude", "drop"]),
-       st.data())
-def test_generated_malformed_tracks_name_the_line(tmp_path, tr, fault, data):
-    n = len(tr["t"])
-    k = data.draw(st.integers(1, n - 1))
+def malformed(tr, fault, k):
+    """The bytes of ``tr`` with one fault at data row ``k`` (≥ 1), and the phrases its
+    error message must hold."""
     t, lat = tr["t"].copy(), tr["lat"].astype(object)
     phrases = [f"line {k + 2}"]
     if fault == "repeat":
@@ -279,6 +277,17 @@ def test_generated_malformed_tracks_name_the_line(tmp_path, tr, fault, data):
         raw = raw.replace(tr["names"]["lat"].replace(" ", "" if tr["delimiter"] == " " else " ")
                           .encode(), b"northing", 1)
         phrases = ["lacks column(s) ['lat']"]
+    return raw, phrases
+
+
+FAULTS = ["repeat", "backward", "text", "latitude", "drop"]
+
+
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                 HealthCheck.function_scoped_fixture])
+@given(tracks(), st.sampled_from(FAULTS), st.data())
+def test_generated_malformed_tracks_name_the_line(tmp_path, tr, fault, data):
+    raw, phrases = malformed(tr, fault, data.draw(st.integers(1, len(tr["t"]) - 1)))
     path = tmp_path / "m.csv"
     path.write_bytes(raw)
     with pytest.raises(ValueError) as info:
@@ -287,6 +296,60 @@ def test_generated_malformed_tracks_name_the_line(tmp_path, tr, fault, data):
     assert "np." not in msg and str(path) in msg
     for p in phrases:
         assert p in msg, (p, msg)
+
+
+# ------------------------------------------- the same files through a command, in-process
+@pytest.fixture(scope="module")
+def global_map(tmp_path_factory):
+    """A global 1° map on 0–359° longitudes (NetCDF) and its nodes, for ``jaxgrav sample``."""
+    lat, lon = np.arange(-90.0, 90.5, 1.0), np.arange(0.0, 360.0, 1.0)
+    la, lo = np.meshgrid(lat, lon, indexing="ij")
+    values = 50 * np.sin(np.radians(3 * la)) * np.cos(np.radians(2 * lo)) + 0.1 * lo
+    path = tmp_path_factory.mktemp("global") / "g.nc"
+    xr.Dataset({"anomaly": (("lat", "lon"), values, {"units": "mGal"})},
+               coords={"lat": lat, "lon": lon}).to_netcdf(path)
+    return path, lat, lon, values
+
+
+def _bilinear_wrapped(lat, lon, values, plat, plon):
+    """Brute-force bilinear interpolation on a global 1° grid, longitudes wrapped."""
+    fy = plat - lat[0]
+    fx = np.mod(plon - lon[0], 360.0)
+    r, c = np.minimum(np.floor(fy).astype(int), len(lat) - 2), np.floor(fx).astype(int)
+    ty, tx = fy - r, fx - c
+    c1 = (c + 1) % len(lon)
+    return (values[r, c] * (1 - ty) * (1 - tx) + values[r + 1, c] * ty * (1 - tx)
+            + values[r + 1, c1] * ty * tx + values[r, c1] * (1 - ty) * tx)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                 HealthCheck.function_scoped_fixture])
+@given(tracks(), st.one_of(st.none(), st.sampled_from(FAULTS)), st.data())
+def test_generated_tracks_through_the_sample_command(tmp_path, capsys, global_map, tr, fault,
+                                                     data):
+    """``jaxgrav sample`` run in-process on generated files: a valid one gives the map's
+    bilinear values at every row (across 0°/360° too) and keeps the text column; a
+    malformed one exits 2 with one line naming the file and the line, writing nothing."""
+    path_map, lat, lon, values = global_map
+    raw = render(tr) if fault is None else malformed(
+        tr, fault, data.draw(st.integers(1, len(tr["t"]) - 1)))[0]
+    track, out = tmp_path / "in.csv", tmp_path / "out.csv"
+    track.write_bytes(raw)
+    out.unlink(missing_ok=True)
+    capsys.readouterr()
+    code = main(["sample", "--map", str(path_map), "--track", str(track), "--out", str(out),
+                 "--method", "bilinear"])
+    if fault is not None:
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and str(track) in err and "\n" not in err and "Traceback" not in err
+        assert not out.exists()
+        return
+    assert code == 0
+    got = read_track_csv(out, required=("lat", "lon", "map"), allow_nan=("gravity",))
+    want = _bilinear_wrapped(lat, lon, values, np.asarray(tr["lat"], float),
+                             np.asarray(tr["lon"], float))
+    np.testing.assert_allclose(got["map"], want, atol=1e-6)
+    assert list(got.text["ship"]) == tr["ship"]
 
 
 def test_pass_through_keeps_the_files_text_and_epoch_seconds(tmp_path):
