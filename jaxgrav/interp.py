@@ -258,7 +258,8 @@ def bicubic(coefficients, iy, ix):
     -------
     Array, shape ``(..., *P)``
         Interpolated values; NaN where a point is outside the array or its cell has a
-        missing (NaN) corner.
+        missing (NaN) corner (there the gradient with respect to the point is NaN too:
+        one gather per corner on this hot path, no masking of the coefficients).
     """
     ny, nx = coefficients.shape[-3:-1]
     iy, ix = jnp.broadcast_arrays(jnp.asarray(iy), jnp.asarray(ix))
@@ -269,26 +270,16 @@ def bicubic(coefficients, iy, ix):
     hy0, hy1, gy0, gy1 = hermite(ty)
     hx0, hx1, gx0, gx1 = hermite(tx)
     out = 0.0
-    valid = in_x & in_y
     for r, hy, gy in ((r0, hy0, gy0), (r0 + 1, hy1, gy1)):
         for col, hx, gx in ((c0, hx0, gx0), (c0 + 1, hx1, gx1)):
-            k, present = _corner(coefficients, r, col)
-            valid = valid & present
+            k = coefficients[..., r, col, :]  # NaN at a missing node: the cell is NaN
             out = out + (
                 k[..., 0] * hy * hx
                 + k[..., 1] * hy * gx
                 + k[..., 2] * gy * hx
                 + k[..., 3] * gy * gx
             )
-    return jnp.where(valid, out, jnp.nan).astype(dtype)
-
-
-def _corner(coefficients, r, col):
-    """A cell corner's four coefficients (0 at a missing node, so that gradients stay
-    finite: "double where") and whether the node is present."""
-    k = coefficients[..., r, col, :]
-    present = jnp.isfinite(k[..., 0])
-    return jnp.where(present[..., None], k, jnp.zeros((), k.dtype)), present
+    return jnp.where(in_x & in_y, out, jnp.nan).astype(dtype)
 
 
 def hermite_derivative(t):
@@ -325,11 +316,9 @@ def bicubic_value_and_gradient(coefficients, iy, ix):
     hy, dhy = hermite(ty), hermite_derivative(ty)
     hx, dhx = hermite(tx), hermite_derivative(tx)
     val = d_y = d_x = 0.0
-    inside = in_x & in_y
     for j, r in enumerate((r0, r0 + 1)):
         for i, col in enumerate((c0, c0 + 1)):
-            k, present = _corner(coefficients, r, col)
-            inside = inside & present
+            k = coefficients[r, col, :]
             # value / slope weights: index j (or i) for the node, +2 for its slope
             a = k[..., 0] * hx[i] + k[..., 1] * hx[i + 2]  # rows' value part along x
             b = k[..., 2] * hx[i] + k[..., 3] * hx[i + 2]  # rows' slope part along x
@@ -338,6 +327,7 @@ def bicubic_value_and_gradient(coefficients, iy, ix):
             d_x = d_x + (k[..., 0] * dhx[i] + k[..., 1] * dhx[i + 2]) * hy[j] + (
                 k[..., 2] * dhx[i] + k[..., 3] * dhx[i + 2]
             ) * hy[j + 2]
+    inside = in_x & in_y & jnp.isfinite(val)  # a missing corner: NaN value, 0 gradient
     zero = jnp.zeros((), dtype)
     return (
         jnp.where(inside, val, jnp.nan).astype(dtype),

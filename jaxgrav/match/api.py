@@ -227,13 +227,14 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
         if not (np.isfinite(ve).all() and np.isfinite(vn).all()):
             raise ValueError("v_east and v_north must be finite at every fix")
         readings = readings + np.asarray(eotvos(lat, ve, vn))
+    masked = missing_in_reach(grid, lat, lon, drift_radius_m) > 0
     if method in ("dense", "chains"):
         result = _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
-                                    bias_sigma_mgal, corrected, config, map_error)
+                                    bias_sigma_mgal, corrected, config, map_error, masked)
     else:
         result = _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise,
                                 max_rotation_deg, entropy_half_size, config, map_error)
-    if missing_in_reach(grid, lat, lon, drift_radius_m):
+    if masked:
         result = result._replace(status=result.status | MASKED)
     if warn:
         for msg in status_messages(int(result.status)):
@@ -267,7 +268,7 @@ def missing_in_reach(grid, lat, lon, reach_m):
 
 
 def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
-                       bias_sigma_mgal, corrected, config, map_error=None):
+                       bias_sigma_mgal, corrected, config, map_error=None, masked=False):
     """``dense`` or ``chains`` on checked inputs."""
     if bias_sigma_mgal is None:
         bias_sigma_mgal = 3.0 if corrected else math.inf
@@ -279,8 +280,7 @@ def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
             tol = (float(v) for v in chain_tolerances(as_grid(grid), lat, config))
             config = dataclasses.replace(
                 config, stencil_size=stencil_size_for(as_grid(grid), lat, lon, *tol))
-    if method == "dense" and config.lattice_block and missing_in_reach(grid, lat, lon,
-                                                                        drift_radius_m):
+    if method == "dense" and config.lattice_block and masked:
         # the separable lattice spreads a missing node over its block: score each
         # shifted fix on its own (same values elsewhere), masking only what touches it
         config = dataclasses.replace(config, lattice_block=0)
