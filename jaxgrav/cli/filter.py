@@ -56,7 +56,7 @@ from jaxgrav.cli.inputs import (
     read_track,
     track_map,
 )
-from jaxgrav.cli.sanity import check_readings, innovation_check
+from jaxgrav.cli.sanity import check_readings, implausible_rows, innovation_check
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
 from jaxgrav.filters import STATUS_FILTER, map_at_error, status_messages_filter
@@ -85,6 +85,9 @@ _WARN = {
                          "was not positive; update skipped",
     "gated": "innovation outside the gate; update skipped",
     "grid_edge": "posterior mass at the edge of the point-mass grid; raise --sigma-pos",
+    "implausible_fit": "the innovations of the rows' block of readings are implausible for "
+                       "their predicted variance (chi-squared p < 1e-3); the 1-sigma there is "
+                       "not trustworthy",
 }
 
 
@@ -315,6 +318,8 @@ def cmd_filter(args):
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
                        guard=args.guard, map_error=fogm, eotvos_velocity=jac, where=where,
                        **_particle_options(args))
+    res["status"] = np.where(implausible_rows(res["innovation"], res["innovation_sigma"]),
+                             res["status"] | STATUS_FILTER["implausible_fit"], res["status"])
     write_track_csv(args.out, _output_columns(t, track, res), force=args.force, precision=12)
     n_read = int(np.isfinite(g).sum())
     stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""

@@ -20,7 +20,13 @@ from jaxgrav.cli.inputs import (
 from jaxgrav.cli.sanity import check_readings, fit_check
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import eotvos
-from jaxgrav.match import ENTROPY_HALF_SIZE, METHODS, match_track, status_messages
+from jaxgrav.match import (
+    ENTROPY_HALF_SIZE,
+    IMPLAUSIBLE_FIT,
+    METHODS,
+    match_track,
+    status_messages,
+)
 from jaxgrav.match.api import MAP_ERROR_METHODS
 from jaxgrav.sim import DEG_ARC_M
 from jaxgrav.tracks import csv_line, write_track_csv
@@ -160,9 +166,10 @@ def _cmd_match(args):
         v_east=track["v_east"] if has_v else None,
         v_north=track["v_north"] if has_v else None, warn=False, **kw,
     )
-    messages = status_messages(int(result.status))
     n_fix = len(track["lat"])
     p_fit, fit_warning = fit_check(result.chi2_per_dof, n_fix - 3, args.noise)
+    # the implausible-fit bit's message is the fit check's own line, with its numbers
+    messages = status_messages(int(result.status) & ~IMPLAUSIBLE_FIT)
     if fit_warning is not None:
         messages = [*messages, fit_warning]
     r = {"t": np.asarray(track["t"], float).tolist()}

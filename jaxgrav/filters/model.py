@@ -69,6 +69,7 @@ STATUS_FILTER = {
     "gated": 16,  # innovation outside the gate: update skipped
     "grid_edge": 32,  # point-mass filter: posterior mass at the grid boundary
     "reading_ignored": 64,  # run_filter(every=k): a reading off the update stride, not used
+    "implausible_fit": 128,  # jaxgrav filter: the row's block of innovations fails χ² (p<1e-3)
 }
 """Bit flags in :attr:`StepInfo.status` (and, OR-ed over a run, in the summary)."""
 

@@ -28,7 +28,14 @@ from jaxgrav.match.entropy import (
 )
 from jaxgrav.match.entropy_iccp import match_track_b, status_messages_b
 from jaxgrav.match.iccp import IccpConfig, kabsch_2d, match_iccp, match_iccp_batch
-from jaxgrav.match.result import STATUS, MatchResult, status_messages
+from jaxgrav.match.result import (
+    IMPLAUSIBLE_FIT,
+    P_IMPLAUSIBLE,
+    STATUS,
+    MatchResult,
+    fit_p_value,
+    status_messages,
+)
 from jaxgrav.match.scoring import SCORES, bias_precision, decreasing_weights, score_track
 from jaxgrav.match.sizing import config_for, iccp_config_for
 from jaxgrav.match.suitability import DESCRIPTORS, Suitability, suitability
@@ -37,8 +44,10 @@ from jaxgrav.prepared import PreparedMap, prepare_map
 __all__ = [
     "DESCRIPTORS",
     "ENTROPY_HALF_SIZE",
+    "IMPLAUSIBLE_FIT",
     "METHODS",
     "MIN_FIXES",
+    "P_IMPLAUSIBLE",
     "SCORES",
     "STATUS",
     "ChainConfig",
@@ -53,6 +62,7 @@ __all__ = [
     "decreasing_weights",
     "difference_entropy",
     "entropy_config_for",
+    "fit_p_value",
     "iccp_config_for",
     "information_entropy",
     "kabsch_2d",

@@ -25,7 +25,7 @@ from jaxgrav.match.dense import DenseConfig, match_dense
 from jaxgrav.match.entropy import EntropyConfig, entropy_config_for, match_entropy
 from jaxgrav.match.iccp import IccpConfig, match_iccp
 from jaxgrav.match.lattice_chains import stencil_size_for
-from jaxgrav.match.result import status_messages
+from jaxgrav.match.result import IMPLAUSIBLE_FIT, P_IMPLAUSIBLE, fit_p_value, status_messages
 from jaxgrav.match.sizing import config_for, iccp_config_for
 from jaxgrav.prepared import as_grid, prepare_map
 
@@ -201,6 +201,11 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
     (``lattice_block=0``, also with an explicit ``config``): the separable lattice
     would spread one missing node over its whole block.
 
+    The fix's χ² is tested against its degrees of freedom (``N − 3``,
+    :func:`~jaxgrav.match.result.fit_p_value`); below ``P_IMPLAUSIBLE`` (10⁻³) status
+    bit 16384 (:data:`~jaxgrav.match.result.IMPLAUSIBLE_FIT`) says the readings do not
+    fit the map as the stated noise and map error allow (``accepted`` is unchanged).
+
     Returns
     -------
     MatchResult
@@ -236,6 +241,8 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
                                 max_rotation_deg, entropy_half_size, config, map_error)
     if masked:
         result = result._replace(status=result.status | MASKED)
+    if fit_p_value(result.chi2_per_dof, lat.size - 3) < P_IMPLAUSIBLE:
+        result = result._replace(status=result.status | IMPLAUSIBLE_FIT)
     if warn:
         for msg in status_messages(int(result.status)):
             warnings.warn(f"match_track: {msg}", RuntimeWarning, stacklevel=2)

@@ -1,12 +1,15 @@
 """The result of a match and the status bits, shared by every matcher."""
 
+import math
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.special import chdtrc
 
-__all__ = ["CORRELATION_STATUS", "STATUS", "MatchResult", "nearest_to_ins", "status_messages"]
+__all__ = ["CORRELATION_STATUS", "IMPLAUSIBLE_FIT", "P_IMPLAUSIBLE", "STATUS", "MatchResult",
+           "fit_p_value", "nearest_to_ins", "status_messages"]
 
 STATUS = {
     1: "no candidate track survived (tolerances too tight, the track off the map, or every "
@@ -31,6 +34,9 @@ STATUS = {
     8192: "the search region holds missing (NaN) map nodes: candidates touching them were "
           "masked and the fix is the best of the rest (if the map is missing data there "
           "rather than land, the truth may lie in the masked part)",
+    16384: "the fix fits the readings far worse than the stated noise and map error allow "
+           "(chi-squared p < 1e-3): a wrong map, unit, noise or an untold map error; the "
+           "fix and its covariance are not trustworthy as stated",
 }
 """Bit flags of :attr:`MatchResult.status`, for every method (one table).
 
@@ -39,8 +45,16 @@ rejected fix: :attr:`MatchResult.accepted` false); ``chains`` 1, 2, 4, 8, 256 an
 integrity bits 512, 1024, 2048; ``entropy`` 1, 8 and 32;
 ``iccp`` 1, 16 and 64; ``entropy+iccp`` those of entropy and ICCP, 128 and the
 integrity bits 512–4096. Every method, through :func:`~jaxgrav.match.match_track`:
-8192 when the map has missing nodes within the drift radius of the track.
+8192 when the map has missing nodes within the drift radius of the track, and 16384
+when the fix's χ² is implausible for the stated error model (:func:`fit_p_value`
+below :data:`P_IMPLAUSIBLE`; a warning, not a rejection: ``accepted`` is unchanged).
 """
+
+IMPLAUSIBLE_FIT = 16384
+"""Status bit: the fix's misfit is statistically implausible (see :data:`STATUS`)."""
+
+P_IMPLAUSIBLE = 1e-3
+"""A fit whose χ² exceeds its (1 − 10⁻³) quantile is flagged (:data:`IMPLAUSIBLE_FIT`)."""
 
 CORRELATION_STATUS = {bit: STATUS[bit] for bit in (1, 2, 4, 8, 256, 512, 1024, 2048, 4096)}
 """The bits of the correlation matchers (``dense``, ``chains``): an excerpt of :data:`STATUS`."""
@@ -168,3 +182,25 @@ def status_messages(status):
     list of str
     """
     return [msg for bit, msg in STATUS.items() if int(status) & bit]
+
+
+def fit_p_value(chi2_per_dof, dof):
+    """Probability of a misfit at least this large if the error model is right.
+
+    Parameters
+    ----------
+    chi2_per_dof : float
+        The fix's χ² over its degrees of freedom (:attr:`MatchResult.chi2_per_dof`).
+    dof : int
+        Its degrees of freedom (``N − 3`` for ``N`` fixes: a bias and two offsets).
+
+    Returns
+    -------
+    float
+        ``P(χ²(dof) ≥ dof · chi2_per_dof)``; NaN when ``chi2_per_dof`` is not finite
+        (a matcher without a χ²) or ``dof < 1``.
+    """
+    c = float(chi2_per_dof)
+    if not (math.isfinite(c) and dof >= 1):
+        return float("nan")
+    return float(chdtrc(dof, c * dof))

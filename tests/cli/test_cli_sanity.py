@@ -12,7 +12,8 @@ import pytest
 from scipy.stats import chi2
 
 from jaxgrav.cli import main
-from jaxgrav.cli.sanity import check_readings, fit_check, innovation_check
+from jaxgrav.cli.sanity import check_readings, fit_check, implausible_rows, innovation_check
+from jaxgrav.match import IMPLAUSIBLE_FIT, fit_p_value
 
 # ------------------------------------------------------------------ the functions
 
@@ -34,6 +35,26 @@ def test_fit_and_innovation_checks_against_scipy_chi2():
     nu[::2] = np.nan  # readings not used do not count
     assert innovation_check(nu, s)[0] == pytest.approx(
         np.mean((nu[1::2] / 2.0) ** 2))
+
+
+def test_implausible_rows_against_a_loop_over_blocks():
+    rng = np.random.default_rng(1)
+    s = rng.uniform(1.0, 3.0, 700)
+    nu = rng.normal(0.0, 1.0, 700) * s
+    nu[::9] = np.nan  # no reading: not counted, but inside a flagged block's span
+    nu[200:330] *= 2.5  # a stretch where the map is wrong
+    flagged = implausible_rows(nu, s, block=50)
+    used = np.flatnonzero(np.isfinite(nu))
+    expected = np.zeros(700, bool)
+    for k in range(0, used.size, 50):
+        rows = used[k:k + 50]
+        if chi2.sf(np.sum((nu[rows] / s[rows]) ** 2), rows.size) < 1e-3:
+            expected[rows[0]:rows[-1] + 1] = True
+    np.testing.assert_array_equal(flagged, expected)
+    assert flagged[230:300].all() and not flagged[:150].any() and not flagged[400:].any()
+    assert not implausible_rows(np.full(4, np.nan), np.ones(4)).any()
+    assert fit_p_value(2.0, 27) == pytest.approx(chi2.sf(54.0, 27), rel=1e-9)
+    assert np.isnan(fit_p_value(float("nan"), 27)) and np.isnan(fit_p_value(1.0, 0))
 
 
 @pytest.fixture
@@ -150,7 +171,8 @@ def test_match_flags_an_implausible_fit_and_writes_time_and_units(tracks, tmp_pa
                  "--force"]) == 0
     r = json.loads(out.read_text())
     assert r["fit_plausible"] is False and r["fit_p_value"] < 1e-3
-    assert any("far worse than the stated noise" in m for m in r["status_messages"])
+    assert r["status"] & IMPLAUSIBLE_FIT and r["accepted"] is True  # flagged, not rejected
+    assert sum("far worse than the stated noise" in m for m in r["status_messages"]) == 1
     assert "far worse than the stated noise" in capsys.readouterr().err
 
 
@@ -183,3 +205,12 @@ def test_filter_warns_when_the_innovations_are_implausible(tracks, tmp_path, cap
                  str(out)]) == 0
     err = capsys.readouterr().err
     assert "innovations are" in err and "not trustworthy" in err
+    assert "implausible_fit on" in err
+    with open(out, newline="") as f:
+        status = np.array([int(row["status"]) for row in csv.DictReader(f)])
+    assert np.count_nonzero(status & 128) > 0.9 * status.size  # every block of readings
+    assert main(["filter", "--track", str(tracks / "f.csv"), "--point-masses", "paper-d",
+                 "--out", str(out), "--force"]) == 0  # the readings as simulated: no flag
+    with open(out, newline="") as f:
+        assert not any(int(row["status"]) & 128 for row in csv.DictReader(f))
+    assert "implausible_fit" not in capsys.readouterr().err
