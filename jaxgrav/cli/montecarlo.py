@@ -5,7 +5,6 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``; the command function is
 """
 
 import json
-import math
 import os
 import sys
 import time
@@ -15,6 +14,7 @@ import jax
 import numpy as np
 
 from jaxgrav import __version__, montecarlo
+from jaxgrav.cli.montecarlo_options import check_options, told_from_args
 from jaxgrav.cli.montecarlo_voyage import (
     plot_voyage_tracks,
     plot_voyages,
@@ -29,7 +29,6 @@ from jaxgrav.cli.simulate import (
     map_error_from_args,
 )
 from jaxgrav.datasets import load_map
-from jaxgrav.fields.map_error import map_error
 from jaxgrav.montecarlo.draws import variable_attrs
 from jaxgrav.montecarlo.filter_runs import MAP_ERROR_TOLD
 from jaxgrav.montecarlo.fix_metrics import fix_summary
@@ -46,7 +45,7 @@ from jaxgrav.montecarlo.methods import (
 from jaxgrav.plot import plot_error_summary, save_figure
 from jaxgrav.scenarios import INS_GRADES
 
-__all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize", "told_from_args"]
+__all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize"]
 
 PERCENTILES = (5, 25, 50, 75, 95)
 
@@ -241,35 +240,6 @@ def _command(args):
     return "jaxgrav montecarlo " + " ".join(f"{k} {v}" for k, v in opts if v is not None)
 
 
-def told_from_args(args):
-    """The ``map_error_told`` of ``--told-map-error SIGMA[,L]``: ``"auto"`` when absent,
-    None for σ = 0, else a CorrelatedMapError. ValueError naming the option for a value
-    that is not one or two numbers, σ negative, NaN or inf, L not finite and > 0."""
-    text = args.told_map_error
-    if text is None:
-        return "auto"
-    if str(text).strip().lower() == "none":
-        return None
-    parts = str(text).split(",")
-    try:
-        nums = [float(p) for p in parts]
-    except ValueError:
-        nums = None
-    if nums is None or len(nums) not in (1, 2):
-        raise ValueError(f"--told-map-error must be SIGMA or SIGMA,L (numbers: map units, m) "
-                         f"or none for --method dense; got {text!r}")
-    sigma = nums[0]
-    if not (math.isfinite(sigma) and sigma >= 0):
-        raise ValueError(f"--told-map-error SIGMA must be a finite standard deviation >= 0 "
-                         f"(map units, 0 = white-noise matcher); got {sigma!r}")
-    length = nums[1] if len(nums) == 2 else (
-        DEFAULT_MAP_ERROR_LENGTH_M if args.map_error_length is None else args.map_error_length)
-    if sigma > 0 and not (math.isfinite(length) and length > 0):
-        raise ValueError(f"--told-map-error L must be a finite correlation length > 0 (m); "
-                         f"got {length!r}")
-    return None if sigma == 0 else map_error(sigma, length)
-
-
 def _fix_lines(results):
     fs = fix_summary(results)
     if not fs:
@@ -295,9 +265,8 @@ def cmd_montecarlo(args):
         print(f"jaxgrav montecarlo: --method {args.method} is deprecated; use --method "
               f"{DEPRECATED_METHODS[args.method]}", file=sys.stderr)
         args.method = resolve_method(args.method)
+    check_options(args)
     if args.devices is not None:
-        if args.devices < 1:
-            raise ValueError(f"--devices must be at least 1; got {args.devices}")
         _split_cpu(args.devices)
     out = Path(args.out)
     png = out.with_suffix(".png")
@@ -309,9 +278,6 @@ def cmd_montecarlo(args):
     existing = [str(p) for p in targets if p.exists()]
     if existing and not args.force:
         raise FileExistsError(f"{existing} exist; pass --force to overwrite")
-    for name, value in (("--runs", args.runs), ("--chunk", args.chunk)):
-        if value is not None and value < 1:
-            raise ValueError(f"{name} must be a positive number of runs; got {value}")
     if args.map is not None:
         map_name = str(args.map)
     else:  # the method's default (jaxgrav.montecarlo.build)

@@ -54,9 +54,9 @@ def region_of(grid):
 
 def check_settings(drift, noise, n):
     """One clear error for a non-positive drift, a negative noise or fewer than 5 fixes."""
-    if not drift > 0:
+    if not 0 < drift < float("inf"):
         raise ValueError(f"drift must be a positive angle (degrees of arc); got {drift!r}")
-    if not noise >= 0:
+    if not 0 <= noise < float("inf"):
         raise ValueError(f"noise must be a non-negative standard deviation (mGal); got {noise!r}")
     if n < 5:
         raise ValueError(f"fixes must be at least 5 per track; got {n}")

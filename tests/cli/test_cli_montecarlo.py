@@ -115,9 +115,12 @@ def test_montecarlo_refuses_to_overwrite(mc_run, capsys):
     (["--runs", "0"], "--runs must be a positive number of runs; got 0"),
     (["--runs", "8", "--chunk", "0"], "--chunk must be a positive number of runs; got 0"),
     (["--runs", "8", "--devices", "64"], "devices=64 but JAX sees 1 device"),
-    (["--runs", "8", "--noise", "-1"], "noise must be a non-negative standard deviation"),
-    (["--runs", "8", "--drift", "0"], "drift must be a positive angle"),
-    (["--runs", "8", "--fixes", "2"], "fixes must be at least 5 per track; got 2"),
+    (["--runs", "8", "--devices", "0"], "--devices must be at least 1; got 0"),
+    (["--runs", "8", "--noise", "-1"], "--noise must be a finite standard deviation >= 0"),
+    (["--runs", "8", "--noise", "nan"], "--noise must be a finite standard deviation >= 0"),
+    (["--runs", "8", "--drift", "0"], "--drift must be a finite positive angle"),
+    (["--runs", "8", "--drift", "inf"], "--drift must be a finite positive angle"),
+    (["--runs", "8", "--fixes", "2"], "--fixes must be at least 5 per track"),
 ])
 def test_montecarlo_bad_input(tmp_path, capsys, args, match):
     jax.devices()  # JAX runs already (else --devices 64 would split the host into 64)
@@ -390,7 +393,7 @@ def test_montecarlo_told_map_error_bad_input(tmp_path, capsys, told, match):
 def test_montecarlo_told_map_error_parsing(tmp_path, capsys):
     import argparse
 
-    from jaxgrav.cli.montecarlo import told_from_args
+    from jaxgrav.cli.montecarlo_options import told_from_args
 
     def told(text, length=None):
         return told_from_args(argparse.Namespace(told_map_error=text, map_error_length=length))
