@@ -219,13 +219,15 @@ def render(tr):
     times = ([(start + dt.timedelta(seconds=float(s))).isoformat() for s in tr["t"]]
              if tr["iso"] else [num(s) for s in tr["t"]])
     names = tr["names"]
-    header = [names["t"], names["lat"], names["lon"], "gravity", "ship"]
+    extra = tr.get("extra", {})  # more numeric columns, after the text column
+    header = [names["t"], names["lat"], names["lon"], "gravity", "ship", *extra]
     if d == " ":
         header = [h.replace(" ", "") for h in header]
     lines = [d.join(quote(h) for h in header)]
     for i in range(len(tr["t"])):
         lines.append(d.join([times[i], num(tr["lat"][i]), num(tr["lon"][i]),
-                             num(tr["gravity"][i]), quote(tr["ship"][i])]))
+                             num(tr["gravity"][i]), quote(tr["ship"][i]),
+                             *(num(v[i]) for v in extra.values())]))
     eol = "\r\n" if tr["crlf"] else "\n"
     data = (eol.join(lines) + eol).encode()
     return (codecs.BOM_UTF8 if tr["bom"] else b"") + data
@@ -350,6 +352,36 @@ def test_generated_tracks_through_the_sample_command(tmp_path, capsys, global_ma
                              np.asarray(tr["lon"], float))
     np.testing.assert_allclose(got["map"], want, atol=1e-6)
     assert list(got.text["ship"]) == tr["ship"]
+
+
+COMMANDS = {"match": ["--out", "out.json"], "filter": ["--out", "out.csv"],
+            "navigate": ["--out", "out.csv"], "sample": ["--out", "out.csv"]}
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                 HealthCheck.function_scoped_fixture])
+@given(tracks(), st.sampled_from(FAULTS), st.sampled_from(sorted(COMMANDS)), st.data())
+def test_generated_malformed_tracks_through_every_command(tmp_path, capsys, global_map, tr,
+                                                          fault, command, data):
+    """Every command that reads a track (``match``, ``filter``, ``navigate``, ``sample``)
+    refuses a generated malformed file the same way: exit 2, one line naming the file
+    and the line (the tracks carry velocity columns, which ``navigate`` needs), no
+    traceback, no output written."""
+    n = len(tr["t"])
+    tr = {**tr, "extra": {"v_east": np.full(n, 5.0), "v_north": np.full(n, -1.5)}}
+    raw, phrases = malformed(tr, fault, data.draw(st.integers(1, n - 1)))
+    track = tmp_path / "in.csv"
+    track.write_bytes(raw)
+    out = tmp_path / COMMANDS[command][1]
+    out.unlink(missing_ok=True)
+    capsys.readouterr()
+    code = main([command, "--map", str(global_map[0]), "--track", str(track), "--out",
+                 str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and str(track) in err and "\n" not in err and "Traceback" not in err
+    for p in phrases:
+        assert p in err, (p, err)
+    assert not out.exists()
 
 
 def test_pass_through_keeps_the_files_text_and_epoch_seconds(tmp_path):

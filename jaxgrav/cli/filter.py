@@ -52,7 +52,6 @@ from jaxgrav.cli.inputs import (
     add_columns_option,
     add_map_error_var_option,
     map_error_args,
-    map_error_from_var,
     read_track,
     track_map,
 )
@@ -211,16 +210,19 @@ _FILTER_MARGIN_M = 20e3
 """Reach of a filter beyond its point-mass grid (m): the INS drift over a few hours."""
 
 
-def _field(args, track):
-    """The map (cut to the track's reach), its name for messages, and the model's offset."""
+def _field(args, track, sigma_given):
+    """The map (cut to the track's reach), its name for messages, the model's offset and
+    ``--map-error-var``'s σ (None without it)."""
     if args.point_masses == "paper-d":
-        return paper_d(), "point masses paper-d", 0.0
+        return paper_d(), "point masses paper-d", 0.0, None
     if args.point_masses is not None:
         masses, offset = load_point_masses(args.point_masses)
         return (masses, f"point masses {args.point_masses} (K = {masses.size}, offset "
-                f"{offset:+.3f} mGal)", offset)
+                f"{offset:+.3f} mGal)", offset, None)
     margin_m = PMF_SPAN_SIGMA * args.sigma_pos + _FILTER_MARGIN_M
-    return track_map(args, track, margin_m), f"map {args.map}", 0.0
+    grid, sigma_var = track_map(args, track, margin_m, error_reach_m=_FILTER_MARGIN_M,
+                                sigma_given=sigma_given)
+    return grid, f"map {args.map}", 0.0, sigma_var
 
 
 def _eotvos(args, track, g):
@@ -302,11 +304,11 @@ def cmd_filter(args):
     if args.map_error_var is not None and args.map is None:
         raise ValueError("--map-error-var needs --map (a point-mass model has no uncertainty "
                          "grid)")
-    if args.map_error_var is not None:
-        me_sigma = map_error_from_var(args, track, _FILTER_MARGIN_M, sigma_given=me_sigma > 0)
+    field, field_name, offset, sigma_var = _field(args, track, sigma_given=me_sigma > 0)
+    if sigma_var is not None:
+        me_sigma = sigma_var
     fogm = (map_error_state(me_sigma, me_length, args.map_error_order) if me_sigma > 0
             else None)
-    field, field_name, offset = _field(args, track)
     if args.map is not None:
         _check_on_map(field, lat, lon, where, args.map)
     g_raw = g

@@ -15,11 +15,11 @@ its nodes missing.
 
 import numpy as np
 
-from jaxgrav.datasets import load_map, map_for_track
+from jaxgrav.datasets import map_for_track
 from jaxgrav.tracks import parse_columns, read_track_csv
 
 __all__ = ["MAX_MISSING", "add_columns_option", "add_map_error_var_option", "map_error_args",
-           "map_error_from_var", "read_track", "track_map"]
+           "read_track", "track_map"]
 
 MAX_MISSING = 0.9
 """Largest fraction of missing (NaN) nodes accepted in the map region a track needs."""
@@ -52,26 +52,55 @@ def read_track(args, required, optional=(), allow_nan=()):
                           columns=parse_columns(args.columns))
 
 
-def track_map(args, track, margin_m):
-    """The ``--map`` of a command, cut to what ``track`` needs.
+def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False):
+    """The ``--map`` of a command, cut to what ``track`` needs, and ``--map-error-var``'s σ.
 
     Parameters
     ----------
     args : argparse.Namespace
-        With ``map`` and ``var``.
+        With ``map``, ``var`` and (optionally) ``map_error_var``.
     track : mapping
         With ``lat`` and ``lon`` (degrees).
     margin_m : float
         How far (m) the command's method reaches from the track.
+    error_reach_m : float, optional
+        With ``--map-error-var``: the nodes of the uncertainty averaged over are those
+        within this distance (m) of the track's box (default ``margin_m``).
+    sigma_given : bool
+        ``--map-error`` was given too (refused with ``--map-error-var``: one source of σ).
 
     Returns
     -------
-    Grid
+    grid : Grid
         The map or its region; missing (NaN) nodes kept as a mask, refused only when
         they are more than :data:`MAX_MISSING` of the region's nodes.
+    sigma_var : float or None
+        The RMS (map units) of the uncertainty variable over its finite nodes near the
+        track (one read of the file with the map); None without ``--map-error-var``.
+
+    Raises
+    ------
+    ValueError
+        Both ``--map-error`` and ``--map-error-var``; a shipped map (no uncertainty); no
+        such variable, another grid or negative values (:func:`jaxgrav.datasets.load_map`);
+        no finite uncertainty near the track.
     """
-    return map_for_track(args.map, args.var, track["lat"], track["lon"], margin_m,
-                         max_missing=MAX_MISSING, option="--map")
+    error_var = getattr(args, "map_error_var", None)
+    if error_var is not None and sigma_given:
+        raise ValueError("give either --map-error SIGMA or --map-error-var NAME (the map's "
+                         "own uncertainty), not both")
+    loaded = map_for_track(args.map, args.var, track["lat"], track["lon"], margin_m,
+                           max_missing=MAX_MISSING, option="--map", error_var=error_var)
+    if error_var is None:
+        return loaded, None
+    grid, err = loaded
+    reach_m = margin_m if error_reach_m is None else error_reach_m
+    near = err.values_near(track["lat"], track["lon"], reach_m)
+    finite = near[np.isfinite(near)]
+    if finite.size == 0:
+        raise ValueError(f"--map-error-var {error_var!r} of --map {str(args.map)!r} has no "
+                         f"value within {reach_m / 1000:.3g} km of the track")
+    return grid, float(np.sqrt(np.mean(finite**2)))
 
 
 def map_error_args(args):
@@ -99,44 +128,3 @@ def add_map_error_var_option(parser):
              "grid (map units, e.g. an error grid from the map's compilation): the "
              "map-error sigma told to the method is its RMS over the track's region, "
              "instead of --map-error (with --map-error-length as the correlation length)")
-
-
-def map_error_from_var(args, track, reach_m, *, sigma_given):
-    """The map-error σ from ``--map-error-var``: RMS of the uncertainty near the track.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        With ``map``, ``var`` and ``map_error_var``.
-    track : mapping
-        With ``lat`` and ``lon`` (degrees).
-    reach_m : float
-        How far (m) the method reaches from the track (the nodes averaged over).
-    sigma_given : bool
-        ``--map-error`` was given too (refused: one source of σ).
-
-    Returns
-    -------
-    float or None
-        The RMS (map units) over the finite nodes within ``reach_m`` of the track's box;
-        None without ``--map-error-var``.
-
-    Raises
-    ------
-    ValueError
-        Both options given; a shipped map (no uncertainty); no such variable, another
-        grid or negative values (:func:`jaxgrav.datasets.load_map`); no finite
-        uncertainty near the track.
-    """
-    if args.map_error_var is None:
-        return None
-    if sigma_given:
-        raise ValueError("give either --map-error SIGMA or --map-error-var NAME (the map's "
-                         "own uncertainty), not both")
-    _, err = load_map(args.map, args.var, error_var=args.map_error_var, allow_nan=True)
-    near = err.values_near(track["lat"], track["lon"], reach_m)
-    finite = near[np.isfinite(near)]
-    if finite.size == 0:
-        raise ValueError(f"--map-error-var {args.map_error_var!r} of --map {str(args.map)!r} "
-                         f"has no value within {reach_m / 1000:.3g} km of the track")
-    return float(np.sqrt(np.mean(finite**2)))

@@ -13,7 +13,6 @@ from jaxgrav._io import atomic_output
 from jaxgrav.cli.inputs import (
     add_columns_option,
     add_map_error_var_option,
-    map_error_from_var,
     read_track,
     track_map,
 )
@@ -101,7 +100,7 @@ def add_parsers(sub):
 
 def _cmd_sample(args):
     track = read_track(args, required=("lat", "lon"))
-    grid = track_map(args, track, 0.0)
+    grid, _ = track_map(args, track, 0.0)
     values = np.asarray(grid.sample(track["lat"], track["lon"], args.method, strict=True))
     cols = track.columns()
     cols[args.column] = values
@@ -127,9 +126,8 @@ def _cmd_match(args):
         radius_deg = float(np.nanmax(track["drift_radius"]))
     else:
         radius_deg = 0.05
-    grid = track_map(args, track, radius_deg * DEG_ARC_M)
-    sigma_var = map_error_from_var(args, track, radius_deg * DEG_ARC_M,
-                                   sigma_given=args.map_error > 0)
+    grid, sigma_var = track_map(args, track, radius_deg * DEG_ARC_M,
+                                sigma_given=args.map_error > 0)
     if sigma_var is not None:
         if args.method not in MAP_ERROR_METHODS:
             raise ValueError(f"--map-error-var is used by --method {', '.join(MAP_ERROR_METHODS)}"

@@ -44,7 +44,6 @@ from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import (
     add_columns_option,
     add_map_error_var_option,
-    map_error_from_var,
     read_track,
     track_map,
 )
@@ -185,9 +184,8 @@ def cmd_navigate(args):
     check_outputs([args.out], force=args.force, names=["--out"])
     track = read_track(args, ("t", "lat", "lon", "v_east", "v_north", "gravity"),
                        allow_nan=("gravity",))
-    grid = track_map(args, track, _MAP_MARGIN_M)  # missing (NaN) nodes kept as a mask
-    sigma_var = map_error_from_var(args, track, _MAP_MARGIN_M,
-                                   sigma_given=args.map_error is not None)
+    grid, sigma_var = track_map(args, track, _MAP_MARGIN_M,  # missing nodes kept as a mask
+                                sigma_given=args.map_error is not None)
     args.map_error = (sigma_var if sigma_var is not None
                       else 3.0 if args.map_error is None else args.map_error)
     _, n_missing, n_off = check_log(track, grid, args.max_gap, args.max_speed)

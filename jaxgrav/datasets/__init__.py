@@ -254,7 +254,8 @@ def load_map(path, var=None, dataset_default="anomaly_2p5min", *, error_var=None
     return grid, _grid_with_mask(err, f"the uncertainty {error_var!r} of {label}", allow_nan)
 
 
-def map_for_track(path, var, lat, lon, margin_m, *, max_missing=0.0, option="--map"):
+def map_for_track(path, var, lat, lon, margin_m, *, max_missing=0.0, option="--map",
+                  error_var=None):
     """The map a track needs: :func:`load_map` keeping NaN nodes, then its region.
 
     One call for the commands: the file (or shipped map) is read with missing nodes
@@ -275,14 +276,20 @@ def map_for_track(path, var, lat, lon, margin_m, *, max_missing=0.0, option="--m
         Fraction of missing nodes accepted in the region (0 until the method masks them).
     option : str
         The command's option, for messages.
+    error_var : str, optional
+        The file's uncertainty variable, read in the same pass (:func:`load_map`).
 
     Returns
     -------
     Grid
+        The map's region; with ``error_var``, ``(region, uncertainty)`` (the uncertainty
+        Grid whole, as read).
     """
-    grid = load_map(path, var, allow_nan=True)
-    return grid.finite_region(lat, lon, margin_m, max_missing=max_missing,
-                              source=f"{option} {str(path)!r}")
+    loaded = load_map(path, var, allow_nan=True, error_var=error_var)
+    grid, err = loaded if error_var is not None else (loaded, None)
+    region = grid.finite_region(lat, lon, margin_m, max_missing=max_missing,
+                                source=f"{option} {str(path)!r}")
+    return region if error_var is None else (region, err)
 
 
 def _grid_with_mask(arrays, label, allow_nan):
