@@ -352,6 +352,38 @@ def test_generated_grids_through_the_sample_command(tmp_path, capsys, g, fault):
     np.testing.assert_allclose(got, want.ravel(), atol=1e-9 * (1 + np.abs(want).max()))
 
 
+MAP_COMMANDS = {"match": "r.json", "filter": "f.csv", "navigate": "n.csv",
+                "suitability": "s.nc", "simulate": "t.csv", "simulate-filter": "sf.csv",
+                "simulate-voyage": "v.csv"}
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                 HealthCheck.function_scoped_fixture])
+@given(small_grids(), st.sampled_from(GRID_FAULTS), st.sampled_from(sorted(MAP_COMMANDS)))
+def test_generated_bad_grids_through_every_command(tmp_path, capsys, g, fault, command):
+    """Every command that reads ``--map`` refuses a generated broken grid the same way:
+    exit 2, one line naming the file and what is wrong, no traceback, nothing written."""
+    values, lat, lon, extra, phrase = bad_grid(g, fault)
+    path = write(tmp_path / "bad.nc", values=values, lat=lat, lon=lon, lat_name=g[3][0],
+                 lon_name=g[3][1], extra=extra)
+    n = 40  # a valid track (every column a command may need) inside the grid
+    track = tmp_path / "log_in.csv"
+    write_track_csv(track, {"t": 10.0 * np.arange(n), "lat": np.full(n, lat[0]),
+                            "lon": np.full(n, lon[0]), "v_east": np.zeros(n),
+                            "v_north": np.zeros(n), "gravity": np.zeros(n)}, force=True)
+    out = tmp_path / MAP_COMMANDS[command]
+    out.unlink(missing_ok=True)
+    argv = [command, "--map", str(path), "--out", str(out)]
+    if command in ("match", "filter", "navigate"):
+        argv += ["--track", str(track)]
+    capsys.readouterr()
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2 and phrase in err and str(path) in err, err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert not list(tmp_path.glob(f"{out.stem}*"))
+
+
 # ---------------------------------------------------------------------- through the command
 def test_sample_command_reads_user_maps_and_refuses_bad_ones(tmp_path, capsys):
     write_track_csv(tmp_path / "t.csv", {"lat": [30.2, 30.4], "lon": [130.2, 130.6]})
