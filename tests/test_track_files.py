@@ -354,8 +354,8 @@ def test_generated_tracks_through_the_sample_command(tmp_path, capsys, global_ma
     assert list(got.text["ship"]) == tr["ship"]
 
 
-COMMANDS = {"match": ["--out", "out.json"], "filter": ["--out", "out.csv"],
-            "navigate": ["--out", "out.csv"], "sample": ["--out", "out.csv"]}
+COMMANDS = {"match": "out.json", "filter": "out.csv", "navigate": "out.csv",
+            "sample": "out.csv", "dov": "out.csv"}
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
@@ -363,20 +363,22 @@ COMMANDS = {"match": ["--out", "out.json"], "filter": ["--out", "out.csv"],
 @given(tracks(), st.sampled_from(FAULTS), st.sampled_from(sorted(COMMANDS)), st.data())
 def test_generated_malformed_tracks_through_every_command(tmp_path, capsys, global_map, tr,
                                                           fault, command, data):
-    """Every command that reads a track (``match``, ``filter``, ``navigate``, ``sample``)
-    refuses a generated malformed file the same way: exit 2, one line naming the file
-    and the line (the tracks carry velocity columns, which ``navigate`` needs), no
+    """Every command that reads a track (``match``, ``filter``, ``navigate``, ``sample``,
+    ``dov``) refuses a generated malformed file the same way: exit 2, one line naming the file
+    and the line (the tracks carry the velocity and height columns ``navigate`` and
+    ``dov`` need), no
     traceback, no output written."""
     n = len(tr["t"])
-    tr = {**tr, "extra": {"v_east": np.full(n, 5.0), "v_north": np.full(n, -1.5)}}
+    tr = {**tr, "extra": {"v_east": np.full(n, 5.0), "v_north": np.full(n, -1.5),
+                          "h": np.full(n, 100.0)}}
     raw, phrases = malformed(tr, fault, data.draw(st.integers(1, n - 1)))
     track = tmp_path / "in.csv"
     track.write_bytes(raw)
-    out = tmp_path / COMMANDS[command][1]
+    out = tmp_path / COMMANDS[command]
     out.unlink(missing_ok=True)
     capsys.readouterr()
-    code = main([command, "--map", str(global_map[0]), "--track", str(track), "--out",
-                 str(out)])
+    the_map = [] if command == "dov" else ["--map", str(global_map[0])]
+    code = main([command, *the_map, "--track", str(track), "--out", str(out)])
     err = capsys.readouterr().err.strip()
     assert code == 2 and str(track) in err and "\n" not in err and "Traceback" not in err
     for p in phrases:

@@ -58,7 +58,7 @@ from jaxgrav.cli.inputs import (
 from jaxgrav.cli.sanity import check_readings, implausible_rows, innovation_check
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
-from jaxgrav.filters import STATUS_FILTER, map_at_error, status_messages_filter
+from jaxgrav.filters import STATUS_FILTER, map_anomaly, status_messages_filter
 from jaxgrav.filters.api import (
     FILTER_METHODS,
     PARTICLES,
@@ -194,16 +194,14 @@ def _check_sigma(name, value):
         raise ValueError(f"{name} must be a positive, finite standard deviation; got {value!r}")
 
 
-@jax.jit
-def _map_at_ins_jit(field, lat, lon):
-    zero = jnp.zeros(2, jnp.result_type(lat.dtype, float))
-    return jax.vmap(lambda a, b: map_at_error(field, zero, a, b))(lat, lon)
+_map_anomaly = jax.jit(map_anomaly)  # the filters' own map evaluation, one compile per field
 
 
 def _map_at_ins(field, lat, lon):
-    """The map (or point-mass model) at the INS positions (mGal; NaN off a map or in a
-    cell with a missing node)."""
-    return np.asarray(_map_at_ins_jit(field, jnp.asarray(lat), jnp.asarray(lon)))
+    """The map (or point-mass model) at the INS positions, as the filters evaluate it
+    (:func:`~jaxgrav.filters.map_anomaly`; mGal, NaN off a map or in a cell with a missing
+    node)."""
+    return np.asarray(_map_anomaly(field, jnp.asarray(lat), jnp.asarray(lon)))
 
 
 _FILTER_MARGIN_M = 20e3
