@@ -18,8 +18,8 @@ import jaxgrav as jg
 import jaxgrav.match as jm
 from jaxgrav import interp
 from jaxgrav.filters import STATUS_FILTER, filter_track
+from jaxgrav.match import shifted_tracks
 from jaxgrav.match.api import MASKED, missing_in_reach
-from jaxgrav.match.dense import shifted_tracks
 
 RNG = np.random.default_rng(7)
 

@@ -17,7 +17,7 @@ from jaxgrav.match import entropy_iccp as _entropy_iccp
 from jaxgrav.match.api import ENTROPY_HALF_SIZE, METHODS, MIN_FIXES, match_track, validate_track
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import ChainConfig, match_chains
-from jaxgrav.match.dense import DenseConfig, lattice_table, match_dense, shifted_tracks
+from jaxgrav.match.dense import DenseConfig, lattice_table, match_dense
 from jaxgrav.match.entropy import (
     EntropyConfig,
     difference_entropy,
@@ -28,6 +28,7 @@ from jaxgrav.match.entropy import (
 )
 from jaxgrav.match.entropy_iccp import match_track_b, status_messages_b
 from jaxgrav.match.iccp import IccpConfig, kabsch_2d, match_iccp, match_iccp_batch
+from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import (
     IMPLAUSIBLE_FIT,
     P_IMPLAUSIBLE,

@@ -29,7 +29,6 @@ import jax.numpy as jnp
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.contour import value_grad
-from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.entropy import EntropyConfig, coarse_offsets, offset_grid
 from jaxgrav.match.fix_covariance import (
     gauss_newton_information,
@@ -40,6 +39,7 @@ from jaxgrav.match.fix_covariance import (
 )
 from jaxgrav.match.gls import gls_score, offset_posterior, track_covariance
 from jaxgrav.match.iccp import IccpConfig, iccp_fit, local_track_frame
+from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import STATUS, MatchResult
 from jaxgrav.prepared import prepare_map
 

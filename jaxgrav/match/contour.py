@@ -11,7 +11,7 @@ iterations × tracks), so this module prepares the map once for that loop:
   value and both derivatives by two short Horner sums with no basis functions to build.
 - :class:`LocalField` maps local metres ``(north, east)`` about a track's centroid
   linearly to fractional grid indices (the frame of
-  :func:`~jaxgrav.match.dense.shifted_tracks`), so no latitude/longitude arithmetic
+  :func:`~jaxgrav.match.offsets.shifted_tracks`), so no latitude/longitude arithmetic
   is done inside the loop.
 - :func:`value_grad` gives the value and the analytic gradient (per metre) at points
   (:func:`value_grad_ne` with north and east in separate arrays, the hot-loop form);

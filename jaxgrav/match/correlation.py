@@ -52,13 +52,13 @@ from jaxgrav.match.chains import (
     kbest_chains,
     step_compatibility,
 )
-from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.lattice_chains import (
     count_chains_lattice,
     eliminate_lattice,
     kbest_chains_lattice,
     lattice_steps,
 )
+from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import MatchResult, nearest_to_ins
 from jaxgrav.match.scoring import SCORES, decreasing_weights, score_track
 from jaxgrav.prepared import as_grid

@@ -43,11 +43,11 @@ from jaxgrav import interp
 from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import concrete
 from jaxgrav.constants import DEG
-from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
+from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.gls import gls_dof, gls_score, gls_whitener, track_covariance
 from jaxgrav.match.integrity import fix_quality
 from jaxgrav.match.lattice import patch_values
-from jaxgrav.match.offsets import means, offset_scores, track_frame
+from jaxgrav.match.offsets import means, offset_scores, shifted_tracks, track_frame
 from jaxgrav.match.refine import (
     gauss_newton,
     gls_residual_function,
@@ -65,7 +65,7 @@ from jaxgrav.match.scoring import (
 )
 from jaxgrav.prepared import as_grid, prepare_map
 
-__all__ = ["DenseConfig", "lattice_table", "match_dense", "shifted_tracks"]
+__all__ = ["DenseConfig", "lattice_table", "match_dense"]
 
 
 @pytree_dataclass
@@ -124,6 +124,15 @@ class DenseConfig:
     map_error_order : {1, 2}
         Gauss–Markov order of the map-error covariance (static), as
         :class:`~jaxgrav.fields.map_error.CorrelatedMapError`'s family.
+    score_model : {"auto", "white", "gls"}
+        Which score is compiled (static). ``"auto"`` (default): the white-noise score
+        always, and the GLS one in a branch taken when ``map_error_mgal > 0`` at run
+        time, so a sweep of σ through 0 never recompiles. ``"white"``: only the
+        white-noise score (``map_error_mgal`` must be 0); ``"gls"``: only the GLS score
+        (σ = 0 then gives the white-noise likelihood to rounding). Either compiles
+        about half the program of ``"auto"``, and ``"gls"`` runs faster, since
+        ``"auto"`` evaluates the white score too. :func:`~jaxgrav.match.sizing.config_for`
+        sets ``"white"`` or ``"gls"`` from its ``map_error``.
     fix : {"best", "posterior"}
         The returned offset (static): the refined best candidate, or the
         likelihood-weighted posterior mean over all offsets (the refined best when
@@ -156,6 +165,7 @@ class DenseConfig:
     map_error_mgal: float = 0.0
     map_error_length_m: float = 10000.0
     map_error_order: int = static_field(2)
+    score_model: str = static_field("auto")
     fix: str = static_field("best")
     resolved_n_effective: float = 3.0
     max_sigma_m: float = float("inf")
@@ -168,11 +178,19 @@ class DenseConfig:
             raise ValueError(f"fix must be 'best' or 'posterior'; got {self.fix!r}")
         if self.map_error_order not in (1, 2):
             raise ValueError(f"map_error_order must be 1 or 2; got {self.map_error_order!r}")
+        if self.score_model not in ("auto", "white", "gls"):
+            raise ValueError(f"score_model must be 'auto', 'white' or 'gls'; got "
+                             f"{self.score_model!r}")
         for name in ("map_error_mgal", "map_error_length_m"):
             arr = concrete(getattr(self, name))
             if arr is not None and arr.dtype != object and not (
                     np.all(np.isfinite(arr)) and np.all(arr >= 0)):
                 raise ValueError(f"{name} must be finite and >= 0; got {arr}")
+        sigma = concrete(self.map_error_mgal)
+        if (self.score_model == "white" and sigma is not None and sigma.dtype != object
+                and np.any(sigma > 0)):
+            raise ValueError(f"score_model='white' ignores the map error; got map_error_mgal="
+                             f"{sigma} (use 'gls' or 'auto')")
         if isinstance(self.score, str) and self.score not in SCORES:
             raise ValueError(f"score must be one of {SCORES}; got {self.score!r}")
         if isinstance(self.n_rotations, int) and self.n_rotations < 1:
@@ -204,33 +222,6 @@ def lattice_table(grid, method="bicubic"):
     if method == "bilinear":
         return jnp.asarray(as_grid(grid).values)
     return prepare_map(grid).interleaved()
-
-
-def shifted_tracks(lat, lon, d_north, d_east, rotation_rad):
-    """INS track shifted by offsets and turned about its centroid.
-
-    Parameters
-    ----------
-    lat, lon : Array, shape ``(N,)``
-        INS fixes (degrees).
-    d_north, d_east : Array, shape ``S``
-        Offsets (m).
-    rotation_rad : Array, shape ``S``
-        Heading errors (rad, clockwise), broadcast with the offsets.
-
-    Returns
-    -------
-    tuple of Array
-        ``(lat, lon)`` of shape ``(*S, N)`` in degrees.
-    """
-    lat_c, lon_c = means(lat, lon)
-    m_c = meridian_radius(lat_c) * DEG
-    n_c = prime_vertical_radius(lat_c) * jnp.cos(lat_c * DEG) * DEG
-    north, east = (lat - lat_c) * m_c, (lon - lon_c) * n_c
-    c, s = jnp.cos(rotation_rad)[..., None], jnp.sin(rotation_rad)[..., None]
-    rn = c * north - s * east + jnp.asarray(d_north)[..., None]
-    re = s * north + c * east + jnp.asarray(d_east)[..., None]
-    return lat_c + rn / m_c, lon_c + re / n_c
 
 
 @jax.jit
@@ -345,11 +336,14 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
 
         return run
 
-    # today's white path runs outside the branch (a branch body compiles to other bits)
-    white = search(False)(None)
-    (scores, top, topk_lat, topk_lon, chosen, found, p, final_score, final_bias,
-     laplace) = jax.lax.cond(jnp.asarray(config.map_error_mgal) > 0, search(True),
-                             lambda _: white, None)
+    if config.score_model == "auto":
+        # today's white path runs outside the branch (a branch body compiles to other bits)
+        white = search(False)(None)
+        searched = jax.lax.cond(jnp.asarray(config.map_error_mgal) > 0, search(True),
+                                lambda _: white, None)
+    else:
+        searched = search(config.score_model == "gls")(None)
+    scores, top, topk_lat, topk_lon, chosen, found, p, final_score, final_bias, laplace = searched
     topk_score = scores[top]
     chi2 = scores / jnp.maximum(scale, jnp.finfo(dtype).tiny)
     quality = fix_quality(chi2, config.n_rotations, on, oe, p[:2], laplace,

@@ -39,7 +39,7 @@ import numpy as np
 
 from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.geodesy import local_offsets_m
-from jaxgrav.match.dense import shifted_tracks
+from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import STATUS, MatchResult
 from jaxgrav.prepared import as_grid, prepare_map
 
@@ -264,7 +264,7 @@ def coarse_offsets(sample, lat, lon, readings, config):
     -------
     tuple
         ``(result, d_north, d_east, topk_north, topk_east)``: the :class:`MatchResult`,
-        the chosen offset (m) in the frame of :func:`~jaxgrav.match.dense.shifted_tracks`
+        the chosen offset (m) in the frame of :func:`~jaxgrav.match.offsets.shifted_tracks`
         and the offsets ``(k_best,)`` of the top-k candidates (the chosen offset where
         fewer were accepted). In the result, ``score`` is the chosen |ΔH| (nats),
         ``bias`` is 0, ``topk_score`` the |ΔH| of the ``k_best`` best accepted

@@ -1,7 +1,7 @@
 """ICCP fine matching (paper B, second stage): Iterative Closest Contour Point.
 
 Work is done in local metres ``(north, east)`` about the INS track's centroid, the
-frame of :func:`~jaxgrav.match.dense.shifted_tracks`, so a result is exactly a
+frame of :func:`~jaxgrav.match.offsets.shifted_tracks`, so a result is exactly a
 shift plus a rotation of the INS track about its centroid. Each iteration:
 
 1. Transform the INS points: ``y_n = R p_n + t``.
@@ -37,7 +37,7 @@ from jaxgrav._validate import concrete
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
 from jaxgrav.match.contour import local_field, project_to_contours, value_grad_ne
-from jaxgrav.match.dense import shifted_tracks
+from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import STATUS, MatchResult
 from jaxgrav.match.rigid import kabsch_2d, kabsch_ne, refine_local
 from jaxgrav.prepared import prepare_map

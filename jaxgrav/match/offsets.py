@@ -1,6 +1,6 @@
 """Grid search of the dense matcher: every offset of a regular grid scored at once.
 
-Works in the frame of :func:`~jaxgrav.match.dense.shifted_tracks` expressed in map
+Works in the frame of :func:`~jaxgrav.match.offsets.shifted_tracks` expressed in map
 indices (:func:`track_frame`): a fix turned and shifted to local ``(north, east)``
 metres about the track's centroid lies at a fractional map index that is linear in
 them. For one fix the shifted positions over the offset grid are then a regular
@@ -20,7 +20,7 @@ from jaxgrav.match.gls import gls_score
 from jaxgrav.match.lattice import lattice_values, patch_values
 from jaxgrav.match.scoring import score_track, sums
 
-__all__ = ["lattice_scores", "means", "offset_scores", "track_frame"]
+__all__ = ["lattice_scores", "means", "offset_scores", "shifted_tracks", "track_frame"]
 
 
 def means(*xs):
@@ -183,3 +183,30 @@ def lattice_scores(g, v, w, kind, prior, centre):
     bias = (s1 + c) / (1.0 + prior)
     e = bias - c
     return s2 - 2.0 * e * s1 + e * e + prior * bias * bias, bias
+
+
+def shifted_tracks(lat, lon, d_north, d_east, rotation_rad):
+    """INS track shifted by offsets and turned about its centroid.
+
+    Parameters
+    ----------
+    lat, lon : Array, shape ``(N,)``
+        INS fixes (degrees).
+    d_north, d_east : Array, shape ``S``
+        Offsets (m).
+    rotation_rad : Array, shape ``S``
+        Heading errors (rad, clockwise), broadcast with the offsets.
+
+    Returns
+    -------
+    tuple of Array
+        ``(lat, lon)`` of shape ``(*S, N)`` in degrees.
+    """
+    lat_c, lon_c = means(lat, lon)
+    m_c = meridian_radius(lat_c) * DEG
+    n_c = prime_vertical_radius(lat_c) * jnp.cos(lat_c * DEG) * DEG
+    north, east = (lat - lat_c) * m_c, (lon - lon_c) * n_c
+    c, s = jnp.cos(rotation_rad)[..., None], jnp.sin(rotation_rad)[..., None]
+    rn = c * north - s * east + jnp.asarray(d_north)[..., None]
+    re = s * north + c * east + jnp.asarray(d_east)[..., None]
+    return lat_c + rn / m_c, lon_c + re / n_c

@@ -65,7 +65,9 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         σ > 0 the fix and integrity thresholds of :data:`MAP_ERROR_INTEGRITY`
         (``dense``, measured with ``examples/map_error_dense.py``) or
         :data:`CHAIN_MAP_ERROR_INTEGRITY` (``chains``, whose iso-value tolerance
-        then grows to ``2·√(noise² + σ²)``). None: the white-noise score.
+        then grows to ``2·√(noise² + σ²)``). None: the white-noise score. ``dense``
+        compiles only the score it uses (``DenseConfig.score_model`` ``"gls"`` when
+        σ > 0, else ``"white"``).
 
     Returns
     -------
@@ -83,9 +85,10 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         half = math.ceil(reach / spacing)
         if half > 40:
             half, spacing = 40, reach / 40
+        told = map_error is not None and float(map_error.sigma) > 0
         config = DenseConfig(spacing_m=spacing, half_size=half, noise_mgal=noise_mgal,
                              bias_sigma_mgal=bias_sigma_mgal, n_rotations=n_rotations,
-                             score=score or "bias")
+                             score=score or "bias", score_model="gls" if told else "white")
         return _with_map_error(config, map_error, MAP_ERROR_INTEGRITY)
     half = math.ceil(reach / min(dy, dx))
     if 2 * half + 1 > min(grid.ny, grid.nx):

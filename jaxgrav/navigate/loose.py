@@ -144,7 +144,7 @@ def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=100
     matcher = DenseConfig(noise_mgal=noise_mgal / math.sqrt(fix_every),
                           map_error_mgal=map_error_mgal, map_error_length_m=map_error_length_m,
                           fix="posterior", max_sigma_m=3000.0, max_edge_mass=0.2, n_rotations=5,
-                          max_rotation_deg=3.0)
+                          max_rotation_deg=3.0, score_model="gls")
     return LooseConfig(matcher=matcher, ins=ins, **changes)
 
 

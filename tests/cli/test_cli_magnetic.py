@@ -12,8 +12,7 @@ import pytest
 
 from jaxgrav.cli import main
 from jaxgrav.fields import magnetic
-from jaxgrav.match import match_track
-from jaxgrav.match.dense import shifted_tracks
+from jaxgrav.match import match_track, shifted_tracks
 from jaxgrav.sim import DEG_ARC_M, Track, track_error_m
 from jaxgrav.tracks import read_track_csv, write_track_csv
 

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from jaxgrav.fields import magnetic
-from jaxgrav.match import match_track
-from jaxgrav.match.dense import shifted_tracks
+from jaxgrav.match import match_track, shifted_tracks
 from jaxgrav.sim import DEG_ARC_M, Track, track_error_m
 
 LAT = 39.0 + 0.1 * np.arange(20)

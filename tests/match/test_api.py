@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 
 import jaxgrav.match as jm
-from jaxgrav.match import entropy_iccp
+from jaxgrav.match import entropy_iccp, shifted_tracks
 from jaxgrav.match.combined import COMBINED_STATUS
-from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.entropy import ENTROPY_STATUS, EntropyConfig
 from jaxgrav.match.iccp import ICCP_STATUS, IccpConfig
 from jaxgrav.match.result import CORRELATION_STATUS

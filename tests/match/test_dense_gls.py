@@ -11,7 +11,7 @@ import pytest
 
 from jaxgrav.fields.map_error import map_error, truth_field
 from jaxgrav.geodesy import local_offsets_m
-from jaxgrav.match.dense import DenseConfig, match_dense, shifted_tracks
+from jaxgrav.match import DenseConfig, match_dense, shifted_tracks
 from jaxgrav.match.gls import track_covariance
 from jaxgrav.match.result import STATUS
 from jaxgrav.match.sizing import config_for
@@ -132,6 +132,31 @@ def test_integrity_rejection_returns_the_ins_track_with_status_bits(grid):
     np.testing.assert_array_equal(np.asarray(r.lat), np.asarray(run.ins_lat))
     assert int(r.status) & 512 and 512 in STATUS and 4096 in STATUS
     assert float(r.offset_north_m) == 0.0
+
+
+def test_score_model_compiles_one_score_with_the_same_results(grid):
+    """``score_model`` "gls" and "white" (what config_for sets) give what "auto" gives,
+    and "white" refuses a map error it would ignore."""
+    run = matching_scenario(jax.random.key(3), grid, SCEN)
+    args = (grid, run.ins_lat, run.ins_lon, run.readings)
+    gls = _gls_config(grid, half_size=4, spacing_m=350.0)
+    white = config_for("dense", grid, 1500.0)
+    white = dataclasses.replace(white, half_size=4, spacing_m=350.0)
+    assert (gls.score_model, white.score_model) == ("gls", "white")
+    for cfg in (gls, white):
+        one, auto = (match_dense(*args, dataclasses.replace(cfg, score_model=m))
+                     for m in (cfg.score_model, "auto"))
+        for f in ("lat", "lon", "score", "bias", "covariance_m2", "status", "topk_score"):
+            np.testing.assert_allclose(np.asarray(getattr(one, f)),
+                                       np.asarray(getattr(auto, f)), rtol=1e-9, atol=1e-9)
+    # "gls" told σ = 0 is the white-noise likelihood: the white fix, to rounding
+    zero = match_dense(*args, dataclasses.replace(gls, map_error_mgal=0.0))
+    auto0 = match_dense(*args, dataclasses.replace(gls, map_error_mgal=0.0, score_model="auto"))
+    np.testing.assert_allclose(np.asarray(zero.lat), np.asarray(auto0.lat), atol=1e-9)
+    with pytest.raises(ValueError, match="score_model='white' ignores the map error"):
+        DenseConfig(score_model="white", map_error_mgal=3.0)
+    with pytest.raises(ValueError, match="score_model must be"):
+        DenseConfig(score_model="both")
 
 
 def test_config_validation_and_other_matchers_neutral_quality(grid):

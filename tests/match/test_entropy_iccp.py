@@ -11,10 +11,10 @@ import pytest
 
 from jaxgrav.grid import make_sampler
 from jaxgrav.match import entropy as entropy_mod
+from jaxgrav.match import shifted_tracks
 from jaxgrav.match.api import match_track
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.contour import local_field, patch_coefficients, value_grad
-from jaxgrav.match.dense import shifted_tracks
 from jaxgrav.match.entropy import EntropyConfig, entropy_config_for
 from jaxgrav.match.iccp import (
     IccpConfig,
