@@ -129,10 +129,10 @@ class DenseConfig:
         always, and the GLS one in a branch taken when ``map_error_mgal > 0`` at run
         time, so a sweep of σ through 0 never recompiles. ``"white"``: only the
         white-noise score (``map_error_mgal`` must be 0); ``"gls"``: only the GLS score
-        (σ = 0 then gives the white-noise likelihood to rounding). Either compiles
-        about half the program of ``"auto"``, and ``"gls"`` runs faster, since
-        ``"auto"`` evaluates the white score too. :func:`~jaxgrav.match.sizing.config_for`
-        sets ``"white"`` or ``"gls"`` from its ``map_error``.
+        (σ = 0 then gives the white-noise likelihood to rounding). Either compiles in
+        about half to two thirds of the time of ``"auto"`` (the run time measured the
+        same within noise). :func:`~jaxgrav.match.sizing.config_for` sets ``"white"``
+        or ``"gls"`` from its ``map_error``.
     fix : {"best", "posterior"}
         The returned offset (static): the refined best candidate, or the
         likelihood-weighted posterior mean over all offsets (the refined best when
