@@ -318,8 +318,9 @@ def cmd_filter(args):
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
                        guard=args.guard, map_error=fogm, eotvos_velocity=jac, where=where,
                        **_particle_options(args))
-    res["status"] = np.where(implausible_rows(res["innovation"], res["innovation_sigma"]),
-                             res["status"] | STATUS_FILTER["implausible_fit"], res["status"])
+    res["status"] = res["status"] | np.where(
+        implausible_rows(res["innovation"], res["innovation_sigma"]),
+        STATUS_FILTER["implausible_fit"], 0)
     write_track_csv(args.out, _output_columns(t, track, res), force=args.force, precision=12)
     n_read = int(np.isfinite(g).sum())
     stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""

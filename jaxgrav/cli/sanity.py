@@ -184,13 +184,11 @@ def innovation_check(innovation, innovation_sigma):
     warning : str or None
         One line when ``p_value < P_IMPLAUSIBLE``.
     """
-    nu = np.asarray(innovation, float)
-    s = np.asarray(innovation_sigma, float)
-    used = np.isfinite(nu) & np.isfinite(s) & (s > 0)
-    k = int(used.sum())
+    _, z2 = _used_nis(innovation, innovation_sigma)
+    k = z2.size
     if k == 0:
         return float("nan"), float("nan"), None
-    nis = float(np.mean((nu[used] / s[used]) ** 2))
+    nis = float(np.mean(z2))
     p = float(chdtrc(k, nis * k))
     if p >= P_IMPLAUSIBLE:
         return nis, p, None
@@ -221,16 +219,22 @@ def implausible_rows(innovation, innovation_sigma, block=INNOVATION_BLOCK):
     -------
     Array of bool, shape ``(N,)``
     """
-    nu = np.asarray(innovation, float)
-    s = np.asarray(innovation_sigma, float)
-    used = np.flatnonzero(np.isfinite(nu) & np.isfinite(s) & (s > 0))
-    flagged = np.zeros(nu.size + 1, int)
+    used, z2 = _used_nis(innovation, innovation_sigma)
+    flagged = np.zeros(np.shape(innovation)[0] + 1, int)
     if used.size == 0:
         return flagged[:-1].astype(bool)
     starts = np.arange(0, used.size, block)
-    nis = np.add.reduceat((nu[used] / s[used]) ** 2, starts)
+    nis = np.add.reduceat(z2, starts)
     bad = chdtrc(np.diff(np.append(starts, used.size)), nis) < P_IMPLAUSIBLE
     first, last = used[starts[bad]], used[np.minimum(starts[bad] + block, used.size) - 1]
     np.add.at(flagged, first, 1)
     np.add.at(flagged, last + 1, -1)
     return np.cumsum(flagged[:-1]) > 0
+
+
+def _used_nis(innovation, innovation_sigma):
+    """Rows with a usable innovation and their normalised innovations squared."""
+    nu = np.asarray(innovation, float)
+    s = np.asarray(innovation_sigma, float)
+    used = np.flatnonzero(np.isfinite(nu) & np.isfinite(s) & (s > 0))
+    return used, (nu[used] / s[used]) ** 2
