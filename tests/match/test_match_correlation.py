@@ -303,7 +303,8 @@ def test_match_chains_recovers_a_node_track_and_reports_work(smooth_grid):
 def test_match_dense_recovers_offset(smooth_grid, score):
     tr, ilat, ilon, g = _scenario(jax.random.key(7), smooth_grid, 12, 60.0, 1500.0, 0.0,
                                   "bicubic")
-    cfg = DenseConfig(spacing_m=400.0, half_size=5, score=score, method="bicubic")
+    cfg = DenseConfig(spacing_m=400.0, half_size=5, score=score, method="bicubic",
+                      score_model="white")
     r = match_dense(smooth_grid, ilat, ilon, g, cfg)
     err = np.hypot(*cand_mod.local_offsets_m(r.lat, r.lon, tr.lat, tr.lon))
     assert int(r.status) == 0
@@ -318,7 +319,7 @@ def test_match_dense_exact_on_bicubic_truth_and_rotation(smooth_grid):
     g = smooth_grid.sample(tr.lat, tr.lon, "bicubic") + 3.0
     del key
     cfg = DenseConfig(spacing_m=300.0, half_size=6, n_rotations=5, max_rotation_deg=2.0,
-                      refine_steps=12)
+                      refine_steps=12, score_model="white")
     r = match_dense(smooth_grid, ilat, ilon, g, cfg)
     err = np.hypot(*cand_mod.local_offsets_m(r.lat, r.lon, tr.lat, tr.lon))
     assert np.max(err) < 5.0, err
@@ -332,7 +333,7 @@ def test_dense_grid_search_paths_agree(smooth_grid, score):
                                   "bicubic")
     # the offsets span 2*6*150 m = 1.8 km, 1.6-1.9 cells of this 0.01 degree map
     base = DenseConfig(spacing_m=150.0, half_size=6, n_rotations=3, score=score,
-                       selection="nearest", bias_sigma_mgal=4.0)
+                       selection="nearest", bias_sigma_mgal=4.0, score_model="white")
     table = lattice_table(smooth_grid)
     runs = {block: match_dense(smooth_grid, ilat, ilon, g,
                                dataclasses.replace(base, lattice_block=block), table)
@@ -356,10 +357,11 @@ def test_jit_no_retrace_and_vmap_equals_loop(smooth_grid):
     # the sizes and config of test_match_dense_recovers_offset[bias]: its compiled matcher
     keys = jax.random.split(jax.random.key(2), 4)
     data = [_scenario(k, smooth_grid, 12, 60.0, 800.0, 0.5)[1:] for k in keys]
-    cfg = DenseConfig(spacing_m=400.0, half_size=5)
+    cfg = DenseConfig(spacing_m=400.0, half_size=5, score_model="white")
     match_dense(smooth_grid, *data[0], cfg)
     size = match_dense._cache_size()
-    match_dense(smooth_grid, *data[1], DenseConfig(spacing_m=350.0, half_size=5, noise_mgal=2.0))
+    match_dense(smooth_grid, *data[1], DenseConfig(spacing_m=350.0, half_size=5, noise_mgal=2.0,
+                                                     score_model="white"))
     assert match_dense._cache_size() == size  # new numbers in the config do not recompile
     lat, lon, g = (jnp.stack(x) for x in zip(*data, strict=True))
     batched = jax.vmap(match_dense, in_axes=(None, 0, 0, 0, None))(smooth_grid, lat, lon, g, cfg)

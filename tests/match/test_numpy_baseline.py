@@ -89,7 +89,7 @@ def test_dense_agrees_with_jaxgrav(region, tracks):
     # decreasing weights and the nearest-to-INS rule: the least common paths
     cfg = DenseConfig(spacing_m=500.0, half_size=5, n_rotations=3, max_rotation_deg=1.0,
                       weight_decay=0.5, bias_sigma_mgal=5.0, selection="nearest",
-                      refine_steps=6)
+                      refine_steps=6, score_model="white")
     m = npc.prepare_grid(region)
     for lat, lon, g in tracks:
         r = match_dense(region, lat, lon, g, cfg)

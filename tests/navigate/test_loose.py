@@ -89,7 +89,8 @@ def short_voyages(smooth_grid):
     return jax.vmap(lambda g, k: voyage_scenario(k, g, sc), in_axes=(None, 0))(smooth_grid, keys)
 
 
-CONFIG = LooseConfig(matcher=DenseConfig(noise_mgal=0.5, half_size=6, fix="posterior"),
+CONFIG = LooseConfig(matcher=DenseConfig(noise_mgal=0.5, half_size=6, fix="posterior",
+                                         score_model="white"),
                      ins=INS, sigma_pos_m=1100.0, fix_every=6, n_fixes=20, stride=10)
 
 
