@@ -6,7 +6,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint bench venv clean
+.PHONY: demo test test-long test-all lint bench venv clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -24,25 +24,35 @@ demo: $(STAMP)
 # --max-worker-restart 0: pytest-xdist (--dist loadfile) hangs for ever, workers idle, when a
 # worker dies and is restarted; without a restart the run ends, failed.
 XDIST  := -n 2 --dist loadfile --max-worker-restart 0
-# The suite runs in groups, each in fresh workers: in one 20-minute session, XLA:CPU
-# aborted or segfaulted while compiling late in a worker's life (three full runs, ~93 %,
-# two different tests; each passes alone). A group that fails runs once more; a real
-# failure fails both times. tests/test_layout.py checks that the groups cover every test.
+# Two tiers. `make test` runs every test not marked `long` in one pytest-xdist session
+# (the project's 5-minute budget on 2 cores). `make test-long` runs the tests marked
+# `long` (whole pipelines compiled, the example scripts' smoke runs, the demo) in
+# groups, each in fresh workers: in one 20-minute session XLA:CPU aborted or segfaulted
+# while compiling late in a worker's life (three full runs, ~93 %, two different tests;
+# each passes alone). A group that fails runs once more; a real failure fails both
+# times; a group with no long test (pytest's exit code 5) passes. CI runs both tiers
+# (.ci/run); tests/test_layout.py checks that the groups cover every test file.
 TEST_GROUPS := tests/match|tests/cli|tests/examples tests/navigate|tests/filters tests/montecarlo|tests/fields tests/dov tests/sim tests/scenarios tests/test_*.py
 
 test: $(STAMP)
 	$(BIN)/ruff check .
+	$(BIN)/python -m pytest -q $(XDIST) -m "not long" tests || { \
+	  echo "make test failed; running it once more (a worker crash ends a run)"; \
+	  $(BIN)/python -m pytest -q $(XDIST) -m "not long" tests; }
+
+test-long: $(STAMP)
 	@groups='$(TEST_GROUPS)'; IFS='|'; for group in $$groups; do IFS=' '; \
-	  echo "make test: $$group"; \
-	  $(BIN)/python -m pytest -q $(XDIST) $$group || { \
-	    echo "make test: $$group failed; running it once more (a worker crash ends a run)"; \
-	    $(BIN)/python -m pytest -q $(XDIST) $$group || exit 1; }; \
+	  echo "make test-long: $$group"; \
+	  $(BIN)/python -m pytest -q $(XDIST) -m long $$group; rc=$$?; \
+	  if [ $$rc -ne 0 ] && [ $$rc -ne 5 ]; then \
+	    echo "make test-long: $$group failed; running it once more (a worker crash ends a run)"; \
+	    $(BIN)/python -m pytest -q $(XDIST) -m long $$group; rc=$$?; \
+	    if [ $$rc -ne 0 ] && [ $$rc -ne 5 ]; then exit 1; fi; \
+	  fi; \
 	done
 
-# the edit loop: the suite without the example scripts' smoke runs
-test-fast: $(STAMP)
-	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q $(XDIST) tests --ignore=tests/examples
+# both tiers, as CI runs them
+test-all: test test-long
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
