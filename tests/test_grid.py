@@ -114,6 +114,7 @@ def test_channels_are_interpolated_together(field, points):
 
 
 @pytest.mark.parametrize("method", ["bilinear", "bicubic"])
+@pytest.mark.long
 def test_jit_no_retrace_vmap_equals_loop(grid, points, method):
     traces = []
 
@@ -141,6 +142,7 @@ def test_jit_no_retrace_vmap_equals_loop(grid, points, method):
 
 
 @pytest.mark.parametrize("method", ["bilinear", "bicubic"])
+@pytest.mark.long
 def test_grad_in_points_and_values(grid, method):
     lat0, lon0 = 30.123, 131.377  # inside a cell, away from nodes
     f = lambda la, lo: grid.sample(la, lo, method)  # noqa: E731

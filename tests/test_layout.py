@@ -172,8 +172,8 @@ def test_deprecated_module_paths_warn_and_give_the_same_objects(old, new):
 
 
 def test_make_test_groups_cover_every_test_file_once():
-    """``make test`` runs the suite in groups (Makefile TEST_GROUPS): every test file must be
-    in exactly one, or it would silently not run."""
+    """``make test-long`` runs the long tier in groups (Makefile TEST_GROUPS): every test file
+    must be in exactly one, or its long tests would silently not run."""
     project = ROOT.parent
     line = next(x for x in (project / "Makefile").read_text().splitlines()
                 if x.startswith("TEST_GROUPS"))

@@ -44,6 +44,7 @@ def _touches(v, iy, ix):
              & np.isfinite(v[r + 1, c + 1]))
 
 
+@pytest.mark.long
 def test_bicubic_masks_exactly_the_cells_touching_a_missing_node():
     full = _field()
     holey = _holey(full)
@@ -65,6 +66,7 @@ def test_bicubic_masks_exactly_the_cells_touching_a_missing_node():
     assert np.max(np.abs(a[far] - b[far])) < 2e-4
 
 
+@pytest.mark.long
 def test_value_and_gradient_masked_and_gradients_finite():
     holey = jnp.asarray(_holey(_field()))
     iy, ix = RNG.uniform(0, 39, 3000), RNG.uniform(0, 49, 3000)
@@ -138,6 +140,7 @@ def _error_m(r, t_lat, t_lon):
 
 
 @pytest.mark.parametrize("method", ["dense", "chains", "entropy+iccp"])
+@pytest.mark.long
 def test_matchers_mask_candidates_on_missing_nodes_and_flag_them(smooth_grid, scene, method):
     lat, lon, z, t_lat, t_lon = scene
     # a hole 1.5-3 km north of the INS track: inside the search region (3 km), far from
@@ -157,6 +160,7 @@ def test_matchers_mask_candidates_on_missing_nodes_and_flag_them(smooth_grid, sc
     assert _error_m(r, t_lat, t_lon) < max(2.0 * _error_m(ref, t_lat, t_lon), 300.0)
 
 
+@pytest.mark.long
 def test_dense_with_the_truth_masked_returns_a_finite_flagged_fix(smooth_grid, scene):
     lat, lon, z, t_lat, t_lon = scene
     holey = _with_hole(smooth_grid, (t_lat.min() - 0.005, t_lat.max() + 0.005),
@@ -173,6 +177,7 @@ def test_dense_with_the_truth_masked_returns_a_finite_flagged_fix(smooth_grid, s
 
 # ----------------------------------------------------------------------------- filters
 @pytest.mark.parametrize("method", ["ukf", "pf", "pmf"])
+@pytest.mark.long
 def test_filters_skip_or_mask_missing_cells_and_flag_them(smooth_grid, method):
     n = 240
     t = 10.0 * np.arange(n)

@@ -25,6 +25,7 @@ def track(tmp_path_factory):
     return d
 
 
+@pytest.mark.long
 def test_match_eotvos_corrected_takes_the_column_as_is(track):
     """--eotvos-corrected (older name --no-eotvos): the same rule as filter and navigate."""
     for flag in ("--eotvos-corrected", "--no-eotvos"):
@@ -34,6 +35,7 @@ def test_match_eotvos_corrected_takes_the_column_as_is(track):
         assert json.loads(out.read_text())["eotvos_corrected"] is False
 
 
+@pytest.mark.long
 def test_simulate_then_match_beats_ins(track):
     out = track / "r.json"
     assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"),
@@ -74,6 +76,7 @@ def _check_chains_result(r, truth, ins):
     assert err < ins_err, (err, ins_err)  # (0.014° against 0.035° when written)
 
 
+@pytest.mark.long
 def test_match_reads_a_user_netcdf_map(track, tmp_path):
     datasets.load("ryukyu")["anomaly_2p5min"].to_netcdf(tmp_path / "map.nc")
     assert main(["match", "--map", str(tmp_path / "map.nc"), "--track", str(track / "t.csv"),
@@ -98,6 +101,7 @@ def test_match_bad_tracks_get_clear_errors(track, tmp_path, capsys, edit, messag
     assert not (tmp_path / "r.json").exists()
 
 
+@pytest.mark.long
 def test_sample_command(track, tmp_path):
     assert main(["sample", "--map", "ryukyu:anomaly_0p5deg", "--track", str(track / "t.csv"),
                  "--out", str(tmp_path / "s.csv")]) == 0
@@ -105,6 +109,7 @@ def test_sample_command(track, tmp_path):
     assert np.all(np.isfinite(s["map"]))
 
 
+@pytest.mark.long
 def test_console_script_help():
     r = subprocess.run([sys.executable, "-m", "jaxgrav.cli", "--help"], capture_output=True,
                        text=True, check=True)
@@ -112,6 +117,7 @@ def test_console_script_help():
         assert cmd in r.stdout
 
 
+@pytest.mark.long
 def test_dov_command_against_the_exact_model(tmp_path, capsys):
     lat = np.array([34.23, 35.0, 36.1, 37.3])
     lon = np.array([108.33, 109.0, 110.2, 111.0])
@@ -130,6 +136,7 @@ def test_dov_command_against_the_exact_model(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("method", ["entropy+iccp"])
+@pytest.mark.long
 def test_match_paper_b_methods(track, tmp_path, method):
     out = tmp_path / "b.json"
     assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"), "--out", str(out),
@@ -138,6 +145,7 @@ def test_match_paper_b_methods(track, tmp_path, method):
     assert len(r["lat"]) == 20 and r["method"] == method and r["field"] == "gravity"
 
 
+@pytest.mark.long
 def test_match_iccp_max_rotation_bounds_the_heading_and_matches_the_library(tmp_path):
     # paper B's experiment: INS offset 0.02-0.03 deg and rotated 1.5 deg, 1 mGal
     grid = datasets.load("ryukyu")["anomaly_2p5min"]
@@ -199,6 +207,7 @@ def test_match_help_documents_paper_b_options(capsys):
     assert "heading error" in text
 
 
+@pytest.mark.long
 def test_match_map_error_options_and_result_fields(track, tmp_path, capsys):
     out = tmp_path / "gls.json"
     assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"), "--out", str(out),
@@ -223,6 +232,7 @@ def test_match_map_error_options_and_result_fields(track, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("method", ["chains", "entropy+iccp"])
+@pytest.mark.long
 def test_match_map_error_with_chains_and_entropy_iccp(track, tmp_path, method):
     out = tmp_path / "gls.json"
     assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"), "--out", str(out),

@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from jaxgrav.cli import main
 from jaxgrav.cli.cache import cache_dir, prune_large_entries
 
@@ -22,6 +24,7 @@ def _jaxgrav(args, env):
                           capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.long
 def test_a_second_call_loads_the_compiled_programs(tmp_path):
     env = {k: v for k, v in os.environ.items()
            if not k.startswith("JAX_") and k != "JAXGRAV_CACHE"}  # conftest turns it off

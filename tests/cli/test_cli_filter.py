@@ -51,6 +51,7 @@ def _filter(track, out, *extra, source=("--point-masses", "paper-d")):
     return main(["filter", *source, "--track", str(track), "--out", str(out), *extra])
 
 
+@pytest.mark.long
 def test_simulate_filter_writes_track_and_truth(sim):
     track = read_track_csv(sim / "track.csv")
     truth = read_track_csv(sim / "truth.csv")
@@ -67,6 +68,7 @@ def test_simulate_filter_writes_track_and_truth(sim):
     assert np.hypot(dn, de) == pytest.approx(2000.0, rel=1e-6)
 
 
+@pytest.mark.long
 def test_ukf_beats_the_ins_on_an_east_west_track(sim, tmp_path, capsys):
     out = tmp_path / "ukf.csv"
     assert _filter(sim / "track.csv", out, "--method", "ukf") == 0
@@ -100,6 +102,7 @@ def test_ukf_beats_the_ins_on_an_east_west_track(sim, tmp_path, capsys):
     assert np.all(res["status"] == 0)
 
 
+@pytest.mark.long
 def test_rbpf_beats_the_ins_reproducibly_and_pf_runs(sim, tmp_path, capsys):
     """The particle filters through the CLI: same columns, honest-ish 1-σ, seeds matter."""
     track, truth = read_track_csv(sim / "track.csv"), read_track_csv(sim / "truth.csv")
@@ -126,6 +129,7 @@ def test_rbpf_beats_the_ins_reproducibly_and_pf_runs(sim, tmp_path, capsys):
     assert _rms_error_m(res["lat"], res["lon"], truth) < ins
 
 
+@pytest.mark.long
 def test_guard_holds_back_weak_directions(sim, tmp_path, capsys):
     plain, guarded = tmp_path / "ukf.csv", tmp_path / "ukf_guard.csv"
     assert _filter(sim / "track.csv", plain, "--method", "ukf") == 0
@@ -182,6 +186,7 @@ def _anomaly_map(path, lat, lon):
     return path
 
 
+@pytest.mark.long
 def test_ekf_on_a_netcdf_map(sim, tmp_path, capsys):
     nc = _anomaly_map(tmp_path / "pd.nc", np.linspace(23.9, 24.7, 81),
                       np.linspace(122.6, 123.3, 71))
@@ -239,6 +244,7 @@ def stride_track(sim):
     return sim / "stride.csv"
 
 
+@pytest.mark.long
 def test_pmf_on_a_reading_stride_is_causal(sim, stride_track, tmp_path, capsys):
     cols = read_track_csv(stride_track)
     out = tmp_path / "pmf.csv"
@@ -282,6 +288,7 @@ def test_force_overwrites_and_its_absence_protects(sim, tmp_path, capsys):
     assert not (tmp_path / "new.csv").exists()
 
 
+@pytest.mark.long
 def test_pmf_grid_too_small_warns(stride_track, tmp_path, capsys):
     # --sigma-pos 300 m: the grid spans ±1.2 km, the INS is 2 km off
     assert _filter(stride_track, tmp_path / "o.csv", "--method", "pmf",
@@ -388,6 +395,7 @@ def test_a_second_run_with_new_values_does_not_retrace(sim, stride_track, tmp_pa
         assert names == [], (second, names)
 
 
+@pytest.mark.long
 def test_map_error_on_a_map_end_to_end(tmp_path, capsys):
     """simulate-filter --map with a 3 mGal map error; filter --map-error adds the FOGM state,
     which widens the filter's 1-sigma (it no longer trusts the map to 1 mGal)."""
@@ -424,6 +432,7 @@ def test_simulate_filter_map_error_needs_a_map(tmp_path, capsys):
     assert "--map-error needs --map" in capsys.readouterr().err
 
 
+@pytest.mark.long
 def test_eotvos_corrected_needs_the_velocity_columns(stride_track, tmp_path, capsys):
     out = tmp_path / "o.csv"
     assert _filter(stride_track, out, "--eotvos-corrected") == 2

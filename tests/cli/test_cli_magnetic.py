@@ -19,6 +19,7 @@ from jaxgrav.tracks import read_track_csv, write_track_csv
 pytest.importorskip("xarray")
 
 
+@pytest.mark.long
 def test_match_magnetic_track_entropy_iccp(tmp_path, capsys):
     magnetic.magnetic_map((39.0, 39.5, 115.0, 115.5), 0.01,
                           main_field=False).anomaly.to_netcdf(tmp_path / "m.nc")

@@ -38,6 +38,7 @@ def mc_run(tmp_path_factory):
     return code, out
 
 
+@pytest.mark.long
 def test_montecarlo_writes_netcdf_png_and_summary(mc_run, capsys):
     code, out = mc_run
     assert code == 0
@@ -71,6 +72,7 @@ def test_montecarlo_writes_netcdf_png_and_summary(mc_run, capsys):
         np.testing.assert_array_equal(ds["err_m"].values, lib["err_m"])
 
 
+@pytest.mark.long
 def test_montecarlo_prints_summary_table(tmp_path, capsys):
     out = tmp_path / "again.nc"  # compiled already: same shapes as mc_run
     assert main(["montecarlo", "--method", "dense", "--runs", "8", "--chunk", "4",
@@ -131,6 +133,7 @@ def test_montecarlo_bad_input(tmp_path, capsys, args, match):
     assert not (tmp_path / "x.nc").exists()
 
 
+@pytest.mark.long
 def test_montecarlo_filter_summary_uses_no_harm_bound(tmp_path, capsys):
     out = tmp_path / "ukf.nc"
     assert main(["montecarlo", "--method", "ekf", "--runs", "4", "--chunk", "2", "--fixes",
@@ -148,6 +151,7 @@ def test_montecarlo_filter_summary_uses_no_harm_bound(tmp_path, capsys):
         assert np.all(np.isfinite(ds["start_lat"])) and np.all(np.isfinite(ds["start_lon"]))
 
 
+@pytest.mark.long
 def test_montecarlo_filter_on_a_map(tmp_path, capsys):
     """--map for a filter: straight tracks in random directions inside the map."""
     out = tmp_path / "ekf_map.nc"
@@ -182,6 +186,7 @@ def test_montecarlo_filter_map_too_small(tmp_path, capsys):
 
 @pytest.mark.parametrize("method, fixes, drift", [("chains", 12, 0.02), ("entropy", 20, 0.03),
                                                   ("iccp", 20, 0.03)])
+@pytest.mark.long
 def test_montecarlo_more_matchers(tmp_path, capsys, method, fixes, drift):
     """Paper A's chains and paper B's stages alone, two runs each through the command."""
     out = tmp_path / f"{method}.nc"
@@ -329,6 +334,7 @@ def test_bench_default_dir_missing_names_both(tmp_path, monkeypatch, capsys):
     assert "pass --dir" in err and not (tmp_path / "b.md").exists()
 
 
+@pytest.mark.long
 def test_montecarlo_map_error_setting_in_summary_and_attributes(tmp_path, capsys):
     out = tmp_path / "me.nc"
     assert main(["montecarlo", "--method", "dense", "--runs", "4", "--chunk", "4", "--fixes",
@@ -344,6 +350,7 @@ def test_montecarlo_map_error_setting_in_summary_and_attributes(tmp_path, capsys
         assert a["map_error_setting"] == "map error 3 (map units), L = 8 km"
 
 
+@pytest.mark.long
 def test_montecarlo_truth_map(tmp_path, capsys):
     out = tmp_path / "tm.nc"
     assert main(["montecarlo", "--method", "dense", "--runs", "2", "--chunk", "2", "--fixes",

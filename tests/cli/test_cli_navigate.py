@@ -18,6 +18,7 @@ def voyage_log(tmp_path_factory):
     return log, truth
 
 
+@pytest.mark.long
 def test_navigate_writes_every_row_with_sigma_and_fix_events(voyage_log, tmp_path, capsys):
     log, _ = voyage_log
     out = tmp_path / "nav.csv"
@@ -34,6 +35,7 @@ def test_navigate_writes_every_row_with_sigma_and_fix_events(voyage_log, tmp_pat
     assert "pass --force" in capsys.readouterr().err
 
 
+@pytest.mark.long
 def test_tight_ukf_beats_the_ins_against_the_truth(voyage_log, tmp_path, capsys):
     """--method ukf: every row with the filter's status, innovation and bias, and a solution
     closer to the written truth than the INS log in the last half hour."""
@@ -59,6 +61,7 @@ def test_tight_ukf_beats_the_ins_against_the_truth(voyage_log, tmp_path, capsys)
     assert err(nav) < 0.7 * err(ins), (err(nav), err(ins))
 
 
+@pytest.mark.long
 def test_missing_readings_are_counted_not_fatal(voyage_log, tmp_path, capsys):
     log, _ = voyage_log
     track = read_track_csv(log, ("t", "lat", "lon", "v_east", "v_north", "gravity"))
@@ -126,6 +129,7 @@ def test_bad_options_are_named(voyage_log, tmp_path, capsys, args, message):
     assert message in capsys.readouterr().err and not out.exists()
 
 
+@pytest.mark.long
 def test_navigate_on_a_map_with_missing_nodes_by_the_track(voyage_log, tmp_path, capsys):
     """Land next to the voyage: a hole of 2 x 2 nodes beside its middle is a mask, and both
     couplings run through it without a NaN."""

@@ -9,6 +9,7 @@ from jaxgrav.geodesy import eotvos, local_offsets_m
 from jaxgrav.tracks import read_track_csv
 
 
+@pytest.mark.long
 def test_simulate_voyage_writes_a_raw_log_and_its_truth(tmp_path, capsys):
     log, truth = tmp_path / "log.csv", tmp_path / "truth.csv"
     assert main(["simulate-voyage", "--out", str(log), "--truth", str(truth),

@@ -23,6 +23,9 @@ def _record_trace(name, secs, fun_name="", **kw):
         TRACED.append(fun_name)
 
 
+pytestmark = pytest.mark.long  # every test reads the demo's output (one run, minutes)
+
+
 @pytest.fixture(scope="module")
 def demo_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo") / "out"

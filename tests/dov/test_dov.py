@@ -65,6 +65,7 @@ def test_exact_on_polynomials_of_the_method_order(method, deg_h, deg_v):
     np.testing.assert_allclose(out.values[1], 2 * poly(lat, lon, h) - 1, rtol=0, atol=1e-9)
 
 
+@pytest.mark.long
 def test_harmonic_vertical_beats_linear_on_a_harmonic_model():
     masses = PointMasses.create(lat=[33.4, 33.7], lon=[108.3, 108.6], depth=[40e3, 60e3],
                                 mass=[2e15, -3e15])
@@ -81,6 +82,7 @@ def test_harmonic_vertical_beats_linear_on_a_harmonic_model():
     assert err["bicubic-harmonic"] < 0.2 * err["bicubic-linear"], err
 
 
+@pytest.mark.long
 def test_grad_forward_reverse_finite_differences():
     layers = _layers(_smooth)
 
@@ -117,6 +119,7 @@ def test_grad_forward_reverse_finite_differences():
     np.testing.assert_allclose(jnp.sum(gv * dv), fd, rtol=1e-9)
 
 
+@pytest.mark.long
 def test_jit_no_retrace_and_vmap_equals_loop():
     layers = _layers(_smooth)
     lat, lon, h = _points(16, seed=3)

@@ -50,6 +50,7 @@ def test_final_error_gradient_wrt_compensation_error_matches_fd():
         np.testing.assert_allclose(g[idx], (f(eps + d) - f(eps - d)) / 2e-4, rtol=1e-6)
 
 
+@pytest.mark.long
 def test_spacing_gradient_matches_fd(small):
     model, lat, lon, h, truth = small
     heights = np.array([0.0, 10000.0, 20000.0])
@@ -69,6 +70,7 @@ def test_spacing_gradient_matches_fd(small):
     np.testing.assert_allclose(g, fd, rtol=1e-3)
 
 
+@pytest.mark.long
 def test_height_gradient_and_optimisation(small):
     model, lat, lon, h, truth = small
     build = sensitivity.harmonic_layers(model, np.linspace(34.0, 35.5, 16),

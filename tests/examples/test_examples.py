@@ -12,7 +12,10 @@ import itertools
 import json
 import re
 
+import pytest
 from _examples import run_example
+
+pytestmark = pytest.mark.long  # runs an example script end to end (a process of its own)
 
 
 def test_paper_b_failures_smoke():

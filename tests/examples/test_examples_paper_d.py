@@ -9,9 +9,12 @@ EKF and UKF on 8 runs of 20 min, ``paper_d_noharm`` with the UKF on 16 runs of
 import re
 
 import numpy as np
+import pytest
 from _examples import run_example
 
 from jaxgrav.fields.pointmass_fit import load_point_masses
+
+pytestmark = pytest.mark.long  # runs an example script end to end (a process of its own)
 
 NUM = r"(-?[\d.]+|nan|inf)"
 

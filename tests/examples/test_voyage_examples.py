@@ -4,6 +4,9 @@ import importlib.util
 import pathlib
 
 import numpy as np
+import pytest
+
+pytestmark = pytest.mark.long  # runs an example script end to end (a process of its own)
 
 SCRIPT = pathlib.Path(__file__).parents[2] / "examples" / "voyage_loose.py"
 

@@ -110,6 +110,7 @@ def small():
     return hm.SphericalHarmonics.from_arrays(c, s, GM, R)
 
 
+@pytest.mark.long
 def test_potential_matches_pyshtools(coeffs360, points, fields360):
     ref = ref_potential(*coeffs360, *points)
     np.testing.assert_allclose(fields360.potential, ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
@@ -173,6 +174,7 @@ def _fields_of_x(model):
     return lambda x: hm.synthesize(model, x[0], x[1], x[2])
 
 
+@pytest.mark.long
 def test_autodiff_in_points(small):
     """Derived fields equal autodiff of T; jacfwd = grad = finite differences."""
     f = _fields_of_x(small)
@@ -238,6 +240,7 @@ def test_grid_equals_point_synthesis(small):
         np.testing.assert_allclose(grid[k], p, rtol=1e-12, atol=atol, err_msg=name)
 
 
+@pytest.mark.long
 def test_degree_2000_at_30n_matches_pyshtools():
     c, s = random_coeffs(2000, seed=11)
     model = hm.SphericalHarmonics.from_arrays(c, s, GM, R)

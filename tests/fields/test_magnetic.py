@@ -102,6 +102,7 @@ def magnetic_track(grid, d_north_m, d_east_m, rot_deg, seed):
     return lat, lon, np.asarray(ins_lat), np.asarray(ins_lon), z
 
 
+@pytest.mark.long
 def test_entropy_iccp_on_a_magnetic_map_beats_the_ins(tmp_path):
     pytest.importorskip("xarray")
 

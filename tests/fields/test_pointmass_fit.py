@@ -128,6 +128,7 @@ def test_loss_gradient_matches_finite_differences():
 # --- recovery ------------------------------------------------------------------------
 
 
+@pytest.mark.long
 def test_recovers_one_mass_and_fit_is_a_map():
     truth = _one_mass()
     g = _grid1(truth)
@@ -157,6 +158,7 @@ def paper_d_fit():
     return values, pf.fit_point_masses(values, 3, lat=lat, lon=lon, **THREE)
 
 
+@pytest.mark.long
 def test_recovers_paper_d_three_masses(paper_d_fit):
     values, fit = paper_d_fit
     _check_recovered(fit, pm.three_mass_model(), pos_km=1.0, rel_mass=0.03)
@@ -201,6 +203,7 @@ def _map_points(masses, lat, lon):
     return np.asarray(pm.gravity_anomaly(masses, lat, lon), dtype=float)
 
 
+@pytest.mark.long
 def test_fitted_model_as_a_filter_map():
     """The UKF on paper D-like runs with a fitted model as its map (masses + offset, fitted
     to a noisy map window) does about as well as with the true masses."""
@@ -237,6 +240,7 @@ def test_fitted_model_as_a_filter_map():
     assert np.mean(score(fit.masses, -PAPER_D_OFFSET)) > np.mean(ratio_true) + 0.05
 
 
+@pytest.mark.long
 def test_jit_no_retrace_on_new_data_and_sweep():
     pf.fit_point_masses(_grid1(_one_mass()), 1, **ONE)
     size = pfs.fit_batch._cache_size()
@@ -273,6 +277,7 @@ def test_vmap_over_restarts_equals_loop():
 # --- model files ---------------------------------------------------------------------
 
 
+@pytest.mark.long
 def test_save_and_load_round_trip(paper_d_fit, tmp_path):
     _, fit = paper_d_fit
     path = tmp_path / "model.json"

@@ -198,6 +198,7 @@ def test_sigma_weights_sum_to_one_and_match_filterpy():
         np.testing.assert_allclose(float(scale), alpha**2 * (n + kappa), rtol=1e-9)
 
 
+@pytest.mark.long
 def test_ukf_equals_filterpy_on_the_gravity_measurement(dynamics, prior, runs):
     steps = _one(runs[0], 0)
     x0, p0 = prior
@@ -234,6 +235,7 @@ def _with_h_lin(steps):
     return steps._replace(h_lin=jnp.asarray(scale[:, None] * H_LIN))
 
 
+@pytest.mark.long
 def test_ukf_linear_part_equals_filterpy_with_it_in_hx(dynamics, prior, runs):
     """Step.h_lin: the structured UKF adds h_lin·x at every sigma point, as filterpy's
     full 27-point UKF does with it written into hx."""
@@ -276,6 +278,7 @@ def _linear_part_generic(field, x, lat, lon):
 EKF_H_LIN = fl.ekf(_linear_part_generic)
 
 
+@pytest.mark.long
 def test_ekf_linear_part_equals_the_measurement_written_with_it(dynamics, prior, runs):
     steps = _one(runs[0], 2)
     x0, p0 = prior
@@ -291,6 +294,7 @@ def test_ekf_linear_part_equals_the_measurement_written_with_it(dynamics, prior,
 UKF_CURVED = fl.ukf(curvature_count=40.0)
 
 
+@pytest.mark.long
 def test_ukf_curvature_count_adds_the_map_second_order_variance(dynamics, prior, runs):
     """curvature_count · ½ tr((∇²h P)²), with the Hessian by central differences in NumPy,
     is what the curvature term adds to the reading variance."""
@@ -322,6 +326,7 @@ def test_ukf_curvature_count_adds_the_map_second_order_variance(dynamics, prior,
                                atol=1e-6)
 
 
+@pytest.mark.long
 def test_pmf_refuses_a_linear_part(dynamics, prior, runs):
     steps = _with_h_lin(_one(runs[0], 0))
     x0, p0 = prior
@@ -403,6 +408,7 @@ def _correlated_p(p0, seed=7):
 
 
 @pytest.mark.parametrize("map_kind", ["pointmass", "grid"])
+@pytest.mark.long
 def test_ekf_update_uses_the_finite_difference_jacobian(map_kind, prior, still, smooth_grid):
     """ekf().update's H (recovered from its gain) is the central-difference H at the mean."""
     if map_kind == "pointmass":
@@ -541,6 +547,7 @@ UKF_GENERIC = fl.ukf(_generic_gravity)
 
 
 @pytest.mark.parametrize("map_kind", ["pointmass", "grid"])
+@pytest.mark.long
 def test_structured_ukf_equals_the_generic_ukf(map_kind, dynamics, prior, runs, smooth_grid):
     """MapPlusBias: the map at the 5 distinct sigma positions gives the 27-point numbers."""
     x0, p0 = prior
@@ -599,6 +606,7 @@ GSF3 = fl.gaussian_sum(UKF, per_axis=3)
 
 @pytest.mark.parametrize(("which", "n_steps"), [  # a length that is not a multiple of
     ("ukf", N_STEPS), ("ukf", N_STEPS - 1), ("ekf", N_STEPS - 1), ("gsf", N_STEPS)])  # every
+@pytest.mark.long
 def test_update_only_on_reading_steps_equals_every_step(which, n_steps, dynamics, prior, runs):
     """run_filter(every=2) — predictions between readings — equals the every-step run."""
     filt = {"ukf": UKF, "ekf": EKF, "gsf": GSF3}[which]
@@ -706,6 +714,7 @@ def _stack(infos):
 
 
 @pytest.mark.parametrize("filt", [UKF, EKF], ids=["ukf", "ekf"])
+@pytest.mark.long
 def test_batched_equals_loop(filt, dynamics, prior, runs):
     """vmap(run_filter) over runs equals a Python loop over runs and steps of ``update``."""
     steps = runs[0]

@@ -160,6 +160,7 @@ def _infos(rng, t):
     return info, jnp.asarray(b)
 
 
+@pytest.mark.long
 def test_guard_infos_vmap_equals_loop():
     runs, t = 4, 40
     cases = [_infos(np.random.default_rng(i), t) for i in range(runs)]
@@ -201,6 +202,7 @@ def test_guard_infos_bad_input():
         guard_infos(info, b, GuardConfig(0.7, 0.3))
 
 
+@pytest.mark.long
 def test_guard_run_uses_free_covariance():
     model = ins.INSErrorModel()
     dyn = Dynamics(*ins.transition(model, 24.3, 10.0))

@@ -67,6 +67,7 @@ def test_fogm_length_matches_the_integral_scale():
     assert float(fogm_length(map_error(3.0, 10e3))) == 20e3
 
 
+@pytest.mark.long
 def test_off_is_today_bit_for_bit(grid):
     key = jax.random.key(3)
     a = jax.jit(filter_scenario)(key, grid, SCEN)
@@ -84,6 +85,7 @@ def test_off_is_today_bit_for_bit(grid):
         np.testing.assert_array_equal(np.asarray(today[k]), np.asarray(off[k]))
 
 
+@pytest.mark.long
 def test_map_error_changes_only_the_readings(grid):
     key = jax.random.key(4)
     a = filter_scenario(key, grid, SCEN)
@@ -101,6 +103,7 @@ def test_point_masses_refuse_map_error():
         filter_builder(None, kind="ukf", map_error=map_error(1.0, 1e4))
 
 
+@pytest.mark.long
 def test_structured_ukf_equals_generic_with_the_map_error_state(grid):
     run_ = filter_scenario(jax.random.key(5), grid, SCEN, map_error(3.0, 10e3))
     dyn, steps = run_steps(run_, SCEN)
@@ -118,6 +121,7 @@ def test_structured_ukf_equals_generic_with_the_map_error_state(grid):
     np.testing.assert_allclose(np.asarray(a.p_pos), np.asarray(b.p_pos), rtol=1e-9, atol=1e-6)
 
 
+@pytest.mark.long
 def test_sweeping_sigma_and_length_does_not_retrace(grid):
     key, truth = jax.random.key(6), map_error(3.0, 10e3)
     n0 = len(_TRACES)
@@ -151,6 +155,7 @@ def test_bad_map_error_input_names_the_option():
         filter_builder(datasets.load("ryukyu")["anomaly_2p5min"], kind="ukf", map_error=3.0)
 
 
+@pytest.mark.long
 def test_nees_is_honest_with_the_matched_state_and_not_without(grid):
     """A small Monte Carlo (24 runs, 1 h) with a 3 mGal, 10 km markov2 map error; the
     default state is the matched second-order one."""

@@ -44,6 +44,7 @@ def test_systematic_resample_equals_filterpy(seed, monkeypatch):
     np.testing.assert_array_equal(np.asarray(systematic_resample(key, log_w)), expected)
 
 
+@pytest.mark.long
 def test_residual_resample_copies_and_is_unbiased():
     log_w = _log_w(4, 40)
     n = log_w.shape[0]
@@ -114,6 +115,7 @@ def _linear_problem(t=60, seed=0):
 
 
 @pytest.mark.parametrize("kind", ["rbpf", "pf"])
+@pytest.mark.long
 def test_particle_filters_match_the_kalman_filter_on_a_linear_map(kind):
     """With a plane map the EKF is the exact posterior; both particle filters approach it."""
     dyn, x0, p0, steps = _linear_problem()
@@ -135,6 +137,7 @@ def test_particle_filters_match_the_kalman_filter_on_a_linear_map(kind):
                                np.asarray(kf.innovation_var)[fin], rtol=0.25)
 
 
+@pytest.mark.long
 def test_rbpf_shared_covariance_equals_the_kalman_one_on_a_linear_map():
     """The RBPF's Riccati part: with one particle-free direction it is the KF's exactly."""
     dyn, x0, p0, steps = _linear_problem(20)
@@ -154,6 +157,7 @@ def _small(kind, n=64):
 
 
 @pytest.mark.parametrize("kind", ["rbpf", "pf"])
+@pytest.mark.long
 def test_vmap_equals_loop_and_no_retrace(kind):
     dyn, x0, p0, steps = _linear_problem(15)
     traces = []
@@ -172,6 +176,7 @@ def test_vmap_equals_loop_and_no_retrace(kind):
     np.testing.assert_array_equal(np.asarray(fn(keys[0])), loop[0])  # and reproduces
 
 
+@pytest.mark.long
 def test_every_stride_and_map_error_state():
     dyn, x0, p0, steps = _linear_problem(30)
     cfg = map_error_state(2.0, 10e3, 1)
@@ -185,6 +190,7 @@ def test_every_stride_and_map_error_state():
         assert np.all(np.isfinite(np.asarray(infos.x)))
 
 
+@pytest.mark.long
 def test_off_map_particles_skip_the_reading():
     dyn, x0, p0, steps = _linear_problem(5)
 
@@ -198,6 +204,7 @@ def test_off_map_particles_skip_the_reading():
         assert np.all(np.isfinite(np.asarray(infos.x)))
 
 
+@pytest.mark.long
 def test_bad_settings_are_clear_errors():
     with pytest.raises(ValueError, match="n_particles"):
         pf(1)

@@ -34,6 +34,7 @@ def _model():
     return Dynamics(f, q, jnp.asarray(10.0)), p0
 
 
+@pytest.mark.long
 def test_bound_is_the_kalman_covariance_on_a_linear_map():
     """H does not depend on the state: the bound is the (exact) KF covariance."""
     dyn, p0 = _model()
@@ -47,6 +48,7 @@ def test_bound_is_the_kalman_covariance_on_a_linear_map():
     assert not np.any(np.asarray(res.off_map))
 
 
+@pytest.mark.long
 def test_bound_equals_a_numpy_recursion_on_the_point_masses():
     """Brute force: H by central differences of the map at the true position, the
     Riccati recursion in NumPy."""
@@ -99,6 +101,7 @@ def test_off_map_and_missing_readings_add_no_information():
     np.testing.assert_allclose(b[7], f @ b[6] @ f.T + q, rtol=1e-10, atol=1e-14)
 
 
+@pytest.mark.long
 def test_vmap_equals_loop_and_grad_matches_finite_differences():
     dyn, p0 = _model()
     steps = _steps(20)

@@ -236,6 +236,7 @@ def test_recentres_on_the_posterior_mean():
 # ----------------------------------------------------------------- runs
 
 
+@pytest.mark.long
 def test_every_is_causal_and_predicts_between_readings(prior):
     x0, p0 = prior
     every, n = 4, 16
@@ -269,6 +270,7 @@ def test_every_is_causal_and_predicts_between_readings(prior):
                                    rtol=1e-9)
 
 
+@pytest.mark.long
 def test_vmap_equals_loop(prior):
     # the single runs share the compiled program of the causality test (16 steps, every 4)
     x0, p0 = prior

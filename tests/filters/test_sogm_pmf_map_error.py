@@ -139,6 +139,7 @@ def _np_step(state, step, dyn):
                 err_var=se1 - ke**2 * s, err_cross=c1 - kb * ke * s), centre
 
 
+@pytest.mark.long
 def test_pmf_map_error_equals_a_brute_force_numpy_filter():
     dyn, x0, p0 = _prior()
     init = jax.jit(PMF.init)
@@ -170,6 +171,7 @@ def _pmf_run(sigma, length, steps):
     return fl.run_filter(PMF, FIELD, dyn, x0, p0, steps)[1]
 
 
+@pytest.mark.long
 def test_pmf_map_error_vmap_equals_loop_and_sigma_length_do_not_retrace():
     steps = _steps(6, seed=1, n_runs=2)
     one = jax.jit(_pmf_run)

@@ -18,6 +18,7 @@ import datetime
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from stonesoup.base import Property
 from stonesoup.functions import grid_creation
 from stonesoup.models.base import GaussianModel
@@ -110,6 +111,7 @@ def _kalman(f, q, x0, p0, h, r, zs):
     return x, p
 
 
+@pytest.mark.long
 def test_particle_filters_approach_the_kalman_posterior():
     f, q, x0, p0, h, r, zs = _linear_case()
     x_kf, p_kf = _kalman(f, q, x0, p0, h, r, zs)
@@ -159,6 +161,7 @@ class _SumModel(LinearGaussian):
         return self.h[None, :]
 
 
+@pytest.mark.long
 def test_pmf_matches_stonesoup_point_mass_filter():
     sigma, n_cells, q_pos, dt, r = 1000.0, 81, 20.0, 10.0, 0.25
     cell = 8.0 * sigma / (n_cells - 1)  # Stone Soup's ±4σ grid of the prior: the same points

@@ -39,6 +39,7 @@ def test_one_method_list_and_one_status_table():
         jm.match_track(None, [0.0], [0.0], [0.0], method="correlation")
 
 
+@pytest.mark.long
 def test_match_track_runs_every_contour_method_on_one_prepared_map(smooth_grid, track):
     lat, lon, z = track
     pm = jm.prepare_map(smooth_grid)

@@ -15,6 +15,7 @@ from jaxgrav.match.dense import DenseConfig, match_dense
 
 
 @pytest.mark.parametrize("map_error_mgal", [0.0, 2.0])
+@pytest.mark.long
 def test_refinement_is_clamped_to_the_searched_square(map_error_mgal):
     lat = np.linspace(29.0, 31.0, 41)
     lon = np.linspace(129.0, 131.0, 41)

@@ -30,6 +30,7 @@ def grid(smooth_grid):
     return smooth_grid
 
 
+@pytest.mark.long
 def test_map_error_zero_is_todays_white_score_bit_for_bit(grid):
     gold = json.loads(GOLDEN.read_text())  # written by the matcher before map errors existed
     for name, nrot in (("plain", 1), ("rot", 3)):
@@ -54,6 +55,7 @@ def _gls_config(grid, sigma=3.0, length=8000.0, **kw):
     return dataclasses.replace(cfg, **kw)
 
 
+@pytest.mark.long
 def test_gls_dense_scores_equal_brute_force_numpy_gls(grid):
     cfg = _gls_config(grid, half_size=3, spacing_m=300.0, k_best=10, refine_steps=0)
     run = matching_scenario(jax.random.key(5), grid, SCEN)
@@ -80,6 +82,7 @@ def test_gls_dense_scores_equal_brute_force_numpy_gls(grid):
     np.testing.assert_allclose(np.asarray(r.topk_score), want, rtol=2e-4)
 
 
+@pytest.mark.long
 def test_no_retrace_when_map_error_changes_and_vmap_equals_loop(grid):
     runs = [matching_scenario(jax.random.key(s), grid, SCEN) for s in range(3)]
     lat, lon, g = (jnp.stack([getattr(r, f) for r in runs]) for f in ("ins_lat", "ins_lon",
@@ -102,6 +105,7 @@ def test_no_retrace_when_map_error_changes_and_vmap_equals_loop(grid):
     assert not np.allclose(np.asarray(out[0].score), np.asarray(out[1].score))
 
 
+@pytest.mark.long
 def test_covariance_95_ellipse_coverage_with_a_correlated_map_error(grid):
     """Truth = map + a drawn σ = 3 mGal, L = 8 km error; 60 runs, posterior fix, all accepted."""
     model = map_error(3.0, 8000.0)
@@ -124,6 +128,7 @@ def test_covariance_95_ellipse_coverage_with_a_correlated_map_error(grid):
     assert 0.85 <= coverage <= 1.0, coverage
 
 
+@pytest.mark.long
 def test_integrity_rejection_returns_the_ins_track_with_status_bits(grid):
     run = matching_scenario(jax.random.key(1), grid, SCEN)
     cfg = _gls_config(grid, max_sigma_m=1e-3, max_second_mode=0.0)
@@ -134,6 +139,7 @@ def test_integrity_rejection_returns_the_ins_track_with_status_bits(grid):
     assert float(r.offset_north_m) == 0.0
 
 
+@pytest.mark.long
 def test_score_model_compiles_one_score_with_the_same_results(grid):
     """``score_model`` "gls" and "white" (what config_for sets) give what "auto" gives,
     and "white" refuses a map error it would ignore."""

@@ -136,6 +136,7 @@ def test_solve3_matches_numpy():
     assert np.all(np.asarray(solve3(jnp.zeros((3, 3)), jnp.ones(3))) == 0.0)
 
 
+@pytest.mark.long
 def test_patch_coefficients_are_the_bicubic_interpolant(smooth_grid):
     """Value and analytic gradient in local metres = the Grid's bicubic sampler + autodiff."""
     lat_c, lon_c = jnp.asarray(30.0), jnp.asarray(130.0)
@@ -157,6 +158,7 @@ def test_patch_coefficients_are_the_bicubic_interpolant(smooth_grid):
     assert local_field  # the public constructor used by local_track_frame
 
 
+@pytest.mark.long
 def test_least_squares_refinement_and_rotation_bound(smooth_grid):
     lat, lon = _track()
     z = smooth_grid.sample(lat, lon, "bicubic")
@@ -180,6 +182,7 @@ def test_least_squares_refinement_and_rotation_bound(smooth_grid):
 
 # ---------------------------------------------------------------------- ICCP
 @pytest.mark.parametrize("d_n,d_e,rot_deg", [(300.0, -200.0, 0.0), (-150.0, 250.0, 1.5)])
+@pytest.mark.long
 def test_iccp_converges_from_small_offsets(smooth_grid, d_n, d_e, rot_deg):
     lat, lon = _track()
     z = smooth_grid.sample(lat, lon, "bicubic")  # noiseless readings at the truth
@@ -201,6 +204,7 @@ def test_iccp_converges_from_small_offsets(smooth_grid, d_n, d_e, rot_deg):
     assert int(res.status) & 16
 
 
+@pytest.mark.long
 def test_iccp_batch_in_chunks_equals_looped(smooth_grid):
     rng = np.random.default_rng(7)
     lat, lon = _track()
@@ -229,6 +233,7 @@ ICP = IccpConfig(window_m=600.0, max_step_m=300.0, contour_tol=2.0)
 # every combined call below shares these static settings and a 20-fix track: one compile
 
 
+@pytest.mark.long
 def test_entropy_coarse_finds_exact_offset(smooth_grid):
     lat, lon = _track()
     # truth = INS shifted by a grid offset: that candidate has ΔH = 0 and zero misfit
@@ -247,6 +252,7 @@ def test_entropy_coarse_finds_exact_offset(smooth_grid):
     assert entropy_config_for(smooth_grid, 800.0).shift == 0
 
 
+@pytest.mark.long
 def test_combined_batched_equals_looped_and_no_retrace(smooth_grid):
     rng = np.random.default_rng(5)
     lat, lon = _track()
@@ -279,6 +285,7 @@ def test_combined_batched_equals_looped_and_no_retrace(smooth_grid):
     assert match_entropy_iccp._cache_size() == size
 
 
+@pytest.mark.long
 def test_combined_keeps_coarse_unless_significantly_better(smooth_grid):
     lat, lon = _track()
     t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), 330.0, -510.0,
@@ -295,6 +302,7 @@ def test_combined_keeps_coarse_unless_significantly_better(smooth_grid):
     np.testing.assert_allclose(kept.lat, kept.topk_lat[0])
 
 
+@pytest.mark.long
 def test_match_track_validates_the_contour_methods(smooth_grid):
     lat, lon = _track()
     t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), -200.0, 400.0, 0.0)
@@ -372,6 +380,7 @@ def _candidate_values(grid, lat, lon):
     return np.array(offs), np.array(vals)
 
 
+@pytest.mark.long
 def test_entropy_acceptance_test_by_hand(smooth_grid):
     """Paper B's acceptance test: only candidates whose RMS misfit beats the INS track's."""
     lat, lon = _track()
@@ -414,6 +423,7 @@ def test_entropy_acceptance_test_by_hand(smooth_grid):
 
 
 # ---------------------------------------------------------------------- no retrace
+@pytest.mark.long
 def test_match_entropy_and_iccp_numbers_do_not_retrace(smooth_grid):
     lat, lon = _track()
     t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), 150.0, -100.0,

@@ -214,6 +214,7 @@ def _quad(on, oe, mean, cov):
     return np.einsum("ci,ij,cj->c", d, np.linalg.inv(cov), d)
 
 
+@pytest.mark.long
 def test_posterior_of_a_gaussian_likelihood():
     on, oe = _lattice()
     j = _quad(on, oe, MEAN, K) + 25.0
@@ -253,6 +254,7 @@ def test_bimodal_likelihood_has_second_mode_ratio_near_one():
     assert np.sqrt(post.covariance_m2[0, 0]) > 900.0  # the spread of both modes
 
 
+@pytest.mark.long
 def test_invalid_offsets_are_ignored_and_all_invalid_is_flagged():
     on, oe = _lattice()
     j = _quad(on, oe, MEAN, K)
@@ -280,6 +282,7 @@ def test_invalid_offsets_are_ignored_and_all_invalid_is_flagged():
     assert not batch.valid[1]
 
 
+@pytest.mark.long
 def test_posterior_covers_the_truth_under_a_correlated_map_error():
     """Monte Carlo: map error drawn from the model along the true track, readings matched
     on an offset lattice fine enough to resolve the posterior (a smooth map, ~10 offsets

@@ -23,6 +23,7 @@ def _lattices(n_lat, a, b, span_y, span_x, margin=0.0):
 
 
 @pytest.mark.parametrize("method", ["bicubic", "bilinear"])
+@pytest.mark.long
 def test_lattice_equals_pointwise(method):
     coef = interp.bicubic_coefficients(VALUES)
     table = interleave(coef) if method == "bicubic" else VALUES
@@ -38,6 +39,7 @@ def test_lattice_equals_pointwise(method):
                                atol=1e-12)
 
 
+@pytest.mark.long
 def test_lattice_at_the_map_edges():
     coef = interp.bicubic_coefficients(VALUES)
     rows = jnp.asarray([[0.0, 0.5, 1.0], [20.0, 21.0, 22.0]])
@@ -48,6 +50,7 @@ def test_lattice_at_the_map_edges():
     np.testing.assert_allclose(v, ref, rtol=0, atol=1e-12)
 
 
+@pytest.mark.long
 def test_patch_values_and_gradient():
     coef = interp.bicubic_coefficients(VALUES)
     iy = jnp.asarray(RNG.uniform(-0.5, 22.5, 300))

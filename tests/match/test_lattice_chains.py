@@ -76,6 +76,7 @@ def case(smooth_grid):
                 geo=geo, size=size, truth=truth)
 
 
+@pytest.mark.long
 def test_elimination_and_count_equal_the_pairwise_search(case):
     """Same candidates (all window nodes): the stencil elimination and chain count equal
     the pairwise ones exactly, and no step overflows the stencil sized for the track."""
@@ -92,6 +93,7 @@ def test_elimination_and_count_equal_the_pairwise_search(case):
     np.testing.assert_allclose(n_l, n, rtol=1e-12)
 
 
+@pytest.mark.long
 def test_kbest_equal_the_pairwise_programme(case):
     cands, steps, tol, geo, g = case["cands"], case["steps"], case["tol"], case["geo"], case["g"]
     alive = eliminate(cands, steps, *tol)
@@ -112,6 +114,7 @@ def test_kbest_equal_the_pairwise_programme(case):
 ISOLATED = "JAXGRAV_ISOLATED_TEST"
 
 
+@pytest.mark.long
 def test_stencil_equals_pairwise_in_a_process_of_its_own():
     """XLA:CPU aborted (SIGABRT while compiling) in the next test late in two full
     ``make test`` runs, in the same place both times; alone it passes. So it runs in a
@@ -146,6 +149,7 @@ def test_match_chains_stencil_equals_pairwise_and_flags_overflow(case, smooth_gr
     assert int(small.status) & 256
 
 
+@pytest.mark.long
 def test_stencil_vmap_equals_loop_and_no_retrace(smooth_grid):
     cfg = ChainConfig(delta=1.0, half_size=5, stencil_size=7)
     tracks = [_track(smooth_grid, jax.random.key(10 + i)) for i in range(3)]

@@ -66,6 +66,7 @@ def test_scan_whitener_equals_the_lapack_one():
         np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-10, atol=1e-12)
 
 
+@pytest.mark.long
 def test_chain_gls_score_equals_brute_force_numpy_and_covariance_is_pd(smooth_grid):
     grid = smooth_grid
     cfg = _chain_cfg(grid, fix="chain", max_sigma_m=float("inf"), selection="best")
@@ -100,6 +101,7 @@ def test_chain_gls_score_equals_brute_force_numpy_and_covariance_is_pd(smooth_gr
     np.testing.assert_array_equal(np.asarray(rejected.lat), lat)
 
 
+@pytest.mark.long
 def test_iccp_gls_score_equals_brute_force_numpy_and_covariance_is_pd(smooth_grid):
     grid = smooth_grid
     ent, fine = _iccp_cfgs(grid, max_sigma_m=float("inf"))
@@ -118,6 +120,7 @@ def test_iccp_gls_score_equals_brute_force_numpy_and_covariance_is_pd(smooth_gri
     np.testing.assert_array_equal(np.asarray(rejected.lat), lat)
 
 
+@pytest.mark.long
 def test_no_retrace_when_map_error_changes_and_vmap_equals_loop(smooth_grid):
     grid = smooth_grid
     runs_a = [matching_scenario(jax.random.key(s), grid, SCEN_A) for s in (1, 2)]
@@ -153,6 +156,7 @@ def test_no_retrace_when_map_error_changes_and_vmap_equals_loop(smooth_grid):
 
 
 @pytest.mark.parametrize("method", ["chains", "entropy+iccp"])
+@pytest.mark.long
 def test_covariance_coverage_on_a_small_monte_carlo(smooth_grid, method):
     """Truth = map + a drawn σ = 3 mGal, L = 8 km error; 32 runs; loose bounds."""
     grid = smooth_grid

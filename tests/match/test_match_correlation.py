@@ -37,6 +37,7 @@ def rough_grid():
     return jg.Grid.from_arrays(LAT, LON, RNG.normal(size=(41, 41)) * 5)
 
 
+@pytest.mark.long
 def test_scores_by_hand():
     g = jnp.array([1.0, 2.0, 4.0])
     m = jnp.array([[1.0, 2.0, 4.0], [2.0, 3.0, 5.0], [0.0, 2.0, 4.0]])
@@ -76,6 +77,7 @@ def _brute_force(cands, steps, tol, g, wd):
     return sorted(found)
 
 
+@pytest.mark.long
 def test_chain_steps_against_brute_force(rough_grid):
     n = 4
     flat = 30 + np.arange(n) * 0.06
@@ -107,6 +109,7 @@ def test_chain_steps_against_brute_force(rough_grid):
     np.testing.assert_array_equal(res.index, [c for _, c in brute[:6]])
 
 
+@pytest.mark.long
 def test_kmin_and_overflow_reported(rough_grid):
     x = jnp.array([[3.0, 1.0, 2.0, 0.5]])
     v, i = chains.kmin(x, 2)
@@ -146,6 +149,7 @@ def _iso_brute_force(grid, lat, lon, g, k, delta, slope_factor):
 
 
 @pytest.mark.parametrize(("slope_factor", "delta", "small_cap"), [(0.0, 6.0, 9), (1.0, 1.0, 20)])
+@pytest.mark.long
 def test_iso_masks_equal_the_rule_by_brute_force(smooth_grid, slope_factor, delta, small_cap):
     """Candidates are exactly the window nodes within δ (+ the node allowance); with too
     small a capacity the count and overflow are still right and the best fits are kept."""
@@ -230,6 +234,7 @@ def _scenario(key, grid, n, dt, drift_m, noise, method="bilinear"):
 
 
 @pytest.mark.parametrize(("strict", "dt"), [(False, 300.0), (True, 300.0), (False, 60.0)])
+@pytest.mark.long
 def test_elimination_never_removes_true_chain_noiseless(smooth_grid, strict, dt):
     """Exact readings at off-node positions: the true chain (node nearest the truth at
     every fix) is a complete chain under the library's tolerances and survives.
@@ -279,6 +284,7 @@ def test_elimination_never_removes_true_chain_noiseless(smooth_grid, strict, dt)
     assert out["alive"].all()  # and elimination keeps the whole chain
 
 
+@pytest.mark.long
 def test_match_chains_recovers_a_node_track_and_reports_work(smooth_grid):
     """Truth on map nodes, exact readings: the true chain scores zero and is returned."""
     i = np.arange(10)
@@ -300,6 +306,7 @@ def test_match_chains_recovers_a_node_track_and_reports_work(smooth_grid):
 
 
 @pytest.mark.parametrize("score", ["bias", "difference", "absolute"])
+@pytest.mark.long
 def test_match_dense_recovers_offset(smooth_grid, score):
     tr, ilat, ilon, g = _scenario(jax.random.key(7), smooth_grid, 12, 60.0, 1500.0, 0.0,
                                   "bicubic")
@@ -311,6 +318,7 @@ def test_match_dense_recovers_offset(smooth_grid, score):
     assert np.mean(err) < 5.0, np.mean(err)  # exact up to the refinement's convergence
 
 
+@pytest.mark.long
 def test_match_dense_exact_on_bicubic_truth_and_rotation(smooth_grid):
     key = jax.random.key(11)
     tr = sim.straight_track(29.8, 129.8, 6.0, 4.0, 15, 60.0)
@@ -327,6 +335,7 @@ def test_match_dense_exact_on_bicubic_truth_and_rotation(smooth_grid):
 
 
 @pytest.mark.parametrize("score", ["bias", "difference"])
+@pytest.mark.long
 def test_dense_grid_search_paths_agree(smooth_grid, score):
     """Separable lattice (small block, large block) and point-by-point sampling agree."""
     _, ilat, ilon, g = _scenario(jax.random.key(5), smooth_grid, 12, 60.0, 600.0, 0.5,
@@ -353,6 +362,7 @@ def test_dense_grid_search_paths_agree(smooth_grid, score):
         match_dense(smooth_grid, ilat, ilon, g, base, table[:-2])
 
 
+@pytest.mark.long
 def test_jit_no_retrace_and_vmap_equals_loop(smooth_grid):
     # the sizes and config of test_match_dense_recovers_offset[bias]: its compiled matcher
     keys = jax.random.split(jax.random.key(2), 4)
@@ -385,6 +395,7 @@ def test_jit_no_retrace_and_vmap_equals_loop(smooth_grid):
         np.testing.assert_array_equal(bc.status[i], one.status)
 
 
+@pytest.mark.long
 def test_match_chains_no_retrace_when_tolerances_change(smooth_grid):
     """δ, the node allowance, step/angle tolerances and the weight decay are pytree
     leaves: new values (and a new track) reuse the compiled matcher."""
@@ -412,6 +423,7 @@ def test_match_chains_no_retrace_when_tolerances_change(smooth_grid):
     assert int(r1.status) & 1 == 0 and int(r3.status) & 1 == 0
 
 
+@pytest.mark.long
 def test_chain_survivor_compaction(smooth_grid):
     """Compacting survivors changes nothing but the work; too few slots raise overflow."""
     keys = jax.random.split(jax.random.key(9), 3)
@@ -441,6 +453,7 @@ def test_chain_survivor_compaction(smooth_grid):
         ChainConfig(survivor_capacity=-1)
 
 
+@pytest.mark.long
 def test_compact_and_small_capacity_kbest(rough_grid):
     """compact keeps survivors in slot order; the k-best programme with fewer slots than
     k equals brute force."""
@@ -475,6 +488,7 @@ def test_compact_and_small_capacity_kbest(rough_grid):
     np.testing.assert_array_equal(lost, n_alive > 1)
 
 
+@pytest.mark.long
 def test_no_chain_returns_ins_with_status(rough_grid):
     lat = 30 + np.arange(5) * 0.05
     lon = 130 + np.arange(5) * 0.05
@@ -484,6 +498,7 @@ def test_no_chain_returns_ins_with_status(rough_grid):
     assert np.isinf(r.score)
 
 
+@pytest.mark.long
 def test_grad_of_score_through_the_map(smooth_grid):
     """The dense score is differentiable in the offset (used by the refinement)."""
     tr = sim.straight_track(29.8, 129.8, 6.0, 4.0, 10, 60.0)

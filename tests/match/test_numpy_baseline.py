@@ -84,6 +84,7 @@ def test_dense_grid_sampling_equals_point_sampling(region, tracks):
         np.testing.assert_allclose(a.lat, b.lat, rtol=0, atol=1e-9)
 
 
+@pytest.mark.long
 def test_dense_agrees_with_jaxgrav(region, tracks):
     # rotations (point sampling, rotation column of the Jacobian), a bias prior,
     # decreasing weights and the nearest-to-INS rule: the least common paths
@@ -107,6 +108,7 @@ def test_dense_agrees_with_jaxgrav(region, tracks):
         assert int(r.status) == a.status
 
 
+@pytest.mark.long
 def test_chains_agree_with_jaxgrav(region, tracks):
     fine = region.refine(4)
     m = npc.prepare_grid(fine, spline=False)

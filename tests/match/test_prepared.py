@@ -46,6 +46,7 @@ def test_prepared_map_equals_the_old_paths(smooth_grid, points):
         pm.sample(lat, lon, "nearest")
 
 
+@pytest.mark.long
 def test_prepared_map_vmaps_over_points_and_jits_without_retrace(smooth_grid, points):
     pm = prepare_map(smooth_grid)
     lat, lon = points
@@ -61,6 +62,7 @@ def test_prepared_map_vmaps_over_points_and_jits_without_retrace(smooth_grid, po
     assert len(leaves) == 2 and isinstance(pm, PreparedMap)  # values and coefficients
 
 
+@pytest.mark.long
 def test_prepared_map_gradient_against_finite_differences(smooth_grid, points):
     pm = prepare_map(smooth_grid)
     lat, lon = (a[:8] for a in points)
@@ -87,6 +89,7 @@ def test_cores_take_a_prepared_map(smooth_grid):
         np.testing.assert_allclose(np.asarray(y), np.asarray(x), rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.long
 def test_a_closed_over_map_is_not_constant_folded_and_stays_differentiable(smooth_grid):
     """A map closed over by a jitted caller is prepared at run time (XLA's constant folder
     spent ~15 s on a 289 × 289 map's spline products), with the same values, and the

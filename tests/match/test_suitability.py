@@ -47,6 +47,7 @@ def _brute_force(grid, iy, ix, heading, n, spacing, noise, sig, length):
 
 
 @pytest.mark.parametrize(("heading", "sig"), [(45.0, 0.0), (120.0, 3.0)])
+@pytest.mark.long
 def test_crlb_equals_a_numpy_information_matrix(small, heading, sig):
     s = suitability(small, heading_deg=heading, n_fixes=12, spacing_m=1500.0, noise_mgal=1.0,
                     map_error_mgal=sig, map_error_length_m=10e3)
@@ -59,6 +60,7 @@ def test_crlb_equals_a_numpy_information_matrix(small, heading, sig):
                                    rtol=1e-3, atol=1e-4)
 
 
+@pytest.mark.long
 def test_map_error_and_noise_make_the_bound_worse(small):
     a = suitability(small, n_fixes=12, spacing_m=1500.0)
     b = suitability(small, n_fixes=12, spacing_m=1500.0, map_error_mgal=3.0)
@@ -68,6 +70,7 @@ def test_map_error_and_noise_make_the_bound_worse(small):
     np.testing.assert_allclose(c.precision_m[ok], 2 * a.precision_m[ok], rtol=1e-9)
 
 
+@pytest.mark.long
 def test_plane_map_offset_is_confounded_with_a_free_bias():
     lat = np.arange(30) * 0.05
     lon = np.arange(30) * 0.05
@@ -96,6 +99,7 @@ def test_segments_leaving_the_map_are_nan(small):
     assert np.all(np.isfinite(s.precision_m[: ny - reach - 1, :]))
 
 
+@pytest.mark.long
 def test_descriptors_against_numpy(small):
     s = suitability(small, n_fixes=8, spacing_m=1000.0, window_cells=5)
     z = np.asarray(small.values, float)
@@ -125,6 +129,7 @@ def test_bad_settings(small, kwargs, message):
         suitability(small, **kwargs)
 
 
+@pytest.mark.long
 def test_cli_writes_netcdf_and_png_and_refuses_overwrite(tmp_path, capsys):
     out = tmp_path / "suit.nc"
     assert main(["suitability", "--map", "ryukyu", "--out", str(out), "--fixes", "10",

@@ -101,6 +101,7 @@ def test_told_and_white_settings():
         montecarlo_methods.build("dense", grid, map_error=err, map_error_told=3.0, **opts)
 
 
+@pytest.mark.long
 def test_coverage_on_a_small_monte_carlo():
     """Told the true error model, the accepted fixes' 95 % ellipses cover the truth on most
     runs and the returned track is rarely worse than the INS (loose bounds: 32 runs)."""

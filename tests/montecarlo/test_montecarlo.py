@@ -71,6 +71,7 @@ def assert_same(a, b, label=""):
         np.testing.assert_allclose(a[k], b[k], rtol=1e-12, atol=1e-12, err_msg=f"{label} {k}")
 
 
+@pytest.mark.long
 def test_equals_vmapped_loop_with_shapes():
     out = montecarlo.run(toy, jax.random.key(0), N_RUNS, args=toy_args(), progress=False)
     assert {k: v.shape for k, v in out.items()} == {
@@ -81,6 +82,7 @@ def test_equals_vmapped_loop_with_shapes():
 
 
 @pytest.mark.parametrize("chunk", [1, 3, 100])
+@pytest.mark.long
 def test_chunking_does_not_change_numbers(chunk):
     out = montecarlo.run(toy, jax.random.key(0), N_RUNS, chunk=chunk, args=toy_args(),
                          progress=False)
@@ -214,6 +216,7 @@ def assert_same_runs(a, b, label=""):
 
 
 @pytest.mark.parametrize("method", REAL)
+@pytest.mark.long
 def test_real_method_gives_the_same_runs_for_any_chunk(method):
     opts, n, chunk = REAL[method]
     alone, chunked = real_runs(method, 1), real_runs(method, chunk)
@@ -298,6 +301,7 @@ def _split(npz, names):
             for n in names}
 
 
+@pytest.mark.long
 def test_eight_devices_give_the_numbers_of_one(tmp_path):
     """The toy, and the real dense matcher and UKF (all runs in one chunk of 8,
     one run a device, padded), on 8 devices against one device in chunks."""
@@ -322,6 +326,7 @@ def _free_port():
         return str(s.getsockname()[1])
 
 
+@pytest.mark.long
 def test_two_processes_on_loopback_give_the_numbers_of_one(tmp_path):
     """jax.distributed over two local processes × 2 CPU devices (gloo collectives)."""
     out = tmp_path / "hosts.npz"
@@ -353,6 +358,7 @@ def _me_grid():
 
 
 @pytest.mark.parametrize("method", ["dense", "entropy"])
+@pytest.mark.long
 def test_matcher_builders_take_a_map_error(method):
     from jaxgrav.fields.map_error import map_error
 
@@ -392,6 +398,7 @@ def test_builder_truth_grid_and_its_coverage():
     assert montecarlo_methods.build("ukf", None, map_error=None, n_fixes=20).fn is not None
 
 
+@pytest.mark.long
 def test_paper_a_table1_run_batch_takes_a_map_error():
     from jaxgrav.fields.map_error import map_error
     from jaxgrav.match.sizing import config_for

@@ -53,6 +53,7 @@ def test_filters_are_registered_with_paper_d_defaults():
 
 @pytest.mark.parametrize("kind", ["ukf", "rbpf", *(pytest.param(k, marks=slow)
                                                    for k in FILTERS[2:])])
+@pytest.mark.long
 def test_every_filter_runs_in_the_monte_carlo_runner(kind):
     spec = montecarlo_methods.build(kind, n_fixes=N_FIXES)
     r = montecarlo.run(spec.fn, jax.random.key(1), 2, chunk=2, args=spec.args, progress=False)
@@ -67,6 +68,7 @@ def test_every_filter_runs_in_the_monte_carlo_runner(kind):
     assert np.all(r["nees"] < 50)
 
 
+@pytest.mark.long
 def test_montecarlo_command_with_a_filter(tmp_path, capsys):
     out = tmp_path / "ukf.nc"
     assert main(["montecarlo", "--method", "ukf", "--runs", "2", "--chunk", "2", "--seed", "1",
@@ -105,6 +107,7 @@ def test_filters_on_a_map_start_far_enough_inside():
 
 @pytest.mark.parametrize(("kind", "told"), [("ukf", "state order 2"), ("pmf", "state order 1"),
                                             ("rbpf", "state order 2")])
+@pytest.mark.long
 def test_filter_builder_with_map_error(kind, told):
     """map_error=: readings from map + a drawn error per run; the filters are told by default
     (the matched SOGM state for the Kalman filters, a per-cell FOGM for pmf);

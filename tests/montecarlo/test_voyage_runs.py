@@ -24,6 +24,7 @@ def tight():
     return spec, montecarlo.run(spec.fn, jax.random.key(3), 2, args=spec.args, progress=False)
 
 
+@pytest.mark.long
 def test_a_run_is_the_navigator_on_the_same_voyage(tight):
     spec, res = tight
     pm, grid, scenario, model, config = spec.args
@@ -49,6 +50,7 @@ def test_a_run_is_the_navigator_on_the_same_voyage(tight):
     np.testing.assert_allclose(tracks["free INS"][0], voyage.ins.lat, rtol=0, atol=1e-12)
 
 
+@pytest.mark.long
 def test_dense_runs_record_their_fix_events():
     spec = montecarlo.build("voyage-dense", None, map_error=MODEL, hours=1.0)
     res = montecarlo.run(spec.fn, jax.random.key(0), 1, args=spec.args, progress=False)
@@ -72,6 +74,7 @@ def test_bad_builder_options_are_named(options, error, message):
         voyage_builder(None, **kw)
 
 
+@pytest.mark.long
 def test_cli_voyage_method_writes_results_and_figure(tmp_path, capsys):
     out = tmp_path / "v.nc"
     assert main(["montecarlo", "--method", "voyage-ukf", "--runs", "2", "--hours", "1",

@@ -29,6 +29,7 @@ from jaxgrav.sim.ins import INSErrorModel, transition
 INS = INSErrorModel()
 
 
+@pytest.mark.long
 def test_tables_equal_matrix_powers_in_numpy():
     t = error_kf_tables(INS, 30.0, 10.0, 5, 4)
     f, q = (np.asarray(a) for a in transition(INS, 30.0, 10.0))
@@ -94,6 +95,7 @@ CONFIG = LooseConfig(matcher=DenseConfig(noise_mgal=0.5, half_size=6, fix="poste
                      ins=INS, sigma_pos_m=1100.0, fix_every=6, n_fixes=20, stride=10)
 
 
+@pytest.mark.long
 def test_the_loop_corrects_the_ins_on_an_informative_map(smooth_grid, short_voyages):
     pm = prepare_map(smooth_grid)
     v = jax.tree.map(lambda a: a[0], short_voyages)
@@ -109,6 +111,7 @@ def test_the_loop_corrects_the_ins_on_an_informative_map(smooth_grid, short_voya
     assert 0.2 < float(jnp.mean(err.nees[n // 2:])) < 8.0
 
 
+@pytest.mark.long
 def test_jit_without_retrace_and_vmap_equals_loop(smooth_grid, short_voyages):
     pm = prepare_map(smooth_grid)
     batch = jax.vmap(navigate_loose, in_axes=(None, 0, None))(pm, short_voyages, CONFIG)
@@ -122,6 +125,7 @@ def test_jit_without_retrace_and_vmap_equals_loop(smooth_grid, short_voyages):
     assert navigate_loose._cache_size() == before
 
 
+@pytest.mark.long
 def test_missing_readings_are_not_matched(smooth_grid, short_voyages):
     pm = prepare_map(smooth_grid)
     v = jax.tree.map(lambda a: a[0], short_voyages)

@@ -22,6 +22,7 @@ from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
 from jaxgrav.sim.ins import initial_covariance, transition
 
 
+@pytest.mark.long
 def test_eotvos_jacobian_against_finite_differences():
     lat, ve, vn = np.array([10.0, 30.0, 60.0]), np.array([4.0, -6.0, 0.5]), np.array([3, 1, -8.0])
     h = 1e-4
@@ -53,6 +54,7 @@ def _first(voyages):
     return jax.tree.map(lambda a: a[0], voyages)
 
 
+@pytest.mark.long
 def test_the_filter_holds_the_ins_and_the_eotvos_part_matters(smooth_grid, voyages):
     pm = prepare_map(smooth_grid)
     v = _first(voyages)
@@ -76,6 +78,7 @@ def test_the_filter_holds_the_ins_and_the_eotvos_part_matters(smooth_grid, voyag
     assert float(jnp.mean(err_b.nees[n // 2:])) > 2.0 * float(jnp.mean(err.nees[n // 2:]))
 
 
+@pytest.mark.long
 def test_a_map_error_state_is_appended(smooth_grid, voyages):
     v = _first(voyages)
     cfg = dataclasses.replace(CONFIG, map_error=map_error_state(2.0, 20000.0))
@@ -89,6 +92,7 @@ def test_a_map_error_state_is_appended(smooth_grid, voyages):
         err.free_m[-1])
 
 
+@pytest.mark.long
 def test_missing_readings_and_leaving_the_map_are_flagged(smooth_grid, voyages):
     pm = prepare_map(smooth_grid)
     v = _first(voyages)
@@ -107,6 +111,7 @@ def test_missing_readings_and_leaving_the_map_are_flagged(smooth_grid, voyages):
     assert np.all(np.isfinite(np.asarray(res.nav.lat))) and sig[-1] > sig[3 * n // 4]
 
 
+@pytest.mark.long
 def test_jit_without_retrace_and_vmap_equals_loop(smooth_grid, voyages):
     pm = prepare_map(smooth_grid)
     batch = jax.vmap(navigate_tight, in_axes=(None, 0, None))(pm, voyages, CONFIG)
@@ -130,6 +135,7 @@ def test_bad_settings_get_clear_errors(change, error, message):
         TightConfig(**change)
 
 
+@pytest.mark.long
 def test_the_filter_equals_filterpy_with_scipy_spline_map(smooth_grid, voyages):
     """An independent UKF: filterpy's, with the map as SciPy's bicubic spline, the same
     15-state model (13 INS states and a second-order map-error state), prior, Eötvös term."""

@@ -29,6 +29,7 @@ def scen(grid, **kw):
     return MatchingScenario(**{**base, **kw})
 
 
+@pytest.mark.long
 def test_map_error_none_is_bit_identical(grid):
     key = jax.random.key(7)
     s = MatchingScenario(region=scen(grid).region)
@@ -51,6 +52,7 @@ def errors_along_track(grid, model, n_runs, **kw):
     return np.asarray(runs.readings - m), s
 
 
+@pytest.mark.long
 def test_readings_minus_map_have_the_model_std_and_correlation(grid):
     err, s = errors_along_track(grid, map_error(SIGMA, LENGTH), 60, n_fixes=30)
     assert np.std(err) == pytest.approx(SIGMA, rel=0.2)
@@ -89,6 +91,7 @@ def test_no_retrace_when_sigma_or_length_change(grid):
     assert not np.allclose(np.asarray(r1), np.asarray(r2))
 
 
+@pytest.mark.long
 def test_vmap_over_keys_equals_the_loop(grid):
     s = scen(grid, noise_mgal=1.0)
     model = map_error(SIGMA, LENGTH)

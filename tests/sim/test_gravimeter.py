@@ -150,6 +150,7 @@ def test_platform_discretisation_and_response():
     np.testing.assert_allclose(h, [1.0, 1 / (2j * 0.6)], rtol=1e-12)
 
 
+@pytest.mark.long
 def test_tilt_kf_equals_numpy_loop(record):
     _, _, cfg, rec = record
     gyro, acc = np.asarray(rec.gyro), np.asarray(rec.accel_h)

@@ -103,6 +103,7 @@ def test_readings_model():
     assert np.std(np.asarray(g2) - 1.0) > 0.1
 
 
+@pytest.mark.long
 def test_scenario_keeps_track_in_region_and_vmaps():
     grid = datasets.load("ryukyu")["anomaly_2p5min"]
     scen = MatchingScenario(n_fixes=20, drift_deg=0.05)

@@ -49,6 +49,7 @@ def test_an_open_route_holds_its_course_after_the_last_waypoint():
     assert np.ptp(late) < 1e-9
 
 
+@pytest.mark.long
 def test_the_free_ins_error_of_the_navigation_grade_preset():
     """The issue's figures: about 2.1 km at 1 h, 11 km at 6 h and 28 km at 12 h (RMS)."""
     grid_free = lambda lat, lon: jnp.zeros_like(lat)  # noqa: E731
@@ -61,6 +62,7 @@ def test_the_free_ins_error_of_the_navigation_grade_preset():
     assert sc.ins == NAVIGATION_GRADE and sc.n_steps == 4321
 
 
+@pytest.mark.long
 def test_voyage_readings_and_ins_track_follow_their_definitions(smooth_grid):
     sc = voyage_preset("patrol-12h", hours=2.0, region=(29.6, 30.4, 129.6, 130.4),
                        leg_m=20000.0, margin_deg=0.05)
@@ -78,6 +80,7 @@ def test_voyage_readings_and_ins_track_follow_their_definitions(smooth_grid):
     assert float(t.lat.min()) > 29.6 and float(t.lon.max()) < 130.4
 
 
+@pytest.mark.long
 def test_voyage_route_vmap_equals_loop():
     sc = voyage_preset("transit-24h")
     keys = jax.random.split(jax.random.key(5), 3)
