@@ -145,6 +145,7 @@ def test_bad_settings_get_clear_errors(change, message):
         LooseConfig(**change)
 
 
+@pytest.mark.long  # cheap, but short_voyages costs ~30 s to build: with its other users
 def test_errors_need_the_truth(short_voyages):
     v = jax.tree.map(lambda a: a[0], short_voyages)._replace(truth=None)
     with pytest.raises(ValueError, match=r"voyage\.truth is None"):
