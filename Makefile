@@ -34,21 +34,20 @@ XDIST  := -n 2 --dist loadfile --max-worker-restart 0
 # (.ci/run); tests/test_layout.py checks that the groups cover every test file.
 TEST_GROUPS := tests/match|tests/cli|tests/examples tests/navigate|tests/filters tests/montecarlo|tests/fields tests/dov tests/sim tests/scenarios tests/test_*.py
 
+PYTEST := $(BIN)/python -m pytest -q $(XDIST)
+
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q $(XDIST) -m "not long" tests || { \
+	$(PYTEST) -m "not long" tests || { \
 	  echo "make test failed; running it once more (a worker crash ends a run)"; \
-	  $(BIN)/python -m pytest -q $(XDIST) -m "not long" tests; }
+	  $(PYTEST) -m "not long" tests; }
 
 test-long: $(STAMP)
 	@groups='$(TEST_GROUPS)'; IFS='|'; for group in $$groups; do IFS=' '; \
 	  echo "make test-long: $$group"; \
-	  $(BIN)/python -m pytest -q $(XDIST) -m long $$group; rc=$$?; \
-	  if [ $$rc -ne 0 ] && [ $$rc -ne 5 ]; then \
+	  $(PYTEST) -m long $$group || [ $$? -eq 5 ] || { \
 	    echo "make test-long: $$group failed; running it once more (a worker crash ends a run)"; \
-	    $(BIN)/python -m pytest -q $(XDIST) -m long $$group; rc=$$?; \
-	    if [ $$rc -ne 0 ] && [ $$rc -ne 5 ]; then exit 1; fi; \
-	  fi; \
+	    $(PYTEST) -m long $$group || [ $$? -eq 5 ] || exit 1; }; \
 	done
 
 # both tiers, as CI runs them

@@ -28,6 +28,15 @@ def means(*xs):
     return [t / xs[0].shape[-1] for t in sums(xs, -1)]
 
 
+def _centroid_frame(lat, lon):
+    """Centroid ``(lat_c, lon_c)`` (degrees), metres per degree north ``m_c`` and east
+    ``n_c`` there, and the fixes' offsets from it ``(north, east)`` (m)."""
+    lat_c, lon_c = means(lat, lon)
+    m_c = meridian_radius(lat_c) * DEG
+    n_c = prime_vertical_radius(lat_c) * jnp.cos(lat_c * DEG) * DEG
+    return lat_c, lon_c, m_c, n_c, (lat - lat_c) * m_c, (lon - lon_c) * n_c
+
+
 def track_frame(grid, lat, lon):
     """The frame of :func:`shifted_tracks` in map indices.
 
@@ -36,10 +45,7 @@ def track_frame(grid, lat, lon):
     metre north and east, and the fixes' offsets from the centroid (m). A fix
     turned and shifted to local ``(rn, re)`` lies at index ``(iy_c + ky·rn, ix_c + kx·re)``.
     """
-    lat_c, lon_c = means(lat, lon)
-    m_c = meridian_radius(lat_c) * DEG
-    n_c = prime_vertical_radius(lat_c) * jnp.cos(lat_c * DEG) * DEG
-    north, east = (lat - lat_c) * m_c, (lon - lon_c) * n_c
+    lat_c, lon_c, m_c, n_c, north, east = _centroid_frame(lat, lon)
     lon_mid = grid.lon0 + 0.5 * (grid.nx - 1) * grid.dlon
     iy_c = (lat_c - grid.lat0) / grid.dlat
     ix_c = (jnp.mod(lon_c - lon_mid + 180.0, 360.0) - 180.0 + (lon_mid - grid.lon0)) / grid.dlon
@@ -202,10 +208,7 @@ def shifted_tracks(lat, lon, d_north, d_east, rotation_rad):
     tuple of Array
         ``(lat, lon)`` of shape ``(*S, N)`` in degrees.
     """
-    lat_c, lon_c = means(lat, lon)
-    m_c = meridian_radius(lat_c) * DEG
-    n_c = prime_vertical_radius(lat_c) * jnp.cos(lat_c * DEG) * DEG
-    north, east = (lat - lat_c) * m_c, (lon - lon_c) * n_c
+    lat_c, lon_c, m_c, n_c, north, east = _centroid_frame(lat, lon)
     c, s = jnp.cos(rotation_rad)[..., None], jnp.sin(rotation_rad)[..., None]
     rn = c * north - s * east + jnp.asarray(d_north)[..., None]
     re = s * north + c * east + jnp.asarray(d_east)[..., None]
