@@ -11,9 +11,13 @@ Part 2, the dense matcher: paper A's tracks (:class:`~jaxgrav.scenarios.Matching
 defaults: 30 fixes, drift 0.035°, 1 mGal noise) on the 2.5′ map; in every run an
 "island" of 3 × 3 to 5 × 5 nodes (14–23 km) is cut out of the map inside the searched
 region, but not under the true track ("land": the ship cannot be there, so the mask is
-information), and, separately, a hole over part of the true track ("missing data": the
-truth cannot be found; the fix is the best of the rest). The same readings are matched
-on the complete and the holey maps: median error / INS error, share worse than the INS,
+information), and, separately, holes over part of the true track ("missing data"): a
+wide one (3–5 nodes a side) and a narrow one (1–2 nodes). Each holey map under the
+track is matched twice: as land (``missing="land"``, the default: candidates touching
+the hole are dropped, so is the truth) and as survey gaps (``missing="gaps"``: each
+candidate scored on its fixes over present cells, :mod:`jaxgrav.match.gaps`). The same
+readings are matched on the complete and the holey maps: median error / INS error,
+share worse than the INS,
 share flagged (status 8192), share whose fit the χ² test of ``jaxgrav match`` calls
 implausible (p < 10⁻³). Rows for a perfect map and for a map error of σ = 3 mGal,
 L = 10 km (truth = map + a correlated error, the matcher told it: GLS).
@@ -69,9 +73,9 @@ def interpolant_cost(values, trials, rng):
                "node_step_std_mgal": round(step, 3)}
 
 
-def _under_truth(grid, run, rng):
-    """A hole of 3–5 nodes a side over part of the true track (missing survey data)."""
-    h, w = rng.integers(3, 6, 2)
+def _under_truth(grid, run, rng, sides=(3, 5)):
+    """A hole of ``sides`` nodes a side over part of the true track (missing survey data)."""
+    h, w = rng.integers(sides[0], sides[1] + 1, 2)
     i = rng.integers(0, np.size(run.truth.lat))
     r0 = int(np.floor((float(run.truth.lat[i]) - grid.lat0) / grid.dlat)) - h // 2
     c0 = int(np.floor((float(run.truth.lon[i]) - grid.lon0) / grid.dlon)) - w // 2
@@ -111,7 +115,10 @@ def matcher_cost(grid, runs, sigma, length, rng):
     model = map_error(sigma, length) if sigma > 0 else None
     keys = jax.random.split(jax.random.key(11), runs)
     simulate = jax.jit(lambda k, g: matching_scenario(k, g, scen, map_error=model))
-    names = ("complete", "hole off the truth (land)", "hole under the truth (missing data)")
+    names = ("complete", "hole off the truth (land)", "wide hole under the truth, as land",
+             "wide hole under the truth, as gaps", "narrow hole under the truth, as land",
+             "narrow hole under the truth, as gaps")
+    missing = ("land", "land", "land", "gaps", "land", "gaps")
     ratio = {name: [] for name in names}
     flagged = {name: 0 for name in names}
     implausible = {name: 0 for name in names}
@@ -123,11 +130,14 @@ def matcher_cost(grid, runs, sigma, length, rng):
             continue
         used += 1
         ins = float(track_error_m(run.ins_lat, run.ins_lon, run.truth))
-        for name, g in zip(names, (grid, holey, _under_truth(grid, run, rng)), strict=True):
+        wide, narrow = _under_truth(grid, run, rng), _under_truth(grid, run, rng, (1, 2))
+        maps = (grid, holey, wide, wide, narrow, narrow)
+        for name, g, miss in zip(names, maps, missing, strict=True):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 r = match_track(g, run.ins_lat, run.ins_lon, run.readings,
                                 drift_radius_m=radius, noise=scen.noise_mgal, warn=False,
+                                missing=miss,
                                 **({"map_error": model} if model else {}))
             ratio[name].append(float(track_error_m(r.lat, r.lon, run.truth)) / ins)
             flagged[name] += bool(int(r.status) & MASKED)

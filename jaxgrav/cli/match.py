@@ -78,6 +78,10 @@ def add_parsers(sub):
                    help="dense, chains, entropy+iccp: correlation length of the map's error "
                         "(m, default 10000)")
     add_map_error_var_option(m)
+    m.add_argument("--missing", choices=("land", "gaps"), default="land",
+                   help="what missing (NaN) map nodes are: land (default; candidates touching "
+                        "them are dropped) or, dense only, survey gaps (each candidate is "
+                        "scored on its fixes over present cells)")
     m.add_argument("--eotvos-corrected", "--no-eotvos", dest="no_eotvos", action="store_true",
                    help="the gravity column is already Eötvös-corrected (with velocities "
                         "v_east, v_north the column is otherwise taken as raw and corrected "
@@ -152,6 +156,8 @@ def _cmd_match(args):
     kw = {}  # the options each method takes (--bias-sigma is ignored by the others)
     if args.method in ("dense", "chains"):
         kw["bias_sigma_mgal"] = args.bias_sigma
+    if args.method == "dense":
+        kw["missing"] = args.missing
     if args.map_error > 0:
         kw["map_error"] = map_error(args.map_error, args.map_error_length)
     if args.method in ("iccp", "entropy+iccp"):
@@ -180,8 +186,8 @@ def _cmd_match(args):
              sigma_north_m=float(np.sqrt(cov[0, 0])), sigma_east_m=float(np.sqrt(cov[1, 1])),
              map_error_mgal=args.map_error, map_error_length_m=args.map_error_length,
              map_error_var=args.map_error_var)
-    r.update(method=args.method, field=field, map=str(args.map), track=str(args.track),
-             drift_radius_deg=radius_deg, eotvos_corrected=has_v)
+    r.update(method=args.method, missing=args.missing, field=field, map=str(args.map),
+             track=str(args.track), drift_radius_deg=radius_deg, eotvos_corrected=has_v)
     if args.method in CONTOUR_METHODS:
         r.update(max_rotation_deg=max_rotation, entropy_half_size=args.entropy_half_size)
     with atomic_output(args.out, force=args.force) as tmp:
@@ -272,6 +278,9 @@ def _check_match_args(args):
     if args.map_error > 0 and args.method not in MAP_ERROR_METHODS:
         raise ValueError(f"--map-error is used by --method {', '.join(MAP_ERROR_METHODS)} "
                          f"only; got --method {args.method}")
+    if args.missing == "gaps" and args.method != "dense":
+        raise ValueError(f"--missing gaps (survey gaps scored per fix) is built for --method "
+                         f"dense only; got --method {args.method} (use --missing land)")
     if args.max_rotation is not None:
         if args.method not in ("iccp", "entropy+iccp"):
             raise ValueError(f"--max-rotation bounds ICCP's rotation; it has no effect with "

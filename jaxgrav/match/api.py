@@ -30,7 +30,7 @@ from jaxgrav.match.sizing import config_for, iccp_config_for
 from jaxgrav.prepared import as_grid, prepare_map
 
 __all__ = ["ENTROPY_HALF_SIZE", "MAP_ERROR_METHODS", "MASKED", "METHODS", "MIN_FIXES",
-           "match_track", "missing_in_reach", "validate_track"]
+           "match_track", "max_gap_fixes", "missing_in_reach", "validate_track"]
 
 METHODS = ("dense", "chains", "entropy", "iccp", "entropy+iccp")
 """``dense``: offset grid + Gauss–Newton (default, most accurate on real maps);
@@ -139,7 +139,7 @@ def _check_options(method, noise, bias_sigma_mgal, max_rotation_deg, entropy_hal
 def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000.0,
                 noise=1.0, v_east=None, v_north=None, bias_sigma_mgal=None,
                 max_rotation_deg=None, entropy_half_size=None, config=None, warn=True,
-                noise_mgal=None, map_error=None):
+                noise_mgal=None, map_error=None, missing="land"):
     """Match one track against a map, with input checks (the public entry point).
 
     Parameters
@@ -191,6 +191,14 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
         (:func:`~jaxgrav.fields.map_error.map_error`): GLS score, posterior fix and
         integrity test (:func:`config_for`, :func:`iccp_config_for`); None (default)
         or σ = 0: today's white-noise score. Ignored with an explicit ``config``.
+    missing : {"land", "gaps"}
+        What missing (NaN) map nodes are. ``"land"`` (default): places the vehicle
+        cannot be, candidates touching them are dropped. ``"gaps"`` (``dense`` only):
+        gaps in the survey, each candidate is scored on its fixes over present cells
+        (each other fix adds its expected χ², 1: :mod:`~jaxgrav.match.gaps`), with
+        at most :func:`max_gap_fixes` of the N fixes in gaps. The same as ``"land"``
+        on a map without missing nodes in reach. With an explicit ``config``, its
+        ``gap_fixes`` decides instead.
 
     Notes
     -----
@@ -225,6 +233,11 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
     if map_error is not None and method not in MAP_ERROR_METHODS:
         raise ValueError(f"map_error is used by methods {MAP_ERROR_METHODS} only; got method "
                          f"{method!r}")
+    if missing not in ("land", "gaps"):
+        raise ValueError(f"missing must be 'land' or 'gaps'; got {missing!r}")
+    if missing == "gaps" and method != "dense":
+        raise ValueError(f"missing='gaps' (survey gaps scored per fix) is built for method "
+                         f"'dense' only; got method {method!r} (use missing='land')")
     lat, lon, readings = validate_track(grid, lat, lon, readings)
     corrected = v_east is not None and v_north is not None
     if corrected:
@@ -235,7 +248,8 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
     masked = missing_in_reach(grid, lat, lon, drift_radius_m) > 0
     if method in ("dense", "chains"):
         result = _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
-                                    bias_sigma_mgal, corrected, config, map_error, masked)
+                                    bias_sigma_mgal, corrected, config, map_error, masked,
+                                    missing == "gaps")
     else:
         result = _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise,
                                 max_rotation_deg, entropy_half_size, config, map_error)
@@ -251,6 +265,14 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
 
 MASKED = 8192
 """Status bit: the search region holds missing (NaN) map nodes (see :data:`STATUS`)."""
+
+
+def max_gap_fixes(n):
+    """Most of ``n`` fixes a candidate may have over survey gaps (``missing="gaps"``).
+
+    All but :data:`MIN_FIXES`.
+    """
+    return max(0, n - MIN_FIXES)
 
 
 def missing_in_reach(grid, lat, lon, reach_m):
@@ -275,11 +297,13 @@ def missing_in_reach(grid, lat, lon, reach_m):
 
 
 def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
-                       bias_sigma_mgal, corrected, config, map_error=None, masked=False):
+                       bias_sigma_mgal, corrected, config, map_error=None, masked=False,
+                       gaps=False):
     """``dense`` or ``chains`` on checked inputs."""
     if bias_sigma_mgal is None:
         bias_sigma_mgal = 3.0 if corrected else math.inf
-    if config is None:
+    sized = config is None
+    if sized:
         config = config_for(method, grid, drift_radius_m, noise_mgal=noise,
                             bias_sigma_mgal=bias_sigma_mgal,
                             **({"map_error": map_error} if map_error is not None else {}))
@@ -287,6 +311,8 @@ def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
             tol = (float(v) for v in chain_tolerances(as_grid(grid), lat, config))
             config = dataclasses.replace(
                 config, stencil_size=stencil_size_for(as_grid(grid), lat, lon, *tol))
+    if sized and gaps and masked:
+        config = dataclasses.replace(config, gap_fixes=max_gap_fixes(lat.size))
     if method == "dense" and config.lattice_block and masked:
         # the separable lattice spreads a missing node over its block: score each
         # shifted fix on its own (same values elsewhere), masking only what touches it

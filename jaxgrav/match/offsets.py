@@ -16,6 +16,7 @@ import jax.numpy as jnp
 
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.match.gaps import gap_score, gls_gap_score
 from jaxgrav.match.gls import gls_score
 from jaxgrav.match.lattice import lattice_values, patch_values
 from jaxgrav.match.scoring import score_track, sums
@@ -116,6 +117,8 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
         :class:`~jaxgrav.match.gls.GlsWhitener`, bias prior σ_b in mGal), times
         ``scale`` (mGal²) to keep the white score's mGal² scale. The lattice values
         are whitened after the lattice evaluation, one product per candidate.
+        With ``config.gap_fixes`` > 0 (survey gaps) every shifted fix is sampled on its
+        own and scored by :mod:`~jaxgrav.match.gaps`.
 
     Returns
     -------
@@ -149,14 +152,18 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
         r_of = jnp.repeat(jnp.arange(n_rot), d_n.shape[0] // n_rot)
         iy = iy_c + ky * (rn[r_of] + d_n[:, None])
         ix = ix_c + kx * (re[r_of] + d_e[:, None])
+        v = patch_values(table, iy, ix, config.method)
+        gaps = config.gap_fixes
         if gls is not None:
-            r = readings - patch_values(table, iy, ix, config.method)
-            sc, b = gls_score(gls[0], r, gls[1])
+            sc, b = (gls_gap_score(gls[0], readings - v, gls[1], gaps) if gaps
+                     else gls_score(gls[0], readings - v, gls[1]))
             return sc * gls[2], b
-        return score_track(readings, patch_values(table, iy, ix, config.method), w,
-                           config.score, prior)
+        if gaps:
+            unit = jnp.asarray(config.noise_mgal, v.dtype) ** 2 * jnp.sum((w / jnp.sum(w)) ** 2)
+            return gap_score(readings, v, w, config.score, prior, unit, gaps)
+        return score_track(readings, v, w, config.score, prior)
 
-    blocks = _lattice_blocks(grid, config)
+    blocks = [] if config.gap_fixes else _lattice_blocks(grid, config)
     if not blocks:
         return points(None)
     index = jnp.asarray(len(blocks), jnp.int32)  # points, unless a block fits

@@ -20,7 +20,7 @@ __all__ = ["gauss_newton", "gls_residual_function", "laplace_covariance", "resid
            "solve_spd"]
 
 
-def residual_function(table, frame, g, w, kind, prior, method):
+def residual_function(table, frame, g, w, kind, prior, method, present=None):
     """Weighted residuals of ``p = (north, east, rotation, bias)`` and their Jacobian.
 
     Parameters
@@ -37,6 +37,10 @@ def residual_function(table, frame, g, w, kind, prior, method):
     prior : Array
         κ of the bias prior.
     method : {"bicubic", "bilinear"}
+    present : Array of bool, shape ``(N,)``, optional
+        Survey gaps (:mod:`~jaxgrav.match.gaps`): only these fixes enter (the others'
+        residuals and Jacobian rows are 0); a present fix that moves into a missing
+        cell gives NaN, so the step is refused.
 
     Returns
     -------
@@ -61,21 +65,26 @@ def residual_function(table, frame, g, w, kind, prior, method):
         v, v_y, v_x = computed_once((v, v_y, v_x), v)
         r = g - v
         a, b = v_y * ky, v_x * kx  # dv/d(north), dv/d(east)
+        if present is not None:
+            r, a, b = jnp.where(present, r, 0.0), a * present, b * present
         cols = (-a, -b, a * re - b * rn)  # dr/dp for the shift and turn
         if kind == "difference":
-            d_cols = (*(sqrt_wd * jnp.diff(x) for x in cols), zero[1:])
-            return sqrt_wd * jnp.diff(r), d_cols, no_prior
+            swd = sqrt_wd if present is None else sqrt_wd * (present[1:] & present[:-1])
+            d_cols = (*(swd * jnp.diff(x) for x in cols), zero[1:])
+            return swd * jnp.diff(r), d_cols, no_prior
         if kind == "bias":
             sp = jnp.sqrt(prior)
             j_prior = jnp.zeros((4,), north.dtype).at[3].set(sp)
-            return (sqrt_w * (r - p[3]), (*(sqrt_w * x for x in cols), -sqrt_w),
+            sw = sqrt_w if present is None else sqrt_w * present
+            return (sw * (r - p[3]), (*(sqrt_w * x for x in cols), -sw),
                     (sp * p[3], j_prior))
         return sqrt_w * r, (*(sqrt_w * x for x in cols), zero), no_prior
 
     return res
 
 
-def gls_residual_function(table, frame, g, inv_chol, ones, scale, bias_sigma, method):
+def gls_residual_function(table, frame, g, inv_chol, ones, scale, bias_sigma, method,
+                          present=None):
     """Whitened residuals ``√s·W(g − v(p) − b)`` of ``p`` and their Jacobian (GLS refinement).
 
     As :func:`residual_function`, for readings whose error has covariance Σ = L Lᵀ
@@ -83,6 +92,8 @@ def gls_residual_function(table, frame, g, inv_chol, ones, scale, bias_sigma, me
     the Jacobian ``√s·W ∂v/∂p``, bias column ``−√s·W 1``, prior row ``√s·b/σ_b``.
     ``scale`` s (mGal²) puts the squared norm on the mGal² scale of the white score
     (χ² · s); ``bias_sigma`` σ_b (mGal, ``inf`` flat, a large finite value for none).
+    With survey gaps, ``present`` masks the fixes as in :func:`residual_function` and
+    ``inv_chol``, ``ones`` come from :func:`~jaxgrav.match.gaps.gap_whitener`.
     """
     iy_c, ix_c, ky, kx, north, east = frame
     root = jnp.sqrt(scale)
@@ -96,7 +107,10 @@ def gls_residual_function(table, frame, g, inv_chol, ones, scale, bias_sigma, me
         v, v_y, v_x = patch_values(table, iy_c + ky * (rn + p[0]), ix_c + kx * (re + p[1]),
                                    method, gradient=True)
         a, b = v_y * ky, v_x * kx
-        m = jnp.stack([g - v - p[3], -a, -b, a * re - b * rn]) @ wt
+        r = g - v - p[3]
+        if present is not None:
+            r, a, b = jnp.where(present, r, 0.0), a * present, b * present
+        m = jnp.stack([r, -a, -b, a * re - b * rn]) @ wt
         return m[0], (m[1], m[2], m[3], -ones * root), (sp * p[3], j_prior)
 
     return res
