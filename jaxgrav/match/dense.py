@@ -53,7 +53,7 @@ from jaxgrav.match.refine import (
     laplace_covariance,
     residual_function,
 )
-from jaxgrav.match.result import MatchResult, nearest_to_ins
+from jaxgrav.match.result import GAPPED, MatchResult, nearest_to_ins
 from jaxgrav.match.scoring import (
     bias_precision,
     decreasing_weights,
@@ -209,7 +209,7 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
                     final_bias = p[3]
             laplace = laplace_covariance(res, p, free) * scale
             return (scores, top, topk_lat, topk_lon, chosen, found, p,
-                    final_score, final_bias, laplace)
+                    final_score, final_bias, laplace, jnp.sum(jnp.isnan(v)))
 
         return run
 
@@ -220,7 +220,8 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
                                 lambda _: white, None)
     else:
         searched = search(config.score_model == "gls")(None)
-    scores, top, topk_lat, topk_lon, chosen, found, p, final_score, final_bias, laplace = searched
+    (scores, top, topk_lat, topk_lon, chosen, found, p, final_score, final_bias, laplace,
+     n_gap) = searched
     topk_score = scores[top]
     chi2 = scores / jnp.maximum(scale, jnp.finfo(dtype).tiny)
     quality = fix_quality(chi2, config.n_rotations, on, oe, p[:2], laplace,
@@ -229,7 +230,10 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
     if config.fix == "posterior":
         p = p.at[:2].set(jnp.where(found, jnp.stack([quality.mean_north_m,
                                                      quality.mean_east_m]), 0.0))
-    accepted = quality.accepted
+    # survey gaps: a fix read mostly off the map is not one (the truth's neighbours, in
+    # the gap, tie at their expectation; a fix there is a guess)
+    thin = (n_gap > n // 2) if config.gap_fixes else jnp.zeros((), bool)
+    accepted = quality.accepted & ~thin
     m_lat, m_lon = shifted_tracks(lat, lon, p[0], p[1], p[2])
     m_lat, m_lon = jnp.where(accepted, m_lat, lat), jnp.where(accepted, m_lon, lon)
     mean_off = means(*local_offsets_m(m_lat, m_lon, lat, lon))
@@ -251,7 +255,8 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
         work_unconstrained=n_off**n,
         work_constrained=n_off,
         work_pairs=n_off * n,
-        status=jnp.where(found, 0, 1) | jnp.where(found & edge, 8, 0) | quality.status,
+        status=(jnp.where(found, 0, 1) | jnp.where(found & edge, 8, 0) | quality.status
+                | jnp.where(found & thin, GAPPED, 0)),
         covariance_m2=quality.covariance_m2,
         accepted=accepted,
         n_effective=quality.n_effective,

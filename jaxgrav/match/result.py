@@ -8,8 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.special import chdtrc
 
-__all__ = ["CORRELATION_STATUS", "IMPLAUSIBLE_FIT", "P_IMPLAUSIBLE", "STATUS", "MatchResult",
-           "fit_p_value", "nearest_to_ins", "status_messages"]
+__all__ = ["CORRELATION_STATUS", "GAPPED", "IMPLAUSIBLE_FIT", "P_IMPLAUSIBLE", "STATUS",
+           "MatchResult", "fit_p_value", "nearest_to_ins", "status_messages"]
 
 STATUS = {
     1: "no candidate track survived (tolerances too tight, the track off the map, or every "
@@ -39,11 +39,14 @@ STATUS = {
     16384: "the fix fits the readings far worse than the stated noise and map error allow "
            "(chi-squared p < 1e-3): a wrong map, unit, noise or an untold map error; the "
            "fix and its covariance are not trustworthy as stated",
+    32768: "fix rejected: more than half of the fix's readings lie over survey gaps of the "
+           "map (missing='gaps'); INS track kept",
 }
 """Bit flags of :attr:`MatchResult.status`, for every method (one table).
 
-``dense`` raises 1 and 8, and the integrity bits 512, 1024, 2048 and 4096 (a
-rejected fix: :attr:`MatchResult.accepted` false); ``chains`` 1, 2, 4, 8, 256 and the
+``dense`` raises 1 and 8, the integrity bits 512, 1024, 2048 and 4096 (a
+rejected fix: :attr:`MatchResult.accepted` false), and with survey gaps 32768
+(rejected too); ``chains`` 1, 2, 4, 8, 256 and the
 integrity bits 512, 1024, 2048; ``entropy`` 1, 8 and 32;
 ``iccp`` 1, 16 and 64; ``entropy+iccp`` those of entropy and ICCP, 128 and the
 integrity bits 512–4096. Every method, through :func:`~jaxgrav.match.match_track`:
@@ -52,13 +55,17 @@ when the fix's χ² is implausible for the stated error model (:func:`fit_p_valu
 below :data:`P_IMPLAUSIBLE`; a warning, not a rejection: ``accepted`` is unchanged).
 """
 
+GAPPED = 32768
+"""Status bit: ``dense`` with survey gaps, fix over gaps at most of its fixes (rejected)."""
+
 IMPLAUSIBLE_FIT = 16384
 """Status bit: the fix's misfit is statistically implausible (see :data:`STATUS`)."""
 
 P_IMPLAUSIBLE = 1e-3
 """A fit whose χ² exceeds its (1 − 10⁻³) quantile is flagged (:data:`IMPLAUSIBLE_FIT`)."""
 
-CORRELATION_STATUS = {bit: STATUS[bit] for bit in (1, 2, 4, 8, 256, 512, 1024, 2048, 4096)}
+CORRELATION_STATUS = {bit: STATUS[bit] for bit in (1, 2, 4, 8, 256, 512, 1024, 2048, 4096,
+                                                   32768)}
 """The bits of the correlation matchers (``dense``, ``chains``): an excerpt of :data:`STATUS`."""
 
 

@@ -104,7 +104,12 @@ def test_sample_and_match_use_a_map_with_missing_nodes_away_from_the_track(sim, 
                  "--out", str(tmp_path / "r2.json")]) == 0
     r = json.loads((tmp_path / "r2.json").read_text())
     assert r["status"] & 8192 and any("missing (NaN)" in m for m in r["status_messages"])
-    assert np.isfinite(r["lat"]).all()
+    assert np.isfinite(r["lat"]).all() and r["missing"] == "land"
+    # the same hole read as a survey gap: candidates scored on their present fixes
+    assert main(["match", "--map", str(tmp_path / "near.nc"), "--track", str(d / "t.csv"),
+                 "--out", str(tmp_path / "r2g.json"), "--missing", "gaps"]) == 0
+    r = json.loads((tmp_path / "r2g.json").read_text())
+    assert r["status"] & 8192 and r["missing"] == "gaps" and np.isfinite(r["lat"]).all()
     # a region that is almost all hole is refused in one line naming the file
     _holey_map(tmp_path / "sea.nc", (slice(i - 30, i + 30), slice(j - 30, j + 30)))
     capsys.readouterr()
@@ -113,6 +118,16 @@ def test_sample_and_match_use_a_map_with_missing_nodes_away_from_the_track(sim, 
     err = capsys.readouterr().err.strip()
     assert "sea.nc" in err and "too little map" in err and "\n" not in err
     assert not (tmp_path / "r3.json").exists()
+
+
+def test_missing_gaps_is_refused_for_methods_other_than_dense(sim, tmp_path, capsys):
+    d, _ = sim
+    out = tmp_path / "r.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(d / "t.csv"), "--out", str(out),
+                 "--method", "chains", "--refine", "2", "--missing", "gaps"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--missing gaps" in err and "--method dense only" in err and "\n" not in err
+    assert not out.exists()
 
 
 def test_sample_passes_text_columns_through(sim, tmp_path):

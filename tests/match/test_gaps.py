@@ -19,6 +19,7 @@ from jaxgrav.match.gaps import gap_score, gap_whitener, gls_gap_score
 from jaxgrav.match.gls import gls_score, gls_whitener, track_covariance
 from jaxgrav.match.offsets import track_frame
 from jaxgrav.match.refine import gls_residual_function, residual_function
+from jaxgrav.match.result import GAPPED
 from jaxgrav.match.scoring import score_track
 from jaxgrav.prepared import prepare_map
 
@@ -206,3 +207,11 @@ def test_dense_matches_across_a_survey_gap_that_land_mode_cannot(smooth_grid):
     assert err < max(2.0 * out["complete"][0], 300.0), out  # as good as without the gap
     assert out["land"][0] > 3 * err, out
     assert 0.3 < float(r.chi2_per_dof) < 3.0  # the gaps count at their expectation
+    # a gap over most of the track: the fix would be a guess, so it is rejected
+    v[:, (lo > mid - 0.03) & (lo < mid + 0.03)] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        r = jm.match_track(dataclasses.replace(smooth_grid, values=jnp.asarray(v)), lat, lon, z,
+                           drift_radius_m=3000.0, noise=0.5, missing="gaps")
+    assert int(r.status) & GAPPED and not bool(r.accepted)
+    np.testing.assert_array_equal(np.asarray(r.lat), lat)  # the INS track kept
