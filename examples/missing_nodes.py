@@ -115,10 +115,11 @@ def matcher_cost(grid, runs, sigma, length, rng):
     model = map_error(sigma, length) if sigma > 0 else None
     keys = jax.random.split(jax.random.key(11), runs)
     simulate = jax.jit(lambda k, g: matching_scenario(k, g, scen, map_error=model))
-    names = ("complete", "hole off the truth (land)", "wide hole under the truth, as land",
+    names = ("complete", "hole off the truth (land), as land",
+             "hole off the truth (land), as gaps", "wide hole under the truth, as land",
              "wide hole under the truth, as gaps", "narrow hole under the truth, as land",
              "narrow hole under the truth, as gaps")
-    missing = ("land", "land", "land", "gaps", "land", "gaps")
+    missing = ("land", "land", "gaps", "land", "gaps", "land", "gaps")
     ratio = {name: [] for name in names}
     flagged = {name: 0 for name in names}
     implausible = {name: 0 for name in names}
@@ -131,7 +132,7 @@ def matcher_cost(grid, runs, sigma, length, rng):
         used += 1
         ins = float(track_error_m(run.ins_lat, run.ins_lon, run.truth))
         wide, narrow = _under_truth(grid, run, rng), _under_truth(grid, run, rng, (1, 2))
-        maps = (grid, holey, wide, wide, narrow, narrow)
+        maps = (grid, holey, holey, wide, wide, narrow, narrow)
         for name, g, miss in zip(names, maps, missing, strict=True):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)

@@ -196,7 +196,9 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
         cannot be, candidates touching them are dropped. ``"gaps"`` (``dense`` only):
         gaps in the survey, each candidate is scored on its fixes over present cells
         (each other fix adds its expected χ², 1: :mod:`~jaxgrav.match.gaps`), with
-        at most :func:`max_gap_fixes` of the N fixes in gaps. The same as ``"land"``
+        at most :func:`max_gap_fixes` of the N fixes in gaps; a fix read over gaps at
+        more than half of its fixes is rejected (status 32768,
+        :data:`~jaxgrav.match.result.GAPPED`, INS track kept). The same as ``"land"``
         on a map without missing nodes in reach. With an explicit ``config``, its
         ``gap_fixes`` decides instead.
 
