@@ -318,7 +318,6 @@ def test_generated_bad_grids_are_refused_by_name(tmp_path, g, fault):
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                  HealthCheck.function_scoped_fixture])
 @given(small_grids(), st.one_of(st.none(), st.sampled_from(GRID_FAULTS)))
-@pytest.mark.long
 def test_generated_grids_through_the_sample_command(tmp_path, capsys, g, fault):
     """``jaxgrav sample`` in-process on generated NetCDF grids: at the file's nodes a
     valid grid gives its node values (any axis names, order, singleton dimension, 0–360

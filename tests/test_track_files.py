@@ -327,7 +327,6 @@ def _bilinear_wrapped(lat, lon, values, plat, plon):
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                  HealthCheck.function_scoped_fixture])
 @given(tracks(), st.one_of(st.none(), st.sampled_from(FAULTS)), st.data())
-@pytest.mark.long
 def test_generated_tracks_through_the_sample_command(tmp_path, capsys, global_map, tr, fault,
                                                      data):
     """``jaxgrav sample`` run in-process on generated files: a valid one gives the map's

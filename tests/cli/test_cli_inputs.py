@@ -34,7 +34,6 @@ def _user_log(path, track):
     path.write_text("\n".join(rows) + "\n")
 
 
-@pytest.mark.long
 def test_match_reads_a_user_log_with_columns(sim, tmp_path):
     d, track = sim
     _user_log(tmp_path / "log.csv", track)
@@ -71,7 +70,6 @@ def _holey_map(path, hole):
                coords={"lat": np.asarray(grid.lat), "lon": np.asarray(grid.lon)}).to_netcdf(path)
 
 
-@pytest.mark.long
 def test_sample_and_match_use_a_map_with_missing_nodes_away_from_the_track(sim, tmp_path,
                                                                            capsys):
     d, track = sim
@@ -151,7 +149,6 @@ def _map_with_uncertainty(path, sigma):
                coords={"lat": np.asarray(grid.lat), "lon": np.asarray(grid.lon)}).to_netcdf(path)
 
 
-@pytest.mark.long
 def test_map_error_var_tells_the_method_the_maps_own_uncertainty(sim, tmp_path, capsys):
     d, _ = sim
     _map_with_uncertainty(tmp_path / "u.nc", 2.5)

@@ -60,7 +60,6 @@ def test_outputs_get_the_users_permissions(tmp_path):
     assert stat.S_IMODE((tmp_path / "x.txt").stat().st_mode) == 0o640
 
 
-@pytest.mark.long
 def test_simulated_track_is_readable_by_others_under_umask_022(tmp_path):
     old = os.umask(0o022)
     try:

@@ -141,7 +141,6 @@ _MATCH_BAD = {
 
 
 @pytest.mark.parametrize("case", sorted(_MATCH_BAD))
-@pytest.mark.long
 def test_match_refuses_bad_readings_and_options(tracks, tmp_path, capsys, case):
     change, options, phrases = _MATCH_BAD[case]
     track = _edited(tracks / "t.csv", tmp_path / "bad.csv", change)
@@ -155,7 +154,6 @@ def test_match_refuses_bad_readings_and_options(tracks, tmp_path, capsys, case):
     assert not out.exists()
 
 
-@pytest.mark.long
 def test_match_flags_an_implausible_fit_and_writes_time_and_units(tracks, tmp_path, capsys):
     out = tmp_path / "r.json"
     assert main(["match", "--map", "ryukyu", "--track", str(tracks / "t.csv"), "--out",
@@ -178,7 +176,6 @@ def test_match_flags_an_implausible_fit_and_writes_time_and_units(tracks, tmp_pa
     assert "far worse than the stated noise" in capsys.readouterr().err
 
 
-@pytest.mark.long
 def test_chains_without_refine_on_a_coarse_map_warns(tracks, tmp_path, capsys):
     out = tmp_path / "r.json"
     assert main(["match", "--map", "ryukyu", "--track", str(tracks / "t.csv"), "--out",
@@ -200,7 +197,6 @@ def test_filter_refuses_bad_readings(tracks, tmp_path, capsys, change, phrases):
     assert err.count("\n") == 0 and all(p in err for p in phrases) and not out.exists()
 
 
-@pytest.mark.long
 def test_filter_warns_when_the_innovations_are_implausible(tracks, tmp_path, capsys):
     noisy = _edited(tracks / "f.csv", tmp_path / "noisy.csv",
                     lambda i, g: g + (8.0 if i % 2 else -8.0))
