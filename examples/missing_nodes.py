@@ -12,10 +12,11 @@ defaults: 30 fixes, drift 0.035°, 1 mGal noise) on the 2.5′ map; in every run
 "island" of 3 × 3 to 5 × 5 nodes (14–23 km) is cut out of the map inside the searched
 region, but not under the true track ("land": the ship cannot be there, so the mask is
 information), and, separately, holes over part of the true track ("missing data"): a
-wide one (3–5 nodes a side) and a narrow one (1–2 nodes). Each holey map under the
-track is matched twice: as land (``missing="land"``, the default: candidates touching
-the hole are dropped, so is the truth) and as survey gaps (``missing="gaps"``: each
-candidate scored on its fixes over present cells, :mod:`jaxgrav.match.gaps`). The same
+wide one (3–5 nodes a side) and a narrow one (1–2 nodes). Each holey map is matched
+three times: as land (``missing="land"``: candidates touching the hole are dropped),
+as survey gaps (``missing="gaps"``: each candidate scored on its fixes over present
+cells, :mod:`jaxgrav.match.gaps`) and as the default decides (``missing="auto"``: gaps
+when the INS track itself crosses the hole, else land). The same
 readings are matched on the complete and the holey maps: median error / INS error,
 share worse than the INS,
 share flagged (status 8192), share whose fit the χ² test of ``jaxgrav match`` calls
@@ -116,10 +117,12 @@ def matcher_cost(grid, runs, sigma, length, rng):
     keys = jax.random.split(jax.random.key(11), runs)
     simulate = jax.jit(lambda k, g: matching_scenario(k, g, scen, map_error=model))
     names = ("complete", "hole off the truth (land), as land",
-             "hole off the truth (land), as gaps", "wide hole under the truth, as land",
-             "wide hole under the truth, as gaps", "narrow hole under the truth, as land",
-             "narrow hole under the truth, as gaps")
-    missing = ("land", "land", "gaps", "land", "gaps", "land", "gaps")
+             "hole off the truth (land), as gaps", "hole off the truth (land), auto",
+             "wide hole under the truth, as land",
+             "wide hole under the truth, as gaps", "wide hole under the truth, auto",
+             "narrow hole under the truth, as land",
+             "narrow hole under the truth, as gaps", "narrow hole under the truth, auto")
+    missing = ("land", "land", "gaps", "auto", "land", "gaps", "auto", "land", "gaps", "auto")
     ratio = {name: [] for name in names}
     flagged = {name: 0 for name in names}
     implausible = {name: 0 for name in names}
@@ -132,7 +135,7 @@ def matcher_cost(grid, runs, sigma, length, rng):
         used += 1
         ins = float(track_error_m(run.ins_lat, run.ins_lon, run.truth))
         wide, narrow = _under_truth(grid, run, rng), _under_truth(grid, run, rng, (1, 2))
-        maps = (grid, holey, holey, wide, wide, narrow, narrow)
+        maps = (grid, holey, holey, holey, wide, wide, wide, narrow, narrow, narrow)
         for name, g, miss in zip(names, maps, missing, strict=True):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)

@@ -167,7 +167,8 @@ def test_dense_with_the_truth_masked_returns_a_finite_flagged_fix(smooth_grid, s
                        (t_lon.min() - 0.005, t_lon.min() + 0.02))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        r = jm.match_track(holey, lat, lon, z, drift_radius_m=3000.0, noise=0.5)
+        r = jm.match_track(holey, lat, lon, z, drift_radius_m=3000.0, noise=0.5,
+                           missing="land")
     assert int(r.status) & MASKED
     for k in ("lat", "lon", "offset_north_m", "offset_east_m", "bias"):
         assert np.isfinite(np.asarray(getattr(r, k))).all(), k

@@ -26,7 +26,7 @@ from jaxgrav.match import (
     match_track,
     status_messages,
 )
-from jaxgrav.match.api import MAP_ERROR_METHODS
+from jaxgrav.match.api import MAP_ERROR_METHODS, MASKED, ins_over_missing
 from jaxgrav.sim import DEG_ARC_M
 from jaxgrav.tracks import csv_line, write_track_csv
 
@@ -78,10 +78,11 @@ def add_parsers(sub):
                    help="dense, chains, entropy+iccp: correlation length of the map's error "
                         "(m, default 10000)")
     add_map_error_var_option(m)
-    m.add_argument("--missing", choices=("land", "gaps"), default="land",
-                   help="what missing (NaN) map nodes are: land (default; candidates touching "
-                        "them are dropped) or, dense only, survey gaps (each candidate is "
-                        "scored on its fixes over present cells)")
+    m.add_argument("--missing", choices=("auto", "land", "gaps"), default="auto",
+                   help="what missing (NaN) map nodes are: land (candidates touching them are "
+                        "dropped) or, dense only, survey gaps (each candidate is scored on its "
+                        "fixes over present cells); auto (default): gaps for dense when the "
+                        "INS track itself crosses a missing cell, else land")
     m.add_argument("--eotvos-corrected", "--no-eotvos", dest="no_eotvos", action="store_true",
                    help="the gravity column is already Eötvös-corrected (with velocities "
                         "v_east, v_north the column is otherwise taken as raw and corrected "
@@ -186,7 +187,11 @@ def _cmd_match(args):
              sigma_north_m=float(np.sqrt(cov[0, 0])), sigma_east_m=float(np.sqrt(cov[1, 1])),
              map_error_mgal=args.map_error, map_error_length_m=args.map_error_length,
              map_error_var=args.map_error_var)
-    r.update(method=args.method, missing=args.missing, field=field, map=str(args.map),
+    gaps = args.method == "dense" and bool(int(result.status) & MASKED) and (
+        args.missing == "gaps" or (args.missing == "auto"
+                                   and ins_over_missing(grid, track["lat"], track["lon"])))
+    r.update(method=args.method, missing=args.missing, missing_read_as="gaps" if gaps else "land",
+             field=field, map=str(args.map),
              track=str(args.track), drift_radius_deg=radius_deg, eotvos_corrected=has_v)
     if args.method in CONTOUR_METHODS:
         r.update(max_rotation_deg=max_rotation, entropy_half_size=args.entropy_half_size)
@@ -280,7 +285,7 @@ def _check_match_args(args):
                          f"only; got --method {args.method}")
     if args.missing == "gaps" and args.method != "dense":
         raise ValueError(f"--missing gaps (survey gaps scored per fix) is built for --method "
-                         f"dense only; got --method {args.method} (use --missing land)")
+                         f"dense only; got --method {args.method} (use --missing land or auto)")
     if args.max_rotation is not None:
         if args.method not in ("iccp", "entropy+iccp"):
             raise ValueError(f"--max-rotation bounds ICCP's rotation; it has no effect with "

@@ -30,7 +30,8 @@ from jaxgrav.match.sizing import config_for, iccp_config_for
 from jaxgrav.prepared import as_grid, prepare_map
 
 __all__ = ["ENTROPY_HALF_SIZE", "MAP_ERROR_METHODS", "MASKED", "METHODS", "MIN_FIXES",
-           "match_track", "max_gap_fixes", "missing_in_reach", "validate_track"]
+           "ins_over_missing", "match_track", "max_gap_fixes", "missing_in_reach",
+           "validate_track"]
 
 METHODS = ("dense", "chains", "entropy", "iccp", "entropy+iccp")
 """``dense``: offset grid + Gauss–Newton (default, most accurate on real maps);
@@ -139,7 +140,7 @@ def _check_options(method, noise, bias_sigma_mgal, max_rotation_deg, entropy_hal
 def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000.0,
                 noise=1.0, v_east=None, v_north=None, bias_sigma_mgal=None,
                 max_rotation_deg=None, entropy_half_size=None, config=None, warn=True,
-                noise_mgal=None, map_error=None, missing="land"):
+                noise_mgal=None, map_error=None, missing="auto"):
     """Match one track against a map, with input checks (the public entry point).
 
     Parameters
@@ -191,14 +192,17 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
         (:func:`~jaxgrav.fields.map_error.map_error`): GLS score, posterior fix and
         integrity test (:func:`config_for`, :func:`iccp_config_for`); None (default)
         or σ = 0: today's white-noise score. Ignored with an explicit ``config``.
-    missing : {"land", "gaps"}
-        What missing (NaN) map nodes are. ``"land"`` (default): places the vehicle
-        cannot be, candidates touching them are dropped. ``"gaps"`` (``dense`` only):
-        gaps in the survey, each candidate is scored on its fixes over present cells
-        (each other fix adds its expected χ², 1: :mod:`~jaxgrav.match.gaps`), with
-        at most :func:`max_gap_fixes` of the N fixes in gaps; a fix read over gaps at
-        more than half of its fixes is rejected (status 32768,
-        :data:`~jaxgrav.match.result.GAPPED`, INS track kept). The same as ``"land"``
+    missing : {"auto", "land", "gaps"}
+        What missing (NaN) map nodes are. ``"land"``: places the vehicle cannot be,
+        candidates touching them are dropped. ``"gaps"`` (``dense`` only): gaps in the
+        survey, each candidate is scored on its fixes over present cells (each other
+        fix adds its expected χ², 1: :mod:`~jaxgrav.match.gaps`), with at most
+        :func:`max_gap_fixes` of the N fixes in gaps; a fix read over gaps at more
+        than half of its fixes is rejected (status 32768,
+        :data:`~jaxgrav.match.result.GAPPED`, INS track kept). ``"auto"`` (default):
+        ``"gaps"`` for ``dense`` when the INS-indicated track itself crosses a missing
+        cell (:func:`ins_over_missing`: where the vehicle is believed to be is not
+        land), ``"land"`` otherwise and for the other methods. All three are the same
         on a map without missing nodes in reach. With an explicit ``config``, its
         ``gap_fixes`` decides instead.
 
@@ -235,11 +239,11 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
     if map_error is not None and method not in MAP_ERROR_METHODS:
         raise ValueError(f"map_error is used by methods {MAP_ERROR_METHODS} only; got method "
                          f"{method!r}")
-    if missing not in ("land", "gaps"):
-        raise ValueError(f"missing must be 'land' or 'gaps'; got {missing!r}")
+    if missing not in ("land", "gaps", "auto"):
+        raise ValueError(f"missing must be 'land', 'gaps' or 'auto'; got {missing!r}")
     if missing == "gaps" and method != "dense":
         raise ValueError(f"missing='gaps' (survey gaps scored per fix) is built for method "
-                         f"'dense' only; got method {method!r} (use missing='land')")
+                         f"'dense' only; got method {method!r} (use missing='land' or 'auto')")
     lat, lon, readings = validate_track(grid, lat, lon, readings)
     corrected = v_east is not None and v_north is not None
     if corrected:
@@ -251,7 +255,9 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
     if method in ("dense", "chains"):
         result = _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
                                     bias_sigma_mgal, corrected, config, map_error, masked,
-                                    missing == "gaps")
+                                    missing == "gaps" or (missing == "auto" and masked
+                                                          and method == "dense"
+                                                          and ins_over_missing(grid, lat, lon)))
     else:
         result = _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise,
                                 max_rotation_deg, entropy_half_size, config, map_error)
@@ -267,6 +273,11 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
 
 MASKED = 8192
 """Status bit: the search region holds missing (NaN) map nodes (see :data:`STATUS`)."""
+
+
+def ins_over_missing(grid, lat, lon):
+    """Whether the INS-indicated track itself crosses a cell with a missing corner."""
+    return bool(np.isnan(np.asarray(as_grid(grid).sample(lat, lon, "bilinear"))).any())
 
 
 def max_gap_fixes(n):

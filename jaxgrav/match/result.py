@@ -31,11 +31,12 @@ STATUS = {
           "(max_chi2_per_dof); INS track kept",
     4096: "fix rejected: posterior mass at the edge of the search region (max_edge_mass); "
           "INS track kept",
-    8192: "the search region holds missing (NaN) map nodes: as land (the default), "
-          "candidates touching them were dropped and the fix is the best of the rest (if "
-          "the map is missing survey data there, the truth may lie in the dropped part: "
-          "dense matches gaps with missing='gaps', --missing gaps); as survey gaps, each "
-          "candidate was scored on its fixes over present cells",
+    8192: "the search region holds missing (NaN) map nodes: read as land, candidates "
+          "touching them were dropped and the fix is the best of the rest (if the map is "
+          "missing survey data there, the truth may lie in the dropped part: dense reads "
+          "gaps with missing='gaps', --missing gaps); read as survey gaps (dense, and by "
+          "default when the INS track crosses them), each candidate was scored on its "
+          "fixes over present cells",
     16384: "the fix fits the readings far worse than the stated noise and map error allow "
            "(chi-squared p < 1e-3): a wrong map, unit, noise or an untold map error; the "
            "fix and its covariance are not trustworthy as stated",

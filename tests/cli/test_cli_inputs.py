@@ -102,12 +102,14 @@ def test_sample_and_match_use_a_map_with_missing_nodes_away_from_the_track(sim, 
                  "--out", str(tmp_path / "r2.json")]) == 0
     r = json.loads((tmp_path / "r2.json").read_text())
     assert r["status"] & 8192 and any("missing (NaN)" in m for m in r["status_messages"])
-    assert np.isfinite(r["lat"]).all() and r["missing"] == "land"
-    # the same hole read as a survey gap: candidates scored on their present fixes
+    assert np.isfinite(r["lat"]).all() and r["missing"] == "auto"
+    # the hole is under the simulated INS track: the default read it as a survey gap
+    assert r["missing_read_as"] == "gaps"
+    # the same hole read as land: candidates touching it dropped
     assert main(["match", "--map", str(tmp_path / "near.nc"), "--track", str(d / "t.csv"),
-                 "--out", str(tmp_path / "r2g.json"), "--missing", "gaps"]) == 0
+                 "--out", str(tmp_path / "r2g.json"), "--missing", "land"]) == 0
     r = json.loads((tmp_path / "r2g.json").read_text())
-    assert r["status"] & 8192 and r["missing"] == "gaps" and np.isfinite(r["lat"]).all()
+    assert r["status"] & 8192 and r["missing_read_as"] == "land" and np.isfinite(r["lat"]).all()
     # a region that is almost all hole is refused in one line naming the file
     _holey_map(tmp_path / "sea.nc", (slice(i - 30, i + 30), slice(j - 30, j + 30)))
     capsys.readouterr()

@@ -92,7 +92,7 @@ def test_missing_nodes_smoke():
     assert all(a > b for a, b in itertools.pairwise(rms))  # the hole's effect decays
     assert rms[-1] < 0.01 * rms[0]
     match_rows = [r for r in rows if r["part"] == "dense matcher"]
-    assert len(match_rows) == 14  # complete, three holey maps as land and as gaps,
+    assert len(match_rows) == 20  # complete, three holey maps as land, as gaps and auto,
     # perfect map and map error
     for r in match_rows:
         assert r["runs"] > 0 and 0 <= r["median_ratio"] < 10

@@ -175,7 +175,7 @@ def test_gaps_options_are_checked(smooth_grid):
     lat = 29.95 + 0.003 * np.arange(N)
     lon = 129.9 + 0.004 * np.arange(N)
     z = np.asarray(smooth_grid.sample(lat, lon, "bicubic"))
-    with pytest.raises(ValueError, match="missing must be 'land' or 'gaps'; got 'sea'"):
+    with pytest.raises(ValueError, match="missing must be 'land', 'gaps' or 'auto'; got 'sea'"):
         jm.match_track(smooth_grid, lat, lon, z, missing="sea")
     with pytest.raises(ValueError, match="built for method 'dense' only; got method 'chains'"):
         jm.match_track(smooth_grid, lat, lon, z, method="chains", missing="gaps")
@@ -201,7 +201,7 @@ def test_dense_matches_across_a_survey_gap_that_land_mode_cannot(smooth_grid):
     gap = ~np.isfinite(np.asarray(grid.sample(t_lat, t_lon, "bicubic")))
     assert 3 <= gap.sum() <= n // 2
     out = {}
-    for missing, g in (("land", grid), ("gaps", grid), ("complete", smooth_grid)):
+    for missing, g in (("land", grid), ("gaps", grid), ("auto", grid), ("complete", smooth_grid)):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             r = jm.match_track(g, lat, lon, z, drift_radius_m=3000.0, noise=0.5,
@@ -213,6 +213,8 @@ def test_dense_matches_across_a_survey_gap_that_land_mode_cannot(smooth_grid):
     assert int(r.status) & MASKED and bool(r.accepted) and np.isfinite(float(r.score))
     assert err < max(2.0 * out["complete"][0], 300.0), out  # as good as without the gap
     assert out["land"][0] > 3 * err, out
+    # the INS track crosses the gap, so the default reads it as one
+    np.testing.assert_array_equal(np.asarray(out["auto"][1].lat), np.asarray(r.lat))
     assert 0.3 < float(r.chi2_per_dof) < 3.0  # the gaps count at their expectation
     # a gap over most of the track: the fix would be a guess, so it is rejected
     v[:, (lo > mid - 0.03) & (lo < mid + 0.03)] = np.nan
