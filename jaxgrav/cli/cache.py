@@ -12,6 +12,11 @@ program; the folder is bounded to :data:`MAX_BYTES` (least recently used entries
 Entries larger than :data:`MAX_ENTRY_BYTES` are removed when the cache is turned on
 (:func:`prune_large_entries`): such an executable carries a large array baked in as a
 constant, and XLA:CPU has crashed (segmentation fault) deserialising one.
+
+The same switch keeps the commands' compiled entry points themselves in
+``executables/`` inside that folder (:mod:`jaxgrav.executables`): the XLA cache saves
+compiling, but a new process still traces and lowers a program before it can look its
+compile up, about a second for a matcher; a kept executable skips all three.
 """
 
 import os
@@ -19,6 +24,8 @@ from pathlib import Path
 
 import jax
 from filelock import FileLock
+
+from jaxgrav import executables
 
 __all__ = ["MAX_BYTES", "MAX_ENTRY_BYTES", "MIN_COMPILE_SECONDS", "cache_dir",
            "enable_cache", "prune_large_entries"]
@@ -67,10 +74,11 @@ def enable_cache(off=False):
     str or None
         The cache folder in use (possibly the caller's own), or None.
     """
+    folder = None if off else cache_dir()
+    executables.use_folder(None if folder is None else folder / "executables")
     current = jax.config.jax_compilation_cache_dir
     if current:  # configured by the caller or JAX_COMPILATION_CACHE_DIR: keep it
         return current
-    folder = None if off else cache_dir()
     if folder is None:
         return None
     prune_large_entries(folder)

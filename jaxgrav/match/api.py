@@ -17,6 +17,7 @@ import warnings
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav import executables
 from jaxgrav._validate import check_latitude
 from jaxgrav.geodesy import eotvos
 from jaxgrav.match.combined import match_entropy_iccp
@@ -27,7 +28,7 @@ from jaxgrav.match.iccp import IccpConfig, match_iccp
 from jaxgrav.match.lattice_chains import stencil_size_for
 from jaxgrav.match.result import IMPLAUSIBLE_FIT, P_IMPLAUSIBLE, fit_p_value, status_messages
 from jaxgrav.match.sizing import config_for, iccp_config_for
-from jaxgrav.prepared import as_grid, prepare_map
+from jaxgrav.prepared import as_grid
 
 __all__ = ["ENTROPY_HALF_SIZE", "MAP_ERROR_METHODS", "MASKED", "METHODS", "MIN_FIXES",
            "ins_over_missing", "match_track", "max_gap_fixes", "missing_in_reach",
@@ -331,9 +332,11 @@ def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
         # shifted fix on its own (same values elsewhere), masking only what touches it
         config = dataclasses.replace(config, lattice_block=0)
     args = (jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(readings), config)
+    # one program per call (the map's spline is prepared inside it), kept on disk when
+    # the command line (or the caller) set a folder for executables
     if method == "dense":
-        return match_dense(prepare_map(grid), *args)
-    return match_chains(as_grid(grid), *args)  # reads node values only: nothing to prepare
+        return executables.call(match_dense, grid, *args)
+    return executables.call(match_chains, as_grid(grid), *args)  # reads node values only
 
 
 def _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise, max_rotation_deg,
@@ -354,9 +357,9 @@ def _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise, max_
         iccp = iccp_config_for(grid, drift_radius_m, stage=stage, noise=noise,
                                max_rotation_deg=90.0 if max_rotation_deg is None
                                else max_rotation_deg, map_error=map_error)
-    pm = prepare_map(grid)
+    args = (grid, jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(readings))
     if method == "entropy":
-        return match_entropy(pm, lat, lon, readings, entropy)
+        return executables.call(match_entropy, *args, entropy)
     if method == "iccp":
-        return match_iccp(pm, lat, lon, readings, iccp)
-    return match_entropy_iccp(pm, lat, lon, readings, entropy, iccp)
+        return executables.call(match_iccp, *args, iccp)
+    return executables.call(match_entropy_iccp, *args, entropy, iccp)
