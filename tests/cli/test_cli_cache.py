@@ -41,6 +41,17 @@ def test_a_second_call_loads_the_compiled_programs(tmp_path):
     assert second.returncode == 0, second.stderr
     assert second.stdout == first.stdout  # same result from the loaded programs
     assert sorted(p.name for p in (tmp_path / "xla").iterdir()) == entries  # nothing new
+    # match keeps its compiled matcher itself: the second call loads it, same result
+    match = ["match", "--map", "ryukyu", "--track", str(track), "--force",
+             "--out", str(tmp_path / "m.json")]
+    assert _jaxgrav(match, env).returncode == 0
+    kept = sorted(p.name for p in (tmp_path / "xla" / "executables").iterdir())
+    assert len(kept) == 1 and kept[0].endswith(".jaxexe")
+    result = (tmp_path / "m.json").read_text()
+    second = _jaxgrav(match, env)
+    assert second.returncode == 0, second.stderr
+    assert (tmp_path / "m.json").read_text() == result
+    assert sorted(p.name for p in (tmp_path / "xla" / "executables").iterdir()) == kept
     # turned off: no folder
     env["JAXGRAV_CACHE_DIR"] = str(tmp_path / "none")
     off = _jaxgrav(["--no-cache", *args], env)
@@ -58,24 +69,3 @@ def test_prune_large_entries_removes_only_oversized_entries(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir() if p.name != ".lockfile") == [
         "small-atime", "small-cache"]
     assert prune_large_entries(tmp_path / "missing") == []
-
-
-@pytest.mark.long
-def test_a_second_match_loads_the_kept_executable(tmp_path):
-    """``match`` keeps its compiled program: the second call adds nothing, same result."""
-    env = {k: v for k, v in os.environ.items()
-           if not k.startswith("JAX_") and k != "JAXGRAV_CACHE"}  # conftest turns it off
-    env["JAXGRAV_CACHE_DIR"] = str(tmp_path / "xla")
-    track = tmp_path / "t.csv"
-    assert main(["simulate", "--out", str(track), "--n", "12", "--seed", "2"]) == 0
-    args = ["match", "--map", "ryukyu", "--track", str(track), "--force",
-            "--out", str(tmp_path / "m.json")]
-    first = _jaxgrav(args, env)
-    assert first.returncode == 0, first.stderr
-    kept = sorted(p.name for p in (tmp_path / "xla" / "executables").iterdir())
-    assert len(kept) == 1 and kept[0].endswith(".jaxexe")
-    result = (tmp_path / "m.json").read_text()
-    second = _jaxgrav(args, env)
-    assert second.returncode == 0, second.stderr
-    assert (tmp_path / "m.json").read_text() == result
-    assert sorted(p.name for p in (tmp_path / "xla" / "executables").iterdir()) == kept
