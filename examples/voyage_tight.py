@@ -22,7 +22,7 @@ Printed, one JSON line per setting: the figures of
 the free INS, last-hour ratio, last over second hour, share of voyages worse than the
 free INS in some hour from the second on, NEES), the share of readings used, runs/s.
 
-Run: ``python examples/voyage_tight.py [--runs 100] [--method ukf|ekf|gsf] [--order 1|2]
+Run: ``python examples/voyage_tight.py [--runs 100] [--method ukf|ekf|gsf|rbpf] [--order 1|2]
 [--sigma 3] [--length 10000] [--ins navigation|strategic] [--png FILE] [--tracks-png FILE]
 [--smoke]``.
 """
@@ -61,7 +61,7 @@ SETTINGS = ("perfect map", "map error, told", "map error, not told",
 
 def _one(pm, grid, key, scenario, model, config):
     voyage = voyage_scenario(key, grid, scenario, model)
-    res = navigate_tight(pm, voyage, config)
+    res = navigate_tight(pm, voyage, config, jax.random.fold_in(key, 1))  # rbpf's draws
     err = voyage_errors(voyage, res.nav, res.cov_north_east)
     sigma = jnp.sqrt(jnp.trace(res.cov_north_east, axis1=1, axis2=2))
     used = jnp.mean((res.status == 0) & jnp.isfinite(voyage.gravity))  # status 0: updated
@@ -82,7 +82,7 @@ def run(grid, scenario, model, config, keys, batch=50):
 def tracks_figure(grid, scenario, model, config, key, path, title, force):
     """One voyage on the map: the truth, the free INS and the tightly coupled solution."""
     voyage = voyage_scenario(key, grid, scenario, model)
-    res = navigate_tight(prepare_map(grid), voyage, config)
+    res = navigate_tight(prepare_map(grid), voyage, config, jax.random.fold_in(key, 1))
     tracks = {"truth": (voyage.truth.lat, voyage.truth.lon),
               "free INS": (voyage.ins.lat, voyage.ins.lon),
               "navigation": (res.nav.lat, res.nav.lon)}

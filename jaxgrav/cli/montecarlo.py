@@ -64,7 +64,8 @@ def add_parser(subparsers):
                         "1000 particles) and the guarded "
                         "ukf-guard, gsf-guard: paper D's filters (over its three point "
                         "masses, or over --map); voyage-dense (loosely coupled, hourly dense "
-                        "fixes), voyage-ukf, voyage-ekf, voyage-gsf (tightly coupled): 12 h "
+                        "fixes), voyage-ukf, voyage-ekf, voyage-gsf, voyage-rbpf (tightly "
+                        "coupled; voyage-rbpf: 500 particles): 12 h "
                         "patrols (--hours) navigated with a navigation-grade INS (--ins)")
     m.add_argument("--runs", type=int, required=True, help="number of simulated runs")
     m.add_argument("--chunk", type=int, default=None,

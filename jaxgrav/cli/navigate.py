@@ -28,16 +28,19 @@ The readings are Eötvös-corrected with the filter's velocity, the one rule of 
 navigation loop. Where the log leaves the map, the fixes stop (event 2) and the
 solution continues on the INS with a growing σ.
 
-``--method ukf|ekf|gsf`` (tightly coupled, :func:`jaxgrav.navigate.navigate_tight`):
+``--method ukf|ekf|gsf|rbpf`` (tightly coupled, :func:`jaxgrav.navigate.navigate_tight`):
 every reading updates the INS error filter; the readings are Eötvös-corrected with the
 INS velocity and the Eötvös effect of its velocity error is part of the measurement;
 ``--map-error`` adds a second-order Gauss–Markov map-error state of that σ and L.
+``rbpf`` is the Rao–Blackwellised particle filter (``--particles``, default 500;
+``--seed`` for its draws).
 Readings that are missing or off the map are skipped and flagged row by row.
 """
 
 import math
 import sys
 
+import jax
 import numpy as np
 
 from jaxgrav._io import check_outputs
@@ -86,7 +89,11 @@ def add_parser(sub):
     add_columns_option(p)
     p.add_argument("--method", choices=METHODS, default="dense",
                    help="dense: hourly matcher fixes into the INS error filter (loosely "
-                        "coupled); ukf, ekf, gsf: every reading into the filter (tightly)")
+                        "coupled); ukf, ekf, gsf, rbpf: every reading into the filter "
+                        "(tightly)")
+    p.add_argument("--particles", type=int, default=500,
+                   help="particles of --method rbpf (default 500)")
+    p.add_argument("--seed", type=int, default=0, help="seed of --method rbpf's draws")
     p.add_argument("--out", required=True, help="navigation CSV (see jaxgrav navigate docs)")
     p.add_argument("--eotvos-corrected", action="store_true",
                    help="the gravity column is already Eötvös-corrected with the INS velocity")
@@ -172,6 +179,8 @@ def cmd_navigate(args):
     _positive("--map-error-length", args.map_error_length, "m")
     _positive("--max-gap", args.max_gap, "s")
     _positive("--max-speed", args.max_speed, "m/s")
+    if args.particles < 2:
+        raise ValueError(f"--particles must be an integer >= 2; got {args.particles}")
     for name, value in (("--fix-every", args.fix_every), ("--n-fixes", args.n_fixes),
                         ("--stride", args.stride)):
         if value < 1:
@@ -224,8 +233,8 @@ def _tight(args, voyage, grid, n_missing, n_off):
             if args.map_error > 0 else None)
     cfg = TightConfig(ins=INS_GRADES[args.ins], sigma_pos_m=args.sigma_pos,
                       sigma_vel=args.sigma_vel, noise_mgal=args.noise, map_error=told,
-                      method=args.method)
-    res = navigate_tight(prepare_map(grid), voyage, cfg)
+                      method=args.method, n_particles=args.particles)
+    res = navigate_tight(prepare_map(grid), voyage, cfg, jax.random.PRNGKey(args.seed))
     cov = np.asarray(res.cov_north_east)
     sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
     x, sigma = np.asarray(res.error_estimate), np.asarray(res.sigma)

@@ -26,8 +26,8 @@ run (expected value 2); they run over paper D's point masses, or over a map (str
 tracks in random directions).
 
 Voyages (:mod:`~jaxgrav.montecarlo.voyage_runs`): ``voyage-dense`` (loosely coupled,
-hourly dense fixes) and ``voyage-ukf``, ``voyage-ekf``, ``voyage-gsf`` (tightly
-coupled) navigate 12 h patrols; ``ins_err_m`` and ``err_m`` are the last hour's RMS, and
+hourly dense fixes) and ``voyage-ukf``, ``voyage-ekf``, ``voyage-gsf``, ``voyage-rbpf``
+(tightly coupled) navigate 12 h patrols; ``ins_err_m`` and ``err_m`` are the last hour's RMS, and
 they return the hourly RMS and error series too.
 
 ``fn`` must be a module-level function (not a fresh closure), so that repeated runs

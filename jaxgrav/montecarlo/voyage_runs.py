@@ -2,9 +2,11 @@
 
 ``voyage-dense`` is the loosely coupled loop (:func:`~jaxgrav.navigate.navigate_loose`,
 hourly dense-matcher fixes, :func:`~jaxgrav.navigate.loose_config`); ``voyage-ukf``,
-``voyage-ekf`` and ``voyage-gsf`` the tightly coupled filters
-(:func:`~jaxgrav.navigate.navigate_tight`). Each run draws a ``patrol-12h`` voyage
-(:func:`~jaxgrav.scenarios.voyage_scenario`; navigation-grade INS unless told
+``voyage-ekf``, ``voyage-gsf`` and ``voyage-rbpf`` the tightly coupled filters
+(:func:`~jaxgrav.navigate.navigate_tight`; the particle filter's key is
+``fold_in(run key, 1)``, apart from the simulation's, as for the filter methods). Each
+run draws a ``patrol-12h`` voyage (:func:`~jaxgrav.scenarios.voyage_scenario`;
+navigation-grade INS unless told
 otherwise) whose readings see the map plus the run's map error, and returns, besides
 :data:`~jaxgrav.montecarlo.spec.METRICS`:
 
@@ -93,7 +95,7 @@ def voyage_tight_run(key, pm, grid, scenario, model, config):
     config : TightConfig
     """
     voyage = voyage_scenario(key, grid, scenario, model)
-    res = navigate_tight(pm, voyage, config)
+    res = navigate_tight(pm, voyage, config, jax.random.fold_in(key, 1))
     status = jax.lax.reduce(res.status, jnp.int32(0), jax.lax.bitwise_or, (0,))
     return _metrics(voyage, res.nav, res.cov_north_east, scenario.dt, status)
 
@@ -122,7 +124,7 @@ def voyage_tracks(key, pm, grid, scenario, model, config):
     """
     voyage = voyage_scenario(key, grid, scenario, model)
     if isinstance(config, TightConfig):
-        nav = navigate_tight(pm, voyage, config).nav
+        nav = navigate_tight(pm, voyage, config, jax.random.fold_in(key, 1)).nav
     else:
         nav = navigate_loose(pm, voyage, config).nav
     return {"truth": (voyage.truth.lat, voyage.truth.lon),
@@ -140,7 +142,7 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
     grid : Grid, optional
         The map (default the shipped 2.5′ ``ryukyu``). The preset's region (25–35° N,
         125–135° E) is used if the map covers it, else the map's own extent.
-    kind : {"voyage-dense", "voyage-ukf", "voyage-ekf", "voyage-gsf"}
+    kind : {"voyage-dense", "voyage-ukf", "voyage-ekf", "voyage-gsf", "voyage-rbpf"}
     drift_deg : float, optional
         Initial INS position error (degrees of arc; default 500 m).
     noise : float, optional

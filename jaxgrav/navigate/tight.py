@@ -2,9 +2,16 @@
 
 Where the loosely coupled loop (:mod:`~jaxgrav.navigate.loose`) matches an hour of
 readings into one position fix, here every reading updates the 13-state INS error
-filter directly (UKF, EKF or Gaussian sum of :mod:`jaxgrav.filters`), with the same
-error model the voyage is simulated with, discretised once at the voyage's mean
-latitude.
+filter directly (UKF, EKF, Gaussian sum or Rao–Blackwellised particle filter of
+:mod:`jaxgrav.filters`), with the same error model the voyage is simulated with,
+discretised once at the voyage's mean latitude.
+
+**Particles** (``rbpf``, :func:`~jaxgrav.filters.rbpf`): particles over the horizontal
+position error, each with the Gaussian of the other states (velocity, attitude, sensor
+biases, gravimeter bias, map error), which the reading, the Eötvös part included, is
+linear in. No linearisation of the map, so no curvature term; a multimodal position
+(a ship on a flat or repetitive stretch) stays multimodal instead of locking onto one
+mode. Its draws come from ``key``.
 
 **Eötvös, as a real system must.** The gravimeter reads the true field minus the
 Eötvös effect of the *true* velocity; the navigation system corrects it with the
@@ -53,6 +60,7 @@ from jaxgrav.filters import (
     eotvos_part,
     gaussian_sum,
     gravity_measurement,
+    rbpf,
     run_filter,
     ukf,
 )
@@ -63,8 +71,9 @@ from jaxgrav.sim.trajectory import Track
 
 __all__ = ["TIGHT_METHODS", "TightConfig", "TightResult", "navigate_tight"]
 
-TIGHT_METHODS = ("ukf", "ekf", "gsf")
-"""The filters :func:`navigate_tight` runs (``gsf``: a 3 × 3 Gaussian sum of UKFs)."""
+TIGHT_METHODS = ("ukf", "ekf", "gsf", "rbpf")
+"""The filters :func:`navigate_tight` runs (``gsf``: a 3 × 3 Gaussian sum of UKFs;
+``rbpf``: the Rao–Blackwellised particle filter)."""
 
 
 @pytree_dataclass
@@ -85,8 +94,10 @@ class TightConfig:
     gate : float
         Skip readings whose normalised innovation squared exceeds this (1 degree of
         freedom; ``inf``: never).
-    method : {"ukf", "ekf", "gsf"}
+    method : {"ukf", "ekf", "gsf", "rbpf"}
         The filter (static).
+    n_particles : int
+        Particles of ``rbpf`` (static, ≥ 2; default 500).
     curvature_cells : float
         Map cells over which the map's linearisation error is taken as correlated (see
         the module notes; ``ukf`` and ``gsf``); 0: off, as before.
@@ -104,12 +115,16 @@ class TightConfig:
     gate: float = float("inf")
     curvature_cells: float = 1.0
     method: str = static_field("ukf")
+    n_particles: int = static_field(500)
     eotvos_velocity: bool = static_field(True)
 
     def __post_init__(self):
         if self.method not in TIGHT_METHODS:
             raise ValueError(f"method must be one of {', '.join(TIGHT_METHODS)}; got "
                              f"{self.method!r}")
+        if (isinstance(self.n_particles, bool) or not isinstance(self.n_particles, int)
+                or self.n_particles < 2):
+            raise ValueError(f"n_particles must be an integer >= 2; got {self.n_particles!r}")
         if self.map_error is not None and not isinstance(self.map_error, MapErrorState):
             raise TypeError("map_error must be a MapErrorState (map_error_state(sigma, length_m)) "
                             f"or None; got {type(self.map_error).__name__}")
@@ -144,11 +159,13 @@ class TightResult(NamedTuple):
     status: jax.Array
 
 
-def _filter(method, measurement, gate, count):
+def _filter(method, measurement, gate, count, n_particles):
     if method == "ukf":
         return ukf(measurement, gate=gate, curvature_count=count)
     if method == "ekf":
         return ekf(measurement, gate=gate)
+    if method == "rbpf":
+        return rbpf(n_particles, measurement, gate=gate)
     return gaussian_sum(ukf(measurement, gate=gate, curvature_count=count), 3)
 
 
@@ -162,7 +179,7 @@ def _cell_m(grid):
 
 
 @jax.jit
-def navigate_tight(grid, voyage, config):
+def navigate_tight(grid, voyage, config, key=None):
     """Tightly coupled map-aided navigation over one voyage (see the module notes).
 
     Parameters
@@ -173,6 +190,9 @@ def navigate_tight(grid, voyage, config):
         The INS log and the raw readings (Eötvös not corrected; NaN where none);
         ``truth`` is not used. Uniform step.
     config : TightConfig
+    key : PRNG key, optional
+        The particle filter's draws (``rbpf``; default ``PRNGKey(0)``); unused by the
+        Kalman filters.
 
     Returns
     -------
@@ -195,8 +215,11 @@ def navigate_tight(grid, voyage, config):
     r = jnp.full(z.shape, jnp.asarray(cfg.noise_mgal, z.dtype) ** 2)
     steps = Step(ins.lat, ins.lon, z, r, h_lin)
     count = cfg.curvature_cells * _cell_m(grid) / jnp.maximum(speed * dt, 1e-9)
-    filt = _filter(cfg.method, meas, cfg.gate, count)
-    _, infos = run_filter(filt, grid, dynamics, x0, p0, steps)
+    filt = _filter(cfg.method, meas, cfg.gate, count, cfg.n_particles)
+    if cfg.method == "rbpf" and key is None:
+        key = jax.random.PRNGKey(0)
+    _, infos = run_filter(filt, grid, dynamics, x0, p0, steps,
+                          key=key if cfg.method == "rbpf" else None)
     xs = infos.x
     lat, lon = apply_drift(ins.lat, ins.lon, -xs[:, 0], -xs[:, 1])
     nav = Track(ins.t, lat, lon, ins.v_east - xs[:, VEL.start + 1], ins.v_north - xs[:, VEL.start])

@@ -36,14 +36,15 @@ def test_navigate_writes_every_row_with_sigma_and_fix_events(voyage_log, tmp_pat
 
 
 @pytest.mark.long
-def test_tight_ukf_beats_the_ins_against_the_truth(voyage_log, tmp_path, capsys):
-    """--method ukf: every row with the filter's status, innovation and bias, and a solution
-    closer to the written truth than the INS log in the last half hour."""
+@pytest.mark.parametrize("method", [["ukf"], ["rbpf", "--particles", "400", "--seed", "2"]])
+def test_tight_filters_beat_the_ins_against_the_truth(voyage_log, tmp_path, capsys, method):
+    """--method ukf, rbpf: every row with the filter's status, innovation and bias, and a
+    solution closer to the written truth than the INS log in the last half hour."""
     log, truth_csv = voyage_log
     out = tmp_path / "tight.csv"
-    assert main(["navigate", "--track", str(log), "--out", str(out), "--method", "ukf"]) == 0
+    assert main(["navigate", "--track", str(log), "--out", str(out), "--method", *method]) == 0
     said = capsys.readouterr().out
-    assert "541 rows" in said and "used by the ukf filter" in said
+    assert "541 rows" in said and f"used by the {method[0]} filter" in said
     cols = ("t", "lat", "lon", "sigma_north", "sigma_east", "status", "innovation",
             "innovation_sigma", "gravimeter_bias", "sigma_gravimeter_bias")
     nav = read_track_csv(out, cols, allow_nan=("innovation", "innovation_sigma"))
@@ -121,6 +122,7 @@ def test_bad_logs_are_named(voyage_log, tmp_path, capsys, edit, message):
     (["--sigma-pos", "-1"], "--sigma-pos must be a finite value > 0"),
     (["--map-error", "nan"], "--map-error must be a finite value >= 0"),
     (["--n-fixes", "100", "--stride", "100"], "one segment of --n-fixes 100"),
+    (["--method", "rbpf", "--particles", "1"], "--particles must be an integer >= 2"),
 ])
 def test_bad_options_are_named(voyage_log, tmp_path, capsys, args, message):
     out = tmp_path / "n.csv"

@@ -18,9 +18,9 @@ from jaxgrav.scenarios import voyage_scenario
 MODEL = map_error(3.0, 10000.0)
 
 
-@pytest.fixture(scope="module")
-def tight():
-    spec = montecarlo.build("voyage-ukf", None, map_error=MODEL, hours=1.0)
+@pytest.fixture(scope="module", params=["voyage-ukf", "voyage-rbpf"])
+def tight(request):
+    spec = montecarlo.build(request.param, None, map_error=MODEL, hours=1.0)
     return spec, montecarlo.run(spec.fn, jax.random.key(3), 2, args=spec.args, progress=False)
 
 
@@ -31,7 +31,7 @@ def test_a_run_is_the_navigator_on_the_same_voyage(tight):
     assert config.map_error is not None and config.map_error.order == 2  # matched, told
     key = jax.random.split(jax.random.key(3), 2)[1]
     voyage = voyage_scenario(key, grid, scenario, model)
-    nav = navigate_tight(pm, voyage, config)
+    nav = navigate_tight(pm, voyage, config, jax.random.fold_in(key, 1))  # particles' key
     err = voyage_errors(voyage, nav.nav, nav.cov_north_east)
     last = round(3600.0 / scenario.dt)
     assert float(res["err_m"][1]) == pytest.approx(
