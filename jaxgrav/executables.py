@@ -143,8 +143,9 @@ def _key(fn, in_tree, leaves):
     """The entry's name: a hash of everything the executable depends on."""
     h = hashlib.sha256()
     name = getattr(fn, "__wrapped__", fn)
+    line = getattr(getattr(name, "__code__", None), "co_firstlineno", "")
     for part in (
-        f"{name.__module__}.{name.__qualname__}",
+        f"{name.__module__}.{name.__qualname__}:{line}",  # two lambdas of a module differ
         _source_hash(),
         jax.__version__,
         jaxlib.__version__,

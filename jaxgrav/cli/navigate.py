@@ -43,6 +43,7 @@ import sys
 import jax
 import numpy as np
 
+from jaxgrav import executables
 from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import (
     add_columns_option,
@@ -218,13 +219,25 @@ def cmd_navigate(args):
     cfg = loose_config(INS_GRADES[args.ins], args.map_error, args.map_error_length, args.noise,
                        sigma_pos_m=args.sigma_pos, sigma_vel=args.sigma_vel,
                        fix_every=args.fix_every, n_fixes=args.n_fixes, stride=args.stride)
-    res = navigate_loose(prepare_map(grid), voyage, cfg)
+    res = executables.call(_loose, grid, voyage, cfg)
     _write(args, ins, res, cfg)
     events = np.asarray(res.fix_event)
     counts = ", ".join(f"{int(np.sum(events == k))} {FIX_EVENTS[k].split(':')[0]}"
                        for k in FIX_EVENTS if np.any(events == k))
     print(f"wrote {args.out}: {len(ins.t)} rows, {events.size} segment ends ({counts}); "
           f"{n_missing} missing reading(s) skipped, {n_off} row(s) off the map (not aided)")
+
+
+@jax.jit
+def _loose(grid, voyage, cfg):
+    """The loosely coupled loop as one program, the map's spline prepared inside it."""
+    return navigate_loose(prepare_map(grid), voyage, cfg)
+
+
+@jax.jit
+def _tight_program(grid, voyage, cfg, key):
+    """The tightly coupled filter as one program, the map's spline prepared inside it."""
+    return navigate_tight(prepare_map(grid), voyage, cfg, key)
 
 
 def _tight(args, voyage, grid, n_missing, n_off):
@@ -234,7 +247,7 @@ def _tight(args, voyage, grid, n_missing, n_off):
     cfg = TightConfig(ins=INS_GRADES[args.ins], sigma_pos_m=args.sigma_pos,
                       sigma_vel=args.sigma_vel, noise_mgal=args.noise, map_error=told,
                       method=args.method, n_particles=args.particles)
-    res = navigate_tight(prepare_map(grid), voyage, cfg, jax.random.PRNGKey(args.seed))
+    res = executables.call(_tight_program, grid, voyage, cfg, jax.random.PRNGKey(args.seed))
     cov = np.asarray(res.cov_north_east)
     sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
     x, sigma = np.asarray(res.error_estimate), np.asarray(res.sigma)
