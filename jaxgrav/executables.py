@@ -14,9 +14,11 @@ only by the same program on the same kind of machine: its key hashes the functio
 name, the jaxgrav source (every ``.py`` file of the package), the JAX and jaxlib
 versions, the 64-bit flag, the backend, the CPU (model and instruction-set flags) and
 ``XLA_FLAGS``, the arguments' tree structure (static settings included) and every
-leaf's shape and dtype. Entries are written atomically; one that fails to load is
-replaced. Like XLA's own cache, an entry holds machine code that is run as it is: the
-folder must be the user's own (the default is in the user's cache directory).
+leaf's shape and dtype. Entries are written atomically; one that fails to load or to
+run is compiled again and replaced. A kept executable is compiled past XLA's cache
+(one loaded from there serialises incompletely). Like XLA's own cache, an entry holds
+machine code that is run as it is: the folder must be the user's own (the default is in
+the user's cache directory).
 """
 
 import hashlib
@@ -85,10 +87,30 @@ def call(fn, *args):
     leaves, in_tree = jax.tree_util.tree_flatten((args, {}))
     path = where / f"{_key(fn, in_tree, leaves)}.jaxexe"
     compiled = _load(path, in_tree)
-    if compiled is None:
-        compiled = fn.lower(*args).compile()
-        _store(path, compiled)
+    if compiled is not None:
+        try:
+            return jax.block_until_ready(compiled(*args))
+        except (jax.errors.JaxRuntimeError, TypeError, ValueError):
+            path.unlink(missing_ok=True)  # an entry that does not run: compile it again
+    compiled = _compile_fresh(fn, args)
+    _store(path, compiled)
     return compiled(*args)
+
+
+def _compile_fresh(fn, args):
+    """Compile ``fn`` for ``args`` past XLA's persistent cache.
+
+    An executable that XLA:CPU loaded from its own cache serialises incompletely
+    (jaxlib 0.10.2: the point-mass filter's program, kept that way, failed when run
+    with "Function multiply_bitcast_fusion.2 not found"), so a kept executable is always
+    one compiled here. A call of the command line (single-threaded) is the only user.
+    """
+    before = jax.config.jax_enable_compilation_cache
+    jax.config.update("jax_enable_compilation_cache", False)
+    try:
+        return fn.lower(*args).compile()
+    finally:
+        jax.config.update("jax_enable_compilation_cache", before)
 
 
 def _load(path, in_tree):

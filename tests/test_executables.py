@@ -107,3 +107,23 @@ def test_match_track_gives_the_same_fix_through_a_kept_executable(kept):
     for a, b, c in zip(plain, first, loaded, strict=True):
         np.testing.assert_array_equal(np.asarray(b), np.asarray(c))
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-9)
+
+
+def test_an_entry_that_fails_to_run_is_compiled_again(kept, monkeypatch):
+    """A kept executable that loads but fails when run (as one serialised after XLA loaded
+    it from its own cache did) is removed, compiled again past XLA's cache, and kept."""
+    executables.call(_program, *_args())
+    (entry,) = kept.glob("*.jaxexe")
+
+    class Broken:
+        def __call__(self, *args):
+            raise jax.errors.JaxRuntimeError("INTERNAL: Function fusion.2 not found")
+
+    real = executables.serialize_executable.deserialize_and_load
+    monkeypatch.setattr(executables.serialize_executable, "deserialize_and_load",
+                        lambda *a, **k: Broken())
+    out = executables.call(_program, *_args())
+    assert float(out["sum"]) == pytest.approx(60.5)
+    assert entry.exists()  # written again
+    monkeypatch.setattr(executables.serialize_executable, "deserialize_and_load", real)
+    assert float(executables.call(_program, *_args())["sum"]) == pytest.approx(60.5)

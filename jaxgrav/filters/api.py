@@ -8,12 +8,12 @@ The jitted runners are module functions: one compilation per process, filter and
 track shape.
 """
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav import executables
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import DEG
 from jaxgrav.filters.gaussian_sum import gaussian_sum
 from jaxgrav.filters.guard import GuardConfig, guard_run
@@ -153,23 +153,34 @@ def _prior_and_dynamics(lat_mean, dt, sigma_pos, sigma_vel):
                                                                                lat_mean, dt))
 
 
-@functools.partial(jax.jit, static_argnames=("kind", "n_particles"))
-def _gaussian_run(kind, field, dynamics, p0, steps, guard, meas, key=None, n_particles=0):
+@pytree_dataclass
+class _Program:
+    """The static choices of :func:`filter_track`'s program (no traced fields)."""
+
+    kind: str = static_field("ukf")
+    n_particles: int = static_field(0)
+    every: int = static_field(1)
+
+
+@jax.jit
+def _gaussian_run(program, field, dynamics, p0, steps, guard, meas, key=None):
     # meas: a MapPlusBias (a pytree without leaves: its layout is part of the compiled code)
+    n_particles = program.n_particles
     filt = {"ukf": ukf, "ekf": ekf, "gsf": lambda m: gaussian_sum(ukf(m), 3),
-            "pf": lambda m: pf(n_particles, m), "rbpf": lambda m: rbpf(n_particles, m)}[kind](meas)
+            "pf": lambda m: pf(n_particles, m),
+            "rbpf": lambda m: rbpf(n_particles, m)}[program.kind](meas)
     _, infos = run_filter(filt, field, dynamics, jnp.zeros(p0.shape[0]), p0, steps, key=key)
     # guard: a traced ratio (inf = off), so one compilation serves both
     guarded = guard_run(infos, dynamics, p0, GuardConfig(guard, guard))
     return jax.tree.map(lambda g, a: jnp.where(jnp.isfinite(guard), g, a), guarded, infos)
 
 
-@functools.partial(jax.jit, static_argnames=("every",))
-def _pmf_run(field, dt, p0, cell_m, q_pos, steps, every, map_error=None, speed=0.0):
+@jax.jit
+def _pmf_run(program, field, dt, p0, cell_m, q_pos, steps, map_error, speed):
     filt = pmf(PMF_CELLS, cell_m, q_pos=q_pos)
     dynamics = filt.dynamics(jnp.mean(steps.lat), dt)
     dynamics, x0, p0, _ = augment(map_error, dynamics, jnp.zeros(p0.shape[0]), p0, speed)
-    _, infos = run_filter(filt, field, dynamics, x0, p0, steps, every)
+    _, infos = run_filter(filt, field, dynamics, x0, p0, steps, program.every)
     return infos
 
 
@@ -242,7 +253,8 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     dt = float(np.median(np.diff(t)))
     n = t.size
     r = float(sigma_gravity) ** 2
-    p0, dynamics = _prior_and_dynamics(float(np.mean(lat)), dt, sigma_pos, sigma_vel)
+    p0, dynamics = executables.call(_prior_and_dynamics, float(np.mean(lat)), dt, sigma_pos,
+                                    sigma_vel)
     every = None
     meas = gravity_measurement
     speed = 0.0
@@ -269,17 +281,19 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         cell_m = 2.0 * PMF_SPAN_SIGMA * sigma_pos / (PMF_CELLS - 1)
         q_pos = PMF_Q_POS * (sigma_vel / 0.1414) ** 2
         padded, start = pad_to_stride(steps, every, rows[0])
-        infos = _pmf_run(field, dt, p0, cell_m, q_pos, padded, every=every,
-                         map_error=map_error, speed=speed)
+        infos = executables.call(_pmf_run, _Program("pmf", every=every), field, dt, p0,
+                                 cell_m, q_pos, padded, map_error, speed)
         # causal: rows between readings show the prediction
         infos = jax.tree.map(lambda a: np.asarray(a)[start:start + n], infos)
     else:
         ratio = np.inf if guard is None else float(guard)
-        extra = {}
+        program, key = _Program(method), None
         if method in PARTICLES:
             count = PARTICLES[method] if n_particles is None else n_particles
-            extra = dict(key=jax.random.PRNGKey(seed), n_particles=count)
-        infos = _gaussian_run(method, field, dynamics, p0, steps, ratio, meas, **extra)
+            program, key = _Program(method, count), jax.random.PRNGKey(seed)
+        # one program per call, kept on disk when the command line set a folder for it
+        infos = executables.call(_gaussian_run, program, field, dynamics, p0, steps, ratio,
+                                 meas, key)
         infos = jax.tree.map(np.asarray, infos)
     x, sigma = infos.x, infos.sigma
     m = np.asarray(meridian_radius(lat))

@@ -52,6 +52,21 @@ def test_a_second_call_loads_the_compiled_programs(tmp_path):
     assert second.returncode == 0, second.stderr
     assert (tmp_path / "m.json").read_text() == result
     assert sorted(p.name for p in (tmp_path / "xla" / "executables").iterdir()) == kept
+    # a program XLA loads from its own cache is compiled again to be kept (one serialised
+    # after such a load failed when run: "Function ... not found"), here the point-mass
+    # filter's, in its cache but not kept
+    flt = tmp_path / "f.csv"
+    assert main(["simulate-filter", "--out", str(flt), "--minutes", "20"]) == 0
+    pmf = ["filter", "--track", str(flt), "--point-masses", "paper-d", "--method", "pmf",
+           "--force", "--out", str(tmp_path / "p.csv")]
+    assert _jaxgrav(pmf, env).returncode == 0
+    before = (tmp_path / "p.csv").read_text()
+    for entry in (tmp_path / "xla" / "executables").glob("*.jaxexe"):
+        entry.unlink()
+    for _ in range(2):  # kept from XLA's cache, then loaded and run
+        again = _jaxgrav(pmf, env)
+        assert again.returncode == 0, again.stderr
+        assert (tmp_path / "p.csv").read_text() == before
     # turned off: no folder
     env["JAXGRAV_CACHE_DIR"] = str(tmp_path / "none")
     off = _jaxgrav(["--no-cache", *args], env)
