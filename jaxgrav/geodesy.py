@@ -6,8 +6,6 @@ arguments, and take degrees, metres and m/s at the interface. Work in float64
 sub-millimetre or sub-µGal results; float32 is fine for mGal-level work.
 """
 
-import functools
-
 import jax
 import jax.numpy as jnp
 
@@ -173,23 +171,17 @@ def eotvos(lat_deg, v_east, v_north, h=0.0, form="full"):
         Eötvös effect E in mGal, broadcast shape of the inputs.
     """
     check_latitude(lat_deg, "lat_deg")
-    if form not in ("full", "simple"):
-        raise ValueError(f"form must be 'full' or 'simple', got {form!r}")
-    return _eotvos(lat_deg, v_east, v_north, h, form)
-
-
-@functools.partial(jax.jit, static_argnames="form")
-def _eotvos(lat_deg, v_east, v_north, h, form):
-    """:func:`eotvos` on checked inputs, one program (not a dozen eager operations)."""
     s, co = _sin_cos_lat(lat_deg)
     ve = jnp.asarray(v_east, dtype=s.dtype)
     vn = jnp.asarray(v_north, dtype=s.dtype)
     coriolis = 2.0 * c.EARTH_RATE * ve * co
     if form == "simple":
         e = coriolis + (ve**2 + vn**2) / c.WGS84_MEAN_RADIUS
-    else:
+    elif form == "full":
         r_phi = c.WGS84_A * (1.0 - c.WGS84_F * s**2)
         e = (1.0 + jnp.asarray(h, dtype=s.dtype) / r_phi) * (coriolis + (ve**2 + vn**2) / r_phi)
+    else:
+        raise ValueError(f"form must be 'full' or 'simple', got {form!r}")
     return e / c.MGAL
 
 
