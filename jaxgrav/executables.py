@@ -14,18 +14,31 @@ only by the same program on the same kind of machine: its key hashes the functio
 name, the jaxgrav source (every ``.py`` file of the package), the JAX and jaxlib
 versions, the 64-bit flag, the backend, the CPU (model and instruction-set flags) and
 ``XLA_FLAGS``, the arguments' tree structure (static settings included) and every
-leaf's shape and dtype. Entries are written atomically; one that fails to load or to
-run is compiled again and replaced. A kept executable is compiled past XLA's cache
-(one loaded from there serialises incompletely). Like XLA's own cache, an entry holds
-machine code that is run as it is: the folder must be the user's own (the default is in
-the user's cache directory).
+leaf's shape and dtype; a program whose settings hold a closure or a lambda is not kept.
+
+How an entry is made (jaxlib 0.10.2, XLA:CPU): an executable serialised in a process
+that has run other programs can lack kernels it shares by name with them (kept that
+way, the dense matcher failed when run: "Function broadcast_multiply_fusion.4 not
+found"), and some serialised executables crash XLA:CPU when run (the loosely coupled
+voyage loop: a segmentation fault, which no caller can catch). So the first call runs
+the program the usual way and leaves a detached process (``python -m
+jaxgrav.executables``) that compiles only this program, then has a third process load
+it and run it on zeros; only an entry that passed is kept. Entries are written
+atomically; one that fails to load or to run is removed. Like XLA's own cache, an entry
+holds machine code that is run as it is: the folder must be the user's own (the default
+is in the user's cache directory).
 """
 
 import hashlib
+import importlib
 import os
 import pickle
 import platform
+import re
+import subprocess
+import sys
 import tempfile
+import time
 from pathlib import Path
 
 import jax
@@ -40,6 +53,7 @@ MAX_ENTRIES = 64
 MAX_ENTRY_BYTES = 32 * 2**20
 """Executables larger than this (bytes) are not kept (one baking a large constant)."""
 
+_FUNCTION_ADDRESS = re.compile(r"<function ([\w.<>]+) at 0x[0-9a-fA-F]+>")
 _STATE = {"folder": None}  # set by use_folder (the command line), like JAX's cache folder
 _SOURCE_HASH = []  # computed once per process
 
@@ -79,38 +93,104 @@ def call(fn, *args):
 
     Returns
     -------
-    The output of ``fn(*args)``.
+    The output of ``fn(*args)``: from the kept executable when there is one, else from
+    ``fn`` (a detached process then keeps it for the next call).
     """
     where = folder()
     if where is None:
         return fn(*args)
     leaves, in_tree = jax.tree_util.tree_flatten((args, {}))
-    path = where / f"{_key(fn, in_tree, leaves)}.jaxexe"
+    key = _key(fn, in_tree, leaves)
+    if key is None:  # settings that cannot be told apart between processes
+        return fn(*args)
+    path = where / f"{key}.jaxexe"
     compiled = _load(path, in_tree)
     if compiled is not None:
         try:
             return jax.block_until_ready(compiled(*args))
         except (jax.errors.JaxRuntimeError, TypeError, ValueError):
             path.unlink(missing_ok=True)  # an entry that does not run: compile it again
-    compiled = _compile_fresh(fn, args)
-    _store(path, compiled)
-    return compiled(*args)
+    _keep_later(fn, in_tree, leaves, path)
+    return fn(*args)
 
 
-def _compile_fresh(fn, args):
-    """Compile ``fn`` for ``args`` past XLA's persistent cache.
+def _keep_later(fn, in_tree, leaves, path):
+    """Compile ``fn`` for these arguments' shapes and keep it, in a process of its own.
 
-    An executable that XLA:CPU loaded from its own cache serialises incompletely
-    (jaxlib 0.10.2: the point-mass filter's program, kept that way, failed when run
-    with "Function multiply_bitcast_fusion.2 not found"), so a kept executable is always
-    one compiled here. A call of the command line (single-threaded) is the only user.
+    An executable serialised in a process that has compiled or loaded other programs
+    may lack kernels it shares by name with them (jaxlib 0.10.2, XLA:CPU: kept that way,
+    the dense matcher failed when run with "Function broadcast_multiply_fusion.4 not
+    found"). A fresh process that compiles only this program writes a complete one. It
+    runs detached, after this call has its result the usual way; nothing depends on it.
     """
-    before = jax.config.jax_enable_compilation_cache
-    jax.config.update("jax_enable_compilation_cache", False)
+    pending = path.with_suffix(".pending")
     try:
-        return fn.lower(*args).compile()
+        if pending.exists() and time.time() - pending.stat().st_mtime < 600:
+            return  # already being compiled
+        structs = [_struct(leaf) for leaf in leaves]
+        name = getattr(fn, "__wrapped__", fn)
+        job = pickle.dumps({"module": name.__module__, "name": name.__qualname__,
+                            "tree": in_tree, "leaves": structs, "path": str(path),
+                            "x64": bool(jax.config.jax_enable_x64)})
+        path.parent.mkdir(parents=True, exist_ok=True)
+        pending.write_bytes(job)
+        subprocess.Popen([sys.executable, "-m", "jaxgrav.executables", str(pending)],
+                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL, start_new_session=True)
+    except (OSError, pickle.PicklingError, TypeError, ValueError):
+        return  # run without keeping it
+
+
+def _struct(leaf):
+    """``(shape, dtype, weak_type)`` of an argument leaf, as the program was traced with."""
+    if isinstance(leaf, np.ndarray | np.generic):
+        return tuple(leaf.shape), np.dtype(leaf.dtype).str, False
+    a = leaf if hasattr(leaf, "weak_type") else jax.numpy.asarray(leaf)
+    return tuple(a.shape), np.dtype(a.dtype).str, bool(a.weak_type)
+
+
+def _work(pending):
+    """The detached process of :func:`_keep_later`: compile the job's program, keep it."""
+    pending = Path(pending)
+    try:
+        job = pickle.loads(pending.read_bytes())
+        jax.config.update("jax_enable_x64", job["x64"])
+        fn = importlib.import_module(job["module"])
+        for part in job["name"].split("."):
+            fn = getattr(fn, part)
+        if not hasattr(fn, "lower"):
+            fn = jax.jit(fn)
+        structs = [jax.ShapeDtypeStruct(shape, np.dtype(dtype), weak_type=weak)
+                   for shape, dtype, weak in job["leaves"]]
+        args, _ = jax.tree_util.tree_unflatten(job["tree"], structs)
+        path = Path(job["path"])
+        trial = path.with_suffix(".trial")
+        _store(trial, fn.lower(*args).compile())
+        # loaded and run in a third process first: some executables, once serialised,
+        # crash XLA:CPU when run (a segmentation fault, which no caller could catch)
+        if trial.exists():
+            ok = subprocess.run([sys.executable, "-m", "jaxgrav.executables", "--trial",
+                                 str(pending)], stdin=subprocess.DEVNULL,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                timeout=600).returncode == 0
+            if ok:
+                os.replace(trial, path)
+            trial.unlink(missing_ok=True)
     finally:
-        jax.config.update("jax_enable_compilation_cache", before)
+        pending.unlink(missing_ok=True)
+
+
+def _trial(pending):
+    """Load the job's trial executable and run it on zeros: exit code 0 if it runs."""
+    job = pickle.loads(Path(pending).read_bytes())
+    jax.config.update("jax_enable_x64", job["x64"])
+    trial = Path(job["path"]).with_suffix(".trial")
+    exe, out_tree = pickle.loads(trial.read_bytes())
+    compiled = serialize_executable.deserialize_and_load(exe, job["tree"], out_tree)
+    zeros = [jax.numpy.zeros(shape, np.dtype(dtype)) if not weak or shape
+             else np.dtype(dtype).type(0).item() for shape, dtype, weak in job["leaves"]]
+    args, _ = jax.tree_util.tree_unflatten(job["tree"], zeros)
+    jax.block_until_ready(compiled(*args))
 
 
 def _load(path, in_tree):
@@ -140,7 +220,7 @@ def _store(path, compiled):
         return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".jaxexe")
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".tmp")
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         os.replace(tmp, path)
@@ -162,9 +242,19 @@ def _evict(where):
 
 
 def _key(fn, in_tree, leaves):
-    """The entry's name: a hash of everything the executable depends on."""
-    h = hashlib.sha256()
+    """The entry's name: a hash of everything the executable depends on, or None.
+
+    A module-level function in the static settings (e.g. a measurement model's map
+    function) is named by its qualified name, its code being in the source hash; a
+    closure, a lambda or any other object known only by its address cannot be named
+    across processes, so its program is not kept (None).
+    """
     name = getattr(fn, "__wrapped__", fn)
+    tree = _FUNCTION_ADDRESS.sub(r"<function \1>", str(in_tree))
+    if (" at 0x" in tree or "<lambda>" in tree or "<locals>" in tree
+            or "<locals>" in name.__qualname__):  # a closure: what it holds is unseen
+        return None
+    h = hashlib.sha256()
     line = getattr(getattr(name, "__code__", None), "co_firstlineno", "")
     for part in (
         f"{name.__module__}.{name.__qualname__}:{line}",  # two lambdas of a module differ
@@ -178,7 +268,7 @@ def _key(fn, in_tree, leaves):
         str(jax.devices()[0].client.platform_version),
         _cpu(),
         os.environ.get("XLA_FLAGS", ""),
-        str(in_tree),
+        tree,
     ):
         h.update(part.encode())
         h.update(b"\0")
@@ -209,3 +299,10 @@ def _cpu():
     keep = [line for line in text.splitlines()
             if line.startswith(("model name", "flags", "Features", "CPU part"))]
     return "\n".join(sorted(set(keep)))
+
+
+if __name__ == "__main__":  # python -m jaxgrav.executables [--trial] JOB (see _keep_later)
+    if sys.argv[1] == "--trial":
+        _trial(sys.argv[2])
+    else:
+        _work(sys.argv[1])

@@ -11,13 +11,13 @@ shared by the map and track readers).
 """
 
 import dataclasses
+import math
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav import interp
-from jaxgrav.constants import DEG
+from jaxgrav.constants import DEG, WGS84_A, WGS84_E2
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 
 __all__ = ["GeographicAxes", "contiguous_longitudes", "regular_axis"]
@@ -185,10 +185,12 @@ class GeographicAxes:
         tuple
             North–south and east–west node spacing (m).
         """
-        if lat is None:
+        if lat is None:  # static geometry: Python floats, also under jit, no device work
             lat_c = self.lat0 + 0.5 * self.dlat * (self.ny - 1)
-            with jax.ensure_compile_time_eval():  # static geometry: floats even under jit
-                return tuple(float(v) for v in self.spacing_m(lat_c))
+            s2 = math.sin(lat_c * DEG) ** 2
+            w = 1.0 - WGS84_E2 * s2  # M and N of geodesy.meridian/prime_vertical_radius
+            return (WGS84_A * (1.0 - WGS84_E2) / w**1.5 * self.dlat * DEG,
+                    WGS84_A / math.sqrt(w) * math.cos(lat_c * DEG) * self.dlon * DEG)
         dy = meridian_radius(lat) * self.dlat * DEG
         dx = prime_vertical_radius(lat) * jnp.cos(jnp.asarray(lat) * DEG) * self.dlon * DEG
         return dy, dx

@@ -1,5 +1,8 @@
 """Compiled programs kept on disk between processes (``jaxgrav.executables``)."""
 
+import os
+import time
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -7,6 +10,7 @@ import pytest
 
 from jaxgrav import executables
 from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.grid import Grid
 
 
@@ -14,6 +18,7 @@ from jaxgrav.grid import Grid
 class _Settings:
     scale: float = 2.0
     power: int = static_field(2)
+    fn: object = static_field(np.sin)
 
 
 @jax.jit
@@ -29,8 +34,25 @@ def kept(tmp_path):
     executables.use_folder(before)
 
 
+def _key(fn, *args):
+    leaves, tree = jax.tree_util.tree_flatten((args, {}))
+    return executables._key(fn, tree, leaves)
+
+
 def _args(n=5, **kw):
     return (jnp.arange(n, dtype=float), 0.5, _Settings(**kw))
+
+
+def _kept_entries(folder, count, timeout=240.0):
+    """The folder's entries once ``count`` are there (a detached process writes them)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        entries = sorted(folder.glob("*.jaxexe")) if folder.is_dir() else []
+        pending = list(folder.glob("*.pending")) if folder.is_dir() else []
+        if len(entries) >= count and not pending:
+            return entries
+        time.sleep(0.5)
+    pytest.fail(f"no {count} kept executable(s) in {folder} after {timeout} s")
 
 
 def test_off_by_default_is_the_jitted_call():
@@ -39,43 +61,71 @@ def test_off_by_default_is_the_jitted_call():
     assert out["sum"] == _program(*_args())["sum"]
 
 
-def test_a_second_call_loads_the_kept_executable(kept, monkeypatch):
-    first = executables.call(_program, *_args())
-    entries = sorted(kept.glob("*.jaxexe"))
-    assert len(entries) == 1
-    # a loaded executable is neither traced, lowered nor compiled again
-    monkeypatch.setattr(type(_program), "lower", lambda *a, **k: pytest.fail("compiled again"))
-    second = executables.call(_program, *_args())
-    for k in ("sum", "x"):
-        np.testing.assert_array_equal(second[k], first[k])
-        np.testing.assert_array_equal(second[k], _program(*_args())[k])
-    assert sorted(kept.glob("*.jaxexe")) == entries
+def test_the_key_tells_programs_apart():
+    base = _key(_program, *_args())
+    assert base == _key(_program, *_args(scale=5.0))  # a traced field: the same program
+    assert base != _key(_program, *_args(power=3))  # a static field: another program
+    assert base != _key(_program, *_args(n=7))  # another shape
+    assert base == _key(_program, *_args(fn=np.sin))  # a function by its name, not address
+    assert base != _key(_program, *_args(fn=np.cos))
 
 
-def test_each_static_setting_and_shape_has_its_own_entry(kept):
-    executables.call(_program, *_args())
-    executables.call(_program, *_args(power=3))  # a static field: another program
-    executables.call(_program, *_args(n=7))  # another shape
-    executables.call(_program, *_args(scale=5.0))  # a traced field: the same program
-    assert len(list(kept.glob("*.jaxexe"))) == 3
-    out = executables.call(_program, *_args(power=3, scale=5.0))
-    assert float(out["sum"]) == pytest.approx(5.0 * np.sum(np.arange(5.0) ** 3) + 0.5)
+def test_only_programs_named_across_processes_are_kept(kept):
+    """A lambda in the settings, or a closure as the program, cannot be named in another
+    process: it runs, and nothing is kept for it."""
+    assert _key(_program, *_args(fn=lambda v: 2 * v)) is None
+
+    def make(scale):
+        return jax.jit(lambda v: scale * v)
+
+    assert _key(make(3.0), jnp.ones(2)) is None
+    np.testing.assert_allclose(executables.call(make(3.0), jnp.ones(2)), 3.0)
+    assert not kept.exists() or not list(kept.glob("*"))
 
 
-def test_a_damaged_entry_is_compiled_again_and_replaced(kept):
-    executables.call(_program, *_args())
-    (entry,) = kept.glob("*.jaxexe")
+def test_a_program_is_kept_by_a_process_of_its_own_then_loaded(kept, monkeypatch):
+    """The first call runs the program the usual way and leaves a detached process to
+    compile and keep it; a later call loads it (no compile: the keeping step is not
+    reached) and gives the same numbers."""
+    lat, ve, vn = jnp.linspace(10.0, 40.0, 7), jnp.full(7, 5.0), jnp.full(7, -2.0)
+    first = executables.call(eotvos_jit, lat, ve, vn)
+    np.testing.assert_array_equal(first, eotvos_jit(lat, ve, vn))
+    (entry,) = _kept_entries(kept, 1)
+    monkeypatch.setattr(executables, "_keep_later", lambda *a: pytest.fail("not loaded"))
+    np.testing.assert_array_equal(executables.call(eotvos_jit, lat, ve, vn), first)
+    # a damaged entry is removed, and the call still gives the result
     entry.write_bytes(b"not an executable")
-    out = executables.call(_program, *_args())
-    assert float(out["sum"]) == pytest.approx(2.0 * 30.0 + 0.5)
-    assert entry.read_bytes() != b"not an executable"
+    monkeypatch.setattr(executables, "_keep_later", lambda *a: None)
+    np.testing.assert_array_equal(executables.call(eotvos_jit, lat, ve, vn), first)
+    assert not entry.exists()
 
 
-def test_the_folder_keeps_the_most_recently_used_entries(kept, monkeypatch):
+def test_an_entry_that_fails_to_run_is_removed(kept, monkeypatch):
+    """One that loads but fails when run (XLA:CPU: "Function ... not found") is removed
+    and the program runs the usual way."""
+    kept.mkdir(parents=True)
+    leaves, tree = jax.tree_util.tree_flatten((_args(), {}))
+    entry = kept / f"{executables._key(_program, tree, leaves)}.jaxexe"
+    entry.write_bytes(b"x")
+
+    class Broken:
+        def __call__(self, *args):
+            raise jax.errors.JaxRuntimeError("INTERNAL: Function fusion.2 not found")
+
+    monkeypatch.setattr(executables, "_load", lambda path, tree: Broken())
+    monkeypatch.setattr(executables, "_keep_later", lambda *a: None)
+    assert float(executables.call(_program, *_args())["sum"]) == pytest.approx(60.5)
+    assert not entry.exists()
+
+
+def test_the_folder_keeps_the_most_recently_used_entries(tmp_path, monkeypatch):
     monkeypatch.setattr(executables, "MAX_ENTRIES", 2)
-    for n in (3, 4, 5, 6):
-        executables.call(_program, *_args(n=n))
-    assert len(list(kept.glob("*.jaxexe"))) == 2
+    for i in range(4):
+        (tmp_path / f"{i}.jaxexe").write_bytes(b"x")
+        t = time.time() - 100 + i
+        os.utime(tmp_path / f"{i}.jaxexe", (t, t))
+    executables._evict(tmp_path)
+    assert sorted(p.name for p in tmp_path.glob("*.jaxexe")) == ["2.jaxexe", "3.jaxexe"]
 
 
 def test_an_unwritable_folder_still_gives_the_result(tmp_path):
@@ -98,32 +148,8 @@ def test_match_track_gives_the_same_fix_through_a_kept_executable(kept):
     lat = 30.8 + 0.01 * np.arange(12)
     lon = 130.8 + 0.012 * np.arange(12)
     g = np.asarray(grid.sample(lat - 0.02, lon + 0.01, "bicubic"))
-    plain_before = executables.use_folder(None)
-    plain = match_track(grid, lat, lon, g, drift_radius_m=4000.0, warn=False)
-    executables.use_folder(plain_before)
     first = match_track(grid, lat, lon, g, drift_radius_m=4000.0, warn=False)
+    _kept_entries(kept, 1)
     loaded = match_track(grid, lat, lon, g, drift_radius_m=4000.0, warn=False)
-    assert len(list(kept.glob("*.jaxexe"))) == 1
-    for a, b, c in zip(plain, first, loaded, strict=True):
-        np.testing.assert_array_equal(np.asarray(b), np.asarray(c))
-        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-9)
-
-
-def test_an_entry_that_fails_to_run_is_compiled_again(kept, monkeypatch):
-    """A kept executable that loads but fails when run (as one serialised after XLA loaded
-    it from its own cache did) is removed, compiled again past XLA's cache, and kept."""
-    executables.call(_program, *_args())
-    (entry,) = kept.glob("*.jaxexe")
-
-    class Broken:
-        def __call__(self, *args):
-            raise jax.errors.JaxRuntimeError("INTERNAL: Function fusion.2 not found")
-
-    real = executables.serialize_executable.deserialize_and_load
-    monkeypatch.setattr(executables.serialize_executable, "deserialize_and_load",
-                        lambda *a, **k: Broken())
-    out = executables.call(_program, *_args())
-    assert float(out["sum"]) == pytest.approx(60.5)
-    assert entry.exists()  # written again
-    monkeypatch.setattr(executables.serialize_executable, "deserialize_and_load", real)
-    assert float(executables.call(_program, *_args())["sum"]) == pytest.approx(60.5)
+    for a, b in zip(first, loaded, strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

@@ -67,7 +67,7 @@ from jaxgrav.filters.api import (
     reading_stride,
 )
 from jaxgrav.filters.map_state import map_error_state
-from jaxgrav.geodesy import eotvos, eotvos_jacobian
+from jaxgrav.geodesy import eotvos_jacobian, eotvos_jit
 from jaxgrav.tracks import csv_line, write_track_csv
 
 __all__ = ["add_parser", "cmd_filter"]
@@ -233,7 +233,7 @@ def _eotvos(args, track, g):
         return g, None, "no velocity columns: gravity taken as Eötvös-corrected"
     lat, ve, vn = (np.asarray(track[k]) for k in ("lat", "v_east", "v_north"))
     if not args.eotvos_corrected:
-        g = g + np.asarray(eotvos(lat, ve, vn))
+        g = g + np.asarray(eotvos_jit(lat, ve, vn))
     how = "given corrected" if args.eotvos_corrected else "Eötvös-corrected here"
     if args.method == "pmf":
         return g, None, f"readings {how} with the INS velocity (pmf: its error not modelled)"

@@ -18,7 +18,7 @@ from jaxgrav.cli.inputs import (
 )
 from jaxgrav.cli.sanity import check_readings, fit_check
 from jaxgrav.fields.map_error import map_error
-from jaxgrav.geodesy import eotvos
+from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.match import (
     ENTROPY_HALF_SIZE,
     IMPLAUSIBLE_FIT,
@@ -142,8 +142,8 @@ def _cmd_match(args):
              and not args.no_eotvos)
     unit = "nT" if field == "magnetic" else "mGal"
     # compared with the map as the matcher will: Eötvös-corrected
-    correction = (np.asarray(eotvos(track["lat"], track["v_east"], track["v_north"])) if has_v
-                  else 0.0)
+    correction = (np.asarray(eotvos_jit(track["lat"], track["v_east"], track["v_north"]))
+                  if has_v else 0.0)
     check_readings(track[field], np.asarray(grid.sample(track["lat"], track["lon"], "bicubic")),
                    args.noise, column=field, where=f"--track {str(args.track)!r}", unit=unit,
                    correction=correction, missing_skipped=False)

@@ -53,7 +53,7 @@ from jaxgrav.cli.inputs import (
 )
 from jaxgrav.cli.sanity import check_readings, innovation_check
 from jaxgrav.filters import map_error_state, status_messages_filter
-from jaxgrav.geodesy import eotvos
+from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
     FIX_EVENTS,
     TIGHT_METHODS,
@@ -206,7 +206,7 @@ def cmd_navigate(args):
                          f"more than {segment_rows}")
     ins = Track(*(np.asarray(track[k]) for k in ("t", "lat", "lon", "v_east", "v_north")))
     gravity = np.asarray(track["gravity"])
-    e_ins = np.asarray(eotvos(ins.lat, ins.v_east, ins.v_north))
+    e_ins = np.asarray(eotvos_jit(ins.lat, ins.v_east, ins.v_north))
     check_readings(gravity, np.asarray(grid.sample(ins.lat, ins.lon, "bicubic")), args.noise,
                    column="gravity", where=f"--track {track.path!r}",
                    correction=0.0 if args.eotvos_corrected else e_ins)

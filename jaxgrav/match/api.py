@@ -19,7 +19,7 @@ import numpy as np
 
 from jaxgrav import executables
 from jaxgrav._validate import check_latitude
-from jaxgrav.geodesy import eotvos
+from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import ChainConfig, chain_tolerances, match_chains
 from jaxgrav.match.dense import DenseConfig, match_dense
@@ -251,7 +251,7 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
         ve, vn = (np.broadcast_to(np.asarray(v, float), lat.shape) for v in (v_east, v_north))
         if not (np.isfinite(ve).all() and np.isfinite(vn).all()):
             raise ValueError("v_east and v_north must be finite at every fix")
-        readings = readings + np.asarray(eotvos(lat, ve, vn))
+        readings = readings + np.asarray(eotvos_jit(lat, ve, vn))
     masked = missing_in_reach(grid, lat, lon, drift_radius_m) > 0
     if method in ("dense", "chains"):
         result = _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
