@@ -37,7 +37,6 @@ import platform
 import re
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -45,6 +44,8 @@ import jax
 import jaxlib
 import numpy as np
 from jax.experimental import serialize_executable
+
+from jaxgrav._io import atomic_output
 
 __all__ = ["MAX_ENTRIES", "MAX_ENTRY_BYTES", "call", "folder", "use_folder"]
 
@@ -109,7 +110,7 @@ def call(fn, *args):
         try:
             return jax.block_until_ready(compiled(*args))
         except (jax.errors.JaxRuntimeError, TypeError, ValueError):
-            path.unlink(missing_ok=True)  # an entry that does not run: compile it again
+            path.unlink(missing_ok=True)  # an entry that does not run: removed
     _keep_later(fn, in_tree, leaves, path)
     return fn(*args)
 
@@ -202,7 +203,7 @@ def _load(path, in_tree):
     try:
         exe, out_tree = pickle.loads(data)
         compiled = serialize_executable.deserialize_and_load(exe, in_tree, out_tree)
-    except Exception:  # a damaged or foreign entry: compile again and replace it
+    except Exception:  # a damaged or foreign entry: removed, kept again by a later call
         path.unlink(missing_ok=True)
         return None
     os.utime(path)  # least recently used goes first
@@ -213,17 +214,15 @@ def _store(path, compiled):
     """Write ``compiled`` to ``path`` atomically; skipped when it cannot be serialised."""
     try:
         exe, _, out_tree = serialize_executable.serialize(compiled)
-    except (ValueError, NotImplementedError):  # e.g. constants baked into the program
+    except (ValueError, NotImplementedError):  # JAX cannot serialise baked-in constants
         return
     data = pickle.dumps((exe, out_tree))
     if len(data) > MAX_ENTRY_BYTES:
         return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
+        with atomic_output(path, force=True) as tmp:
+            tmp.write_bytes(data)
         _evict(path.parent)
     except OSError:  # a read-only or full cache folder: run without keeping it
         return
