@@ -24,7 +24,9 @@ voyage loop: a segmentation fault, which no caller can catch). So the first call
 the program the usual way and leaves a detached process (``python -m
 jaxgrav.executables``) that compiles only this program, then has a third process load
 it and run it on zeros; only an entry that passed is kept. Entries are written
-atomically; one that fails to load or to run is removed. Like XLA's own cache, an entry
+atomically; one that fails to load or to run is removed. A program whose trial or kept
+entry failed gets a ``.failed`` mark and is not compiled in the background again (until
+the source or JAX changes its key). Like XLA's own cache, an entry
 holds machine code that is run as it is: the folder must be the user's own (the default
 is in the user's cache directory).
 """
@@ -111,8 +113,21 @@ def call(fn, *args):
             return jax.block_until_ready(compiled(*args))
         except (jax.errors.JaxRuntimeError, TypeError, ValueError):
             path.unlink(missing_ok=True)  # an entry that does not run: removed
-    _keep_later(fn, in_tree, leaves, path)
+            _mark_failed(path)
+    if not path.with_suffix(".failed").exists():  # else: kept before, and it did not run
+        _keep_later(fn, in_tree, leaves, path)
     return fn(*args)
+
+
+def _mark_failed(path):
+    """Remember that the program of ``path`` does not survive being kept (not tried again).
+
+    The key hashes the package's source and the JAX version, so a new version tries again.
+    """
+    try:
+        path.with_suffix(".failed").touch()
+    except OSError:
+        return
 
 
 def _keep_later(fn, in_tree, leaves, path):
@@ -176,6 +191,8 @@ def _work(pending):
                                 timeout=600).returncode == 0
             if ok:
                 os.replace(trial, path)
+            else:  # e.g. the voyage loop's program (a segmentation fault when loaded)
+                _mark_failed(path)
             trial.unlink(missing_ok=True)
     finally:
         pending.unlink(missing_ok=True)
@@ -231,7 +248,7 @@ def _store(path, compiled):
 def _evict(where):
     """Remove the least recently used entries beyond :data:`MAX_ENTRIES`."""
     entries = []
-    for p in where.glob("*.jaxexe"):
+    for p in (*where.glob("*.jaxexe"), *where.glob("*.failed")):
         try:
             entries.append((p.stat().st_mtime, p))
         except FileNotFoundError:  # removed by a concurrent command

@@ -1,6 +1,7 @@
 """Compiled programs kept on disk between processes (``jaxgrav.executables``)."""
 
 import os
+import subprocess
 import time
 
 import jax
@@ -101,8 +102,8 @@ def test_a_program_is_kept_by_a_process_of_its_own_then_loaded(kept, monkeypatch
 
 
 def test_an_entry_that_fails_to_run_is_removed(kept, monkeypatch):
-    """One that loads but fails when run (XLA:CPU: "Function ... not found") is removed
-    and the program runs the usual way."""
+    """One that loads but fails when run (XLA:CPU: "Function ... not found") is removed,
+    marked as failed, and the program runs the usual way."""
     kept.mkdir(parents=True)
     leaves, tree = jax.tree_util.tree_flatten((_args(), {}))
     entry = kept / f"{executables._key(_program, tree, leaves)}.jaxexe"
@@ -116,6 +117,11 @@ def test_an_entry_that_fails_to_run_is_removed(kept, monkeypatch):
     monkeypatch.setattr(executables, "_keep_later", lambda *a: None)
     assert float(executables.call(_program, *_args())["sum"]) == pytest.approx(60.5)
     assert not entry.exists()
+    # remembered: later calls run it the usual way and start no futile keeping process
+    assert entry.with_suffix(".failed").exists()
+    monkeypatch.setattr(executables, "_load", lambda path, tree: None)
+    monkeypatch.setattr(executables, "_keep_later", lambda *a: pytest.fail("kept again"))
+    assert float(executables.call(_program, *_args())["sum"]) == pytest.approx(60.5)
 
 
 def test_the_folder_keeps_the_most_recently_used_entries(tmp_path, monkeypatch):
@@ -153,3 +159,20 @@ def test_match_track_gives_the_same_fix_through_a_kept_executable(kept):
     loaded = match_track(grid, lat, lon, g, drift_radius_m=4000.0, warn=False)
     for a, b in zip(first, loaded, strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_a_program_whose_trial_fails_is_marked_not_kept(kept, monkeypatch):
+    """The keeping process's trial run fails (as the voyage loop's crashes XLA:CPU): no
+    entry, a failed mark, and no keeping process for that program again."""
+    started = []
+    monkeypatch.setattr(executables.subprocess, "Popen", lambda cmd, **kw: started.append(cmd))
+    lat, ve, vn = jnp.linspace(10.0, 40.0, 7), jnp.full(7, 5.0), jnp.full(7, -2.0)
+    first = executables.call(eotvos_jit, lat, ve, vn)
+    (cmd,) = started
+    monkeypatch.setattr(executables.subprocess, "run",
+                        lambda *a, **kw: subprocess.CompletedProcess(a, returncode=-11))
+    executables._work(cmd[-1])  # the detached process's work, here
+    assert not list(kept.glob("*.jaxexe")) and not list(kept.glob("*.trial"))
+    assert len(list(kept.glob("*.failed"))) == 1
+    np.testing.assert_array_equal(executables.call(eotvos_jit, lat, ve, vn), first)
+    assert len(started) == 1

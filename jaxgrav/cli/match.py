@@ -26,7 +26,7 @@ from jaxgrav.match import (
     match_track,
     status_messages,
 )
-from jaxgrav.match.api import MAP_ERROR_METHODS, MASKED, ins_over_missing
+from jaxgrav.match.api import MAP_ERROR_METHODS, missing_reading
 from jaxgrav.sim import DEG_ARC_M
 from jaxgrav.tracks import csv_line, write_track_csv
 
@@ -187,10 +187,9 @@ def _cmd_match(args):
              sigma_north_m=float(np.sqrt(cov[0, 0])), sigma_east_m=float(np.sqrt(cov[1, 1])),
              map_error_mgal=args.map_error, map_error_length_m=args.map_error_length,
              map_error_var=args.map_error_var)
-    gaps = args.method == "dense" and bool(int(result.status) & MASKED) and (
-        args.missing == "gaps" or (args.missing == "auto"
-                                   and ins_over_missing(grid, track["lat"], track["lon"])))
-    r.update(method=args.method, missing=args.missing, missing_read_as="gaps" if gaps else "land",
+    read_as = missing_reading(grid, track["lat"], track["lon"], args.method, args.missing,
+                              radius_deg * DEG_ARC_M)
+    r.update(method=args.method, missing=args.missing, missing_read_as=read_as,
              field=field, map=str(args.map),
              track=str(args.track), drift_radius_deg=radius_deg, eotvos_corrected=has_v)
     if args.method in CONTOUR_METHODS:

@@ -32,7 +32,7 @@ from jaxgrav.prepared import as_grid
 
 __all__ = ["ENTROPY_HALF_SIZE", "MAP_ERROR_METHODS", "MASKED", "METHODS", "MIN_FIXES",
            "ins_over_missing", "match_track", "max_gap_fixes", "missing_in_reach",
-           "validate_track"]
+           "missing_reading", "validate_track"]
 
 METHODS = ("dense", "chains", "entropy", "iccp", "entropy+iccp")
 """``dense``: offset grid + Gauss–Newton (default, most accurate on real maps);
@@ -254,11 +254,15 @@ def match_track(grid, lat, lon, readings, *, method="dense", drift_radius_m=5000
         readings = readings + np.asarray(eotvos_jit(lat, ve, vn))
     masked = missing_in_reach(grid, lat, lon, drift_radius_m) > 0
     if method in ("dense", "chains"):
+        reading = missing_reading(grid, lat, lon, method, missing, drift_radius_m)
+        if warn and missing == "gaps" and masked and reading == "land":
+            warnings.warn(f"match_track: missing='gaps' needs more than {MIN_FIXES} fixes (at "
+                          f"least {MIN_FIXES} of a candidate's fixes over present cells); with "
+                          f"{lat.size} fixes missing nodes are read as land", RuntimeWarning,
+                          stacklevel=2)
         result = _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
                                     bias_sigma_mgal, corrected, config, map_error, masked,
-                                    missing == "gaps" or (missing == "auto" and masked
-                                                          and method == "dense"
-                                                          and ins_over_missing(grid, lat, lon)))
+                                    reading == "gaps")
     else:
         result = _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise,
                                 max_rotation_deg, entropy_half_size, config, map_error)
@@ -279,6 +283,36 @@ MASKED = 8192
 def ins_over_missing(grid, lat, lon):
     """Whether the INS-indicated track itself crosses a cell with a missing corner."""
     return bool(np.isnan(np.asarray(as_grid(grid).sample(lat, lon, "bilinear"))).any())
+
+
+def missing_reading(grid, lat, lon, method, missing, reach_m):
+    """How :func:`match_track` reads the missing map nodes in reach: ``"gaps"`` or ``"land"``.
+
+    The one rule (the command line reports it): ``"land"`` when no node in reach is
+    missing, for methods other than ``dense``, and for tracks of :data:`MIN_FIXES`
+    fixes (no candidate may then have a fix in a gap); otherwise ``"gaps"`` when
+    ``missing="gaps"``, or ``missing="auto"`` and the INS-indicated track crosses a
+    missing cell (:func:`ins_over_missing`).
+
+    Parameters
+    ----------
+    grid : Grid or PreparedMap
+    lat, lon : array_like, shape ``(N,)``
+        INS-indicated track (degrees).
+    method : str
+        Matcher (see :data:`METHODS`).
+    missing : {"auto", "land", "gaps"}
+    reach_m : float
+        Search reach (m), the drift radius.
+
+    Returns
+    -------
+    str
+    """
+    if (method != "dense" or missing == "land" or max_gap_fixes(np.size(lat)) == 0
+            or missing_in_reach(grid, lat, lon, reach_m) == 0):
+        return "land"
+    return "gaps" if missing == "gaps" or ins_over_missing(grid, lat, lon) else "land"
 
 
 def max_gap_fixes(n):

@@ -15,6 +15,13 @@ measured worse (``examples/missing_nodes.py``): along a track the unknown values
 a gap are strongly correlated, so independent priors overcharge the truth, and the
 matcher then prefers wrong candidates that avoid the gap.
 
+The gap score is a pseudo-likelihood, not a likelihood: the exact marginal of the
+present fixes would also carry ``log|Σ_p|``, the log-determinant of the readings'
+covariance restricted to them, which differs between candidates with different gaps.
+It is left out on purpose: with the unknown map values over the gap, no candidate's
+Σ_p is the truth's, and charging the expectation keeps the truth's score (the
+quantity compared) independent of its gaps, which the tests check.
+
 Both scores equal their gap-free forms when no fix is missing:
 :func:`gap_score` is :func:`~jaxgrav.match.scoring.score_track`, :func:`gls_gap_score`
 is :func:`~jaxgrav.match.gls.gls_score` (there the readings' covariance restricted to

@@ -190,7 +190,8 @@ def patch_values(table, iy, ix, method="bicubic", gradient=False):
     Returns
     -------
     Array, shape ``P`` (or a tuple ``value, d_iy, d_ix``)
-        Values NaN off the map, derivatives 0 there; the same as
+        Values NaN off the map and in cells with a missing (NaN) node, derivatives 0
+        there (never NaN); elsewhere the same as
         :func:`jaxgrav.interp.bicubic` and :func:`jaxgrav.interp.bicubic_value_and_gradient`.
     """
     interp.check_method(method)
@@ -231,7 +232,8 @@ def patch_values(table, iy, ix, method="bicubic", gradient=False):
     zero = jnp.zeros((), dtype)
     d_y = _dot(_rows(dy, p), hx).reshape(shape)
     d_x = _dot(rows, dx).reshape(shape)
-    return val, jnp.where(inside, d_y, zero), jnp.where(inside, d_x, zero)
+    known = ~jnp.isnan(val)  # off the map or in a cell with a missing (NaN) node
+    return val, jnp.where(known, d_y, zero), jnp.where(known, d_x, zero)
 
 
 def _rows(weights, patch):

@@ -66,7 +66,7 @@ def residual_function(table, frame, g, w, kind, prior, method, present=None):
         r = g - v
         a, b = v_y * ky, v_x * kx  # dv/d(north), dv/d(east)
         if present is not None:
-            r, a, b = jnp.where(present, r, 0.0), a * present, b * present
+            r, a, b = (jnp.where(present, x, 0.0) for x in (r, a, b))
         cols = (-a, -b, a * re - b * rn)  # dr/dp for the shift and turn
         if kind == "difference":
             swd = sqrt_wd if present is None else sqrt_wd * (present[1:] & present[:-1])
@@ -109,7 +109,7 @@ def gls_residual_function(table, frame, g, inv_chol, ones, scale, bias_sigma, me
         a, b = v_y * ky, v_x * kx
         r = g - v - p[3]
         if present is not None:
-            r, a, b = jnp.where(present, r, 0.0), a * present, b * present
+            r, a, b = (jnp.where(present, x, 0.0) for x in (r, a, b))
         m = jnp.stack([r, -a, -b, a * re - b * rn]) @ wt
         return m[0], (m[1], m[2], m[3], -ones * root), (sp * p[3], j_prior)
 

@@ -14,11 +14,17 @@ import numpy as np
 import pytest
 
 import jaxgrav.match as jm
-from jaxgrav.match.api import MASKED, MIN_FIXES, max_gap_fixes
+from jaxgrav.match.api import MASKED, MIN_FIXES, max_gap_fixes, missing_reading
 from jaxgrav.match.gaps import gap_score, gap_whitener, gls_gap_score
 from jaxgrav.match.gls import gls_score, gls_whitener, track_covariance
+from jaxgrav.match.lattice import patch_values
 from jaxgrav.match.offsets import track_frame
-from jaxgrav.match.refine import gls_residual_function, residual_function
+from jaxgrav.match.refine import (
+    gauss_newton,
+    gls_residual_function,
+    laplace_covariance,
+    residual_function,
+)
 from jaxgrav.match.result import GAPPED
 from jaxgrav.match.scoring import score_track
 from jaxgrav.prepared import prepare_map
@@ -169,6 +175,77 @@ def test_refinement_residuals_are_the_gap_score(smooth_grid):
 
     for cost, score in both(jnp.asarray(g), jnp.asarray(v_gap)):
         np.testing.assert_allclose(float(cost), float(score), rtol=1e-9)
+
+
+def _banded(grid, lon0, half_width):
+    """``grid`` with a north-south band of missing nodes (a survey gap) about ``lon0``."""
+    v = np.array(grid.values)
+    lo = np.asarray(grid.lon)
+    v[:, (lo > lon0 - half_width) & (lo < lon0 + half_width)] = np.nan
+    return dataclasses.replace(grid, values=jnp.asarray(v))
+
+
+def test_refinement_moves_from_a_start_with_gaps(smooth_grid):
+    """Gauss–Newton from a start whose fixes cross a gap: finite Jacobian, steps taken.
+
+    The truth is 300 m south of the INS track; the readings come from the complete
+    field, the matcher sees it with a band of missing nodes across the track.
+    """
+    n = 16
+    lat = 29.9 + 0.002 * np.arange(n)
+    lon = 129.85 + 0.003 * np.arange(n)
+    grid = _banded(smooth_grid, lon[n // 2], 0.006)
+    t_lat, t_lon = (np.asarray(a) for a in jm.shifted_tracks(
+        jnp.asarray(lat), jnp.asarray(lon), -300.0, 0.0, 0.0))
+    z = jnp.asarray(np.asarray(smooth_grid.sample(t_lat, t_lon, "bicubic")) + 1.5)
+    table = prepare_map(grid).interleaved()
+    frame = track_frame(grid, jnp.asarray(lat), jnp.asarray(lon))
+    iy_c, ix_c, ky, kx, north, east = frame
+    v, v_y, v_x = patch_values(table, iy_c + ky * north, ix_c + kx * east, gradient=True)
+    present = ~jnp.isnan(v)
+    assert 3 <= int((~present).sum()) <= n // 2
+    # in a cell with a missing node the value is NaN and its derivatives 0, never NaN
+    assert np.all(np.asarray(v_y)[~np.asarray(present)] == 0.0)
+    assert np.all(np.asarray(v_x)[~np.asarray(present)] == 0.0)
+    free = (True, True, False, True)
+    step_max = jnp.array([1000.0, 1000.0, 1.0, np.inf])
+    cov = track_covariance(north, east, 0.7, 2.0, 5000.0)
+    inv, ones = gap_whitener(gls_whitener(cov), present)
+    for res in (residual_function(table, frame, z, jnp.full(n, 1.0 / n), "bias", 0.0,
+                                  "bicubic", present),
+                gls_residual_function(table, frame, z, inv, ones, 1.0, np.inf, "bicubic",
+                                      present)):
+        def cost(p, res=res):
+            r, _, (r_k, _) = res(jnp.asarray(p, float))
+            return float(jnp.sum(r * r) + r_k**2)
+
+        r, cols, _ = res(jnp.zeros(4))
+        assert all(np.isfinite(np.asarray(c)).all() for c in (r, *cols))
+        p = np.asarray(gauss_newton(res, jnp.zeros(4), free, step_max, 1e-3, 8))
+        assert np.hypot(p[0] + 300.0, p[1]) < 100.0, p
+        # the minimum of the gapped map is near the truth (its spline differs by the band)
+        assert cost(p) <= cost([-300.0, 0.0, 0.0, 1.5]) < 0.1 * cost(np.zeros(4))
+        assert np.isfinite(np.asarray(laplace_covariance(res, jnp.asarray(p), free))).all()
+
+
+def test_how_missing_nodes_are_read(smooth_grid):
+    """The one rule (:func:`missing_reading`), and a warning when gaps cannot apply."""
+    n = 12
+    lat = 29.9 + 0.002 * np.arange(n)
+    lon = 129.85 + 0.003 * np.arange(n)
+    grid = _banded(smooth_grid, lon[n // 2], 0.006)
+    far = _banded(smooth_grid, 130.4, 0.006)  # missing nodes out of reach
+    reach = 3000.0
+    assert missing_reading(grid, lat, lon, "dense", "auto", reach) == "gaps"  # INS crosses
+    assert missing_reading(grid, lat, lon, "dense", "land", reach) == "land"
+    assert missing_reading(grid, lat, lon, "chains", "auto", reach) == "land"
+    assert missing_reading(far, lat, lon, "dense", "gaps", reach) == "land"
+    assert missing_reading(grid, lat[:MIN_FIXES], lon[:MIN_FIXES], "dense", "gaps",
+                           reach) == "land"
+    z = np.asarray(smooth_grid.sample(lat, lon, "bicubic"))[:MIN_FIXES]
+    with pytest.warns(RuntimeWarning, match="needs more than 5 fixes"):
+        jm.match_track(grid, lat[:MIN_FIXES], lon[:MIN_FIXES], z, drift_radius_m=reach,
+                       noise=0.5, missing="gaps")
 
 
 def test_gaps_options_are_checked(smooth_grid):
