@@ -10,7 +10,8 @@ apart, the combined match therefore does not move away from the coarse one.
 Every match reports the covariance of its fix and an integrity decision. The entropy
 score (a difference of sequence entropies) is no likelihood, so GLS does not apply to
 it; the quality comes from what does: the GLS likelihood (:mod:`~jaxgrav.match.gls`,
-covariance ``σ_n² I + C_map`` along the track, ``σ_n = iccp.noise``, no bias) of every
+covariance ``σ_n² I + C_map`` along the track, ``σ_n = iccp.noise``, no bias unless
+``iccp.bias_sigma`` > 0, then marginalised) of every
 offset of the entropy stage's grid gives a posterior over the offsets
 (:func:`~jaxgrav.match.gls.offset_posterior`), and the Gauss–Newton curvature of the
 whitened misfit at the returned transform (rotation marginalised) gives the local
@@ -72,7 +73,7 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     lat, lon : Array, shape ``(N,)``
         INS-indicated fixes (degrees).
     readings : Array, shape ``(N,)``
-        Measured values (map units), bias-free.
+        Measured values (map units); bias-free unless ``iccp.bias_sigma`` > 0.
     entropy : EntropyConfig
     iccp : IccpConfig
         ``window_m`` should cover the coarse stage's error (a few offset spacings
@@ -101,7 +102,9 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     wh = gls_whitener_scan(track_covariance(p0[:, 0], p0[:, 1], jnp.where(noise > 0, noise, 1.0),
                                        iccp.map_error_mgal, iccp.map_error_length_m,
                                        iccp.map_error_order))
-    gls = lambda f: gls_score(wh, z - f, zero)[0]  # noqa: E731
+    sb = jnp.asarray(iccp.bias_sigma, dtype)  # 0: bias-free readings (as ICCP assumes)
+    gls_b = lambda f: gls_score(wh, z - f, sb)  # noqa: E731  (score, bias)
+    gls = lambda f: gls_b(f)[0]  # noqa: E731
     g_n, g_e = offset_grid(entropy, dtype)
     j_grid = gls(value_grad(field, p0 + jnp.stack([g_n, g_e], -1)[:, None, :])[0])
     post = offset_posterior(j_grid, g_n, g_e, entropy.spacing_m, dof=n)
@@ -110,15 +113,18 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
         d_e = jnp.where(post.valid, post.mean_east_m, d_e).astype(d_e.dtype)
     starts = jnp.stack([jnp.concatenate([top_n, jnp.stack([zero, d_n])]),
                         jnp.concatenate([top_e, jnp.stack([zero, d_e])])], -1).astype(dtype)
-    fits = jax.vmap(lambda t0: iccp_fit(field, p0, z, iccp, t0=t0))(starts)
+    # each start fits the readings less the GLS bias there (none when bias_sigma = 0)
+    b_starts = gls_b(value_grad(field, p0 + starts[:, None, :])[0])[1]
+    b_starts = jnp.where(jnp.isfinite(b_starts), b_starts, 0.0)
+    fits = jax.vmap(lambda t0, b: iccp_fit(field, p0, z - b, iccp, t0=t0))(starts, b_starts)
     misfits = jnp.where(jnp.isfinite(fits.misfit), fits.misfit, jnp.inf)
-    j_fits = gls(value_grad(field, _moved(p0, fits.rotation, fits.translation))[0])
+    j_fits, b_fits = gls_b(value_grad(field, _moved(p0, fits.rotation, fits.translation))[0])
     best = jnp.argmin(jnp.where(told, jnp.where(jnp.isfinite(j_fits), j_fits, jnp.inf),
                                 misfits))
     st = jax.tree.map(lambda x: x[best], fits)
     f_c, _ = value_grad(field, p0 + jnp.stack([d_n, d_e]).astype(dtype))
-    coarse_misfit = jnp.mean((z - f_c) ** 2)
-    j_coarse = gls(f_c)
+    j_coarse, b_coarse = gls_b(f_c)
+    coarse_misfit = jnp.mean((z - b_coarse - f_c) ** 2)
     gain = n * (coarse_misfit - st.misfit)
     use_fine = jnp.isfinite(st.misfit) & jnp.where(
         told, ~(j_coarse - j_fits[best] < iccp.accept_chi2),
@@ -156,7 +162,7 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
         offset_east_m=keep(jnp.mean(f_e), coarse.offset_east_m),
         rotation_deg=keep(rot / DEG, coarse.rotation_deg),
         score=pick(st.misfit, coarse_misfit),
-        bias=coarse.bias,
+        bias=jnp.where(sb > 0, pick(b_fits[best], b_coarse), coarse.bias),
         topk_lat=jnp.stack([coarse.lat, f_lat]),
         topk_lon=jnp.stack([coarse.lon, f_lon]),
         topk_score=jnp.stack([coarse_misfit, st.misfit]),
@@ -187,7 +193,8 @@ def _fix_covariance(field, p0, wh, rotation, translation, j_fix, fine, post, j_g
     _, g = value_grad(field, _moved(p0, rotation, translation))
     turned = p0 @ rotation.T
     d_theta = jnp.sum(g * jnp.stack([-turned[:, 1], turned[:, 0]], -1), axis=-1)
-    info = gauss_newton_information(wh, jnp.concatenate([d_theta[:, None], g], -1), 0.0)
+    info = gauss_newton_information(wh, jnp.concatenate([d_theta[:, None], g], -1),
+                                    jnp.asarray(iccp.bias_sigma, g.dtype))
     gn_fine, gn_coarse = offset_covariance(info), offset_covariance(info[1:, 1:])
     chi2 = j_fix / n
     dof = jnp.where(fine, n - 3, n - 2)
