@@ -34,6 +34,7 @@ from jaxgrav import datasets
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.navigate import (
     FIX_EVENTS,
+    LOOSE_MATCHERS,
     error_kf_tables,
     fix_segment,
     fix_update,
@@ -144,6 +145,8 @@ def main(argv=None):
     p.add_argument("--png", default=None, help="error-against-time figure of the map-error runs")
     p.add_argument("--force", action="store_true", help="overwrite --png")
     p.add_argument("--smoke", action="store_true", help="2 voyages of 2 h")
+    p.add_argument("--matcher", choices=LOOSE_MATCHERS, default="dense",
+                   help="the loop's matcher (default dense)")
     a = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # geodesy and 12 h of INS error in float64
     runs, hours = (2, 2.0) if a.smoke else (a.runs, 12.0)
@@ -154,7 +157,8 @@ def main(argv=None):
     rows = {}
     for name, sigma in (("perfect map", 0.0), ("map error, told", a.sigma)):
         model = map_error(a.sigma, a.length) if sigma > 0 else None
-        cfg = loose_config(ins, sigma, a.length)  # the matcher told the map error
+        # the matcher told the map error
+        cfg = loose_config(ins, sigma, a.length, matcher=a.matcher, grid=grid)
         t0 = time.perf_counter()
         if a.calibrate:
             row = {"setting": name, "ins": a.ins, "runs": runs, "calibrate": True,
@@ -164,7 +168,7 @@ def main(argv=None):
             continue
         out = run(grid, scenario, model, cfg, keys)
         seconds = time.perf_counter() - t0
-        row = {"setting": name, "ins": a.ins, "runs": runs, "hours": hours,
+        row = {"setting": name, "ins": a.ins, "matcher": a.matcher, "runs": runs, "hours": hours,
                "map_error_mgal": sigma, **summarise(*out),
                "seconds": round(seconds, 1), "runs_per_s": round(runs / seconds, 2)}
         print(json.dumps(row))

@@ -15,6 +15,7 @@ from jaxgrav.navigate.error_kf import (
 )
 from jaxgrav.navigate.loose import (
     FIX_EVENTS,
+    LOOSE_MATCHERS,
     LooseConfig,
     LooseResult,
     eotvos_sigma,
@@ -32,6 +33,7 @@ from jaxgrav.navigate.tight import (
 
 __all__ = [
     "FIX_EVENTS",
+    "LOOSE_MATCHERS",
     "TIGHT_METHODS",
     "ErrorKFTables",
     "LooseConfig",

@@ -30,15 +30,23 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import eotvos, eotvos_jacobian
+from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.dense import DenseConfig, match_dense
+from jaxgrav.match.entropy import EntropyConfig
+from jaxgrav.match.sizing import iccp_config_for
 from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, innovation_nis, spread
 from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance
 from jaxgrav.sim.trajectory import Track
 
-__all__ = ["FIX_EVENTS", "LooseConfig", "LooseResult", "eotvos_sigma", "fix_segment",
-           "loose_config", "navigate_loose"]
+__all__ = ["FIX_EVENTS", "LOOSE_MATCHERS", "LooseConfig", "LooseResult", "eotvos_sigma",
+           "fix_segment", "loose_config", "navigate_loose"]
+
+LOOSE_MATCHERS = ("dense", "entropy+iccp")
+"""Matchers of the loop: the dense offset grid (GLS score, Gauss–Newton), or paper B's
+entropy coarse search and ICCP fine match (the reading bias marginalised)."""
 
 FIX_EVENTS = {
     0: "accepted",
@@ -56,8 +64,10 @@ class LooseConfig:
 
     Attributes
     ----------
-    matcher : DenseConfig
-        The dense matcher's settings (``spacing_m`` is set per segment from the window).
+    matcher : DenseConfig or tuple of (EntropyConfig, IccpConfig)
+        The matcher's settings: the dense matcher (``spacing_m`` is set per segment from
+        the window), or the entropy+ICCP matcher (the entropy grid's ``spacing_m`` set
+        the same way, ICCP's ``window_m`` raised to 1.2 × the reach).
     ins : INSErrorModel
         The filter's INS error model.
     sigma_pos_m, sigma_vel : float
@@ -116,13 +126,17 @@ class LooseConfig:
 
 
 def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=10000.0,  # noqa: B008
-                 noise_mgal=1.0, **changes):
+                 noise_mgal=1.0, matcher="dense", grid=None, **changes):
     """The loop's settings used by the examples, ``navigate`` and ``montecarlo``.
 
-    The dense matcher told the map error (GLS score), a posterior-mean fix, fixes with
-    a 1-σ above 3 km or more than 20 % of the posterior mass on the search edge
-    rejected, five rotations within ±3°; its reading noise is ``noise_mgal / √fix_every``
-    (a fix averages ``fix_every`` readings).
+    The matcher told the map error (GLS score), a posterior-mean fix, fixes with a 1-σ
+    above 3 km or more than 20 % of the posterior mass on the search edge rejected,
+    rotations within ±3° (the dense matcher: five); its reading noise is
+    ``noise_mgal / √fix_every`` (a fix averages ``fix_every`` readings).
+    ``entropy+iccp``: a 41 × 41 entropy grid (H_CY), ICCP as the fine stage of
+    :func:`~jaxgrav.match.sizing.iccp_config_for` on ``grid`` (window at least a map
+    cell's diagonal, ten least-squares steps), the reading bias (gravimeter offset,
+    Eötvös error) marginalised with a flat prior.
 
     Parameters
     ----------
@@ -132,6 +146,9 @@ def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=100
         The map error told to the matcher (mGal, m); 0: the white-noise matcher.
     noise_mgal : float
         1-σ of one reading (mGal).
+    matcher : {"dense", "entropy+iccp"}
+    grid : Grid or PreparedMap, optional
+        The map (``entropy+iccp`` only: its cell sizes ICCP's window).
     **changes
         Other :class:`LooseConfig` fields (``fix_every``, ``n_fixes``, ``stride``,
         ``sigma_pos_m`` …).
@@ -140,12 +157,25 @@ def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=100
     -------
     LooseConfig
     """
+    if matcher not in LOOSE_MATCHERS:
+        raise ValueError(f"matcher must be one of {LOOSE_MATCHERS}; got {matcher!r}")
     fix_every = changes.get("fix_every", LooseConfig.fix_every)
-    matcher = DenseConfig(noise_mgal=noise_mgal / math.sqrt(fix_every),
-                          map_error_mgal=map_error_mgal, map_error_length_m=map_error_length_m,
-                          fix="posterior", max_sigma_m=3000.0, max_edge_mass=0.2, n_rotations=5,
-                          max_rotation_deg=3.0, score_model="gls")
-    return LooseConfig(matcher=matcher, ins=ins, **changes)
+    noise = noise_mgal / math.sqrt(fix_every)
+    if matcher == "dense":
+        config = DenseConfig(noise_mgal=noise, map_error_mgal=map_error_mgal,
+                             map_error_length_m=map_error_length_m, fix="posterior",
+                             max_sigma_m=3000.0, max_edge_mass=0.2, n_rotations=5,
+                             max_rotation_deg=3.0, score_model="gls")
+    else:
+        if grid is None:
+            raise ValueError("loose_config(matcher='entropy+iccp') needs the grid (its cell "
+                             "sizes ICCP's window)")
+        # sized for a nominal 1 km reach; the loop sets the spacing and window per segment
+        iccp = iccp_config_for(grid, 1000.0, stage="fine", noise=noise, max_rotation_deg=3.0,
+                               map_error=map_error(map_error_mgal, map_error_length_m),
+                               bias_sigma=math.inf, max_edge_mass=0.2)
+        config = (EntropyConfig(half_size=20), iccp)
+    return LooseConfig(matcher=config, ins=ins, **changes)
 
 
 class LooseResult(NamedTuple):
@@ -225,13 +255,18 @@ def eotvos_sigma(lat, v_east, v_north, vel_cov):
 
 
 def _match(cfg, grid, lat, lon, g, reach, sigma_eotvos):
-    """The dense matcher, its offset grid spread over the reach and the Eötvös error of
-    the filter's velocity told as a correlated error beside the map's."""
-    h = cfg.matcher.half_size
-    spacing = jnp.clip(reach / h, cfg.min_spacing_m, cfg.max_spacing_m)
-    told = jnp.sqrt(cfg.matcher.map_error_mgal**2 + sigma_eotvos**2)
-    return match_dense(grid, lat, lon, g, dataclasses.replace(
-        cfg.matcher, spacing_m=spacing, map_error_mgal=told))
+    """The matcher, its offset grid spread over the reach and the Eötvös error of the
+    filter's velocity told as a correlated error beside the map's."""
+    dense = isinstance(cfg.matcher, DenseConfig)
+    entropy, iccp = (cfg.matcher, None) if dense else cfg.matcher
+    spacing = jnp.clip(reach / entropy.half_size, cfg.min_spacing_m, cfg.max_spacing_m)
+    told = jnp.sqrt((entropy if dense else iccp).map_error_mgal**2 + sigma_eotvos**2)
+    if dense:
+        return match_dense(grid, lat, lon, g, dataclasses.replace(
+            cfg.matcher, spacing_m=spacing, map_error_mgal=told))
+    window = jnp.maximum(iccp.window_m, 1.2 * spacing * entropy.half_size)
+    return match_entropy_iccp(grid, lat, lon, g, dataclasses.replace(entropy, spacing_m=spacing),
+                              dataclasses.replace(iccp, window_m=window, map_error_mgal=told))
 
 
 def fix_segment(config, tables, grid, ins, gravity, x, p, end):

@@ -12,6 +12,8 @@ import pytest
 
 from jaxgrav.geodesy import eotvos
 from jaxgrav.match.dense import DenseConfig
+from jaxgrav.match.entropy import EntropyConfig
+from jaxgrav.match.sizing import iccp_config_for
 from jaxgrav.navigate import (
     FIX_EVENTS,
     LooseConfig,
@@ -19,6 +21,7 @@ from jaxgrav.navigate import (
     error_kf_tables,
     fix_update,
     hourly_rms,
+    loose_config,
     navigate_loose,
     voyage_errors,
 )
@@ -112,6 +115,19 @@ def test_the_loop_corrects_the_ins_on_an_informative_map(smooth_grid, short_voya
 
 
 @pytest.mark.long
+def test_the_entropy_iccp_loop_corrects_the_ins_too(smooth_grid, short_voyages):
+    """Paper B's matcher in the loop: the gravimeter's bias marginalised, fixes accepted."""
+    iccp = iccp_config_for(smooth_grid, 1000.0, stage="fine", noise=0.5, max_rotation_deg=3.0,
+                           bias_sigma=float("inf"), max_sigma_m=3000.0)
+    config = dataclasses.replace(CONFIG, matcher=(EntropyConfig(half_size=6), iccp))
+    v = jax.tree.map(lambda a: a[0], short_voyages)
+    res = navigate_loose(prepare_map(smooth_grid), v, config)
+    assert int(np.sum(np.asarray(res.fix_event) == 0)) >= 5
+    err = voyage_errors(v, res.nav, res.cov_north_east)
+    assert float(err.nav_m[-1]) < 0.3 * float(err.free_m[-1])
+
+
+@pytest.mark.long
 def test_jit_without_retrace_and_vmap_equals_loop(smooth_grid, short_voyages):
     pm = prepare_map(smooth_grid)
     batch = jax.vmap(navigate_loose, in_axes=(None, 0, None))(pm, short_voyages, CONFIG)
@@ -143,6 +159,16 @@ def test_missing_readings_are_not_matched(smooth_grid, short_voyages):
 def test_bad_settings_get_clear_errors(change, message):
     with pytest.raises(ValueError, match=message):
         LooseConfig(**change)
+
+
+def test_loose_config_names_its_matchers(smooth_grid):
+    with pytest.raises(ValueError, match=r"matcher must be one of .*; got 'chains'"):
+        loose_config(matcher="chains")
+    with pytest.raises(ValueError, match="needs the grid"):
+        loose_config(matcher="entropy+iccp")
+    entropy, iccp = loose_config(matcher="entropy+iccp", grid=smooth_grid).matcher
+    assert iccp.bias_sigma == float("inf") and iccp.map_error_mgal == 3.0
+    assert entropy.half_size == 20 and iccp.max_rotation_deg == 3.0
 
 
 @pytest.mark.long  # cheap, but short_voyages costs ~30 s to build: with its other users
