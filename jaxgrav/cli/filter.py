@@ -235,8 +235,6 @@ def _eotvos(args, track, g):
     if not args.eotvos_corrected:
         g = g + np.asarray(eotvos_jit(lat, ve, vn))
     how = "given corrected" if args.eotvos_corrected else "Eötvös-corrected here"
-    if args.method == "pmf":
-        return g, None, f"readings {how} with the INS velocity (pmf: its error not modelled)"
     jac = np.asarray(eotvos_jacobian(lat, ve, vn))
     return g, jac, f"readings {how} with the INS velocity, its error in the filter"
 

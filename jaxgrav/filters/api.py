@@ -87,8 +87,9 @@ def pad_to_stride(steps, every, first=None):
     idx = np.clip(np.arange(total) - start, 0, t - 1)
     inside = (np.arange(total) >= start) & (np.arange(total) < start + t)
     z = jnp.where(inside, jnp.asarray(steps.z)[idx], jnp.nan)
+    h_lin = None if steps.h_lin is None else jnp.asarray(steps.h_lin)[idx]
     return Step(jnp.asarray(steps.lat)[idx], jnp.asarray(steps.lon)[idx], z,
-                jnp.asarray(steps.r)[idx]), start
+                jnp.asarray(steps.r)[idx], h_lin), start
 
 
 def reading_stride(rows, where):
@@ -219,8 +220,9 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         ``∂E/∂v`` (mGal per m/s, north then east;
         :func:`~jaxgrav.geodesy.eotvos_jacobian`) at the velocity the readings were
         Eötvös-corrected with: the filter carries the Eötvös error of the INS velocity
-        error, ``∂E/∂v · δv``, in its measurement (:attr:`~jaxgrav.filters.Step.h_lin`).
-        All but ``pmf`` (ValueError). None: the readings are taken as exactly corrected.
+        error, ``∂E/∂v · δv``, in its measurement (:attr:`~jaxgrav.filters.Step.h_lin`;
+        the point-mass filter updates each cell's Gaussian states with it). None: the
+        readings are taken as exactly corrected.
     where : str
         How error messages name the track.
     n_particles : int, optional
@@ -268,10 +270,6 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         dynamics, _, p0, meas = augment(map_error, dynamics, jnp.zeros(p0.shape[0]), p0, speed)
     h_lin = None
     if eotvos_velocity is not None:
-        if method == "pmf":
-            raise ValueError(f"{where}: the point-mass filter does not carry the Eötvös error "
-                             "of the velocity; use ukf, ekf or gsf, or pass "
-                             "eotvos_velocity=None")
         h_lin = eotvos_part(jnp.asarray(eotvos_velocity, p0.dtype), p0.shape[0])
     steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r),
                  h_lin)

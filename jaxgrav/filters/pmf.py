@@ -73,14 +73,18 @@ from jaxgrav.filters.model import (
     run_filter,
 )
 from jaxgrav.filters.pmf_cells import (
+    PMFState,
     cell_fields,
     diffusion_kernel,
     global_moments,
     grid_moments,
+    mix_cells,
     point_mass_cells,
+    regrid_matrix,
     shift_axis,
     with_cells,
 )
+from jaxgrav.filters.pmf_linear import conditional_reading, mixture_update
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import GRAV, N_STATES, INSErrorModel, transition
 
@@ -88,42 +92,12 @@ __all__ = ["PMFDynamics", "PMFFilter", "PMFState", "diffusion_kernel", "pmf", "r
 
 EDGE_MASS = 1e-3
 """``grid_edge`` is flagged when the outermost cells hold more than this mass."""
+REGRID_RATIO = 1.4
+"""An adaptive grid is re-sized when its cell is off the wanted size by more than this."""
 RECENTRE_LOSS = 1e-5
 """Re-centring may push at most this mass off the grid."""
 _DEFAULT_INS = INSErrorModel()
 _TINY = 1e-13  # cells below this fraction of the peak weight take the global bias moments
-
-
-class PMFState(NamedTuple):
-    """Point-mass filter state (the last three fields None without a map-error state).
-
-    Attributes
-    ----------
-    w : Array, shape ``(G, G)``
-        Normalised cell weights (north index first).
-    bias_mean, bias_var : Array, shape ``(G, G)``
-        Per-cell Gaussian of the gravimeter bias (mGal, mGal²).
-    centre : Array, shape ``(2,)``
-        Position error (m, north, east) of the grid's centre cell.
-    x : Array, shape ``(13,)``
-        Mean of the whole error state; its position block is the grid's mean.
-    p : Array, shape ``(13, 13)``
-        Its covariance; the position block is the grid's covariance.
-    err_mean, err_var : Array, shape ``(G, G)``, or None
-        Per-cell Gaussian of the map error (mGal, mGal²).
-    err_cross : Array, shape ``(G, G)``, or None
-        Per-cell covariance of the bias and the map error (mGal²).
-    """
-
-    w: jax.Array
-    bias_mean: jax.Array
-    bias_var: jax.Array
-    centre: jax.Array
-    x: jax.Array
-    p: jax.Array
-    err_mean: jax.Array | None = None
-    err_var: jax.Array | None = None
-    err_cross: jax.Array | None = None
 
 
 PMFDynamics = Dynamics
@@ -152,7 +126,7 @@ class PMFFilter(NamedTuple):
 
 
 def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
-        measurement=gravity_measurement):
+        measurement=gravity_measurement, adapt_span=None, min_cell_m=None, max_cell_m=None):
     """Grid point-mass filter with the INS error model's drift.
 
     Parameters
@@ -172,6 +146,14 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
     measurement : callable
         ``h(field, x, lat, lon)``, evaluated with ``x`` holding a cell's offset and
         zero bias.
+    adapt_span : float, optional
+        An adaptive grid: after each prediction, when the cell size needed for the grid
+        to span ``±adapt_span`` σ of the weights (per axis, within ``[min_cell_m,
+        max_cell_m]``, default ``cell_m/4`` and ``8·cell_m``) differs from the current
+        one by more than :data:`REGRID_RATIO`, the grid is re-centred on the mean with
+        that cell size and the weights and per-cell Gaussians carried over
+        (:func:`~jaxgrav.filters.pmf_cells.regrid_matrix`). ``cell_m`` is the first
+        cell size. None (default): the fixed grid.
 
     Returns
     -------
@@ -184,9 +166,19 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         raise ValueError(f"n_cells must be an odd integer >= 3; got {n_cells!r}")
     half = (n_cells - 1) / 2
     base = (jnp.arange(n_cells) - half) * cell_m
+    if adapt_span is not None:
+        min_cell_m = cell_m / 4 if min_cell_m is None else min_cell_m
+        max_cell_m = cell_m * 8 if max_cell_m is None else max_cell_m
 
-    def cells(centre):
-        return jnp.meshgrid(centre[0] + base, centre[1] + base, indexing="ij")
+    def _size(state):
+        return cell_m if state.cell is None else state.cell
+
+    def cells(centre, c=None):
+        """Cell position errors (m) of a grid centred at ``centre`` (cell ``c``, or cell_m)."""
+        if c is None:
+            return jnp.meshgrid(centre[0] + base, centre[1] + base, indexing="ij")
+        i = jnp.arange(n_cells) - half
+        return jnp.meshgrid(centre[0] + i * c[0], centre[1] + i * c[1], indexing="ij")
 
     def init(x0, p0):
         x0, p0 = jnp.asarray(x0, float), jnp.asarray(p0, float)
@@ -203,8 +195,9 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
             e = N_STATES
             extra = (jnp.full(shape, x0[e]), jnp.full(shape, p0[e, e]),
                      jnp.full(shape, p0[GRAV, e]))
+        size = None if adapt_span is None else jnp.full(2, cell_m, x0.dtype)
         state = PMFState(w, jnp.full(shape, x0[GRAV]), jnp.full(shape, p0[GRAV, GRAV]), centre,
-                         x0[:N_STATES], p0[:N_STATES, :N_STATES], *extra)
+                         x0[:N_STATES], p0[:N_STATES, :N_STATES], *extra, cell=size)
         return _sync(state, *grid_moments(w, dn, de, cell_m))
 
     def _n_map_states(n):
@@ -230,7 +223,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
 
     def _recentre(state):
         mean = state.x[:2]
-        k = jnp.round((mean - state.centre) / cell_m).astype(jnp.int32)
+        size = cell_m if state.cell is None else state.cell
+        k = jnp.round((mean - state.centre) / size).astype(jnp.int32)
         k = jnp.clip(k, -(n_cells - 1), n_cells - 1)
         cell = cell_fields(state)
         arrays = (state.w, *cell)
@@ -242,7 +236,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         ok = kept > 1.0 - RECENTRE_LOSS
         w, *cell = (jnp.where(ok, a, b) for a, b in zip(arrays, (state.w, *cell), strict=True))
         w = jnp.where(ok, w / kept, w)
-        centre = jnp.where(ok, state.centre + k * cell_m, state.centre)
+        centre = jnp.where(ok, state.centre + k * size, state.centre)
         return with_cells(state._replace(w=w, centre=centre), cell)
 
     def _predict(state, dyn):
@@ -267,36 +261,33 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         # predicts (conditional noise plus the coherent growth from the velocity error)
         spread = jnp.maximum(jnp.diagonal(p_new[:2, :2] - p[:2, :2]), 0.0) + q_pos * dyn.dt
         centre = state.centre + (x_new[:2] - x[:2])
-        a_n = diffusion_kernel(n_cells, spread[0] / cell_m**2)
-        a_e = diffusion_kernel(n_cells, spread[1] / cell_m**2)
-        w0, m0, s0 = state.w, state.bias_mean, state.bias_var
+        size = (cell_m, cell_m) if state.cell is None else state.cell
+        a_n = diffusion_kernel(n_cells, spread[0] / size[0] ** 2)
+        a_e = diffusion_kernel(n_cells, spread[1] / size[1] ** 2)
+        m0, s0 = state.bias_mean, state.bias_var
         # per-cell bias: its own (scalar) error model, then moment matching through the kernel
         fb, qb = f[GRAV, GRAV], q[GRAV, GRAV]
-        m0, s0 = fb * m0, fb**2 * s0 + qb
-        chans = [w0, w0 * m0, w0 * (s0 + m0**2)]
-        cell0 = [m0, s0]
+        cell0 = [fb * m0, fb**2 * s0 + qb]
         if has_err:
             em, ev, ec = state.err_mean, state.err_var, state.err_cross
-            em, ev, ec = phi * em, phi**2 * ev + qe, fb * phi * ec
-            chans += [w0 * em, w0 * (ev + em**2), w0 * (ec + m0 * em)]
-            cell0 += [em, ev, ec]
-        w, wm, wm2, *we = jnp.einsum("ij,cjk,lk->cil", a_n, jnp.stack(chans), a_e)
-        glob = global_moments(w0, cell0)
-        tiny = w <= _TINY * w.max()
-        safe = jnp.where(tiny, 1.0, w)
-        m = jnp.where(tiny, glob[0], wm / safe)
-        s = jnp.where(tiny, glob[1], jnp.clip(wm2 / safe - m**2, 1e-12, None))
-        cell = [m, s]
-        if has_err:
-            em = jnp.where(tiny, glob[2], we[0] / safe)
-            ev = jnp.where(tiny, glob[3], jnp.clip(we[1] / safe - em**2, 1e-12, None))
-            ec = jnp.where(tiny, glob[4], we[2] / safe - m * em)
-            # keep each cell's 2 x 2 covariance positive semi-definite after round-off
-            lim = jnp.sqrt(s * ev)
-            cell += [em, ev, jnp.clip(ec, -lim, lim)]
-        w = w / w.sum()
-        state = PMFState(w, m, s, centre, x_new, 0.5 * (p_new + p_new.T))
-        return with_cells(state, cell)
+            cell0 += [phi * em, phi**2 * ev + qe, fb * phi * ec]
+        w, cell = mix_cells(a_n, a_e, state.w, cell0, _TINY)
+        state = PMFState(w, *cell[:2], centre, x_new, 0.5 * (p_new + p_new.T), cell=state.cell)
+        state = with_cells(state, cell)
+        return state if adapt_span is None else _regrid(state)
+
+    def _regrid(state):
+        """Cell sizes to span ±adapt_span σ of the weights, when off by more than 1.4 ×."""
+        c = state.cell
+        mean, cov = grid_moments(state.w, *cells(state.centre, c), c)
+        target = jnp.clip(2.0 * adapt_span * jnp.sqrt(jnp.diagonal(cov)) / (n_cells - 1),
+                          min_cell_m, max_cell_m)
+        go = jnp.any(jnp.abs(jnp.log(target / c)) > jnp.log(REGRID_RATIO))
+        r_n, r_e = (regrid_matrix(state.centre[k], c[k], mean[k], target[k], n_cells)
+                    for k in (0, 1))
+        w, cell = mix_cells(r_n, r_e, state.w, cell_fields(state), _TINY)
+        new = with_cells(state._replace(w=w, centre=mean, cell=target), cell)
+        return jax.tree.map(lambda a, b: jnp.where(go, a, b), new, state)
 
     def _sync(state, mean, cov, prior_mean=None):
         """Gaussian position block := the grid's moments; the rest moves by regression."""
@@ -325,8 +316,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
     def predict(state, step, field, dynamics):
         del field
         state = _predict(state, dynamics)
-        dn, de = cells(state.centre)
-        mean, cov = grid_moments(state.w, dn, de, cell_m)
+        dn, de = cells(state.centre, state.cell)
+        mean, cov = grid_moments(state.w, dn, de, _size(state))
         state = _sync(state, mean, cov, mean)  # the grid's own edge effects move no velocity
         nan = jnp.full((), jnp.nan, state.x.dtype)
         flags = STATUS_FILTER["no_reading"] | jnp.where(
@@ -347,12 +338,10 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return jax.vmap(jax.vmap(one))(dn, de)
 
     def update(state, step, field, dynamics):
-        if step.h_lin is not None:  # e.g. the Eötvös effect of the velocity error
-            raise ValueError("the point-mass filter takes no Step.h_lin; use a Kalman filter")
         state = _predict(state, dynamics)
         w, m, s = state.w, state.bias_mean, state.bias_var
-        dn, de = cells(state.centre)
-        prior_mean, _ = grid_moments(w, dn, de, cell_m)
+        dn, de = cells(state.centre, state.cell)
+        prior_mean, _ = grid_moments(w, dn, de, _size(state))
 
         has = jnp.isfinite(step.z)
         g = _cell_values(field, step, dn, de)
@@ -363,6 +352,10 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
             pred_m, pred_v, cross_b, cross_e = m + em, s + ev + 2.0 * ec, s + ec, ec + ev
         else:
             pred_m, pred_v, cross_b = m, s, s
+        lin = (None if step.h_lin is None  # e.g. the Eötvös effect of the velocity error
+               else conditional_reading(state.x, state.p, step.h_lin, dn, de))
+        if lin is not None:
+            pred_m, pred_v = pred_m + lin[0], pred_v + lin[1]
         nu = jnp.where(has & on_map, step.z - g - pred_m, 0.0)
         var = pred_v + step.r
         loglik = jnp.where(on_map, -0.5 * (nu**2 / var + jnp.log(var)), -jnp.inf)
@@ -382,8 +375,13 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
             state = state._replace(err_mean=jnp.where(do, em + gain_e * nu, em),
                                    err_var=jnp.where(do, ev - gain_e * cross_e, ev),
                                    err_cross=jnp.where(do, ec - gain * cross_e, ec))
-        mean, cov = grid_moments(w_new, dn, de, cell_m)
-        state = _sync(state, mean, cov, prior_mean)
+        mean, cov = grid_moments(w_new, dn, de, _size(state))
+        if lin is None:
+            state = _sync(state, mean, cov, prior_mean)
+        else:  # each cell's Gaussian updated by the reading, then the mixture's moments
+            x, p = mixture_update(w_new, *lin[2:], jnp.where(do, nu / var, 0.0),
+                                  jnp.where(do, jnp.sum(w_new / var), 0.0), mean, cov)
+            state = state._replace(x=x, p=p)
 
         g_safe = jnp.where(on_map, g, 0.0)
         z_hat = jnp.sum(w * (g_safe + pred_m))

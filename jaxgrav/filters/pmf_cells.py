@@ -6,14 +6,62 @@ cell grid, and the per-cell Gaussians (the gravimeter bias and, optionally, a ma
 with its covariance with the bias) with their mixture moments.
 """
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 
 from jaxgrav import constants
 from jaxgrav.geodesy import enu_basis, geodetic_to_ecef
 
-__all__ = ["cell_fields", "diffusion_kernel", "global_moments", "grid_moments",
-           "point_mass_cells", "shift_axis", "with_cells"]
+__all__ = [
+    "PMFState",
+    "cell_fields",
+    "diffusion_kernel",
+    "global_moments",
+    "grid_moments",
+    "mix_cells",
+    "point_mass_cells",
+    "regrid_matrix",
+    "shift_axis",
+    "with_cells",
+]
+
+
+class PMFState(NamedTuple):
+    """Point-mass filter state (the last three fields None without a map-error state).
+
+    Attributes
+    ----------
+    w : Array, shape ``(G, G)``
+        Normalised cell weights (north index first).
+    bias_mean, bias_var : Array, shape ``(G, G)``
+        Per-cell Gaussian of the gravimeter bias (mGal, mGal²).
+    centre : Array, shape ``(2,)``
+        Position error (m, north, east) of the grid's centre cell.
+    x : Array, shape ``(13,)``
+        Mean of the whole error state; its position block is the grid's mean.
+    p : Array, shape ``(13, 13)``
+        Its covariance; the position block is the grid's covariance.
+    err_mean, err_var : Array, shape ``(G, G)``, or None
+        Per-cell Gaussian of the map error (mGal, mGal²).
+    err_cross : Array, shape ``(G, G)``, or None
+        Per-cell covariance of the bias and the map error (mGal²).
+    cell : Array, shape ``(2,)``, or None
+        Cell size (m, north and east) of an adaptive grid; None: the filter's fixed
+        ``cell_m``.
+    """
+
+    w: jax.Array
+    bias_mean: jax.Array
+    bias_var: jax.Array
+    centre: jax.Array
+    x: jax.Array
+    p: jax.Array
+    err_mean: jax.Array | None = None
+    err_var: jax.Array | None = None
+    err_cross: jax.Array | None = None
+    cell: jax.Array | None = None
 
 
 def _neumann_basis(n):
@@ -103,3 +151,62 @@ def point_mass_cells(masses, lat, lon):
     k = constants.G_NEWTON * jnp.asarray(masses.mass, dtype=dtype) * inv_l**3
     _, _, up = enu_basis(lat, lon)
     return sum(jnp.sum(k * di, axis=-1) * u for di, u in zip(d, up, strict=True)) / constants.MGAL
+
+
+def mix_cells(a_n, a_e, w0, cell0, tiny=1e-13):
+    """Weights and per-cell Gaussians carried through the separable kernels ``a_n``, ``a_e``.
+
+    ``w = a_n w0 a_eᵀ`` and each cell's moments matched from the mixed channels
+    ``w·m``, ``w·(s + m²)`` (and, with a map error, its mean, variance and covariance
+    with the bias); a cell below ``tiny`` of the peak weight takes the global moments.
+
+    Parameters
+    ----------
+    a_n, a_e : Array, shape ``(G, G)``
+        Kernels along north and east (new cell index first).
+    w0 : Array, shape ``(G, G)``
+        Weights.
+    cell0 : list of Array
+        Per-cell arrays in :func:`cell_fields` order.
+
+    Returns
+    -------
+    w : Array, shape ``(G, G)``
+        Normalised.
+    cell : list of Array
+    """
+    m0, s0 = cell0[0], cell0[1]
+    chans = [w0, w0 * m0, w0 * (s0 + m0**2)]
+    has_err = len(cell0) > 2
+    if has_err:
+        em, ev, ec = cell0[2:]
+        chans += [w0 * em, w0 * (ev + em**2), w0 * (ec + m0 * em)]
+    w, wm, wm2, *we = jnp.einsum("ij,cjk,lk->cil", a_n, jnp.stack(chans), a_e)
+    glob = global_moments(w0, cell0)
+    small = w <= tiny * w.max()
+    safe = jnp.where(small, 1.0, w)
+    m = jnp.where(small, glob[0], wm / safe)
+    s = jnp.where(small, glob[1], jnp.clip(wm2 / safe - m**2, 1e-12, None))
+    cell = [m, s]
+    if has_err:
+        em = jnp.where(small, glob[2], we[0] / safe)
+        ev = jnp.where(small, glob[3], jnp.clip(we[1] / safe - em**2, 1e-12, None))
+        ec = jnp.where(small, glob[4], we[2] / safe - m * em)
+        # keep each cell's 2 x 2 covariance positive semi-definite after round-off
+        lim = jnp.sqrt(s * ev)
+        cell += [em, ev, jnp.clip(ec, -lim, lim)]
+    return w / w.sum(), cell
+
+
+def regrid_matrix(old_centre, old_cell, new_centre, new_cell, n):
+    """Weights of ``n`` new nodes from ``n`` old ones along one axis, ``(n, n)``.
+
+    A hat of half-width ``max(old_cell, new_cell)``: linear interpolation when the
+    grid is refined, each new cell gathering the mass about it when coarsened (rows
+    not normalised: the caller renormalises the weights).
+    """
+    i = jnp.arange(n) - (n - 1) / 2
+    old = old_centre + i * old_cell
+    new = new_centre + i * new_cell
+    h = jnp.maximum(old_cell, new_cell)
+    return jnp.maximum(0.0, 1.0 - jnp.abs(new[:, None] - old[None, :]) / h)

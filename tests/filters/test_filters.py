@@ -327,13 +327,18 @@ def test_ukf_curvature_count_adds_the_map_second_order_variance(dynamics, prior,
 
 
 @pytest.mark.long
-def test_pmf_refuses_a_linear_part(dynamics, prior, runs):
+def test_pmf_takes_a_linear_part(dynamics, prior, runs):
+    """The point-mass filter with Step.h_lin (its update against NumPy: test_pmf.py): a
+    reading's linear part moves the velocity error beyond its regression on the grid."""
     steps = _with_h_lin(_one(runs[0], 0))
     x0, p0 = prior
     state = PMF.init(x0, p0)
     dyn = PMF.dynamics(LAT_REF, DT)
-    with pytest.raises(ValueError, match=r"point-mass filter takes no Step\.h_lin"):
-        PMF.update(state, _one(steps, 0), FIELD, dyn)
+    step = _one(steps, int(np.flatnonzero(np.isfinite(np.asarray(steps.z)))[0]))
+    with_part, info = PMF.update(state, step, FIELD, dyn)
+    without, _ = PMF.update(state, step._replace(h_lin=None), FIELD, dyn)
+    assert np.all(np.isfinite(np.asarray(info.x)))
+    assert np.abs(np.asarray(with_part.x)[2:4] - np.asarray(without.x)[2:4]).max() > 1e-4
 
 
 LIN_A = np.zeros(ins.N_STATES)

@@ -207,6 +207,55 @@ def test_update_is_the_brute_force_bayes_grid(prior, dyn):
     assert int(info.status) & ~FLAGS["grid_edge"] == 0
 
 
+def test_update_with_a_linear_part_is_the_brute_force_mixture(prior, dyn):
+    """A reading with the Eötvös effect of the velocity error (``Step.h_lin``): each cell
+    a joint Kalman update of its bias and the Gaussian states, the weights by the cells'
+    innovation likelihoods, the state's moments those of the mixture (NumPy, by hand)."""
+    x0, p0 = prior
+    state = init(PMF, x0, p0)
+    lat, lon, z, r = LAT, MASS_LON + 0.02, 4.0, 0.7
+    h = np.zeros(ins.N_STATES)
+    h[[2, 3]] = [0.4, 12.6]  # mGal per m/s, north and east
+    step = _step(z, lat, lon, r)._replace(h_lin=jnp.asarray(h))
+    new, info = update(PMF, state, step, FIELD, dyn)
+    pred, _ = predict(PMF, state, dyn)
+
+    w, m, s = (np.asarray(a) for a in (pred.w, pred.bias_mean, pred.bias_var))
+    xp, pp = np.asarray(pred.x), np.asarray(pred.p)
+    offsets = (np.arange(G) - (G - 1) / 2) * CELL
+    dn, de = np.meshgrid(pred.centre[0] + offsets, pred.centre[1] + offsets, indexing="ij")
+    mr, nr = _radii(lat)
+    g = np.asarray(gravity_anomaly(FIELD, lat - dn / mr / DEG,
+                                   lon - de / (nr * np.cos(lat * DEG)) / DEG))
+    k = pp[:, :2] @ np.linalg.inv(pp[:2, :2])
+    c = pp - k @ pp[:2, :]
+    post_w = np.zeros((G, G))
+    mus, covs, b_cell = np.zeros((G, G, 13)), np.zeros((G, G, 13, 13)), np.zeros((G, G))
+    for i in range(G):
+        for j in range(G):
+            mu = xp + k @ (np.array([dn[i, j], de[i, j]]) - xp[:2])
+            s_ij = s[i, j] + h @ c @ h + r
+            nu = z - g[i, j] - m[i, j] - h @ mu
+            post_w[i, j] = w[i, j] * np.exp(-0.5 * nu**2 / s_ij) / np.sqrt(s_ij)
+            mus[i, j] = mu + c @ h * nu / s_ij
+            covs[i, j] = c - np.outer(c @ h, c @ h) / s_ij
+            b_cell[i, j] = m[i, j] + s[i, j] / s_ij * nu
+    post_w /= post_w.sum()
+    x = np.einsum("ij,ijk->k", post_w, mus)
+    dev = mus - x
+    p = np.einsum("ij,ijkl->kl", post_w, covs) + np.einsum("ij,ijk,ijl->kl", post_w, dev, dev)
+
+    np.testing.assert_allclose(np.asarray(new.w), post_w, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(np.asarray(new.bias_mean), b_cell, rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(new.x)[:12], x[:12], rtol=1e-7, atol=1e-12)
+    p[:2, :2] += np.eye(2) * CELL**2 / 12  # the position block: the grid's, quantisation in
+    np.testing.assert_allclose(np.asarray(new.p)[:12, :12], p[:12, :12], rtol=1e-7, atol=1e-12)
+    # the reading moved the velocity error beyond the regression on the position
+    moved = np.asarray(new.x)[2:4] - xp[2:4]
+    regressed = (k @ (x[:2] - xp[:2]))[2:4]
+    assert np.abs(moved - regressed).max() > 1e-3
+
+
 def test_nan_reading_leaves_the_prediction(prior, dyn):
     x0, p0 = prior
     state = init(PMF, x0, p0)
@@ -231,6 +280,54 @@ def test_recentres_on_the_posterior_mean():
     wide = init(PMF_RW, x0, jnp.asarray(ins.initial_covariance(ins.INSErrorModel(), 2000.0)))
     new, _ = predict(PMF_RW, wide, PMF_RW.dynamics(LAT, 1.0))
     np.testing.assert_allclose(np.asarray(new.centre), 0.0)
+
+
+@pytest.mark.parametrize(("old", "new"), [(400.0, 150.0), (150.0, 400.0)])
+def test_regrid_matrix_keeps_a_gaussian(old, new):
+    """Refined (interpolated) or coarsened (gathered), the weights keep their mean and
+    their variance within the two grids' quantisation."""
+    n, mu, sd = 41, 300.0, 600.0  # both grids span beyond ±5σ
+    i = np.arange(n) - (n - 1) / 2
+    x = 100.0 + i * old
+    w = np.exp(-0.5 * ((x - mu) / sd) ** 2)
+    w /= w.sum()
+    r = np.asarray(fl.pmf_cells.regrid_matrix(100.0, old, 250.0, new, n))
+    w2 = r @ w
+    w2 /= w2.sum()
+    y = 250.0 + i * new
+    m2 = np.sum(w2 * y)
+    v2 = np.sum(w2 * (y - m2) ** 2)
+    assert abs(m2 - mu) < 0.02 * sd
+    # the hat (half-width h, the coarser cell) smooths by about h²/6 at most
+    h = max(old, new)
+    assert 0.0 <= v2 - sd**2 < h**2 / 5, (v2 - sd**2, h**2)
+
+
+def test_adaptive_grid_follows_the_spread():
+    """A narrow prior: the cells shrink (to their floor); a random walk then widens the
+    weights: the cells grow, keeping about ±3σ across; the spread is the one a fixed,
+    wide enough grid gives."""
+    x0 = jnp.zeros(ins.N_STATES).at[0].set(250.0)
+    p0 = jnp.asarray(ins.initial_covariance(ins.INSErrorModel(), 150.0, 0.01))
+    walk = {"q_pos": 2000.0, "ins": None}
+    filt = fl.pmf(n_cells=G, cell_m=CELL, adapt_span=3.0, **walk)
+    wide = fl.pmf(n_cells=61, cell_m=150.0, **walk)
+    state, fixed = init(filt, x0, p0), init(wide, x0, p0)
+    before = np.asarray(state.x)[:2]  # the 400 m grid's mean (quantised: not 250)
+    state, info = predict(filt, state, DT)
+    assert np.all(np.asarray(state.cell) < CELL / 3)  # down to (near) the floor, CELL / 4
+    np.testing.assert_allclose(np.asarray(info.x)[:2], before, atol=5.0)
+    for _ in range(100):
+        state, info = predict(filt, state, DT)
+        fixed, finfo = predict(wide, fixed, DT)
+    grown = np.asarray(state.cell)
+    sd = np.sqrt(np.diagonal(np.asarray(info.p_pos)))
+    assert np.all(grown > CELL) and np.all(sd > 1200.0)
+    span = grown * (G - 1) / 2  # re-sized only when off by more than REGRID_RATIO
+    assert np.all(span / sd > 3.0 / 1.4) and np.all(span / sd < 3.0 * 1.4), span / sd
+    np.testing.assert_allclose(sd, np.sqrt(np.diagonal(np.asarray(finfo.p_pos))), rtol=0.05)
+    np.testing.assert_allclose(np.asarray(info.x)[:2], before, atol=10.0)  # over the re-griddings
+    assert float(state.w.sum()) == pytest.approx(1.0, abs=1e-12)
 
 
 # ----------------------------------------------------------------- runs
