@@ -63,9 +63,10 @@ def add_parser(subparsers):
                         "filter, 2000 particles), rbpf (Rao-Blackwellised particle filter, "
                         "1000 particles) and the guarded "
                         "ukf-guard, gsf-guard: paper D's filters (over its three point "
-                        "masses, or over --map); voyage-dense (loosely coupled, hourly dense "
-                        "fixes), voyage-ukf, voyage-ekf, voyage-gsf, voyage-rbpf (tightly "
-                        "coupled; voyage-rbpf: 500 particles): 12 h "
+                        "masses, or over --map); voyage-dense, voyage-entropy+iccp "
+                        "(loosely coupled, hourly fixes of that matcher), voyage-ukf, "
+                        "voyage-ekf, voyage-gsf, voyage-rbpf, voyage-pmf (tightly coupled; "
+                        "voyage-rbpf: 500 particles): 12 h "
                         "patrols (--hours) navigated with a navigation-grade INS (--ins)")
     m.add_argument("--runs", type=int, required=True, help="number of simulated runs")
     m.add_argument("--chunk", type=int, default=None,

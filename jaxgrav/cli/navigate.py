@@ -20,18 +20,20 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
               innovation and innovation_sigma (mGal), gravimeter_bias and
               sigma_gravimeter_bias (mGal)
 
-``--method dense`` (loosely coupled): every ``--stride`` fixes the last ``--n-fixes``
-fixes (each the mean of ``--fix-every`` rows) are matched with the dense matcher on the
-filter-corrected track; accepted fixes update the 13-state INS error Kalman filter
-(:func:`jaxgrav.navigate.navigate_loose`).
+``--method dense|entropy+iccp`` (loosely coupled): every ``--stride`` fixes the last
+``--n-fixes`` fixes (each the mean of ``--fix-every`` rows) are matched with the dense
+matcher (or paper B's entropy coarse search and ICCP fine match, the reading bias
+marginalised) on the filter-corrected track; accepted fixes update the 13-state INS
+error Kalman filter (:func:`jaxgrav.navigate.navigate_loose`).
 The readings are Eötvös-corrected with the filter's velocity, the one rule of the
 navigation loop. Where the log leaves the map, the fixes stop (event 2) and the
 solution continues on the INS with a growing σ.
 
-``--method ukf|ekf|gsf|rbpf`` (tightly coupled, :func:`jaxgrav.navigate.navigate_tight`):
+``--method ukf|ekf|gsf|rbpf|pmf`` (tightly coupled, :func:`jaxgrav.navigate.navigate_tight`):
 every reading updates the INS error filter; the readings are Eötvös-corrected with the
 INS velocity and the Eötvös effect of its velocity error is part of the measurement;
-``--map-error`` adds a second-order Gauss–Markov map-error state of that σ and L.
+``--map-error`` adds a second-order Gauss–Markov map-error state of that σ and L
+(``pmf``: first order, per grid cell).
 ``rbpf`` is the Rao–Blackwellised particle filter (``--particles``, default 500;
 ``--seed`` for its draws).
 Readings that are missing or off the map are skipped and flagged row by row.
@@ -56,6 +58,7 @@ from jaxgrav.filters import map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
     FIX_EVENTS,
+    LOOSE_MATCHERS,
     TIGHT_METHODS,
     TightConfig,
     loose_config,
@@ -71,9 +74,10 @@ from jaxgrav.tracks import csv_line, write_track_csv
 
 __all__ = ["METHODS", "add_parser", "check_log", "cmd_navigate"]
 
-METHODS = ("dense", *TIGHT_METHODS)
-"""Navigation methods of the command: loosely coupled with the dense matcher, or tightly
-coupled with a filter of :data:`jaxgrav.navigate.TIGHT_METHODS`."""
+METHODS = (*LOOSE_MATCHERS, *TIGHT_METHODS)
+"""Navigation methods of the command: loosely coupled with a matcher of
+:data:`jaxgrav.navigate.LOOSE_MATCHERS`, or tightly coupled with a filter of
+:data:`jaxgrav.navigate.TIGHT_METHODS`."""
 
 _MAP_MARGIN_M = 50e3
 """Map kept around the INS log (m): the navigation error and the matchers' searches."""
@@ -89,9 +93,9 @@ def add_parser(sub):
                    help="INS log CSV: t, lat, lon, v_east, v_north, gravity (raw, mGal)")
     add_columns_option(p)
     p.add_argument("--method", choices=METHODS, default="dense",
-                   help="dense: hourly matcher fixes into the INS error filter (loosely "
-                        "coupled); ukf, ekf, gsf, rbpf: every reading into the filter "
-                        "(tightly)")
+                   help="dense, entropy+iccp: hourly fixes of that matcher into the INS "
+                        "error filter (loosely coupled); ukf, ekf, gsf, rbpf, pmf: every reading "
+                        "into the filter (tightly)")
     p.add_argument("--particles", type=int, default=500,
                    help="particles of --method rbpf (default 500)")
     p.add_argument("--seed", type=int, default=0, help="seed of --method rbpf's draws")
@@ -200,7 +204,7 @@ def cmd_navigate(args):
                       else 3.0 if args.map_error is None else args.map_error)
     _, n_missing, n_off = check_log(track, grid, args.max_gap, args.max_speed)
     segment_rows = args.n_fixes * args.fix_every
-    if args.method == "dense" and len(track["t"]) <= segment_rows:
+    if args.method in LOOSE_MATCHERS and len(track["t"]) <= segment_rows:
         raise ValueError(f"track file {track.path!r} has {len(track['t'])} rows; one segment "
                          f"of --n-fixes {args.n_fixes} x --fix-every {args.fix_every} needs "
                          f"more than {segment_rows}")
@@ -217,9 +221,12 @@ def cmd_navigate(args):
         _tight(args, voyage, grid, n_missing, n_off)
         return
     cfg = loose_config(INS_GRADES[args.ins], args.map_error, args.map_error_length, args.noise,
-                       sigma_pos_m=args.sigma_pos, sigma_vel=args.sigma_vel,
-                       fix_every=args.fix_every, n_fixes=args.n_fixes, stride=args.stride)
-    res = executables.call(_loose, grid, voyage, cfg)
+                       matcher=args.method, grid=grid, sigma_pos_m=args.sigma_pos,
+                       sigma_vel=args.sigma_vel, fix_every=args.fix_every,
+                       n_fixes=args.n_fixes, stride=args.stride)
+    # not through executables: the loop's kept program crashes XLA:CPU when loaded
+    # (jaxlib 0.10.2; its trial never passes), so keeping it would only cost a compile
+    res = _loose(grid, voyage, cfg)
     _write(args, ins, res, cfg)
     events = np.asarray(res.fix_event)
     counts = ", ".join(f"{int(np.sum(events == k))} {FIX_EVENTS[k].split(':')[0]}"
@@ -242,7 +249,8 @@ def _tight_program(grid, voyage, cfg, key):
 
 def _tight(args, voyage, grid, n_missing, n_off):
     """Tightly coupled: the filter on every reading, and its CSV."""
-    told = (map_error_state(args.map_error, args.map_error_length, order=2)
+    order = 1 if args.method == "pmf" else 2  # the point-mass filter's is per cell
+    told = (map_error_state(args.map_error, args.map_error_length, order=order)
             if args.map_error > 0 else None)
     cfg = TightConfig(ins=INS_GRADES[args.ins], sigma_pos_m=args.sigma_pos,
                       sigma_vel=args.sigma_vel, noise_mgal=args.noise, map_error=told,

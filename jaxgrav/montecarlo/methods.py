@@ -25,9 +25,10 @@ The paper-D filters (``ukf``, ``ekf``, ``gsf``, ``pmf`` and the guarded ``ukf-gu
 run (expected value 2); they run over paper D's point masses, or over a map (straight
 tracks in random directions).
 
-Voyages (:mod:`~jaxgrav.montecarlo.voyage_runs`): ``voyage-dense`` (loosely coupled,
-hourly dense fixes) and ``voyage-ukf``, ``voyage-ekf``, ``voyage-gsf``, ``voyage-rbpf``
-(tightly coupled) navigate 12 h patrols; ``ins_err_m`` and ``err_m`` are the last hour's RMS, and
+Voyages (:mod:`~jaxgrav.montecarlo.voyage_runs`): ``voyage-dense``,
+``voyage-entropy+iccp`` (loosely coupled, hourly fixes of that matcher) and
+``voyage-ukf``, ``voyage-ekf``, ``voyage-gsf``, ``voyage-rbpf``, ``voyage-pmf`` (tightly
+coupled) navigate 12 h patrols; ``ins_err_m`` and ``err_m`` are the last hour's RMS, and
 they return the hourly RMS and error series too.
 
 ``fn`` must be a module-level function (not a fresh closure), so that repeated runs

@@ -1,8 +1,9 @@
 """Monte Carlo methods over voyages: simulate a patrol, navigate it, measure against the truth.
 
-``voyage-dense`` is the loosely coupled loop (:func:`~jaxgrav.navigate.navigate_loose`,
-hourly dense-matcher fixes, :func:`~jaxgrav.navigate.loose_config`); ``voyage-ukf``,
-``voyage-ekf``, ``voyage-gsf`` and ``voyage-rbpf`` the tightly coupled filters
+``voyage-dense`` and ``voyage-entropy+iccp`` are the loosely coupled loop
+(:func:`~jaxgrav.navigate.navigate_loose`, hourly fixes of the dense or the entropy+ICCP
+matcher, :func:`~jaxgrav.navigate.loose_config`); ``voyage-ukf``,
+``voyage-ekf``, ``voyage-gsf``, ``voyage-rbpf`` and ``voyage-pmf`` the tightly coupled filters
 (:func:`~jaxgrav.navigate.navigate_tight`; the particle filter's key is
 ``fold_in(run key, 1)``, apart from the simulation's, as for the filter methods). Each
 run draws a ``patrol-12h`` voyage (:func:`~jaxgrav.scenarios.voyage_scenario`;
@@ -38,6 +39,7 @@ from jaxgrav.montecarlo.spec import (
 )
 from jaxgrav.navigate import (
     FIX_EVENTS,
+    LOOSE_MATCHERS,
     TIGHT_METHODS,
     TightConfig,
     hourly_rms,
@@ -53,7 +55,7 @@ from jaxgrav.scenarios.paper_a import check_region_covered
 __all__ = ["SERIES_EVERY_S", "VOYAGE_METHODS", "voyage_builder", "voyage_dense_run",
            "voyage_tight_run", "voyage_tracks"]
 
-VOYAGE_METHODS = ("voyage-dense", *(f"voyage-{m}" for m in TIGHT_METHODS))
+VOYAGE_METHODS = tuple(f"voyage-{m}" for m in (*LOOSE_MATCHERS, *TIGHT_METHODS))
 """The voyage methods of :data:`~jaxgrav.montecarlo.methods.BUILDERS`."""
 
 SERIES_EVERY_S = 600.0
@@ -142,7 +144,8 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
     grid : Grid, optional
         The map (default the shipped 2.5′ ``ryukyu``). The preset's region (25–35° N,
         125–135° E) is used if the map covers it, else the map's own extent.
-    kind : {"voyage-dense", "voyage-ukf", "voyage-ekf", "voyage-gsf", "voyage-rbpf"}
+    kind : {"voyage-dense", "voyage-entropy+iccp", "voyage-ukf", "voyage-ekf", "voyage-gsf",
+            "voyage-rbpf", "voyage-pmf"}
     drift_deg : float, optional
         Initial INS position error (degrees of arc; default 500 m).
     noise : float, optional
@@ -193,21 +196,25 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
     model = check_map_error(map_error, grid)
     told = model if isinstance(model, CorrelatedMapError) and map_error_told == "state" else None
     sigma_pos = scenario.pos_error_m / 2**0.5
-    if kind == "voyage-dense":
+    name = kind.removeprefix("voyage-")
+    loose = name in LOOSE_MATCHERS
+    if loose:
         sigma = 0.0 if told is None else float(told.sigma)
         length = 10000.0 if told is None else float(told.length_m)
         config = loose_config(scenario.ins, sigma, length, scenario.noise_mgal,
+                              matcher=name, grid=grid,
                               sigma_pos_m=sigma_pos)
         fn, bits = voyage_dense_run, {1 << k: v for k, v in FIX_EVENTS.items()}
     else:
-        state = None if told is None else matched_state(told, map_error_order or told.order)
+        default = 1 if name == "pmf" else told.order if told is not None else None
+        state = None if told is None else matched_state(told, map_error_order or default)
         config = TightConfig(ins=scenario.ins, sigma_pos_m=sigma_pos,
                              noise_mgal=scenario.noise_mgal, map_error=state,
                              method=kind.removeprefix("voyage-"))
         fn, bits = voyage_tight_run, {v: k for k, v in STATUS_FILTER.items() if v}
     settings = dict(description=f"{scenario.hours:g} h patrols, navigated "
-                    + ("loosely coupled (hourly dense fixes)" if kind == "voyage-dense" else
-                       f"tightly coupled ({kind.removeprefix('voyage-')})"),
+                    + (f"loosely coupled (hourly {name} fixes)" if loose else
+                       f"tightly coupled ({name})"),
                     hours=scenario.hours, dt=scenario.dt, noise_mgal=scenario.noise_mgal,
                     pos_error_m=scenario.pos_error_m, map_error_told=map_error_told,
                     series_every_s=SERIES_EVERY_S, **map_error_settings(model))

@@ -13,6 +13,12 @@ linear in. No linearisation of the map, so no curvature term; a multimodal posit
 (a ship on a flat or repetitive stretch) stays multimodal instead of locking onto one
 mode. Its draws come from ``key``.
 
+**Grid** (``pmf``, :func:`~jaxgrav.filters.pmf`): Bergman's point-mass filter, the
+position error on a grid that follows the estimate and re-sizes its cells to the
+spread, each cell with its gravimeter bias (and first-order map error), the other
+states one Gaussian conditional on the position; the Eötvös part of a reading updates
+that Gaussian cell by cell (:mod:`~jaxgrav.filters.pmf_linear`). No gate.
+
 **Eötvös, as a real system must.** The gravimeter reads the true field minus the
 Eötvös effect of the *true* velocity; the navigation system corrects it with the
 INS velocity, ``z = g_raw + E(v_INS)``. What is left is the Eötvös effect of the INS
@@ -60,6 +66,7 @@ from jaxgrav.filters import (
     eotvos_part,
     gaussian_sum,
     gravity_measurement,
+    pmf,
     rbpf,
     run_filter,
     ukf,
@@ -71,9 +78,9 @@ from jaxgrav.sim.trajectory import Track
 
 __all__ = ["TIGHT_METHODS", "TightConfig", "TightResult", "navigate_tight"]
 
-TIGHT_METHODS = ("ukf", "ekf", "gsf", "rbpf")
+TIGHT_METHODS = ("ukf", "ekf", "gsf", "rbpf", "pmf")
 """The filters :func:`navigate_tight` runs (``gsf``: a 3 × 3 Gaussian sum of UKFs;
-``rbpf``: the Rao–Blackwellised particle filter)."""
+``rbpf``: the Rao–Blackwellised particle filter; ``pmf``: the grid point-mass filter)."""
 
 
 @pytree_dataclass
@@ -94,10 +101,21 @@ class TightConfig:
     gate : float
         Skip readings whose normalised innovation squared exceeds this (1 degree of
         freedom; ``inf``: never).
-    method : {"ukf", "ekf", "gsf", "rbpf"}
+    method : {"ukf", "ekf", "gsf", "rbpf", "pmf"}
         The filter (static).
     n_particles : int
         Particles of ``rbpf`` (static, ≥ 2; default 500).
+    pmf_cells : int
+        Cells per axis of ``pmf``'s grid (static, odd; default 61).
+    pmf_cell_m : float
+        Its first cell size (m; default 100). The grid is adaptive: it follows the
+        estimate and re-sizes its cells to span ±``pmf_span`` σ of the weights
+        (between a quarter and 8 × this size).
+    pmf_span : float
+        σ the adaptive grid spans per side (default 4).
+    pmf_q_pos : float
+        Its extra random-walk density of the position error (m²/s; default 0.25, the
+        ``jaxgrav filter`` value at this ``sigma_vel``).
     curvature_cells : float
         Map cells over which the map's linearisation error is taken as correlated (see
         the module notes; ``ukf`` and ``gsf``); 0: off, as before.
@@ -114,8 +132,12 @@ class TightConfig:
     map_error: MapErrorState | None = None
     gate: float = float("inf")
     curvature_cells: float = 1.0
+    pmf_cell_m: float = 100.0
+    pmf_span: float = 4.0
+    pmf_q_pos: float = 0.25
     method: str = static_field("ukf")
     n_particles: int = static_field(500)
+    pmf_cells: int = static_field(61)
     eotvos_velocity: bool = static_field(True)
 
     def __post_init__(self):
@@ -128,6 +150,10 @@ class TightConfig:
         if self.map_error is not None and not isinstance(self.map_error, MapErrorState):
             raise TypeError("map_error must be a MapErrorState (map_error_state(sigma, length_m)) "
                             f"or None; got {type(self.map_error).__name__}")
+        if (self.method == "pmf" and self.map_error is not None
+                and isinstance(self.map_error.order, int) and self.map_error.order != 1):
+            raise ValueError("method 'pmf' carries a first-order map-error state only (per "
+                             f"grid cell); got order {self.map_error.order}")
 
 
 class TightResult(NamedTuple):
@@ -159,13 +185,17 @@ class TightResult(NamedTuple):
     status: jax.Array
 
 
-def _filter(method, measurement, gate, count, n_particles):
+def _filter(cfg, measurement, count):
+    method, gate = cfg.method, cfg.gate
+    if method == "pmf":  # its map-error state is per cell: the map alone per cell
+        return pmf(cfg.pmf_cells, cfg.pmf_cell_m, q_pos=cfg.pmf_q_pos, ins=cfg.ins,
+                   adapt_span=cfg.pmf_span)
     if method == "ukf":
         return ukf(measurement, gate=gate, curvature_count=count)
     if method == "ekf":
         return ekf(measurement, gate=gate)
     if method == "rbpf":
-        return rbpf(n_particles, measurement, gate=gate)
+        return rbpf(cfg.n_particles, measurement, gate=gate)
     return gaussian_sum(ukf(measurement, gate=gate, curvature_count=count), 3)
 
 
@@ -215,7 +245,7 @@ def navigate_tight(grid, voyage, config, key=None):
     r = jnp.full(z.shape, jnp.asarray(cfg.noise_mgal, z.dtype) ** 2)
     steps = Step(ins.lat, ins.lon, z, r, h_lin)
     count = cfg.curvature_cells * _cell_m(grid) / jnp.maximum(speed * dt, 1e-9)
-    filt = _filter(cfg.method, meas, cfg.gate, count, cfg.n_particles)
+    filt = _filter(cfg, meas, count)
     if cfg.method == "rbpf" and key is None:
         key = jax.random.PRNGKey(0)
     _, infos = run_filter(filt, grid, dynamics, x0, p0, steps,

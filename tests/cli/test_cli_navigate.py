@@ -19,10 +19,13 @@ def voyage_log(tmp_path_factory):
 
 
 @pytest.mark.long
-def test_navigate_writes_every_row_with_sigma_and_fix_events(voyage_log, tmp_path, capsys):
+@pytest.mark.parametrize("method", ["dense", "entropy+iccp"])
+def test_navigate_writes_every_row_with_sigma_and_fix_events(voyage_log, tmp_path, capsys,
+                                                             method):
     log, _ = voyage_log
     out = tmp_path / "nav.csv"
-    assert main(["navigate", "--track", str(log), "--out", str(out), *SHORT]) == 0
+    assert main(["navigate", "--track", str(log), "--out", str(out), "--method", method,
+                 *SHORT]) == 0
     said = capsys.readouterr().out
     assert "541 rows, 9 segment ends" in said and "0 missing reading(s)" in said
     nav = read_track_csv(out, ("t", "lat", "lon", "sigma_north", "sigma_east", "v_east",

@@ -51,14 +51,16 @@ def test_a_run_is_the_navigator_on_the_same_voyage(tight):
 
 
 @pytest.mark.long
-def test_dense_runs_record_their_fix_events():
-    spec = montecarlo.build("voyage-dense", None, map_error=MODEL, hours=1.0)
+@pytest.mark.parametrize("kind", ["voyage-dense", "voyage-entropy+iccp"])
+def test_loose_runs_record_their_fix_events(kind):
+    spec = montecarlo.build(kind, None, map_error=MODEL, hours=1.0)
     res = montecarlo.run(spec.fn, jax.random.key(0), 1, args=spec.args, progress=False)
     events = res["fix_event"][0]
     assert events.shape == (1,)
     assert int(res["status"][0]) == 1 << int(events[0])  # bit k: event k happened
     assert float(res["fix_time_s"][0][0]) == pytest.approx(3600.0)  # the hour's segment end
-    assert spec.args[-1].matcher.map_error_mgal == 3.0  # told
+    matcher = spec.args[-1].matcher
+    assert (matcher if kind == "voyage-dense" else matcher[1]).map_error_mgal == 3.0  # told
 
 
 @pytest.mark.parametrize(("options", "error", "message"), [
@@ -66,7 +68,7 @@ def test_dense_runs_record_their_fix_events():
     ({"map_error_told": "white"}, ValueError, "map_error_told must be one of state, none"),
     ({"map_error_order": 3}, ValueError, "map_error_order must be 1 or 2"),
     ({"noise": -1.0}, ValueError, "noise must be a positive reading"),
-    ({"kind": "voyage-pmf"}, ValueError, "kind must be one of voyage-dense"),
+    ({"kind": "voyage-pf"}, ValueError, "kind must be one of voyage-dense"),
 ])
 def test_bad_builder_options_are_named(options, error, message):
     kw = {"kind": "voyage-ukf", **options}

@@ -108,6 +108,35 @@ def test_the_particle_filter_holds_the_ins_like_the_ukf(smooth_grid, voyages):
 
 
 @pytest.mark.long
+def test_the_point_mass_filter_holds_the_ins_too(smooth_grid, voyages):
+    """pmf: the adaptive grid over the position error, the Eötvös part updating the
+    velocity cell by cell; it estimates the velocity error and bounds the position."""
+    pm = prepare_map(smooth_grid)
+    v = _first(voyages)
+    n = v.ins.t.shape[0]
+    res = navigate_tight(pm, v, dataclasses.replace(
+        CONFIG, method="pmf", map_error=map_error_state(0.5, 20000.0, order=1)))
+    assert res.error_estimate.shape == (n, 14)
+    err = voyage_errors(v, res.nav, res.cov_north_east)
+    nav = np.asarray(err.nav_m)
+    assert float(err.free_m[-1]) > 1000.0 and np.sqrt(np.mean(nav[n // 2:] ** 2)) < 200.0
+    # over-confident (NEES 15 here, the UKF 2.3): the per-cell bias and map error lose
+    # their correlation with the velocity error, which the Eötvös part creates
+    assert 0.3 < float(jnp.mean(err.nees[n // 2:])) < 30.0
+    true_v = np.asarray(v.ins_error[n // 2:, 2:4])
+    est_v = np.asarray(res.error_estimate[n // 2:, 2:4])
+    assert np.sqrt(np.mean((est_v - true_v) ** 2)) < 0.7 * np.sqrt(np.mean(true_v**2))
+    # readings corrected with the true velocity (no Eötvös part): consistent
+    exact = v._replace(gravity=v.gravity + eotvos(v.truth.lat, v.truth.v_east, v.truth.v_north)
+                       - eotvos(v.ins.lat, v.ins.v_east, v.ins.v_north))
+    res = navigate_tight(pm, exact, dataclasses.replace(CONFIG, method="pmf",
+                                                        eotvos_velocity=False))
+    err = voyage_errors(exact, res.nav, res.cov_north_east)
+    assert 0.5 < float(jnp.mean(err.nees[n // 2:])) < 4.0  # 2.2
+    assert np.sqrt(np.mean(np.asarray(err.nav_m[n // 2:]) ** 2)) < 200.0
+
+
+@pytest.mark.long
 def test_a_map_error_state_is_appended(smooth_grid, voyages):
     v = _first(voyages)
     cfg = dataclasses.replace(CONFIG, map_error=map_error_state(2.0, 20000.0))
@@ -156,7 +185,9 @@ def test_jit_without_retrace_and_vmap_equals_loop(smooth_grid, voyages):
 
 
 @pytest.mark.parametrize(("change", "error", "message"), [
-    ({"method": "pmf"}, ValueError, "method must be one of ukf, ekf, gsf"),
+    ({"method": "pf"}, ValueError, "method must be one of ukf, ekf, gsf"),
+    ({"method": "pmf", "map_error": map_error_state(3.0, 1e4, order=2)}, ValueError,
+     "method 'pmf' carries a first-order map-error state only"),
     ({"map_error": 3.0}, TypeError, "map_error must be a MapErrorState"),
     ({"method": "rbpf", "n_particles": 1}, ValueError, "n_particles must be an integer >= 2"),
     ({"n_particles": 2.5}, ValueError, "n_particles must be an integer >= 2"),
