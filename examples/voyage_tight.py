@@ -95,9 +95,9 @@ def tracks_figure(grid, scenario, model, config, key, path, title, force):
     save_figure(fig, path, force=force)
 
 
-def config_for(setting, ins, model, method, order):
-    """The filter of one setting (see the module notes)."""
-    cfg = TightConfig(ins=ins, method=method)
+def config_for(setting, ins, model, method, order, **pmf):
+    """The filter of one setting (see the module notes); ``pmf``: TightConfig's pmf_* fields."""
+    cfg = TightConfig(ins=ins, method=method, **pmf)
     if setting in ("map error, told", "map error, told, Eötvös velocity ignored"):
         cfg = dataclasses.replace(cfg, map_error=matched_state(model, order))
     if setting == "map error, told, Eötvös velocity ignored":
@@ -123,6 +123,10 @@ def main(argv=None):
                         "navigation")
     p.add_argument("--force", action="store_true", help="overwrite --png and --tracks-png")
     p.add_argument("--smoke", action="store_true", help="2 voyages of 2 h")
+    p.add_argument("--pmf-cell", type=float, default=100.0,
+                   help="--method pmf: the (first) cell size, m (default 100)")
+    p.add_argument("--pmf-span", type=float, default=4.0,
+                   help="--method pmf: sigma its adaptive grid spans per side; 0: fixed grid")
     a = p.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # geodesy and 12 h of INS error in float64
     runs, hours = (2, 2.0) if a.smoke else (a.runs, 12.0)
@@ -134,13 +138,16 @@ def main(argv=None):
     rows = {}
     for setting in a.settings:
         truth = None if setting == "perfect map" else model
-        cfg = config_for(setting, ins, model, a.method, a.order)
+        cfg = config_for(setting, ins, model, a.method, a.order, pmf_cell_m=a.pmf_cell,
+                         pmf_span=a.pmf_span)
         t0 = time.perf_counter()
         nav, free, nees, used, series = run(grid, scenario, truth, cfg, keys)
         seconds = time.perf_counter() - t0
         row = {"setting": setting, "method": a.method, "ins": a.ins, "runs": runs,
                "hours": hours, "map_error_mgal": 0.0 if truth is None else a.sigma,
                "map_error_length_m": a.length, "order": a.order,
+               **({"pmf_cell_m": a.pmf_cell, "pmf_span": a.pmf_span} if a.method == "pmf"
+                  else {}),
                **voyage_summary(nav, free, nees),
                "readings_used": float(np.mean(used)), "seconds": round(seconds, 1),
                "runs_per_s": round(runs / seconds, 2)}

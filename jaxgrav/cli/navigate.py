@@ -35,7 +35,9 @@ INS velocity and the Eötvös effect of its velocity error is part of the measur
 ``--map-error`` adds a second-order Gauss–Markov map-error state of that σ and L
 (``pmf``: first order, per grid cell).
 ``rbpf`` is the Rao–Blackwellised particle filter (``--particles``, default 500;
-``--seed`` for its draws).
+``--seed`` for its draws); ``pmf`` the point-mass filter on an adaptive grid
+(over-confident with a navigation-grade INS: one Gaussian velocity for the whole grid
+cannot hold what each cell's Eötvös residual says; see the README).
 Readings that are missing or off the map are skipped and flagged row by row.
 """
 

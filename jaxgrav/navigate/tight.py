@@ -112,7 +112,8 @@ class TightConfig:
         estimate and re-sizes its cells to span ±``pmf_span`` σ of the weights
         (between a quarter and 8 × this size).
     pmf_span : float
-        σ the adaptive grid spans per side (default 4).
+        σ the adaptive grid spans per side (static; default 4; 0: a fixed grid of
+        ``pmf_cell_m`` cells).
     pmf_q_pos : float
         Its extra random-walk density of the position error (m²/s; default 0.25, the
         ``jaxgrav filter`` value at this ``sigma_vel``).
@@ -133,11 +134,11 @@ class TightConfig:
     gate: float = float("inf")
     curvature_cells: float = 1.0
     pmf_cell_m: float = 100.0
-    pmf_span: float = 4.0
     pmf_q_pos: float = 0.25
     method: str = static_field("ukf")
     n_particles: int = static_field(500)
     pmf_cells: int = static_field(61)
+    pmf_span: float = static_field(4.0)
     eotvos_velocity: bool = static_field(True)
 
     def __post_init__(self):
@@ -189,7 +190,7 @@ def _filter(cfg, measurement, count):
     method, gate = cfg.method, cfg.gate
     if method == "pmf":  # its map-error state is per cell: the map alone per cell
         return pmf(cfg.pmf_cells, cfg.pmf_cell_m, q_pos=cfg.pmf_q_pos, ins=cfg.ins,
-                   adapt_span=cfg.pmf_span)
+                   adapt_span=cfg.pmf_span or None)
     if method == "ukf":
         return ukf(measurement, gate=gate, curvature_count=count)
     if method == "ekf":

@@ -229,13 +229,14 @@ def test_update_with_a_linear_part_is_the_brute_force_mixture(prior, dyn):
                                    lon - de / (nr * np.cos(lat * DEG)) / DEG))
     k = pp[:, :2] @ np.linalg.inv(pp[:2, :2])
     c = pp - k @ pp[:2, :]
-    post_w = np.zeros((G, G))
+    post_w, z_hat = np.zeros((G, G)), 0.0
     mus, covs, b_cell = np.zeros((G, G, 13)), np.zeros((G, G, 13, 13)), np.zeros((G, G))
     for i in range(G):
         for j in range(G):
             mu = xp + k @ (np.array([dn[i, j], de[i, j]]) - xp[:2])
             s_ij = s[i, j] + h @ c @ h + r
             nu = z - g[i, j] - m[i, j] - h @ mu
+            z_hat += w[i, j] * (z - nu)
             post_w[i, j] = w[i, j] * np.exp(-0.5 * nu**2 / s_ij) / np.sqrt(s_ij)
             mus[i, j] = mu + c @ h * nu / s_ij
             covs[i, j] = c - np.outer(c @ h, c @ h) / s_ij
@@ -247,6 +248,7 @@ def test_update_with_a_linear_part_is_the_brute_force_mixture(prior, dyn):
 
     np.testing.assert_allclose(np.asarray(new.w), post_w, rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(np.asarray(new.bias_mean), b_cell, rtol=1e-9)
+    np.testing.assert_allclose(float(info.innovation), z - z_hat, rtol=1e-9)
     np.testing.assert_allclose(np.asarray(new.x)[:12], x[:12], rtol=1e-7, atol=1e-12)
     p[:2, :2] += np.eye(2) * CELL**2 / 12  # the position block: the grid's, quantisation in
     np.testing.assert_allclose(np.asarray(new.p)[:12, :12], p[:12, :12], rtol=1e-7, atol=1e-12)
