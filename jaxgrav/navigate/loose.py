@@ -133,7 +133,8 @@ def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=100
     above 3 km or more than 20 % of the posterior mass on the search edge rejected,
     rotations within ±3° (the dense matcher: five); its reading noise is
     ``noise_mgal / √fix_every`` (a fix averages ``fix_every`` readings).
-    ``entropy+iccp``: a 41 × 41 entropy grid (H_CY), ICCP as the fine stage of
+    ``entropy+iccp`` (the same integrity settings): a 41 × 41 entropy grid (H_CY), ICCP
+    as the fine stage of
     :func:`~jaxgrav.match.sizing.iccp_config_for` on ``grid`` (window at least a map
     cell's diagonal, ten least-squares steps), the reading bias (gravimeter offset,
     Eötvös error) marginalised with a flat prior.
@@ -173,7 +174,8 @@ def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=100
         # sized for a nominal 1 km reach; the loop sets the spacing and window per segment
         iccp = iccp_config_for(grid, 1000.0, stage="fine", noise=noise, max_rotation_deg=3.0,
                                map_error=map_error(map_error_mgal, map_error_length_m),
-                               bias_sigma=math.inf, max_edge_mass=0.2)
+                               bias_sigma=math.inf, fix="posterior", max_sigma_m=3000.0,
+                               max_edge_mass=0.2)
         config = (EntropyConfig(half_size=20), iccp)
     return LooseConfig(matcher=config, ins=ins, **changes)
 
