@@ -37,6 +37,7 @@ import os
 import pickle
 import platform
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -185,14 +186,15 @@ def _work(pending):
         # loaded and run in a third process first: some executables, once serialised,
         # crash XLA:CPU when run (a segmentation fault, which no caller could catch)
         if trial.exists():
-            ok = subprocess.run([sys.executable, "-m", "jaxgrav.executables", "--trial",
-                                 str(pending)], stdin=subprocess.DEVNULL,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                timeout=600).returncode == 0
+            code = subprocess.run([sys.executable, "-m", "jaxgrav.executables", "--trial",
+                                   str(pending)], stdin=subprocess.DEVNULL,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                  timeout=600).returncode
+            ok = code == 0
             if ok:
                 os.replace(trial, path)
-            else:  # e.g. the voyage loop's program (a segmentation fault when loaded)
-                _mark_failed(path)
+            elif code != -signal.SIGKILL:  # not for an out-of-memory kill: tried again
+                _mark_failed(path)  # e.g. the voyage loop's program (a segmentation fault)
             trial.unlink(missing_ok=True)
     finally:
         pending.unlink(missing_ok=True)

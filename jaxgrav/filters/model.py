@@ -89,8 +89,10 @@ class Step(NamedTuple):
         A part of the measurement that is linear in the state and known at this step:
         the predicted reading is ``h(x) + h_lin · x`` (mGal). Used for the Eötvös
         error of readings corrected with the INS velocity, ``∂E/∂v · δv``
-        (:mod:`jaxgrav.navigate.tight`). None (default): no linear part. The UKF,
-        EKF and Gaussian sum take it; the point-mass filter refuses it.
+        (:mod:`jaxgrav.navigate.tight`). None (default): no linear part. The Kalman,
+        Gaussian-sum and particle filters take all of it; the point-mass filter its
+        position and INS columns but not the gravimeter-bias and map-error ones (those
+        states are per cell there; :mod:`jaxgrav.filters.pmf_linear`).
     """
 
     lat: jax.Array

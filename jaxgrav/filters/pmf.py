@@ -39,7 +39,9 @@ The Gaussian part is predicted with the Kalman equations, and the per-cell bias
 moments are mixed through the same kernel (moment matching). The update
 multiplies each cell by the likelihood of the reading given the cell's map value
 and bias, ``N(z − Δg_M(cell) − b_c; 0, s_c + r)``; then the Gaussian states move
-by the regression, ``m_o ← m_o + K (d̄⁺ − d̄⁻)``, ``C`` unchanged. A missing
+by the regression, ``m_o ← m_o + K (d̄⁺ − d̄⁻)``, ``C`` unchanged (with a known linear
+part of the reading, :attr:`Step.h_lin`, each cell's Gaussian takes the reading too and
+the state is the mixture's moments: :mod:`~jaxgrav.filters.pmf_linear`). A missing
 reading skips the update; cells off a Grid map get zero likelihood (the update is
 skipped if the whole grid is off the map). The estimate is the posterior mean; its
 position covariance is the grid's plus the cell's own ``cell²/12`` (for NEES).
@@ -75,13 +77,15 @@ from jaxgrav.filters.model import (
 from jaxgrav.filters.pmf_cells import (
     PMFState,
     cell_fields,
+    check_adaptive,
     diffusion_kernel,
     global_moments,
     grid_moments,
     mix_cells,
     point_mass_cells,
-    regrid_matrix,
+    regrid_cells,
     shift_axis,
+    wanted_cell,
     with_cells,
 )
 from jaxgrav.filters.pmf_linear import conditional_reading, mixture_update
@@ -93,7 +97,9 @@ __all__ = ["PMFDynamics", "PMFFilter", "PMFState", "diffusion_kernel", "pmf", "r
 EDGE_MASS = 1e-3
 """``grid_edge`` is flagged when the outermost cells hold more than this mass."""
 REGRID_RATIO = 1.4
-"""An adaptive grid is re-sized when its cell is off the wanted size by more than this."""
+"""An adaptive grid is re-sized when its cell is off the wanted size by more than this;
+it always spans the cells weighing more than KEEP_WEIGHT (a distant mode stays)."""
+KEEP_WEIGHT = 1e-3
 RECENTRE_LOSS = 1e-5
 """Re-centring may push at most this mass off the grid."""
 _DEFAULT_INS = INSErrorModel()
@@ -101,8 +107,7 @@ _TINY = 1e-13  # cells below this fraction of the peak weight take the global bi
 
 
 PMFDynamics = Dynamics
-"""The point-mass filter's dynamics: a :class:`~jaxgrav.filters.model.Dynamics` with its
-step length ``dt`` (the name is kept for one release)."""
+"""Kept for one release: a :class:`~jaxgrav.filters.model.Dynamics` with its ``dt``."""
 
 
 class PMFFilter(NamedTuple):
@@ -147,13 +152,11 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         ``h(field, x, lat, lon)``, evaluated with ``x`` holding a cell's offset and
         zero bias.
     adapt_span : float, optional
-        An adaptive grid: after each prediction, when the cell size needed for the grid
-        to span ``±adapt_span`` σ of the weights (per axis, within ``[min_cell_m,
-        max_cell_m]``, default ``cell_m/4`` and ``8·cell_m``) differs from the current
-        one by more than :data:`REGRID_RATIO`, the grid is re-centred on the mean with
-        that cell size and the weights and per-cell Gaussians carried over
-        (:func:`~jaxgrav.filters.pmf_cells.regrid_matrix`). ``cell_m`` is the first
-        cell size. None (default): the fixed grid.
+        An adaptive grid, first cell ``cell_m``: after each prediction it is re-centred
+        and re-sized to span ``±adapt_span`` σ of the weights per axis (cells within
+        ``[min_cell_m, max_cell_m]``, default ``cell_m/4`` and ``8·cell_m``; see
+        :data:`REGRID_RATIO`, :func:`~jaxgrav.filters.pmf_cells.regrid_cells`). None
+        (default): the fixed grid.
 
     Returns
     -------
@@ -169,6 +172,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
     if adapt_span is not None:
         min_cell_m = cell_m / 4 if min_cell_m is None else min_cell_m
         max_cell_m = cell_m * 8 if max_cell_m is None else max_cell_m
+        check_adaptive(adapt_span, min_cell_m, max_cell_m)
 
     def _size(state):
         return cell_m if state.cell is None else state.cell
@@ -277,16 +281,13 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return state if adapt_span is None else _regrid(state)
 
     def _regrid(state):
-        """Cell sizes to span ±adapt_span σ of the weights, when off by more than 1.4 ×."""
-        c = state.cell
-        mean, cov = grid_moments(state.w, *cells(state.centre, c), c)
-        target = jnp.clip(2.0 * adapt_span * jnp.sqrt(jnp.diagonal(cov)) / (n_cells - 1),
+        """Cells to span ±adapt_span σ (see REGRID_RATIO)."""
+        c, where = state.cell, cells(state.centre, state.cell)
+        mean, cov = grid_moments(state.w, *where, c)
+        target = jnp.clip(wanted_cell(state.w, where, mean, cov, adapt_span, KEEP_WEIGHT),
                           min_cell_m, max_cell_m)
+        new, _ = regrid_cells(state, mean, target, _TINY)
         go = jnp.any(jnp.abs(jnp.log(target / c)) > jnp.log(REGRID_RATIO))
-        r_n, r_e = (regrid_matrix(state.centre[k], c[k], mean[k], target[k], n_cells)
-                    for k in (0, 1))
-        w, cell = mix_cells(r_n, r_e, state.w, cell_fields(state), _TINY)
-        new = with_cells(state._replace(w=w, centre=mean, cell=target), cell)
         return jax.tree.map(lambda a, b: jnp.where(go, a, b), new, state)
 
     def _sync(state, mean, cov, prior_mean=None):
@@ -353,7 +354,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         else:
             pred_m, pred_v, cross_b = m, s, s
         lin = (None if step.h_lin is None  # e.g. the Eötvös effect of the velocity error
-               else conditional_reading(state.x, state.p, step.h_lin, dn, de))
+               else conditional_reading(state.x.at[:2].set(prior_mean), state.p,
+                                        step.h_lin, dn, de))
         if lin is not None:
             pred_m, pred_v = pred_m + lin[0], pred_v + lin[1]
         nu = jnp.where(has & on_map, step.z - g - pred_m, 0.0)

@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav import constants
+from jaxgrav._validate import concrete
 from jaxgrav.geodesy import enu_basis, geodetic_to_ecef
 
 __all__ = [
@@ -210,3 +211,61 @@ def regrid_matrix(old_centre, old_cell, new_centre, new_cell, n):
     new = new_centre + i * new_cell
     h = jnp.maximum(old_cell, new_cell)
     return jnp.maximum(0.0, 1.0 - jnp.abs(new[:, None] - old[None, :]) / h)
+
+
+def regrid_cells(state, mean, target, tiny=1e-13):
+    """``state`` on the grid of cell ``target`` centred at ``mean``, and the mass lost.
+
+    Parameters
+    ----------
+    state : PMFState
+        With its ``cell`` (m, north and east) set.
+    mean, target : Array, shape ``(2,)``
+        The new grid's centre (m) and cell size (m), north and east.
+    tiny : float
+        As in :func:`mix_cells`.
+
+    Returns
+    -------
+    new : PMFState
+        Weights and per-cell Gaussians carried by :func:`regrid_matrix` (normalised),
+        the grid shifted so that the weights' mean stays ``mean``.
+    lost : Array
+        The mass of the old cells outside the new grid (cut off by a refinement).
+    """
+    n = state.w.shape[0]
+    i = jnp.arange(n) - (n - 1) / 2
+    old = [state.centre[k] + i * state.cell[k] for k in (0, 1)]
+    inside = [jnp.abs(old[k] - mean[k]) <= (n / 2) * target[k] for k in (0, 1)]
+    lost = 1.0 - jnp.sum(state.w * inside[0][:, None] * inside[1][None, :])
+    r_n, r_e = (regrid_matrix(state.centre[k], state.cell[k], mean[k], target[k], n)
+                for k in (0, 1))
+    w, cell = mix_cells(r_n, r_e, state.w, cell_fields(state), tiny)
+    # the interpolated weights' mean, off by a fraction of a cell, put back where it was
+    moved = jnp.stack([jnp.sum(w.sum(1) * i), jnp.sum(w.sum(0) * i)]) * target
+    centre = mean - moved
+    return with_cells(state._replace(w=w, centre=centre, cell=target), cell), lost
+
+
+def wanted_cell(w, where, mean, cov, span, keep):
+    """Cell size (m, north and east) for the grid to span ``±span`` σ of the weights and
+    every cell weighing more than ``keep`` (a distant mode stays on the grid).
+
+    ``where`` are the cells' position errors ``(dn, de)``, ``(G, G)`` each; ``mean``,
+    ``cov`` the weights' moments (:func:`grid_moments`).
+    """
+    reach = [jnp.max(jnp.where(w > keep, jnp.abs(a - mean[k]), 0.0))
+             for k, a in enumerate(where)]
+    return (jnp.maximum(2.0 * span * jnp.sqrt(jnp.diagonal(cov)), 2.0 * jnp.stack(reach))
+            / (w.shape[0] - 1))
+
+
+def check_adaptive(span, min_cell_m, max_cell_m):
+    """ValueError unless ``span > 0`` and ``0 < min_cell_m <= max_cell_m`` (where concrete)."""
+    vals = [concrete(v) for v in (span, min_cell_m, max_cell_m)]
+    if any(v is None or v.dtype == object for v in vals):
+        return  # traced: checked where the numbers are made
+    span, lo, hi = (float(v) for v in vals)
+    if not (span > 0 and 0 < lo <= hi):
+        raise ValueError("an adaptive grid needs adapt_span > 0 and 0 < min_cell_m <= "
+                         f"max_cell_m (m); got {span:g}, {lo:g}, {hi:g}")

@@ -38,7 +38,7 @@ from jaxgrav.match.fix_covariance import (
     offset_covariance,
     spread_about,
 )
-from jaxgrav.match.gls import gls_score, offset_posterior, track_covariance
+from jaxgrav.match.gls import gls_dof, gls_score, offset_posterior, track_covariance
 from jaxgrav.match.iccp import IccpConfig, iccp_fit, local_track_frame
 from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import STATUS, MatchResult
@@ -107,7 +107,8 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     gls = lambda f: gls_b(f)[0]  # noqa: E731
     g_n, g_e = offset_grid(entropy, dtype)
     j_grid = gls(value_grad(field, p0 + jnp.stack([g_n, g_e], -1)[:, None, :])[0])
-    post = offset_posterior(j_grid, g_n, g_e, entropy.spacing_m, dof=n)
+    dof = gls_dof(n, sb)  # n, or n − 1 when a free bias takes one
+    post = offset_posterior(j_grid, g_n, g_e, entropy.spacing_m, dof=dof)
     if iccp.fix == "posterior":
         d_n = jnp.where(post.valid, post.mean_north_m, d_n).astype(d_n.dtype)
         d_e = jnp.where(post.valid, post.mean_east_m, d_e).astype(d_e.dtype)
@@ -117,8 +118,12 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     b_starts = gls_b(value_grad(field, p0 + starts[:, None, :])[0])[1]
     b_starts = jnp.where(jnp.isfinite(b_starts), b_starts, 0.0)
     fits = jax.vmap(lambda t0, b: iccp_fit(field, p0, z - b, iccp, t0=t0))(starts, b_starts)
+    f_fits = value_grad(field, _moved(p0, fits.rotation, fits.translation))[0]
+    j_fits, b_fits = gls_b(f_fits)
+    # with a bias: the misfit at each fit's own GLS bias, as the coarse one's below
+    fits = fits._replace(misfit=jnp.where(
+        sb > 0, jnp.mean((z - b_fits[:, None] - f_fits) ** 2, -1), fits.misfit))
     misfits = jnp.where(jnp.isfinite(fits.misfit), fits.misfit, jnp.inf)
-    j_fits, b_fits = gls_b(value_grad(field, _moved(p0, fits.rotation, fits.translation))[0])
     best = jnp.argmin(jnp.where(told, jnp.where(jnp.isfinite(j_fits), j_fits, jnp.inf),
                                 misfits))
     st = jax.tree.map(lambda x: x[best], fits)
@@ -142,7 +147,8 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     t_fix = pick(st.translation, jnp.stack([d_n, d_e]).astype(dtype))
     j_fix = pick(j_fits[best], j_coarse)
     cov, chi2 = _fix_covariance(field, p0, wh, pick(st.rotation, jnp.eye(2, dtype=dtype)),
-                                t_fix, j_fix, use_fine, post, j_grid, g_n, g_e, entropy, iccp)
+                                t_fix, j_fix, use_fine, post, j_grid, g_n, g_e, entropy, iccp,
+                                dof - n)
     reject = integrity_status(cov, post.second_mode_ratio, chi2, post.edge_mass, iccp)
     accepted = found & (reject == 0)
     keep = lambda a, b: jnp.where(accepted, pick(a, b), jnp.zeros_like(a))  # noqa: E731
@@ -187,8 +193,9 @@ def _moved(p0, rotation, translation):
 
 
 def _fix_covariance(field, p0, wh, rotation, translation, j_fix, fine, post, j_grid, g_n,
-                    g_e, entropy, iccp):
-    """2 × 2 covariance (m²) of the fix and its GLS χ² per fix."""
+                    g_e, entropy, iccp, bias_dof=0):
+    """2 × 2 covariance (m²) of the fix and its GLS χ² per fix (``bias_dof``: −1 when a
+    free bias takes a degree of freedom)."""
     n = p0.shape[0]
     _, g = value_grad(field, _moved(p0, rotation, translation))
     turned = p0 @ rotation.T
@@ -197,7 +204,7 @@ def _fix_covariance(field, p0, wh, rotation, translation, j_fix, fine, post, j_g
                                     jnp.asarray(iccp.bias_sigma, g.dtype))
     gn_fine, gn_coarse = offset_covariance(info), offset_covariance(info[1:, 1:])
     chi2 = j_fix / n
-    dof = jnp.where(fine, n - 3, n - 2)
+    dof = jnp.where(fine, n - 3, n - 2) + bias_dof
     gn = jnp.where(fine, gn_fine, gn_coarse) * jnp.maximum(1.0, j_fix / jnp.maximum(dof, 1))
     spread, _, _ = spread_about(j_grid, g_n, g_e, translation[0], translation[1])
     cell = jnp.asarray(entropy.spacing_m, spread.dtype) ** 2 / 12.0

@@ -35,6 +35,7 @@ from jaxgrav.geodesy import eotvos, eotvos_jacobian
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.dense import DenseConfig, match_dense
 from jaxgrav.match.entropy import EntropyConfig
+from jaxgrav.match.iccp_config import IccpConfig
 from jaxgrav.match.sizing import iccp_config_for
 from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, innovation_nis, spread
 from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
@@ -67,7 +68,9 @@ class LooseConfig:
     matcher : DenseConfig or tuple of (EntropyConfig, IccpConfig)
         The matcher's settings: the dense matcher (``spacing_m`` is set per segment from
         the window), or the entropy+ICCP matcher (the entropy grid's ``spacing_m`` set
-        the same way, ICCP's ``window_m`` raised to 1.2 × the reach).
+        the same way, ICCP's ``window_m`` raised to 1.2 × the reach; set
+        ``IccpConfig.bias_sigma`` for the gravimeter bias and the Eötvös error, as
+        :func:`loose_config` does).
     ins : INSErrorModel
         The filter's INS error model.
     sigma_pos_m, sigma_vel : float
@@ -120,6 +123,12 @@ class LooseConfig:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 1):
                 raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
+        m = self.matcher
+        if not (isinstance(m, DenseConfig) or (
+                isinstance(m, tuple) and len(m) == 2 and isinstance(m[0], EntropyConfig)
+                and isinstance(m[1], IccpConfig))):
+            raise TypeError("matcher must be a DenseConfig or a tuple (EntropyConfig, "
+                            f"IccpConfig); got {type(m).__name__}")
         if self.stride > self.n_fixes:
             raise ValueError(f"stride must be at most n_fixes = {self.n_fixes} (segments may "
                              f"overlap, not leave gaps); got {self.stride}")

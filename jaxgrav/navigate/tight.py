@@ -55,8 +55,10 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav._validate import concrete
 from jaxgrav.filters import (
     Dynamics,
     MapErrorState,
@@ -151,6 +153,11 @@ class TightConfig:
         if self.map_error is not None and not isinstance(self.map_error, MapErrorState):
             raise TypeError("map_error must be a MapErrorState (map_error_state(sigma, length_m)) "
                             f"or None; got {type(self.map_error).__name__}")
+        if not (isinstance(self.pmf_span, int | float) and self.pmf_span >= 0):
+            raise ValueError(f"pmf_span must be >= 0 (0: a fixed grid); got {self.pmf_span!r}")
+        cell = concrete(self.pmf_cell_m)
+        if cell is not None and cell.dtype != object and not np.all(cell > 0):
+            raise ValueError(f"pmf_cell_m must be > 0 (m); got {cell}")
         if (self.method == "pmf" and self.map_error is not None
                 and isinstance(self.map_error.order, int) and self.map_error.order != 1):
             raise ValueError("method 'pmf' carries a first-order map-error state only (per "

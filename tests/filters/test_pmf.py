@@ -306,7 +306,7 @@ def test_regrid_matrix_keeps_a_gaussian(old, new):
 
 
 def test_adaptive_grid_follows_the_spread():
-    """A narrow prior: the cells shrink (to their floor); a random walk then widens the
+    """A narrow prior: the cells shrink; a random walk then widens the
     weights: the cells grow, keeping about ±3σ across; the spread is the one a fixed,
     wide enough grid gives."""
     x0 = jnp.zeros(ins.N_STATES).at[0].set(250.0)
@@ -317,7 +317,8 @@ def test_adaptive_grid_follows_the_spread():
     state, fixed = init(filt, x0, p0), init(wide, x0, p0)
     before = np.asarray(state.x)[:2]  # the 400 m grid's mean (quantised: not 250)
     state, info = predict(filt, state, DT)
-    assert np.all(np.asarray(state.cell) < CELL / 3)  # down to (near) the floor, CELL / 4
+    # refined, as far as the cells holding mass (> KEEP_WEIGHT) allow
+    assert np.all(np.asarray(state.cell) < 0.75 * CELL)
     np.testing.assert_allclose(np.asarray(info.x)[:2], before, atol=5.0)
     for _ in range(100):
         state, info = predict(filt, state, DT)
@@ -330,6 +331,28 @@ def test_adaptive_grid_follows_the_spread():
     np.testing.assert_allclose(sd, np.sqrt(np.diagonal(np.asarray(finfo.p_pos))), rtol=0.05)
     np.testing.assert_allclose(np.asarray(info.x)[:2], before, atol=10.0)  # over the re-griddings
     assert float(state.w.sum()) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_adaptive_grid_keeps_a_distant_mode():
+    """A 4 % mode 3 km from the main one: refining to the main mode's spread would cut
+    it off the grid, so the grid is not refined, and the mode keeps its mass."""
+    filt = fl.pmf(n_cells=31, cell_m=250.0, q_pos=0.1, ins=None, adapt_span=3.0)
+    x0 = jnp.zeros(ins.N_STATES)
+    p0 = jnp.asarray(ins.initial_covariance(ins.INSErrorModel(), 300.0, 0.01))
+    state = init(filt, x0, p0)
+    dn, _ = np.meshgrid(np.arange(31) - 15.0, np.arange(31) - 15.0, indexing="ij")
+    far = (np.abs(dn * 250.0 - 3000.0) < 300.0) & (np.abs(_ - 0.0) < 2)
+    w = np.asarray(state.w) * 0.96 + 0.04 * far / far.sum()
+    state = state._replace(w=jnp.asarray(w / w.sum()))
+    new, _ = predict(filt, state, DT)
+    assert np.all(np.asarray(new.cell) < 250.0)  # refined, around both modes
+    after = np.asarray(new.w)
+    offsets = np.asarray(new.centre)[0] + (np.arange(31) - 15.0) * float(new.cell[0])
+    assert after[np.abs(offsets - 3000.0) < 400.0].sum() > 0.03
+    with pytest.raises(ValueError, match="an adaptive grid needs adapt_span > 0"):
+        fl.pmf(adapt_span=-3.0)
+    with pytest.raises(ValueError, match="0 < min_cell_m <= max_cell_m"):
+        fl.pmf(adapt_span=3.0, min_cell_m=0.0)
 
 
 # ----------------------------------------------------------------- runs

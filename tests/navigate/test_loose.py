@@ -166,6 +166,8 @@ def test_loose_config_names_its_matchers(smooth_grid):
         loose_config(matcher="chains")
     with pytest.raises(ValueError, match="needs the grid"):
         loose_config(matcher="entropy+iccp")
+    with pytest.raises(TypeError, match="matcher must be a DenseConfig or a tuple"):
+        LooseConfig(matcher=(None, EntropyConfig()))
     entropy, iccp = loose_config(matcher="entropy+iccp", grid=smooth_grid).matcher
     assert iccp.bias_sigma == float("inf") and iccp.map_error_mgal == 3.0
     assert entropy.half_size == 20 and iccp.max_rotation_deg == 3.0
