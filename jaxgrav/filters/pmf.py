@@ -227,7 +227,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
 
     def _recentre(state):
         mean = state.x[:2]
-        size = cell_m if state.cell is None else state.cell
+        size = _size(state)
         k = jnp.round((mean - state.centre) / size).astype(jnp.int32)
         k = jnp.clip(k, -(n_cells - 1), n_cells - 1)
         cell = cell_fields(state)
@@ -265,9 +265,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         # predicts (conditional noise plus the coherent growth from the velocity error)
         spread = jnp.maximum(jnp.diagonal(p_new[:2, :2] - p[:2, :2]), 0.0) + q_pos * dyn.dt
         centre = state.centre + (x_new[:2] - x[:2])
-        size = (cell_m, cell_m) if state.cell is None else state.cell
-        a_n = diffusion_kernel(n_cells, spread[0] / size[0] ** 2)
-        a_e = diffusion_kernel(n_cells, spread[1] / size[1] ** 2)
+        size = (cell_m, cell_m) if state.cell is None else state.cell  # per axis
+        a_n, a_e = (diffusion_kernel(n_cells, spread[k] / size[k] ** 2) for k in (0, 1))
         m0, s0 = state.bias_mean, state.bias_var
         # per-cell bias: its own (scalar) error model, then moment matching through the kernel
         fb, qb = f[GRAV, GRAV], q[GRAV, GRAV]
@@ -286,7 +285,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         mean, cov = grid_moments(state.w, *where, c)
         target = jnp.clip(wanted_cell(state.w, where, mean, cov, adapt_span, KEEP_WEIGHT),
                           min_cell_m, max_cell_m)
-        new, _ = regrid_cells(state, mean, target, _TINY)
+        new = regrid_cells(state, mean, target, _TINY)
         go = jnp.any(jnp.abs(jnp.log(target / c)) > jnp.log(REGRID_RATIO))
         return jax.tree.map(lambda a, b: jnp.where(go, a, b), new, state)
 

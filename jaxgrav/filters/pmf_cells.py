@@ -214,7 +214,7 @@ def regrid_matrix(old_centre, old_cell, new_centre, new_cell, n):
 
 
 def regrid_cells(state, mean, target, tiny=1e-13):
-    """``state`` on the grid of cell ``target`` centred at ``mean``, and the mass lost.
+    """``state`` on the grid of cell ``target`` centred at ``mean``.
 
     Parameters
     ----------
@@ -229,22 +229,18 @@ def regrid_cells(state, mean, target, tiny=1e-13):
     -------
     new : PMFState
         Weights and per-cell Gaussians carried by :func:`regrid_matrix` (normalised),
-        the grid shifted so that the weights' mean stays ``mean``.
-    lost : Array
-        The mass of the old cells outside the new grid (cut off by a refinement).
+        the grid shifted so that the weights' mean stays ``mean``. Old cells outside
+        the new grid are dropped: size it with :func:`wanted_cell` to keep the mass.
     """
     n = state.w.shape[0]
     i = jnp.arange(n) - (n - 1) / 2
-    old = [state.centre[k] + i * state.cell[k] for k in (0, 1)]
-    inside = [jnp.abs(old[k] - mean[k]) <= (n / 2) * target[k] for k in (0, 1)]
-    lost = 1.0 - jnp.sum(state.w * inside[0][:, None] * inside[1][None, :])
     r_n, r_e = (regrid_matrix(state.centre[k], state.cell[k], mean[k], target[k], n)
                 for k in (0, 1))
     w, cell = mix_cells(r_n, r_e, state.w, cell_fields(state), tiny)
     # the interpolated weights' mean, off by a fraction of a cell, put back where it was
     moved = jnp.stack([jnp.sum(w.sum(1) * i), jnp.sum(w.sum(0) * i)]) * target
     centre = mean - moved
-    return with_cells(state._replace(w=w, centre=centre, cell=target), cell), lost
+    return with_cells(state._replace(w=w, centre=centre, cell=target), cell)
 
 
 def wanted_cell(w, where, mean, cov, span, keep):

@@ -269,12 +269,14 @@ def _match(cfg, grid, lat, lon, g, reach, sigma_eotvos):
     """The matcher, its offset grid spread over the reach and the Eötvös error of the
     filter's velocity told as a correlated error beside the map's."""
     dense = isinstance(cfg.matcher, DenseConfig)
-    entropy, iccp = (cfg.matcher, None) if dense else cfg.matcher
-    spacing = jnp.clip(reach / entropy.half_size, cfg.min_spacing_m, cfg.max_spacing_m)
-    told = jnp.sqrt((entropy if dense else iccp).map_error_mgal**2 + sigma_eotvos**2)
+    # the offset grid's settings, and the settings that are told the map error
+    offsets, told_to = (cfg.matcher, cfg.matcher) if dense else cfg.matcher
+    spacing = jnp.clip(reach / offsets.half_size, cfg.min_spacing_m, cfg.max_spacing_m)
+    told = jnp.sqrt(told_to.map_error_mgal**2 + sigma_eotvos**2)
     if dense:
         return match_dense(grid, lat, lon, g, dataclasses.replace(
             cfg.matcher, spacing_m=spacing, map_error_mgal=told))
+    entropy, iccp = cfg.matcher
     window = jnp.maximum(iccp.window_m, 1.2 * spacing * entropy.half_size)
     return match_entropy_iccp(grid, lat, lon, g, dataclasses.replace(entropy, spacing_m=spacing),
                               dataclasses.replace(iccp, window_m=window, map_error_mgal=told))
