@@ -1,8 +1,9 @@
 """Deflection of the vertical: layered DOV grids, their interpolation (paper C) and layer studies.
 
 :class:`LayeredGrid` (:mod:`~jaxgrav.dov.layers`) holds ξ, η on one lat/lon grid at
-several heights; :func:`interpolate`, :func:`make_interpolator` and :func:`scan_track`
-(:mod:`~jaxgrav.dov.interpolate`) interpolate it with the traced kernels of
+several heights; :func:`interpolate`, :func:`make_interpolator` (a callable
+:class:`PreparedLayers` pytree) and :func:`scan_track` (:mod:`~jaxgrav.dov.interpolate`)
+interpolate it with the traced kernels of
 :mod:`~jaxgrav.dov.kernels`; :mod:`~jaxgrav.dov.sensitivity` differentiates the
 interpolation error in the layer heights and spacing (optax studies).
 """
@@ -10,6 +11,7 @@ interpolation error in the layer heights and spacing (optax studies).
 from jaxgrav.dov import sensitivity
 from jaxgrav.dov.interpolate import (
     Interpolated,
+    PreparedLayers,
     interpolate,
     make_interpolator,
     scan_track,
@@ -33,6 +35,7 @@ __all__ = [
     "HeightStudy",
     "Interpolated",
     "LayeredGrid",
+    "PreparedLayers",
     "SchulerError",
     "harmonic_layers",
     "interpolate",

@@ -34,6 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import check_points, concrete
 from jaxgrav.dov import kernels
 from jaxgrav.dov.kernels import DEFAULT_METHOD
@@ -43,6 +44,7 @@ __all__ = [
     "DEFAULT_METHOD",
     "METHODS",
     "Interpolated",
+    "PreparedLayers",
     "interpolate",
     "make_interpolator",
     "scan_track",
@@ -136,13 +138,59 @@ def interpolate(layers, lat, lon, h, method=DEFAULT_METHOD, *, strict=False):
 @functools.partial(jax.jit, static_argnames="method")
 def interpolate_compiled(layers, lat, lon, h, method):
     """The compiled core of :func:`interpolate` (no validation; package-internal)."""
-    return Interpolated(*make_interpolator(layers, method)(lat, lon, h))
+    return make_interpolator(layers, method)(lat, lon, h)
+
+
+@pytree_dataclass
+class PreparedLayers:
+    """A layered grid prepared for interpolation once: a callable pytree value.
+
+    Build with :func:`make_interpolator`. Its coefficients (spline slopes and, for
+    ``harmonic``, the vertical curvatures of every layer) are array leaves and the
+    method is static, so it is passed as data through ``jit``, ``vmap`` and ``scan``
+    (a filter's state, a sensitivity study) without being rebuilt, and a new map of
+    the same shape does not recompile. Calling it does no validation.
+
+    Attributes
+    ----------
+    layers : LayeredGrid
+        The grid it was made from (heights and geometry are read from it).
+    coefficients : Array
+        ``(L, C', ny, nx)`` (bilinear) or ``(L, C', ny, nx, 4)`` (bicubic), with
+        ``C' = 2C`` for ``harmonic`` (values, then curvatures).
+    method : str
+        One of :data:`METHODS`. Static.
+    """
+
+    layers: LayeredGrid
+    coefficients: jax.Array
+    method: str = static_field(DEFAULT_METHOD)
+
+    # a function value: compared and hashed by identity, as functools.partial is, so
+    # that ``jax.jit(make_interpolator(...))`` works (fields holding arrays are not
+    # hashable)
+    __eq__ = object.__eq__
+    __hash__ = object.__hash__
+
+    def __call__(self, lat, lon, h):
+        """Interpolate at points (degrees, degrees, m), broadcast to shape ``P``.
+
+        Returns
+        -------
+        Interpolated
+            ``values (C, *P)`` (NaN off the map or the height range) and ``inside P``.
+        """
+        horiz, vert = self.method.split("-")
+        return Interpolated(*kernels.evaluate(self.layers, self.coefficients, horiz, vert,
+                                              lat, lon, h))
 
 
 def make_interpolator(layers, method=DEFAULT_METHOD):
-    """Interpolation function with the per-map work (spline slopes, curvatures) done once.
+    """The layered grid prepared once for interpolation (spline slopes, curvatures).
 
     For use inside ``jit`` (filters, sensitivity studies): no validation at call.
+    Traceable: made inside a jitted function, the preparation is part of it and is
+    differentiable in ``layers.values`` and ``layers.heights``.
 
     Parameters
     ----------
@@ -152,16 +200,12 @@ def make_interpolator(layers, method=DEFAULT_METHOD):
 
     Returns
     -------
-    callable
-        ``f(lat, lon, h) -> (values (C, *P), inside P)``, as :func:`interpolate`.
+    PreparedLayers
+        ``f(lat, lon, h) -> Interpolated(values (C, *P), inside P)``, as
+        :func:`interpolate`; a pytree, so it can be an argument of a jitted function.
     """
     horiz, vert = kernels.check_method(method, layers.values.shape[0])
-    coef = kernels.prepare(layers, horiz, vert)
-
-    def f(lat, lon, h):
-        return kernels.evaluate(layers, coef, horiz, vert, lat, lon, h)
-
-    return f
+    return PreparedLayers(layers, kernels.prepare(layers, horiz, vert), method)
 
 
 def scan_track(layers, lat, lon, h, method=DEFAULT_METHOD):

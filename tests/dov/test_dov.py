@@ -135,6 +135,32 @@ def test_jit_no_retrace_and_vmap_equals_loop():
     np.testing.assert_allclose(batched, loop, rtol=1e-12, atol=1e-12)
 
 
+def test_prepared_layers_are_a_pytree_value():
+    """make_interpolator's result passes through jit as data: a new map, no retrace."""
+    layers = _layers(_smooth)
+    lat, lon, h = (jnp.asarray(x) for x in _points(30, seed=5))
+    prepared = dov.make_interpolator(layers)
+    assert isinstance(prepared, dov.PreparedLayers) and prepared.method == dov.DEFAULT_METHOD
+    calls = []
+
+    @jax.jit
+    def f(p, la, lo, hh):
+        calls.append(1)
+        return p(la, lo, hh)
+
+    out = f(prepared, lat, lon, h)
+    ref = dov.interpolate(layers, lat, lon, h)
+    np.testing.assert_allclose(out.values, ref.values, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(out.inside, ref.inside)
+    other = _layers(lambda la, lo, hh: np.cos(la) * np.sin(lo) * (1.0 + hh / 1e4))
+    out2 = f(dov.make_interpolator(other), lat, lon, h)
+    assert len(calls) == 1  # same shapes and method: no retrace
+    np.testing.assert_allclose(out2.values, dov.interpolate(other, lat, lon, h).values,
+                               rtol=0, atol=1e-12)
+    leaves = jax.tree_util.tree_leaves(prepared)
+    assert any(leaf.shape == prepared.coefficients.shape for leaf in leaves)
+
+
 def dataclass_replace(obj, **kw):
     return dataclasses.replace(obj, **kw)
 
