@@ -7,6 +7,17 @@ top: ``constants``, ``geodesy``, ``interp`` → ``grid``, ``prepared`` → ``fie
 """
 
 import importlib
+import os
+import sys
+
+if os.path.basename(sys.argv[0]) == "jaxgrav" and "jax" not in sys.modules:
+    # The ``jaxgrav`` command only (a library user's program is left alone): jaxlib
+    # 0.10.1 logs one C++ ERROR line, ~1 kB, for every compiled program it loads from
+    # the persistent compilation cache ("Target machine feature +prefer-no-gather is
+    # not supported": a tuning flag taken for a CPU feature, openxla/xla#44565; the
+    # program loads and runs), hundreds per warm command. The level is read when jaxlib
+    # loads, so it is set here, before JAX is imported, unless the user set it.
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
 
 from jaxgrav import (
     constants,
