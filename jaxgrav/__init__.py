@@ -10,7 +10,7 @@ import importlib
 import os
 import sys
 
-if os.path.basename(sys.argv[0]) == "jaxgrav" and "jax" not in sys.modules:
+if os.path.basename((sys.argv or [""])[0]) == "jaxgrav" and "jax" not in sys.modules:
     # The ``jaxgrav`` command only (a library user's program is left alone): jaxlib
     # 0.10.1 logs one C++ ERROR line, ~1 kB, for every compiled program it loads from
     # the persistent compilation cache ("Target machine feature +prefer-no-gather is

@@ -149,7 +149,12 @@ class PreparedLayers:
     ``harmonic``, the vertical curvatures of every layer) are array leaves and the
     method is static, so it is passed as data through ``jit``, ``vmap`` and ``scan``
     (a filter's state, a sensitivity study) without being rebuilt, and a new map of
-    the same shape does not recompile. Calling it does no validation.
+    the same shape and geometry (``lat0``, ``dlat``, ``lon0``, ``dlon`` are static) does
+    not recompile. Calling it validates only the (static) method, not the points.
+    Differentiate through :func:`make_interpolator` (made inside the differentiated
+    function) to get gradients in the map: the coefficients are computed from
+    ``layers.values``, which the call itself reads only for its shape, so a gradient
+    with respect to a prepared value's ``layers.values`` is zero.
 
     Attributes
     ----------
@@ -180,7 +185,7 @@ class PreparedLayers:
         Interpolated
             ``values (C, *P)`` (NaN off the map or the height range) and ``inside P``.
         """
-        horiz, vert = self.method.split("-")
+        horiz, vert = kernels.check_method(self.method, self.layers.values.shape[0])
         return Interpolated(*kernels.evaluate(self.layers, self.coefficients, horiz, vert,
                                               lat, lon, h))
 

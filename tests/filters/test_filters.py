@@ -685,6 +685,10 @@ def test_modified_cholesky_equals_lapack_and_flags_non_pd(prior):
     low, repaired, failed = chol(jnp.asarray(a))
     assert bool(repaired) and not bool(failed)
     np.testing.assert_allclose(np.asarray(low @ low.T), a, atol=1e-6 * np.abs(a).max())
+    # a pivot slightly negative, within the relative jitter: clamped, repaired, usable
+    near = jnp.asarray([[1.0, 1.0], [1.0, 1.0 - 1e-12]])
+    low, repaired, failed = jax.jit(modified_cholesky)(near)
+    assert bool(repaired) and not bool(failed) and np.all(np.isfinite(np.asarray(low)))
     # indefinite, and NaN: failed, zero factor
     b = _spd(rng, 13, np.ones(13)) - 50.0 * np.eye(13)
     for bad in (b, np.where(np.eye(13) > 0, np.nan, a)):
