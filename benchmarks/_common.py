@@ -27,15 +27,19 @@ def best_time(fn, repeats):
 
 
 def emit(bench, case, n, jaxgrav_s, baseline, baseline_s, **extra):
-    """Print one JSON line in the DESIGN.md benchmark format."""
+    """Print one JSON line in the DESIGN.md benchmark format.
+
+    ``baseline_s`` None (the baseline did not finish) gives ``ratio`` None: no ratio is
+    invented.
+    """
     row = {
         "bench": bench,
         "case": case,
         "n": n,
         "jaxgrav_s": round(jaxgrav_s, 6),
         "baseline": baseline,
-        "baseline_s": round(baseline_s, 6),
-        "ratio": round(baseline_s / jaxgrav_s, 2),
+        "baseline_s": None if baseline_s is None else round(baseline_s, 6),
+        "ratio": None if baseline_s is None else round(baseline_s / jaxgrav_s, 2),
         "machine": f"{platform.machine()} {os.cpu_count()} cores",
         **extra,
     }

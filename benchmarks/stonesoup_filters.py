@@ -50,7 +50,6 @@ progress on stderr. Compare ratios within one run (shared machine).
 
 import argparse
 import datetime
-import json
 import math
 import sys
 import time
@@ -307,12 +306,9 @@ def bench_one(kind, filt, ctx, ss, baseline, note, keyed=True):
     progress(f"{kind}: jaxgrav {jax_s:.2f} s for {n_runs} runs")
     err = [second_half_rms(est[i], np.asarray(truth[i])) for i in range(n_runs)]
     case = f"{kind}-{N_PARTICLES if kind != 'pmf' else N_CELLS}"
-    if ss_per_run is None:  # no ratio without a baseline time: say so, do not invent one
-        print(json.dumps({"bench": BENCH, "case": case, "n": n_runs,
-                          "jaxgrav_s": round(jax_s, 6), "baseline": baseline,
-                          "baseline_s": None, "ratio": None,
-                          "baseline_failed": ss_failed,
-                          "err_m_jaxgrav_all": round(float(np.mean(err)), 1)}), flush=True)
+    if ss_per_run is None:  # no Stone Soup run finished: no ratio
+        emit(BENCH, case, n_runs, jax_s, baseline, None, compile_s=round(compile_s, 2),
+             baseline_failed=ss_failed, err_m_jaxgrav_all=round(float(np.mean(err)), 1))
         return
     emit(BENCH, case, n_runs, jax_s, baseline,
          ss_per_run * n_runs, runs_per_s=round(n_runs / jax_s, 2),
