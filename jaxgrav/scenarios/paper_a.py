@@ -14,6 +14,7 @@ import numpy as np
 
 from jaxgrav import sim
 from jaxgrav._pytree import pytree_dataclass, static_field
+from jaxgrav._validate import concrete
 from jaxgrav.constants import KNOT
 from jaxgrav.fields import map_error as map_errors
 from jaxgrav.fields.map_error import CorrelatedMapError, TruthGrid, map_error_key
@@ -49,6 +50,11 @@ class MatchingScenario:
         Eötvös effect in the readings (static).
     truth_method : {"bicubic", "bilinear"}
         Interpolation of a Grid truth field (static).
+    start_lat, start_lon : float
+        A fixed start of the true track (degrees; traced, so a batch may give every run
+        its own, e.g. the cells of a suitability map). NaN (default): uniform in
+        ``region`` with the margin. A start given does not have to leave that margin;
+        a track that leaves the map gives NaN readings, which the matchers flag.
     """
 
     region: tuple = static_field((24.0, 36.0, 124.0, 136.0))
@@ -64,6 +70,19 @@ class MatchingScenario:
     drift_law: str = static_field("fixed")
     eotvos: str = static_field("full")
     truth_method: str = static_field("bicubic")
+    start_lat: float = float("nan")
+    start_lon: float = float("nan")
+
+    def __post_init__(self):
+        lat, lon = concrete(self.start_lat), concrete(self.start_lon)
+        if lat is None or lon is None or lat.dtype == object or lon.dtype == object:
+            return  # traced, or a pytree placeholder
+        given = np.isfinite(lat), np.isfinite(lon)
+        if np.any(given[0] != given[1]) or np.any(np.isinf(lat)) or np.any(np.isinf(lon)):
+            raise ValueError("start_lat and start_lon must both be finite (a fixed start, "
+                             f"degrees) or both NaN (a random start); got {lat}, {lon}")
+        if np.any(np.abs(lat[given[0]]) > 90.0):
+            raise ValueError(f"start_lat must be within -90..90 degrees; got {lat}")
 
     @property
     def step_m(self):
@@ -151,7 +170,10 @@ def matching_scenario(key, truth_field, scenario=MatchingScenario(), map_error=N
     """Simulate one matching run.
 
     The start point is uniform in ``scenario.region`` with a margin so that the
-    whole track stays inside it; the drift direction is uniform.
+    whole track stays inside it (or ``scenario.start_lat, start_lon`` when given); the
+    drift direction is uniform. The start's draw is made either way, so a run with a
+    fixed start draws the same drift, noise and map error as the run of that key
+    without it.
 
     Parameters
     ----------
@@ -185,6 +207,9 @@ def matching_scenario(key, truth_field, scenario=MatchingScenario(), map_error=N
         jnp.where(s.v_east >= 0, 0.0, dlon), jnp.where(s.v_east >= 0, dlon, 0.0),
     ]) + 1.5 * s.drift_deg
     lat0, lon0 = sim.random_start(k_start, s.region, margin)
+    fixed = jnp.isfinite(s.start_lat) & jnp.isfinite(s.start_lon)
+    lat0 = jnp.where(fixed, s.start_lat, lat0)
+    lon0 = jnp.where(fixed, s.start_lon, lon0)
     truth = sim.straight_track(lat0, lon0, s.v_east, s.v_north, s.n_fixes, s.dt)
     drift = sim.sample_drift(k_drift, s.drift_deg * sim.DEG_ARC_M, growth=s.drift_growth,
                              rotation_deg=s.drift_rotation_deg, law=s.drift_law)
