@@ -73,14 +73,18 @@ def test_paper_d_gravimeter_smoke():
 
 
 def test_suitability_validation_smoke():
-    """Two settings, each a JSON line with the CRLB's and the std descriptor's ranking."""
-    lines = [json.loads(s) for s in run_example("suitability_validation.py").splitlines()
+    """Two settings, each a JSON line with the CRLB's, the std descriptor's and the
+    oracle's ranking (40 runs and 2 more draws each: 80, a full batch and a padded one)."""
+    lines = [json.loads(s) for s in run_example("suitability_validation.py",
+                                                "--oracle-draws", "2").splitlines()
              if s.startswith("{")]
     assert [r["setting"] for r in lines] == ["perfect map", "map error"]
     for r in lines:
         assert r["crlb"]["runs"] == 40 and (r["heading_deg"], r["n_fixes"]) == (45.0, 30)
         assert -1 <= r["crlb"]["spearman"] <= 1 and r["crlb"]["cut"] > 0
         assert r["std_descriptor"]["runs"] > 30
+        assert r["oracle_draws"] == 2 and r["oracle"]["runs"] == 40
+        assert r["bias_prior_sigma_mgal"] == 3.0
 
 
 def test_missing_nodes_smoke():
