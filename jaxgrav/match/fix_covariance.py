@@ -16,18 +16,15 @@ apply as it is. Their fix quality is built from two parts that do:
 :func:`integrity_status` turns a covariance and the test statistics into the
 rejection bits 512, 1024, 2048 and 4096 of :data:`~jaxgrav.match.result.STATUS`.
 
-:func:`gls_whitener_scan` is :func:`~jaxgrav.match.gls.gls_whitener` in plain JAX
-operations: under ``vmap`` ``jnp.linalg.cholesky`` and the triangular solve become
-batched LAPACK calls that can deadlock XLA's CPU thread pool on a loaded 2-core machine
-(see :mod:`jaxgrav._linalg`); a ``lax.scan`` over the columns neither unrolls nor
-calls LAPACK.
+:func:`gls_whitener_scan` is :func:`~jaxgrav.match.gls.gls_whitener` (which is now itself
+free of LAPACK calls: under ``vmap`` they can deadlock XLA's CPU thread pool, see
+:mod:`jaxgrav._linalg`).
 """
 
-import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import inv_2x2
-from jaxgrav.match.gls import GlsWhitener, whiten
+from jaxgrav.match.gls import gls_whitener, whiten
 from jaxgrav.match.integrity import largest_sigma
 
 __all__ = [
@@ -41,32 +38,9 @@ __all__ = [
 
 
 def gls_whitener_scan(cov):
-    """:func:`~jaxgrav.match.gls.gls_whitener` of ``cov`` ``(N, N)`` without LAPACK calls.
-
-    Cholesky factor column by column and its inverse row by row, each a ``lax.scan``
-    of N steps of O(N²) work (N fixes: tens). NaN where ``cov`` is not positive
-    definite. Returns a :class:`~jaxgrav.match.gls.GlsWhitener`.
-    """
-    a = jnp.asarray(cov)
-    n = a.shape[-1]
-    idx = jnp.arange(n)
-
-    def column(low, j):
-        row = low[j]  # entries before j only
-        d = jnp.sqrt(a[j, j] - jnp.sum(row * row))
-        col = (a[:, j] - low @ row) / d
-        return low.at[:, j].set(jnp.where(idx > j, col, jnp.where(idx == j, d, 0.0))), None
-
-    chol, _ = jax.lax.scan(column, jnp.zeros_like(a), idx)
-
-    def inverse_row(x, i):  # forward substitution of L X = I, row i
-        row = ((idx == i).astype(a.dtype) - chol[i] @ x) / chol[i, i]
-        return x.at[i].set(row), None
-
-    inv_chol, _ = jax.lax.scan(inverse_row, jnp.zeros_like(a), idx)
-    ones = jnp.sum(inv_chol, axis=-1)
-    return GlsWhitener(chol, inv_chol, ones, jnp.sum(ones**2),
-                       2.0 * jnp.sum(jnp.log(jnp.diagonal(chol))))
+    """:func:`~jaxgrav.match.gls.gls_whitener` (kept under this name for its callers): a
+    :class:`~jaxgrav.match.gls.GlsWhitener` of ``cov`` ``(N, N)`` without LAPACK calls."""
+    return gls_whitener(cov)
 
 
 def gauss_newton_information(whitener, jac, bias_prior_sigma=float("inf")):

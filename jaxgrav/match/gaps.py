@@ -29,8 +29,8 @@ the present fixes is factorised per candidate, since the gaps differ between
 candidates).
 """
 
+import jax
 import jax.numpy as jnp
-from jax.scipy.linalg import solve_triangular
 
 from jaxgrav.match.gls import gls_whitener
 from jaxgrav.match.scoring import sums
@@ -123,9 +123,13 @@ def gls_gap_score(whitener, residuals, bias_prior_sigma, max_gaps):
     present = ~jnp.isnan(r)
     n_gap = jnp.sum(~present, -1)
     cov = whitener.chol @ whitener.chol.T
-    chol = jnp.linalg.cholesky(_restricted(cov, present))
+    restricted = _restricted(cov, present)  # (..., N, N), one per candidate
+    n = restricted.shape[-1]
+    # L⁻¹ per candidate without LAPACK (batched LAPACK calls can deadlock, gls_whitener)
+    inv_chol = jax.vmap(lambda c: gls_whitener(c).inv_chol)(
+        restricted.reshape(-1, n, n)).reshape(restricted.shape)
     rhs = jnp.stack([jnp.where(present, r, 0.0), present.astype(r.dtype)], axis=-1)
-    z = solve_triangular(chol, rhs, lower=True)
+    z = inv_chol @ rhs
     zr, u = z[..., 0], z[..., 1]
     s1, uu = jnp.sum(zr * u, -1), jnp.sum(u * u, -1)
     shrink = 1.0 / (1.0 + jnp.asarray(bias_prior_sigma, r.dtype) ** 2 * uu)

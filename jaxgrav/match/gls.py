@@ -134,10 +134,32 @@ class GlsWhitener(NamedTuple):
 
 
 def gls_whitener(cov):
-    """:class:`GlsWhitener` of one track's SPD covariance ``cov`` ``(N, N)`` (map units²)."""
-    cov = jnp.asarray(cov)
-    chol = jnp.linalg.cholesky(cov)
-    inv_chol = solve_triangular(chol, jnp.eye(cov.shape[-1], dtype=chol.dtype), lower=True)
+    """:class:`GlsWhitener` of one track's SPD covariance ``cov`` ``(N, N)`` (map units²).
+
+    Plain JAX operations, no LAPACK call: the Cholesky factor column by column and its
+    inverse row by row, each a ``lax.scan`` of N steps of O(N²) work (N fixes: tens).
+    Under ``vmap`` ``jnp.linalg.cholesky`` and the triangular solve become batched
+    LAPACK calls, and two independent ones in one program (a ``lax.map`` remainder
+    batch beside the full ones, two branches) deadlock XLA's CPU thread pool on jaxlib
+    0.10.x (see :mod:`jaxgrav._linalg`). NaN where ``cov`` is not positive definite.
+    """
+    a = jnp.asarray(cov)
+    n = a.shape[-1]
+    idx = jnp.arange(n)
+
+    def column(low, j):
+        row = low[j]  # entries before j only
+        d = jnp.sqrt(a[j, j] - jnp.sum(row * row))
+        col = (a[:, j] - low @ row) / d
+        return low.at[:, j].set(jnp.where(idx > j, col, jnp.where(idx == j, d, 0.0))), None
+
+    chol, _ = jax.lax.scan(column, jnp.zeros_like(a), idx)
+
+    def inverse_row(x, i):  # forward substitution of L X = I, row i
+        row = ((idx == i).astype(a.dtype) - chol[i] @ x) / chol[i, i]
+        return x.at[i].set(row), None
+
+    inv_chol, _ = jax.lax.scan(inverse_row, jnp.zeros_like(a), idx)
     ones = jnp.sum(inv_chol, axis=-1)  # L⁻¹ 1
     return GlsWhitener(chol, inv_chol, ones, jnp.sum(ones**2),
                        2.0 * jnp.sum(jnp.log(jnp.diagonal(chol))))

@@ -1,0 +1,54 @@
+"""The GLS matchers compile without LAPACK calls under ``vmap``.
+
+jaxlib 0.10.x splits a batched LAPACK call (Cholesky, triangular solve) over XLA's CPU
+thread pool from inside that pool; two independent ones in one program — a
+``lax.map`` remainder batch beside the full ones, or two branches — deadlock a 2-core
+machine (all threads parked on futexes; upstream jax-ml/jax#36927, fixed after 0.11.0).
+It hung ``jax.lax.map(dense run told the map error, 80 keys, batch_size=50)``. So the
+whitening is plain JAX (:func:`jaxgrav.match.gls.gls_whitener`), and these tests keep
+LAPACK out of the lowered programs, which is deterministic where the hang is not.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgrav.fields.map_error import map_error
+from jaxgrav.match.gaps import gls_gap_score
+from jaxgrav.match.gls import gls_whitener, track_covariance
+from jaxgrav.montecarlo import methods
+
+
+def _lapack_calls(lowered):
+    text = lowered.as_text()
+    return sorted({w for w in text.replace('"', " ").replace("@", " ").split()
+                   if "lapack" in w})
+
+
+def test_whitener_matches_lapack_and_has_no_lapack_call():
+    d = np.arange(12) * 900.0
+    cov = track_covariance(jnp.asarray(d), jnp.asarray(0.5 * d), 1.0, 3.0, 10e3)
+    w = gls_whitener(cov)
+    np.testing.assert_allclose(w.chol, np.linalg.cholesky(np.asarray(cov)), rtol=1e-10)
+    np.testing.assert_allclose(w.inv_chol @ w.chol, np.eye(12), atol=1e-10)
+    batch = jnp.stack([cov, 2.0 * cov])
+    assert _lapack_calls(jax.jit(jax.vmap(gls_whitener)).lower(batch)) == []
+
+
+def test_gap_score_has_no_lapack_call():
+    d = np.arange(10) * 900.0
+    w = gls_whitener(track_covariance(jnp.asarray(d), jnp.asarray(d), 1.0, 3.0, 10e3))
+    r = jnp.asarray(np.random.default_rng(0).normal(size=(7, 10))).at[2, 3].set(jnp.nan)
+    score, _ = gls_gap_score(w, r, 3.0, 2)
+    assert np.all(np.isfinite(np.asarray(score)))
+    lowered = jax.jit(lambda r: gls_gap_score(w, r, 3.0, 2)).lower(r)
+    assert _lapack_calls(lowered) == []
+
+
+@pytest.mark.long
+def test_dense_run_told_the_map_error_has_no_lapack_call():
+    spec = methods.build("dense", None, map_error=map_error(3.0, 10e3))
+    keys = jax.random.split(jax.random.key(0), 4)
+    lowered = jax.jit(jax.vmap(lambda k: spec.fn(k, *spec.args)["err_m"])).lower(keys)
+    assert _lapack_calls(lowered) == []
