@@ -66,22 +66,6 @@ def ranking(pred, err, better_is_low=True):
         cut=round(float(np.median(err) / np.median(best)), 2), runs=int(ok.sum()))
 
 
-BATCH = 50
-
-
-def padded_map(fn, xs):
-    """``jax.lax.map(fn, xs, batch_size=BATCH)`` with the leading axis padded to a multiple
-    of BATCH (the last item repeated, then dropped): a remainder batch beside the full
-    ones made some of these matcher runs with a map error hang (a deadlock in the CPU
-    runtime, jax 0.10.1 and 0.10.2)."""
-    n = jax.tree.leaves(xs)[0].shape[0]
-    pad = -n % BATCH
-    xs = jax.tree.map(lambda a: jax.numpy.concatenate([a, jax.numpy.repeat(a[-1:], pad, 0)]),
-                      xs)
-    out = jax.lax.map(fn, xs, batch_size=min(BATCH, n + pad))
-    return jax.tree.map(lambda a: a[:n], out)
-
-
 def oracle_errors(spec, keys, lat0, lon0, draws):
     """Errors (m) of every start matched ``draws`` more times with fresh keys, (runs, draws)."""
     grid, scen, *rest = spec.args
@@ -97,7 +81,7 @@ def oracle_errors(spec, keys, lat0, lon0, draws):
             return spec.fn(k, grid, dataclasses.replace(scen, start_lat=la, start_lon=lo),
                            *rest)["err_m"]
 
-        return padded_map(one, (keys, lat0, lon0))
+        return jax.lax.map(one, (keys, lat0, lon0), batch_size=50)
 
     return np.asarray(batch(fresh, lat0, lon0)).reshape(runs, draws)
 
@@ -136,7 +120,7 @@ def main():
                 out = fn(k, *args)
                 return out["err_m"], out["ins_err_m"], run.truth.lat[0], run.truth.lon[0]
 
-            return padded_map(one, keys)
+            return jax.lax.map(one, keys, batch_size=50)
 
         err, ins, lat0, lon0 = (np.asarray(v) for v in batch(keys, spec.args))
         pred = node_values(grid, suit.precision_m, lat0, lon0)

@@ -74,7 +74,8 @@ def test_paper_d_gravimeter_smoke():
 
 def test_suitability_validation_smoke():
     """Two settings, each a JSON line with the CRLB's, the std descriptor's and the
-    oracle's ranking (40 runs and 2 more draws each: 80, a full batch and a padded one)."""
+    oracle's ranking (40 runs and 2 more draws each: 80, a batch of 50 beside a remainder
+    of 30, which deadlocked when the GLS whitening called LAPACK)."""
     lines = [json.loads(s) for s in run_example("suitability_validation.py",
                                                 "--oracle-draws", "2").splitlines()
              if s.startswith("{")]
