@@ -2,12 +2,15 @@
 
 The filters factor a 13 × 13 covariance per run and per step. Under ``vmap`` the
 ``jnp.linalg`` routines become batched LAPACK custom calls, which on CPU (jaxlib
-0.10.2) split the batch over XLA's intra-op thread pool from inside that same pool
-(``jax::ParallelBatchMap``); on a 2-core machine every worker can end up waiting for
-sub-tasks that no free worker will run — a deadlock we hit repeatedly in Monte Carlo
+0.10.0 to 0.11.0; jax-ml/jax#36927, fixed upstream after 0.11.0) split the batch over
+XLA's intra-op thread pool from inside that same pool (``jax::ParallelBatchMap``); on
+a 2-core machine every worker can end up waiting for sub-tasks that no free worker will
+run — a deadlock we hit repeatedly in Monte Carlo
 runs (all threads parked on futexes, native stacks in ``lapack_dpotrf_ffi``). For
 matrices this small, unrolled elementwise code is also faster than a library call,
-so jaxgrav uses these instead inside vmapped code.
+so jaxgrav uses these instead inside vmapped code (the GLS whitener of
+:mod:`jaxgrav.match.gls` likewise; ``tests/match/test_no_lapack.py`` checks the Monte
+Carlo runs).
 """
 
 import jax.numpy as jnp

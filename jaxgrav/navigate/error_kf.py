@@ -73,7 +73,7 @@ def error_kf_tables(model, lat_deg, dt, steps_between, segment_steps):
     eye = jnp.eye(f.shape[0], dtype=f.dtype)
     (step_f, step_q), (forward, noise) = jax.lax.scan(
         fwd, (eye, jnp.zeros_like(f)), None, length=steps_between)
-    f_inv = jnp.linalg.inv(f)
+    f_inv, _ = transition(model, lat_deg, -dt)  # expm(−A Δt) = F⁻¹, exact; no LAPACK call
 
     def back(p, _):
         p = f_inv @ p

@@ -36,6 +36,7 @@ from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.dense import DenseConfig, match_dense
 from jaxgrav.match.entropy import EntropyConfig
 from jaxgrav.match.iccp_config import IccpConfig
+from jaxgrav.match.integrity import largest_sigma
 from jaxgrav.match.sizing import iccp_config_for
 from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, innovation_nis, spread
 from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
@@ -312,7 +313,7 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     cfg = config
     h_mean = tables.h_mean
     lat, lon, g, complete = _segment(cfg, tables, ins, gravity, x, end)
-    sigma = jnp.sqrt(jnp.max(jnp.linalg.eigvalsh(h_mean @ p @ h_mean.T)))
+    sigma = largest_sigma(h_mean @ p @ h_mean.T)  # closed form: no LAPACK call
     reach = rayleigh_quantile(sigma, cfg.window_p)
     usable = complete & jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(grid.sample(lat, lon)))
     sig_e = eotvos_sigma(jnp.mean(lat), ins.v_east[end], ins.v_north[end], p[2:4, 2:4])

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav._linalg import inv_2x2
 from jaxgrav.geodesy import local_offsets_m
 
 __all__ = ["VoyageErrors", "hourly_rms", "voyage_errors", "voyage_summary"]
@@ -56,7 +57,7 @@ def voyage_errors(voyage, nav, cov_north_east):
     e_n, e_e = local_offsets_m(nav.lat, nav.lon, t.lat, t.lon)
     f_n, f_e = local_offsets_m(voyage.ins.lat, voyage.ins.lon, t.lat, t.lon)
     e = jnp.stack([e_n, e_e], axis=-1)
-    nees = jnp.einsum("ni,nij,nj->n", e, jnp.linalg.inv(cov_north_east), e)
+    nees = jnp.einsum("ni,nij,nj->n", e, jax.vmap(inv_2x2)(cov_north_east), e)
     return VoyageErrors(jnp.hypot(e_n, e_e), jnp.hypot(f_n, f_e), nees)
 
 
