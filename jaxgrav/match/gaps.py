@@ -32,7 +32,7 @@ candidates).
 import jax
 import jax.numpy as jnp
 
-from jaxgrav.match.gls import gls_whitener
+from jaxgrav.match.gls import cholesky_scan, forward_substitution, gls_whitener
 from jaxgrav.match.scoring import sums
 
 __all__ = ["gap_score", "gap_whitener", "gls_gap_score"]
@@ -125,11 +125,10 @@ def gls_gap_score(whitener, residuals, bias_prior_sigma, max_gaps):
     cov = whitener.chol @ whitener.chol.T
     restricted = _restricted(cov, present)  # (..., N, N), one per candidate
     n = restricted.shape[-1]
-    # L⁻¹ per candidate without LAPACK (batched LAPACK calls can deadlock, gls_whitener)
-    inv_chol = jax.vmap(lambda c: gls_whitener(c).inv_chol)(
-        restricted.reshape(-1, n, n)).reshape(restricted.shape)
     rhs = jnp.stack([jnp.where(present, r, 0.0), present.astype(r.dtype)], axis=-1)
-    z = inv_chol @ rhs
+    # per candidate without LAPACK (batched LAPACK calls can deadlock: gls_whitener)
+    chol = jax.vmap(cholesky_scan)(restricted.reshape(-1, n, n))
+    z = jax.vmap(forward_substitution)(chol, rhs.reshape(-1, n, 2)).reshape(rhs.shape)
     zr, u = z[..., 0], z[..., 1]
     s1, uu = jnp.sum(zr * u, -1), jnp.sum(u * u, -1)
     shrink = 1.0 / (1.0 + jnp.asarray(bias_prior_sigma, r.dtype) ** 2 * uu)

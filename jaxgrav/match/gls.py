@@ -37,6 +37,8 @@ from jaxgrav.match.scoring import k_smallest
 __all__ = [
     "GlsWhitener",
     "OffsetPosterior",
+    "cholesky_scan",
+    "forward_substitution",
     "gls_dof",
     "gls_log_normaliser",
     "gls_score",
@@ -133,19 +135,12 @@ class GlsWhitener(NamedTuple):
     log_det: jax.Array
 
 
-def gls_whitener(cov):
-    """:class:`GlsWhitener` of one track's SPD covariance ``cov`` ``(N, N)`` (map units²).
-
-    Plain JAX operations, no LAPACK call: the Cholesky factor column by column and its
-    inverse row by row, each a ``lax.scan`` of N steps of O(N²) work (N fixes: tens).
-    Under ``vmap`` ``jnp.linalg.cholesky`` and the triangular solve become batched
-    LAPACK calls, and two independent ones in one program (a ``lax.map`` remainder
-    batch beside the full ones, two branches) deadlock XLA's CPU thread pool on jaxlib
-    0.10.x (see :mod:`jaxgrav._linalg`). NaN where ``cov`` is not positive definite.
-    """
-    a = jnp.asarray(cov)
-    n = a.shape[-1]
-    idx = jnp.arange(n)
+def cholesky_scan(a):
+    """Lower Cholesky factor of an SPD ``a`` ``(N, N)``, column by column in a ``lax.scan``
+    of N steps of O(N²) work: no unrolling, no LAPACK call under ``vmap`` (see
+    :func:`gls_whitener`). NaN where ``a`` is not positive definite."""
+    a = jnp.asarray(a)
+    idx = jnp.arange(a.shape[-1])
 
     def column(low, j):
         row = low[j]  # entries before j only
@@ -154,12 +149,34 @@ def gls_whitener(cov):
         return low.at[:, j].set(jnp.where(idx > j, col, jnp.where(idx == j, d, 0.0))), None
 
     chol, _ = jax.lax.scan(column, jnp.zeros_like(a), idx)
+    return chol
 
-    def inverse_row(x, i):  # forward substitution of L X = I, row i
-        row = ((idx == i).astype(a.dtype) - chol[i] @ x) / chol[i, i]
-        return x.at[i].set(row), None
 
-    inv_chol, _ = jax.lax.scan(inverse_row, jnp.zeros_like(a), idx)
+def forward_substitution(chol, b):
+    """``X`` with ``chol X = b`` (``chol`` lower triangular ``(N, N)``, ``b`` ``(N, K)``),
+    row by row in a ``lax.scan`` (no LAPACK call)."""
+    b = jnp.asarray(b)
+    idx = jnp.arange(chol.shape[-1])
+
+    def row(x, i):
+        return x.at[i].set((b[i] - chol[i] @ x) / chol[i, i]), None
+
+    x, _ = jax.lax.scan(row, jnp.zeros_like(b), idx)
+    return x
+
+
+def gls_whitener(cov):
+    """:class:`GlsWhitener` of one track's SPD covariance ``cov`` ``(N, N)`` (map units²).
+
+    Plain JAX operations, no LAPACK call: :func:`cholesky_scan` and its inverse by
+    :func:`forward_substitution`. Under ``vmap`` ``jnp.linalg.cholesky`` and the
+    triangular solve become batched LAPACK calls, and two independent ones in one
+    program (a ``lax.map`` remainder batch beside the full ones, two branches) deadlock
+    XLA's CPU thread pool on jaxlib 0.10.x (see :mod:`jaxgrav._linalg`). NaN where
+    ``cov`` is not positive definite.
+    """
+    chol = cholesky_scan(cov)
+    inv_chol = forward_substitution(chol, jnp.eye(chol.shape[-1], dtype=chol.dtype))
     ones = jnp.sum(inv_chol, axis=-1)  # L⁻¹ 1
     return GlsWhitener(chol, inv_chol, ones, jnp.sum(ones**2),
                        2.0 * jnp.sum(jnp.log(jnp.diagonal(chol))))

@@ -16,7 +16,7 @@ import pytest
 
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match.gaps import gls_gap_score
-from jaxgrav.match.gls import gls_whitener, track_covariance
+from jaxgrav.match.gls import cholesky_scan, forward_substitution, gls_whitener, track_covariance
 from jaxgrav.montecarlo import methods
 
 
@@ -59,3 +59,15 @@ def test_monte_carlo_runs_have_no_lapack_call(method):
     lowered = jax.jit(jax.vmap(lambda k: jax.tree.leaves(spec.fn(k, *spec.args))[0])).lower(
         keys)
     assert _lapack_calls(lowered) == []
+
+
+def test_scan_factorisation_equals_numpy():
+    rng = np.random.default_rng(1)
+    m = rng.normal(size=(9, 9))
+    a = m @ m.T + 9 * np.eye(9)
+    chol = cholesky_scan(jnp.asarray(a))
+    np.testing.assert_allclose(chol, np.linalg.cholesky(a), rtol=1e-10)
+    b = rng.normal(size=(9, 2))
+    np.testing.assert_allclose(forward_substitution(chol, jnp.asarray(b)),
+                               np.linalg.solve(np.linalg.cholesky(a), b), rtol=1e-9)
+    assert np.all(np.isnan(np.asarray(cholesky_scan(jnp.asarray(-a)))[0, 0]))
