@@ -12,13 +12,18 @@ import jax.numpy as jnp
 from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.fix_covariance import (
     gauss_newton_information,
-    gls_whitener_scan,
     integrity_status,
     offset_covariance,
     second_mode_ratio,
     spread_about,
 )
-from jaxgrav.match.gls import gls_dof, gls_score, offset_posterior, track_covariance
+from jaxgrav.match.gls import (
+    gls_dof,
+    gls_score,
+    gls_whitener,
+    offset_posterior,
+    track_covariance,
+)
 
 __all__ = ["chain_gls_scores", "chain_quality", "node_gradient"]
 
@@ -38,7 +43,7 @@ def chain_gls_scores(grid, lat, lon, readings, values, w, config, dtype):
     cov = track_covariance(north.astype(dtype), east.astype(dtype), noise.astype(dtype),
                            config.map_error_mgal, config.map_error_length_m,
                            config.map_error_order, weights=w)
-    wh = gls_whitener_scan(cov)
+    wh = gls_whitener(cov)
     sigma_b = jnp.asarray(0.0 if config.score == "absolute" else jnp.inf, dtype)
     j, b = gls_score(wh, readings - values, sigma_b)
     mu = w / jnp.sum(w)

@@ -33,12 +33,17 @@ from jaxgrav.match.contour import value_grad
 from jaxgrav.match.entropy import EntropyConfig, coarse_offsets, offset_grid
 from jaxgrav.match.fix_covariance import (
     gauss_newton_information,
-    gls_whitener_scan,
     integrity_status,
     offset_covariance,
     spread_about,
 )
-from jaxgrav.match.gls import gls_dof, gls_score, offset_posterior, track_covariance
+from jaxgrav.match.gls import (
+    gls_dof,
+    gls_score,
+    gls_whitener,
+    offset_posterior,
+    track_covariance,
+)
 from jaxgrav.match.iccp import IccpConfig, iccp_fit, local_track_frame
 from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import STATUS, MatchResult
@@ -99,7 +104,7 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     zero = jnp.zeros((), dtype)
     told = jnp.asarray(iccp.map_error_mgal) > 0
     noise = jnp.asarray(iccp.noise, dtype)
-    wh = gls_whitener_scan(track_covariance(p0[:, 0], p0[:, 1], jnp.where(noise > 0, noise, 1.0),
+    wh = gls_whitener(track_covariance(p0[:, 0], p0[:, 1], jnp.where(noise > 0, noise, 1.0),
                                        iccp.map_error_mgal, iccp.map_error_length_m,
                                        iccp.map_error_order))
     sb = jnp.asarray(iccp.bias_sigma, dtype)  # 0: bias-free readings (as ICCP assumes)

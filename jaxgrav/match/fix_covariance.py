@@ -16,31 +16,23 @@ apply as it is. Their fix quality is built from two parts that do:
 :func:`integrity_status` turns a covariance and the test statistics into the
 rejection bits 512, 1024, 2048 and 4096 of :data:`~jaxgrav.match.result.STATUS`.
 
-:func:`gls_whitener_scan` is :func:`~jaxgrav.match.gls.gls_whitener` (which is now itself
-free of LAPACK calls: under ``vmap`` they can deadlock XLA's CPU thread pool, see
-:mod:`jaxgrav._linalg`).
+The track's whitening is :func:`~jaxgrav.match.gls.gls_whitener`, free of LAPACK calls
+(under ``vmap`` they can deadlock XLA's CPU thread pool, see :mod:`jaxgrav._linalg`).
 """
 
 import jax.numpy as jnp
 
 from jaxgrav._linalg import inv_2x2
-from jaxgrav.match.gls import gls_whitener, whiten
+from jaxgrav.match.gls import whiten
 from jaxgrav.match.integrity import largest_sigma
 
 __all__ = [
     "gauss_newton_information",
-    "gls_whitener_scan",
     "integrity_status",
     "offset_covariance",
     "second_mode_ratio",
     "spread_about",
 ]
-
-
-def gls_whitener_scan(cov):
-    """:func:`~jaxgrav.match.gls.gls_whitener` (kept under this name for its callers): a
-    :class:`~jaxgrav.match.gls.GlsWhitener` of ``cov`` ``(N, N)`` without LAPACK calls."""
-    return gls_whitener(cov)
 
 
 def gauss_newton_information(whitener, jac, bias_prior_sigma=float("inf")):

@@ -27,7 +27,6 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.linalg import solve_triangular
 
 from jaxgrav._validate import concrete
 from jaxgrav.fields.random import MarkovSpectrum
@@ -191,7 +190,7 @@ def whiten(whitener, v, solve=False):
         Residuals (map units), fixes along the last axis; leading axes are candidates.
     solve : bool
         Static. False: one product with ``inv_chol`` (on CPU far faster than a
-        batched triangular solve); True: a triangular solve with ``chol``.
+        triangular solve); True: :func:`forward_substitution` with ``chol``.
 
     Returns
     -------
@@ -202,7 +201,7 @@ def whiten(whitener, v, solve=False):
     if not solve:
         return v @ whitener.inv_chol.T
     n = v.shape[-1]
-    z = solve_triangular(whitener.chol, v.reshape(-1, n).T, lower=True)
+    z = forward_substitution(whitener.chol, v.reshape(-1, n).T)
     return z.T.reshape(v.shape)
 
 

@@ -34,10 +34,9 @@ from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.grid import Grid
 from jaxgrav.match.fix_covariance import (
     gauss_newton_information,
-    gls_whitener_scan,
     offset_covariance,
 )
-from jaxgrav.match.gls import track_covariance
+from jaxgrav.match.gls import gls_whitener, track_covariance
 from jaxgrav.prepared import prepare_map
 
 __all__ = ["DESCRIPTORS", "Suitability", "suitability"]
@@ -225,7 +224,7 @@ def suitability(grid, *, heading_deg=45.0, n_fixes=30, spacing_m=1200.0, noise_m
                          "nodes)")
     north, east = _track_offsets(n_fixes, spacing_m, heading)
     cov = track_covariance(jnp.asarray(north), jnp.asarray(east), noise, map_sigma, length)
-    whitener = gls_whitener_scan(cov)
+    whitener = gls_whitener(cov)
     lat0, lon0 = np.meshgrid(lat, np.asarray(grid.lon), indexing="ij")
     crlb = np.asarray(_precision(prepare_map(grid), jnp.asarray(lat0.ravel()),
                                  jnp.asarray(lon0.ravel()), jnp.asarray(north),

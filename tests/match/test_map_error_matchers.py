@@ -13,7 +13,6 @@ from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import match_chains
 from jaxgrav.match.entropy import entropy_config_for
-from jaxgrav.match.fix_covariance import gls_whitener_scan
 from jaxgrav.match.gls import gls_whitener
 from jaxgrav.match.sizing import config_for, iccp_config_for
 from jaxgrav.prepared import prepare_map
@@ -60,10 +59,15 @@ def _iccp_cfgs(grid, sigma=SIGMA, length=LENGTH, **kw):
 
 
 def test_scan_whitener_equals_the_lapack_one():
+    """The plain-JAX whitener against NumPy's LAPACK factor, inverse and log-determinant."""
     m = np.random.default_rng(0).normal(size=(12, 12))
     cov = m @ m.T + 12 * np.eye(12)
-    for got, want in zip(gls_whitener_scan(cov), gls_whitener(cov), strict=True):
-        np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-10, atol=1e-12)
+    chol = np.linalg.cholesky(cov)
+    inv_chol = np.linalg.inv(chol)
+    want = (chol, inv_chol, inv_chol.sum(-1), (inv_chol.sum(-1) ** 2).sum(),
+            np.linalg.slogdet(cov)[1])
+    for got, ref in zip(gls_whitener(cov), want, strict=True):
+        np.testing.assert_allclose(np.asarray(got), ref, rtol=1e-10, atol=1e-12)
 
 
 @pytest.mark.long
