@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav import constants
+from jaxgrav._fusion import computed_once
 from jaxgrav._validate import concrete
 from jaxgrav.geodesy import enu_basis, geodetic_to_ecef
 
@@ -142,16 +143,27 @@ def point_mass_cells(masses, lat, lon):
 
     The same physics as :func:`~jaxgrav.fields.pointmass.gravity_anomaly`, with the
     trigonometry of the cells' latitudes and longitudes done per row and per column
-    (``2G`` instead of ``G²`` evaluations).
+    (``2G`` instead of ``G²`` evaluations). The row and column factors and the result
+    are materialised (:func:`~jaxgrav._fusion.computed_once`): left to itself, XLA's CPU
+    fusion recomputes the row and column sines and cosines for every cell and mass
+    inside each consumer of the anomaly (the filter ran at half the speed).
     """
     dtype = jnp.result_type(float)
-    xp = geodetic_to_ecef(lat, lon, 0.0)
+    # rows: distance from the axis, height above the equator, the up vector's parts
+    rho, _, z = geodetic_to_ecef(lat, 0.0, 0.0)
+    _, _, (c_lat, _, s_lat) = enu_basis(lat, 0.0)
+    lam = jnp.deg2rad(jnp.asarray(lon, dtype))
+    rho, z, c_lat, s_lat = computed_once((rho, z, c_lat, s_lat), lat)
+    c_lon, s_lon = computed_once((jnp.cos(lam), jnp.sin(lam)), lon)
+    xp = (rho * c_lon, rho * s_lon, z)  # z broadcasts along the row
+    up = (c_lat * c_lon, c_lat * s_lon, s_lat)
     xm = geodetic_to_ecef(masses.lat, masses.lon, -jnp.asarray(masses.depth, dtype=dtype))
     d = [a[..., None] - b for a, b in zip(xp, xm, strict=True)]
     inv_l = jax.lax.rsqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
     k = constants.G_NEWTON * jnp.asarray(masses.mass, dtype=dtype) * inv_l**3
-    _, _, up = enu_basis(lat, lon)
-    return sum(jnp.sum(k * di, axis=-1) * u for di, u in zip(d, up, strict=True)) / constants.MGAL
+    g = sum(jnp.sum(k * di, axis=-1) * u for di, u in zip(d, up, strict=True)) / constants.MGAL
+    (g,) = computed_once((g,), g)
+    return g
 
 
 def mix_cells(a_n, a_e, w0, cell0, tiny=1e-13):

@@ -30,6 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav import interp
+from jaxgrav._fusion import computed_once
 
 __all__ = ["computed_once", "interleave", "lattice_values", "patch_values"]
 
@@ -96,24 +97,6 @@ def _basis(cell, weights, block):
     for j in reversed(range(len(weights))):
         w = jnp.where(k == j, weights[j][:, None, :], w)
     return w
-
-
-def computed_once(xs, like):
-    """``xs`` unchanged, but computed once rather than inside every consumer element.
-
-    XLA fuses cheap element-wise producers into their consumers and recomputes
-    them per consumer element; for the K-fold expansion of per-point weights into
-    basis matrices that recomputation (lattice positions, cells, Hermite weights)
-    costs more than the expansion. A floating division is "expensive" to XLA and
-    is not duplicated, so dividing by a run-time one (from ``like``, not a
-    constant that would fold away, nor a broadcast one that XLA turns into a
-    multiplication) makes XLA compute the values once.
-    ``jax.lax.optimization_barrier`` does not survive XLA's CPU pipeline.
-    """
-    leaves, tree = jax.tree.flatten(xs)
-    one = 1.0 + 0.0 * jnp.abs(like)
-    stacked = jnp.stack(leaves) / one  # one pass for all of them
-    return jax.tree.unflatten(tree, list(stacked))
 
 
 def lattice_values(table, rows, cols, block, method="bicubic"):
