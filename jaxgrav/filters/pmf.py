@@ -20,20 +20,26 @@ Prediction over a step (:func:`pmf`'s ``predict``), from the linear error model
 2. **Diffusion**: each cell's mass spreads by the growth of the position
    variance the error model predicts, ``D = diag(F P Fᵀ + Q − P)_pos`` (clipped at
    0) ``+ q_pos Δt`` — the conditional noise ``F_po C F_poᵀ + Q_pp`` plus the
-   coherent growth from the velocity error, which the exact model would apply as a
-   shear ``Δt·K (d − d̄)`` of the grid, here matched in variance as a blur; the
-   north–east correlation of ``D`` is dropped. The spread is the exact solution of the diffusion
-   equation on the cell grid, ``w ← A_n w A_eᵀ`` with ``A = exp(v/2 · L)``, ``L``
-   the second-difference matrix and ``v = D/cell²`` the variance in cells²: a
-   non-negative, mass-conserving kernel of variance exactly ``v`` (away from the
-   edges) for any ``v``, computed in closed form from the cosine basis that
-   diagonalises ``L``. **Boundary**: ``L`` has zero-flux (Neumann, reflecting)
-   edges — mass that would diffuse past an edge is reflected back into the edge
-   cells, never lost; ``status`` flags ``grid_edge`` when more than 1e-3 of the
-   mass sits in the outermost cells, and the estimate is then unreliable.
-3. **Re-centring**: when the posterior mean is a cell or more from the grid's
-   centre, the weights are shifted by whole cells to re-centre it, provided the
-   cells pushed off the far edge hold less than 1e-5 of the mass.
+   coherent growth from the velocity error (the exact model's shear
+   ``Δt·K (d − d̄)`` of the grid, matched in variance as a blur); the north–east
+   correlation of ``D`` is dropped. The spread is the exact solution of the diffusion
+   equation on the cells, ``w ← A_n w A_eᵀ`` with ``A = exp(v/2 · L)``, ``L`` the
+   second-difference matrix and ``v = D/cell²``: non-negative, mass-conserving, of
+   variance exactly ``v`` (away from the edges) for any ``v`` (closed form in the
+   cosine basis that diagonalises ``L``). **Boundary**: zero-flux (reflecting) edges,
+   no mass lost; ``status`` flags ``grid_edge`` when more than 1e-3 of the mass sits
+   in the outermost cells, and the estimate is then unreliable.
+3. **Re-centring**: when the mean is a cell or more from the grid's centre, the
+   weights are shifted by whole cells (folded into ``A``), provided the cells pushed
+   off the far edge hold less than 1e-5 of the mass.
+
+**Pending between readings.** Spreads compose (``A(v₁) A(v₂) = A(v₁ + v₂)``) and the
+per-cell models are affine and the same in every cell, so ``predict`` only moves the
+centre, predicts the Gaussian part and adds to :attr:`PMFState.pending`; the cells are
+spread once, when a reading comes (``update``) or on ``settle``. Its reported moments
+are the grid's without the edges' reflection (tested against the settled grid).
+With a reading every ``k`` steps (``run_filter(..., every=k)``) the grid is touched once
+per reading, not ``k`` times.
 
 The Gaussian part is predicted with the Kalman equations, and the per-cell bias
 moments are mixed through the same kernel (moment matching). The update
@@ -65,8 +71,6 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import inv_2x2
-from jaxgrav.constants import DEG
-from jaxgrav.fields.pointmass import PointMasses
 from jaxgrav.filters.model import (
     STATUS_FILTER,
     Dynamics,
@@ -77,19 +81,23 @@ from jaxgrav.filters.model import (
 from jaxgrav.filters.pmf_cells import (
     PMFState,
     cell_fields,
+    cell_values,
     check_adaptive,
-    diffusion_kernel,
     global_moments,
     grid_moments,
     mix_cells,
-    point_mass_cells,
     regrid_cells,
-    shift_axis,
     wanted_cell,
     with_cells,
 )
 from jaxgrav.filters.pmf_linear import conditional_reading, mixture_update
-from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.filters.pmf_predict import (
+    affine_cells,
+    compose_pending,
+    diffusion_kernel,
+    no_pending,
+    shifted_kernel,
+)
 from jaxgrav.sim.ins import GRAV, N_STATES, INSErrorModel, transition
 
 __all__ = ["PMFDynamics", "PMFFilter", "PMFState", "diffusion_kernel", "pmf", "run_pmf"]
@@ -103,7 +111,7 @@ KEEP_WEIGHT = 1e-3
 RECENTRE_LOSS = 1e-5
 """Re-centring may push at most this mass off the grid."""
 _DEFAULT_INS = INSErrorModel()
-_TINY = 1e-13  # cells below this fraction of the peak weight take the global bias moments
+_TINY = 1e-13  # cells below this fraction of the total weight take the global bias moments
 
 
 PMFDynamics = Dynamics
@@ -121,13 +129,16 @@ class PMFFilter(NamedTuple):
     ``dynamics(lat, dt) -> Dynamics`` is the error model over a step of ``dt`` seconds at a
     latitude, with ``dt`` filled in (the filter's random-walk spread needs it). The
     ``dynamics`` argument of ``update`` and ``predict`` may also be a scalar ``dt``: a
-    pure random walk of density ``q_pos``, no error model.
+    pure random walk of density ``q_pos``, no error model. ``settle(state) -> state``
+    applies a pending prediction to the cells (``predict`` leaves it pending; ``update``
+    settles before the reading).
     """
 
     init: Callable
     update: Callable
     predict: Callable
     dynamics: Callable
+    settle: Callable | None = None
 
 
 def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
@@ -201,7 +212,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
                      jnp.full(shape, p0[GRAV, e]))
         size = None if adapt_span is None else jnp.full(2, cell_m, x0.dtype)
         state = PMFState(w, jnp.full(shape, x0[GRAV]), jnp.full(shape, p0[GRAV, GRAV]), centre,
-                         x0[:N_STATES], p0[:N_STATES, :N_STATES], *extra, cell=size)
+                         x0[:N_STATES], p0[:N_STATES, :N_STATES], *extra, cell=size,
+                         pending=no_pending(x0.dtype))
         return _sync(state, *grid_moments(w, dn, de, cell_m))
 
     def _n_map_states(n):
@@ -225,25 +237,11 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return Dynamics(jnp.eye(N_STATES, dtype=dt.dtype), jnp.zeros((N_STATES,) * 2, dt.dtype),
                         dt)
 
-    def _recentre(state):
-        mean = state.x[:2]
-        size = _size(state)
-        k = jnp.round((mean - state.centre) / size).astype(jnp.int32)
-        k = jnp.clip(k, -(n_cells - 1), n_cells - 1)
-        cell = cell_fields(state)
-        arrays = (state.w, *cell)
-        fills = (0.0, *global_moments(state.w, cell))
-        for axis in (0, 1):
-            arrays = tuple(shift_axis(a, k[axis], fill, axis)
-                           for a, fill in zip(arrays, fills, strict=True))
-        kept = arrays[0].sum()
-        ok = kept > 1.0 - RECENTRE_LOSS
-        w, *cell = (jnp.where(ok, a, b) for a, b in zip(arrays, (state.w, *cell), strict=True))
-        w = jnp.where(ok, w / kept, w)
-        centre = jnp.where(ok, state.centre + k * size, state.centre)
-        return with_cells(state._replace(w=w, centre=centre), cell)
+    def _advance(state, dyn):
+        """The prediction over a step, left pending on the cells (no grid work).
 
-    def _predict(state, dyn):
+        Returns the state and the step's spread variance (m², north and east).
+        """
         if not isinstance(dyn, Dynamics):
             dyn = _random_walk(dyn)
         if dyn.dt is None:
@@ -255,8 +253,6 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
                              f"but its state {N_STATES + int(has_err)}: augment the dynamics "
                              "and the prior with the same map-error state")
         e = N_STATES
-        phi, qe = (dyn.f[e, e], dyn.q[e, e]) if has_err else (None, None)
-        state = _recentre(state)
         x, p = state.x, state.p
         f, q = dyn.f[:N_STATES, :N_STATES], dyn.q[:N_STATES, :N_STATES]
         x_new = f @ x
@@ -264,18 +260,32 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         # the grid spreads by the growth of the position variance that the error model
         # predicts (conditional noise plus the coherent growth from the velocity error)
         spread = jnp.maximum(jnp.diagonal(p_new[:2, :2] - p[:2, :2]), 0.0) + q_pos * dyn.dt
-        centre = state.centre + (x_new[:2] - x[:2])
-        size = (cell_m, cell_m) if state.cell is None else state.cell  # per axis
-        a_n, a_e = (diffusion_kernel(n_cells, spread[k] / size[k] ** 2) for k in (0, 1))
-        m0, s0 = state.bias_mean, state.bias_var
-        # per-cell bias: its own (scalar) error model, then moment matching through the kernel
-        fb, qb = f[GRAV, GRAV], q[GRAV, GRAV]
-        cell0 = [fb * m0, fb**2 * s0 + qb]
-        if has_err:
-            em, ev, ec = state.err_mean, state.err_var, state.err_cross
-            cell0 += [phi * em, phi**2 * ev + qe, fb * phi * ec]
-        w, cell = mix_cells(a_n, a_e, state.w, cell0, _TINY)
-        state = PMFState(w, *cell[:2], centre, x_new, 0.5 * (p_new + p_new.T), cell=state.cell)
+        pending = no_pending(x.dtype) if state.pending is None else state.pending
+        err = (dyn.f[e, e], dyn.q[e, e]) if has_err else ()
+        pending = compose_pending(pending, spread, f[GRAV, GRAV], q[GRAV, GRAV], *err)
+        state = state._replace(centre=state.centre + (x_new[:2] - x[:2]), x=x_new,
+                               p=0.5 * (p_new + p_new.T), pending=pending)
+        return state, spread
+
+    def settle(state):
+        """Apply the pending prediction: re-centre, spread, the per-cell models; re-size."""
+        if state.pending is None:
+            return state
+        pending = state.pending
+        size = jnp.broadcast_to(jnp.asarray(_size(state), state.x.dtype), (2,))
+        # re-centre on the mean by whole cells, unless the cells pushed off hold mass
+        k = jnp.round((state.x[:2] - state.centre) / size).astype(jnp.int32)
+        k = jnp.clip(k, -(n_cells - 1), n_cells - 1)
+        kept = [(jnp.arange(n_cells) - k[a] >= 0) & (jnp.arange(n_cells) - k[a] < n_cells)
+                for a in (0, 1)]  # old cells that stay on the grid
+        ok = kept[0].astype(state.w.dtype) @ state.w @ kept[1].astype(state.w.dtype) > (
+            1.0 - RECENTRE_LOSS)
+        k = jnp.where(ok, k, 0)
+        a_n, a_e = (shifted_kernel(n_cells, pending[a] / size[a] ** 2, k[a]) for a in (0, 1))
+        w, cell = mix_cells(a_n, a_e, state.w, affine_cells(cell_fields(state), pending),
+                            _TINY)
+        state = state._replace(w=w, centre=state.centre + k * size,
+                               pending=no_pending(pending.dtype))
         state = with_cells(state, cell)
         return state if adapt_span is None else _regrid(state)
 
@@ -301,7 +311,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return state._replace(x=x, p=0.5 * (p + p.T))
 
     def _info(state, mean, cov, innovation, innovation_var, flags):
-        glob = global_moments(state.w, cell_fields(state))
+        glob = affine_cells(global_moments(state.w, cell_fields(state)), state.pending)
         x = state.x.at[GRAV].set(glob[0])
         sigma = jnp.sqrt(jnp.maximum(jnp.diagonal(state.p), 0.0)).at[GRAV].set(
             jnp.sqrt(glob[1]))
@@ -315,36 +325,25 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
 
     def predict(state, step, field, dynamics):
         del field
-        state = _predict(state, dynamics)
-        dn, de = cells(state.centre, state.cell)
-        mean, cov = grid_moments(state.w, dn, de, _size(state))
-        state = _sync(state, mean, cov, mean)  # the grid's own edge effects move no velocity
+        cov = state.p[:2, :2]  # the grid's covariance, as the last step left it
+        state, spread = _advance(state, dynamics)
+        # the pending spread keeps the weights' mean (moved with the centre) and adds its
+        # variance: the grid's moments without touching the grid (edge effects aside)
+        mean, cov = state.x[:2], cov + jnp.diag(spread)
+        state = _sync(state, mean, cov, mean)
         nan = jnp.full((), jnp.nan, state.x.dtype)
         flags = STATUS_FILTER["no_reading"] | jnp.where(
             jnp.isfinite(step.z), STATUS_FILTER["reading_ignored"], 0)
         return state, _info(state, mean, cov, nan, nan, flags)
 
-    def _cell_values(field, step, dn, de):
-        if measurement is gravity_measurement and isinstance(field, PointMasses):
-            # the cells' true latitudes depend on the row only, longitudes on the column only
-            lat = step.lat - dn[:, :1] / meridian_radius(step.lat) / DEG
-            east = prime_vertical_radius(step.lat) * jnp.cos(step.lat * DEG)
-            return point_mass_cells(field, lat, step.lon - de[:1, :] / east / DEG)
-        x = jnp.zeros(N_STATES, dn.dtype)
-
-        def one(a, b):
-            return measurement(field, x.at[0].set(a).at[1].set(b), step.lat, step.lon)
-
-        return jax.vmap(jax.vmap(one))(dn, de)
-
     def update(state, step, field, dynamics):
-        state = _predict(state, dynamics)
+        state = settle(_advance(state, dynamics)[0])
         w, m, s = state.w, state.bias_mean, state.bias_var
         dn, de = cells(state.centre, state.cell)
         prior_mean, _ = grid_moments(w, dn, de, _size(state))
 
         has = jnp.isfinite(step.z)
-        g = _cell_values(field, step, dn, de)
+        g = cell_values(field, step, dn, de, measurement)
         on_map = jnp.isfinite(g)
         has_err = state.err_mean is not None
         if has_err:
@@ -394,7 +393,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return state, _info(state, mean, cov, jnp.where(has, step.z - z_hat, jnp.nan),
                             jnp.where(has, z_var, jnp.nan), flags)
 
-    return PMFFilter(init, update, predict, dynamics)
+    return PMFFilter(init, update, predict, dynamics, settle)
 
 
 def run_pmf(filt, field, dt, x0, p0, steps, every=1):

@@ -1,8 +1,8 @@
-"""The point-mass filter's cell grid: diffusion kernel, moments, per-cell Gaussians.
+"""The point-mass filter's cell grid: its state, moments, map values, per-cell Gaussians.
 
-Helpers of :mod:`jaxgrav.filters.pmf`: the zero-flux diffusion kernel of its prediction,
-the grid's position moments, whole-cell shifts, the point-mass anomaly on a separable
-cell grid, and the per-cell Gaussians (the gravimeter bias and, optionally, a map error
+Helpers of :mod:`jaxgrav.filters.pmf`: its state, the grid's position moments, the map
+values of the cells (the point-mass anomaly on a separable cell grid), and the per-cell
+Gaussians (the gravimeter bias and, optionally, a map error
 with its covariance with the bias) with their mixture moments.
 """
 
@@ -14,18 +14,21 @@ import jax.numpy as jnp
 from jaxgrav import constants
 from jaxgrav._fusion import computed_once
 from jaxgrav._validate import concrete
-from jaxgrav.geodesy import enu_basis, geodetic_to_ecef
+from jaxgrav.constants import DEG
+from jaxgrav.fields.pointmass import PointMasses
+from jaxgrav.filters.model import gravity_measurement
+from jaxgrav.geodesy import enu_basis, geodetic_to_ecef, meridian_radius, prime_vertical_radius
+from jaxgrav.sim.ins import N_STATES
 
 __all__ = [
     "PMFState",
     "cell_fields",
-    "diffusion_kernel",
+    "cell_values",
     "global_moments",
     "grid_moments",
     "mix_cells",
     "point_mass_cells",
     "regrid_matrix",
-    "shift_axis",
     "with_cells",
 ]
 
@@ -52,6 +55,12 @@ class PMFState(NamedTuple):
     cell : Array, shape ``(2,)``, or None
         Cell size (m, north and east) of an adaptive grid; None: the filter's fixed
         ``cell_m``.
+    pending : Array, shape ``(6,)``, or None
+        The prediction not yet applied to the cells (:func:`compose_pending`): spread
+        variance north and east (m²), then the per-cell bias model's factor and noise
+        variance (mGal²) and the map error's; None: nothing pending. ``w`` and the
+        per-cell arrays are the grid as it was when last settled; ``centre``, ``x``
+        and ``p`` are always up to date.
     """
 
     w: jax.Array
@@ -64,44 +73,23 @@ class PMFState(NamedTuple):
     err_var: jax.Array | None = None
     err_cross: jax.Array | None = None
     cell: jax.Array | None = None
-
-
-def _neumann_basis(n):
-    """Orthonormal cosine basis and eigenvalues of the zero-flux second difference on n cells."""
-    i = jnp.arange(n)[:, None] + 0.5
-    k = jnp.arange(n)[None, :]
-    v = jnp.cos(jnp.pi * k * i / n) * jnp.where(k == 0, jnp.sqrt(1.0 / n), jnp.sqrt(2.0 / n))
-    lam = -4.0 * jnp.sin(jnp.pi * jnp.arange(n) / (2 * n)) ** 2
-    return v, lam
-
-
-def diffusion_kernel(n, v):
-    """Diffusion kernel ``exp(v/2 · L)`` on ``n`` cells with zero-flux edges.
-
-    Parameters
-    ----------
-    n : int
-        Cells (static).
-    v : Array, shape ``()``
-        Variance of the spread in cells² (any ``v ≥ 0``).
-
-    Returns
-    -------
-    Array, shape ``(n, n)``
-        ``A[i, j]``: share of cell ``j``'s mass that moves to cell ``i``. Entries
-        are ``≥ 0`` (round-off negatives clipped) and each column sums to 1.
-    """
-    basis, lam = _neumann_basis(n)
-    a = (basis * jnp.exp(0.5 * jnp.maximum(v, 0.0) * lam)) @ basis.T
-    a = jnp.maximum(a, 0.0)
-    return a / a.sum(0, keepdims=True)
+    pending: jax.Array | None = None
 
 
 def grid_moments(w, dn, de, cell_m):
-    mean = jnp.array([jnp.sum(w * dn), jnp.sum(w * de)])
-    cn, ce = dn - mean[0], de - mean[1]
-    cne = jnp.sum(w * cn * ce)
-    cov = jnp.array([[jnp.sum(w * cn * cn), cne], [cne, jnp.sum(w * ce * ce)]])
+    """Mean and covariance (m, m²) of the weights over the cells' position errors.
+
+    ``dn``, ``de`` are an ``ij`` meshgrid (north constant along a row, east along a
+    column), so the moments come from the weights' row and column sums and one
+    matrix-vector product (three passes over the cells, not five); the covariance
+    includes each cell's own ``cell_m²/12``.
+    """
+    north, east = dn[:, 0], de[0, :]
+    rows, cols = w.sum(1), w.sum(0)
+    mean = jnp.stack([rows @ north, cols @ east])
+    cn, ce = north - mean[0], east - mean[1]
+    cne = cn @ w @ ce
+    cov = jnp.array([[rows @ cn**2, cne], [cne, cols @ ce**2]])
     return mean, cov + jnp.eye(2) * cell_m**2 / 12.0
 
 
@@ -126,16 +114,6 @@ def with_cells(state, cell):
     """``state`` with the per-cell arrays of :func:`cell_fields` replaced."""
     names = ("bias_mean", "bias_var", "err_mean", "err_var", "err_cross")
     return state._replace(**dict(zip(names, cell, strict=False)))
-
-
-def shift_axis(a, k, fill, axis):
-    """``a`` shifted by ``k`` cells along ``axis`` (``out[i] = a[i + k]``), ``fill`` outside."""
-    n = a.shape[axis]
-    idx = jnp.arange(n) + k
-    ok = (idx >= 0) & (idx < n)
-    out = jnp.take(a, jnp.clip(idx, 0, n - 1), axis=axis)
-    ok = ok[:, None] if axis == 0 else ok[None, :]
-    return jnp.where(ok, out, fill)
 
 
 def point_mass_cells(masses, lat, lon):
@@ -166,12 +144,34 @@ def point_mass_cells(masses, lat, lon):
     return g
 
 
+def cell_values(field, step, dn, de, measurement):
+    """The reading each cell predicts, ``(G, G)`` (mGal): the map at the INS position
+    minus the cell's position error (``dn``, ``de``: an ``ij`` meshgrid, m).
+
+    ``measurement(field, x, lat, lon)`` with ``x`` holding the cell's offset and zero
+    bias; paper D's point masses with the library's measurement take the separable path
+    of :func:`point_mass_cells`.
+    """
+    if measurement is gravity_measurement and isinstance(field, PointMasses):
+        # the cells' true latitudes depend on the row only, longitudes on the column only
+        lat = step.lat - dn[:, :1] / meridian_radius(step.lat) / DEG
+        east = prime_vertical_radius(step.lat) * jnp.cos(step.lat * DEG)
+        return point_mass_cells(field, lat, step.lon - de[:1, :] / east / DEG)
+    x = jnp.zeros(N_STATES, dn.dtype)
+
+    def one(a, b):
+        return measurement(field, x.at[0].set(a).at[1].set(b), step.lat, step.lon)
+
+    return jax.vmap(jax.vmap(one))(dn, de)
+
+
 def mix_cells(a_n, a_e, w0, cell0, tiny=1e-13):
     """Weights and per-cell Gaussians carried through the separable kernels ``a_n``, ``a_e``.
 
     ``w = a_n w0 a_eᵀ`` and each cell's moments matched from the mixed channels
     ``w·m``, ``w·(s + m²)`` (and, with a map error, its mean, variance and covariance
-    with the bias); a cell below ``tiny`` of the peak weight takes the global moments.
+    with the bias); a cell below ``tiny`` of the total weight (where the channels are
+    rounding noise) takes the global moments.
 
     Parameters
     ----------
@@ -196,7 +196,8 @@ def mix_cells(a_n, a_e, w0, cell0, tiny=1e-13):
         chans += [w0 * em, w0 * (ev + em**2), w0 * (ec + m0 * em)]
     w, wm, wm2, *we = jnp.einsum("ij,cjk,lk->cil", a_n, jnp.stack(chans), a_e)
     glob = global_moments(w0, cell0)
-    small = w <= tiny * w.max()
+    total = w.sum()
+    small = w <= tiny * total  # the channels' rounding is relative to the total mass
     safe = jnp.where(small, 1.0, w)
     m = jnp.where(small, glob[0], wm / safe)
     s = jnp.where(small, glob[1], jnp.clip(wm2 / safe - m**2, 1e-12, None))
@@ -208,7 +209,7 @@ def mix_cells(a_n, a_e, w0, cell0, tiny=1e-13):
         # keep each cell's 2 x 2 covariance positive semi-definite after round-off
         lim = jnp.sqrt(s * ev)
         cell += [em, ev, jnp.clip(ec, -lim, lim)]
-    return w / w.sum(), cell
+    return w / total, cell
 
 
 def regrid_matrix(old_centre, old_cell, new_centre, new_cell, n):
