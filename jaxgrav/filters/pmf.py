@@ -37,7 +37,8 @@ Prediction over a step (:func:`pmf`'s ``predict``), from the linear error model
 per-cell models are affine and the same in every cell, so ``predict`` only moves the
 centre, predicts the Gaussian part and adds to :attr:`PMFState.pending`; the cells are
 spread once, when a reading comes (``update``) or on ``settle``. Its reported moments
-are the grid's without the edges' reflection (tested against the settled grid).
+are the grid's without the edges' reflection (tested against the settled grid); its
+``grid_edge`` flag is the last settled grid's.
 With a reading every ``k`` steps (``run_filter(..., every=k)``) the grid is touched once
 per reading, not ``k`` times.
 
@@ -184,6 +185,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         min_cell_m = cell_m / 4 if min_cell_m is None else min_cell_m
         max_cell_m = cell_m * 8 if max_cell_m is None else max_cell_m
         check_adaptive(adapt_span, min_cell_m, max_cell_m)
+    span_m = (n_cells - 1) * (cell_m if adapt_span is None else max_cell_m)  # cells' extent
 
     def _size(state):
         return cell_m if state.cell is None else state.cell
@@ -343,7 +345,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         prior_mean, _ = grid_moments(w, dn, de, _size(state))
 
         has = jnp.isfinite(step.z)
-        g = cell_values(field, step, dn, de, measurement)
+        g = cell_values(field, step, dn, de, measurement, span_m)
         on_map = jnp.isfinite(g)
         has_err = state.err_mean is not None
         if has_err:

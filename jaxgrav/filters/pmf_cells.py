@@ -6,6 +6,7 @@ Gaussians (the gravimeter bias and, optionally, a map error
 with its covariance with the bias) with their mixture moments.
 """
 
+import math
 from typing import NamedTuple
 
 import jax
@@ -14,10 +15,12 @@ import jax.numpy as jnp
 from jaxgrav import constants
 from jaxgrav._fusion import computed_once
 from jaxgrav._validate import concrete
-from jaxgrav.constants import DEG
+from jaxgrav.constants import DEG, WGS84_A, WGS84_E2
 from jaxgrav.fields.pointmass import PointMasses
 from jaxgrav.filters.model import gravity_measurement
 from jaxgrav.geodesy import enu_basis, geodetic_to_ecef, meridian_radius, prime_vertical_radius
+from jaxgrav.lattice import lattice_values
+from jaxgrav.prepared import PreparedMap
 from jaxgrav.sim.ins import N_STATES
 
 __all__ = [
@@ -26,6 +29,7 @@ __all__ = [
     "cell_values",
     "global_moments",
     "grid_moments",
+    "lattice_block",
     "mix_cells",
     "point_mass_cells",
     "regrid_matrix",
@@ -144,25 +148,62 @@ def point_mass_cells(masses, lat, lon):
     return g
 
 
-def cell_values(field, step, dn, de, measurement):
+def cell_values(field, step, dn, de, measurement, span_m=None):
     """The reading each cell predicts, ``(G, G)`` (mGal): the map at the INS position
     minus the cell's position error (``dn``, ``de``: an ``ij`` meshgrid, m).
 
     ``measurement(field, x, lat, lon)`` with ``x`` holding the cell's offset and zero
-    bias; paper D's point masses with the library's measurement take the separable path
-    of :func:`point_mass_cells`.
+    bias. With the library's measurement the cells' true latitudes depend on the row
+    only and their longitudes on the column only, which two fast paths use: paper D's
+    point masses (:func:`point_mass_cells`), and a prepared map (a Grid, as
+    :func:`~jaxgrav.filters.model.run_filter` passes it) evaluated separably on the
+    cells' lattice (:func:`jaxgrav.lattice.lattice_values`, a block of map nodes of
+    static size from ``span_m``, the largest extent of the cells per axis in metres;
+    equal to point-by-point bicubic sampling, NaN off the map and in cells with a
+    missing node; tested). Otherwise, or when the block would not fit the map, the
+    cells are sampled one by one.
     """
-    if measurement is gravity_measurement and isinstance(field, PointMasses):
-        # the cells' true latitudes depend on the row only, longitudes on the column only
-        lat = step.lat - dn[:, :1] / meridian_radius(step.lat) / DEG
+    if measurement is gravity_measurement and isinstance(field, (PointMasses, PreparedMap)):
+        lat = step.lat - dn[:, 0] / meridian_radius(step.lat) / DEG
         east = prime_vertical_radius(step.lat) * jnp.cos(step.lat * DEG)
-        return point_mass_cells(field, lat, step.lon - de[:1, :] / east / DEG)
+        lon = step.lon - de[0, :] / east / DEG
+        if isinstance(field, PointMasses):
+            return point_mass_cells(field, lat[:, None], lon[None, :])
+        block = lattice_block(field.grid, span_m)
+        if block is not None:
+            # the lattice ascends (north offsets ascend, so latitudes descend)
+            iy, _ = field.grid.fractional_index(lat[::-1], step.lon)
+            _, ix = field.grid.fractional_index(step.lat, lon[::-1])
+            v, in_y, in_x = lattice_values(field.interleaved(), iy[None], ix[None], block,
+                                           nan_cells=True)
+            v = jnp.where(in_y[0][:, None] & in_x[0][None, :], v[0], jnp.nan)
+            return v[::-1, ::-1]
     x = jnp.zeros(N_STATES, dn.dtype)
 
     def one(a, b):
         return measurement(field, x.at[0].set(a).at[1].set(b), step.lat, step.lon)
 
     return jax.vmap(jax.vmap(one))(dn, de)
+
+
+def lattice_block(grid, span_m, largest=64):
+    """Nodes per axis of a map block that holds any lattice of cells spanning ``span_m``
+    metres per axis (static), or None when there is none (no ``span_m``, a map global in
+    longitude, within 1° of a pole, or a block larger than ``largest`` or the map).
+
+    Bounds: a row spans at least ``a (1 − e²) · dlat`` (the meridian radius's minimum),
+    a column at least ``a cos φ_max · dlon`` at the map's highest latitude.
+    """
+    span_m = None if span_m is None else concrete(span_m)
+    if span_m is None or span_m.dtype == object or grid.nx * grid.dlon >= 359.0:
+        return None
+    top = max(abs(grid.lat0), abs(grid.lat0 + (grid.ny - 1) * grid.dlat))
+    if top >= 89.0:
+        return None
+    row_m = WGS84_A * (1.0 - WGS84_E2) * grid.dlat * DEG
+    col_m = WGS84_A * math.cos(top * DEG) * grid.dlon * DEG
+    block = math.ceil(float(span_m) / min(row_m, col_m)) + 3
+    return block if block <= min(largest, grid.ny, grid.nx) else None
 
 
 def mix_cells(a_n, a_e, w0, cell0, tiny=1e-13):

@@ -15,7 +15,7 @@ clamped to the searched square (``±half_size · spacing_m`` per axis).
 Work is done in local metres about the track's centroid and in fractional map
 indices, which keeps float32 accurate. For one fix the shifted positions form a
 regular lattice of map indices, so the map under all candidates is evaluated
-separably (:mod:`~jaxgrav.match.offsets`, :mod:`~jaxgrav.match.lattice`: a few
+separably (:mod:`~jaxgrav.match.offsets`, :mod:`~jaxgrav.lattice`: a few
 short reads of spline coefficients and one small matrix product per fix) rather
 than point by point; the block of map nodes this reads has a static size
 (``DenseConfig.lattice_block``, or a larger one when the offsets span more cells),
@@ -41,11 +41,11 @@ import jax.numpy as jnp
 from jaxgrav import interp
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m
+from jaxgrav.lattice import patch_values
 from jaxgrav.match.dense_config import DenseConfig
 from jaxgrav.match.gaps import gap_score, gap_whitener, gls_gap_score
 from jaxgrav.match.gls import gls_dof, gls_score, gls_whitener, track_covariance
 from jaxgrav.match.integrity import fix_quality
-from jaxgrav.match.lattice import patch_values
 from jaxgrav.match.offsets import means, offset_scores, shifted_tracks, track_frame
 from jaxgrav.match.refine import (
     gauss_newton,
@@ -82,7 +82,7 @@ def lattice_table(grid, method="bicubic"):
     Array
         ``bicubic``: the not-a-knot spline coefficients
         (:func:`jaxgrav.interp.bicubic_coefficients`) interleaved into one
-        ``(2·ny, 2·nx)`` table (:func:`jaxgrav.match.lattice.interleave`);
+        ``(2·ny, 2·nx)`` table (:func:`jaxgrav.lattice.interleave`);
         ``bilinear``: the node values ``(ny, nx)``.
     """
     interp.check_method(method)

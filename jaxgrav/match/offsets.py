@@ -4,7 +4,7 @@ Works in the frame of :func:`~jaxgrav.match.offsets.shifted_tracks` expressed in
 indices (:func:`track_frame`): a fix turned and shifted to local ``(north, east)``
 metres about the track's centroid lies at a fractional map index that is linear in
 them. For one fix the shifted positions over the offset grid are then a regular
-lattice of map indices, evaluated separably (:func:`jaxgrav.match.lattice.lattice_values`)
+lattice of map indices, evaluated separably (:func:`jaxgrav.lattice.lattice_values`)
 from a block of map nodes of static size; :func:`offset_scores` picks the smallest
 block that fits at run time (a branch that depends on the map and the config only,
 so it stays one branch under ``vmap`` over tracks), or samples every shifted fix on
@@ -16,9 +16,9 @@ import jax.numpy as jnp
 
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
+from jaxgrav.lattice import lattice_values, patch_values
 from jaxgrav.match.gaps import gap_score, gls_gap_score
 from jaxgrav.match.gls import gls_score
-from jaxgrav.match.lattice import lattice_values, patch_values
 from jaxgrav.match.scoring import score_track, sums
 
 __all__ = ["lattice_scores", "means", "offset_scores", "shifted_tracks", "track_frame"]

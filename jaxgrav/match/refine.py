@@ -13,7 +13,7 @@ few element-wise operations per step rather than per-track LAPACK calls.
 import jax
 import jax.numpy as jnp
 
-from jaxgrav.match.lattice import computed_once, patch_values
+from jaxgrav.lattice import computed_once, patch_values
 from jaxgrav.match.scoring import sums
 
 __all__ = ["gauss_newton", "gls_residual_function", "laplace_covariance", "residual_function",
