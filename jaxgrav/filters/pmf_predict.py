@@ -81,7 +81,8 @@ def compose_pending(pending, spread, fb, qb, phi=1.0, qe=0.0):
     ``exp(v/2 · L)``); the per-cell scalar models are affine and the same for every
     cell, so they commute with the mixing and compose: ``m ← f₂ f₁ m``,
     ``s ← f₂² (f₁² s + q₁) + q₂``. A prediction over several steps is therefore applied
-    to the cells once, exactly (up to the clamps of :func:`mix_cells`).
+    to the cells once, exactly (up to the clamps of
+    :func:`~jaxgrav.filters.pmf_cells.mix_cells`).
 
     Parameters
     ----------
@@ -108,12 +109,12 @@ def affine_cells(cell, pending):
 
     ``m ← f m``, ``s ← f² s + q`` for the bias; with a map error likewise ``ε ← φ ε``
     and the cross covariance ``c ← f φ c``. The same on the mixture's moments
-    (:func:`global_moments`), since every cell takes the same map.
+    (:func:`~jaxgrav.filters.pmf_cells.global_moments`), since every cell takes the same map.
 
     Parameters
     ----------
     cell : list of Array
-        In :func:`cell_fields` order.
+        In :func:`~jaxgrav.filters.pmf_cells.cell_fields` order.
     pending : Array, shape ``(6,)``, or None
         None: unchanged.
     """
