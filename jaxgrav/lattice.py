@@ -32,7 +32,7 @@ import jax.numpy as jnp
 from jaxgrav import interp
 from jaxgrav._fusion import computed_once
 
-__all__ = ["computed_once", "interleave", "lattice_values", "patch_values"]
+__all__ = ["interleave", "lattice_values", "patch_values"]
 
 
 def interleave(coefficients):

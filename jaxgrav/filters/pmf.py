@@ -10,8 +10,8 @@ posterior of the position error ``(d_n, d_e)`` is on ``G × G`` cells; the rest 
   position shared by all cells (one ``13 × 13`` mean and covariance in the state,
   whose position block is the grid's mean and covariance).
 
-Prediction over a step (:func:`pmf`'s ``predict``), from the linear error model
-``x ← F x + w``:
+Prediction, from the linear error model ``x ← F x + w`` (each step moves the
+origin and adds to the pending spread; ``settle`` applies the spread to the cells, below):
 
 1. **Drift**: the grid is translated by the mean drift the error model predicts,
    ``s = (F x̄ − x̄)_pos`` (the INS error's Schuler-coupled drift from the estimated
@@ -29,18 +29,20 @@ Prediction over a step (:func:`pmf`'s ``predict``), from the linear error model
    cosine basis that diagonalises ``L``). **Boundary**: zero-flux (reflecting) edges,
    no mass lost; ``status`` flags ``grid_edge`` when more than 1e-3 of the mass sits
    in the outermost cells, and the estimate is then unreliable.
-3. **Re-centring**: when the mean is a cell or more from the grid's centre, the
-   weights are shifted by whole cells (folded into ``A``), provided the cells pushed
-   off the far edge hold less than 1e-5 of the mass.
+3. **Re-centring** (applied before the spread, folded into ``A``): when the mean is
+   half a cell or more from the grid's centre, the weights are shifted by whole cells,
+   provided the cells pushed off the far edge hold less than 1e-5 of the mass.
 
 **Pending between readings.** Spreads compose (``A(v₁) A(v₂) = A(v₁ + v₂)``) and the
 per-cell models are affine and the same in every cell, so ``predict`` only moves the
 centre, predicts the Gaussian part and adds to :attr:`PMFState.pending`; the cells are
-spread once, when a reading comes (``update``) or on ``settle``. Its reported moments
-are the grid's without the edges' reflection (tested against the settled grid); its
-``grid_edge`` flag is the last settled grid's.
-With a reading every ``k`` steps (``run_filter(..., every=k)``) the grid is touched once
-per reading, not ``k`` times.
+spread once (re-centred, re-sized if adaptive), when a reading comes (``update``) or on
+``settle``. ``predict``'s reported moments are the settled grid's plus the pending drift
+and spread, without the edges' reflection, the re-centring loss or a re-gridding (tested
+against the settled grid); its ``grid_edge`` flag is the last settled grid's, so a grid
+spreading into its edges between readings is flagged at the next reading. With a
+reading every ``k`` steps (``run_filter(..., every=k)``) the cells are spread once per
+reading, not ``k`` times.
 
 The Gaussian part is predicted with the Kalman equations, and the per-cell bias
 moments are mixed through the same kernel (moment matching). The update
@@ -51,7 +53,8 @@ part of the reading, :attr:`Step.h_lin`, each cell's Gaussian takes the reading 
 the state is the mixture's moments: :mod:`~jaxgrav.filters.pmf_linear`). A missing
 reading skips the update; cells off a Grid map get zero likelihood (the update is
 skipped if the whole grid is off the map). The estimate is the posterior mean; its
-position covariance is the grid's plus the cell's own ``cell²/12`` (for NEES).
+position covariance is the grid's plus the cell's own ``cell²/12`` (for NEES; after a
+``predict``, plus the pending spread).
 
 **Map-error state** (Rao–Blackwellised, like the bias). When the prior and the
 dynamics carry one more state after the 13 INS error states — a first-order
@@ -68,10 +71,10 @@ import warnings
 from collections.abc import Callable
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import inv_2x2
+from jaxgrav._validate import concrete
 from jaxgrav.filters.model import (
     STATUS_FILTER,
     Dynamics,
@@ -87,8 +90,8 @@ from jaxgrav.filters.pmf_cells import (
     global_moments,
     grid_moments,
     mix_cells,
-    regrid_cells,
-    wanted_cell,
+    resize_cells,
+    sync_gaussian,
     with_cells,
 )
 from jaxgrav.filters.pmf_linear import conditional_reading, mixture_update
@@ -115,8 +118,7 @@ _DEFAULT_INS = INSErrorModel()
 _TINY = 1e-13  # cells below this fraction of the total weight take the global bias moments
 
 
-PMFDynamics = Dynamics
-"""Kept for one release: a :class:`~jaxgrav.filters.model.Dynamics` with its ``dt``."""
+PMFDynamics = Dynamics  # kept for one release: a Dynamics with its dt
 
 
 class PMFFilter(NamedTuple):
@@ -164,11 +166,11 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         ``h(field, x, lat, lon)``, evaluated with ``x`` holding a cell's offset and
         zero bias.
     adapt_span : float, optional
-        An adaptive grid, first cell ``cell_m``: after each prediction it is re-centred
-        and re-sized to span ``±adapt_span`` σ of the weights per axis (cells within
-        ``[min_cell_m, max_cell_m]``, default ``cell_m/4`` and ``8·cell_m``; see
-        :data:`REGRID_RATIO`, :func:`~jaxgrav.filters.pmf_cells.regrid_cells`). None
-        (default): the fixed grid.
+        An adaptive grid, first cell ``cell_m``: whenever the prediction is settled (each
+        ``update`` or ``settle``) it is re-centred and re-sized to span ``±adapt_span`` σ
+        of the weights per axis (cells within ``[min_cell_m, max_cell_m]``, default
+        ``cell_m/4`` and ``8·cell_m``; see :data:`REGRID_RATIO`,
+        :func:`~jaxgrav.filters.pmf_cells.regrid_cells`). None (default): the fixed grid.
 
     Returns
     -------
@@ -185,7 +187,10 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         min_cell_m = cell_m / 4 if min_cell_m is None else min_cell_m
         max_cell_m = cell_m * 8 if max_cell_m is None else max_cell_m
         check_adaptive(adapt_span, min_cell_m, max_cell_m)
-    span_m = (n_cells - 1) * (cell_m if adapt_span is None else max_cell_m)  # cells' extent
+    # the cells' largest extent (an adaptive grid starts at cell_m, then stays in [min, max]);
+    # None when a size is traced: the cells are then sampled one by one on a map
+    sizes = [concrete(v) for v in ((cell_m,) if adapt_span is None else (cell_m, max_cell_m))]
+    span_m = None if any(v is None for v in sizes) else (n_cells - 1) * max(map(float, sizes))
 
     def _size(state):
         return cell_m if state.cell is None else state.cell
@@ -216,7 +221,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         state = PMFState(w, jnp.full(shape, x0[GRAV]), jnp.full(shape, p0[GRAV, GRAV]), centre,
                          x0[:N_STATES], p0[:N_STATES, :N_STATES], *extra, cell=size,
                          pending=no_pending(x0.dtype))
-        return _sync(state, *grid_moments(w, dn, de, cell_m))
+        return sync_gaussian(state, *grid_moments(w, dn, de, cell_m))
 
     def _n_map_states(n):
         if n == N_STATES:
@@ -270,7 +275,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return state, spread
 
     def settle(state):
-        """Apply the pending prediction: re-centre, spread, the per-cell models; re-size."""
+        """Apply the pending prediction: re-centre, spread, the per-cell models; re-size;
+        then the position moments of ``x``, ``p`` are the grid's."""
         if state.pending is None:
             return state
         pending = state.pending
@@ -289,28 +295,12 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         state = state._replace(w=w, centre=state.centre + k * size,
                                pending=no_pending(pending.dtype))
         state = with_cells(state, cell)
-        return state if adapt_span is None else _regrid(state)
-
-    def _regrid(state):
-        """Cells to span ±adapt_span σ (see REGRID_RATIO)."""
-        c, where = state.cell, cells(state.centre, state.cell)
-        mean, cov = grid_moments(state.w, *where, c)
-        target = jnp.clip(wanted_cell(state.w, where, mean, cov, adapt_span, KEEP_WEIGHT),
-                          min_cell_m, max_cell_m)
-        new = regrid_cells(state, mean, target, _TINY)
-        go = jnp.any(jnp.abs(jnp.log(target / c)) > jnp.log(REGRID_RATIO))
-        return jax.tree.map(lambda a, b: jnp.where(go, a, b), new, state)
-
-    def _sync(state, mean, cov, prior_mean=None):
-        """Gaussian position block := the grid's moments; the rest moves by regression."""
-        x, p = state.x, state.p
-        prior_mean = x[:2] if prior_mean is None else prior_mean
-        k = p[2:, :2] @ inv_2x2(p[:2, :2])
-        x = x.at[2:].add(k @ (mean - prior_mean)).at[:2].set(mean)
-        p_oo = p[2:, 2:] - k @ p[2:, :2].T + k @ cov @ k.T
-        p_op = k @ cov
-        p = jnp.block([[cov, p_op.T], [p_op, p_oo]])
-        return state._replace(x=x, p=0.5 * (p + p.T))
+        if adapt_span is not None:  # cells to span ±adapt_span σ (see REGRID_RATIO)
+            state = resize_cells(state, cells(state.centre, state.cell), adapt_span,
+                                 (min_cell_m, max_cell_m), KEEP_WEIGHT, REGRID_RATIO, _TINY)
+        # the Gaussian part's position block := the spread grid's moments, as predicted
+        mean, cov = grid_moments(state.w, *cells(state.centre, state.cell), _size(state))
+        return sync_gaussian(state, mean, cov, mean)
 
     def _info(state, mean, cov, innovation, innovation_var, flags):
         glob = affine_cells(global_moments(state.w, cell_fields(state)), state.pending)
@@ -332,7 +322,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         # the pending spread keeps the weights' mean (moved with the centre) and adds its
         # variance: the grid's moments without touching the grid (edge effects aside)
         mean, cov = state.x[:2], cov + jnp.diag(spread)
-        state = _sync(state, mean, cov, mean)
+        state = sync_gaussian(state, mean, cov, mean)
         nan = jnp.full((), jnp.nan, state.x.dtype)
         flags = STATUS_FILTER["no_reading"] | jnp.where(
             jnp.isfinite(step.z), STATUS_FILTER["reading_ignored"], 0)
@@ -342,7 +332,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         state = settle(_advance(state, dynamics)[0])
         w, m, s = state.w, state.bias_mean, state.bias_var
         dn, de = cells(state.centre, state.cell)
-        prior_mean, _ = grid_moments(w, dn, de, _size(state))
+        prior_mean = state.x[:2]  # the settled grid's mean
 
         has = jnp.isfinite(step.z)
         g = cell_values(field, step, dn, de, measurement, span_m)
@@ -379,7 +369,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
                                    err_cross=jnp.where(do, ec - gain * cross_e, ec))
         mean, cov = grid_moments(w_new, dn, de, _size(state))
         if lin is None:
-            state = _sync(state, mean, cov, prior_mean)
+            state = sync_gaussian(state, mean, cov, prior_mean)
         else:  # each cell's Gaussian updated by the reading, then the mixture's moments
             x, p = mixture_update(w_new, *lin[2:], jnp.where(do, nu / var, 0.0),
                                   jnp.where(do, jnp.sum(w_new / var), 0.0), mean, cov)

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 
 from jaxgrav import constants
 from jaxgrav._fusion import computed_once
+from jaxgrav._linalg import inv_2x2
 from jaxgrav._validate import concrete
 from jaxgrav.constants import DEG, WGS84_A, WGS84_E2
 from jaxgrav.fields.pointmass import PointMasses
@@ -33,6 +34,8 @@ __all__ = [
     "mix_cells",
     "point_mass_cells",
     "regrid_matrix",
+    "resize_cells",
+    "sync_gaussian",
     "with_cells",
 ]
 
@@ -60,11 +63,13 @@ class PMFState(NamedTuple):
         Cell size (m, north and east) of an adaptive grid; None: the filter's fixed
         ``cell_m``.
     pending : Array, shape ``(6,)``, or None
-        The prediction not yet applied to the cells (:func:`compose_pending`): spread
-        variance north and east (m²), then the per-cell bias model's factor and noise
-        variance (mGal²) and the map error's; None: nothing pending. ``w`` and the
-        per-cell arrays are the grid as it was when last settled; ``centre``, ``x``
-        and ``p`` are always up to date.
+        The prediction not yet applied to the cells
+        (:func:`~jaxgrav.filters.pmf_predict.compose_pending`): spread variance north
+        and east (m²), then the per-cell bias model's factor and noise variance (mGal²)
+        and the map error's; None: nothing pending. ``w`` and the per-cell arrays are
+        the grid as it was when last settled; ``centre`` is current, and ``x``, ``p``
+        hold the predicted moments (the settled grid's position moments plus the
+        pending drift and spread, without the edges' reflection).
     """
 
     w: jax.Array
@@ -95,6 +100,21 @@ def grid_moments(w, dn, de, cell_m):
     cne = cn @ w @ ce
     cov = jnp.array([[rows @ cn**2, cne], [cne, cols @ ce**2]])
     return mean, cov + jnp.eye(2) * cell_m**2 / 12.0
+
+
+def sync_gaussian(state, mean, cov, prior_mean=None):
+    """The Gaussian part's position block set to ``mean``, ``cov`` (the grid's moments);
+    the other states move by their regression on the position,
+    ``m_o ← m_o + K (mean − prior_mean)``, ``K = P_op P_pp⁻¹`` (``prior_mean``
+    default: the current ``x[:2]``)."""
+    x, p = state.x, state.p
+    prior_mean = x[:2] if prior_mean is None else prior_mean
+    k = p[2:, :2] @ inv_2x2(p[:2, :2])
+    x = x.at[2:].add(k @ (mean - prior_mean)).at[:2].set(mean)
+    p_oo = p[2:, 2:] - k @ p[2:, :2].T + k @ cov @ k.T
+    p_op = k @ cov
+    p = jnp.block([[cov, p_op.T], [p_op, p_oo]])
+    return state._replace(x=x, p=0.5 * (p + p.T))
 
 
 def cell_fields(state):
@@ -155,7 +175,8 @@ def cell_values(field, step, dn, de, measurement, span_m=None):
     ``measurement(field, x, lat, lon)`` with ``x`` holding the cell's offset and zero
     bias. With the library's measurement the cells' true latitudes depend on the row
     only and their longitudes on the column only, which two fast paths use: paper D's
-    point masses (:func:`point_mass_cells`), and a prepared map (a Grid, as
+    point masses (:func:`point_mass_cells`), and a
+    :class:`~jaxgrav.prepared.PreparedMap` (a Grid as
     :func:`~jaxgrav.filters.model.run_filter` passes it) evaluated separably on the
     cells' lattice (:func:`jaxgrav.lattice.lattice_values`, a block of map nodes of
     static size from ``span_m``, the largest extent of the cells per axis in metres;
@@ -171,9 +192,12 @@ def cell_values(field, step, dn, de, measurement, span_m=None):
             return point_mass_cells(field, lat[:, None], lon[None, :])
         block = lattice_block(field.grid, span_m)
         if block is not None:
-            # the lattice ascends (north offsets ascend, so latitudes descend)
+            # the lattice ascends (north offsets ascend, so latitudes descend); the
+            # longitudes are wrapped once, at the easternmost cell, then run on linearly
+            # (wrapped one by one, cells across the map's west edge would jump by 360°)
             iy, _ = field.grid.fractional_index(lat[::-1], step.lon)
-            _, ix = field.grid.fractional_index(step.lat, lon[::-1])
+            _, ix_east = field.grid.fractional_index(step.lat, lon[0])
+            ix = ix_east - (lon[0] - lon[::-1]) / field.grid.dlon
             v, in_y, in_x = lattice_values(field.interleaved(), iy[None], ix[None], block,
                                            nan_cells=True)
             v = jnp.where(in_y[0][:, None] & in_x[0][None, :], v[0], jnp.nan)
@@ -192,12 +216,18 @@ def lattice_block(grid, span_m, largest=64):
     longitude, within 1° of a pole, or a block larger than ``largest`` or the map).
 
     Bounds: a row spans at least ``a (1 − e²) · dlat`` (the meridian radius's minimum),
-    a column at least ``a cos φ_max · dlon`` at the map's highest latitude.
+    a column at least ``a cos φ_max · dlon`` at the map's highest latitude plus half the
+    span. :func:`~jaxgrav.lattice.lattice_values` has no run-time check of the span: the
+    caller's cells must never be wider than ``span_m`` allows (the point-mass filter's
+    largest cell, fixed or adaptive, times ``G − 1``).
     """
     span_m = None if span_m is None else concrete(span_m)
     if span_m is None or span_m.dtype == object or grid.nx * grid.dlon >= 359.0:
         return None
     top = max(abs(grid.lat0), abs(grid.lat0 + (grid.ny - 1) * grid.dlat))
+    # the cells' longitudes are converted at the INS latitude, which may lie up to half
+    # the span beyond the map while some cells are on it
+    top += float(span_m) / 2.0 / (WGS84_A * (1.0 - WGS84_E2)) / DEG
     if top >= 89.0:
         return None
     row_m = WGS84_A * (1.0 - WGS84_E2) * grid.dlat * DEG
@@ -295,6 +325,22 @@ def regrid_cells(state, mean, target, tiny=1e-13):
     moved = jnp.stack([jnp.sum(w.sum(1) * i), jnp.sum(w.sum(0) * i)]) * target
     centre = mean - moved
     return with_cells(state._replace(w=w, centre=centre, cell=target), cell)
+
+
+def resize_cells(state, where, span, bounds, keep, ratio, tiny=1e-13):
+    """An adaptive grid re-sized to span ``±span`` σ of its weights (and every cell
+    weighing more than ``keep``), cells clipped to ``bounds`` (m) — only when the wanted
+    cell is off the current one by more than the factor ``ratio`` on either axis.
+
+    ``where``: the cells' position errors ``(dn, de)`` (:func:`regrid_cells`,
+    :func:`wanted_cell`).
+    """
+    c = state.cell
+    mean, cov = grid_moments(state.w, *where, c)
+    target = jnp.clip(wanted_cell(state.w, where, mean, cov, span, keep), *bounds)
+    new = regrid_cells(state, mean, target, tiny)
+    go = jnp.any(jnp.abs(jnp.log(target / c)) > jnp.log(ratio))
+    return jax.tree.map(lambda a, b: jnp.where(go, a, b), new, state)
 
 
 def wanted_cell(w, where, mean, cov, span, keep):

@@ -3,6 +3,7 @@
 This import path is kept: it re-exports the same functions.
 """
 
-from jaxgrav.lattice import computed_once, interleave, lattice_values, patch_values
+from jaxgrav._fusion import computed_once
+from jaxgrav.lattice import interleave, lattice_values, patch_values
 
 __all__ = ["computed_once", "interleave", "lattice_values", "patch_values"]

@@ -13,7 +13,8 @@ few element-wise operations per step rather than per-track LAPACK calls.
 import jax
 import jax.numpy as jnp
 
-from jaxgrav.lattice import computed_once, patch_values
+from jaxgrav._fusion import computed_once
+from jaxgrav.lattice import patch_values
 from jaxgrav.match.scoring import sums
 
 __all__ = ["gauss_newton", "gls_residual_function", "laplace_covariance", "residual_function",

@@ -19,6 +19,7 @@ import scipy.special
 from jaxgrav import filters as fl
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
+from jaxgrav.filters.map_state import augment, map_error_state
 from jaxgrav.filters.pmf import PMFDynamics, diffusion_kernel
 from jaxgrav.scenarios.paper_d import MASS_LON
 from jaxgrav.sim import ins
@@ -171,36 +172,44 @@ def test_prediction_translates_by_the_model_drift_and_spreads_by_its_variance_gr
     np.testing.assert_allclose(float(info.x[0]), np.sum(w * dn[:, None]), atol=0.01)
 
 
-def test_pending_predictions_compose_exactly(prior, dyn):
+@pytest.mark.parametrize("map_error", [False, True])
+def test_pending_predictions_compose_exactly(prior, map_error):
     """Five predictions left pending then settled once are five settled predictions (the
-    spreads add, the per-cell models compose; on a grid whose edges hold no mass), and
-    the moments reported on the way are the settled grid's."""
+    spreads add, the per-cell bias and map-error models and their cross term compose;
+    on a grid whose edges hold no mass), and the moments reported on the way are the
+    settled grid's."""
     filt = fl.pmf(n_cells=41, cell_m=400.0, q_pos=Q_POS)
     x0, p0 = prior
+    dyn = filt.dynamics(LAT, DT)
+    if map_error:  # a first-order map error per cell, correlated with the bias
+        dyn, x0, p0, _ = augment(map_error_state(3.0, 10e3, order=1), dyn, x0, p0, 5.0)
+        p0 = p0.at[12, 13].set(0.3).at[13, 12].set(0.3)
     lazy = eager = init(filt, x0, p0)
     for _ in range(5):
         lazy, info = predict(filt, lazy, dyn)
-        eager, einfo = predict_settled(filt, eager, dyn)
-        np.testing.assert_allclose(np.asarray(info.x), np.asarray(einfo.x), rtol=1e-9,
-                                   atol=1e-9)
+        eager, _ = predict_settled(filt, eager, dyn)
     assert float(lazy.pending[0]) > 0.0  # the cells not touched yet
     settled = jax.jit(filt.settle)(lazy)
     w = np.asarray(eager.w)
     np.testing.assert_allclose(np.asarray(settled.w), w, rtol=1e-8, atol=1e-15)
     big = w > 1e-10
-    for name in ("bias_mean", "bias_var"):
+    names = ("bias_mean", "bias_var") + (("err_mean", "err_var", "err_cross") if map_error
+                                         else ())
+    for name in names:
         np.testing.assert_allclose(np.asarray(getattr(settled, name))[big],
-                                   np.asarray(getattr(eager, name))[big], rtol=1e-9)
-    np.testing.assert_allclose(np.asarray(settled.centre), np.asarray(eager.centre), rtol=1e-12)
-    # the grid's moments are what the pending prediction reported
-    offsets = np.arange(41) - 20.0
-    dn = np.asarray(settled.centre)[0] + offsets * 400.0
-    de = np.asarray(settled.centre)[1] + offsets * 400.0
-    w = np.asarray(settled.w)
-    np.testing.assert_allclose([np.sum(w * dn[:, None]), np.sum(w * de[None, :])],
-                               np.asarray(info.x)[:2], atol=1e-6)
-    var = [np.sum(w * (dn[:, None] - info.x[0]) ** 2), np.sum(w * (de[None, :] - info.x[1]) ** 2)]
-    np.testing.assert_allclose(np.add(var, 400.0**2 / 12), np.diagonal(info.p_pos), rtol=1e-9)
+                                   np.asarray(getattr(eager, name))[big], rtol=1e-9, atol=1e-12)
+    for name in ("centre", "x", "p"):  # settled: x, p hold the grid's position moments
+        np.testing.assert_allclose(np.asarray(getattr(settled, name)),
+                                   np.asarray(getattr(eager, name)), rtol=1e-9, atol=1e-9)
+    # what the pending prediction reported is the settled grid's moments
+    np.testing.assert_allclose(np.asarray(info.x)[:2], np.asarray(settled.x)[:2], atol=1e-6)
+    np.testing.assert_allclose(np.asarray(info.p_pos), np.asarray(settled.p)[:2, :2], rtol=1e-9)
+    ws = np.asarray(settled.w)  # and the per-cell Gaussians' mixture means
+    np.testing.assert_allclose(float(info.x[12]), np.sum(ws * np.asarray(settled.bias_mean)),
+                               rtol=1e-9)
+    if map_error:
+        np.testing.assert_allclose(float(info.x[13]),
+                                   np.sum(ws * np.asarray(settled.err_mean)), atol=1e-12)
 
 
 @pytest.mark.parametrize("dt", [10.0, 5000.0])
@@ -325,10 +334,15 @@ def test_recentres_on_the_posterior_mean():
     x0 = jnp.zeros(ins.N_STATES).at[0].set(1300.0).at[1].set(-900.0)
     p0 = jnp.asarray(ins.initial_covariance(ins.INSErrorModel(), 150.0, 0.01))
     state = init(PMF_RW, x0, p0)
-    new, info = predict_settled(PMF_RW, state, PMF_RW.dynamics(LAT, 1.0))
+    new, _ = predict_settled(PMF_RW, state, PMF_RW.dynamics(LAT, 1.0))
     np.testing.assert_allclose(np.asarray(new.centre), [1200.0, -800.0])  # whole cells
-    np.testing.assert_allclose(np.asarray(info.x)[:2], np.asarray(state.x)[:2], atol=1e-6)
-    assert abs(float(info.x[0]) - 1300.0) < 100.0  # σ = 150 m on 400 m cells
+    # the settled grid keeps its mean (new.x: the settled grid's moments)
+    np.testing.assert_allclose(np.asarray(new.x)[:2], np.asarray(state.x)[:2], atol=1e-3)
+    offsets = (np.arange(G) - (G - 1) / 2) * CELL
+    w = np.asarray(new.w)
+    np.testing.assert_allclose(np.sum(w * (new.centre[0] + offsets)[:, None]),
+                               float(new.x[0]), rtol=1e-12)
+    assert abs(float(new.x[0]) - 1300.0) < 100.0  # σ = 150 m on 400 m cells
     assert float(new.w.sum()) == pytest.approx(1.0, abs=1e-13)
     # a wide posterior is not re-centred: the far edge would lose mass
     wide = init(PMF_RW, x0, jnp.asarray(ins.initial_covariance(ins.INSErrorModel(), 2000.0)))
@@ -368,20 +382,21 @@ def test_adaptive_grid_follows_the_spread():
     wide = fl.pmf(n_cells=61, cell_m=150.0, **walk)
     state, fixed = init(filt, x0, p0), init(wide, x0, p0)
     before = np.asarray(state.x)[:2]  # the 400 m grid's mean (quantised: not 250)
-    state, info = predict_settled(filt, state, DT)
-    # refined, as far as the cells holding mass (> KEEP_WEIGHT) allow
+    state, _ = predict_settled(filt, state, DT)
+    # refined, as far as the cells holding mass (> KEEP_WEIGHT) allow; the moments below
+    # are the settled grids' (settle sets x, p to them)
     assert np.all(np.asarray(state.cell) < 0.75 * CELL)
-    np.testing.assert_allclose(np.asarray(info.x)[:2], before, atol=5.0)
+    np.testing.assert_allclose(np.asarray(state.x)[:2], before, atol=5.0)
     for _ in range(100):
-        state, info = predict_settled(filt, state, DT)
-        fixed, finfo = predict_settled(wide, fixed, DT)
+        state, _ = predict_settled(filt, state, DT)
+        fixed, _ = predict_settled(wide, fixed, DT)
     grown = np.asarray(state.cell)
-    sd = np.sqrt(np.diagonal(np.asarray(info.p_pos)))
+    sd = np.sqrt(np.diagonal(np.asarray(state.p)[:2, :2]))
     assert np.all(grown > CELL) and np.all(sd > 1200.0)
     span = grown * (G - 1) / 2  # re-sized only when off by more than REGRID_RATIO
     assert np.all(span / sd > 3.0 / 1.4) and np.all(span / sd < 3.0 * 1.4), span / sd
-    np.testing.assert_allclose(sd, np.sqrt(np.diagonal(np.asarray(finfo.p_pos))), rtol=0.05)
-    np.testing.assert_allclose(np.asarray(info.x)[:2], before, atol=10.0)  # over the re-griddings
+    np.testing.assert_allclose(sd, np.sqrt(np.diagonal(np.asarray(fixed.p)[:2, :2])), rtol=0.05)
+    np.testing.assert_allclose(np.asarray(state.x)[:2], before, atol=10.0)  # over re-griddings
     assert float(state.w.sum()) == pytest.approx(1.0, abs=1e-12)
 
 

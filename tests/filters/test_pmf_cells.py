@@ -21,15 +21,17 @@ def _cells(n, cell_m, centre=(130.0, -250.0)):
                         indexing="ij")
 
 
-@pytest.mark.parametrize(("n", "cell_m", "lat", "lon"), [
-    (15, 400.0, 30.3, 129.7),     # interior
-    (15, 3200.0, 27.1, 131.2),    # an adaptive grid's widest cells (45 km)
-    (21, 300.0, 24.02, 135.97),   # across the south-east corner: partly off the map
+@pytest.mark.parametrize(("n", "cell_m", "lat", "lon", "hole"), [
+    (15, 400.0, 30.3, 129.7, True),     # interior
+    (15, 3200.0, 27.1, 131.2, True),    # an adaptive grid's widest cells (45 km)
+    (21, 300.0, 24.02, 135.97, True),   # across the south-east corner: partly off the map
+    (21, 300.0, 35.99, 124.01, False),  # across the north-west corner (longitudes wrap west)
 ])
-def test_lattice_cells_equal_pointwise(n, cell_m, lat, lon):
+def test_lattice_cells_equal_pointwise(n, cell_m, lat, lon, hole):
     values = np.asarray(GRID.values).copy()
     iy, ix = int((lat - GRID.lat0) / GRID.dlat), int((lon - GRID.lon0) / GRID.dlon)
-    values[iy + 1, ix + 1] = np.nan  # a missing node among the cells
+    if hole:
+        values[iy + 1, ix + 1] = np.nan  # a missing node among the cells
     field = prepare_map(Grid(jnp.asarray(values), GRID.lat0, GRID.dlat, GRID.lon0, GRID.dlon))
     dn, de = _cells(n, cell_m)
     step = fl.Step(*(jnp.asarray(v) for v in (lat, lon, 0.0, 1.0)))
@@ -39,7 +41,7 @@ def test_lattice_cells_equal_pointwise(n, cell_m, lat, lon):
     slow = jax.jit(lambda f, s: cell_values(f, s, dn, de, fl.gravity_measurement))
     v, ref = np.asarray(fast(field, step)), np.asarray(slow(field, step))
     np.testing.assert_array_equal(np.isnan(v), np.isnan(ref))
-    assert np.isnan(ref).any() and np.isfinite(ref).sum() > n  # missing and present cells
+    assert np.isnan(ref).any() and np.isfinite(ref).sum() > n  # off-map or missing, and present
     ok = np.isfinite(ref)
     np.testing.assert_allclose(v[ok], ref[ok], rtol=0, atol=1e-9)
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from jaxgrav import interp
-from jaxgrav.match.lattice import interleave, lattice_values, patch_values
+from jaxgrav.lattice import interleave, lattice_values, patch_values
 from jaxgrav.match.refine import solve_spd
 
 RNG = np.random.default_rng(5)
@@ -37,6 +37,12 @@ def test_lattice_equals_pointwise(method):
     assert inside.any() and not inside.all()  # both cases exercised
     np.testing.assert_allclose(np.asarray(v)[inside], np.asarray(ref)[inside], rtol=0,
                                atol=1e-12)
+
+
+def test_the_old_import_path_reexports():
+    from jaxgrav.match import lattice as old
+
+    assert old.lattice_values is lattice_values and old.patch_values is patch_values
 
 
 @pytest.mark.parametrize("method", ["bicubic", "bilinear"])
