@@ -51,14 +51,13 @@ A missing reading (NaN) or a sigma point off the map skips the update (status fl
 INS prediction, and says so row by row.
 """
 
+import numbers
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from jaxgrav._pytree import pytree_dataclass, static_field
-from jaxgrav._validate import concrete
 from jaxgrav.filters import (
     Dynamics,
     MapErrorState,
@@ -110,9 +109,10 @@ class TightConfig:
     pmf_cells : int
         Cells per axis of ``pmf``'s grid (static, odd; default 61).
     pmf_cell_m : float
-        Its first cell size (m; default 100). The grid is adaptive: it follows the
-        estimate and re-sizes its cells to span ±``pmf_span`` σ of the weights
-        (between a quarter and 8 × this size).
+        Its first cell size (m; default 100; static: the block of map nodes from which
+        the cells' map values are evaluated as one lattice is sized from it). The grid
+        is adaptive: it follows the estimate and re-sizes its cells to span
+        ±``pmf_span`` σ of the weights (between a quarter and 8 × this size).
     pmf_span : float
         σ the adaptive grid spans per side (static; default 4; 0: a fixed grid of
         ``pmf_cell_m`` cells).
@@ -135,12 +135,12 @@ class TightConfig:
     map_error: MapErrorState | None = None
     gate: float = float("inf")
     curvature_cells: float = 1.0
-    pmf_cell_m: float = 100.0
     pmf_q_pos: float = 0.25
     method: str = static_field("ukf")
     n_particles: int = static_field(500)
     pmf_cells: int = static_field(61)
     pmf_span: float = static_field(4.0)
+    pmf_cell_m: float = static_field(100.0)
     eotvos_velocity: bool = static_field(True)
 
     def __post_init__(self):
@@ -155,9 +155,9 @@ class TightConfig:
                             f"or None; got {type(self.map_error).__name__}")
         if not (isinstance(self.pmf_span, int | float) and self.pmf_span >= 0):
             raise ValueError(f"pmf_span must be >= 0 (0: a fixed grid); got {self.pmf_span!r}")
-        cell = concrete(self.pmf_cell_m)
-        if cell is not None and cell.dtype != object and not np.all(cell > 0):
-            raise ValueError(f"pmf_cell_m must be > 0 (m); got {cell}")
+        cell = self.pmf_cell_m
+        if isinstance(cell, bool) or not isinstance(cell, numbers.Real) or not cell > 0:
+            raise ValueError(f"pmf_cell_m must be a number > 0 (m; static); got {cell!r}")
         if (self.method == "pmf" and self.map_error is not None
                 and isinstance(self.map_error.order, int) and self.map_error.order != 1):
             raise ValueError("method 'pmf' carries a first-order map-error state only (per "
