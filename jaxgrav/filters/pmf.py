@@ -101,6 +101,7 @@ from jaxgrav.filters.pmf_predict import (
     diffusion_kernel,
     no_pending,
     shifted_kernel,
+    staying_cells,
 )
 from jaxgrav.sim.ins import GRAV, N_STATES, INSErrorModel, transition
 
@@ -284,10 +285,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         # re-centre on the mean by whole cells, unless the cells pushed off hold mass
         k = jnp.round((state.x[:2] - state.centre) / size).astype(jnp.int32)
         k = jnp.clip(k, -(n_cells - 1), n_cells - 1)
-        kept = [(jnp.arange(n_cells) - k[a] >= 0) & (jnp.arange(n_cells) - k[a] < n_cells)
-                for a in (0, 1)]  # old cells that stay on the grid
-        ok = kept[0].astype(state.w.dtype) @ state.w @ kept[1].astype(state.w.dtype) > (
-            1.0 - RECENTRE_LOSS)
+        kept = [staying_cells(n_cells, k[a]).astype(state.w.dtype) for a in (0, 1)]
+        ok = kept[0] @ state.w @ kept[1] > 1.0 - RECENTRE_LOSS
         k = jnp.where(ok, k, 0)
         a_n, a_e = (shifted_kernel(n_cells, pending[a] / size[a] ** 2, k[a]) for a in (0, 1))
         w, cell = mix_cells(a_n, a_e, state.w, affine_cells(cell_fields(state), pending),

@@ -19,9 +19,10 @@ from jaxgrav._validate import concrete
 from jaxgrav.constants import DEG, WGS84_A, WGS84_E2
 from jaxgrav.fields.pointmass import PointMasses
 from jaxgrav.filters.model import gravity_measurement
-from jaxgrav.geodesy import enu_basis, geodetic_to_ecef, meridian_radius, prime_vertical_radius
+from jaxgrav.geodesy import enu_basis, geodetic_to_ecef
 from jaxgrav.lattice import lattice_values
 from jaxgrav.prepared import PreparedMap
+from jaxgrav.sim.drift import apply_drift
 from jaxgrav.sim.ins import N_STATES
 
 __all__ = [
@@ -185,9 +186,7 @@ def cell_values(field, step, dn, de, measurement, span_m=None):
     cells are sampled one by one.
     """
     if measurement is gravity_measurement and isinstance(field, (PointMasses, PreparedMap)):
-        lat = step.lat - dn[:, 0] / meridian_radius(step.lat) / DEG
-        east = prime_vertical_radius(step.lat) * jnp.cos(step.lat * DEG)
-        lon = step.lon - de[0, :] / east / DEG
+        lat, lon = apply_drift(step.lat, step.lon, -dn[:, 0], -de[0, :])  # (G,) each
         if isinstance(field, PointMasses):
             return point_mass_cells(field, lat[:, None], lon[None, :])
         block = lattice_block(field.grid, span_m)

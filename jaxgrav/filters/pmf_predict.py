@@ -8,7 +8,8 @@ add, per-cell scalar models that compose.
 
 import jax.numpy as jnp
 
-__all__ = ["affine_cells", "compose_pending", "diffusion_kernel", "no_pending", "shifted_kernel"]
+__all__ = ["affine_cells", "compose_pending", "diffusion_kernel", "no_pending", "shifted_kernel",
+           "staying_cells"]
 
 
 def _neumann_basis(n):
@@ -64,9 +65,15 @@ def shifted_kernel(n, v, k):
         pushed off the grid are zero.
     """
     j = jnp.arange(n) - k
-    inside = (j >= 0) & (j < n)
     a = jnp.take(diffusion_kernel(n, v), jnp.clip(j, 0, n - 1), axis=1)
-    return jnp.where(inside[None, :], a, 0.0)
+    return jnp.where(staying_cells(n, k)[None, :], a, 0.0)
+
+
+def staying_cells(n, k):
+    """Which of ``n`` cells stay on the grid after a shift of ``k`` whole cells
+    (:func:`shifted_kernel`), shape ``(n,)`` bool."""
+    j = jnp.arange(n) - k
+    return (j >= 0) & (j < n)
 
 
 def no_pending(dtype):
