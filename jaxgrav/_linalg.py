@@ -7,30 +7,44 @@ XLA's intra-op thread pool from inside that same pool (``jax::ParallelBatchMap``
 a 2-core machine every worker can end up waiting for sub-tasks that no free worker will
 run — a deadlock we hit repeatedly in Monte Carlo
 runs (all threads parked on futexes, native stacks in ``lapack_dpotrf_ffi``). For
-matrices this small, unrolled elementwise code is also faster than a library call,
-so jaxgrav uses these instead inside vmapped code (the GLS whitener of
+matrices this small, a loop over the columns in plain operations is also faster than a
+library call, so jaxgrav uses these instead inside vmapped code (the GLS whitener of
 :mod:`jaxgrav.match.gls` likewise; ``tests/match/test_no_lapack.py`` checks the Monte
 Carlo runs).
 """
 
+import jax
 import jax.numpy as jnp
 
 __all__ = ["cholesky", "expm", "inv_2x2", "modified_cholesky", "psd_sqrt"]
 
 
+def _column(a, low, j):
+    """Pivot of column ``j`` and its sub-diagonal before division.
+
+    Columns ``≥ j`` of ``low`` are still zero, so full-length products need no mask.
+    """
+    row = low[j]
+    return a[j, j] - jnp.sum(row**2), a[:, j] - low @ row
+
+
+def _set_column(low, j, d, col):
+    """``low[:, j]`` ← ``d`` on the diagonal, ``col`` below it, zero above."""
+    idx = jnp.arange(low.shape[-1])
+    return low.at[:, j].set(jnp.where(idx == j, d, jnp.where(idx > j, col, 0.0)))
+
+
 def _cholesky(a, rtol):
     """Column-by-column Cholesky; ``rtol=None``: NaN on a non-positive pivot, else zero column."""
-    n = a.shape[-1]
-    low = jnp.zeros_like(a)
-    for j in range(n):  # unrolls over the (static, small) matrix size
-        pivot = a[j, j] - jnp.sum(low[j, :j] ** 2)
+    a = jnp.asarray(a)
+
+    def body(j, low):
+        pivot, col = _column(a, low, j)
         ok = True if rtol is None else pivot > rtol * jnp.abs(a[j, j])
         d = jnp.sqrt(jnp.where(ok, pivot, 1.0))
-        low = low.at[j, j].set(jnp.where(ok, d, 0.0))
-        if j + 1 < n:
-            col = (a[j + 1 :, j] - low[j + 1 :, :j] @ low[j, :j]) / d
-            low = low.at[j + 1 :, j].set(jnp.where(ok, col, 0.0))
-    return low
+        return _set_column(low, j, jnp.where(ok, d, 0.0), jnp.where(ok, col / d, 0.0))
+
+    return jax.lax.fori_loop(0, a.shape[-1], body, jnp.zeros_like(a))
 
 
 def cholesky(a):
@@ -39,7 +53,8 @@ def cholesky(a):
     Parameters
     ----------
     a : Array, shape ``(n, n)``
-        ``n`` is static and small (the loop over columns unrolls at trace time).
+        ``n`` is small (a ``fori_loop`` over the columns: one compiled column step,
+        not ``n`` unrolled copies, which cost compile time and ran no faster).
 
     Returns
     -------
@@ -63,7 +78,7 @@ def modified_cholesky(a, jitter=1e-9):
     Parameters
     ----------
     a : Array, shape ``(n, n)``
-        Symmetric; ``n`` static and small (the loop over columns unrolls).
+        Symmetric; ``n`` small (a ``fori_loop`` over the columns, as :func:`cholesky`).
     jitter : float
         Relative pivot clamp ``ε_j / |a_jj|``.
 
@@ -75,20 +90,20 @@ def modified_cholesky(a, jitter=1e-9):
         ``a`` was not numerically positive definite (a pivot was clamped, or failed).
     failed : Array, shape ``()``, bool
     """
-    n = a.shape[-1]
-    low = jnp.zeros_like(a)
-    repaired = failed = jnp.zeros((), bool)
+    a = jnp.asarray(a)
     tiny = jnp.finfo(a.dtype).tiny
-    for j in range(n):  # unrolls over the (static, small) matrix size
-        pivot = a[j, j] - jnp.sum(low[j, :j] ** 2)
+
+    def body(j, carry):
+        low, repaired, failed = carry
+        pivot, col = _column(a, low, j)
         eps = jitter * jnp.abs(a[j, j]) + tiny
         clamp = pivot <= 0.0
-        repaired = repaired | clamp
         failed = failed | ~jnp.isfinite(pivot) | (pivot < -eps)
         d = jnp.sqrt(jnp.where(clamp, eps, pivot))
-        low = low.at[j, j].set(d)
-        if j + 1 < n:
-            low = low.at[j + 1 :, j].set((a[j + 1 :, j] - low[j + 1 :, :j] @ low[j, :j]) / d)
+        return _set_column(low, j, d, col / d), repaired | clamp, failed
+
+    no = jnp.zeros((), bool)
+    low, repaired, failed = jax.lax.fori_loop(0, a.shape[-1], body, (jnp.zeros_like(a), no, no))
     return jnp.where(failed, 0.0, low), repaired | failed, failed
 
 
@@ -117,8 +132,8 @@ def expm(m, squarings=16, order=10):
 
     Taylor series of ``e^{X} − I`` after scaling by ``2^−squarings``, then
     ``D ← 2D + D²`` (squaring ``I + D`` without losing D's digits). Fixed loop
-    counts, so it is cheap to compile and differentiable in both modes; accurate
-    for ``‖m‖ ≲ 10³``.
+    counts (two ``fori_loop``s), so it is cheap to compile and differentiable in both
+    modes; accurate for ``‖m‖ ≲ 10³``.
 
     Parameters
     ----------
@@ -130,13 +145,16 @@ def expm(m, squarings=16, order=10):
     -------
     Array, shape ``(n, n)``
     """
+    m = jnp.asarray(m)
     x = m / 2.0**squarings
-    term, d = x, x
-    for k in range(2, order + 1):
-        term = term @ x / k
-        d = d + term
-    for _ in range(squarings):
-        d = 2.0 * d + d @ d
+
+    def taylor(k, carry):
+        term, d = carry
+        term = term @ x / k.astype(m.dtype)
+        return term, d + term
+
+    _, d = jax.lax.fori_loop(2, order + 1, taylor, (x, x))
+    d = jax.lax.fori_loop(0, squarings, lambda _, d: 2.0 * d + d @ d, d)
     return jnp.eye(m.shape[0], dtype=m.dtype) + d
 
 
