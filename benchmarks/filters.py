@@ -30,7 +30,9 @@ an hour, so filterpy is timed on a few runs and its time per run scaled to ``n``
 (``max_diff_sigma``: largest difference over the run, in units of the filter's own σ;
 ``max_diff_m`` in metres). Every line's baseline is the filterpy UKF.
 
-jaxgrav's compile time is separate (``compile_s``); timed calls are compiled already.
+jaxgrav's compile time is separate (``compile_s``); timed calls are compiled already,
+with jaxgrav's XLA options (:func:`jaxgrav.xla_options.compiler_options`: LLVM ``-O2``
+on CPU, what the Monte Carlo runner and the command use).
 ``--profile`` adds lines (bench ``filters_profile``) with the cost per run-step of the
 parts of a filter step (prediction, factorisation, map evaluations, a whole update,
 the generic 27-point update), timed as scans over 600 steps of all runs, and XLA's
@@ -64,6 +66,7 @@ from jaxgrav._linalg import modified_cholesky  # noqa: E402
 from jaxgrav.fields.pointmass import paper_d  # noqa: E402
 from jaxgrav.filters import kalman  # noqa: E402
 from jaxgrav.geodesy import geodetic_to_ecef  # noqa: E402
+from jaxgrav.xla_options import compiler_options  # noqa: E402
 
 BENCH = "filters"
 CHUNK = 25  # runs per vmapped chunk (divides 1000: no remainder program to compile)
@@ -225,7 +228,7 @@ def monte_carlo_pmf(filt, dt, every, chunk=None):
 def time_compiled(fn, args, repeats):
     """(compile_s, best run s, output)."""
     t0 = time.perf_counter()
-    compiled = fn.lower(*args).compile()
+    compiled = fn.lower(*args).compile(compiler_options() or None)  # as the runner does
     compile_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     out = jax.block_until_ready(compiled(*args))

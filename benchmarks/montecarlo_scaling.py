@@ -33,8 +33,15 @@ with the shape of an earlier one loads its executable). Timed runs exclude
 compilation (the key split for each ``n`` is compiled before timing too). The full
 run adds float32 cases (``jax_enable_x64`` off).
 
-Run ``python benchmarks/montecarlo_scaling.py [--quick]``. Absolute times on a shared
-machine are noise; compare within one run.
+* ``montecarlo_options`` (``--compile-only``, nothing else): for every method, compile
+  (as above) and the run time of one chunk of 16 runs with the method's own XLA options
+  (:attr:`jaxgrav.montecarlo.MethodSpec.cpu_options`, what the runner and the command
+  use: LLVM ``-O2`` on CPU, :mod:`jaxgrav.xla_options`) against XLA's default options
+  (``-O3``), each in a fresh process; ratio = default / jaxgrav's (> 1: jaxgrav's
+  options are faster).
+
+Run ``python benchmarks/montecarlo_scaling.py [--quick | --compile-only]``. Absolute
+times on a shared machine are noise; compare within one run.
 """
 
 import argparse
@@ -81,7 +88,10 @@ def child(spec):
 
     def go(n_runs, ch, spec_=m):
         t0 = time.perf_counter()
-        montecarlo.run(spec_.fn, key, n_runs, chunk=ch, progress=False, args=spec_.args)
+        # the method's own XLA options, or XLA's defaults (the baseline of --compile-only)
+        options = () if spec.get("xla_defaults") else spec_.cpu_options
+        montecarlo.run(spec_.fn, key, n_runs, chunk=ch, progress=False, args=spec_.args,
+                       cpu_options=options)
         return time.perf_counter() - t0
 
     out["first_s"] = go(chunk, chunk)  # trace + compile + one chunk
@@ -122,15 +132,41 @@ def montecarlo_methods_names():
     return ["dense", *(m for m in BUILDERS if m != "dense")]
 
 
+def compile_options_rows(emit, methods, chunk):
+    """``montecarlo_options`` rows: compile and run time of each method's chunk function
+    with :mod:`jaxgrav.xla_options` (what the runner uses) against XLA's defaults."""
+    with tempfile.TemporaryDirectory(prefix="jaxgrav-cc-") as cache:
+        for method in methods:
+            r = {}
+            for name, defaults in (("jaxgrav", False), ("xla", True)):
+                # a cache folder each: a method whose own options are XLA's defaults
+                # (rbpf) would otherwise load the first child's program
+                r[name] = spawn(1, method=method, chunk=chunk, n=chunk, compile=True,
+                                cache=os.path.join(cache, f"{method}-{name}"),
+                                xla_defaults=defaults)
+            jc, xc = (r[k]["first_s"] - r[k]["second_s"] for k in ("jaxgrav", "xla"))
+            emit("montecarlo_options", f"{method} chunk={chunk} compile", chunk, jc,
+                 "XLA default options (LLVM -O3)", xc, recompiled=r["jaxgrav"]["recompiled"])
+            emit("montecarlo_options", f"{method} chunk={chunk} run", chunk,
+                 r["jaxgrav"]["run_s"], "XLA default options (LLVM -O3)", r["xla"]["run_s"],
+                 runs_per_s=round(chunk / r["jaxgrav"]["run_s"], 2))
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="CI-sized run")
+    p.add_argument("--compile-only", action="store_true",
+                   help="only every method's compile and run time, jaxgrav's XLA options "
+                        "against XLA's defaults")
     p.add_argument("--child", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
         return child(json.loads(args.child))
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from _common import emit
+
+    if args.compile_only:
+        return compile_options_rows(emit, montecarlo_methods_names(), chunk=16)
 
     if args.quick:
         n, repeats, mem_chunk = 256, 2, 16

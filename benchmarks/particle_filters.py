@@ -18,7 +18,9 @@ regularisation (the RBPF's of positions and means together), the point-mass anom
 vectorised over particles. Timed on a few runs and scaled per run (field ``note``).
 Both are scored on those runs: RMS position error over the second hour (``err_m``;
 different random numbers, so equal within Monte Carlo noise, not to the digit).
-jaxgrav's compile time is separate (``compile_s``).
+jaxgrav's compile time is separate (``compile_s``); each filter is compiled with the XLA
+options the Monte Carlo runner gives its method
+(:func:`jaxgrav.montecarlo.spec.cpu_options_for`).
 
 Run ``python benchmarks/particle_filters.py [--quick]``; JSON lines on stdout, progress
 on stderr. Compare ratios within one run (shared machine).
@@ -41,7 +43,9 @@ from jaxgrav import scenarios as sc  # noqa: E402
 from jaxgrav.fields.pointmass import paper_d  # noqa: E402
 from jaxgrav.filters.particles import kernel_bandwidth  # noqa: E402
 from jaxgrav.geodesy import geodetic_to_ecef  # noqa: E402
+from jaxgrav.montecarlo.spec import cpu_options_for  # noqa: E402
 from jaxgrav.sim.ins import GRAV  # noqa: E402
+from jaxgrav.xla_options import compiler_options  # noqa: E402
 
 BENCH = "particle_filters"
 N_PARTICLES = 1000
@@ -228,7 +232,9 @@ def bench_one(kind, filt, ref, field, anomaly, dyn, steps, truth, x0, p0, n_np, 
 
     args = (field, dyn, steps, jax.random.split(jax.random.PRNGKey(1), n_runs))
     t0 = time.perf_counter()
-    compiled = mc.lower(*args).compile()
+    # the XLA options the Monte Carlo runner gives this method (jaxgrav.xla_options)
+    compiled = mc.lower(*args).compile(compiler_options(cpu_options=cpu_options_for(kind))
+                                       or None)
     compile_s = time.perf_counter() - t0
     est = np.asarray(jax.block_until_ready(compiled(*args)))
     jax_s = best_time(lambda: jax.block_until_ready(compiled(*args)), repeats)

@@ -45,7 +45,8 @@ noise. ``n`` runs (default 100, ``--quick`` 10). Reference: Stone Soup (PyPI
 Stone Soup is timed on a few runs and scaled per run (field ``note``); both are scored
 on those runs: RMS position error over the second hour (``err_m``; different random
 numbers, so equal within Monte Carlo noise, not to the digit). jaxgrav's compile time is
-separate (``compile_s``).
+separate (``compile_s``); each filter is compiled with the XLA options the Monte Carlo
+runner gives its method (:func:`jaxgrav.montecarlo.spec.cpu_options_for`).
 
 Run ``python benchmarks/stonesoup_filters.py [--quick]``; JSON lines on stdout,
 progress on stderr. Compare ratios within one run (shared machine).
@@ -85,7 +86,9 @@ from stonesoup.updater.particle import ParticleUpdater  # noqa: E402
 from stonesoup.updater.pointmass import PointMassUpdater  # noqa: E402
 
 from jaxgrav import filters as fl  # noqa: E402
+from jaxgrav.montecarlo.spec import cpu_options_for  # noqa: E402
 from jaxgrav.sim.ins import GRAV  # noqa: E402
+from jaxgrav.xla_options import compiler_options  # noqa: E402
 
 BENCH = "stonesoup_filters"
 N_PARTICLES = 1000
@@ -331,7 +334,9 @@ def bench_one(kind, filt, ctx, ss, baseline, note, keyed=True):
 
     args = (field, dyn, steps, jax.random.split(jax.random.PRNGKey(1), n_runs))
     t0 = time.perf_counter()
-    compiled = mc.lower(*args).compile()
+    # the XLA options the Monte Carlo runner gives this method (jaxgrav.xla_options)
+    compiled = mc.lower(*args).compile(compiler_options(cpu_options=cpu_options_for(kind))
+                                       or None)
     compile_s = time.perf_counter() - t0
     est = np.asarray(jax.block_until_ready(compiled(*args)))
     jax_s = best_time(lambda: jax.block_until_ready(compiled(*args)), repeats)

@@ -9,7 +9,8 @@ the same program loads it in ~0.1 s without tracing, lowering or compiling.
 
 It is off until a folder is set with :func:`use_folder` (the command line sets
 ``executables/`` inside its cache folder; ``--no-cache`` and ``JAXGRAV_CACHE=off``
-leave it off); off, :func:`call` is the jitted function's own call. An entry is used
+leave it off); off, :func:`call` compiles the jitted function in memory, with
+:func:`jaxgrav.xla_options.compiler_options` as every entry is. An entry is used
 only by the same program on the same kind of machine: its key hashes the function's
 name, the jaxgrav source (every ``.py`` file of the package), the JAX and jaxlib
 versions, the 64-bit flag, the backend, the CPU (model and instruction-set flags) and
@@ -49,6 +50,7 @@ import numpy as np
 from jax.experimental import serialize_executable
 
 from jaxgrav._io import atomic_output
+from jaxgrav.xla_options import compiled as compiled_for
 
 __all__ = ["MAX_ENTRIES", "MAX_ENTRY_BYTES", "call", "folder", "use_folder"]
 
@@ -102,11 +104,11 @@ def call(fn, *args):
     """
     where = folder()
     if where is None:
-        return fn(*args)
+        return compiled_for(fn, *args)(*args)
     leaves, in_tree = jax.tree_util.tree_flatten((args, {}))
     key = _key(fn, in_tree, leaves)
     if key is None:  # settings that cannot be told apart between processes
-        return fn(*args)
+        return compiled_for(fn, *args)(*args)
     path = where / f"{key}.jaxexe"
     compiled = _load(path, in_tree)
     if compiled is not None:
@@ -117,7 +119,7 @@ def call(fn, *args):
             _mark_failed(path)
     if not path.with_suffix(".failed").exists():  # else: kept before, and it did not run
         _keep_later(fn, in_tree, leaves, path)
-    return fn(*args)
+    return compiled_for(fn, *args)(*args)
 
 
 def _mark_failed(path):
@@ -182,7 +184,7 @@ def _work(pending):
         args, _ = jax.tree_util.tree_unflatten(job["tree"], structs)
         path = Path(job["path"])
         trial = path.with_suffix(".trial")
-        _store(trial, fn.lower(*args).compile())
+        _store(trial, compiled_for(fn, *args))
         # loaded and run in a third process first: some executables, once serialised,
         # crash XLA:CPU when run (a segmentation fault, which no caller could catch)
         if trial.exists():

@@ -329,7 +329,7 @@ def cmd_montecarlo(args):
     t0 = time.perf_counter()
     results = montecarlo.run(spec.fn, jax.random.key(args.seed), args.runs, chunk=args.chunk,
                              devices=args.devices, progress=not args.no_progress,
-                             args=spec.args)
+                             args=spec.args, cpu_options=spec.cpu_options)
     seconds = time.perf_counter() - t0
     missing = [k for k in METRICS if k not in results]
     if missing:

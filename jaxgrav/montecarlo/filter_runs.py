@@ -49,7 +49,7 @@ __all__ = [
 ]
 
 from jaxgrav.montecarlo.draws import scenario_draws
-from jaxgrav.montecarlo.spec import MethodSpec, check_settings
+from jaxgrav.montecarlo.spec import MethodSpec, check_settings, cpu_options_for
 from jaxgrav.scenarios import (
     FilterScenario,
     filter_scenario,
@@ -365,7 +365,7 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None, map_
                         map_error_told=told_name)
     bits = {b: name for name, b in STATUS_FILTER.items() if b and name != "no_reading"}
     args = (field, scen) if map_error is None else (field, scen, map_error, told)
-    return MethodSpec(fn, args, settings, bits)
+    return MethodSpec(fn, args, settings, bits, cpu_options_for(kind))
 
 
 def _innerregion_of(grid, margin_m):

@@ -48,6 +48,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from tqdm.auto import tqdm
 
 from jaxgrav._io import atomic_output
+from jaxgrav.xla_options import CPU_OPTIONS, check_cpu_options, compiler_options
 
 __all__ = ["DEFAULT_CHUNK", "RUN_AXIS", "run", "to_dataset", "write_netcdf"]
 
@@ -116,7 +117,7 @@ def _check_leaves(out):
 
 
 @functools.lru_cache(maxsize=32)
-def _batched(fn, impl, mesh):
+def _batched(fn, impl, mesh, cpu_options):
     """The jitted, vmapped, sharded chunk function; cached so repeated runs reuse it."""
     run_sharding = NamedSharding(mesh, PartitionSpec(RUN_AXIS))
 
@@ -129,7 +130,8 @@ def _batched(fn, impl, mesh):
     def chunk_fn(key_data, *args):
         return jax.vmap(one, in_axes=(0, *([None] * len(args))))(key_data, *args)
 
-    return jax.jit(chunk_fn, out_shardings=run_sharding)
+    return jax.jit(chunk_fn, out_shardings=run_sharding,
+                   compiler_options=compiler_options(mesh.devices.flat[0], cpu_options))
 
 
 def _to_host(out):
@@ -146,7 +148,8 @@ def _store(results, host, start, count, n_runs):
     return results
 
 
-def run(fn, key, n_runs, *, chunk=None, devices=None, progress=True, args=()):
+def run(fn, key, n_runs, *, chunk=None, devices=None, progress=True, args=(),
+        cpu_options=CPU_OPTIONS):
     """Run ``fn`` over ``n_runs`` PRNG keys, vmapped, sharded over devices, in chunks.
 
     Parameters
@@ -173,6 +176,11 @@ def run(fn, key, n_runs, *, chunk=None, devices=None, progress=True, args=()):
         Extra arguments of ``fn``, the same for every run (maps, configurations);
         replicated on the devices. Array leaves are traced, so new values do not
         recompile.
+    cpu_options : tuple of (str, value)
+        XLA options the runs are compiled with on CPU
+        (:data:`jaxgrav.xla_options.CPU_OPTIONS`: LLVM ``-O2``; a method's own in
+        :attr:`~jaxgrav.montecarlo.MethodSpec.cpu_options`); other platforms use XLA's
+        defaults.
 
     Returns
     -------
@@ -182,11 +190,12 @@ def run(fn, key, n_runs, *, chunk=None, devices=None, progress=True, args=()):
     Raises
     ------
     ValueError
-        ``n_runs`` or ``chunk`` not a positive int, bad ``key`` or ``devices``, or
-        ``fn`` returning something other than arrays.
+        ``n_runs`` or ``chunk`` not a positive int, bad ``key``, ``devices`` or
+        ``cpu_options``, or ``fn`` returning something other than arrays.
     """
     n_runs = _positive_int("n_runs", n_runs)
     chunk = DEFAULT_CHUNK if chunk is None else _positive_int("chunk", chunk)
+    cpu_options = check_cpu_options(cpu_options)
     if not callable(fn):
         raise ValueError(f"fn must be callable as fn(key, *args); got {fn!r}")
     if not isinstance(args, tuple):
@@ -204,7 +213,7 @@ def run(fn, key, n_runs, *, chunk=None, devices=None, progress=True, args=()):
     key_sharding = NamedSharding(mesh, PartitionSpec(RUN_AXIS))
     keys, impl = _split_keys(key, n_runs)
     args = jax.device_put(args, NamedSharding(mesh, PartitionSpec()))
-    batched = _batched(fn, impl, mesh)
+    batched = _batched(fn, impl, mesh, cpu_options)
 
     def launch(start):
         part = keys[start:start + size]

@@ -9,8 +9,10 @@ from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.fields.map_error import CorrelatedMapError, TruthGrid
 from jaxgrav.fields.map_error_estimate import estimate_map_error
 from jaxgrav.scenarios.paper_a import check_region_covered
+from jaxgrav.xla_options import CPU_OPTIONS, XLA_DEFAULTS
 
-__all__ = ["METRICS", "MethodSpec", "check_map_error", "check_settings", "default_grid",
+__all__ = ["METRICS", "MethodSpec", "check_map_error", "check_settings", "cpu_options_for",
+           "default_grid",
            "map_error_settings", "region_of", "told_map_error", "told_settings"]
 
 METRICS = ("ins_err_m", "err_m", "status")
@@ -33,12 +35,27 @@ class MethodSpec:
         The resolved scenario settings and a one-line description (for file attributes).
     status_bits : dict of int to str
         Meaning of the ``status`` bits.
+    cpu_options : tuple of (str, value)
+        XLA options to compile ``fn``'s runs with on CPU (``run(..., cpu_options=)``):
+        :data:`jaxgrav.xla_options.CPU_OPTIONS`, or
+        :data:`~jaxgrav.xla_options.XLA_DEFAULTS` for a method measured faster with them.
     """
 
     fn: Callable = static_field()
     args: tuple
     settings: dict = static_field()
     status_bits: dict = static_field()
+    cpu_options: tuple = static_field(default=CPU_OPTIONS)
+
+
+def cpu_options_for(kind):
+    """XLA options on CPU of a method's runs (:attr:`MethodSpec.cpu_options`).
+
+    :data:`~jaxgrav.xla_options.CPU_OPTIONS` (LLVM ``-O2``), except the Rao–Blackwellised
+    particle filter's (``rbpf``, ``voyage-rbpf``), whose long runs took 7–15 % longer at
+    ``-O2`` (``python benchmarks/montecarlo_scaling.py --compile-only``): XLA's defaults.
+    """
+    return XLA_DEFAULTS if kind.removeprefix("voyage-") == "rbpf" else CPU_OPTIONS
 
 
 def default_grid():

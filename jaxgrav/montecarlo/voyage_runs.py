@@ -33,6 +33,7 @@ from jaxgrav.montecarlo.draws import scenario_draws
 from jaxgrav.montecarlo.spec import (
     MethodSpec,
     check_map_error,
+    cpu_options_for,
     default_grid,
     map_error_settings,
     region_of,
@@ -218,7 +219,8 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
                     hours=scenario.hours, dt=scenario.dt, noise_mgal=scenario.noise_mgal,
                     pos_error_m=scenario.pos_error_m, map_error_told=map_error_told,
                     series_every_s=SERIES_EVERY_S, **map_error_settings(model))
-    return MethodSpec(fn, (prepare_map(grid), grid, scenario, model, config), settings, bits)
+    return MethodSpec(fn, (prepare_map(grid), grid, scenario, model, config), settings, bits,
+                      cpu_options_for(kind))
 
 
 BUILDERS = {k: functools.partial(voyage_builder, kind=k) for k in VOYAGE_METHODS}
