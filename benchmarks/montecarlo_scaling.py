@@ -36,9 +36,10 @@ run adds float32 cases (``jax_enable_x64`` off).
 * ``montecarlo_options`` (``--compile-only``, nothing else): for every method, compile
   (as above) and the run time of one chunk of 16 runs with the method's own XLA options
   (:attr:`jaxgrav.montecarlo.MethodSpec.cpu_options`, what the runner and the command
-  use: LLVM ``-O2`` on CPU, :mod:`jaxgrav.xla_options`) against XLA's default options
-  (``-O3``), each in a fresh process; ratio = default / jaxgrav's (> 1: jaxgrav's
-  options are faster).
+  use: LLVM ``-O2`` on CPU, :mod:`jaxgrav.xla_options`) against the other setting —
+  XLA's default options (``-O3``), or ``-O2`` for a method that keeps XLA's defaults
+  (rbpf) — each in a fresh process with its own cache folder; ratio = other / own (> 1:
+  the method's own options are faster).
 
 Run ``python benchmarks/montecarlo_scaling.py [--quick | --compile-only]``. Absolute
 times on a shared machine are noise; compare within one run.
@@ -72,7 +73,7 @@ def child(spec):
     jax.monitoring.register_event_duration_secs_listener(
         lambda name, secs, fun_name="", **kw: events.append((name, fun_name))
         if name in (TRACE_EVENT, COMPILE_EVENT) else None)
-    from jaxgrav import montecarlo
+    from jaxgrav import montecarlo, xla_options
     from jaxgrav.montecarlo import methods as montecarlo_methods
 
     def maxrss_mb():
@@ -88,8 +89,11 @@ def child(spec):
 
     def go(n_runs, ch, spec_=m):
         t0 = time.perf_counter()
-        # the method's own XLA options, or XLA's defaults (the baseline of --compile-only)
-        options = () if spec.get("xla_defaults") else spec_.cpu_options
+        # the method's own XLA options, or the other setting (the baseline of
+        # --compile-only): XLA's defaults, or level 2 for a method whose own are the defaults
+        options = spec_.cpu_options
+        if spec.get("other_options"):
+            options = () if options else xla_options.CPU_OPTIONS
         montecarlo.run(spec_.fn, key, n_runs, chunk=ch, progress=False, args=spec_.args,
                        cpu_options=options)
         return time.perf_counter() - t0
@@ -134,21 +138,24 @@ def montecarlo_methods_names():
 
 def compile_options_rows(emit, methods, chunk):
     """``montecarlo_options`` rows: compile and run time of each method's chunk function
-    with :mod:`jaxgrav.xla_options` (what the runner uses) against XLA's defaults."""
+    with its own XLA options (what the runner uses) against the other setting."""
+    from jaxgrav.montecarlo.spec import cpu_options_for
+
     with tempfile.TemporaryDirectory(prefix="jaxgrav-cc-") as cache:
         for method in methods:
             r = {}
-            for name, defaults in (("jaxgrav", False), ("xla", True)):
-                # a cache folder each: a method whose own options are XLA's defaults
-                # (rbpf) would otherwise load the first child's program
+            for name, other in (("jaxgrav", False), ("other", True)):
                 r[name] = spawn(1, method=method, chunk=chunk, n=chunk, compile=True,
                                 cache=os.path.join(cache, f"{method}-{name}"),
-                                xla_defaults=defaults)
-            jc, xc = (r[k]["first_s"] - r[k]["second_s"] for k in ("jaxgrav", "xla"))
-            emit("montecarlo_options", f"{method} chunk={chunk} compile", chunk, jc,
-                 "XLA default options (LLVM -O3)", xc, recompiled=r["jaxgrav"]["recompiled"])
+                                other_options=other)
+            own = cpu_options_for(method)
+            label = ("LLVM -O2 (jaxgrav's CPU_OPTIONS; this method keeps XLA's defaults)"
+                     if not own else "XLA default options (LLVM -O3)")
+            jc, xc = (r[k]["first_s"] - r[k]["second_s"] for k in ("jaxgrav", "other"))
+            emit("montecarlo_options", f"{method} chunk={chunk} compile", chunk, jc, label, xc,
+                 recompiled=r["jaxgrav"]["recompiled"])
             emit("montecarlo_options", f"{method} chunk={chunk} run", chunk,
-                 r["jaxgrav"]["run_s"], "XLA default options (LLVM -O3)", r["xla"]["run_s"],
+                 r["jaxgrav"]["run_s"], label, r["other"]["run_s"],
                  runs_per_s=round(chunk / r["jaxgrav"]["run_s"], 2))
 
 

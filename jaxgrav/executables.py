@@ -100,7 +100,8 @@ def call(fn, *args):
     Returns
     -------
     The output of ``fn(*args)``: from the kept executable when there is one, else from
-    ``fn`` (a detached process then keeps it for the next call).
+    ``fn`` compiled in memory with :func:`jaxgrav.xla_options.compiled` (a detached
+    process then keeps it for the next call).
     """
     where = folder()
     if where is None:

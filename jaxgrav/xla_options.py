@@ -3,18 +3,20 @@
 XLA's CPU backend hands every kernel to LLVM at its most aggressive level by default
 (``xla_backend_optimization_level`` 3, LLVM's ``-O3``). For jaxgrav's programs level 2
 compiles faster and runs as fast or faster: on the 2-core machine (jax 0.10.1, every
-Monte Carlo method's chunk function, same results to rounding) compile took 0.3–2 s
+Monte Carlo method's chunk function, same results to rounding) compile took 0.2–3.5 s
 less, and the Kalman filters' runs took less than half the time (UKF 0.49 → 0.21 s,
 EKF 0.28 → 0.13 s for 64 and 32 of paper D's runs; ``-O3`` unrolls and vectorises
 their 13 × 13 loops into slower code), the point-mass filter 6 % less; the particle
-filter ran as fast, the matchers up to 5 % slower (dense 0.039 → 0.041 s for 256 runs),
-and the Rao–Blackwellised particle filter 7–15 % slower (its random numbers: JAX's
+filter ran as fast, the matchers within ±10 % (dense 0.039 → 0.041 s for 256 runs in a
+paired A/B), and the Rao–Blackwellised particle filter 7–15 % slower (its random numbers: JAX's
 threefry and float64 inverse-error-function normals vectorise better at ``-O3``). So
 jaxgrav compiles at level 2 on CPU where it compiles a program itself: the Monte Carlo
 runner (:func:`jaxgrav.montecarlo.run`; a method whose runs are long and slower at level
 2, the RBPF's, asks for XLA's defaults with :data:`XLA_DEFAULTS`) and the command
-line's programs (:mod:`jaxgrav.executables`). Other platforms keep XLA's defaults (not
-measured).
+line's programs (:mod:`jaxgrav.executables`; one command's run is short next to its
+compile, so level 2 is used there for every method, the RBPF's too). Other platforms keep
+XLA's defaults (not measured). An option XLA does not know fails when the program is
+compiled (``jax.errors.JaxRuntimeError``: "No such compile option").
 
 A program of your own that calls jaxgrav inside its ``jax.jit`` is compiled with
 *your* options: pass ``jax.jit(f, compiler_options=compiler_options())`` for the same.
@@ -34,12 +36,14 @@ XLA_DEFAULTS = ()
 def check_cpu_options(cpu_options):
     """``cpu_options`` (pairs or a dict) as a tuple of ``(name, value)`` pairs, or a
     ValueError naming it."""
-    if isinstance(cpu_options, dict):
-        cpu_options = sorted(cpu_options.items())
     try:
+        if isinstance(cpu_options, dict):
+            cpu_options = sorted(cpu_options.items(), key=lambda kv: str(kv[0]))
         pairs = tuple((str(k), v) for k, v in cpu_options)
+        hash(pairs)  # a key of the runner's cache of compiled functions
     except (TypeError, ValueError):
-        raise ValueError(f"cpu_options must be (name, value) pairs of XLA options, e.g. "
+        raise ValueError(f"cpu_options must be (name, value) pairs of XLA options with "
+                         f"hashable values, e.g. "
                          f"{CPU_OPTIONS}; got {cpu_options!r}") from None
     if any(not k.startswith("xla_") for k, _ in pairs):
         raise ValueError(f"cpu_options must name XLA options (xla_...); got {cpu_options!r}")

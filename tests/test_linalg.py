@@ -62,3 +62,27 @@ def test_expm_equals_scipy_and_its_gradient_finite_differences():
     e[1, 3] = 1e-6
     fd = (f(m + e) - f(m - e)) / 2e-6
     np.testing.assert_allclose(g[1, 3], fd, rtol=1e-6)
+
+
+def test_cholesky_gradient_finite_differences():
+    a = _spd(4, 7)
+    w = np.random.default_rng(8).normal(size=(4, 4))
+
+    def f(x):
+        return jnp.sum(w * cholesky(0.5 * (x + x.T)))
+
+    g = jax.grad(f)(a)
+    e = np.zeros_like(a)
+    e[2, 1] = 1e-6
+    fd = (f(a + e) - f(a - e)) / 2e-6
+    np.testing.assert_allclose(g[2, 1], fd, rtol=1e-6)
+
+
+def test_psd_sqrt_tolerance_is_relative_to_each_state():
+    """A state with a tiny variance keeps it; a pivot that is rounding of a dependent
+    column (below rtol of its own diagonal entry) gives a zero column."""
+    low = np.asarray(psd_sqrt(np.diag([1.0, 1e-14, 4.0])))
+    np.testing.assert_allclose(np.diag(low), [1.0, 1e-7, 2.0])
+    dependent = np.array([[1.0, 1.0], [1.0, 1.0 + 1e-15]])
+    low = np.asarray(psd_sqrt(dependent))
+    assert low[1, 1] == 0.0 and low[1, 0] == 1.0

@@ -53,7 +53,8 @@ def cpu_options_for(kind):
 
     :data:`~jaxgrav.xla_options.CPU_OPTIONS` (LLVM ``-O2``), except the Rao–Blackwellised
     particle filter's (``rbpf``, ``voyage-rbpf``), whose long runs took 7–15 % longer at
-    ``-O2`` (``python benchmarks/montecarlo_scaling.py --compile-only``): XLA's defaults.
+    ``-O2`` in three paired measurements (``python benchmarks/montecarlo_scaling.py
+    --compile-only`` compares them with ``-O2``): XLA's defaults.
     """
     return XLA_DEFAULTS if kind.removeprefix("voyage-") == "rbpf" else CPU_OPTIONS
 
