@@ -52,30 +52,24 @@ def test_column_loop_is_one_compiled_step():
 def test_expm_equals_scipy_and_its_gradient_finite_differences():
     m = np.random.default_rng(2).normal(size=(5, 5)) * 0.3
     np.testing.assert_allclose(jax.jit(expm)(m), scipy.linalg.expm(m), rtol=1e-12, atol=1e-13)
-    w = np.random.default_rng(3).normal(size=(5, 5))
+    _check_gradient(expm, m, (1, 3), seed=3)
 
-    def f(x):
-        return jnp.sum(w * expm(x))
 
-    g = jax.grad(f)(m)
-    e = np.zeros_like(m)
-    e[1, 3] = 1e-6
-    fd = (f(m + e) - f(m - e)) / 2e-6
-    np.testing.assert_allclose(g[1, 3], fd, rtol=1e-6)
+def _check_gradient(fn, x, at, seed):
+    """``grad`` of a random weighting of ``fn(x)`` against a central difference at ``at``."""
+    w = np.random.default_rng(seed).normal(size=x.shape)
+
+    def f(y):
+        return jnp.sum(w * fn(y))
+
+    e = np.zeros_like(x)
+    e[at] = 1e-6
+    fd = (f(x + e) - f(x - e)) / 2e-6
+    np.testing.assert_allclose(jax.grad(f)(x)[at], fd, rtol=1e-6)
 
 
 def test_cholesky_gradient_finite_differences():
-    a = _spd(4, 7)
-    w = np.random.default_rng(8).normal(size=(4, 4))
-
-    def f(x):
-        return jnp.sum(w * cholesky(0.5 * (x + x.T)))
-
-    g = jax.grad(f)(a)
-    e = np.zeros_like(a)
-    e[2, 1] = 1e-6
-    fd = (f(a + e) - f(a - e)) / 2e-6
-    np.testing.assert_allclose(g[2, 1], fd, rtol=1e-6)
+    _check_gradient(lambda x: cholesky(0.5 * (x + x.T)), _spd(4, 7), (2, 1), seed=8)
 
 
 def test_psd_sqrt_tolerance_is_relative_to_each_state():
