@@ -104,22 +104,20 @@ def call(fn, *args):
     process then keeps it for the next call).
     """
     where = folder()
-    if where is None:
-        return compiled_for(fn, *args)(*args)
     leaves, in_tree = jax.tree_util.tree_flatten((args, {}))
-    key = _key(fn, in_tree, leaves)
-    if key is None:  # settings that cannot be told apart between processes
-        return compiled_for(fn, *args)(*args)
-    path = where / f"{key}.jaxexe"
-    compiled = _load(path, in_tree)
-    if compiled is not None:
-        try:
-            return jax.block_until_ready(compiled(*args))
-        except (jax.errors.JaxRuntimeError, TypeError, ValueError):
-            path.unlink(missing_ok=True)  # an entry that does not run: removed
-            _mark_failed(path)
-    if not path.with_suffix(".failed").exists():  # else: kept before, and it did not run
-        _keep_later(fn, in_tree, leaves, path)
+    # None: off, or settings that cannot be told apart between processes
+    key = None if where is None else _key(fn, in_tree, leaves)
+    if key is not None:
+        path = where / f"{key}.jaxexe"
+        compiled = _load(path, in_tree)
+        if compiled is not None:
+            try:
+                return jax.block_until_ready(compiled(*args))
+            except (jax.errors.JaxRuntimeError, TypeError, ValueError):
+                path.unlink(missing_ok=True)  # an entry that does not run: removed
+                _mark_failed(path)
+        if not path.with_suffix(".failed").exists():  # else: kept before, did not run
+            _keep_later(fn, in_tree, leaves, path)
     return compiled_for(fn, *args)(*args)
 
 
