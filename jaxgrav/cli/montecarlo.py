@@ -99,8 +99,9 @@ def add_parser(subparsers):
                    help="what the method is told about --map-error / --truth-map. Filters: "
                         "state (default: a Gauss-Markov map-error state; the point-mass "
                         "filter's is per cell), white (white noise of the same sigma) or none. "
-                        "dense: SIGMA[,L] (GLS score, posterior-mean fix, fixes with a 1-sigma "
-                        "above 3 km rejected; SIGMA in map units, L in m, default "
+                        "dense: SIGMA[,L] (GLS score over the searched disc, posterior-mean "
+                        "fix, fixes with a 1-sigma above 3 km or above 0.9 x the disc's own "
+                        "rejected; SIGMA in map units, L in m, default "
                         "--map-error-length or 10000) or 0 / none (the white-noise matcher); "
                         "default the --map-error model itself, or for --truth-map an estimate "
                         "from --map alone (fields.map_error_estimate)")

@@ -10,7 +10,9 @@ shifted fixes (no node quantisation). The best candidates are ranked, one is
 selected (least score, or paper A's nearest-to-INS rule among the top k), and its
 offset, heading error and bias are then refined below the offset spacing by a few
 damped Gauss–Newton steps on the differentiable (bicubic) map; the refined offset is
-clamped to the searched square (``±half_size · spacing_m`` per axis).
+clamped to the searched region: the square (``±half_size · spacing_m`` per axis) or,
+with ``DenseConfig.region="disc"`` (:func:`~jaxgrav.match.sizing.config_for`'s
+default), the disc of that radius, whose offsets alone are candidates then.
 
 Work is done in local metres about the track's centroid and in fractional map
 indices, which keeps float32 accurate. For one fix the shifted positions form a
@@ -156,6 +158,8 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
                 gls = (wh, _gls_bias_sigma(config, dtype), scale)
             scores, biases = offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n,
                                            d_e, rot, config, gls)
+            if config.region == "disc":
+                scores = jnp.where(d_n**2 + d_e**2 <= reach**2 * (1 + 1e-9), scores, jnp.inf)
             k = min(config.k_best, scores.shape[0])
             top = k_smallest(scores, k)
             topk_lat, topk_lon = shifted_tracks(lat, lon, d_n[top], d_e[top], rr[top])
@@ -187,7 +191,7 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
                  if config.refine_steps else p0)
             # the refinement may not leave the searched region (its steps are capped
             # one by one, not in total: on a coarse map it walked far outside)
-            p = p.at[:2].set(jnp.clip(p[:2], -reach, reach))
+            p = p.at[:2].set(_clamp_offset(p[:2], reach, config.region))
             p = jnp.where(found, p, jnp.zeros_like(p))
             v = _track_values(table, frame, p, config.method)
             # clipped into a cell with a missing (NaN) corner: back to the best candidate
@@ -237,7 +241,8 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
     m_lat, m_lon = shifted_tracks(lat, lon, p[0], p[1], p[2])
     m_lat, m_lon = jnp.where(accepted, m_lat, lat), jnp.where(accepted, m_lon, lon)
     mean_off = means(*local_offsets_m(m_lat, m_lon, lat, lon))
-    edge = (jnp.abs(p[0]) >= reach) | (jnp.abs(p[1]) >= reach)
+    edge = (jnp.hypot(p[0], p[1]) >= reach * (1 - 1e-9) if config.region == "disc"
+            else (jnp.abs(p[0]) >= reach) | (jnp.abs(p[1]) >= reach))
     n_off = jnp.asarray(scores.shape[0], dtype)
     return MatchResult(
         lat=m_lat,
@@ -264,6 +269,14 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
         edge_mass=quality.edge_mass,
         chi2_per_dof=quality.chi2_per_dof,
     )
+
+
+def _clamp_offset(ne, reach, region):
+    """The offset ``(north, east)`` (m) moved back into the searched square or disc."""
+    if region == "disc":
+        r = jnp.hypot(ne[0], ne[1])
+        return ne * jnp.minimum(1.0, reach / jnp.where(r > 0, r, 1.0))
+    return jnp.clip(ne, -reach, reach)
 
 
 def _track_values(table, frame, p, method):

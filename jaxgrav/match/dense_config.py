@@ -17,6 +17,15 @@ class DenseConfig:
     ----------
     spacing_m : float
         Spacing of the offset grid (m).
+    region : {"square", "disc"}
+        The searched offsets (static): the whole square lattice of
+        ``(2·half_size + 1)²`` offsets (paper A's window), or only those within the
+        disc of radius ``half_size · spacing_m`` about the INS track. The window's
+        half-side is sized from a drift *radius* (:func:`~jaxgrav.match.sizing.config_for`),
+        so the square's corners, up to √2 × that radius away, are offsets the INS
+        error cannot reach; with ``"disc"`` they are not candidates, the refined
+        offset is clamped to the disc and the posterior is taken over it (a uniform
+        prior over the disc instead of the square).
     max_rotation_deg : float
         Largest heading error tried (degrees); rotations are spread evenly over
         ±max_rotation_deg.
@@ -95,9 +104,16 @@ class DenseConfig:
         second-mode likelihood ratio, the refined best χ² per degree of freedom or
         the posterior mass on the outermost offsets exceeds it. Defaults ``inf``:
         every found fix is accepted.
+    max_sigma_ratio : float
+        Also rejected (status 512) when the largest σ exceeds this fraction of the
+        1-σ of a uniform prior over the searched region
+        (:func:`~jaxgrav.match.integrity.region_sigma`): the readings did not narrow
+        the search enough for a fix, whatever the region's size (traced; ``inf``,
+        the default, never rejects).
     """
 
     spacing_m: float = 500.0
+    region: str = static_field("square")
     max_rotation_deg: float = 2.0
     weight_decay: float = 0.0
     noise_mgal: float = 1.0
@@ -119,11 +135,14 @@ class DenseConfig:
     fix: str = static_field("best")
     resolved_n_effective: float = 3.0
     max_sigma_m: float = float("inf")
+    max_sigma_ratio: float = float("inf")
     max_second_mode: float = float("inf")
     max_chi2_per_dof: float = float("inf")
     max_edge_mass: float = float("inf")
 
     def __post_init__(self):
+        if self.region not in ("square", "disc"):
+            raise ValueError(f"region must be 'square' or 'disc'; got {self.region!r}")
         if self.fix not in ("best", "posterior"):
             raise ValueError(f"fix must be 'best' or 'posterior'; got {self.fix!r}")
         if self.map_error_order not in (1, 2):
@@ -136,6 +155,9 @@ class DenseConfig:
             if arr is not None and arr.dtype != object and not (
                     np.all(np.isfinite(arr)) and np.all(arr >= 0)):
                 raise ValueError(f"{name} must be finite and >= 0; got {arr}")
+        ratio = concrete(self.max_sigma_ratio)
+        if ratio is not None and ratio.dtype != object and not np.all(ratio >= 0):
+            raise ValueError(f"max_sigma_ratio must be >= 0 (inf: no test); got {ratio}")
         sigma = concrete(self.map_error_mgal)
         if (self.score_model == "white" and sigma is not None and sigma.dtype != object
                 and np.any(sigma > 0)):

@@ -10,10 +10,9 @@ The score (:func:`gls_score`) is the GLS misfit with a common reading bias ``b``
 marginalised, in χ² units (dimensionless), for residuals ``r = g − m``:
 ``J = min_b (r − b1)ᵀ Σ⁻¹ (r − b1) + b²/σ_b²`` = ``rᵀ (Σ + σ_b² 11ᵀ)⁻¹ r``
 (σ_b = ∞: flat prior, ``J = rᵀΣ⁻¹r − (1ᵀΣ⁻¹r)²/1ᵀΣ⁻¹1``). The likelihood of a
-candidate is ``∝ exp(−J/2)``; ``J + gls_log_normaliser(...)`` is ``−2 log p(r)``,
-comparable across tracks and noise levels. With no map error and the fixes' noise
-variances ``σ_n² Σμ²/μ_i`` (normalised weights μ; σ_n² for equal weights), ``J``
-times ``σ_n² Σμ²`` is exactly the ``bias`` score of
+candidate is ``∝ exp(−J/2)``; ``J + gls_log_normaliser(...)`` is ``−2 log p(r)``.
+With no map error and the fixes' noise variances ``σ_n² Σμ²/μ_i`` (normalised weights
+μ; σ_n² for equal weights), ``J`` times ``σ_n² Σμ²`` is exactly the ``bias`` score of
 :func:`~jaxgrav.match.scoring.score_track` with the prior
 :func:`~jaxgrav.match.scoring.bias_precision`, and the bias estimates are equal.
 
@@ -338,7 +337,7 @@ def _curvature(j, d, ok, best):
 
 
 def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof=1,
-                     exclusion_m=0.0, exclusion_chi2=9.0):
+                     exclusion_m=0.0, exclusion_chi2=9.0, rim_m=None):
     """Posterior of the offset over a lattice, weights ``∝ exp(−score/2)``.
 
     Parameters
@@ -359,6 +358,9 @@ def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof
         curvature covariance (or, when its fit fails, the posterior covariance).
     exclusion_chi2 : float or Array
         Squared Mahalanobis radius of the default neighbourhood (9: 3 σ).
+    rim_m : float or Array, optional
+        ``edge_mass`` is the mass farther than this (m) from the origin (a disc of
+        offsets); None (default): on the lattice's outermost rows and columns.
 
     Returns
     -------
@@ -396,7 +398,8 @@ def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof
     j2 = jnp.min(jnp.where(ok & outside, j, jnp.inf))
     ratio = jnp.exp(-0.5 * (j2 - j_best))
     mean = mean + d0[best]
-    edge = jnp.any((d0 == jnp.min(d0, axis=0)) | (d0 == jnp.max(d0, axis=0)), axis=-1)
+    edge = (jnp.sum(d0 * d0, axis=-1) > jnp.asarray(rim_m, dtype) ** 2 if rim_m is not None
+            else jnp.any((d0 == jnp.min(d0, axis=0)) | (d0 == jnp.max(d0, axis=0)), axis=-1))
     return OffsetPosterior(
         mean_north_m=jnp.where(valid, mean[0], 0.0),
         mean_east_m=jnp.where(valid, mean[1], 0.0),

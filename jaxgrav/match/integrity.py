@@ -16,7 +16,7 @@ import jax.numpy as jnp
 
 from jaxgrav.match.gls import offset_posterior
 
-__all__ = ["FixQuality", "fix_quality", "largest_sigma"]
+__all__ = ["FixQuality", "fix_quality", "largest_sigma", "region_sigma"]
 
 
 class FixQuality(NamedTuple):
@@ -56,6 +56,35 @@ def largest_sigma(cov):
     return jnp.sqrt(0.5 * (a + d) + jnp.sqrt(0.25 * (a - d) ** 2 + b * b))
 
 
+def region_sigma(d_n, d_e, cell_m, region):
+    """1-σ per axis (m) of a uniform prior over the searched offsets.
+
+    The posterior's covariance when the readings carry no information: the second
+    moment of the lattice's offsets (of those within the disc of radius
+    ``max(d_n)`` for ``region="disc"``) plus the cell's ``cell_m²/12``.
+
+    Parameters
+    ----------
+    d_n, d_e : Array, shape ``(A²,)``
+        The square lattice of offsets (m), centred on the INS track.
+    cell_m : float or Array
+        Lattice spacing (m).
+    region : {"square", "disc"}
+        :attr:`~jaxgrav.match.dense.DenseConfig.region` (static).
+
+    Returns
+    -------
+    Array
+        Scalar (m).
+    """
+    d_n, d_e = jnp.asarray(d_n), jnp.asarray(d_e)
+    r2 = d_n**2 + d_e**2
+    inside = (r2 <= jnp.max(d_n) ** 2 * (1 + 1e-9) if region == "disc"
+              else jnp.ones_like(r2, bool))
+    second = 0.5 * jnp.sum(jnp.where(inside, r2, 0.0)) / jnp.sum(inside)
+    return jnp.sqrt(second + jnp.asarray(cell_m, r2.dtype) ** 2 / 12.0)
+
+
 def fix_quality(chi2, n_rot, d_n, d_e, best_ne, laplace_m2, final_chi2, dof, found, config):
     """Covariance, statistics and integrity decision of one dense match.
 
@@ -79,8 +108,9 @@ def fix_quality(chi2, n_rot, d_n, d_e, best_ne, laplace_m2, final_chi2, dof, fou
     found : Array of bool
         Whether any candidate was valid.
     config : DenseConfig
-        ``spacing_m``, ``resolved_n_effective`` and the thresholds ``max_sigma_m``,
-        ``max_second_mode``, ``max_chi2_per_dof``, ``max_edge_mass``.
+        ``spacing_m``, ``region``, ``resolved_n_effective`` and the thresholds
+        ``max_sigma_m``, ``max_sigma_ratio``, ``max_second_mode``, ``max_chi2_per_dof``,
+        ``max_edge_mass``.
 
     Returns
     -------
@@ -88,13 +118,17 @@ def fix_quality(chi2, n_rot, d_n, d_e, best_ne, laplace_m2, final_chi2, dof, fou
     """
     j = chi2.reshape(n_rot, -1)
     j = j[0] if n_rot == 1 else -2.0 * jax.nn.logsumexp(-0.5 * j, axis=0)
-    post = offset_posterior(j, d_n, d_e, config.spacing_m, dof=dof)
+    reach = jnp.max(d_n)
+    rim = None if config.region == "square" else reach - jnp.asarray(config.spacing_m, j.dtype)
+    post = offset_posterior(j, d_n, d_e, config.spacing_m, dof=dof, rim_m=rim)
+    prior_sigma = region_sigma(d_n, d_e, config.spacing_m, config.region)
     resolved = post.n_effective >= config.resolved_n_effective
     lap_ok = jnp.all(jnp.isfinite(laplace_m2)) & (laplace_m2[0, 0] > 0) & (laplace_m2[1, 1] > 0)
     cov = jnp.where(resolved | ~lap_ok, post.covariance_m2, laplace_m2)
     chi2_dof = final_chi2 / dof
     sigma = largest_sigma(cov)
-    status = (jnp.where(sigma > config.max_sigma_m, 512, 0)
+    status = (jnp.where((sigma > config.max_sigma_m)
+                        | (sigma > config.max_sigma_ratio * prior_sigma), 512, 0)
               | jnp.where(post.second_mode_ratio > config.max_second_mode, 1024, 0)
               | jnp.where(chi2_dof > config.max_chi2_per_dof, 2048, 0)
               | jnp.where(post.edge_mass > config.max_edge_mass, 4096, 0))

@@ -24,7 +24,8 @@ STATUS = {
     64: "ICCP: fewer than 3 contour points inside the window at some iteration (transform kept)",
     128: "entropy+ICCP: the ICCP result did not fit significantly better than the coarse "
          "match; coarse track kept",
-    512: "fix rejected: the posterior of the offset is too wide (max_sigma_m); INS track kept",
+    512: ("fix rejected: the posterior of the offset is too wide (max_sigma_m, or "
+          "max_sigma_ratio of the searched region's own spread); INS track kept"),
     1024: "fix rejected: a distinct second mode is nearly as likely (max_second_mode); INS "
           "track kept",
     2048: "fix rejected: the best candidate's misfit is inconsistent with the error model "

@@ -22,9 +22,11 @@ __all__ = [
     "iccp_config_for",
 ]
 
-MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
+MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0, "max_sigma_ratio": 0.9}
 """DenseConfig fields :func:`config_for` sets with a map error (σ > 0): the fix and the
-integrity thresholds chosen by ``examples/map_error_dense.py`` (see the README)."""
+integrity thresholds, ``max_sigma_m`` chosen by ``examples/map_error_dense.py``,
+``max_sigma_ratio`` (a fix must narrow the searched disc's own spread by 10 %) by the
+Monte Carlo sweep in the README."""
 
 CHAIN_MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
 """ChainConfig fields :func:`config_for` sets with a map error (σ > 0), measured with
@@ -36,7 +38,7 @@ with ``examples/map_error_matchers.py`` (see the README)."""
 
 
 def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=math.inf,
-               n_rotations=1, score=None, step_m=None, map_error=None):
+               n_rotations=1, score=None, step_m=None, map_error=None, region="disc"):
     """A matcher configuration whose search region covers the drift.
 
     Parameters
@@ -68,6 +70,11 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         then grows to ``2·√(noise² + σ²)``). None: the white-noise score. ``dense``
         compiles only the score it uses (``DenseConfig.score_model`` ``"gls"`` when
         σ > 0, else ``"white"``).
+    region : {"disc", "square"}
+        ``dense``: the offsets searched (:attr:`~jaxgrav.match.dense.DenseConfig.region`),
+        by default the disc of the search's reach about the INS track (the drift is a
+        radius; the square's corners are offsets it cannot reach). ``"square"`` is
+        paper A's window. ``chains`` searches the square window either way.
 
     Returns
     -------
@@ -86,7 +93,8 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         if half > 40:
             half, spacing = 40, reach / 40
         told = map_error is not None and float(map_error.sigma) > 0
-        config = DenseConfig(spacing_m=spacing, half_size=half, noise_mgal=noise_mgal,
+        config = DenseConfig(spacing_m=spacing, half_size=half, region=region,
+                             noise_mgal=noise_mgal,
                              bias_sigma_mgal=bias_sigma_mgal, n_rotations=n_rotations,
                              score=score or "bias", score_model="gls" if told else "white")
         return _with_map_error(config, map_error, MAP_ERROR_INTEGRITY)

@@ -201,7 +201,7 @@ def table1(key, truth_field, match_map, *, method, runs_per_group, base=None,
         scen = dataclasses.replace(base, drift_deg=drift)
         cfg = config_for(method, match_map, 1.05 * drift * DEG_ARC_M,
                          noise_mgal=max(float(base.noise_mgal), 0.1), score=score,
-                         step_m=scen.step_m)
+                         step_m=scen.step_m, region="square")  # paper A's window
         if selection is not None:
             cfg = dataclasses.replace(cfg, selection=selection)
         out = run_batch(jax.random.fold_in(key, i), runs_per_group, truth_field, match_map,

@@ -321,3 +321,16 @@ def test_posterior_covers_the_truth_under_a_correlated_map_error():
         q = jax.vmap(run, in_axes=(0, 0, 0, 0, None))(waves, starts, offsets, keys, map_sigma)
         coverage = np.mean(np.asarray(q) < 5.991)
         assert lo <= coverage <= hi, (map_sigma, coverage)
+
+
+def test_rim_edge_mass_of_a_disc_equals_numpy():
+    on, oe = _lattice()
+    r2 = on**2 + oe**2
+    j = np.where(r2 <= 3000.0**2, _quad(on, oe, np.array([2500.0, 1200.0]), K), np.inf)
+    post = offset_posterior(j, on, oe, rim_m=2900.0)
+    w = np.exp(-0.5 * (j - j[np.isfinite(j)].min()))
+    w = w / w.sum()
+    np.testing.assert_allclose(post.edge_mass, w[r2 > 2900.0**2].sum(), rtol=1e-10)
+    assert 0.05 < float(post.edge_mass) < 0.95
+    square = offset_posterior(j, on, oe)  # the lattice's outermost rows and columns
+    assert float(square.edge_mass) < 1e-12  # only the four axis ends of the disc
