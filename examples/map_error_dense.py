@@ -13,7 +13,7 @@ share worse than the INS, share accepted, 95 % ellipse coverage on accepted fixe
 the rank correlation of each test statistic with the realised error.
 
 Run: ``python examples/map_error_dense.py [--runs 500] [--sigma 3] [--length 10000]
-[--fixes 30] [--smoke]``.
+[--fixes 30] [--radius-factor 1] [--smoke]``.
 """
 
 import argparse
@@ -28,16 +28,17 @@ from jaxgrav import datasets
 from jaxgrav.fields.map_error import map_error, map_error_key, truth_field
 from jaxgrav.match.dense import lattice_table, match_dense
 from jaxgrav.match.dense_batch import match_dense_batch
-from jaxgrav.match.integrity import region_sigma
+from jaxgrav.match.integrity import region_mask, region_sigma
 from jaxgrav.match.sizing import config_for
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
 from jaxgrav.sim import DEG_ARC_M
 
 
-def variants(grid, scen, sigma, length):
-    """The three matchers compared: name -> DenseConfig."""
-    radius = scen.drift_deg * DEG_ARC_M
+def variants(grid, scen, sigma, length, radius_factor=1.0):
+    """The matchers compared: name -> DenseConfig (window sized for ``radius_factor`` ×
+    the drift radius)."""
+    radius = radius_factor * scen.drift_deg * DEG_ARC_M
     white = config_for("dense", grid, radius)
     gls = config_for("dense", grid, radius, map_error=map_error(sigma, length))
     best = dataclasses.replace(gls, fix="best")
@@ -45,6 +46,7 @@ def variants(grid, scen, sigma, length):
     return {"white": white,
             "gls-best": dataclasses.replace(best, max_sigma_m=inf, max_sigma_ratio=inf),
             "gls-posterior": gls,
+            "gls-posterior-3km": dataclasses.replace(gls, max_sigma_ratio=inf),
             "gls-posterior-all": dataclasses.replace(gls, max_sigma_m=inf, max_sigma_ratio=inf),
             # before the disc: the whole square window, the 3 km test alone
             "gls-posterior-square": dataclasses.replace(gls, region="square",
@@ -95,7 +97,8 @@ def evaluate(prepared, table, sims, config):
     # the disc's informativeness test: σ ≤ ratio × the searched region's own 1-σ (and 3 km)
     d = (np.arange(2 * config.half_size + 1) - config.half_size) * config.spacing_m
     on, oe = (x.reshape(-1) for x in np.meshgrid(d, d, indexing="ij"))
-    spread = float(region_sigma(on, oe, config.spacing_m, config.region))
+    spread = float(region_sigma(on, oe, config.spacing_m,
+                                region_mask(config.half_size, config.region)[0]))
     ratio_sweep = {}
     for q in (0.7, 0.8, 0.9, 1.0, np.inf):
         a2 = np.asarray(r.accepted) & (sig <= 3000.0) & (sig <= q * spread)
@@ -138,6 +141,8 @@ def main(argv=None):
     ap.add_argument("--fixes", type=int, default=30)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--smoke", action="store_true", help="tiny size for the tests")
+    ap.add_argument("--radius-factor", type=float, default=1.0,
+                    help="the search window sized for this many times the drift radius")
     ap.add_argument("--bench", action="store_true",
                     help="only time match_dense_batch on 1000 tracks, white vs GLS")
     a = ap.parse_args(argv)
@@ -165,7 +170,7 @@ def main(argv=None):
         return speed
     rows = {}
     for name, cfg in variants(grid, scen, max(a.sigma, 1e-3) if a.sigma > 0 else 1.0,
-                              a.length).items():
+                              a.length, a.radius_factor).items():
         if a.sigma == 0 and name != "white":  # σ = 0: GLS told the map is perfect = white
             cfg = dataclasses.replace(cfg, map_error_mgal=0.0)
         t0 = time.perf_counter()

@@ -39,6 +39,7 @@ and an integrity decision (:mod:`~jaxgrav.match.integrity`).
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrav import interp
 from jaxgrav.constants import DEG
@@ -47,7 +48,7 @@ from jaxgrav.lattice import patch_values
 from jaxgrav.match.dense_config import DenseConfig
 from jaxgrav.match.gaps import gap_score, gap_whitener, gls_gap_score
 from jaxgrav.match.gls import gls_dof, gls_score, gls_whitener, track_covariance
-from jaxgrav.match.integrity import fix_quality
+from jaxgrav.match.integrity import fix_quality, region_mask
 from jaxgrav.match.offsets import means, offset_scores, shifted_tracks, track_frame
 from jaxgrav.match.refine import (
     gauss_newton,
@@ -145,6 +146,7 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
     frame = track_frame(grid, lat, lon)
     scale = jnp.asarray(config.noise_mgal, dtype) ** 2 * jnp.sum(w**2)  # mGal² per unit χ²
     reach = h * config.spacing_m
+    inside, _ = region_mask(h, config.region)
 
     def search(use_gls):
         """Grid search, selection and refinement: white (today's) or GLS score."""
@@ -159,7 +161,7 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
             scores, biases = offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n,
                                            d_e, rot, config, gls)
             if config.region == "disc":
-                scores = jnp.where(d_n**2 + d_e**2 <= reach**2 * (1 + 1e-9), scores, jnp.inf)
+                scores = jnp.where(np.tile(inside, config.n_rotations), scores, jnp.inf)
             k = min(config.k_best, scores.shape[0])
             top = k_smallest(scores, k)
             topk_lat, topk_lon = shifted_tracks(lat, lon, d_n[top], d_e[top], rr[top])
@@ -241,9 +243,10 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
     m_lat, m_lon = shifted_tracks(lat, lon, p[0], p[1], p[2])
     m_lat, m_lon = jnp.where(accepted, m_lat, lat), jnp.where(accepted, m_lon, lon)
     mean_off = means(*local_offsets_m(m_lat, m_lon, lat, lon))
-    edge = (jnp.hypot(p[0], p[1]) >= reach * (1 - 1e-9) if config.region == "disc"
-            else (jnp.abs(p[0]) >= reach) | (jnp.abs(p[1]) >= reach))
-    n_off = jnp.asarray(scores.shape[0], dtype)
+    # on the disc's rim to rounding (a rim node or a clamped offset, in float32 too)
+    edge = (jnp.hypot(p[0], p[1]) >= reach * (1 - 64 * jnp.finfo(dtype).eps)
+            if config.region == "disc" else (jnp.abs(p[0]) >= reach) | (jnp.abs(p[1]) >= reach))
+    n_off = jnp.asarray(int(inside.sum()) * config.n_rotations, dtype)  # searched offsets
     return MatchResult(
         lat=m_lat,
         lon=m_lon,
@@ -256,7 +259,7 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
         topk_lon=topk_lon,
         topk_score=topk_score,
         chosen=chosen,
-        n_candidates=jnp.full((n,), scores.shape[0], jnp.int32),
+        n_candidates=jnp.full((n,), int(inside.sum()) * config.n_rotations, jnp.int32),
         work_unconstrained=n_off**n,
         work_constrained=n_off,
         work_pairs=n_off * n,

@@ -40,7 +40,7 @@ class DenseConfig:
         Levenberg–Marquardt damping of the refinement (relative to the diagonal).
     half_size : int
         Offsets per side (static): ``(2·half_size + 1)²`` offsets, covering
-        ±half_size·spacing_m.
+        ±half_size·spacing_m (with ``region="disc"`` those within that radius).
     n_rotations : int
         Heading errors tried (static; 1 = none, and the refinement keeps heading fixed).
     refine_steps : int

@@ -337,7 +337,7 @@ def _curvature(j, d, ok, best):
 
 
 def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof=1,
-                     exclusion_m=0.0, exclusion_chi2=9.0, rim_m=None):
+                     exclusion_m=0.0, exclusion_chi2=9.0, edge=None):
     """Posterior of the offset over a lattice, weights ``∝ exp(−score/2)``.
 
     Parameters
@@ -358,9 +358,9 @@ def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof
         curvature covariance (or, when its fit fails, the posterior covariance).
     exclusion_chi2 : float or Array
         Squared Mahalanobis radius of the default neighbourhood (9: 3 σ).
-    rim_m : float or Array, optional
-        ``edge_mass`` is the mass farther than this (m) from the origin (a disc of
-        offsets); None (default): on the lattice's outermost rows and columns.
+    edge : Array of bool, shape of ``scores``, optional
+        The offsets whose mass is ``edge_mass`` (e.g. a disc's outer ring); None
+        (default): the lattice's outermost rows and columns.
 
     Returns
     -------
@@ -398,7 +398,7 @@ def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof
     j2 = jnp.min(jnp.where(ok & outside, j, jnp.inf))
     ratio = jnp.exp(-0.5 * (j2 - j_best))
     mean = mean + d0[best]
-    edge = (jnp.sum(d0 * d0, axis=-1) > jnp.asarray(rim_m, dtype) ** 2 if rim_m is not None
+    edge = (jnp.asarray(edge, bool).reshape(-1) if edge is not None
             else jnp.any((d0 == jnp.min(d0, axis=0)) | (d0 == jnp.max(d0, axis=0)), axis=-1))
     return OffsetPosterior(
         mean_north_m=jnp.where(valid, mean[0], 0.0),

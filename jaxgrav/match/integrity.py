@@ -13,10 +13,11 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrav.match.gls import offset_posterior
 
-__all__ = ["FixQuality", "fix_quality", "largest_sigma", "region_sigma"]
+__all__ = ["FixQuality", "fix_quality", "largest_sigma", "region_mask", "region_sigma"]
 
 
 class FixQuality(NamedTuple):
@@ -56,31 +57,59 @@ def largest_sigma(cov):
     return jnp.sqrt(0.5 * (a + d) + jnp.sqrt(0.25 * (a - d) ** 2 + b * b))
 
 
-def region_sigma(d_n, d_e, cell_m, region):
+def region_mask(half_size, region):
+    """The searched offsets of a ``(2·half_size + 1)²`` lattice and its outermost ring.
+
+    Parameters
+    ----------
+    half_size : int
+        Offsets per side of the centre (static).
+    region : {"square", "disc"}
+        :attr:`~jaxgrav.match.dense.DenseConfig.region`: every offset, or those with
+        ``i² + j² ≤ half_size²`` (lattice indices i, j; exact in any float precision).
+
+    Returns
+    -------
+    inside, ring : numpy.ndarray of bool, shape ``((2·half_size + 1)²,)``
+        North-major like the dense matcher's offsets. ``ring``: the searched offsets
+        on the region's edge (the outermost rows and columns, or ``i² + j² >
+        (half_size − 1)²`` within the disc).
+    """
+    i = np.arange(-half_size, half_size + 1)
+    r2 = i[:, None] ** 2 + i[None, :] ** 2
+    if region == "disc":
+        inside = r2 <= half_size**2
+        ring = inside & (r2 > (half_size - 1) ** 2)
+    else:
+        inside = np.ones_like(r2, bool)
+        ring = (np.abs(i)[:, None] == half_size) | (np.abs(i)[None, :] == half_size)
+    return inside.reshape(-1), ring.reshape(-1)
+
+
+def region_sigma(d_n, d_e, cell_m, inside):
     """1-σ per axis (m) of a uniform prior over the searched offsets.
 
     The posterior's covariance when the readings carry no information: the second
-    moment of the lattice's offsets (of those within the disc of radius
-    ``max(d_n)`` for ``region="disc"``) plus the cell's ``cell_m²/12``.
+    moment of the offsets in ``inside`` about the INS track (isotropic for a square
+    or a disc) plus the cell's ``cell_m²/12``.
 
     Parameters
     ----------
     d_n, d_e : Array, shape ``(A²,)``
-        The square lattice of offsets (m), centred on the INS track.
+        The lattice of offsets (m), centred on the INS track.
     cell_m : float or Array
         Lattice spacing (m).
-    region : {"square", "disc"}
-        :attr:`~jaxgrav.match.dense.DenseConfig.region` (static).
+    inside : Array of bool, shape ``(A²,)``
+        The prior's support: the searched offsets (:func:`region_mask`) that could
+        be scored (a missing map node or the map's edge takes offsets away).
 
     Returns
     -------
     Array
-        Scalar (m).
+        Scalar (m); NaN when ``inside`` is empty.
     """
     d_n, d_e = jnp.asarray(d_n), jnp.asarray(d_e)
     r2 = d_n**2 + d_e**2
-    inside = (r2 <= jnp.max(d_n) ** 2 * (1 + 1e-9) if region == "disc"
-              else jnp.ones_like(r2, bool))
     second = 0.5 * jnp.sum(jnp.where(inside, r2, 0.0)) / jnp.sum(inside)
     return jnp.sqrt(second + jnp.asarray(cell_m, r2.dtype) ** 2 / 12.0)
 
@@ -108,7 +137,7 @@ def fix_quality(chi2, n_rot, d_n, d_e, best_ne, laplace_m2, final_chi2, dof, fou
     found : Array of bool
         Whether any candidate was valid.
     config : DenseConfig
-        ``spacing_m``, ``region``, ``resolved_n_effective`` and the thresholds
+        ``spacing_m``, ``half_size``, ``region``, ``resolved_n_effective`` and the thresholds
         ``max_sigma_m``, ``max_sigma_ratio``, ``max_second_mode``, ``max_chi2_per_dof``,
         ``max_edge_mass``.
 
@@ -118,10 +147,9 @@ def fix_quality(chi2, n_rot, d_n, d_e, best_ne, laplace_m2, final_chi2, dof, fou
     """
     j = chi2.reshape(n_rot, -1)
     j = j[0] if n_rot == 1 else -2.0 * jax.nn.logsumexp(-0.5 * j, axis=0)
-    reach = jnp.max(d_n)
-    rim = None if config.region == "square" else reach - jnp.asarray(config.spacing_m, j.dtype)
-    post = offset_posterior(j, d_n, d_e, config.spacing_m, dof=dof, rim_m=rim)
-    prior_sigma = region_sigma(d_n, d_e, config.spacing_m, config.region)
+    inside, ring = region_mask(config.half_size, config.region)
+    post = offset_posterior(j, d_n, d_e, config.spacing_m, dof=dof, edge=ring)
+    prior_sigma = region_sigma(d_n, d_e, config.spacing_m, inside & jnp.isfinite(j))
     resolved = post.n_effective >= config.resolved_n_effective
     lap_ok = jnp.all(jnp.isfinite(laplace_m2)) & (laplace_m2[0, 0] > 0) & (laplace_m2[1, 1] > 0)
     cov = jnp.where(resolved | ~lap_ok, post.covariance_m2, laplace_m2)

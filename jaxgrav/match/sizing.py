@@ -82,6 +82,8 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
     """
     if method not in ("dense", "chains"):
         raise ValueError(f"method must be 'dense' or 'chains'; got {method!r}")
+    if region not in ("disc", "square"):
+        raise ValueError(f"region must be 'disc' or 'square'; got {region!r}")
     grid = as_grid(grid)
     if not drift_radius_m > 0:
         raise ValueError(f"drift_radius_m must be positive (m); got {drift_radius_m!r}")

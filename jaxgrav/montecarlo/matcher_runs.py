@@ -207,6 +207,8 @@ def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=N
                                 + ("" if told is None else ", told the map error (GLS)"),
                     drift_deg=drift, noise_mgal=noise, n_fixes=n, dt_s=scen.dt,
                     search_half_size=cfg.half_size, search_spacing_m=cfg.spacing_m,
+                    search_region=cfg.region, max_sigma_m=float(cfg.max_sigma_m),
+                    max_sigma_ratio=float(cfg.max_sigma_ratio),
                     **map_error_settings(map_error), **told_settings(told, source))
     return MethodSpec(dense_run, (grid, scen, cfg, map_error), settings,
                       dict(CORRELATION_STATUS))

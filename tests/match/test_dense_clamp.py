@@ -79,21 +79,32 @@ def test_region_is_checked_and_sized_configs_search_the_disc():
     grid = Grid.from_arrays(lat, lat + 100.0, np.zeros((41, 41)), units="mGal")
     assert config_for("dense", grid, 4000.0).region == "disc"
     assert config_for("dense", grid, 4000.0, region="square").region == "square"
+    with pytest.raises(ValueError, match="region must be 'disc' or 'square'; got 'round'"):
+        config_for("chains", grid, 4000.0, region="round")
 
 
-def test_region_sigma_is_the_lattice_second_moment():
-    from jaxgrav.match.integrity import region_sigma
+def test_region_mask_and_sigma_are_the_lattice_s_own():
+    from jaxgrav.match.integrity import region_mask, region_sigma
 
     d = np.arange(-5, 6) * 300.0
     on, oe = (a.reshape(-1) for a in np.meshgrid(d, d, indexing="ij"))
-    inside = on**2 + oe**2 <= 1500.0**2
-    for region, mask in (("square", np.ones_like(inside)), ("disc", inside)):
+    r2 = on**2 + oe**2
+    inside, ring = region_mask(5, "disc")
+    np.testing.assert_array_equal(inside, r2 <= 1500.0**2)
+    np.testing.assert_array_equal(ring, inside & (r2 > 1200.0**2))
+    assert inside[np.flatnonzero((on == 1500.0) & (oe == 0.0))].all()  # the rim's axis nodes
+    square, edge = region_mask(5, "square")
+    assert square.all() and edge.sum() == 40
+    for mask in (square, inside):
         ref = np.sqrt(np.mean(on[mask] ** 2) + 300.0**2 / 12)
-        np.testing.assert_allclose(region_sigma(on, oe, 300.0, region), ref, rtol=1e-12)
+        np.testing.assert_allclose(region_sigma(on, oe, 300.0, mask), ref, rtol=1e-12)
     # the continuous limits: R/√3 for the square, R/2 for the disc
-    np.testing.assert_allclose(region_sigma(on, oe, 300.0, "square"), 1650.0 / np.sqrt(3),
+    np.testing.assert_allclose(region_sigma(on, oe, 300.0, square), 1650.0 / np.sqrt(3),
                                rtol=0.01)
-    np.testing.assert_allclose(region_sigma(on, oe, 300.0, "disc"), 1500.0 / 2, rtol=0.05)
+    np.testing.assert_allclose(region_sigma(on, oe, 300.0, inside), 1500.0 / 2, rtol=0.05)
+    # offsets that could not be scored are not part of the prior
+    half = inside & (on >= 0)
+    assert region_sigma(on, oe, 300.0, half) != region_sigma(on, oe, 300.0, inside)
     for bad in (-1.0, float("nan")):
         with pytest.raises(ValueError, match="max_sigma_ratio must be >= 0"):
             DenseConfig(max_sigma_ratio=bad)

@@ -323,11 +323,11 @@ def test_posterior_covers_the_truth_under_a_correlated_map_error():
         assert lo <= coverage <= hi, (map_sigma, coverage)
 
 
-def test_rim_edge_mass_of_a_disc_equals_numpy():
+def test_edge_mass_of_a_disc_ring_equals_numpy():
     on, oe = _lattice()
     r2 = on**2 + oe**2
     j = np.where(r2 <= 3000.0**2, _quad(on, oe, np.array([2500.0, 1200.0]), K), np.inf)
-    post = offset_posterior(j, on, oe, rim_m=2900.0)
+    post = offset_posterior(j, on, oe, edge=r2 > 2900.0**2)
     w = np.exp(-0.5 * (j - j[np.isfinite(j)].min()))
     w = w / w.sum()
     np.testing.assert_allclose(post.edge_mass, w[r2 > 2900.0**2].sum(), rtol=1e-10)
