@@ -231,13 +231,23 @@ def _load(path, in_tree):
 
 
 def _store(path, compiled):
-    """Write ``compiled`` to ``path`` atomically; skipped when it cannot be serialised."""
+    """Write ``compiled`` to ``path`` atomically.
+
+    A program that cannot be kept (refused by JAX's serialiser, or larger than
+    :data:`MAX_ENTRY_BYTES`) is marked failed instead (:func:`_mark_failed`): the
+    callers go on with their in-memory program and start no futile keeping process for
+    it again.
+    """
     try:
         exe, _, out_tree = serialize_executable.serialize(compiled)
-    except (ValueError, NotImplementedError):  # JAX cannot serialise baked-in constants
+    except (ValueError, NotImplementedError):
+        # what serialize_executable raises for a program it cannot write (e.g. some
+        # baked-in constants): not an error of the caller's run
+        _mark_failed(path)
         return
     data = pickle.dumps((exe, out_tree))
     if len(data) > MAX_ENTRY_BYTES:
+        _mark_failed(path)
         return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

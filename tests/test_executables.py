@@ -176,3 +176,23 @@ def test_a_program_whose_trial_fails_is_marked_not_kept(kept, monkeypatch):
     assert len(list(kept.glob("*.failed"))) == 1
     np.testing.assert_array_equal(executables.call(eotvos_jit, lat, ve, vn), first)
     assert len(started) == 1
+
+
+@pytest.mark.parametrize("error", [ValueError, NotImplementedError])
+def test_a_program_that_cannot_be_serialised_is_not_kept(kept, monkeypatch, error):
+    """serialize_executable refuses the program: no entry, a failed mark (no futile keeping
+    process again), the result as usual."""
+    started = []
+    monkeypatch.setattr(executables.subprocess, "Popen", lambda cmd, **kw: started.append(cmd))
+    first = executables.call(_program, *_args())
+    (cmd,) = started
+
+    def refuse(compiled):
+        raise error("cannot serialise this executable")
+
+    monkeypatch.setattr(executables.serialize_executable, "serialize", refuse)
+    executables._work(cmd[-1])  # the detached process's work, here
+    assert not list(kept.glob("*.jaxexe")) and not list(kept.glob("*.trial"))
+    assert len(list(kept.glob("*.failed"))) == 1  # tried again only by a new version
+    assert float(executables.call(_program, *_args())["sum"]) == float(first["sum"])
+    assert len(started) == 1
