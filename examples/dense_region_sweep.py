@@ -21,7 +21,7 @@ import numpy as np
 
 from jaxgrav import datasets, montecarlo
 from jaxgrav.fields.map_error import map_error
-from jaxgrav.match.integrity import region_mask, region_sigma
+from jaxgrav.match.integrity import region_spread
 
 RATIOS = (0.7, 0.8, 0.9, 1.0, np.inf)
 
@@ -41,10 +41,7 @@ def sweep(runs, sigma, length, n_fixes, seed=0, max_sigma=3000.0):
                              progress=False, cpu_options=spec.cpu_options)
         err, ins, sig, acc, cov = (np.asarray(out[k]) for k in (
             "err_m", "ins_err_m", "sigma_max_m", "accepted", "covered95"))
-        d = (np.arange(2 * off.half_size + 1) - off.half_size) * off.spacing_m
-        on, oe = (x.reshape(-1) for x in np.meshgrid(d, d, indexing="ij"))
-        spread = float(region_sigma(on, oe, off.spacing_m,
-                                    region_mask(off.half_size, region)[0]))
+        spread = float(region_spread(off))
         for ratio in RATIOS:
             a = acc & (sig <= max_sigma) & (sig <= ratio * spread)
             r = np.where(a, err, ins) / ins

@@ -28,7 +28,7 @@ from jaxgrav import datasets
 from jaxgrav.fields.map_error import map_error, map_error_key, truth_field
 from jaxgrav.match.dense import lattice_table, match_dense
 from jaxgrav.match.dense_batch import match_dense_batch
-from jaxgrav.match.integrity import region_mask, region_sigma
+from jaxgrav.match.integrity import region_spread
 from jaxgrav.match.sizing import config_for
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
@@ -95,10 +95,7 @@ def evaluate(prepared, table, sims, config):
         sweep[t] = (np.median(o2 / ins), np.mean(o2 > ins), np.mean(a2),
                     np.mean(inside[a2]) if a2.any() else np.nan)
     # the disc's informativeness test: σ ≤ ratio × the searched region's own 1-σ (and 3 km)
-    d = (np.arange(2 * config.half_size + 1) - config.half_size) * config.spacing_m
-    on, oe = (x.reshape(-1) for x in np.meshgrid(d, d, indexing="ij"))
-    spread = float(region_sigma(on, oe, config.spacing_m,
-                                region_mask(config.half_size, config.region)[0]))
+    spread = float(region_spread(config))
     ratio_sweep = {}
     for q in (0.7, 0.8, 0.9, 1.0, np.inf):
         a2 = np.asarray(r.accepted) & (sig <= 3000.0) & (sig <= q * spread)

@@ -246,7 +246,8 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
     # on the disc's rim to rounding (a rim node or a clamped offset, in float32 too)
     edge = (jnp.hypot(p[0], p[1]) >= reach * (1 - 64 * jnp.finfo(dtype).eps)
             if config.region == "disc" else (jnp.abs(p[0]) >= reach) | (jnp.abs(p[1]) >= reach))
-    n_off = jnp.asarray(int(inside.sum()) * config.n_rotations, dtype)  # searched offsets
+    n_searched = int(inside.sum()) * config.n_rotations  # offsets of the region, all turns
+    n_off = jnp.asarray(n_searched, dtype)
     return MatchResult(
         lat=m_lat,
         lon=m_lon,
@@ -259,7 +260,7 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
         topk_lon=topk_lon,
         topk_score=topk_score,
         chosen=chosen,
-        n_candidates=jnp.full((n,), int(inside.sum()) * config.n_rotations, jnp.int32),
+        n_candidates=jnp.full((n,), n_searched, jnp.int32),
         work_unconstrained=n_off**n,
         work_constrained=n_off,
         work_pairs=n_off * n,

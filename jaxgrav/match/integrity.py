@@ -17,7 +17,8 @@ import numpy as np
 
 from jaxgrav.match.gls import offset_posterior
 
-__all__ = ["FixQuality", "fix_quality", "largest_sigma", "region_mask", "region_sigma"]
+__all__ = ["FixQuality", "fix_quality", "largest_sigma", "region_mask", "region_sigma",
+           "region_spread"]
 
 
 class FixQuality(NamedTuple):
@@ -112,6 +113,28 @@ def region_sigma(d_n, d_e, cell_m, inside):
     r2 = d_n**2 + d_e**2
     second = 0.5 * jnp.sum(jnp.where(inside, r2, 0.0)) / jnp.sum(inside)
     return jnp.sqrt(second + jnp.asarray(cell_m, r2.dtype) ** 2 / 12.0)
+
+
+def region_spread(config):
+    """1-σ per axis (m) of a uniform prior over a dense configuration's searched region.
+
+    :func:`region_sigma` over all of :func:`region_mask`'s offsets (the matcher itself
+    also leaves out offsets that could not be scored).
+
+    Parameters
+    ----------
+    config : DenseConfig
+        ``half_size``, ``spacing_m`` and ``region``.
+
+    Returns
+    -------
+    Array
+        Scalar (m).
+    """
+    h = config.half_size
+    d = jnp.arange(-h, h + 1) * jnp.asarray(config.spacing_m)
+    on, oe = (a.reshape(-1) for a in jnp.meshgrid(d, d, indexing="ij"))
+    return region_sigma(on, oe, config.spacing_m, region_mask(h, config.region)[0])
 
 
 def fix_quality(chi2, n_rot, d_n, d_e, best_ne, laplace_m2, final_chi2, dof, found, config):

@@ -84,7 +84,7 @@ def test_region_is_checked_and_sized_configs_search_the_disc():
 
 
 def test_region_mask_and_sigma_are_the_lattice_s_own():
-    from jaxgrav.match.integrity import region_mask, region_sigma
+    from jaxgrav.match.integrity import region_mask, region_sigma, region_spread
 
     d = np.arange(-5, 6) * 300.0
     on, oe = (a.reshape(-1) for a in np.meshgrid(d, d, indexing="ij"))
@@ -102,6 +102,10 @@ def test_region_mask_and_sigma_are_the_lattice_s_own():
     np.testing.assert_allclose(region_sigma(on, oe, 300.0, square), 1650.0 / np.sqrt(3),
                                rtol=0.01)
     np.testing.assert_allclose(region_sigma(on, oe, 300.0, inside), 1500.0 / 2, rtol=0.05)
+    for region, mask in (("square", square), ("disc", inside)):  # a configuration's own
+        cfg = DenseConfig(spacing_m=300.0, half_size=5, region=region)
+        np.testing.assert_allclose(region_spread(cfg), region_sigma(on, oe, 300.0, mask),
+                                   rtol=1e-12)
     # offsets that could not be scored are not part of the prior
     half = inside & (on >= 0)
     assert region_sigma(on, oe, 300.0, half) != region_sigma(on, oe, 300.0, inside)

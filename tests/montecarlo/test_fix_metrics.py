@@ -12,7 +12,7 @@ import pytest
 from jaxgrav import Grid, montecarlo
 from jaxgrav.fields.map_error import map_error, truth_grid
 from jaxgrav.geodesy import local_offsets_m
-from jaxgrav.match.integrity import region_mask, region_sigma
+from jaxgrav.match.integrity import region_spread
 from jaxgrav.montecarlo import methods as montecarlo_methods
 from jaxgrav.montecarlo.fix_metrics import CHI2_2_95, covered, fix_metrics, fix_summary, sigma_max
 from jaxgrav.montecarlo.paper_a_table1 import summarize as table_summarize
@@ -118,9 +118,8 @@ def test_coverage_on_a_small_monte_carlo():
     assert acc.dtype == bool and acc.sum() >= 8
     assert np.all(np.isfinite(out["sigma_max_m"]))
     cfg = spec.args[-2]
-    d = (np.arange(2 * cfg.half_size + 1) - cfg.half_size) * cfg.spacing_m
-    on, oe = (x.reshape(-1) for x in np.meshgrid(d, d, indexing="ij"))
-    spread = float(region_sigma(on, oe, cfg.spacing_m, region_mask(cfg.half_size, "disc")[0]))
+    assert cfg.region == "disc"
+    spread = float(region_spread(cfg))
     bound = min(3000.0, cfg.max_sigma_ratio * spread)  # the default thresholds
     assert np.all(out["sigma_max_m"][acc] <= bound * (1 + 1e-9))
     s = table_summarize(dict(out, work_unconstrained=np.ones(32), work_constrained=np.ones(32),
