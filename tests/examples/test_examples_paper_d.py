@@ -7,10 +7,12 @@ EKF and UKF on 8 runs of 20 min, ``paper_d_noharm`` with the UKF on 16 runs of
 """
 
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
-from _examples import run_example
+from _examples import EXAMPLES, run_example
 
 from jaxgrav.fields.pointmass_fit import load_point_masses
 
@@ -54,24 +56,49 @@ def test_paper_d_ukf_smoke_with_map_error():
         assert np.all(np.isfinite(vals))
     assert rows["ukf-fogm"][5] < rows["ukf"][5]
 
-def test_paper_d_noharm_smoke():
-    out = run_example("paper_d_noharm.py")
-    assert "ukf: 16 runs, selection seed 1, test seed 0" in out
+def _noharm_rows(out):
+    """The guard table: 39 guards of paper D's grid and 7 harm-probability guards, each
+    with finite scores (NEES NaN for the latter, which have no covariance of their own),
+    and the selection rule applied."""
     rows = re.findall(rf"^(\S.*?)\s+{NUM}\s+{NUM}\s+{NUM}\s+(\d+)\s+{NUM}\s.*\|\s+(\d+)\s+{NUM}"
                       r"(  <- chosen)?$", out, flags=re.M)
     names = [r[0] for r in rows]
-    assert len(rows) == 39 and names[0] == "unguarded" and len(set(names)) == 39, names
+    assert len(rows) == 46 and names[0] == "unguarded" and len(set(names)) == 46, names
     for name, mean, median, worst, above, nees, sel_above, sel_mean, _ in rows:
-        vals = [float(v) for v in (mean, median, worst, nees, sel_mean)]
+        vals = [float(v) for v in (mean, median, worst, sel_mean)]
         assert np.all(np.isfinite(vals)), name
+        assert np.isnan(float(nees)) == name.startswith("risk"), name
         assert 0 < float(median) <= float(worst) and int(above) <= 16 and int(sel_above) <= 16
-    unguarded = [float(v) for v in rows[0][1:4]]
-    assert unguarded[0] < 0.9 and unguarded[1] < 1.0  # the UKF improves on the free INS
     chosen = [r for r in rows if r[-1]]
-    assert len(chosen) == 1
     # the rule: among the seed-1 means <= 0.6, the fewest seed-1 runs above 1.05
     ok = [r for r in rows if float(r[7]) <= 0.6]
-    assert ok and int(chosen[0][6]) == min(int(r[6]) for r in ok)
+    if ok:
+        assert len(chosen) == 1 and int(chosen[0][6]) == min(int(r[6]) for r in ok)
+    else:
+        assert not chosen and "none chosen" in out
+    # a guard only ever holds corrections back: the strictest ones stay near the free INS
+    strict = {r[0]: float(r[3]) for r in rows if r[0] in ("eig 0.1", "risk 0.001")}
+    assert all(w <= 1.1 for w in strict.values()), strict
+    return rows
+
+
+def test_paper_d_noharm_smoke():
+    out = run_example("paper_d_noharm.py")
+    assert "ukf: 16 runs, selection seed 1, test seed 0" in out
+    rows = _noharm_rows(out)
+    unguarded = [float(v) for v in rows[0][1:4]]
+    assert unguarded[0] < 0.9 and unguarded[1] < 1.0  # the UKF improves on the free INS
+
+
+def test_paper_d_noharm_smoke_with_map_error():
+    """--map-error: the ryukyu runs of ``montecarlo --method ukf --map-error``, the same
+    guards; bad values are refused by name."""
+    out = run_example("paper_d_noharm.py", "--map-error", "3")
+    assert "ukf: 16 runs, selection seed 1, test seed 0" in out
+    _noharm_rows(out)
+    proc = subprocess.run([sys.executable, str(EXAMPLES / "paper_d_noharm.py"), "--smoke",
+                           "--map-error", "-1"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "--map-error must be a finite number > 0" in proc.stderr
 
 
 def test_paper_d_pointmass_fit_writes_and_filters_with_its_model(tmp_path):
