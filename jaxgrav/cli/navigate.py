@@ -29,6 +29,10 @@ The readings are Eötvös-corrected with the filter's velocity, the one rule of 
 navigation loop. Where the log leaves the map, the fixes stop (event 2) and the
 solution continues on the INS with a growing σ.
 
+The default is ``--method ukf``: on the README's 12 h patrols the tightly coupled UKF
+ends the last hour at 0.06 × the free INS's error where the loosely coupled loop ends
+at 0.84 (3 mGal map error, the same 100 voyages).
+
 ``--method ukf|ekf|gsf|rbpf|pmf`` (tightly coupled, :func:`jaxgrav.navigate.navigate_tight`):
 every reading updates the INS error filter; the readings are Eötvös-corrected with the
 INS velocity and the Eötvös effect of its velocity error is part of the measurement;
@@ -94,10 +98,11 @@ def add_parser(sub):
     p.add_argument("--track", required=True,
                    help="INS log CSV: t, lat, lon, v_east, v_north, gravity (raw, mGal)")
     add_columns_option(p)
-    p.add_argument("--method", choices=METHODS, default="dense",
-                   help="dense, entropy+iccp: hourly fixes of that matcher into the INS "
-                        "error filter (loosely coupled); ukf, ekf, gsf, rbpf, pmf: every reading "
-                        "into the filter (tightly)")
+    p.add_argument("--method", choices=METHODS, default="ukf",
+                   help="ukf (default), ekf, gsf, rbpf, pmf: every reading into the INS error "
+                        "filter (tightly coupled); dense, entropy+iccp: hourly fixes of that "
+                        "matcher into the filter (loosely coupled; --fix-every, --n-fixes, "
+                        "--stride)")
     p.add_argument("--particles", type=int, default=500,
                    help="particles of --method rbpf (default 500)")
     p.add_argument("--seed", type=int, default=0, help="seed of --method rbpf's draws")

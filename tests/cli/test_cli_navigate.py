@@ -124,7 +124,8 @@ def test_bad_logs_are_named(voyage_log, tmp_path, capsys, edit, message):
     (["--stride", "40"], "--stride must be at most --n-fixes"),
     (["--sigma-pos", "-1"], "--sigma-pos must be a finite value > 0"),
     (["--map-error", "nan"], "--map-error must be a finite value >= 0"),
-    (["--n-fixes", "100", "--stride", "100"], "one segment of --n-fixes 100"),
+    (["--n-fixes", "100", "--stride", "100", "--method", "dense"],
+     "one segment of --n-fixes 100"),
     (["--method", "rbpf", "--particles", "1"], "--particles must be an integer >= 2"),
 ])
 def test_bad_options_are_named(voyage_log, tmp_path, capsys, args, message):
