@@ -88,26 +88,40 @@ def gaussian_sum(base, per_axis=5, spacing=0.8):
     -------
     Filter
         ``init(x0, P0) -> GaussianSumState``; ``update`` returns the mixture's
-        :class:`StepInfo` (mean, σ, position covariance, weighted innovation;
-        status OR-ed over components); ``predict`` predicts every component (weights
-        unchanged) for steps without a reading.
+        :class:`StepInfo` (mean, σ, position covariance; the predicted reading's
+        innovation and variance, mixed with the weights before the reading, the
+        components' spread included, so the NIS of the mixture is that of its
+        predictive distribution's first two moments; status OR-ed over components)
+        and reweights every component by its reading's likelihood (a gated one
+        too; one off the map as the least likely that was not); ``predict``
+        predicts every component (weights unchanged) for steps without a reading.
     """
 
     def init(x0, p0):
         x, p, log_w = split_prior(jnp.asarray(x0), jnp.asarray(p0), per_axis, spacing)
         return GaussianSumState(jax.vmap(base.init)(x, p), log_w)
 
-    def mixture_info(comps, log_w, infos, step):
+    def mixture_info(comps, log_w, infos, step, prior_log_w):
+        """The mixture's moments (weights ``log_w``) and its predicted reading: the
+        components' innovations and variances mixed with the weights *before* the
+        reading (``prior_log_w``), their spread included, over the components that
+        predicted one (NaN when none did)."""
         w = jnp.exp(log_w)
         mean = w @ comps.x
         d = comps.x - mean
         cov = jnp.einsum("m,mi,mj->ij", w, d, d) + jnp.einsum("m,mij->ij", w, comps.p)
         sigma = jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0, None))
-        nu = infos.innovation
+        nu, s = infos.innovation, infos.innovation_var
+        ok = jnp.isfinite(nu) & jnp.isfinite(s)
+        w0 = jnp.where(ok, jnp.exp(prior_log_w), 0.0)
+        total = jnp.sum(w0)
+        w0 = w0 / jnp.where(total > 0, total, 1.0)
+        nu_mix = w0 @ jnp.where(ok, nu, 0.0)
+        s_mix = w0 @ jnp.where(ok, s + (nu - nu_mix) ** 2, 0.0)
+        none = (total <= 0) | ~jnp.isfinite(step.z)
         return StepInfo(
-            mean, sigma, cov[:2, :2], w @ jnp.where(jnp.isfinite(nu), nu, 0.0) + jnp.where(
-                jnp.isfinite(step.z), 0.0, jnp.nan), w @ infos.innovation_var,
-            jnp.bitwise_or.reduce(infos.status),
+            mean, sigma, cov[:2, :2], jnp.where(none, jnp.nan, nu_mix),
+            jnp.where(none, jnp.nan, s_mix), jnp.bitwise_or.reduce(infos.status),
         )  # fmt: skip
 
     def update(state, step, field, dynamics):
@@ -115,13 +129,21 @@ def gaussian_sum(base, per_axis=5, spacing=0.8):
             state.components, step, field, dynamics
         )
         nu, s = infos.innovation, infos.innovation_var
-        skipped = STATUS_FILTER["off_map"] | STATUS_FILTER["covariance_failed"]
-        skipped = skipped | STATUS_FILTER["gated"]
-        used = jnp.isfinite(nu) & ((infos.status & skipped) == 0)
-        loglik = jnp.where(used, -0.5 * (jnp.where(used, nu, 0.0) ** 2 / s + jnp.log(s)), 0.0)
+        # a gated component's reading is still scored (the gate skips its state update,
+        # not its reweighting: an implausible reading must cost it weight)
+        failed = STATUS_FILTER["off_map"] | STATUS_FILTER["covariance_failed"]
+        scored = (jnp.isfinite(nu) & jnp.isfinite(s) & (s > 0)
+                  & ((infos.status & failed) == 0))
+        loglik = -0.5 * (jnp.where(scored, nu, 0.0) ** 2 / jnp.where(scored, s, 1.0)
+                         + jnp.log(jnp.where(scored, s, 1.0)))
+        # a component that could not predict the reading (off the map) explains it no
+        # better than the worst one that could; none could: the weights stay
+        worst = jnp.min(jnp.where(scored, loglik, jnp.inf))
+        loglik = jnp.where(scored, loglik, jnp.where(jnp.any(scored), worst, 0.0))
         log_w = state.log_w + loglik
         log_w = log_w - jax.nn.logsumexp(log_w)
-        return GaussianSumState(comps, log_w), mixture_info(comps, log_w, infos, step)
+        return GaussianSumState(comps, log_w), mixture_info(comps, log_w, infos, step,
+                                                            state.log_w)
 
     base_predict = predict_only(base)
 
@@ -129,7 +151,7 @@ def gaussian_sum(base, per_axis=5, spacing=0.8):
         comps, infos = jax.vmap(base_predict, in_axes=(0, None, None, None))(
             state.components, step, field, dynamics
         )
-        info = mixture_info(comps, state.log_w, infos, step)
+        info = mixture_info(comps, state.log_w, infos, step, state.log_w)
         nan = jnp.full_like(info.innovation, jnp.nan)
         return GaussianSumState(comps, state.log_w), info._replace(innovation=nan,
                                                                    innovation_var=nan)
