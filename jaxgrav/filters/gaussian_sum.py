@@ -112,16 +112,22 @@ def gaussian_sum(base, per_axis=5, spacing=0.8):
         cov = jnp.einsum("m,mi,mj->ij", w, d, d) + jnp.einsum("m,mij->ij", w, comps.p)
         sigma = jnp.sqrt(jnp.clip(jnp.diag(cov), 0.0, None))
         nu, s = infos.innovation, infos.innovation_var
-        ok = jnp.isfinite(nu) & jnp.isfinite(s)
-        w0 = jnp.where(ok, jnp.exp(prior_log_w), 0.0)
-        total = jnp.sum(w0)
-        w0 = w0 / jnp.where(total > 0, total, 1.0)
-        nu_mix = w0 @ jnp.where(ok, nu, 0.0)
-        s_mix = w0 @ jnp.where(ok, s + (nu - nu_mix) ** 2, 0.0)
-        none = (total <= 0) | ~jnp.isfinite(step.z)
+
+        def weights(ok):
+            w0 = jnp.where(ok, jnp.exp(prior_log_w), 0.0)
+            total = jnp.sum(w0)
+            return w0 / jnp.where(total > 0, total, 1.0), total > 0
+
+        has_s = jnp.isfinite(s)
+        has_nu = has_s & jnp.isfinite(nu)  # NaN without a reading: no spread term then
+        w_nu, any_nu = weights(has_nu)
+        w_s, any_s = weights(has_s)
+        nu_mix = w_nu @ jnp.where(has_nu, nu, 0.0)
+        s_mix = w_s @ jnp.where(has_s, s + jnp.where(has_nu, (nu - nu_mix) ** 2, 0.0), 0.0)
         return StepInfo(
-            mean, sigma, cov[:2, :2], jnp.where(none, jnp.nan, nu_mix),
-            jnp.where(none, jnp.nan, s_mix), jnp.bitwise_or.reduce(infos.status),
+            mean, sigma, cov[:2, :2],
+            jnp.where(any_nu & jnp.isfinite(step.z), nu_mix, jnp.nan),
+            jnp.where(any_s, s_mix, jnp.nan), jnp.bitwise_or.reduce(infos.status),
         )  # fmt: skip
 
     def update(state, step, field, dynamics):
