@@ -50,7 +50,7 @@ from jaxgrav.filters.model import (
     gravity_measurement,
 )
 
-__all__ = ["ekf", "predict", "sigma_weights", "ukf"]
+__all__ = ["MIN_ALPHA_FLOAT32", "ekf", "predict", "sigma_weights", "ukf"]
 
 _JITTER = 1e-9
 
@@ -169,6 +169,11 @@ def _curvature_variance(measurement, field, step, x, p):
     return jnp.where(jnp.isfinite(v), v, 0.0)
 
 
+MIN_ALPHA_FLOAT32 = 0.1
+"""Smallest UKF ``alpha`` in float32: on paper D's first update α = 0.1 is within 0.4 % of
+float64 and α = 0.05 4 % off (review of 2026-12-06, helper-30)."""
+
+
 def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate=jnp.inf,
         curvature_count=0.0):
     """Unscented Kalman filter for a scalar reading.
@@ -183,7 +188,13 @@ def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate
         Sigma-point spread. The default 0.5 puts the position sigma points at
         ``α √(n+κ) σ = 1.8 σ`` from the mean for n = 13 — inside a local map and
         across the prior's extent, where the map's curvature matters. Paper D's
-        range is ``1e-4 ≤ α < 1``; small α approaches the EKF.
+        range is ``1e-4 ≤ α < 1``; a small α samples the map close to the mean (a
+        second-order filter in the limit, not the EKF: ``β`` keeps the map's
+        curvature). In float32 ``α`` must be at least :data:`MIN_ALPHA_FLOAT32`: the
+        sigma points then sit a few metres from the mean, closer than float32
+        latitudes and longitudes resolve, and the update is wrong without a sign
+        (α = 1e-3: innovation variance 70 × too large); ``update`` raises
+        ValueError for such a state. Use float64 (``jax_enable_x64``) for smaller α.
     beta : float
         2 is optimal for a Gaussian prior.
     kappa : float
@@ -211,6 +222,12 @@ def ukf(measurement=gravity_measurement, *, alpha=0.5, beta=2.0, kappa=0.0, gate
     def update(state, step, field, dynamics):
         pred = predict(state, dynamics.f, dynamics.q)
         n = pred.x.shape[0]
+        if (pred.x.dtype == jnp.float32 and isinstance(alpha, int | float)
+                and alpha < MIN_ALPHA_FLOAT32):
+            raise ValueError(f"ukf(alpha={alpha!r}) in float32: alpha must be at least "
+                             f"{MIN_ALPHA_FLOAT32} there (the sigma points would sit closer "
+                             "to the mean than float32 positions resolve); enable float64 "
+                             "(jax_enable_x64) or use a larger alpha")
         scale, wm, wc = sigma_weights(n, alpha, beta, kappa)
         chol, repaired, failed = _robust_cholesky(pred.p)
         delta = jnp.sqrt(scale) * chol.T  # rows are the sigma offsets

@@ -211,7 +211,11 @@ def sogm_transition(sigma, length_m, speed, dt):
     phi : Array, shape ``(2, 2)``
         ``exp(A Δt) = e^{−βΔt} [[1 + βΔt, Δt], [−β²Δt, 1 − βΔt]]``.
     q : Array, shape ``(2, 2)``
-        ``P∞ − Φ P∞ Φᵀ`` (mGal², mGal²/s, mGal²/s²), the exact process noise.
+        ``P∞ − Φ P∞ Φᵀ`` (mGal², mGal²/s, mGal²/s²), the exact process noise, in
+        closed form with ``a = βΔt``: ``σ² (1 − e^{−2a}(1 + 2a + 2a²))`` (a series
+        below ``a = 0.1``: the difference loses ``(βΔt)⁻²`` digits, 28 % of ``Q₀₀``
+        in float32 at 10 s steps and an indefinite ``Q`` at 2 s),
+        ``2σ²β a² e^{−2a}`` and ``β²σ² (1 − e^{−2a}(1 − 2a + 2a²))``.
     """
     beta = jnp.asarray(speed) / jnp.asarray(length_m)
     dt = jnp.asarray(dt)
@@ -220,9 +224,20 @@ def sogm_transition(sigma, length_m, speed, dt):
     phi = e * jnp.stack([jnp.stack([1.0 + bt, dt]),
                          jnp.stack([-beta * bt, 1.0 - bt])])
     s2 = jnp.square(sigma)
-    p_inf = jnp.diag(jnp.stack([s2, jnp.square(beta) * s2]))
-    q = p_inf - phi @ p_inf @ phi.T
-    return phi, 0.5 * (q + q.T)
+    e2 = jnp.square(e)
+    small = bt < 0.1
+    a = jnp.where(small, bt, 0.0)  # the series' argument (the other branch's is unused)
+    series = a**3 * jnp.polyval(jnp.asarray(_Q00_SERIES[::-1], a.dtype), a)
+    q00 = s2 * jnp.where(small, series, 1.0 - e2 * (1.0 + 2.0 * bt + 2.0 * bt**2))
+    q01 = 2.0 * s2 * beta * bt**2 * e2
+    q11 = jnp.square(beta) * s2 * (-jnp.expm1(-2.0 * bt) + 2.0 * bt * (1.0 - bt) * e2)
+    return phi, jnp.stack([jnp.stack([q00, q01]), jnp.stack([q01, q11])])
+
+
+_Q00_SERIES = (4 / 3, -2.0, 8 / 5, -8 / 9, 8 / 21, -2 / 15, 16 / 405, -16 / 1575, 8 / 3465,
+               -4 / 8505, 16 / 184275)
+"""``(1 − e^{−2a}(1 + 2a + 2a²)) / a³ = Σ cₖ aᵏ``, k = 0 … 10 (exact to 1e-16 below
+a = 0.1)."""
 
 
 def _transition(config, speed, dt):
@@ -276,7 +291,8 @@ def augment(config, dynamics, x0, p0, speed, measurement=gravity_measurement):
     x0 : Array, shape ``(n,)``
     p0 : Array, shape ``(n, n)``
     speed : float or Array
-        Speed over ground (m/s) for ``τ = L / speed``.
+        Speed over ground (m/s) for ``τ = L / speed``; finite and ≥ 0 (0: a platform at
+        rest, whose map error stays what it is). A concrete bad value is a ValueError.
     measurement : MapPlusBias
         The measurement to extend.
 
@@ -300,6 +316,10 @@ def augment(config, dynamics, x0, p0, speed, measurement=gravity_measurement):
                         f"{type(config).__name__}")
     if dynamics.dt is None:
         raise ValueError("augment needs dynamics.dt (the step, s) to discretise the FOGM")
+    v = concrete(speed)
+    if v is not None and v.dtype != object and not np.all(np.isfinite(v) & (v >= 0)):
+        raise ValueError(f"speed must be a finite number >= 0 (m/s, the map error's time "
+                         f"constant is L / speed); got {v.tolist()}")
     n = dynamics.f.shape[0]
     m = config.order
     phi, qm, p_inf = _transition(config, speed, dynamics.dt)

@@ -386,6 +386,16 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1, key=None):
     every = k
     field = prepare_field(field)
     state = filt.init(x0, p0) if key is None else filt.init(x0, p0, key)
+    # a state below the default float precision (float32 inputs under x64) is promoted
+    # by the update (float64 dynamics, geodesy); the scan's carry must not change type,
+    # so start it in the precision one update returns
+    canonical = jnp.result_type(float)
+    if any(jnp.issubdtype(a.dtype, jnp.floating) and a.dtype != canonical
+           for a in jax.tree.leaves(state) if hasattr(a, "dtype")):
+        first = jax.tree.map(lambda a: a[0], steps)
+        after, _ = jax.eval_shape(lambda st, sp: filt.update(st, sp, field, dynamics), state,
+                                  first)
+        state = jax.tree.map(lambda a, b: a.astype(b.dtype), state, after)
 
     def body(state, step):
         return filt.update(state, step, field, dynamics)

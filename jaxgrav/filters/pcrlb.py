@@ -22,7 +22,9 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from jaxgrav._validate import concrete
 from jaxgrav.filters.model import gravity_measurement, prepare_field
 
 __all__ = ["PCRLBResult", "pcrlb"]
@@ -69,7 +71,9 @@ def pcrlb(field, dynamics, p0, steps, true_error, measurement=gravity_measuremen
         Prior covariance (the bound's start; ``J₀ = P₀⁻¹``).
     steps : Step
         Leading axis ``T``: INS positions, readings (only whether they are finite is
-        used), reading variances ``r`` and optional ``h_lin``.
+        used), reading variances ``r`` (≥ 0; a concrete negative one is a ValueError, a
+        traced one is skipped; ``r = 0``, a perfect reading, counts) and optional
+        ``h_lin``.
     true_error : Array, shape ``(T, m)``, ``m ≤ n``
         The true error state at each step, at least its position part (the measurement
         row depends on the position error only; the other states enter linearly). Zero
@@ -88,6 +92,10 @@ def pcrlb(field, dynamics, p0, steps, true_error, measurement=gravity_measuremen
     Differentiable and batchable like the filters: ``jax.vmap`` over runs, ``jax.grad``
     of the bound with respect to the map or the noise.
     """
+    r = concrete(steps.r)
+    if r is not None and r.dtype != object and np.any(r < 0):
+        raise ValueError(f"steps.r must be >= 0 (reading variances, mGal²); got "
+                         f"{np.min(r)!r} ({int(np.sum(r < 0))} negative)")
     field = prepare_field(field)
     n = p0.shape[0]
     t = steps.z.shape[0]
@@ -100,9 +108,13 @@ def pcrlb(field, dynamics, p0, steps, true_error, measurement=gravity_measuremen
         if step.h_lin is not None:
             h = h + step.h_lin
         off = ~(jnp.isfinite(value) & jnp.all(jnp.isfinite(h)))
-        use = jnp.isfinite(step.z) & ~off & (step.r > 0.0)
+        # a perfect reading (r = 0) carries information too; nothing to learn only where
+        # the innovation variance vanishes (r = 0 on a flat map); r < 0 is refused
+        # above when concrete and skipped when traced
+        use = jnp.isfinite(step.z) & ~off & (step.r >= 0.0)
         h = jnp.where(use, h, 0.0)
         bh = b @ h
+        use = use & (h @ bh + jnp.where(use, step.r, 0.0) > 0.0)
         s = h @ bh + jnp.where(use, step.r, 1.0)
         b = b - jnp.where(use, 1.0, 0.0) * jnp.outer(bh, bh) / s
         b = 0.5 * (b + b.T)

@@ -43,8 +43,8 @@ track with white innovations (an EKF linearised at the *true* position does not 
 The UKF (``ukf``, ``gsf``) therefore adds the map's second-order term over the predicted
 position covariance, ``½ tr((∇²Δg_M P)²)``, times the readings per map cell
 (``curvature_cells`` cells of the map's mean node spacing over the INS's median distance
-per step), to the reading variance: nothing where the position is well known, the
-reading's share of a cell where it is not.
+per step, times the share of steps that carry a reading), to the reading variance:
+nothing where the position is well known, the reading's share of a cell where it is not.
 
 A missing reading (NaN) or a sigma point off the map skips the update (status flags of
 :data:`~jaxgrav.filters.STATUS_FILTER`): a voyage that leaves the map goes on on the
@@ -252,7 +252,11 @@ def navigate_tight(grid, voyage, config, key=None):
         h_lin = eotvos_part(eotvos_jacobian(ins.lat, ins.v_east, ins.v_north), n_state)
     r = jnp.full(z.shape, jnp.asarray(cfg.noise_mgal, z.dtype) ** 2)
     steps = Step(ins.lat, ins.lon, z, r, h_lin)
-    count = cfg.curvature_cells * _cell_m(grid) / jnp.maximum(speed * dt, 1e-9)
+    # readings per map cell: steps per cell times the share of steps with a reading
+    # (a log with INS rows every second and a reading every tenth shares a cell's
+    # linearisation error among a tenth as many readings)
+    share = jnp.mean(jnp.isfinite(voyage.gravity))
+    count = cfg.curvature_cells * _cell_m(grid) * share / jnp.maximum(speed * dt, 1e-9)
     filt = _filter(cfg, meas, count)
     if cfg.method == "rbpf" and key is None:
         key = jax.random.PRNGKey(0)

@@ -7,6 +7,10 @@ with F, Q from the library's continuous model by SciPy's Van Loan) so that the m
 compiles few programs.
 """
 
+import os
+import subprocess
+import sys
+
 import jax
 import jax.extend
 import jax.numpy as jnp
@@ -842,3 +846,53 @@ def test_pad_to_stride_puts_the_readings_on_the_update_steps():
     zp = np.asarray(padded.z)
     assert start == 0 and zp.shape == (6,) and np.isnan(zp[5])
     np.testing.assert_array_equal(np.flatnonzero(np.isfinite(zp)), [2])
+
+
+def test_float32_inputs_under_x64_run_in_the_updates_precision():
+    """float32 state and dynamics with x64 on: the update promotes them (float64
+    geodesy), and run_filter starts its scan in that precision instead of failing on
+    the carry's type (review of 2026-12-06, helper-30)."""
+    f32 = jnp.float32
+    model = ins.INSErrorModel()
+    f, q = ins.transition(model, 24.3, 10.0)
+    dyn = fl.Dynamics(f.astype(f32), q.astype(f32), jnp.asarray(10.0, f32))
+    p0 = ins.initial_covariance(model, 1414.0, 0.14).astype(f32)
+    t = 4
+    steps = fl.Step(jnp.full(t, 24.3, f32), jnp.full(t, 123.0, f32), jnp.ones(t, f32),
+                    jnp.ones(t, f32))
+
+    def field(lat, lon):
+        return 0.005 * (lat - 24.3) * 111000.0
+
+    for filt in (fl.ekf(), fl.ukf()):
+        state, infos = fl.run_filter(filt, field, dyn, jnp.zeros(13, f32), p0, steps)
+        assert state.x.dtype == jnp.float64 and np.all(np.isfinite(np.asarray(infos.x)))
+
+
+_SMALL_ALPHA = """
+import jax, jax.numpy as jnp
+from jaxgrav import filters as fl
+from jaxgrav.fields.pointmass import paper_d
+from jaxgrav.sim import ins
+m = ins.INSErrorModel()
+f, q = ins.transition(m, 24.27, 10.0)
+dyn = fl.Dynamics(f, q, jnp.asarray(10.0))
+p0 = ins.initial_covariance(m, 1414.0, 0.14)
+step = fl.Step(jnp.asarray(24.27), jnp.asarray(122.95), jnp.asarray(1.0), jnp.asarray(1.0))
+assert not jax.config.jax_enable_x64
+fl.ukf(alpha=0.1).update(fl.ukf().init(jnp.zeros(13), p0), step, paper_d(), dyn)
+try:
+    fl.ukf(alpha=0.01).update(fl.ukf().init(jnp.zeros(13), p0), step, paper_d(), dyn)
+except ValueError as e:
+    print("refused:", e)
+"""
+
+
+def test_a_small_alpha_is_refused_in_float32():
+    """α = 1e-3 in float32 put the sigma points closer to the mean than float32 positions
+    resolve (innovation variance 70 × too large, no flag): refused by name."""
+    env = {**os.environ, "JAX_ENABLE_X64": "0"}
+    proc = subprocess.run([sys.executable, "-c", _SMALL_ALPHA], capture_output=True,
+                          text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "refused: ukf(alpha=0.01) in float32: alpha must be at least 0.1" in proc.stdout

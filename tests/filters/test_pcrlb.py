@@ -124,3 +124,26 @@ def map_anomaly_field(lat, lon):
     """A smooth non-linear field (mGal) for the transformation tests."""
     return 30.0 * jnp.sin(40.0 * (lat - LAT0)) * jnp.cos(30.0 * (lon - LON0)) + map_anomaly(
         _plane, lat, lon)
+
+
+def test_a_perfect_reading_counts_and_a_negative_variance_is_refused():
+    """r = 0 is the most informative reading, not none (the bound equalled the prior's
+    there, above what a filter reaches; review of 2026-12-06, helper-30)."""
+    dyn, p0 = _model()
+    truth = jnp.zeros((40, 2))
+    base = _steps()
+    prior = pcrlb(_plane, dyn, p0, base._replace(z=jnp.full(40, jnp.nan)), truth)
+    tiny = pcrlb(_plane, dyn, p0, base._replace(r=jnp.full(40, 1e-6)), truth)
+    perfect = pcrlb(_plane, dyn, p0, base._replace(r=jnp.zeros(40)), truth)
+    assert np.all(np.isfinite(np.asarray(perfect.position_rms)))
+    assert float(perfect.position_rms[-1]) <= float(tiny.position_rms[-1]) * (1 + 1e-6)
+    # a plane observes one direction: that one goes to ~0, the other stays
+    assert float(perfect.position_rms[-1]) < 0.75 * float(prior.position_rms[-1])
+    np.testing.assert_allclose(np.asarray(perfect.position_rms), np.asarray(
+        tiny.position_rms), rtol=1e-3)
+    flat = pcrlb(lambda lat, lon: 0.0 * lat, dyn, p0, base._replace(r=jnp.zeros(40)), truth)
+    np.testing.assert_allclose(np.asarray(flat.position_rms), np.asarray(prior.position_rms),
+                               rtol=1e-12)  # nothing to learn from a flat map, no NaN
+    with pytest.raises(ValueError, match=r"steps\.r must be >= 0"):
+        pcrlb(_plane, dyn, p0, base._replace(r=jnp.full(40, -1.0)), truth)
+
