@@ -11,19 +11,16 @@ the map anomaly at the position the INS would be at without error, plus the bias
 (paper D: ``z = Δg_s − Δg_M``, written here as ``z − h(x)``). The map is a
 :class:`~jaxgrav.grid.Grid` (bicubic) or :class:`~jaxgrav.fields.pointmass.PointMasses`.
 
-Filters follow optax: a :class:`Filter` is a pair of pure functions
-``init(x0, P0) -> FilterState`` and ``update(state, step, field, dynamics) ->
-(FilterState, StepInfo)`` (plus, optionally, a cheap ``predict`` with the same
-signature for steps without a reading); :func:`run_filter` scans ``update`` over a
-run with ``lax.scan``, and a batch of runs is a ``jax.vmap`` of it. When readings sit
-on a fixed stride, ``run_filter(..., every=k)`` updates only on the reading steps
-and only predicts in between.
+Filters follow optax: a :class:`Filter` is a pair of pure functions ``init(x0, P0) ->
+FilterState`` and ``update(state, step, field, dynamics) -> (FilterState, StepInfo)`` (and
+an optional, cheap ``predict`` for steps without a reading); :func:`run_filter` scans
+``update`` over a run with ``lax.scan`` (a batch of runs is a ``jax.vmap`` of it); with
+readings on a stride, ``run_filter(..., every=k)`` updates on them and predicts between.
 
-The measurement is structured: :data:`gravity_measurement` is a
-:class:`MapPlusBias` — a map part that depends on the position states only, plus
-an additive bias state — which the UKF recognises to evaluate the map at the
-``2·2 + 1`` distinct sigma-point positions instead of all ``2n + 1`` points. Any
-callable ``h(field, x, lat, lon)`` still works (the generic path).
+The measurement is structured: :data:`gravity_measurement` is a :class:`MapPlusBias` (a map
+part of the position states only, plus an additive bias state), which the UKF evaluates at
+the ``2·2 + 1`` distinct sigma-point positions instead of all ``2n + 1``; any callable
+``h(field, x, lat, lon)`` also works (the generic path).
 """
 
 import inspect
@@ -38,6 +35,7 @@ from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import PointMasses
 from jaxgrav.fields.pointmass import anomaly_kernel as _anomaly_kernel
+from jaxgrav.filters.precision import in_update_precision
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.grid import Grid
 from jaxgrav.prepared import PreparedMap, prepare_map
@@ -386,16 +384,8 @@ def run_filter(filt, field, dynamics, x0, p0, steps, every=1, key=None):
     every = k
     field = prepare_field(field)
     state = filt.init(x0, p0) if key is None else filt.init(x0, p0, key)
-    # a state below the default float precision (float32 inputs under x64) is promoted
-    # by the update (float64 dynamics, geodesy); the scan's carry must not change type,
-    # so start it in the precision one update returns
-    canonical = jnp.result_type(float)
-    if any(jnp.issubdtype(a.dtype, jnp.floating) and a.dtype != canonical
-           for a in jax.tree.leaves(state) if hasattr(a, "dtype")):
-        first = jax.tree.map(lambda a: a[0], steps)
-        after, _ = jax.eval_shape(lambda st, sp: filt.update(st, sp, field, dynamics), state,
-                                  first)
-        state = jax.tree.map(lambda a, b: a.astype(b.dtype), state, after)
+    state = in_update_precision(filt, state, jax.tree.map(lambda a: a[0], steps), field,
+                                dynamics)
 
     def body(state, step):
         return filt.update(state, step, field, dynamics)
