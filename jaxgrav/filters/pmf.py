@@ -51,9 +51,11 @@ and bias, ``N(z − Δg_M(cell) − b_c; 0, s_c + r)``; then the Gaussian states
 by the regression, ``m_o ← m_o + K (d̄⁺ − d̄⁻)``, ``C`` unchanged (with a known linear
 part of the reading, :attr:`Step.h_lin`, each cell's Gaussian takes the reading too and
 the state is the mixture's moments: :mod:`~jaxgrav.filters.pmf_linear`). A missing
-reading skips the update; cells off a Grid map get zero likelihood (the update is
-skipped if the whole grid is off the map). The estimate is the posterior mean; its
-position covariance is the grid's plus the cell's own ``cell²/12`` (for NEES; after a
+reading skips the update; a cell whose map value is unknown (off a Grid map, or a NaN
+node within the interpolation's reach) gets the known cells' mean likelihood, so the
+reading moves no mass between known and unknown cells, and keeps its bias and linear
+part (no cell on the map: no update). The estimate is the posterior mean; its position
+covariance is the grid's plus the cell's own ``cell²/12`` (for NEES; after a
 ``predict``, plus the pending spread).
 
 **Map-error state** (Rao–Blackwellised, like the bias). When the prior and the
@@ -351,32 +353,40 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         var = pred_v + step.r
         loglik = jnp.where(on_map, -0.5 * (nu**2 / var + jnp.log(var)), -jnp.inf)
         any_on = jnp.any(on_map)
-        loglik = loglik - jnp.max(jnp.where(on_map, loglik, -jnp.inf))
+        lik = jnp.exp(loglik - jnp.max(jnp.where(on_map, loglik, -jnp.inf)))
+        # a cell of unknown map value takes the known cells' mean likelihood (zero piled the
+        # mass onto a NaN hole's rim: 10 km off with a 450 m σ)
+        w_on = jnp.where(on_map, w, 0.0)
+        lik_unknown = jnp.sum(w_on * lik) / jnp.maximum(jnp.sum(w_on), jnp.finfo(w.dtype).tiny)
         do = has & any_on
-        w_new = jnp.where(do, w * jnp.exp(loglik), w)
+        w_new = jnp.where(do, w * jnp.where(on_map, lik, lik_unknown), w)
         total = w_new.sum()
         do = do & (total > 0)
         w_new = jnp.where(do, w_new / jnp.where(total > 0, total, 1.0), w)
+        took = do & on_map  # the cells that took the reading
         gain = cross_b / var
-        m_new = jnp.where(do, m + gain * nu, m)
-        s_new = jnp.where(do, s - gain * cross_b, s)
+        m_new = jnp.where(took, m + gain * nu, m)
+        s_new = jnp.where(took, s - gain * cross_b, s)
         state = state._replace(w=w_new, bias_mean=m_new, bias_var=s_new)
         if has_err:
             gain_e = cross_e / var
-            state = state._replace(err_mean=jnp.where(do, em + gain_e * nu, em),
-                                   err_var=jnp.where(do, ev - gain_e * cross_e, ev),
-                                   err_cross=jnp.where(do, ec - gain * cross_e, ec))
+            state = state._replace(err_mean=jnp.where(took, em + gain_e * nu, em),
+                                   err_var=jnp.where(took, ev - gain_e * cross_e, ev),
+                                   err_cross=jnp.where(took, ec - gain * cross_e, ec))
         mean, cov = grid_moments(w_new, dn, de, _size(state))
         if lin is None:
             state = sync_gaussian(state, mean, cov, prior_mean)
         else:  # each cell's Gaussian updated by the reading, then the mixture's moments
-            x, p = mixture_update(w_new, *lin[2:], jnp.where(do, nu / var, 0.0),
-                                  jnp.where(do, jnp.sum(w_new / var), 0.0), mean, cov)
+            x, p = mixture_update(w_new, *lin[2:], jnp.where(took, nu / var, 0.0),
+                                  jnp.sum(jnp.where(took, w_new / var, 0.0)), mean, cov)
             state = state._replace(x=x, p=p)
 
-        g_safe = jnp.where(on_map, g, 0.0)
-        z_hat = jnp.sum(w * (g_safe + pred_m))
-        z_var = jnp.sum(w * (var + (g_safe + pred_m - z_hat) ** 2))
+        # the predictive moments of the reading: the known cells' (an unknown cell predicts
+        # what the known ones do, as in its likelihood)
+        w_known = w_on / jnp.maximum(jnp.sum(w_on), jnp.finfo(w.dtype).tiny)
+        pred = jnp.where(on_map, g + pred_m, 0.0)
+        z_hat = jnp.sum(w_known * pred)
+        z_var = jnp.sum(w_known * (var + (pred - z_hat) ** 2))
         flags = (
             jnp.where(~has, STATUS_FILTER["no_reading"], 0)
             | jnp.where(has & ~jnp.all(on_map), STATUS_FILTER["off_map"], 0)

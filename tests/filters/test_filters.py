@@ -712,13 +712,18 @@ def test_pmf_off_map(prior, smooth_grid):
     pred, _ = update(PMF, state, _one_step(jnp.nan, 35.0, 130.0), smooth_grid, DT)
     np.testing.assert_allclose(np.asarray(new.w), np.asarray(pred.w), rtol=1e-12, atol=1e-18)
     assert int(info.status) & FLAGS["off_map"]
-    # partly off (INS near the east edge): flagged, off-map cells lose their weight
+    # partly off (INS near the east edge): flagged; the off-map cells are not ruled out,
+    # they keep their prior share of the mass (the reading cannot tell whether the
+    # vehicle is beyond the map's edge), while the reading reweights the cells on the map
     new, info = update(PMF, state, _one_step(5.0, 30.0, 130.49), smooth_grid, DT)
+    pred, _ = update(PMF, state, _one_step(jnp.nan, 30.0, 130.49), smooth_grid, DT)
     assert int(info.status) & FLAGS["off_map"]
     # cell (i, j) is offset east by de_j; true lon = INS lon − de_j/(N cos φ): cells with
     # a large negative de are east of the INS, off the grid
-    w = np.asarray(new.w)
-    assert w[:, 0].sum() == 0.0 and w[:, -1].sum() > 0.0
+    w, w0 = np.asarray(new.w), np.asarray(pred.w)
+    assert w0[:, 0].sum() > 1e-6
+    np.testing.assert_allclose(w[:, 0].sum(), w0[:, 0].sum(), rtol=1e-9)
+    assert np.abs(w[:, -1] - w0[:, -1]).max() > 1e-6 * w0[:, -1].max()  # on the map: moved
     np.testing.assert_allclose(w.sum(), 1.0, rtol=1e-12)
 
 

@@ -16,11 +16,15 @@ import pytest
 import scipy.linalg
 import scipy.special
 
+from jaxgrav import datasets
 from jaxgrav import filters as fl
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
 from jaxgrav.filters.map_state import augment, map_error_state
 from jaxgrav.filters.pmf import PMFDynamics, diffusion_kernel
+from jaxgrav.filters.pmf_cells import cell_values
+from jaxgrav.grid import Grid
+from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios.paper_d import MASS_LON
 from jaxgrav.sim import ins
 
@@ -506,3 +510,44 @@ def test_dynamics_arguments():
     np.testing.assert_allclose(np.asarray(d.q), np.asarray(q))
     rw = PMF_RW.dynamics(LAT, DT)
     np.testing.assert_array_equal(np.asarray(rw.f), np.eye(ins.N_STATES))
+
+
+def test_cells_of_unknown_map_value_neither_gain_nor_lose_mass(prior):
+    """A NaN hole in a real map under part of the grid: the reading reweights the known
+    cells among themselves (Bayes, by hand), the unknown cells keep their prior share of
+    the mass and their bias, and the predicted reading is the known cells' (zero likelihood
+    for the unknown cells piled the mass on the hole's rim: 10 km off with a 450 m σ)."""
+    grid = datasets.load("ryukyu")["anomaly_2p5min"]
+    iy, ix = int((30.3 - grid.lat0) / grid.dlat), int((129.7 - grid.lon0) / grid.dlon)
+    lat, lon = float(grid.lat0 + (iy + 1) * grid.dlat), 129.7  # on a row of nodes
+    values = np.asarray(grid.values).copy()
+    values[iy, ix - 4:ix + 5] = np.nan  # unknown: the two rows of cells south of the INS
+    field = prepare_map(Grid(jnp.asarray(values), grid.lat0, grid.dlat, grid.lon0, grid.dlon))
+    x0, p0 = prior
+    dyn = PMF.dynamics(lat, DT)
+    state = init(PMF, x0, p0)
+    pred, _ = predict_settled(PMF, state, dyn)
+    z, r = 12.0, 0.7
+    step = _step(z, lat, lon, r)
+    new, info = update(PMF, state, step, field, dyn)
+
+    w, m, s = (np.asarray(a) for a in (pred.w, pred.bias_mean, pred.bias_var))
+    offsets = (np.arange(G) - (G - 1) / 2) * CELL
+    dn, de = jnp.meshgrid(pred.centre[0] + offsets, pred.centre[1] + offsets, indexing="ij")
+    g = np.asarray(cell_values(field, step, dn, de, fl.gravity_measurement))
+    known = np.isfinite(g)
+    assert 0.2 < 1 - known.mean() < 0.8
+    like = np.where(known, np.exp(-0.5 * (z - np.where(known, g, 0) - m) ** 2 / (s + r))
+                    / np.sqrt(s + r), 0.0)
+    like_unknown = np.sum(w * like) / np.sum(w[known])
+    post = w * np.where(known, like, like_unknown)
+    post /= post.sum()
+    np.testing.assert_allclose(np.asarray(new.w), post, rtol=1e-9, atol=1e-15)
+    assert np.asarray(new.w)[~known].sum() == pytest.approx(w[~known].sum(), rel=1e-9)
+    np.testing.assert_array_equal(np.asarray(new.bias_var)[~known], s[~known])
+    np.testing.assert_array_equal(np.asarray(new.bias_mean)[~known], m[~known])
+    assert np.all(np.asarray(new.bias_var)[known] < s[known])
+    wk = w * known / np.sum(w * known)
+    z_hat = np.sum(wk * np.where(known, g + m, 0.0))
+    np.testing.assert_allclose(float(info.innovation), z - z_hat, rtol=1e-9)
+    assert int(info.status) & FLAGS["off_map"]
