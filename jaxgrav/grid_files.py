@@ -7,6 +7,8 @@ given as a map) in one line, finds the 1-D latitude and longitude coordinates (`
 dimensions (``time`` of length 1) and refuses other ones by name, makes the longitudes
 contiguous (a regional 0–360 map across 0°, 350 … 10, becomes −10 … 10) and checks both
 axes (a repeated, unsorted or irregular node is named with the file and its value).
+A gravity or magnetic map declared in other units (CF ``units`` ``m s-2``, ``uGal``,
+``uT`` …) is converted to mGal or nT (:func:`map_units`).
 It returns plain arrays; :meth:`Grid.from_netcdf` and :func:`jaxgrav.datasets.load_map`
 build the grid. :func:`write_netcdf` writes a grid with CF ``lat``/``lon`` coordinates,
 atomically. Both are package-internal: use the :class:`~jaxgrav.grid.Grid` methods or
@@ -31,6 +33,16 @@ _CF = {
     "latitude": ("latitude", {"degrees_north", "degree_north", "degrees_n", "degree_n"}),
     "longitude": ("longitude", {"degrees_east", "degree_east", "degrees_e", "degree_e"}),
 }
+_UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (factor, units)
+    **dict.fromkeys(("mgal", "milligal", "milligals"), (1.0, "mGal")),
+    **dict.fromkeys(("gal", "gals"), (1e3, "mGal")),
+    **dict.fromkeys(("ugal", "microgal", "microgals"), (1e-3, "mGal")),
+    **dict.fromkeys(("ms-2", "m/s2", "m/s/s", "ms-1s-1"), (1e5, "mGal")),
+    **dict.fromkeys(("gu", "um/s2", "ums-2"), (0.1, "mGal")),  # gravity units, µm/s²
+    **dict.fromkeys(("nt", "nanotesla", "gamma"), (1.0, "nT")),
+    **dict.fromkeys(("ut", "microtesla"), (1e3, "nT")),
+    **dict.fromkeys(("t", "tesla"), (1e9, "nT")),
+}
 _MAGIC = (b"CDF\x01", b"CDF\x02", b"CDF\x05", b"\x89HDF\r\n\x1a\n")
 """First bytes of NetCDF-3 (classic, 64-bit offset, 64-bit data) and NetCDF-4 (HDF5)."""
 
@@ -47,7 +59,8 @@ class GridArrays(NamedTuple):
     values : ndarray, shape ``(..., ny, nx)``
         The variable (float; fill values as NaN), latitude and longitude last.
     name, units : str
-        The variable's name and its ``units`` attribute (``""`` if none).
+        The variable's name and its ``units`` attribute (``""`` if none; ``mGal`` or
+        ``nT`` when the values were converted from other gravity or magnetic units).
     """
 
     lat: np.ndarray
@@ -199,8 +212,42 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
         units = str(da.attrs.get("units", ""))
     if values.dtype.kind not in "fc":
         values = values.astype(float)
+    values, units = map_units(values, units)
     return GridArrays(*_checked_axes(lat, lon, label, lat_name, lon_name), values, str(var),
                       units)
+
+
+def _unit_key(units):
+    key = units.strip().lower().replace("µ", "u").replace("μ", "u")
+    for c in " *^.·":
+        key = key.replace(c, "")
+    return key
+
+
+def map_units(values, units):
+    """A map's values in the library's units: gravity in mGal, magnetic fields in nT.
+
+    The file's CF ``units`` attribute says what the numbers are (``m s-2``, ``Gal``,
+    ``uGal``, ``gu``, ``T``, ``uT`` …); matching, filtering and the readings' checks
+    work in mGal and nT, so a map in other units is converted, not misread as mGal.
+
+    Parameters
+    ----------
+    values : ndarray
+    units : str
+        The ``units`` attribute (``""``: none, the values are taken as they are).
+
+    Returns
+    -------
+    values : ndarray
+    units : str
+        ``"mGal"`` or ``"nT"`` for a recognised gravity or magnetic unit, else ``units``
+        unchanged (geoid heights in ``m``, DOV in ``arcsec`` …).
+    """
+    factor, canonical = _UNIT_SCALES.get(_unit_key(units), (None, units))
+    if factor is None:
+        return values, units
+    return (values if factor == 1.0 else values * factor), canonical
 
 
 def _checked_axes(lat, lon, label, lat_name, lon_name):

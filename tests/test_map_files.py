@@ -3,6 +3,7 @@ region a track needs (Grid.finite_region): one case per input variant of issue 1
 hypothesis-generated small NetCDF grids."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -134,6 +135,41 @@ def test_coordinates_found_by_cf_attributes(tmp_path):
                coords={"r": ("r", LAT, {"standard_name": "latitude"}),
                        "c": ("c", LON, {"units": "degrees_east"})}).to_netcdf(tmp_path / "cf.nc")
     np.testing.assert_allclose(load_map(tmp_path / "cf.nc").values, FIELD)
+
+
+@pytest.mark.parametrize(("units", "scale", "expected"), [
+    ("mGal", 1.0, "mGal"), ("m s-2", 1e-5, "mGal"), ("m/s^2", 1e-5, "mGal"),
+    ("uGal", 1e3, "mGal"), ("µGal", 1e3, "mGal"), ("Gal", 1e-3, "mGal"), ("gu", 10.0, "mGal"),
+    ("nT", 1.0, "nT"), ("uT", 1e-3, "nT"), ("T", 1e-9, "nT"),
+    ("m", 1.0, "m"), ("", 1.0, ""),  # not a gravity or magnetic unit: as it is
+])
+def test_map_units_are_converted_to_mgal_or_nt(tmp_path, units, scale, expected):
+    """A map declared in m/s² (or µGal, µT …) is read in mGal (nT), not misread as mGal."""
+    path = write(tmp_path / "u.nc", values=FIELD * scale, attrs={"units": units})
+    grid = load_map(path)
+    assert grid.units == expected
+    np.testing.assert_allclose(np.asarray(grid.values), FIELD, rtol=1e-12)
+
+
+def test_a_map_in_m_per_s2_matches_like_the_map_in_mgal(tmp_path, capsys):
+    """The same map in m/s²: match finds the same fix as with the map in mGal."""
+    ryukyu = xr.open_dataset(jg.datasets.path("ryukyu")["anomaly_2p5min"], engine="netcdf4")
+    si = ryukyu.astype("float64")
+    si["gravity_anomaly"] = si["gravity_anomaly"] * 1e-5
+    si["gravity_anomaly"].attrs["units"] = "m s-2"
+    si.to_netcdf(tmp_path / "si.nc")
+    track = tmp_path / "t.csv"
+    assert main(["simulate", "--map", "ryukyu", "--n", "20", "--seed", "3", "--out",
+                 str(track)]) == 0
+    outs = []
+    for name, m in (("mgal", "ryukyu"), ("si", str(tmp_path / "si.nc"))):
+        out = tmp_path / f"{name}.json"
+        assert main(["match", "--map", m, "--track", str(track), "--out", str(out)]) == 0, \
+            capsys.readouterr().err
+        outs.append(json.loads(out.read_text()))
+    a, b = outs
+    np.testing.assert_allclose([b["offset_north_m"], b["offset_east_m"]],
+                               [a["offset_north_m"], a["offset_east_m"]], atol=1.0)
 
 
 def test_fill_values_and_nan_cells_kept_as_a_mask(tmp_path):
