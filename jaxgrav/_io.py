@@ -25,7 +25,7 @@ def _umask():
     return mask
 
 
-def check_outputs(paths, *, force=False, names=None):
+def check_outputs(paths, *, force=False, names=None, inputs=None):
     """Refuse a set of output files before any of them is written.
 
     Parameters
@@ -36,16 +36,22 @@ def check_outputs(paths, *, force=False, names=None):
         Existing files may be replaced.
     names : sequence of str, optional
         The option that names each path (``--out``, ``--truth``), for the message.
+    inputs : mapping of str to str, Path or None, optional
+        The files the command reads, by option (``{"--track": path}``); an output that
+        is one of them is refused, ``force`` or not (None entries, and names that are
+        not existing files, such as a shipped map's, are skipped).
 
     Raises
     ------
     FileExistsError
         If a path exists and ``force`` is false.
     ValueError
-        If two options name the same file, or a path is an existing folder.
+        If two options name the same file, an output is an input, or a path is an
+        existing folder.
     """
     names = [None] * len(paths) if names is None else list(names)
-    seen = {}
+    seen = {Path(p).resolve(): f"the input {opt} {str(p)!r}"
+            for opt, p in (inputs or {}).items() if p is not None and Path(p).is_file()}
     for path, name in zip(paths, names, strict=True):
         if path is None:
             continue
@@ -53,7 +59,7 @@ def check_outputs(paths, *, force=False, names=None):
         resolved = Path(path).resolve()
         if resolved in seen:
             raise ValueError(f"{label} and {seen[resolved]} are the same file; give each "
-                             "output its own path")
+                             "output its own path, apart from the inputs")
         seen[resolved] = label
         if Path(path).is_dir():
             raise ValueError(f"{label} is a folder; expected a file path")
@@ -77,8 +83,12 @@ def atomic_output(path, *, force=False):
     ------
     FileExistsError
         If ``path`` exists and ``force`` is false.
+    ValueError
+        If ``path`` is an existing folder (``force`` or not).
     """
     path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{str(path)!r} is a folder; expected a file path")
     if path.exists() and not force:
         raise FileExistsError(f"{str(path)!r} exists; pass force=True (--force) to overwrite it")
     path.parent.mkdir(parents=True, exist_ok=True)
