@@ -364,7 +364,7 @@ def write_track_csv(path, columns, *, force=False, precision=9):
     if len(set(lengths.values())) > 1:
         raise ValueError(f"columns must have equal lengths; got {lengths}")
     with atomic_output(path, force=force) as tmp, open(tmp, "w", newline="") as fh:
-        w = csv.writer(fh)
+        w = csv.writer(fh, lineterminator="\n")  # csv defaults to CRLF line ends
         w.writerow(list(arrays))
         for row in zip(*arrays.values(), strict=True):
             w.writerow([v if isinstance(v, str) else "" if not np.isfinite(v)
