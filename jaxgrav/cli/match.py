@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 
-from jaxgrav._io import atomic_output
+from jaxgrav._io import atomic_output, check_outputs
 from jaxgrav.cli.inputs import (
     add_columns_option,
     add_map_error_var_option,
@@ -57,8 +57,8 @@ def add_parsers(sub):
     m.add_argument("--noise", type=float, default=1.0,
                    help="reading noise sigma (mGal, or nT for a magnetic track)")
     m.add_argument("--bias-sigma", type=float, default=None,
-                   help="prior sigma of the reading bias (mGal); default 3 with velocities, "
-                        "else free")
+                   help="dense, chains: prior sigma of the reading bias (mGal, > 0; inf: "
+                        "estimated freely); default 3 with velocities, else free")
     m.add_argument("--max-rotation", type=float, default=None, metavar="DEG",
                    help="iccp, entropy+iccp: largest INS heading error (degrees, 0-180), the "
                         "bound on ICCP's rotation (library max_rotation_deg); default 90, "
@@ -98,16 +98,25 @@ def add_parsers(sub):
     add_columns_option(s)
     s.add_argument("--out", required=True, help="output CSV (track columns + sampled column)")
     s.add_argument("--method", choices=("bilinear", "bicubic"), default="bicubic")
-    s.add_argument("--column", default="map", help="name of the added column (default map)")
+    s.add_argument("--column", default="map",
+                   help="name of the added column, not one the track already has (default map)")
     s.add_argument("--force", action="store_true", help="overwrite an existing output")
     s.set_defaults(func=_cmd_sample)
 
 
 def _cmd_sample(args):
+    if not args.column.strip():
+        raise ValueError(f"--column must be a non-empty column name; got {args.column!r}")
+    _check_out(args)
     track = read_track(args, required=("lat", "lon"))
+    cols = track.columns()
+    taken = {c.lower(): c for c in (*cols, *track.renamed.values())}
+    if args.column.strip().lower() in taken:
+        raise ValueError(f"--column {args.column!r} is the name of a column of --track "
+                         f"{str(args.track)!r} ({taken[args.column.strip().lower()]!r}); "
+                         "expected a new name (the track's columns are kept)")
     grid, _ = track_map(args, track, 0.0)
     values = np.asarray(grid.sample(track["lat"], track["lon"], args.method, strict=True))
-    cols = track.columns()
     cols[args.column] = values
     write_track_csv(args.out, cols, force=args.force)
     print(f"wrote {args.out}: {values.size} samples of {grid.name or 'map'} ({args.method})")
@@ -118,19 +127,40 @@ def _cmd_sample(args):
               f"their {args.column!r} cells are left empty", file=sys.stderr)
 
 
+def _check_out(args):
+    """``--out`` before anything is computed: not a folder, not an input, no clobbering."""
+    check_outputs([args.out], force=args.force, names=["--out"],
+                  inputs={"--track": args.track, "--map": args.map})
+
+
+def _drift_radius(args, track):
+    """The search radius (degrees of arc): ``--drift-radius``, else the largest value of
+    the track's ``drift_radius`` column (each must be > 0), else 0.05."""
+    if args.drift_radius is not None:
+        return args.drift_radius
+    if "drift_radius" not in track or not np.isfinite(track["drift_radius"]).any():
+        return 0.05
+    radius = np.asarray(track["drift_radius"], float)
+    bad = np.flatnonzero(np.isfinite(radius) & ~(radius > 0))
+    if bad.size:
+        i = int(bad[0])
+        column = track.renamed.get("drift_radius", "drift_radius")
+        raise ValueError(f"--track {str(args.track)!r}, line {track.line(i)}, column "
+                         f"{column!r}: drift radius {radius[i]:g} is not a positive angle in "
+                         f"degrees of arc ({bad.size} such row(s)); fix the column or give "
+                         "--drift-radius")
+    return float(np.nanmax(radius))
+
+
 def _cmd_match(args):
     _check_match_args(args)
+    _check_out(args)
     track = read_track(args, required=("t", "lat", "lon"))
     field = "magnetic" if "magnetic" in track else "gravity"
     if field not in track:
         raise ValueError(f"track file {str(args.track)!r} needs a 'gravity' (mGal) or "
                          f"'magnetic' (nT) column; it has {sorted(track)}")
-    if args.drift_radius is not None:
-        radius_deg = args.drift_radius
-    elif "drift_radius" in track and np.isfinite(track["drift_radius"]).any():
-        radius_deg = float(np.nanmax(track["drift_radius"]))
-    else:
-        radius_deg = 0.05
+    radius_deg = _drift_radius(args, track)
     grid, sigma_var = track_map(args, track, radius_deg * DEG_ARC_M,
                                 sigma_given=args.map_error > 0)
     if sigma_var is not None:
@@ -154,7 +184,7 @@ def _cmd_match(args):
         raise ValueError(f"--method {args.method} matches gravity; use entropy, iccp or "
                          "entropy+iccp for a magnetic track")
     max_rotation = 90.0 if args.max_rotation is None else args.max_rotation
-    kw = {}  # the options each method takes (--bias-sigma is ignored by the others)
+    kw = {}  # the options each method takes (_check_match_args refuses the others)
     if args.method in ("dense", "chains"):
         kw["bias_sigma_mgal"] = args.bias_sigma
     if args.method == "dense":
@@ -271,8 +301,19 @@ def _check_match_args(args):
     if args.drift_radius is not None and not (math.isfinite(args.drift_radius)
                                               and args.drift_radius > 0):
         bad("--drift-radius", args.drift_radius, "a positive number of degrees of arc")
-    if not (math.isfinite(args.noise) and args.noise >= 0):
-        bad("--noise", args.noise, "a finite standard deviation >= 0 (mGal or nT)")
+    if not (math.isfinite(args.noise) and args.noise > 0):
+        # 0 weights every reading infinitely: χ² of 1e306 and a meaningless covariance
+        bad("--noise", args.noise, "a finite standard deviation > 0 (mGal or nT)")
+    if args.bias_sigma is not None:
+        if args.method not in ("dense", "chains"):
+            raise ValueError(f"--bias-sigma is the bias prior of --method dense and chains; "
+                             f"--method {args.method} estimates no bias (correct the readings "
+                             "instead)")
+        # 0 (a bias known to be zero) divides by zero in the score: no candidate survives
+        if not args.bias_sigma > 0:
+            bad("--bias-sigma", args.bias_sigma, "a standard deviation > 0 (mGal; inf: the "
+                "bias estimated freely; for a bias known to be near zero give a small sigma "
+                "such as 0.01)")
     if args.refine < 1:
         bad("--refine", args.refine, "an integer factor >= 1")
     if not (math.isfinite(args.map_error) and args.map_error >= 0):
