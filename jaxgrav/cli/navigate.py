@@ -53,6 +53,7 @@ import numpy as np
 
 from jaxgrav import executables
 from jaxgrav._io import check_outputs
+from jaxgrav.cli.filter import MIN_PARTICLES, check_particles
 from jaxgrav.cli.inputs import (
     add_columns_option,
     add_map_error_var_option,
@@ -78,7 +79,8 @@ from jaxgrav.sim.trajectory import Track
 from jaxgrav.sim.voyage_log import Voyage
 from jaxgrav.tracks import csv_line, write_track_csv
 
-__all__ = ["METHODS", "add_parser", "check_log", "cmd_navigate"]
+__all__ = ["DEFAULT_PARTICLES", "LOOSE_DEFAULTS", "METHODS", "add_parser", "check_log",
+           "cmd_navigate", "nis_warning"]
 
 METHODS = (*LOOSE_MATCHERS, *TIGHT_METHODS)
 """Navigation methods of the command: loosely coupled with a matcher of
@@ -87,6 +89,13 @@ METHODS = (*LOOSE_MATCHERS, *TIGHT_METHODS)
 
 _MAP_MARGIN_M = 50e3
 """Map kept around the INS log (m): the navigation error and the matchers' searches."""
+
+DEFAULT_PARTICLES = 500
+"""Particles of ``--method rbpf`` without ``--particles``."""
+
+LOOSE_DEFAULTS = {"fix_every": 12, "n_fixes": 30}
+"""``--fix-every`` and ``--n-fixes`` of the loosely coupled methods when not given
+(``--stride`` defaults to ``--n-fixes``)."""
 
 
 def add_parser(sub):
@@ -103,8 +112,9 @@ def add_parser(sub):
                         "filter (tightly coupled); dense, entropy+iccp: hourly fixes of that "
                         "matcher into the filter (loosely coupled; --fix-every, --n-fixes, "
                         "--stride)")
-    p.add_argument("--particles", type=int, default=500,
-                   help="particles of --method rbpf (default 500)")
+    p.add_argument("--particles", type=int, default=None,
+                   help=f"particles of --method rbpf, at least {MIN_PARTICLES} (default "
+                        f"{DEFAULT_PARTICLES})")
     p.add_argument("--seed", type=int, default=0, help="seed of --method rbpf's draws")
     p.add_argument("--out", required=True, help="navigation CSV (see jaxgrav navigate docs)")
     p.add_argument("--eotvos-corrected", action="store_true",
@@ -123,10 +133,15 @@ def add_parser(sub):
     p.add_argument("--map-error-length", type=float, default=10000.0, metavar="L",
                    help="its correlation length (m, default 10000)")
     add_map_error_var_option(p)
-    p.add_argument("--fix-every", type=int, default=12, help="rows per fix (default 12)")
-    p.add_argument("--n-fixes", type=int, default=30, help="fixes per segment (>= 5)")
-    p.add_argument("--stride", type=int, default=30,
-                   help="fixes between segment ends (default = --n-fixes: consecutive)")
+    p.add_argument("--fix-every", type=int, default=None,
+                   help=f"dense, entropy+iccp: rows per fix (default "
+                        f"{LOOSE_DEFAULTS['fix_every']})")
+    p.add_argument("--n-fixes", type=int, default=None,
+                   help=f"dense, entropy+iccp: fixes per segment (>= 5, default "
+                        f"{LOOSE_DEFAULTS['n_fixes']})")
+    p.add_argument("--stride", type=int, default=None,
+                   help="dense, entropy+iccp: fixes between segment ends (default = "
+                        "--n-fixes: consecutive)")
     p.add_argument("--max-gap", type=float, default=60.0,
                    help="longest allowed step between rows (s); the step must be uniform")
     p.add_argument("--max-speed", type=float, default=30.0,
@@ -181,8 +196,29 @@ def check_log(track, grid, max_gap, max_speed):
     return dt, int(np.sum(~np.isfinite(track["gravity"]))), int(np.sum(~on_map))
 
 
+def _method_options(args):
+    """Options that the method does not use: ``--particles`` (rbpf only) is refused;
+    returns the warning for ``--fix-every``, ``--n-fixes``, ``--stride`` given to a
+    tightly coupled method (None if not). Fills in the defaults."""
+    if args.particles is not None and args.method != "rbpf":
+        raise ValueError(f"--particles is for --method rbpf; got --method {args.method}")
+    loose = [f"--{k.replace('_', '-')}" for k in ("fix_every", "n_fixes", "stride")
+             if getattr(args, k) is not None]
+    warning = None
+    if loose and args.method in TIGHT_METHODS:
+        warning = (f"warning: {', '.join(loose)} set the fixes of the loosely coupled methods "
+                   f"({', '.join(LOOSE_MATCHERS)}); --method {args.method} uses every reading "
+                   "and ignores them")
+    args.particles = DEFAULT_PARTICLES if args.particles is None else args.particles
+    for k, v in LOOSE_DEFAULTS.items():
+        setattr(args, k, v if getattr(args, k) is None else getattr(args, k))
+    args.stride = args.n_fixes if args.stride is None else args.stride
+    return warning
+
+
 def cmd_navigate(args):
     """Run ``navigate`` (see the module notes)."""
+    unused = _method_options(args)
     _positive("--sigma-pos", args.sigma_pos, "m")
     _positive("--sigma-vel", args.sigma_vel, "m/s")
     _positive("--noise", args.noise, "mGal")
@@ -191,8 +227,7 @@ def cmd_navigate(args):
     _positive("--map-error-length", args.map_error_length, "m")
     _positive("--max-gap", args.max_gap, "s")
     _positive("--max-speed", args.max_speed, "m/s")
-    if args.particles < 2:
-        raise ValueError(f"--particles must be an integer >= 2; got {args.particles}")
+    check_particles(args.particles)
     for name, value in (("--fix-every", args.fix_every), ("--n-fixes", args.n_fixes),
                         ("--stride", args.stride)):
         if value < 1:
@@ -202,7 +237,10 @@ def cmd_navigate(args):
                          f"reliably); got {args.n_fixes}")
     if args.stride > args.n_fixes:
         raise ValueError(f"--stride must be at most --n-fixes {args.n_fixes}; got {args.stride}")
-    check_outputs([args.out], force=args.force, names=["--out"])
+    check_outputs([args.out], force=args.force, names=["--out"],
+                  inputs={"--track": args.track, "--map": args.map})
+    if unused is not None:
+        print(unused, file=sys.stderr)
     track = read_track(args, ("t", "lat", "lon", "v_east", "v_north", "gravity"),
                        allow_nan=("gravity",))
     grid, sigma_var = track_map(args, track, _MAP_MARGIN_M,  # missing nodes kept as a mask
@@ -279,9 +317,18 @@ def _tight(args, voyage, grid, n_missing, n_off):
           f"by the {args.method} filter; {n_missing} missing reading(s) skipped, {n_off} "
           f"row(s) off the map (not aided); flags seen: "
           f"{', '.join(status_messages_filter(flags)) or 'none'}")
-    _, _, fit_warning = innovation_check(res.innovation, np.sqrt(np.asarray(res.innovation_var)))
+    fit_warning = nis_warning(res.innovation, np.sqrt(np.asarray(res.innovation_var)))
     if fit_warning is not None:
         print(f"warning: {fit_warning}", file=sys.stderr)
+
+
+def nis_warning(innovation, innovation_sigma):
+    """The tight filter's innovation check (:func:`~jaxgrav.cli.sanity.innovation_check`)
+    as navigate's warning: its advice names ``--noise``, navigate's reading noise (the
+    check's own text names ``filter``'s ``--sigma-gravity``); None when the fit is
+    plausible."""
+    _, _, warning = innovation_check(innovation, innovation_sigma)
+    return None if warning is None else warning.replace("--sigma-gravity", "--noise")
 
 
 def _write(args, ins, res, cfg):
