@@ -14,7 +14,8 @@ import jax
 import numpy as np
 
 from jaxgrav import __version__, montecarlo
-from jaxgrav.cli.montecarlo_options import check_options, told_from_args
+from jaxgrav._io import check_outputs
+from jaxgrav.cli.montecarlo_options import check_drift, check_options, told_from_args
 from jaxgrav.cli.montecarlo_voyage import (
     plot_voyage_tracks,
     plot_voyages,
@@ -84,13 +85,15 @@ def add_parser(subparsers):
                    help="INS error (degrees of arc); dense: drift radius (default "
                         "0.035, also chains); entropy, iccp, entropy+iccp: offset uniform in "
                         "[2/3, 1] x drift (default 0.03); filters: initial position error "
-                        "(default 0.018 = 2 km)")
+                        "(default 0.018 = 2 km); below half the map's shorter side (paper D's "
+                        "point masses: 0.35)")
     m.add_argument("--noise", type=float, default=None,
-                   help="reading noise sigma (mGal, default 1)")
+                   help="reading noise sigma (mGal, > 0, default 1)")
     m.add_argument("--fixes", type=int, default=None,
                    help="fixes per track (default 30 dense and chains, 60 entropy, "
                         "iccp and entropy+iccp); "
-                        "filters: readings 10 s apart, start included (default 721 = 2 h)")
+                        "filters: readings 10 s apart, start included (default 721 = 2 h); "
+                        "with --chunk, refused beyond half the machine's memory")
     m.add_argument("--out", required=True,
                    help="results NetCDF (one value per run); a PNG of the errors is written "
                         "next to it with suffix .png")
@@ -277,8 +280,13 @@ def cmd_montecarlo(args):
         raise ValueError(f"--out must be a NetCDF file (the PNG goes next to it); got {out}")
     kind = ("filter" if args.method in FILTER_METHODS else
             "voyage" if args.method in VOYAGE_METHODS else "matcher")
-    targets = (out, png, *((tracks_path(out),) if kind == "voyage" else ()))
-    existing = [str(p) for p in targets if p.exists()]
+    targets = {"--out": out, "the PNG next to --out": png}
+    if kind == "voyage":
+        targets["the tracks PNG next to --out"] = tracks_path(out)
+    # folders, inputs and repeats first, whatever --force; then every existing output named
+    check_outputs(list(targets.values()), force=True, names=list(targets),
+                  inputs={"--map": args.map, "--truth-map": args.truth_map})
+    existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not args.force:
         raise FileExistsError(f"{existing} exist; pass --force to overwrite")
     if args.map is not None:
@@ -289,6 +297,7 @@ def cmd_montecarlo(args):
             else load_map(args.map, None))
     if grid is None and (kind == "voyage" or (kind == "matcher" and args.truth_map)):
         grid = default_grid()
+    check_drift(args, default_grid() if grid is None and kind == "matcher" else grid, kind)
     model = map_error_from_args(args, grid)
     if model is not None and grid is None and kind == "filter":
         raise ValueError(f"--map-error and --truth-map need --map MAP with --method "

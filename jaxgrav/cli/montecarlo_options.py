@@ -1,25 +1,47 @@
 """``jaxgrav montecarlo``'s numeric options, range-checked in one place.
 
 :func:`check_options` refuses a run count, chunk, device count, drift, noise or fix count
-out of range with one line naming the option (``--noise``, not the library's
-``noise``), before any map is read or anything compiled; :func:`told_from_args` parses
-``--told-map-error SIGMA[,L]``.
+out of range, and a ``--fixes`` x ``--chunk`` whose runs would not fit in memory, with
+one line naming the option (``--noise``, not the library's ``noise``), before any map
+is read or anything compiled; :func:`check_drift` refuses a ``--drift`` whose search or
+initial error does not fit on the map, once the map is known; :func:`told_from_args`
+parses ``--told-map-error SIGMA[,L]``.
 """
 
 import math
+import os
 
 from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M
 from jaxgrav.fields.map_error import map_error
+from jaxgrav.montecarlo import DEFAULT_CHUNK
+from jaxgrav.sim import DEG_ARC_M
 
-__all__ = ["check_options", "told_from_args"]
+__all__ = ["BYTES_PER_FIX", "PAPER_D_AREA_DEG", "check_drift", "check_options",
+           "told_from_args"]
+
+BYTES_PER_FIX = {"dense": 110e3, "chains": 110e3, "entropy+iccp": 70e3, "entropy": 25e3,
+                 "iccp": 10e3, **dict.fromkeys(("ukf", "ekf", "gsf", "ukf-guard", "gsf-guard",
+                                                "pmf", "pf", "rbpf"), 3e3)}
+"""Device memory a run takes per fix (bytes; filters: per reading), by method: the
+compiled runs' temporary buffers (XLA's memory analysis of the vmapped run, 30 to 300
+fixes, rounded up). :func:`check_options` refuses a ``--fixes`` x ``--chunk`` that needs
+more than half the machine's memory (two chunks are in flight at a time)."""
+
+_DEFAULT_FIXES = {"dense": 30, "chains": 30, "entropy": 60, "iccp": 60, "entropy+iccp": 60}
+"""The builders' default fixes per track (filters: 721 readings)."""
+
+PAPER_D_AREA_DEG = 0.7
+"""Side of paper D's match area (23.9-24.6 N, 122.6-123.3 E; degrees): the "map" of the
+filter methods over its three point masses, for :func:`check_drift`."""
 
 
 def check_options(args):
     """ValueError naming the option for a numeric option out of range.
 
     ``--runs``, ``--chunk``, ``--devices`` at least 1; ``--drift`` a finite angle > 0;
-    ``--noise`` a finite standard deviation ≥ 0; ``--fixes`` at least 5 (unset options
-    take the method's defaults and are not checked here).
+    ``--noise`` a finite standard deviation > 0; ``--fixes`` at least 5 (unset options
+    take the method's defaults and are not checked here), and with ``--chunk`` within
+    half the machine's memory (:data:`BYTES_PER_FIX`).
     """
     for name, value in (("--runs", args.runs), ("--chunk", args.chunk)):
         if value is not None and value < 1:
@@ -29,12 +51,70 @@ def check_options(args):
     if args.drift is not None and not (math.isfinite(args.drift) and args.drift > 0):
         raise ValueError(f"--drift must be a finite positive angle (degrees of arc); got "
                          f"{args.drift:g}")
-    if args.noise is not None and not (math.isfinite(args.noise) and args.noise >= 0):
-        raise ValueError(f"--noise must be a finite standard deviation >= 0 (mGal); got "
+    # 0 weights the readings infinitely: the filters' NEES reached 4e8, no flag
+    if args.noise is not None and not (math.isfinite(args.noise) and args.noise > 0):
+        raise ValueError(f"--noise must be a finite standard deviation > 0 (mGal); got "
                          f"{args.noise:g}")
     if args.fixes is not None and args.fixes < 5:
         raise ValueError(f"--fixes must be at least 5 per track (filters: readings per run); "
                          f"got {args.fixes}")
+    _check_memory(args)
+
+
+def _memory_bytes():
+    """The machine's physical memory (bytes), or None where it cannot be read."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _check_memory(args):
+    """Refuse ``--fixes`` x ``--chunk`` runs that need more than half the memory."""
+    per_fix, total = BYTES_PER_FIX.get(args.method), _memory_bytes()
+    if per_fix is None or not total:
+        return  # a voyage (sized by --hours) or a method registered elsewhere
+    fixes = args.fixes or _DEFAULT_FIXES.get(args.method, 721)
+    chunk = min(args.chunk or DEFAULT_CHUNK, args.runs)
+    need = 2 * per_fix * fixes * chunk
+    if need <= total / 2:
+        return
+    fit_chunk = int(total / 2 // (2 * per_fix * fixes))
+    fit_fixes = int(total / 2 // (2 * per_fix * chunk))
+    cure = (f"use --chunk {fit_chunk} or less" if fit_chunk >= 1 else
+            f"use --fixes {fit_fixes} or fewer" if fit_fixes >= 5 else
+            "use fewer --fixes and a smaller --chunk")
+    given = "" if args.fixes else " (the default)"
+    raise ValueError(f"--fixes {fixes}{given} with {chunk} runs per compiled call (--chunk) "
+                     f"needs about {need / 1e9:.3g} GB for --method {args.method} "
+                     f"({per_fix / 1e3:g} kB a fix and run, two calls in flight), more than "
+                     f"half of this machine's {total / 1e9:.3g} GB; {cure}")
+
+
+def check_drift(args, grid, kind):
+    """ValueError naming ``--drift`` when the INS error it sets does not fit on the map.
+
+    Matchers search a disc of radius ``--drift`` around the INS track, filters and
+    voyages start with that position error: ``2 x --drift`` (degrees of arc) must stay
+    below the map's shorter side (east-west scaled by the cosine of its mid-latitude),
+    the rule of ``jaxgrav match --drift-radius``. Without a grid (the filters over paper
+    D's three point masses) the side is :data:`PAPER_D_AREA_DEG`.
+    """
+    if args.drift is None:
+        return
+    if grid is None:
+        side, what = PAPER_D_AREA_DEG, "paper D's match area over its point masses"
+    else:
+        w, e, s, n = (float(v) for v in grid.extent)
+        side = min(n - s, (e - w) * math.cos(math.radians((s + n) / 2)))
+        what = f"the map ({n - s:.3g} x {e - w:.3g} degrees, lat x lon)"
+    if 2 * args.drift >= side:
+        use = "search radius" if kind == "matcher" else "initial position error"
+        km = args.drift * DEG_ARC_M / 1e3
+        raise ValueError(f"--drift {args.drift:g} degrees of arc ({km:.0f} km, the {use}) "
+                         f"spans {2 * args.drift:g} degrees, more than "
+                         f"{what}, {side:.3g} degrees of arc across; expected a drift below "
+                         f"{side / 2:.3g} degrees")
 
 
 def told_from_args(args):
