@@ -4,6 +4,7 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
 """
 
 import json
+import math
 import os
 import platform
 import subprocess
@@ -15,7 +16,7 @@ import jax
 import jax.numpy as jnp
 
 import jaxgrav
-from jaxgrav._io import atomic_output
+from jaxgrav._io import atomic_output, check_outputs
 
 __all__ = ["add_parser", "cmd_bench", "default_bench_dir", "machine_info", "matmul_roofline"]
 
@@ -29,7 +30,7 @@ def add_parser(subparsers):
                         "of the repository holding the jaxgrav package)")
     b.add_argument("--out", default="bench.md", help="Markdown report (default bench.md)")
     b.add_argument("--timeout", type=float, default=3600.0,
-                   help="seconds allowed per script (default 3600)")
+                   help="seconds allowed per script (> 0, default 3600)")
     b.add_argument("--force", action="store_true", help="overwrite an existing report")
     b.set_defaults(func=cmd_bench)
     return b
@@ -164,6 +165,9 @@ def default_bench_dir():
 
 def cmd_bench(args):
     """Run ``jaxgrav bench``: every ``--dir/*.py`` not starting with ``_``, as a subprocess."""
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        raise ValueError(f"--timeout must be a finite number of seconds > 0 per script; got "
+                         f"{args.timeout!r}")
     bdir, out = (default_bench_dir() if args.dir is None else Path(args.dir)), Path(args.out)
     if not bdir.is_dir():
         raise FileNotFoundError(f"--dir {str(bdir)!r} is not a folder of benchmark scripts")
@@ -171,8 +175,7 @@ def cmd_bench(args):
     if not scripts:
         raise ValueError(f"--dir {str(bdir)!r} has no benchmark scripts (*.py not starting "
                          "with _)")
-    if out.exists() and not args.force:
-        raise FileExistsError(f"{str(out)!r} exists; pass --force to overwrite it")
+    check_outputs([out], force=args.force, names=["--out"])
     before = machine_info()
     print(f"machine: {before['cpu']}, {before['cores']} cores, load {before['load_average']}, "
           f"roofline float64 {before['roofline']['float64_gflops']:.1f} GFLOP/s", flush=True)
