@@ -1,0 +1,237 @@
+"""Bad options of match, sample, filter, navigate, montecarlo and bench: one line on stderr
+naming the option, the value and what was expected, exit code 2, in CLI syntax, before
+anything is computed and with no output left behind."""
+
+import numpy as np
+import pytest
+
+from jaxgrav._io import atomic_output, check_outputs
+from jaxgrav.cli import main
+from jaxgrav.cli.navigate import nis_warning
+from jaxgrav.tracks import read_track_csv, write_track_csv
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    """A 20-fix simulated track on the shipped map, and one copy of it with an edited
+    drift_radius column per bad value."""
+    d = tmp_path_factory.mktemp("options")
+    assert main(["simulate", "--out", str(d / "t.csv"), "--n", "20", "--seed", "5"]) == 0
+    track = read_track_csv(d / "t.csv", required=("t", "lat", "lon", "gravity"))
+    for name, value in (("neg", -1.0), ("zero", 0.0)):
+        write_track_csv(d / f"dr_{name}.csv",
+                        {**track.columns(), "drift_radius": np.full(20, value)})
+    (d / "bare.csv").write_text("t,lat,lon\n0,28,130\n10,28,130.01\n")  # no readings
+    return d
+
+
+def _refused(capsys, argv, message, leftovers=()):
+    """``argv`` exits 2 with one line holding ``message``, in CLI syntax, no traceback,
+    and none of ``leftovers`` (nor a temporary file next to them) is written."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err, err
+    assert "\n" not in err and "Traceback" not in err, err
+    for library in ("=True", "np.", "_m ", "window_cells", "margin_m"):
+        assert library not in err, err
+    for path in leftovers:
+        assert not path.is_file(), path
+        assert not [p for p in path.parent.iterdir() if p.name.startswith(f".{path.name}.")]
+    return err
+
+
+# ------------------------------------------------------------------- match and sample
+@pytest.mark.parametrize("args, message", [
+    # 1. the added column: not one of the track's (any case), not empty
+    (["sample", "--column", "lat"], "--column 'lat' is the name of a column of --track"),
+    (["sample", "--column", "GRAVITY"], "--column 'GRAVITY' is the name of a column"),
+    (["sample", "--column", ""], "--column must be a non-empty column name; got ''"),
+    (["sample", "--column", "  "], "--column must be a non-empty column name; got '  '"),
+    # 2. the bias prior: > 0 (0 left no candidate), of dense and chains only
+    (["match", "--bias-sigma", "0"], "--bias-sigma must be a standard deviation > 0"),
+    (["match", "--bias-sigma", "-1"], "--bias-sigma must be a standard deviation > 0"),
+    (["match", "--bias-sigma", "nan"], "got nan"),
+    (["match", "--bias-sigma", "2", "--method", "entropy"],
+     "--bias-sigma is the bias prior of --method dense and chains; --method entropy"),
+    # 6. no reading noise: infinite weights, a chi-squared of 1e306
+    (["match", "--noise", "0"], "--noise must be a finite standard deviation > 0"),
+])
+def test_match_and_sample_options(sim, tmp_path, capsys, args, message):
+    out = tmp_path / ("r.json" if args[0] == "match" else "s.csv")
+    _refused(capsys, [args[0], "--map", "ryukyu", "--track", str(sim / "t.csv"),
+                      "--out", str(out), *args[1:]], message, [out])
+
+
+@pytest.mark.parametrize("track, message", [
+    ("dr_neg.csv", "line 2, column 'drift_radius': drift radius -1 is not a positive angle"),
+    ("dr_zero.csv", "drift radius 0 is not a positive angle in degrees of arc (20 such row"),
+])
+def test_match_drift_radius_column(sim, tmp_path, capsys, track, message):
+    """5. the track's drift_radius column is checked as the option is (it said margin_m)."""
+    out = tmp_path / "r.json"
+    err = _refused(capsys, ["match", "--map", "ryukyu", "--track", str(sim / track),
+                            "--out", str(out)], message, [out])
+    assert "--drift-radius" in err
+
+
+def test_match_bias_sigma_small_and_inf_run(sim, tmp_path):
+    """A bias known to be near zero (0.01 mGal) and a free one (inf) still match."""
+    for value in ("0.01", "inf"):
+        out = tmp_path / f"r{value}.json"
+        assert main(["match", "--map", "ryukyu", "--track", str(sim / "t.csv"),
+                     "--out", str(out), "--bias-sigma", value]) == 0
+        assert out.is_file()
+
+
+# ----------------------------------------------------- 3. output targets, checked first
+def _montecarlo(out):
+    return ["montecarlo", "--method", "dense", "--runs", "2", "--out", str(out),
+            "--no-progress", "--force"]
+
+
+@pytest.mark.parametrize("command, message", [
+    (lambda d, o: ["match", "--map", "ryukyu", "--track", str(d / "t.csv"), "--out", str(o)],
+     "--out '{o}' is a folder; expected a file path"),
+    (lambda d, o: ["sample", "--map", "ryukyu", "--track", str(d / "t.csv"), "--out", str(o),
+                   "--force"], "--out '{o}' is a folder"),
+    (lambda d, o: ["filter", "--point-masses", "paper-d", "--track", str(d / "t.csv"),
+                   "--out", str(o), "--force"], "--out '{o}' is a folder"),
+    (lambda d, o: ["navigate", "--track", str(d / "t.csv"), "--out", str(o), "--force"],
+     "--out '{o}' is a folder"),
+    (lambda d, o: _montecarlo(o), "--out '{o}' is a folder"),
+    (lambda d, o: ["bench", "--dir", str(o.parent / "benchmarks"), "--out", str(o),
+                   "--force"], "--out '{o}' is a folder"),
+])
+def test_out_is_a_folder(sim, tmp_path, capsys, command, message):
+    out = tmp_path / "out.x"
+    out.mkdir()
+    (tmp_path / "benchmarks").mkdir()  # for bench: one script, refused before it runs
+    (tmp_path / "benchmarks" / "b.py").write_text("raise SystemExit(3)\n")
+    _refused(capsys, command(sim, out), message.format(o=out))
+    assert out.is_dir() and not list(out.iterdir())
+
+
+def test_montecarlo_png_folder_refused_before_the_runs(tmp_path, capsys):
+    """The PNG next to --out was written last and failed after the runs, leaving the
+    NetCDF behind."""
+    (tmp_path / "mc.png").mkdir()
+    _refused(capsys, _montecarlo(tmp_path / "mc.nc"),
+             f"the PNG next to --out '{tmp_path / 'mc.png'}' is a folder", [tmp_path / "mc.nc"])
+
+
+@pytest.mark.parametrize("command", ["match", "sample", "filter"])
+def test_out_may_not_be_the_input(sim, tmp_path, capsys, command):
+    """--out naming the --track file would replace the input, --force or not."""
+    track = tmp_path / "t.csv"
+    track.write_bytes((sim / "t.csv").read_bytes())
+    source = ["--point-masses", "paper-d"] if command == "filter" else ["--map", "ryukyu"]
+    _refused(capsys, [command, *source, "--track", str(track), "--out", str(track), "--force"],
+             f"--out '{track}' and the input --track '{track}' are the same file")
+    assert track.read_bytes() == (sim / "t.csv").read_bytes()
+
+
+def test_existing_out_names_the_cli_option(sim, tmp_path, capsys):
+    """5. no 'pass force=True': the command's own --force is named."""
+    for command, out in (("match", tmp_path / "r.json"), ("sample", tmp_path / "s.csv")):
+        out.write_text("keep me\n")
+        _refused(capsys, [command, "--map", "ryukyu", "--track", str(sim / "t.csv"),
+                          "--out", str(out)], "exists; pass --force to overwrite it")
+        assert out.read_text() == "keep me\n"
+
+
+# ----------------------------------------------------------------- filter, navigate
+@pytest.mark.parametrize("argv, message", [
+    (["filter", "--point-masses", "paper-d", "--method", "rbpf", "--particles", "2"],
+     "--particles must be an integer >= 100"),
+    (["filter", "--point-masses", "paper-d", "--method", "pf", "--particles", "99"],
+     "--particles must be an integer >= 100 (fewer cannot represent the position's "
+     "posterior); got 99"),
+    (["navigate", "--method", "rbpf", "--particles", "2"], "--particles must be an integer >= 100"),
+    (["navigate", "--method", "ukf", "--particles", "600"],
+     "--particles is for --method rbpf; got --method ukf"),
+])
+def test_particle_options(sim, tmp_path, capsys, argv, message):
+    out = tmp_path / "f.csv"
+    _refused(capsys, [*argv, "--track", str(sim / "t.csv"), "--out", str(out)], message, [out])
+
+
+def test_navigate_warns_of_loose_options_with_a_tight_method(sim, tmp_path, capsys):
+    """6. --fix-every, --n-fixes, --stride set the loosely coupled fixes: named in one
+    warning line with --method ukf (the run then stops at the log with no readings)."""
+    out = tmp_path / "n.csv"
+    assert main(["navigate", "--track", str(sim / "bare.csv"), "--out", str(out),
+                 "--fix-every", "6", "--n-fixes", "10"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 2 and lines[0].startswith("warning: --fix-every, --n-fixes set the "
+                                                   "fixes of the loosely coupled methods")
+    assert "--method ukf uses every reading and ignores them" in lines[0]
+    assert not out.exists()
+    assert main(["navigate", "--track", str(sim / "bare.csv"), "--out", str(out),
+                 "--method", "dense", "--fix-every", "6"]) == 2
+    assert "warning" not in capsys.readouterr().err
+
+
+def test_navigate_nis_warning_names_noise():
+    """4. the innovation check's advice names navigate's --noise, not --sigma-gravity."""
+    rng = np.random.default_rng(0)
+    warning = nis_warning(3.0 * rng.standard_normal(200), np.ones(200))
+    assert "a larger --noise" in warning and "--sigma-gravity" not in warning
+    assert nis_warning(rng.standard_normal(200), np.ones(200)) is None
+
+
+def test_filter_help_lists_the_guarded_methods(capsys):
+    """7. --guard works with ukf, ekf, gsf, pf and rbpf (pmf refuses it)."""
+    with pytest.raises(SystemExit):
+        main(["filter", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "no-harm guard (ukf, ekf, gsf, pf, rbpf; not pmf)" in text
+
+
+# ---------------------------------------------------------------- montecarlo, bench
+@pytest.mark.parametrize("args, message", [
+    (["--method", "dense", "--noise", "0"], "--noise must be a finite standard deviation > 0"),
+    (["--method", "ukf", "--noise", "0"], "--noise must be a finite standard deviation > 0"),
+    (["--method", "dense", "--drift", "10"],
+     "--drift 10 degrees of arc (1112 km, the search radius) spans 20 degrees, more than the "
+     "map"),
+    (["--method", "ukf", "--drift", "1"], "more than paper D's match area"),
+    (["--method", "voyage-ukf", "--drift", "10"], "the initial position error"),
+    (["--method", "dense", "--fixes", "100000000"], "use --fixes"),
+    (["--method", "dense", "--fixes", "1000000", "--runs", "300"], "GB for --method dense"),
+    (["--method", "ukf", "--runs", "100000", "--chunk", "100000", "--fixes", "100000"],
+     "--fixes 100000 with 100000 runs per compiled call (--chunk) needs about"),
+])
+def test_montecarlo_options(tmp_path, capsys, args, message):
+    out = tmp_path / "mc.nc"
+    argv = ["montecarlo", "--runs", "2", "--out", str(out), "--no-progress", *args]
+    _refused(capsys, argv, message, [out, tmp_path / "mc.png"])
+
+
+@pytest.mark.parametrize("value", ["-1", "0", "nan", "inf"])
+def test_bench_timeout(tmp_path, capsys, value):
+    out = tmp_path / "b.md"
+    _refused(capsys, ["bench", "--timeout", value, "--dir", str(tmp_path), "--out", str(out)],
+             "--timeout must be a finite number of seconds > 0 per script; got", [out])
+
+
+# -------------------------------------------------------------------- 8. line ends
+def test_csv_outputs_end_lines_with_lf(sim, tmp_path):
+    out = tmp_path / "s.csv"
+    assert main(["sample", "--map", "ryukyu", "--track", str(sim / "t.csv"),
+                 "--out", str(out), "--column", "faa"]) == 0
+    data = out.read_bytes()
+    assert b"\r" not in data and data.count(b"\n") == 21
+    assert data.splitlines()[0].endswith(b",faa")
+
+
+def test_atomic_output_and_check_outputs_refuse_folders_and_inputs(tmp_path):
+    """The shared helpers: a folder is never a target, --force or not; an output that is
+    an input file is refused; an input name that is no file (a shipped map) is not."""
+    with pytest.raises(ValueError, match="is a folder; expected a file path"):
+        with atomic_output(tmp_path, force=True):
+            pass
+    (tmp_path / "in.csv").write_text("t\n")
+    with pytest.raises(ValueError, match=r"and the input --track .* are the same file"):
+        check_outputs([tmp_path / "in.csv"], force=True, names=["--out"],
+                      inputs={"--track": tmp_path / "in.csv"})
+    check_outputs([tmp_path / "ryukyu"], names=["--out"], inputs={"--map": "ryukyu"})
