@@ -3,6 +3,7 @@
 Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
 """
 
+import dataclasses
 import math
 
 import jax
@@ -11,14 +12,14 @@ import numpy as np
 from jaxgrav._io import check_outputs
 from jaxgrav.constants import KNOT
 from jaxgrav.datasets import load_map
-from jaxgrav.fields.map_error import map_error, truth_grid
+from jaxgrav.fields.map_error import TruthGrid, map_error, truth_grid
 from jaxgrav.montecarlo.spec import region_of
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
-from jaxgrav.scenarios.paper_a import check_region_covered
-from jaxgrav.sim import rayleigh_quantile
+from jaxgrav.scenarios.paper_a import check_region_covered, max_fixes, placement_region
+from jaxgrav.sim import DEG_ARC_M, rayleigh_quantile
 from jaxgrav.tracks import write_track_csv
 
-__all__ = ["DEFAULT_MAP_ERROR_LENGTH_M", "add_map_error_options", "add_parser",
+__all__ = ["DEFAULT_MAP_ERROR_LENGTH_M", "MAX_BIAS_MGAL", "add_map_error_options", "add_parser",
            "describe_map_error", "map_error_from_args"]
 
 DEFAULT_MAP_ERROR_LENGTH_M = 10000.0
@@ -40,7 +41,7 @@ def add_map_error_options(parser):
                              "with --map-error")
 
 
-def map_error_from_args(args, grid):
+def map_error_from_args(args, grid, *, allow_nan=False):
     """The map-error model of ``--map-error``/``--map-error-length``/``--truth-map``.
 
     Parameters
@@ -49,6 +50,9 @@ def map_error_from_args(args, grid):
         With ``map_error``, ``map_error_length``, ``truth_map`` (and ``var``).
     grid : Grid or None
         The map used; a ``--truth-map`` must cover its area.
+    allow_nan : bool
+        Keep a ``--truth-map``'s missing (NaN) nodes (for a command that then checks
+        the readings along its track); by default such a map is refused.
 
     Returns
     -------
@@ -72,7 +76,7 @@ def map_error_from_args(args, grid):
                              "each other: give the truth as a map or as an error model")
         if grid is None:
             raise ValueError(f"--truth-map {args.truth_map} needs a --map to compare with")
-        truth = load_map(args.truth_map, None)
+        truth = load_map(args.truth_map, None, allow_nan=allow_nan)
         check_region_covered(truth, region_of(grid), f"--truth-map {args.truth_map}")
         return truth_grid(truth)
     if not sigma:
@@ -96,7 +100,8 @@ def add_parser(sub):
     sim_p.add_argument("--map", default="ryukyu",
                        help="map the readings are simulated from (plus --map-error; or the region "
                             "of --truth-map): NetCDF grid or shipped map (default ryukyu, "
-                            "2.5')")
+                            "2.5'); missing (NaN) nodes are refused only where the track "
+                            "crosses them")
     sim_p.add_argument("--var", default=None)
     sim_p.add_argument("--out", required=True, help="track CSV (INS fixes and readings)")
     sim_p.add_argument("--truth", default=None, help="also write the true track here")
@@ -120,6 +125,12 @@ def add_parser(sub):
     return sim_p
 
 
+MAX_BIAS_MGAL = 1000.0
+"""Largest ``--bias`` magnitude (mGal): a gravimeter tied to a base station is off by a
+few mGal, and the largest free-air anomalies on Earth are a few hundred mGal; a bias
+beyond this makes readings that are no longer an anomaly."""
+
+
 def _check_simulate_args(args):
     """Range-check every numeric option of ``simulate`` before anything runs."""
     def finite(name, value, ok, expected):
@@ -137,21 +148,65 @@ def _check_simulate_args(args):
     finite("--probability", args.probability, lambda v: 0 < v < 1,
            "a probability strictly between 0 and 1")
     finite("--noise", args.noise, lambda v: v >= 0, "a reading noise >= 0 (mGal)")
-    finite("--bias", args.bias, lambda v: True, "a finite gravimeter bias (mGal)")
+    finite("--bias", args.bias, lambda v: abs(v) <= MAX_BIAS_MGAL,
+           f"a finite gravimeter bias within ±{MAX_BIAS_MGAL:g} mGal (a tied gravimeter is "
+           "off by a few mGal; free-air anomalies stay within a few hundred)")
+
+
+def _check_track_fits(args, scen, grid):
+    """Refuse an ``--n`` whose track cannot fit on the map (its readings would be NaN)."""
+    w, e, s, n = (float(v) for v in grid.extent)
+    where = f"--map {args.map} (lat {s:g}..{n:g}, lon {w:g}..{e:g})"
+    fit = max_fixes(scen)
+    if fit >= args.n:
+        return
+    if fit < 2:
+        raise ValueError(f"{where} is too small for a track of 2 fixes {scen.step_m / 1000:.3g} "
+                         f"km apart kept 1.5 x --drift ({args.drift:g} degrees) from each edge; "
+                         "use a larger map, a shorter --dt or a smaller --drift")
+    span = (args.n - 1) * args.dt
+    dlat = abs(scen.v_north) * span / DEG_ARC_M
+    dlon = abs(scen.v_east) * span / (DEG_ARC_M * math.cos(math.radians(n)))
+    raise ValueError(
+        f"--n {args.n} fixes every {args.dt:g} s at {math.hypot(args.v_east, args.v_north):.3g} "
+        f"kn make a track of {scen.step_m * (args.n - 1) / 1000:.0f} km ({dlat:.4g} degrees "
+        f"north-south, {dlon:.4g} east-west) that does not fit in {where} with 1.5 x --drift "
+        f"from each edge; at most --n {fit} fits (or give a shorter --dt or a lower speed)")
+
+
+def _check_readings(args, run, grid):
+    """Refuse a simulated track whose readings are NaN: off the map, or on missing nodes."""
+    bad = ~np.isfinite(np.asarray(run.readings))
+    if not bad.any():
+        return
+    lat, lon = np.asarray(run.truth.lat), np.asarray(run.truth.lon)
+    i = int(np.flatnonzero(bad)[0])
+    at = f"the first at fix {i + 1} of {args.n} (lat {lat[i]:.5g}, lon {lon[i]:.5g})"
+    source = f"--truth-map {args.truth_map}" if args.truth_map else f"--map {args.map}"
+    if not bool(np.asarray(grid.contains(lat[i], lon[i]))):
+        raise ValueError(f"the simulated track leaves {source} ({int(bad.sum())} readings off "
+                         f"it, {at}); give another --seed or fewer --n")
+    raise ValueError(f"{source} has missing (NaN) nodes along the simulated track: "
+                     f"{int(bad.sum())} of {args.n} readings fall in a cell with a missing "
+                     f"node, {at}; give another --seed or a map complete there (missing "
+                     "nodes away from the track are fine)")
 
 
 def _cmd_simulate(args):
     _check_simulate_args(args)
     check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"])
-    grid = load_map(args.map, args.var)
+    grid = load_map(args.map, args.var, allow_nan=True)
     w, e, s, n = grid.extent
     scen = MatchingScenario(
         region=(s, n, w, e), v_east=args.v_east * KNOT, v_north=args.v_north * KNOT,
         dt=args.dt, drift_deg=args.drift, noise_mgal=args.noise, bias_mgal=args.bias,
         n_fixes=args.n, drift_law=args.drift_law,
     )
-    model = map_error_from_args(args, grid)
+    _check_track_fits(args, scen, grid)
+    scen = dataclasses.replace(scen, region=placement_region(scen))
+    model = map_error_from_args(args, grid, allow_nan=True)
     run = matching_scenario(jax.random.key(args.seed), grid, scen, model)
+    _check_readings(args, run, model.grid if isinstance(model, TruthGrid) else grid)
     truth = run.truth
     write_track_csv(args.out, {
         "t": truth.t, "lat": run.ins_lat, "lon": run.ins_lon, "gravity": run.readings,

@@ -6,6 +6,7 @@ It is what the demo, the paper-A example, the benchmarks and the Monte Carlo run
 simulate, so that they all mean the same thing by "a track".
 """
 
+import dataclasses
 from typing import NamedTuple
 
 import jax
@@ -15,13 +16,14 @@ import numpy as np
 from jaxgrav import sim
 from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import concrete
-from jaxgrav.constants import KNOT
+from jaxgrav.constants import DEG, KNOT, WGS84_A
 from jaxgrav.fields import map_error as map_errors
 from jaxgrav.fields.map_error import CorrelatedMapError, TruthGrid, map_error_key
+from jaxgrav.geodesy import meridian_radius
 from jaxgrav.grid import Grid
 
 __all__ = ["MatchingRun", "MatchingScenario", "check_region_covered", "matching_scenario",
-           "scenario_truth"]
+           "max_fixes", "placement_region", "scenario_truth"]
 
 @pytree_dataclass
 class MatchingScenario:
@@ -99,6 +101,76 @@ class MatchingRun(NamedTuple):
     readings: jax.Array
     drift_north_m: jax.Array
     drift_east_m: jax.Array
+
+
+def placement_region(scenario):
+    """``scenario.region`` narrowed so that every track :func:`matching_scenario` draws stays in it.
+
+    :func:`matching_scenario` keeps the start its track's span plus 1.5 ``drift_deg``
+    from each edge, the span counted on a sphere (mean radius; longitudes at the region's
+    northern edge). The track itself is sailed on the ellipsoid, where a degree of
+    latitude is up to 0.5 % shorter: a long track, or one with a small drift margin, can
+    then end beyond the edge (off the map: NaN readings). The region returned is the
+    scenario's less that excess at each edge where it is larger than the 1.5
+    ``drift_deg`` margin, so the scenario's draws are unchanged whenever the margin
+    already covers it (the usual case).
+
+    Parameters
+    ----------
+    scenario : MatchingScenario
+        Concrete ``v_east``, ``v_north``, ``dt`` and ``drift_deg``.
+
+    Returns
+    -------
+    tuple of float
+        ``(lat_min, lat_max, lon_min, lon_max)`` (degrees); possibly empty (min > max)
+        when the track cannot fit.
+    """
+    s = scenario
+    lat_min, lat_max, lon_min, lon_max = (float(v) for v in s.region)
+    span = (s.n_fixes - 1) * float(s.dt)
+    low = 0.0 if lat_min <= 0.0 <= lat_max else min(abs(lat_min), abs(lat_max))
+    high = min(89.0, max(abs(lat_min), abs(lat_max)))
+    margin = 1.5 * float(s.drift_deg)
+    north_m, east_m = abs(float(s.v_north)) * span, abs(float(s.v_east)) * span
+    over_lat = north_m * (1.0 / (float(meridian_radius(low)) * DEG) - 1.0 / sim.DEG_ARC_M)
+    over_lon = east_m * (1.0 / (WGS84_A * np.cos(high * DEG) * DEG)
+                         - 1.0 / (sim.DEG_ARC_M * np.cos(lat_max * DEG)))
+    d_lat, d_lon = max(0.0, over_lat - margin), max(0.0, float(over_lon) - margin)
+    return (lat_min + d_lat, lat_max - d_lat, lon_min + d_lon, lon_max - d_lon)
+
+
+def max_fixes(scenario):
+    """The largest ``n_fixes`` whose tracks fit in ``scenario.region`` (see
+    :func:`placement_region`): a start is left for the span and the drift margin.
+
+    Parameters
+    ----------
+    scenario : MatchingScenario
+        Concrete ``v_east``, ``v_north``, ``dt`` and ``drift_deg``; its ``n_fixes`` is
+        not used.
+
+    Returns
+    -------
+    int
+        0 when not even two fixes fit; capped at 10**9 for a track that barely moves.
+    """
+    def fits(n):
+        trial = dataclasses.replace(scenario, n_fixes=n)
+        lat_min, lat_max, lon_min, lon_max = placement_region(trial)
+        span = (n - 1) * float(scenario.dt)
+        d_lat = abs(float(scenario.v_north)) * span / sim.DEG_ARC_M
+        d_lon = abs(float(scenario.v_east)) * span / (sim.DEG_ARC_M * np.cos(lat_max * DEG))
+        room = 3.0 * float(scenario.drift_deg)
+        return lat_max - lat_min >= d_lat + room and lon_max - lon_min >= d_lon + room
+
+    lo, hi = 1, 10**9
+    if not fits(2):
+        return 0
+    while hi - lo > 1:  # fits(lo), and hi is beyond the last that fits or the cap
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return hi if fits(hi) else lo
 
 
 def check_region_covered(grid, region, name="map_error.grid (the truth grid)"):
