@@ -14,6 +14,7 @@ import jax
 import numpy as np
 
 from jaxgrav.cli.inputs import map_error_args
+from jaxgrav.cli.voyage import MAX_HOURS
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.fields.pointmass import paper_d
@@ -22,7 +23,7 @@ from jaxgrav.scenarios import FilterScenario, filter_scenario
 from jaxgrav.sim import DEG_ARC_M
 from jaxgrav.tracks import write_track_csv
 
-__all__ = ["add_parser", "cmd_simulate_filter"]
+__all__ = ["MAX_ROWS", "add_parser", "cmd_simulate_filter"]
 
 
 def add_parser(subparsers):
@@ -43,7 +44,8 @@ def add_parser(subparsers):
                    help="simulate over this anomaly map (NetCDF or a shipped map, e.g. "
                         "ryukyu) instead of paper D's point masses: straight tracks from a "
                         "random start at least the track length + 16 km inside the map, "
-                        "random heading (--geometry is then not used)")
+                        "random heading (--geometry is then not used); missing (NaN) nodes "
+                        "are refused only where the track crosses them")
     s.add_argument("--var", default=None, help="variable of --map when the file has several")
     s.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
                    help="with --map: the readings see the map + a drawn error field of this "
@@ -56,21 +58,79 @@ def add_parser(subparsers):
 
 
 _simulate = jax.jit(filter_scenario)
+"""Paper D's scenario, compiled once per process and scenario shape."""
+
 _SIM_MARGIN_M = 16e3  # 3 x 2 km initial error + 10 km: the INS track stays on the map
 
+MAX_ROWS = 1_000_000
+"""Most rows ``simulate-filter`` writes: a million take about 0.5 GB and 20 s to simulate
+and 70 MB of CSV, and ``jaxgrav filter`` then steps through every one."""
 
-def _inner_region(grid, margin_m, name):
-    """``(lat_min, lat_max, lon_min, lon_max)`` of ``grid`` shrunk by ``margin_m`` (m)."""
+
+def _inner_region(grid, length_m, name, dt):
+    """``(lat_min, lat_max, lon_min, lon_max)`` where a straight track of ``length_m`` (m)
+    may start on ``grid``: the map shrunk by the length + the INS margin on every side."""
     w, e, s, n = (float(v) for v in grid.extent)
-    dlat = margin_m / DEG_ARC_M
-    dlon = margin_m / (DEG_ARC_M * np.cos(np.radians(min(max(abs(s), abs(n)), 89.0))))
+    margin_m = length_m + _SIM_MARGIN_M
+    m_per_lon = DEG_ARC_M * np.cos(np.radians(min(max(abs(s), abs(n)), 89.0)))
+    dlat, dlon = margin_m / DEG_ARC_M, margin_m / m_per_lon
     region = (s + dlat, n - dlat, w + dlon, e - dlon)
     if not (region[0] < region[1] and region[2] < region[3]):
-        raise ValueError(f"--map {name} (lat {s:g}..{n:g}, lon {w:g}..{e:g}) is too small for "
-                         f"the run: starts must lie {margin_m / 1e3:.0f} km inside it; use "
-                         "fewer --minutes or a larger map")
+        longest = min(0.5 * (n - s) * DEG_ARC_M, 0.5 * (e - w) * m_per_lon) - _SIM_MARGIN_M
+        steps = np.floor(longest / (FilterScenario().speed * dt) * (1 - 1e-9)) if longest > 0 else 0
+        minutes = np.floor(steps * dt / 6.0) / 10.0  # whole --dt steps, down to 0.1 min
+        raise ValueError(
+            f"--map {name} (lat {s:g}..{n:g}, lon {w:g}..{e:g}) is too small for the run: a "
+            f"straight track of {length_m / 1e3:.0f} km in any direction must start "
+            f"{margin_m / 1e3:.0f} km inside it (the track + {_SIM_MARGIN_M / 1e3:.0f} km for "
+            "the INS error); "
+            + (f"at most --minutes {minutes:g} fits at the scenario's "
+               f"{FilterScenario().speed:g} m/s" if minutes > 0 else
+               "the map is too small for any run")
+            + " (or use a larger map)")
     return region
-"""Paper D's scenario, compiled once per process and scenario shape."""
+
+
+def _steps(args):
+    """Rows of the run, ``--minutes`` at ``--dt`` (at least two)."""
+    if not np.isfinite(args.minutes):
+        raise ValueError(f"--minutes must be a finite duration (min); got {args.minutes!r}")
+    n = round(args.minutes * 60.0 / args.dt) + 1
+    if n < 2:
+        raise ValueError(f"--minutes must cover at least one --dt step ({args.dt:g} s); got "
+                         f"{args.minutes!r}")
+    if args.map is None and args.minutes > 60 * MAX_HOURS:
+        raise ValueError(f"--minutes must be at most {60 * MAX_HOURS:g} ({MAX_HOURS:g} h, the "
+                         "longest INS run the simulators accept, as simulate-voyage --hours) "
+                         f"over paper D's point masses; got {args.minutes:g}")
+    return n
+
+
+def _check_rows(args, n):
+    """Refuse more than :data:`MAX_ROWS` rows, naming the longest ``--minutes`` at ``--dt``."""
+    if n > MAX_ROWS:
+        most = np.floor((MAX_ROWS - 1) * args.dt / 6.0) / 10.0  # down to 0.1 min
+        raise ValueError(f"--minutes {args.minutes:g} at --dt {args.dt:g} s makes {n} rows; at "
+                         f"most {MAX_ROWS} (a million take about 0.5 GB and 20 s to simulate, "
+                         f"70 MB of CSV): at this --dt at most --minutes {most:g}, or a longer "
+                         "--dt")
+
+
+def _check_readings(args, run, grid):
+    """Refuse a run whose due readings are NaN: the track crosses missing map nodes."""
+    due = np.zeros(np.shape(run.readings), bool)
+    due[::args.reading_every] = True
+    bad = due & ~np.isfinite(np.asarray(run.readings))
+    if not bad.any():
+        return
+    i = int(np.flatnonzero(bad)[0])
+    lat, lon = float(run.truth.lat[i]), float(run.truth.lon[i])
+    where = ("has missing (NaN) nodes along" if bool(np.asarray(grid.contains(lat, lon)))
+             else "does not hold")
+    raise ValueError(f"--map {args.map} {where} the simulated track: {int(bad.sum())} of "
+                     f"{int(due.sum())} readings are missing, the first at row {i + 1} (lat "
+                     f"{lat:.5g}, lon {lon:.5g}); give another --seed or a map complete there "
+                     "(missing nodes away from the track are fine)")
 
 
 def cmd_simulate_filter(args):
@@ -86,27 +146,26 @@ def cmd_simulate_filter(args):
     if args.reading_every < 1:
         raise ValueError(f"--reading-every must be a positive number of rows; got "
                          f"{args.reading_every}")
-    n = round(args.minutes * 60.0 / args.dt) + 1 if np.isfinite(args.minutes) else 0
-    if n < 2:
-        raise ValueError(f"--minutes must cover at least one --dt step ({args.dt:g} s); got "
-                         f"{args.minutes!r}")
+    n = _steps(args)
     me_sigma, me_length = map_error_args(args)
     if args.map is None:
         if me_sigma > 0:
             raise ValueError("--map-error needs --map (paper D's point masses have no grid to "
                              "draw the map error on)")
+        _check_rows(args, n)
         scen = FilterScenario(dt=args.dt, reading_every=args.reading_every, n_steps=n,
                               geometry=args.geometry)
         run = _simulate(jax.random.key(args.seed), paper_d(), scen)
         over = f"{args.geometry} over paper D's point masses"
     else:
-        grid = load_map(args.map, args.var)
+        grid = load_map(args.map, args.var, allow_nan=True)
         scen = FilterScenario(dt=args.dt, reading_every=args.reading_every, n_steps=n)
-        margin = scen.speed * args.dt * (n - 1) + _SIM_MARGIN_M
-        scen = dataclasses.replace(scen, geometry="random",
-                                   region=_inner_region(grid, margin, args.map))
+        scen = dataclasses.replace(scen, geometry="random", region=_inner_region(
+            grid, scen.speed * args.dt * (n - 1), args.map, args.dt))
+        _check_rows(args, n)
         me = map_error(me_sigma, me_length) if me_sigma > 0 else None
         run = _simulate(jax.random.key(args.seed), grid, scen, me)
+        _check_readings(args, run, grid)
         over = f"a random straight track over --map {args.map}"
         if me is not None:
             over += f" (map error {me_sigma:g} mGal, L {me_length:g} m)"
