@@ -12,6 +12,17 @@ entropy, correlation length)::
     SUIT.png  the precision map (log colour scale) next to the map's own std
 
 Both files are checked before anything is written; ``--force`` replaces them.
+
+Nodes without a bound are missing values (NaN, the variables' ``_FillValue``), never
+``inf``, and the variable ``status`` says why (CF ``flag_values``/``flag_meanings``):
+0 ``ok``; 1 ``off_map``, the segment leaves the map; 2 ``missing_map``, it crosses a
+cell with a missing (NaN) node, such as land on a marine grid (such maps are read
+whole: their missing nodes only blank the nodes whose segments or windows touch them);
+3 ``no_information``, the map does not place the segment: its CRLB exceeds the map's
+own size, the diagonal of its extent (infinite where the map is flat, as a constant
+map is everywhere; huge where the segment sees a single gradient direction), so the
+bound says "anywhere on the map" (``precision_m``, ``corr`` and the axis whose 1-σ
+exceeds that size are blanked; the summary says how many).
 """
 
 import sys
@@ -23,11 +34,14 @@ import xarray as xr
 from matplotlib.colors import LogNorm
 
 from jaxgrav._io import atomic_output, check_outputs
+from jaxgrav.constants import DEG
 from jaxgrav.datasets import load_map
+from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.match.suitability import DESCRIPTORS, suitability
 from jaxgrav.plot import save_figure
+from jaxgrav.sim import DEG_ARC_M
 
-__all__ = ["add_parser", "cmd_suitability"]
+__all__ = ["STATUS", "add_parser", "cmd_suitability"]
 
 _UNITS = dict(precision_m="m", sigma_north_m="m", sigma_east_m="m", corr="1", std="mGal",
               slope_std="mGal/km", roughness="mGal", entropy="nat", correlation_length_m="m")
@@ -66,16 +80,32 @@ def add_parser(subparsers):
     s.set_defaults(func=cmd_suitability)
 
 
+STATUS = {0: "ok", 1: "off_map", 2: "missing_map", 3: "no_information"}
+"""The ``status`` values of the output (module notes)."""
+
+
 def cmd_suitability(args):
     """Run ``jaxgrav suitability`` (x64 is enabled by the CLI entry point)."""
     png = Path(args.out).with_suffix(".png")
     _check_args(args)
     check_outputs([args.out, png], force=args.force, names=["--out", "its PNG"])
-    grid = load_map(args.map, args.var)
-    suit = suitability(grid, heading_deg=args.heading, n_fixes=args.fixes,
-                       spacing_m=args.spacing, noise_mgal=args.noise,
-                       map_error_mgal=args.map_error, map_error_length_m=args.map_error_length,
-                       window_cells=args.window)
+    grid = load_map(args.map, args.var, allow_nan=True)
+    if grid.n_missing == np.asarray(grid.values).size:
+        raise ValueError(f"--map {args.map} has no value: every node is missing (NaN)")
+    with np.errstate(invalid="ignore"):  # NaN nodes: the descriptors' bins of missing values
+        suit = suitability(grid, heading_deg=args.heading, n_fixes=args.fixes,
+                           spacing_m=args.spacing, noise_mgal=args.noise,
+                           map_error_mgal=args.map_error,
+                           map_error_length_m=args.map_error_length, window_cells=args.window)
+    size_m = _map_size_m(grid)
+    status = _status(grid, suit, args, size_m)
+    blank = status != 0
+    suit = suit._replace(
+        precision_m=np.where(blank, np.nan, suit.precision_m),
+        sigma_north_m=np.where(blank & ~(suit.sigma_north_m <= size_m), np.nan,
+                               suit.sigma_north_m),
+        sigma_east_m=np.where(blank & ~(suit.sigma_east_m <= size_m), np.nan, suit.sigma_east_m),
+        corr=np.where(blank, np.nan, suit.corr))
     fields = dict(precision_m=suit.precision_m, sigma_north_m=suit.sigma_north_m,
                   sigma_east_m=suit.sigma_east_m, corr=suit.corr, **suit.descriptors)
     coords = dict(lat=("lat", np.asarray(grid.lat), {"units": "degrees_north"}),
@@ -83,18 +113,64 @@ def cmd_suitability(args):
     ds = xr.Dataset({k: (("lat", "lon"), np.asarray(v, np.float64),
                          {"units": _UNITS[k], "long_name": _LONG[k]})
                      for k, v in fields.items()}, coords=coords)
+    ds["status"] = (("lat", "lon"), status.astype(np.int8), {
+        "long_name": "why a node has no bound (0: it has one)",
+        "flag_values": np.array(sorted(STATUS), np.int8),
+        "flag_meanings": " ".join(STATUS[k] for k in sorted(STATUS))})
     ds.attrs.update(command="jaxgrav " + " ".join(sys.argv[1:]), map=str(args.map),
                     heading_deg=args.heading, n_fixes=args.fixes, spacing_m=args.spacing,
                     noise_mgal=args.noise, map_error_mgal=args.map_error,
-                    map_error_length_m=args.map_error_length)
+                    map_error_length_m=args.map_error_length,
+                    no_information_above_m=round(size_m),
+                    comment="nodes without a bound are missing values; status says why")
     with atomic_output(args.out, force=args.force) as tmp:
         ds.to_netcdf(tmp)
     _plot(grid, suit, args, png)
-    p = suit.precision_m[np.isfinite(suit.precision_m)]
-    q = np.percentile(p, [10, 50, 90]) if p.size else [np.nan] * 3
-    print(f"wrote {args.out} and {png}: {p.size} of {suit.precision_m.size} nodes start a "
-          f"segment inside the map; predicted precision (m) best tenth <= {q[0]:.0f}, median "
-          f"{q[1]:.0f}, worst tenth >= {q[2]:.0f}; descriptors {', '.join(DESCRIPTORS)}")
+    print(_summary(args, png, suit, status, size_m))
+
+
+def _map_size_m(grid):
+    """The diagonal of the map's extent (m), east-west at its widest latitude."""
+    w, e, s, n = (float(v) for v in grid.extent)
+    widest = 0.0 if s <= 0.0 <= n else min(abs(s), abs(n))
+    return float(np.hypot((n - s) * DEG_ARC_M, (e - w) * DEG_ARC_M * np.cos(np.radians(widest))))
+
+
+def _status(grid, suit, args, size_m):
+    """:data:`STATUS` of every node: why its segment has no bound (0: it has one)."""
+    p = suit.precision_m
+    status = np.zeros(p.shape, np.int8)
+    status[np.isnan(p)] = 1
+    if grid.n_missing:  # a NaN bound on a segment inside the map: missing nodes on it
+        lat0, lon0 = np.meshgrid(np.asarray(grid.lat), np.asarray(grid.lon), indexing="ij")
+        length = (args.fixes - 1) * args.spacing
+        h = np.radians(args.heading)
+        lat1 = lat0 + length * np.cos(h) / np.asarray(meridian_radius(lat0)) / DEG
+        lon1 = lon0 + length * np.sin(h) / (np.asarray(prime_vertical_radius(lat0))
+                                             * np.cos(np.radians(lat0))) / DEG
+        inside = np.asarray(grid.contains(lat1, lon1))
+        status[np.isnan(p) & inside] = 2
+    status[~np.isnan(p) & ~(p <= size_m)] = 3
+    return status
+
+
+def _summary(args, png, suit, status, size_m):
+    """The command's closing lines."""
+    counts = {k: int((status == k).sum()) for k in STATUS}
+    p = suit.precision_m[status == 0]
+    head = (f"wrote {args.out} and {png}: {counts[0]} of {status.size} nodes have a bound "
+            f"({counts[1]} segments leave the map, {counts[2]} cross missing map nodes, "
+            f"{counts[3]} see no information)")
+    if p.size:
+        q = np.percentile(p, [10, 50, 90])
+        head += (f"; predicted precision (m) best tenth <= {q[0]:.0f}, median {q[1]:.0f}, "
+                 f"worst tenth >= {q[2]:.0f}")
+    head += f"; descriptors {', '.join(DESCRIPTORS)}"
+    if counts[3]:
+        head += (f"\nno information: at {counts[3]} nodes the map does not place the segment "
+                 f"(its bound exceeds the map's own {size_m / 1e3:.0f} km: infinite where the "
+                 "map is flat); they are missing values with status 3 (no_information)")
+    return head
 
 
 def _check_args(args):
