@@ -41,14 +41,29 @@ def _km(values):
 
 
 def voyage_lines(results):
-    """The voyage figures of :func:`~jaxgrav.navigate.voyage_summary`, as two lines."""
+    """The voyage figures of :func:`~jaxgrav.navigate.voyage_summary`, as two lines.
+
+    Only the figures the voyage has: the last / second hour ratio needs three whole
+    hours (with two the last hour is the second), the comparison with the free INS
+    "from the second hour" two; a shorter voyage says which are left out and why.
+    """
     vs = voyage_summary(results["hourly_err_m"], results["hourly_ins_err_m"], results["nees"])
+    hours = len(vs["hourly_rms_nav_m"])
+    parts = [f"last hour / free INS {vs['last_hour_ratio']:.3f}"]
+    if hours >= 3:
+        parts.append(f"last / second hour {vs['last_over_second_hour']:.2f}")
+    if hours >= 2:
+        parts.append(f"worse than the free INS in some hour from the second: "
+                     f"{100 * vs['share_worse_than_free_some_hour']:.0f} % of voyages")
+    if hours == 2:
+        parts.append("no last / second hour ratio: the last hour is the second (it needs "
+                     "--hours 3 or more)")
+    elif hours == 1:
+        parts.append("one whole hour, no second: the last / second hour ratio needs --hours 3 "
+                     "or more, the hours from the second --hours 2")
+    parts.append(f"NEES mean {vs['nees']:.2f} (median {vs['nees_median']:.2f}, 2 expected)")
     return (f"hourly RMS (km) navigation: {_km(vs['hourly_rms_nav_m'])}; free INS: "
-            f"{_km(vs['hourly_rms_free_m'])}\n"
-            f"last hour / free INS {vs['last_hour_ratio']:.3f}, last / second hour "
-            f"{vs['last_over_second_hour']:.2f}, worse than the free INS in some hour from "
-            f"the second: {100 * vs['share_worse_than_free_some_hour']:.0f} % of voyages, NEES "
-            f"mean {vs['nees']:.2f} (median {vs['nees_median']:.2f}, 2 expected)")
+            f"{_km(vs['hourly_rms_free_m'])}\n" + ", ".join(parts))
 
 
 def plot_voyages(results, title, path, force):
