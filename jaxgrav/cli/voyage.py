@@ -64,13 +64,19 @@ def cmd_simulate_voyage(args):
     except ValueError as err:
         raise ValueError(f"--preset {args.preset!r}: {err}") from None
     check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"])
-    grid = load_map(args.map, args.var)
+    grid = load_map(args.map, args.var, allow_nan=True)  # missing nodes: checked on the route
     check_region_covered(grid, scenario.region, f"--map {args.map}")
-    model = map_error_from_args(args, grid)
+    model = map_error_from_args(args, grid, allow_nan=True)
     voyage = voyage_scenario(jax.random.key(args.seed), grid, scenario, model)
-    if not np.all(np.isfinite(np.asarray(voyage.gravity))):
-        raise ValueError(f"--map {args.map} has missing values along the simulated route; "
-                         "choose another --seed or a complete map")
+    bad = ~np.isfinite(np.asarray(voyage.gravity))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        source = f"--truth-map {args.truth_map}" if args.truth_map else f"--map {args.map}"
+        raise ValueError(f"{source} has missing (NaN) values along the simulated route: "
+                         f"{int(bad.sum())} of {bad.size} readings, the first at lat "
+                         f"{float(voyage.truth.lat[i]):.5g}, lon {float(voyage.truth.lon[i]):.5g}; "
+                         "choose another --seed or a map complete there (missing nodes away "
+                         "from the route are fine)")
     ins, truth = voyage.ins, voyage.truth
     write_track_csv(args.out, {"t": ins.t, "lat": ins.lat, "lon": ins.lon,
                                "v_east": ins.v_east, "v_north": ins.v_north,
