@@ -55,7 +55,12 @@ from jaxgrav.cli.inputs import (
     read_track,
     track_map,
 )
-from jaxgrav.cli.sanity import check_readings, implausible_rows, innovation_check
+from jaxgrav.cli.sanity import (
+    check_positions,
+    check_readings,
+    implausible_rows,
+    innovation_check,
+)
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
 from jaxgrav.filters import STATUS_FILTER, map_anomaly, status_messages_filter
@@ -297,6 +302,8 @@ def cmd_filter(args):
         i = int(np.flatnonzero(np.abs(lat) > 90)[0])
         raise ValueError(f"{where}: latitude {lat[i]:g} on line {csv_line(i)} is outside "
                          "[-90, 90] degrees")
+    if "v_east" in track and "v_north" in track:
+        check_positions(track, where=where)
     if not np.isfinite(g).any():
         raise ValueError(f"{where}: column 'gravity' has no readings (all {g.size} cells "
                          "empty or NaN); the filter needs at least one (mGal)")

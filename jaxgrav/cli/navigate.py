@@ -60,7 +60,7 @@ from jaxgrav.cli.inputs import (
     read_track,
     track_map,
 )
-from jaxgrav.cli.sanity import check_readings, innovation_check
+from jaxgrav.cli.sanity import check_positions, check_readings, innovation_check
 from jaxgrav.filters import map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
@@ -162,8 +162,8 @@ def check_log(track, grid, max_gap, max_speed):
     """Check an INS log for navigation; returns ``(dt, n_missing, n_off_map)``.
 
     Raises ValueError naming the file, the line and the value: a step longer than
-    ``max_gap`` or not uniform (within 0.1 %), a speed above ``max_speed``, a log with
-    no row on the map.
+    ``max_gap`` or not uniform (within 0.1 %), a speed above ``max_speed``, a position
+    jump (:func:`~jaxgrav.cli.sanity.check_positions`), a log with no row on the map.
     """
     label = f"track file {track.path!r}"
     t = np.asarray(track["t"])
@@ -193,6 +193,7 @@ def check_log(track, grid, max_gap, max_speed):
     on_map = np.isfinite(np.asarray(grid.sample(track["lat"], track["lon"])))
     if not on_map.any():
         raise ValueError(f"{label}: no row lies on the map (extent {grid.extent})")
+    check_positions(track, where=label)
     return dt, int(np.sum(~np.isfinite(track["gravity"]))), int(np.sum(~on_map))
 
 
@@ -315,7 +316,7 @@ def _tight(args, voyage, grid, n_missing, n_off):
     flags = np.bitwise_or.reduce(status)
     print(f"wrote {args.out}: {status.size} rows, {int(np.sum(status == 0))} reading(s) used "
           f"by the {args.method} filter; {n_missing} missing reading(s) skipped, {n_off} "
-          f"row(s) off the map (not aided); flags seen: "
+          f"row(s) without a map value at the INS position; flags seen: "
           f"{', '.join(status_messages_filter(flags)) or 'none'}")
     fit_warning = nis_warning(res.innovation, np.sqrt(np.asarray(res.innovation_var)))
     if fit_warning is not None:
@@ -324,11 +325,8 @@ def _tight(args, voyage, grid, n_missing, n_off):
 
 def nis_warning(innovation, innovation_sigma):
     """The tight filter's innovation check (:func:`~jaxgrav.cli.sanity.innovation_check`)
-    as navigate's warning: its advice names ``--noise``, navigate's reading noise (the
-    check's own text names ``filter``'s ``--sigma-gravity``); None when the fit is
-    plausible."""
-    _, _, warning = innovation_check(innovation, innovation_sigma)
-    return None if warning is None else warning.replace("--sigma-gravity", "--noise")
+    as navigate's warning, its advice naming ``--noise``; None when the fit is plausible."""
+    return innovation_check(innovation, innovation_sigma, noise_option="--noise")[2]
 
 
 def _write(args, ins, res, cfg):

@@ -12,6 +12,10 @@ fixes it) readings that cannot be anomalies in the map's units:
 * a level far from the map's (a total field instead of an anomaly, another datum);
 * single readings far outside what the map and the noise allow.
 
+:func:`check_positions` refuses an INS log whose positions jump: a move between two
+rows that the velocity columns do not explain (a position reset, a glitch), which the
+filters' continuous error model cannot represent.
+
 After a run, :func:`fit_check` (matchers: the fix's χ² per degree of freedom) and
 :func:`innovation_check` (filters: the normalised innovations) test the fit against the
 stated noise and return a warning when it is statistically implausible (p < 10⁻³): the
@@ -24,11 +28,12 @@ import math
 import numpy as np
 from scipy.special import chdtrc
 
+from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.result import P_IMPLAUSIBLE, fit_p_value
 from jaxgrav.tracks import csv_line
 
-__all__ = ["FILL_VALUES", "INNOVATION_BLOCK", "P_IMPLAUSIBLE", "check_readings", "fit_check",
-           "implausible_rows", "innovation_check"]
+__all__ = ["FILL_VALUES", "INNOVATION_BLOCK", "P_IMPLAUSIBLE", "check_positions",
+           "check_readings", "fit_check", "implausible_rows", "innovation_check"]
 
 FILL_VALUES = (-9999.0, 9999.0, -99999.0, 99999.0, -999999.0, 999999.0, -32767.0, 32767.0,
                -32768.0)
@@ -99,13 +104,16 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
         return
     zb, eb = z[both], e[both]
     raw_level = float(np.median(raw[both]))
-    if unit == "mGal" and (9.6e5 < abs(raw_level) < 9.9e5 or 9.6 < abs(raw_level) < 9.9):
+    allowed = max(_iqr(eb), 3.0 * float(noise), 1e-12)
+    # absolute gravity in m/s² sits near 9.8 with a spread of mGal/1e5; an anomaly of
+    # ~9.8 mGal (spread of mGal) is not it
+    si = 9.6 < abs(raw_level) < 9.9 and _iqr(raw[both]) < allowed / _SPREAD_FACTOR
+    if unit == "mGal" and (9.6e5 < abs(raw_level) < 9.9e5 or si):
         scale = "mGal" if abs(raw_level) > 1e3 else "m/s²"
         raise ValueError(
             f"{where}: column {column!r} looks like absolute gravity (median "
             f"{raw_level:.6g}, in {scale}?), not an anomaly; subtract normal gravity (and "
             "give mGal)")
-    allowed = max(_iqr(eb), 3.0 * float(noise), 1e-12)
     spread = _iqr(zb)
     # the raw readings' spread too: a correction in mGal added to readings in m/s² hides it
     small = min(spread, _iqr(raw[both]))
@@ -123,8 +131,7 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
         raise ValueError(
             f"{where}: column {column!r} sits {offset:+.4g} {unit} from the map along the "
             f"track (medians {level:.4g} and {float(np.median(eb)):.4g}), far more than the "
-            f"map's spread {_iqr(eb):.3g} {unit}; is it a total field or another datum "
-            "instead of the map's anomaly?")
+            f"map's spread {_iqr(eb):.3g} {unit}; " + _level_cause(z, raw, both, eb, unit))
     dev = np.abs((zb - eb) - float(np.median(zb - eb)))
     far = dev > _LEVEL_SPREADS * max(allowed, spread)
     if far.any():
@@ -134,6 +141,59 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
             f"map and the noise allow ({z[rows[0]]:g} on line {csv_line(int(rows[0]))}, "
             f"{dev[far][0]:.3g} {unit} from the rest): fill values or spikes? {fix[0].upper()}"
             f"{fix[1:]}")
+
+
+POSITION_JUMP_MS = 1.0
+"""A move between rows that departs from the velocity columns' by more than this (m/s,
+or 10 % of the speed, whichever is larger) is a jump (:func:`check_positions`)."""
+
+
+def check_positions(track, *, where):
+    """Refuse INS positions that jump between rows (see the module notes).
+
+    Parameters
+    ----------
+    track : mapping
+        ``t`` (s), ``lat``, ``lon`` (degrees), ``v_east``, ``v_north`` (m/s), ``(N,)``.
+    where : str
+        The file, for messages.
+
+    Raises
+    ------
+    ValueError
+        The first row whose move from the previous one departs from the mean of the two
+        rows' velocities times the step by more than :data:`POSITION_JUMP_MS` (or 10 %
+        of the speed), with the line, the jump in metres and how many there are.
+    """
+    t, lat, lon = (np.asarray(track[k], float) for k in ("t", "lat", "lon"))
+    ve, vn = np.asarray(track["v_east"], float), np.asarray(track["v_north"], float)
+    if t.size < 2:
+        return
+    dt = np.diff(t)
+    north, east = (np.asarray(a) for a in local_offsets_m(lat[1:], lon[1:], lat[:-1], lon[:-1]))
+    miss_n = north - 0.5 * (vn[1:] + vn[:-1]) * dt
+    miss_e = east - 0.5 * (ve[1:] + ve[:-1]) * dt
+    miss = np.hypot(miss_n, miss_e)
+    speed = 0.5 * (np.hypot(ve[1:], vn[1:]) + np.hypot(ve[:-1], vn[:-1]))
+    jump = np.flatnonzero(miss > np.maximum(POSITION_JUMP_MS, 0.1 * speed) * dt)
+    if jump.size:
+        i = int(jump[0])
+        raise ValueError(
+            f"{where}: the position jumps by {miss[i]:.4g} m between lines {csv_line(i)} and "
+            f"{csv_line(i + 1)} (t {t[i]:g} -> {t[i + 1]:g} s) beyond what v_east/v_north "
+            f"allow ({jump.size} such jump(s)); a reset or glitch of the INS position: split "
+            "the log there or remove the row")
+
+
+def _level_cause(z, raw, both, expected, unit):
+    """The likely cause of readings far from the map: the Eötvös correction, or a datum."""
+    corr = z[both] - raw[both]
+    raw_offset = float(np.median(raw[both]) - np.median(expected))
+    if np.any(corr != 0) and abs(raw_offset) < 0.5 * abs(float(np.median(z[both] - expected))):
+        return (f"the Eötvös correction from the velocity columns (median "
+                f"{float(np.median(corr)):+.4g} {unit}) moved them there: check v_east and "
+                "v_north (m/s), or give --eotvos-corrected if the readings are corrected")
+    return "is it a total field or another datum instead of the map's anomaly?"
 
 
 def fit_check(chi2_per_dof, dof, noise, *, what="the fix"):
@@ -167,13 +227,15 @@ def fit_check(chi2_per_dof, dof, noise, *, what="the fix"):
                "trustworthy")
 
 
-def innovation_check(innovation, innovation_sigma):
+def innovation_check(innovation, innovation_sigma, noise_option="--sigma-gravity"):
     """Are a filter's innovations consistent with their predicted variance?
 
     Parameters
     ----------
     innovation, innovation_sigma : array_like, shape ``(N,)``
         Reading minus prediction and its predicted 1-σ (NaN where no reading was used).
+    noise_option : str
+        The command's reading-noise option, named in the warning's advice.
 
     Returns
     -------
@@ -195,7 +257,7 @@ def innovation_check(innovation, innovation_sigma):
     return nis, p, (f"the innovations are {math.sqrt(nis):.3g} × larger than the filter "
                     f"predicts (mean NIS {nis:.3g} over {k} readings, p = {p:.1e}): the "
                     "readings do not fit the map as stated; state the map's error "
-                    "(--map-error), a larger --sigma-gravity, or check the map and the "
+                    f"(--map-error), a larger {noise_option}, or check the map and the "
                     "units; the stated 1-sigma is not trustworthy")
 
 

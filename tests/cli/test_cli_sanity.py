@@ -12,7 +12,13 @@ import pytest
 from scipy.stats import chi2
 
 from jaxgrav.cli import main
-from jaxgrav.cli.sanity import check_readings, fit_check, implausible_rows, innovation_check
+from jaxgrav.cli.sanity import (
+    check_positions,
+    check_readings,
+    fit_check,
+    implausible_rows,
+    innovation_check,
+)
 from jaxgrav.match import IMPLAUSIBLE_FIT, fit_p_value
 
 # ------------------------------------------------------------------ the functions
@@ -102,6 +108,17 @@ def test_check_readings_units_hints_and_what_passes(column):
     with pytest.raises(ValueError, match="remove the row"):
         check_readings(np.where(np.arange(z.size) == 2, -9999.0, z), expected, 1.0,
                        column="gravity", where="w", missing_skipped=False)
+    # readings that fit the map until a wild Eötvös correction (v_east 500 m/s) moves
+    # them: the message names the velocity columns, not a datum
+    with pytest.raises(ValueError, match="v_east and v_north"):
+        check_readings(z, expected, 1.0, column="gravity", where="w",
+                       correction=np.full(z.size, 3000.0))
+    with pytest.raises(ValueError, match="another datum"):
+        check_readings(z + 3000.0, expected, 1.0, column="gravity", where="w")
+    # an anomaly of about 9.8 mGal over a quiet map is not absolute gravity in m/s²
+    rng = np.random.default_rng(1)
+    quiet = 9.8 + 0.5 * np.sin(np.linspace(0.0, 6.0, 40))
+    check_readings(quiet + rng.standard_normal(40), quiet, 1.0, column="gravity", where="w")
 
 
 # ------------------------------------------------------------------ the commands
@@ -214,3 +231,23 @@ def test_filter_warns_when_the_innovations_are_implausible(tracks, tmp_path, cap
     with open(out, newline="") as f:
         assert not any(int(row["status"]) & 128 for row in csv.DictReader(f))
     assert "implausible_fit" not in capsys.readouterr().err
+
+
+def test_check_positions_refuses_a_jump_in_the_ins_log():
+    """A 300 m glitch in one row of a 10 s log at 5 m/s is named with its line; a
+    smooth log (the simulator's) and a turn pass."""
+    t = np.arange(0.0, 600.0, 10.0)
+    ve = 5.0 * np.cos(t / 300.0)
+    vn = 5.0 * np.sin(t / 300.0)  # turning
+    lat0, lon0 = 30.0, 130.0
+    mr, nr = 6.35e6, 6.38e6 * np.cos(np.radians(lat0))
+    east = np.concatenate([[0.0], np.cumsum(0.5 * (ve[1:] + ve[:-1]) * 10.0)])
+    north = np.concatenate([[0.0], np.cumsum(0.5 * (vn[1:] + vn[:-1]) * 10.0)])
+    track = {"t": t, "lat": lat0 + np.degrees(north / mr), "lon": lon0 + np.degrees(east / nr),
+             "v_east": ve, "v_north": vn}
+    check_positions(track, where="--track 'L.csv'")
+    track["lat"] = track["lat"].copy()
+    track["lat"][20] += np.degrees(300.0 / mr)
+    with pytest.raises(ValueError,
+                       match=r"jumps by 3\d\d(\.\d)? m between lines 21 and 22.*2 such"):
+        check_positions(track, where="--track 'L.csv'")
