@@ -18,6 +18,7 @@ __all__ = [
     "CHAIN_MAP_ERROR_INTEGRITY",
     "ICCP_MAP_ERROR_INTEGRITY",
     "MAP_ERROR_INTEGRITY",
+    "WHITE_INTEGRITY",
     "config_for",
     "iccp_config_for",
 ]
@@ -27,6 +28,12 @@ MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0, "max_sigma_rat
 integrity thresholds, ``max_sigma_m`` chosen by ``examples/map_error_dense.py``,
 ``max_sigma_ratio`` (a fix must narrow the searched disc's own spread by 10 %) by the
 Monte Carlo sweep in the README."""
+
+WHITE_INTEGRITY = {"max_sigma_ratio": 0.9}
+"""DenseConfig fields :func:`config_for` sets without a map error (white-noise score): the
+informativeness test alone (the readings must narrow the searched disc's spread by
+10 %; a fix on a flat or featureless map is rejected, not accepted with a σ as wide as
+the search), the fix still the refined best offset (paper A's)."""
 
 CHAIN_MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
 """ChainConfig fields :func:`config_for` sets with a map error (σ > 0), measured with
@@ -67,7 +74,8 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         σ > 0 the fix and integrity thresholds of :data:`MAP_ERROR_INTEGRITY`
         (``dense``, measured with ``examples/map_error_dense.py``) or
         :data:`CHAIN_MAP_ERROR_INTEGRITY` (``chains``, whose iso-value tolerance
-        then grows to ``2·√(noise² + σ²)``). None: the white-noise score. ``dense``
+        then grows to ``2·√(noise² + σ²)``). None: the white-noise score, with the
+        informativeness test of :data:`WHITE_INTEGRITY` (``dense``). ``dense``
         compiles only the score it uses (``DenseConfig.score_model`` ``"gls"`` when
         σ > 0, else ``"white"``).
     region : {"disc", "square"}
@@ -99,6 +107,8 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
                              noise_mgal=noise_mgal,
                              bias_sigma_mgal=bias_sigma_mgal, n_rotations=n_rotations,
                              score=score or "bias", score_model="gls" if told else "white")
+        if not told:
+            config = dataclasses.replace(config, **WHITE_INTEGRITY)
         return _with_map_error(config, map_error, MAP_ERROR_INTEGRITY)
     half = math.ceil(reach / min(dy, dx))
     if 2 * half + 1 > min(grid.ny, grid.nx):

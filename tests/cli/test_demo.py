@@ -83,7 +83,9 @@ def test_demo_summary_json(demo_dir):
     for r in rows:  # the same tracks in every row: the INS errors are the same
         assert r["ins_error_m_median"] == rows[0]["ins_error_m_median"]
         assert 0.0 <= r["worse_rate"] <= 1.0 and 0.0 <= r["accepted_rate"] <= 1.0
-    assert rows[0]["accepted_rate"] == rows[1]["accepted_rate"] == 1.0  # white: never rejects
+    # the white rows run the informativeness test too (a fix as wide as the search is
+    # rejected), so their accepted share is below 1 at the smoke size's short tracks
+    assert 0.0 < rows[0]["accepted_rate"] <= 1.0
     cfg = s["realistic_config"]
     assert cfg["half_size"] >= 1 and cfg["spacing_m"] > 0 and math.isfinite(cfg["noise_mgal"])
 

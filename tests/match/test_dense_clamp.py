@@ -15,7 +15,9 @@ import numpy as np
 import pytest
 
 from jaxgrav import Grid
+from jaxgrav.fields.map_error import map_error as map_error_model
 from jaxgrav.match.dense import DenseConfig, match_dense
+from jaxgrav.match.sizing import WHITE_INTEGRITY, config_for
 
 
 @pytest.mark.parametrize("map_error_mgal", [0.0, 2.0])
@@ -131,3 +133,21 @@ def test_an_uninformative_fix_is_rejected_by_the_sigma_ratio():
     r = match_dense(grid, ins_lat, ins_lon, readings, ratio)
     assert not bool(r.accepted) and int(r.status) & 512
     np.testing.assert_allclose(r.lat, ins_lat)  # the INS track kept
+
+
+def test_config_for_without_a_map_error_rejects_an_uninformative_fix():
+    """``config_for`` gives the white-noise matcher the informativeness test too: white
+    readings on a flat map were ``accepted`` with a σ as wide as the search."""
+    lat = np.linspace(29.0, 31.0, 41)
+    lon = np.linspace(129.0, 131.0, 41)
+    grid = Grid.from_arrays(lat, lon, np.full((41, 41), 10.0), units="mGal")
+    ins_lat = 29.9 + 0.002 * np.arange(30)
+    ins_lon = 129.9 + 0.002 * np.arange(30)
+    readings = 10.0 + np.random.default_rng(0).normal(0.0, 1.0, 30)
+    for map_error in (None, map_error_model(0.0, 10e3)):
+        cfg = config_for("dense", grid, 3000.0, map_error=map_error)
+        assert cfg.max_sigma_ratio == WHITE_INTEGRITY["max_sigma_ratio"]
+        assert cfg.fix == "best" and cfg.score_model == "white"  # paper A's fix otherwise
+        r = match_dense(grid, ins_lat, ins_lon, readings, cfg)
+        assert not bool(r.accepted) and int(r.status) & 512
+        np.testing.assert_allclose(r.lat, ins_lat)

@@ -221,7 +221,11 @@ def test_real_method_gives_the_same_runs_for_any_chunk(method):
     opts, n, chunk = REAL[method]
     alone, chunked = real_runs(method, 1), real_runs(method, chunk)
     assert_same_runs(alone, chunked, f"{method} chunk 1 vs {chunk}")
-    assert len(set(np.round(chunked["err_m"], 6))) == n  # n different runs, not one repeated
+    # different runs, not one repeated (a rejected dense fix keeps the INS error, equal
+    # in every run of a fixed drift)
+    fixed = ~np.isclose(chunked["err_m"], chunked["ins_err_m"], rtol=1e-9)
+    assert fixed.sum() >= n - 2
+    assert len(set(np.round(chunked["err_m"][fixed], 6))) == fixed.sum()
     if method == "dense":  # fixed INS drift: every INS track is off by exactly it
         np.testing.assert_allclose(chunked["ins_err_m"], opts["drift_deg"] * DEG_ARC_M,
                                    rtol=1e-6)
