@@ -92,6 +92,10 @@ def cmd_suitability(args):
     grid = load_map(args.map, args.var, allow_nan=True)
     if grid.n_missing == np.asarray(grid.values).size:
         raise ValueError(f"--map {args.map} has no value: every node is missing (NaN)")
+    side = min(np.asarray(grid.values).shape[-2:])
+    if args.window is not None and args.window > side:
+        raise ValueError(f"--window must be at most the map's shorter side ({side} nodes); "
+                         f"got {args.window}")
     with np.errstate(invalid="ignore"):  # NaN nodes: the descriptors' bins of missing values
         suit = suitability(grid, heading_deg=args.heading, n_fixes=args.fixes,
                            spacing_m=args.spacing, noise_mgal=args.noise,

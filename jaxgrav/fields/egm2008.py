@@ -220,7 +220,8 @@ def build(region, out_dir, *, force=False):
     targets = [out_dir / p.filename for r in regions for p in r.products]
     existing = [str(t) for t in targets if t.exists()]
     if existing and not force:
-        raise FileExistsError(f"outputs exist: {existing}; pass force=True (--force) to overwrite")
+        raise FileExistsError(f"outputs exist: {existing}; pass --force (library: force=True) "
+                              "to overwrite")
     require_extras()
     out_dir.mkdir(parents=True, exist_ok=True)
     command = build_command(region, out_dir, force)

@@ -328,7 +328,7 @@ def _bad(kind, cols):
      "--guard applies to ukf, ekf, gsf, pf and rbpf; got --method pmf"),
     ("ok", ("--method", "ukf", "--particles", "100"),
      "--particles is for --method pf or rbpf; got --method ukf"),
-    ("ok", ("--method", "rbpf", "--particles", "1"), "--particles must be an integer >= 2; got 1"),
+    ("ok", ("--method", "rbpf", "--particles", "1"), "--particles must be an integer >= 100"),
     ("ok", ("--guard", "-0.5"), "--guard must be a positive variance ratio"),
     ("ok", ("--map-error", "-1"), "--map-error must be a finite map-error sigma >= 0 (mGal); "
                                   "got -1.0"),

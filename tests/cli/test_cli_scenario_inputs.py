@@ -97,6 +97,10 @@ REFUSED = [
      "--map {mostly_nan} has missing (NaN) values along the simulated route: 361 of 361"),
     ("suitability-all-nan", ["suitability", "--map", "{all_nan}", "--out", "{out}"],
      "every node is missing (NaN)"),
+    ("suitability-even-window", ["suitability", "--map", "ryukyu", "--window", "4", "--out",
+                                 "{out}"], "--window must be an odd number of nodes >= 3; got 4"),
+    ("suitability-huge-window", ["suitability", "--map", "ryukyu", "--window", "999", "--out",
+                                 "{out}"], "at most the map's shorter side (289 nodes); got 999"),
 ]
 
 

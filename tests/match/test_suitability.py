@@ -138,7 +138,9 @@ def test_cli_writes_netcdf_and_png_and_refuses_overwrite(tmp_path, capsys):
     assert f"wrote {out} and {out.with_suffix('.png')}" in text
     with xr.open_dataset(out) as ds:
         assert set(ds.data_vars) == {"precision_m", "sigma_north_m", "sigma_east_m", "corr",
-                                     *DESCRIPTORS}
+                                     "status", *DESCRIPTORS}
+        # the complete map places every segment that stays on it
+        assert set(np.unique(ds["status"])) == {0, 1}
         assert ds["precision_m"].attrs["units"] == "m" and ds.attrs["map_error_mgal"] == 3.0
         assert ds["precision_m"].dims == ("lat", "lon")
     assert out.with_suffix(".png").stat().st_size > 10_000
