@@ -33,6 +33,7 @@ from jaxgrav.datasets import load_map
 from jaxgrav.montecarlo.draws import variable_attrs
 from jaxgrav.montecarlo.filter_runs import MAP_ERROR_TOLD
 from jaxgrav.montecarlo.fix_metrics import fix_summary
+from jaxgrav.montecarlo.matcher_runs import MISSING_MAP_START_TRIES
 from jaxgrav.montecarlo.methods import (
     BUILDERS,
     DEPRECATED_METHODS,
@@ -49,6 +50,9 @@ from jaxgrav.scenarios import INS_GRADES
 __all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize"]
 
 PERCENTILES = (5, 25, 50, 75, 95)
+MASKED_MAP_METHODS = ("dense", "chains")
+"""Methods whose runs take a map with missing (land) nodes: a run's start is drawn again
+until its true track reads none (:data:`MISSING_MAP_START_TRIES` tries)."""
 
 
 def add_parser(subparsers):
@@ -293,12 +297,15 @@ def cmd_montecarlo(args):
         map_name = str(args.map)
     else:  # the method's default (jaxgrav.montecarlo.build)
         map_name = "paper-d" if kind == "filter" else "ryukyu"
+    # dense and chains draw each run's start again until its track reads no missing node
+    # (MISSING_MAP_START_TRIES); the other methods' scenarios need a complete map
+    masked_ok = args.method in MASKED_MAP_METHODS
     grid = (None if args.map is None or (kind == "filter" and args.map == "paper-d")
-            else load_map(args.map, None))
+            else load_map(args.map, None, allow_nan=masked_ok))
     if grid is None and (kind == "voyage" or (kind == "matcher" and args.truth_map)):
         grid = default_grid()
     check_drift(args, default_grid() if grid is None and kind == "matcher" else grid, kind)
-    model = map_error_from_args(args, grid)
+    model = map_error_from_args(args, grid, allow_nan=masked_ok)
     if model is not None and grid is None and kind == "filter":
         raise ValueError(f"--map-error and --truth-map need --map MAP with --method "
                          f"{args.method}: paper D's point masses have no grid to draw a map "
@@ -355,6 +362,12 @@ def cmd_montecarlo(args):
               + f" ({spec.settings['told_map_error_source']})")
     for line in _fix_lines(results):
         print(line)
+    if "readings_on_map" in results and not np.all(results["readings_on_map"]):
+        bad = int(np.sum(~np.asarray(results["readings_on_map"], bool)))
+        print(f"warning: {bad} of {args.runs} runs found no start in "
+              f"{MISSING_MAP_START_TRIES} tries whose track reads no missing map node; their "
+              "readings hold NaN and they count as failures (the map is mostly missing?)",
+              file=sys.stderr)
     if kind == "voyage":
         print(voyage_lines(results))
     print(f"{args.runs} runs in {seconds:.1f} s ({args.runs / seconds:.1f} runs/s, "

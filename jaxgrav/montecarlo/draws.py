@@ -23,6 +23,8 @@ DRAW_ATTRS = {
 """NetCDF attributes of :func:`scenario_draws`' variables."""
 
 _OTHER_ATTRS = {
+    "readings_on_map": dict(units="1", long_name="every reading of the run is finite (1): its "
+                                                 "true track read no missing map node"),
     "status": dict(units="1", long_name="status bits OR-ed over the run (see the file's "
                                         "status_bits attribute)"),
     "score": dict(units="map units squared (nats for entropy)",

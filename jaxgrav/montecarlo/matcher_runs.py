@@ -40,6 +40,7 @@ from jaxgrav.sim import DEG_ARC_M, track_error_m
 __all__ = [
     "CHAIN_NODE_DEG",
     "DEPRECATED_NAMES",
+    "MISSING_MAP_START_TRIES",
     "chains_builder",
     "chains_run",
     "dense_builder",
@@ -53,6 +54,10 @@ __all__ = [
     "paper_a_match",
     "paper_b_builder",
 ]
+
+
+MISSING_MAP_START_TRIES = 16
+"""Random starts a paper-A run tries on a map with missing nodes (``start_tries``)."""
 
 
 # ------------------------------------------------------------ metrics of every matcher
@@ -87,11 +92,13 @@ def matcher_record(run, r, **extra):
         ``status`` (int32), ``score`` (the matcher's), the fix metrics ``accepted``,
         ``sigma_max_m``, ``covered95``
         (:func:`~jaxgrav.montecarlo.fix_metrics.fix_metrics`), the run's draws
-        (:func:`~jaxgrav.montecarlo.draws.scenario_draws`: start and INS offset) and
-        ``extra``.
+        (:func:`~jaxgrav.montecarlo.draws.scenario_draws`: start and INS offset),
+        ``readings_on_map`` (every reading finite: the true track read no missing map
+        node) and ``extra``.
     """
     return dict(
         ins_err_m=ins_error_m(run),
+        readings_on_map=jnp.all(jnp.isfinite(run.readings)),
         err_m=track_error_m(r.lat, r.lon, run.truth),
         status=jnp.asarray(r.status, jnp.int32),
         score=r.score,
@@ -166,7 +173,11 @@ def _paper_a_settings(grid, drift_deg, noise, n_fixes, map_error):
     noise = 1.0 if noise is None else float(noise)
     n = 30 if n_fixes is None else int(n_fixes)
     check_settings(drift, noise, n)
-    scen = MatchingScenario(region=region_of(grid), drift_deg=drift, noise_mgal=noise, n_fixes=n)
+    # land masked on the map: a run's start is drawn again (up to 16 times) until its
+    # true track reads no missing node (a complete map: the same runs as one try)
+    tries = MISSING_MAP_START_TRIES if grid.n_missing else 1
+    scen = MatchingScenario(region=region_of(grid), drift_deg=drift, noise_mgal=noise, n_fixes=n,
+                            start_tries=tries)
     return grid, map_error, drift, noise, n, scen
 
 
