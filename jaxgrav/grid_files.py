@@ -219,6 +219,7 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
 
 def _unit_key(units):
     key = units.strip().lower().replace("µ", "u").replace("μ", "u")
+    key = key.replace("²", "2").replace("⁻", "-")
     for c in " *^.·":
         key = key.replace(c, "")
     return key

@@ -139,6 +139,7 @@ def test_coordinates_found_by_cf_attributes(tmp_path):
 
 @pytest.mark.parametrize(("units", "scale", "expected"), [
     ("mGal", 1.0, "mGal"), ("m s-2", 1e-5, "mGal"), ("m/s^2", 1e-5, "mGal"),
+    ("m/s²", 1e-5, "mGal"), ("m s⁻²", 1e-5, "mGal"), ("m·s⁻²", 1e-5, "mGal"),
     ("uGal", 1e3, "mGal"), ("µGal", 1e3, "mGal"), ("Gal", 1e-3, "mGal"), ("gu", 10.0, "mGal"),
     ("nT", 1.0, "nT"), ("uT", 1e-3, "nT"), ("T", 1e-9, "nT"),
     ("m", 1.0, "m"), ("", 1.0, ""),  # not a gravity or magnetic unit: as it is

@@ -97,7 +97,8 @@ def check_particles(n):
 _WARN = {
     "off_map": "the estimate, its sigma points or a particle left the map or met a missing "
                "(NaN) map cell, update skipped "
-               "(pmf: grid cells off the map, left out of the update)",
+               "(pmf: grid cells without a map value, which the reading neither confirms "
+               "nor rules out; the update is skipped only when no cell has one)",
     "covariance_repaired": "the covariance was not positive definite; jitter added",
     "covariance_failed": "the covariance could not be repaired, or the innovation variance "
                          "was not positive; update skipped",

@@ -61,7 +61,7 @@ from jaxgrav.cli.inputs import (
     track_map,
 )
 from jaxgrav.cli.sanity import check_positions, check_readings, innovation_check
-from jaxgrav.filters import map_error_state, status_messages_filter
+from jaxgrav.filters import STATUS_FILTER, map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
     FIX_EVENTS,
@@ -314,7 +314,9 @@ def _tight(args, voyage, grid, n_missing, n_off):
         "gravimeter_bias": x[:, GRAV], "sigma_gravimeter_bias": sigma[:, GRAV]},
         force=args.force)
     flags = np.bitwise_or.reduce(status)
-    print(f"wrote {args.out}: {status.size} rows, {int(np.sum(status == 0))} reading(s) used "
+    skipped = STATUS_FILTER["gated"] | STATUS_FILTER["covariance_failed"]
+    used = np.isfinite(np.asarray(res.innovation)) & (status & skipped == 0)
+    print(f"wrote {args.out}: {status.size} rows, {int(used.sum())} reading(s) used "
           f"by the {args.method} filter; {n_missing} missing reading(s) skipped, {n_off} "
           f"row(s) without a map value at the INS position; flags seen: "
           f"{', '.join(status_messages_filter(flags)) or 'none'}")

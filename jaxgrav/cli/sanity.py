@@ -145,7 +145,12 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
 
 POSITION_JUMP_MS = 1.0
 """A move between rows that departs from the velocity columns' by more than this (m/s,
-or 10 % of the speed, whichever is larger) is a jump (:func:`check_positions`)."""
+or 10 % of the speed, whichever is larger; at least :data:`POSITION_JUMP_M`, plus a
+quarter of the velocity change for turns) is a jump (:func:`check_positions`)."""
+
+POSITION_JUMP_M = 25.0
+"""The least departure (m) taken as a jump: rounded coordinates (1e-5° is 1.1 m) and
+metre-level position noise of a fast log are not jumps."""
 
 
 def check_positions(track, *, where):
@@ -163,7 +168,11 @@ def check_positions(track, *, where):
     ValueError
         The first row whose move from the previous one departs from the mean of the two
         rows' velocities times the step by more than :data:`POSITION_JUMP_MS` (or 10 %
-        of the speed), with the line, the jump in metres and how many there are.
+        of the speed) times the step, at least :data:`POSITION_JUMP_M`, plus a quarter
+        of the velocity change times the step (in a turn the mean velocity cuts the
+        arc's chord short by about ``v Δt θ²/12`` for a heading change θ, which this
+        covers up to θ ≈ 3 rad), with the line, the jump in metres and how many there
+        are.
     """
     t, lat, lon = (np.asarray(track[k], float) for k in ("t", "lat", "lon"))
     ve, vn = np.asarray(track["v_east"], float), np.asarray(track["v_north"], float)
@@ -175,7 +184,9 @@ def check_positions(track, *, where):
     miss_e = east - 0.5 * (ve[1:] + ve[:-1]) * dt
     miss = np.hypot(miss_n, miss_e)
     speed = 0.5 * (np.hypot(ve[1:], vn[1:]) + np.hypot(ve[:-1], vn[:-1]))
-    jump = np.flatnonzero(miss > np.maximum(POSITION_JUMP_MS, 0.1 * speed) * dt)
+    turn = np.hypot(np.diff(ve), np.diff(vn))
+    allowed = np.maximum(np.maximum(POSITION_JUMP_MS, 0.1 * speed) * dt, POSITION_JUMP_M)
+    jump = np.flatnonzero(miss > allowed + 0.25 * turn * dt)
     if jump.size:
         i = int(jump[0])
         raise ValueError(

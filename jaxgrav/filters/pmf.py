@@ -391,8 +391,9 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
             jnp.where(~has, STATUS_FILTER["no_reading"], 0)
             | jnp.where(has & ~jnp.all(on_map), STATUS_FILTER["off_map"], 0)
         )
-        return state, _info(state, mean, cov, jnp.where(has, step.z - z_hat, jnp.nan),
-                            jnp.where(has, z_var, jnp.nan), flags)
+        used = has & any_on  # no cell on the map: the reading was not used, no innovation
+        return state, _info(state, mean, cov, jnp.where(used, step.z - z_hat, jnp.nan),
+                            jnp.where(used, z_var, jnp.nan), flags)
 
     return PMFFilter(init, update, predict, dynamics, settle)
 

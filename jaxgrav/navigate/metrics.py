@@ -102,18 +102,25 @@ def voyage_summary(nav_hourly, free_hourly, nees):
         ``last_hour_ratio`` (nav / free, last hour; goal ≤ 0.1),
         ``last_over_second_hour`` (goal ≤ 1.5), ``share_worse_than_free_some_hour``
         (voyages whose hourly RMS exceeds the free INS's in some hour from the second
-        on; goal 0), ``worst_hourly_ratio``, ``nees`` (mean over voyages; 2 expected)
-        and ``nees_median`` (median of the voyages' means).
+        on; goal 0), ``worst_hourly_ratio`` (over those hours), ``nees`` (mean over
+        voyages; 2 expected) and ``nees_median`` (median of the voyages' means). A
+        figure the voyage does not have is NaN: ``last_over_second_hour`` needs three
+        whole hours (with two, the last hour is the second), the hours from the second
+        need two.
     """
     nav, free = np.asarray(nav_hourly, float), np.asarray(free_hourly, float)
     nees = np.asarray(nees, float)
     rms_nav, rms_free = np.sqrt(np.mean(nav**2, 0)), np.sqrt(np.mean(free**2, 0))
     ratio = nav / free
-    later = ratio[:, 1:] if ratio.shape[1] > 1 else ratio
+    later = ratio[:, 1:]
+    nan = float("nan")
     return {"hourly_rms_nav_m": rms_nav.round(0).tolist(),
             "hourly_rms_free_m": rms_free.round(0).tolist(),
             "last_hour_ratio": float(rms_nav[-1] / rms_free[-1]),
-            "last_over_second_hour": float(rms_nav[-1] / rms_nav[min(1, len(rms_nav) - 1)]),
-            "share_worse_than_free_some_hour": float(np.mean(np.any(later > 1.0, axis=1))),
-            "worst_hourly_ratio": float(later.max()), "nees": float(np.mean(nees)),
+            "last_over_second_hour": (float(rms_nav[-1] / rms_nav[1]) if rms_nav.size >= 3
+                                      else nan),
+            "share_worse_than_free_some_hour": (float(np.mean(np.any(later > 1.0, axis=1)))
+                                                if later.shape[1] else nan),
+            "worst_hourly_ratio": float(later.max()) if later.size else nan,
+            "nees": float(np.mean(nees)),
             "nees_median": float(np.median(nees))}

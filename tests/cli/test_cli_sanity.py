@@ -233,6 +233,38 @@ def test_filter_warns_when_the_innovations_are_implausible(tracks, tmp_path, cap
     assert "implausible_fit" not in capsys.readouterr().err
 
 
+def _arc_log(speed, rate_deg_s, dt, n, lat0=30.0, lon0=130.0):
+    """A log of a constant-rate turn: positions on the arc itself, velocities tangent."""
+    t = np.arange(n) * dt
+    heading = np.radians(rate_deg_s) * t
+    r = speed / np.radians(rate_deg_s)
+    north, east = r * np.sin(heading), r * (1.0 - np.cos(heading))
+    mr, nr = 6.35e6, 6.38e6 * np.cos(np.radians(lat0))
+    return {"t": t, "lat": lat0 + np.degrees(north / mr), "lon": lon0 + np.degrees(east / nr),
+            "v_east": speed * np.sin(heading), "v_north": speed * np.cos(heading)}
+
+
+@pytest.mark.parametrize(("speed", "rate", "dt"), [
+    (5.0, 0.5, 10.0),     # a ship's gentle turn, a row every 10 s
+    (10.0, 1.5, 60.0),    # a tight turn at navigate's largest default gap (90° between rows)
+    (10.0, 0.5, 180.0),   # a matcher track's sparse rows
+    (100.0, 3.0, 30.0),   # an aircraft's standard-rate turn
+])
+def test_check_positions_passes_turns_and_refuses_a_jump(speed, rate, dt):
+    """Turns pass at any row spacing up to a 90° heading change, also with coordinates
+    rounded to 1e-5°; a glitch in one row (60 m, or 80 % of a step; 60 % in the
+    90°-a-row turn, whose allowance is wide) is named with its line."""
+    log = _arc_log(speed, rate, dt, 40)
+    check_positions(log, where="--track 'L.csv'")
+    rounded = {**log, "lat": np.round(log["lat"], 5), "lon": np.round(log["lon"], 5)}
+    check_positions(rounded, where="--track 'L.csv'")  # 1e-5 degree rounding: not a jump
+    jump = max(60.0, 0.8 * speed * dt) if rate * dt < 30 else 0.6 * speed * dt
+    log["lat"] = log["lat"].copy()
+    log["lat"][20] += np.degrees(jump / 6.35e6)
+    with pytest.raises(ValueError, match=r"jumps by .* m between lines 21 and 22.*such"):
+        check_positions(log, where="--track 'L.csv'")
+
+
 def test_check_positions_refuses_a_jump_in_the_ins_log():
     """A 300 m glitch in one row of a 10 s log at 5 m/s is named with its line; a
     smooth log (the simulator's) and a turn pass."""

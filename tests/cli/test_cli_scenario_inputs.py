@@ -16,6 +16,7 @@ import xarray as xr
 from jaxgrav import datasets
 from jaxgrav.cli import main
 from jaxgrav.cli.montecarlo_voyage import voyage_lines
+from jaxgrav.navigate import voyage_summary
 from jaxgrav.tracks import read_track_csv
 
 
@@ -214,3 +215,23 @@ def test_one_hour_voyage_montecarlo_says_there_is_no_second_hour(tmp_path, capsy
                  "--no-progress", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "one whole hour, no second" in text and "last / second hour 1" not in text
+
+
+@pytest.mark.parametrize("hours", [1, 2, 3])
+def test_voyage_summary_leaves_out_what_the_voyage_lacks(hours):
+    """The library's figures too: NaN where the voyage has no such hour, else by hand."""
+    r = _results(hours)
+    vs = voyage_summary(r["hourly_err_m"], r["hourly_ins_err_m"], r["nees"])
+    nav = np.sqrt(np.mean(r["hourly_err_m"] ** 2, 0))
+    ratio = r["hourly_err_m"] / r["hourly_ins_err_m"]
+    if hours >= 3:
+        assert vs["last_over_second_hour"] == pytest.approx(nav[-1] / nav[1])
+    else:
+        assert np.isnan(vs["last_over_second_hour"])
+    if hours >= 2:
+        assert vs["worst_hourly_ratio"] == pytest.approx(ratio[:, 1:].max())
+        assert vs["share_worse_than_free_some_hour"] == pytest.approx(
+            np.mean(np.any(ratio[:, 1:] > 1, axis=1)))
+    else:
+        assert np.isnan(vs["worst_hourly_ratio"])
+        assert np.isnan(vs["share_worse_than_free_some_hour"])

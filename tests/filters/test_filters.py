@@ -712,6 +712,7 @@ def test_pmf_off_map(prior, smooth_grid):
     pred, _ = update(PMF, state, _one_step(jnp.nan, 35.0, 130.0), smooth_grid, DT)
     np.testing.assert_allclose(np.asarray(new.w), np.asarray(pred.w), rtol=1e-12, atol=1e-18)
     assert int(info.status) & FLAGS["off_map"]
+    assert np.isnan(float(info.innovation)) and np.isnan(float(info.innovation_var))  # unused
     # partly off (INS near the east edge): flagged; the off-map cells are not ruled out,
     # they keep their prior share of the mass (the reading cannot tell whether the
     # vehicle is beyond the map's edge), while the reading reweights the cells on the map
