@@ -77,7 +77,11 @@ from jaxgrav.sim.drift import apply_drift
 from jaxgrav.sim.ins import VEL, INSErrorModel, initial_covariance, transition
 from jaxgrav.sim.trajectory import Track
 
-__all__ = ["TIGHT_METHODS", "TightConfig", "TightResult", "navigate_tight"]
+__all__ = ["MOVING_MS", "TIGHT_METHODS", "TightConfig", "TightResult", "navigate_tight"]
+
+MOVING_MS = 0.5
+"""Rows slower than this (m/s) are at rest: the readings-per-cell count of the curvature
+term is taken over the sailing rows (and never below this speed)."""
 
 TIGHT_METHODS = ("ukf", "ekf", "gsf", "rbpf", "pmf")
 """The filters :func:`navigate_tight` runs (``gsf``: a 3 × 3 Gaussian sum of UKFs;
@@ -242,9 +246,14 @@ def navigate_tight(grid, voyage, config, key=None):
     f, q = transition(cfg.ins, jnp.mean(ins.lat), dt)
     p0 = initial_covariance(cfg.ins, cfg.sigma_pos_m, cfg.sigma_vel)
     x0 = jnp.zeros(p0.shape[0], p0.dtype)
-    speed = jnp.median(jnp.hypot(ins.v_east, ins.v_north))
+    # the map error decorrelates at the distance sailed per time (the mean speed; the
+    # median of a log mostly in port was 0: an error that never decorrelates while sailing)
+    rows = jnp.hypot(ins.v_east, ins.v_north)
+    speed = jnp.mean(rows)
     dynamics, x0, p0, meas = augment(cfg.map_error, Dynamics(f, q, dt), x0, p0, speed,
                                      gravity_measurement)
+    moving = rows > MOVING_MS
+    sailing = jnp.sum(jnp.where(moving, rows, 0.0)) / jnp.maximum(jnp.sum(moving), 1)
     n_state = x0.shape[0]
     z = voyage.gravity + eotvos(ins.lat, ins.v_east, ins.v_north)
     h_lin = None
@@ -256,7 +265,8 @@ def navigate_tight(grid, voyage, config, key=None):
     # (a log with INS rows every second and a reading every tenth shares a cell's
     # linearisation error among a tenth as many readings)
     share = jnp.mean(jnp.isfinite(voyage.gravity))
-    count = cfg.curvature_cells * _cell_m(grid) * share / jnp.maximum(speed * dt, 1e-9)
+    count = (cfg.curvature_cells * _cell_m(grid) * share
+             / (jnp.maximum(sailing, MOVING_MS) * dt))  # per cell while sailing
     filt = _filter(cfg, meas, count)
     if cfg.method == "rbpf" and key is None:
         key = jax.random.PRNGKey(0)

@@ -186,3 +186,24 @@ def test_a_position_jump_in_the_log_is_refused(voyage_log, tmp_path, capsys):
         err = capsys.readouterr().err
         assert "jumps by" in err and "lines 100 and 101" in err, err
         assert not out.exists()
+
+
+def test_a_log_mostly_in_port_then_sailing(voyage_log, tmp_path, capsys):
+    """A ship at rest for longer than it then sails: the median speed was 0, and the
+    tight filter's map-error state and curvature count with it gave innovation 1-sigmas of
+    50 000 mGal and covariance repairs on every row (its readings ignored)."""
+    pd = pytest.importorskip("pandas")
+    log = pd.read_csv(voyage_log[0])
+    k = 2 * len(log)
+    first = log.iloc[0]
+    port = pd.DataFrame({"t": np.arange(k) * 10.0, "lat": first["lat"], "lon": first["lon"],
+                         "v_east": 0.0, "v_north": 0.0, "gravity": first["gravity"]
+                         + np.random.default_rng(0).normal(0.0, 1.0, k)})
+    log["t"] = log["t"] + k * 10.0
+    path, out = tmp_path / "port.csv", tmp_path / "n.csv"
+    pd.concat([port, log]).to_csv(path, index=False)
+    assert main(["navigate", "--track", str(path), "--out", str(out), "--method", "ukf"]) == 0
+    nav = pd.read_csv(out)
+    assert not (nav["status"].to_numpy() & 4).any()  # no covariance repair
+    assert nav["innovation_sigma"].max() < 20.0
+    assert nav["sigma_north"].iloc[-1] < 5000.0
