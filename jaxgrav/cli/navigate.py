@@ -14,9 +14,10 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
               matched: missing reading or off the map, 3 rejected by the matcher's
               integrity test, 4 rejected by the innovation gate; empty elsewhere),
               fix_status (the matcher's status bits), fix_north, fix_east (the fix's
-              correction of the segment, m); with ``--method ukf|ekf|gsf`` instead:
-              status (the filter's bits of jaxgrav.filters.STATUS_FILTER: 0 the
-              reading was used, 1 no reading, 2 off the map, 16 gated ...),
+              correction of the segment, m); with ``--method ukf|ekf|gsf|rbpf|pmf``
+              instead: status (the filter's bits of jaxgrav.filters.STATUS_FILTER: 0
+              the reading was used, 1 no reading, 2 off the map, 16 gated, 128 the
+              row's block of 60 readings has implausible innovations ...),
               innovation and innovation_sigma (mGal), gravimeter_bias and
               sigma_gravimeter_bias (mGal)
 
@@ -60,7 +61,12 @@ from jaxgrav.cli.inputs import (
     read_track,
     track_map,
 )
-from jaxgrav.cli.sanity import check_positions, check_readings, innovation_check
+from jaxgrav.cli.sanity import (
+    check_positions,
+    check_readings,
+    implausible_rows,
+    innovation_check,
+)
 from jaxgrav.filters import STATUS_FILTER, map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
@@ -305,12 +311,15 @@ def _tight(args, voyage, grid, n_missing, n_off):
     cov = np.asarray(res.cov_north_east)
     sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
     x, sigma = np.asarray(res.error_estimate), np.asarray(res.sigma)
-    status = np.asarray(res.status)
+    innovation_sigma = np.sqrt(np.asarray(res.innovation_var))
+    # the rows of every block of readings whose innovations fail chi-squared, as filter does
+    status = np.asarray(res.status) | np.where(
+        implausible_rows(res.innovation, innovation_sigma), STATUS_FILTER["implausible_fit"], 0)
     write_track_csv(args.out, {
         "t": voyage.ins.t, "lat": res.nav.lat, "lon": res.nav.lon, "sigma_north": sd[:, 0],
         "sigma_east": sd[:, 1], "cov_north_east": cov[:, 0, 1], "v_east": res.nav.v_east,
         "v_north": res.nav.v_north, "status": status, "innovation": res.innovation,
-        "innovation_sigma": np.sqrt(np.asarray(res.innovation_var)),
+        "innovation_sigma": innovation_sigma,
         "gravimeter_bias": x[:, GRAV], "sigma_gravimeter_bias": sigma[:, GRAV]},
         force=args.force)
     flags = np.bitwise_or.reduce(status)
@@ -320,7 +329,7 @@ def _tight(args, voyage, grid, n_missing, n_off):
           f"by the {args.method} filter; {n_missing} missing reading(s) skipped, {n_off} "
           f"row(s) without a map value at the INS position; flags seen: "
           f"{', '.join(status_messages_filter(flags)) or 'none'}")
-    fit_warning = nis_warning(res.innovation, np.sqrt(np.asarray(res.innovation_var)))
+    fit_warning = nis_warning(res.innovation, innovation_sigma)
     if fit_warning is not None:
         print(f"warning: {fit_warning}", file=sys.stderr)
 

@@ -207,3 +207,17 @@ def test_a_log_mostly_in_port_then_sailing(voyage_log, tmp_path, capsys):
     assert not (nav["status"].to_numpy() & 4).any()  # no covariance repair
     assert nav["innovation_sigma"].max() < 20.0
     assert nav["sigma_north"].iloc[-1] < 5000.0
+
+
+def test_an_implausible_fit_is_flagged_on_its_rows(voyage_log, tmp_path, capsys):
+    """A +250 mGal gravimeter bias: the tight filter's CSV flags the rows of the blocks
+    whose innovations fail chi-squared (bit 128), as filter's does; it said status 0."""
+    pd = pytest.importorskip("pandas")
+    log = pd.read_csv(voyage_log[0])
+    log["gravity"] += 250.0
+    path, out = tmp_path / "b.csv", tmp_path / "n.csv"
+    log.to_csv(path, index=False)
+    assert main(["navigate", "--track", str(path), "--out", str(out), "--method", "ukf"]) == 0
+    captured = capsys.readouterr()
+    assert "implausible_fit" in captured.out and "innovations are" in captured.err
+    assert (pd.read_csv(out)["status"].to_numpy() & 128).mean() > 0.5
