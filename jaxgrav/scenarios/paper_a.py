@@ -22,8 +22,8 @@ from jaxgrav.fields.map_error import CorrelatedMapError, TruthGrid, map_error_ke
 from jaxgrav.geodesy import meridian_radius
 from jaxgrav.grid import Grid
 
-__all__ = ["MatchingRun", "MatchingScenario", "check_region_covered", "matching_scenario",
-           "max_fixes", "placement_region", "scenario_truth"]
+__all__ = ["POLE_LIMIT_DEG", "MatchingRun", "MatchingScenario", "check_region_covered",
+           "matching_scenario", "max_fixes", "placement_region", "scenario_truth"]
 
 @pytree_dataclass
 class MatchingScenario:
@@ -112,6 +112,11 @@ class MatchingRun(NamedTuple):
     drift_east_m: jax.Array
 
 
+POLE_LIMIT_DEG = 89.0
+"""Latitude (degrees, either hemisphere) beyond which :func:`placement_region` places no
+track: a region reaching a pole is cut there."""
+
+
 def placement_region(scenario):
     """``scenario.region`` narrowed so that every track :func:`matching_scenario` draws stays in it.
 
@@ -122,7 +127,9 @@ def placement_region(scenario):
     then end beyond the edge (off the map: NaN readings). The region returned is the
     scenario's less that excess at each edge where it is larger than the 1.5
     ``drift_deg`` margin, so the scenario's draws are unchanged whenever the margin
-    already covers it (the usual case).
+    already covers it (the usual case). A region reaching beyond ±:data:`POLE_LIMIT_DEG`
+    (a global map) is first cut there: at a pole a degree of longitude has no length,
+    and :func:`matching_scenario` spans longitudes at the region's northern edge.
 
     Parameters
     ----------
@@ -137,9 +144,11 @@ def placement_region(scenario):
     """
     s = scenario
     lat_min, lat_max, lon_min, lon_max = (float(v) for v in s.region)
+    # a map reaching a pole: starts kept within ±89° (east-west spans are finite there)
+    lat_min, lat_max = max(lat_min, -POLE_LIMIT_DEG), min(lat_max, POLE_LIMIT_DEG)
     span = (s.n_fixes - 1) * float(s.dt)
     low = 0.0 if lat_min <= 0.0 <= lat_max else min(abs(lat_min), abs(lat_max))
-    high = min(89.0, max(abs(lat_min), abs(lat_max)))
+    high = max(abs(lat_min), abs(lat_max))
     margin = 1.5 * float(s.drift_deg)
     north_m, east_m = abs(float(s.v_north)) * span, abs(float(s.v_east)) * span
     over_lat = north_m * (1.0 / (float(meridian_radius(low)) * DEG) - 1.0 / sim.DEG_ARC_M)
