@@ -11,7 +11,7 @@ parses ``--told-map-error SIGMA[,L]``.
 import math
 import os
 
-from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M
+from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M, check_seed
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.montecarlo import DEFAULT_CHUNK
 from jaxgrav.sim import DEG_ARC_M
@@ -47,7 +47,7 @@ filter methods over its three point masses, for :func:`check_drift`."""
 def check_options(args):
     """ValueError naming the option for a numeric option out of range.
 
-    ``--runs``, ``--chunk``, ``--devices`` at least 1; ``--drift`` a finite angle > 0;
+    ``--seed`` from 0 to 2**63 - 1; ``--runs``, ``--chunk``, ``--devices`` at least 1; ``--drift`` a finite angle > 0;
     ``--noise`` a finite standard deviation > 0 (>= 0 for the matchers); ``--fixes`` at
     least 5 (unset options take the method's defaults and are not checked here); a
     ``--fixes`` or ``--chunk`` given within 80 % of the machine's memory
@@ -56,6 +56,7 @@ def check_options(args):
     for name, value in (("--runs", args.runs), ("--chunk", args.chunk)):
         if value is not None and value < 1:
             raise ValueError(f"{name} must be a positive number of runs; got {value}")
+    check_seed(args.seed)
     if args.devices is not None and args.devices < 1:
         raise ValueError(f"--devices must be at least 1; got {args.devices}")
     if args.drift is not None and not (math.isfinite(args.drift) and args.drift > 0):

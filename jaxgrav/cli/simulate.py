@@ -19,11 +19,25 @@ from jaxgrav.scenarios.paper_a import check_region_covered, max_fixes, placement
 from jaxgrav.sim import DEG_ARC_M, rayleigh_quantile
 from jaxgrav.tracks import write_track_csv
 
-__all__ = ["DEFAULT_MAP_ERROR_LENGTH_M", "MAX_BIAS_MGAL", "add_map_error_options", "add_parser",
-           "describe_map_error", "map_error_from_args"]
+__all__ = ["DEFAULT_MAP_ERROR_LENGTH_M", "MAX_BIAS_MGAL", "MAX_SEED", "add_map_error_options",
+           "add_parser", "check_seed", "describe_map_error", "map_error_from_args"]
 
 DEFAULT_MAP_ERROR_LENGTH_M = 10000.0
 """Default correlation length of ``--map-error`` (m)."""
+
+MAX_SEED = 2**63 - 1
+"""Largest ``--seed``: ``jax.random.key`` takes a signed 64-bit integer."""
+
+
+def check_seed(seed):
+    """ValueError naming ``--seed`` unless it is an integer in 0 .. :data:`MAX_SEED`.
+
+    ``jax.random.key`` fails on 2**63 and beyond with an OverflowError, and a negative
+    seed only repeats a large one (-1 draws what 2**64 - 1 would).
+    """
+    if not 0 <= seed <= MAX_SEED:
+        raise ValueError(f"--seed must be an integer from 0 to {MAX_SEED} (2**63 - 1); "
+                         f"got {seed}")
 
 
 def add_map_error_options(parser):
@@ -136,6 +150,7 @@ def _check_simulate_args(args):
     def finite(name, value, ok, expected):
         if not (math.isfinite(value) and ok(value)):
             raise ValueError(f"{name} must be {expected}; got {value!r}")
+    check_seed(args.seed)
     if args.n < 2:
         raise ValueError(f"--n must be at least 2 fixes; got {args.n}")
     finite("--dt", args.dt, lambda v: v > 0, "a positive interval between fixes (s)")
@@ -166,7 +181,8 @@ def _check_track_fits(args, scen, grid):
                          "use a larger map, a shorter --dt or a smaller --drift")
     span = (args.n - 1) * args.dt
     dlat = abs(scen.v_north) * span / DEG_ARC_M
-    dlon = abs(scen.v_east) * span / (DEG_ARC_M * math.cos(math.radians(n)))
+    north = placement_region(scen)[1]  # the northern edge where tracks start (±89° at most)
+    dlon = abs(scen.v_east) * span / (DEG_ARC_M * math.cos(math.radians(north)))
     raise ValueError(
         f"--n {args.n} fixes every {args.dt:g} s at {math.hypot(args.v_east, args.v_north):.3g} "
         f"kn make a track of {scen.step_m * (args.n - 1) / 1000:.0f} km ({dlat:.4g} degrees "
@@ -194,7 +210,8 @@ def _check_readings(args, run, grid):
 
 def _cmd_simulate(args):
     _check_simulate_args(args)
-    check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"])
+    check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"],
+                  inputs={"--map": args.map, "--truth-map": args.truth_map})
     grid = load_map(args.map, args.var, allow_nan=True)
     w, e, s, n = grid.extent
     scen = MatchingScenario(

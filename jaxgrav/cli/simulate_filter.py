@@ -13,7 +13,9 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import map_error_args
+from jaxgrav.cli.simulate import check_seed
 from jaxgrav.cli.voyage import MAX_HOURS
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import map_error
@@ -135,12 +137,13 @@ def _check_readings(args, run, grid):
 
 def cmd_simulate_filter(args):
     """Run ``jaxgrav simulate-filter``: paper D's scenario over its three point masses."""
-    outs = [p for p in (args.out, args.truth) if p is not None]
-    existing = [str(p) for p in outs if Path(p).exists()]
+    check_seed(args.seed)
+    # folders, inputs and repeats first, whatever --force; then every existing output named
+    check_outputs([args.out, args.truth], force=True, names=["--out", "--truth"],
+                  inputs={"--map": args.map})
+    existing = [str(p) for p in (args.out, args.truth) if p is not None and Path(p).exists()]
     if existing and not args.force:
         raise FileExistsError(f"{existing} exist(s); pass --force to overwrite")
-    if args.truth is not None and Path(args.truth).resolve() == Path(args.out).resolve():
-        raise ValueError(f"--truth must differ from --out; both are {args.out!r}")
     if not (np.isfinite(args.dt) and args.dt > 0):
         raise ValueError(f"--dt must be a positive step (s); got {args.dt!r}")
     if args.reading_every < 1:

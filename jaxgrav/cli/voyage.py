@@ -21,7 +21,12 @@ import jax
 import numpy as np
 
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.simulate import add_map_error_options, describe_map_error, map_error_from_args
+from jaxgrav.cli.simulate import (
+    add_map_error_options,
+    check_seed,
+    describe_map_error,
+    map_error_from_args,
+)
 from jaxgrav.datasets import load_map
 from jaxgrav.scenarios import PRESETS, voyage_preset, voyage_scenario
 from jaxgrav.scenarios.paper_a import check_region_covered
@@ -58,12 +63,14 @@ def cmd_simulate_voyage(args):
     if args.hours is not None and not (math.isfinite(args.hours) and 0 < args.hours <= MAX_HOURS):
         raise ValueError(f"--hours must be a positive length of at most {MAX_HOURS:g} h; "
                          f"got {args.hours!r}")
+    check_seed(args.seed)
     changes = {} if args.hours is None else {"hours": args.hours}
     try:
         scenario = voyage_preset(args.preset, **changes)
     except ValueError as err:
         raise ValueError(f"--preset {args.preset!r}: {err}") from None
-    check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"])
+    check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"],
+                  inputs={"--map": args.map, "--truth-map": args.truth_map})
     grid = load_map(args.map, args.var, allow_nan=True)  # missing nodes: checked on the route
     check_region_covered(grid, scenario.region, f"--map {args.map}")
     model = map_error_from_args(args, grid, allow_nan=True)
