@@ -175,7 +175,9 @@ def cmd_bench(args):
     if not scripts:
         raise ValueError(f"--dir {str(bdir)!r} has no benchmark scripts (*.py not starting "
                          "with _)")
-    check_outputs([out], force=args.force, names=["--out"])
+    # the report never replaces a script or a helper module (_*.py) the scripts import
+    check_outputs([out], force=args.force, names=["--out"],
+                  inputs={f"script {p.name} of --dir": p for p in sorted(bdir.glob("*.py"))})
     before = machine_info()
     print(f"machine: {before['cpu']}, {before['cores']} cores, load {before['load_average']}, "
           f"roofline float64 {before['roofline']['float64_gflops']:.1f} GFLOP/s", flush=True)

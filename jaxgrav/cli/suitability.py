@@ -88,7 +88,8 @@ def cmd_suitability(args):
     """Run ``jaxgrav suitability`` (x64 is enabled by the CLI entry point)."""
     png = Path(args.out).with_suffix(".png")
     _check_args(args)
-    check_outputs([args.out, png], force=args.force, names=["--out", "its PNG"])
+    check_outputs([args.out, png], force=args.force, names=["--out", "its PNG"],
+                  inputs={"--map": args.map})
     grid = load_map(args.map, args.var, allow_nan=True)
     if grid.n_missing == np.asarray(grid.values).size:
         raise ValueError(f"--map {args.map} has no value: every node is missing (NaN)")
