@@ -7,6 +7,7 @@ function is :func:`cmd_dov`.
 import numpy as np
 
 from jaxgrav import dov
+from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import add_columns_option, read_track
 from jaxgrav.dov import DEFAULT_METHOD, METHODS
 from jaxgrav.tracks import write_track_csv
@@ -45,8 +46,27 @@ def _parse_heights(text):
     return vals
 
 
+def _check_points(args, track, layers):
+    """Refuse the first track point outside ``layers``, naming ``--track`` and its line."""
+    lat, lon, h = (np.asarray(track[k], float) for k in ("lat", "lon", "h"))
+    hs = np.asarray(layers.heights)
+    bad = ~(np.asarray(layers.layer(0).contains(lat, lon)) & (h >= hs[0]) & (h <= hs[-1]))
+    if not bad.any():
+        return
+    i = int(np.flatnonzero(bad)[0])
+    w, e, s, n = (float(v) for v in layers.extent)
+    source = f"--grid {args.grid!r}" if args.grid else "the shipped qinling layers"
+    raise ValueError(
+        f"--track {str(args.track)!r}, line {track.line(i)}: point (lat={float(lat[i])!r}, "
+        f"lon={float(lon[i])!r}, h={float(h[i])!r} m) is outside the layered grid of {source} (lat "
+        f"{s:g}..{n:g}, lon {w:g}..{e:g}, h {hs[0]:g}..{hs[-1]:g} m); {int(bad.sum())} of "
+        f"{bad.size} point(s) out of range")
+
+
 def cmd_dov(args):
     """Run ``jaxgrav dov`` (x64 is enabled by the CLI entry point)."""
+    check_outputs([args.out], force=args.force, names=["--out"],
+                  inputs={"--track": args.track, "--grid": args.grid})
     track = read_track(args, required=("lat", "lon", "h"))
     heights = _parse_heights(args.layers) if args.layers else None
     if args.grid:
@@ -58,6 +78,7 @@ def cmd_dov(args):
             )
     else:
         layers = dov.paper_c_layers(heights if heights is not None else dov.PAPER_HEIGHTS)
+    _check_points(args, track, layers)
     res = dov.interpolate(layers, track["lat"], track["lon"], track["h"], args.method,
                           strict=True)
     cols = track.columns()
