@@ -47,9 +47,10 @@ filter methods over its three point masses, for :func:`check_drift`."""
 def check_options(args):
     """ValueError naming the option for a numeric option out of range.
 
-    ``--seed`` from 0 to 2**63 - 1; ``--runs``, ``--chunk``, ``--devices`` at least 1; ``--drift`` a finite angle > 0;
-    ``--noise`` a finite standard deviation > 0 (>= 0 for the matchers); ``--fixes`` at
-    least 5 (unset options take the method's defaults and are not checked here); a
+    ``--seed`` from 0 to 2**63 - 1; ``--runs``, ``--chunk``, ``--devices`` at least 1;
+    ``--drift`` a finite angle > 0; ``--noise`` a finite standard deviation > 0 (>= 0 for
+    the matchers); ``--fixes`` at least 5 (unset options take the method's defaults and
+    are not checked here); a
     ``--fixes`` or ``--chunk`` given within 80 % of the machine's memory
     (:data:`BYTES_PER_FIX`).
     """
