@@ -152,6 +152,7 @@ def test_map_units_are_converted_to_mgal_or_nt(tmp_path, units, scale, expected)
     np.testing.assert_allclose(np.asarray(grid.values), FIELD, rtol=1e-12)
 
 
+@pytest.mark.long
 def test_a_map_in_m_per_s2_matches_like_the_map_in_mgal(tmp_path, capsys):
     """The same map in m/s²: match finds the same fix as with the map in mGal."""
     ryukyu = xr.open_dataset(jg.datasets.path("ryukyu")["anomaly_2p5min"], engine="netcdf4")

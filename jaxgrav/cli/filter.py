@@ -61,6 +61,7 @@ from jaxgrav.cli.sanity import (
     implausible_rows,
     innovation_check,
 )
+from jaxgrav.cli.simulate import check_seed
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
 from jaxgrav.filters import STATUS_FILTER, map_anomaly, status_messages_filter
@@ -295,6 +296,7 @@ def cmd_filter(args):
     for name, value in (("--sigma-pos", args.sigma_pos), ("--sigma-vel", args.sigma_vel),
                         ("--sigma-gravity", args.sigma_gravity)):
         _check_sigma(name, value)
+    check_seed(args.seed)
     where = f"--track {str(args.track)!r}"
     track = read_track(args, required=("t", "lat", "lon", "gravity"), allow_nan=("gravity",))
     t, lat, lon, g = (track[k] for k in ("t", "lat", "lon", "gravity"))

@@ -18,8 +18,16 @@ import numpy as np
 from jaxgrav.datasets import map_for_track
 from jaxgrav.tracks import parse_columns, read_track_csv
 
-__all__ = ["MAX_MISSING", "add_columns_option", "add_map_error_var_option", "map_error_args",
-           "read_track", "track_map"]
+__all__ = [
+    "FIELD_UNITS",
+    "MAX_MISSING",
+    "add_columns_option",
+    "add_map_error_var_option",
+    "check_map_field",
+    "map_error_args",
+    "read_track",
+    "track_map",
+]
 
 MAX_MISSING = 0.9
 """Largest fraction of missing (NaN) nodes accepted in the map region a track needs."""
@@ -52,7 +60,13 @@ def read_track(args, required, optional=(), allow_nan=()):
                           columns=parse_columns(args.columns))
 
 
-def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False):
+FIELD_UNITS = {"gravity": "mGal", "magnetic": "nT"}
+"""The units of each field's readings and maps (a map declared in other gravity or
+magnetic units is converted on reading, :func:`jaxgrav.grid_files.map_units`)."""
+
+
+def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False,
+              field="gravity"):
     """The ``--map`` of a command, cut to what ``track`` needs, and ``--map-error-var``'s σ.
 
     Parameters
@@ -68,6 +82,9 @@ def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False):
         within this distance (m) of the track's box (default ``margin_m``).
     sigma_given : bool
         ``--map-error`` was given too (refused with ``--map-error-var``: one source of σ).
+    field : {"gravity", "magnetic"} or None
+        What the readings measure: a map declared in the other field's units is refused
+        (:func:`check_map_field`); None: not checked here.
 
     Returns
     -------
@@ -91,9 +108,11 @@ def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False):
                          "own uncertainty), not both")
     loaded = map_for_track(args.map, args.var, track["lat"], track["lon"], margin_m,
                            max_missing=MAX_MISSING, option="--map", error_var=error_var)
+    grid, err = (loaded, None) if error_var is None else loaded
+    if field is not None:
+        check_map_field(grid, field, args.map)
     if error_var is None:
-        return loaded, None
-    grid, err = loaded
+        return grid, None
     reach_m = margin_m if error_reach_m is None else error_reach_m
     near = err.values_near(track["lat"], track["lon"], reach_m)
     finite = near[np.isfinite(near)]
@@ -101,6 +120,16 @@ def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False):
         raise ValueError(f"--map-error-var {error_var!r} of --map {str(args.map)!r} has no "
                          f"value within {reach_m / 1000:.3g} km of the track")
     return grid, float(np.sqrt(np.mean(finite**2)))
+
+
+def check_map_field(grid, field, map_name):
+    """ValueError when ``grid`` is declared in the other field's units (``nT`` for
+    gravity readings, ``mGal`` for magnetic ones); a map without units passes."""
+    other = {u: f for f, u in FIELD_UNITS.items() if f != field}
+    if grid.units in other:
+        raise ValueError(f"--map {str(map_name)!r} is a {other[grid.units]} map (units "
+                         f"{grid.units!r}) and the readings are {field} "
+                         f"({FIELD_UNITS[field]}); give a {field} map")
 
 
 def map_error_args(args):

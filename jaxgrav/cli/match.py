@@ -11,8 +11,10 @@ import numpy as np
 
 from jaxgrav._io import atomic_output, check_outputs
 from jaxgrav.cli.inputs import (
+    FIELD_UNITS,
     add_columns_option,
     add_map_error_var_option,
+    check_map_field,
     read_track,
     track_map,
 )
@@ -156,13 +158,18 @@ def _cmd_match(args):
     _check_match_args(args)
     _check_out(args)
     track = read_track(args, required=("t", "lat", "lon"))
-    field = "magnetic" if "magnetic" in track else "gravity"
-    if field not in track:
+    fields = [f for f in FIELD_UNITS if f in track]
+    if not fields:
         raise ValueError(f"track file {str(args.track)!r} needs a 'gravity' (mGal) or "
                          f"'magnetic' (nT) column; it has {sorted(track)}")
     radius_deg = _drift_radius(args, track)
     grid, sigma_var = track_map(args, track, radius_deg * DEG_ARC_M,
-                                sigma_given=args.map_error > 0)
+                                sigma_given=args.map_error > 0, field=None)
+    # a survey file with both columns is matched on the one the map's units name (a map
+    # without units: gravity); it was matched on the magnetic column against any map
+    field = (fields[0] if len(fields) == 1
+             else "magnetic" if grid.units == FIELD_UNITS["magnetic"] else "gravity")
+    check_map_field(grid, field, args.map)
     if sigma_var is not None:
         if args.method not in MAP_ERROR_METHODS:
             raise ValueError(f"--map-error-var is used by --method {', '.join(MAP_ERROR_METHODS)}"

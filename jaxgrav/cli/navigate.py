@@ -67,6 +67,7 @@ from jaxgrav.cli.sanity import (
     implausible_rows,
     innovation_check,
 )
+from jaxgrav.cli.simulate import check_seed
 from jaxgrav.filters import STATUS_FILTER, map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
@@ -234,6 +235,7 @@ def cmd_navigate(args):
     _positive("--map-error-length", args.map_error_length, "m")
     _positive("--max-gap", args.max_gap, "s")
     _positive("--max-speed", args.max_speed, "m/s")
+    check_seed(args.seed)
     check_particles(args.particles)
     for name, value in (("--fix-every", args.fix_every), ("--n-fixes", args.n_fixes),
                         ("--stride", args.stride)):

@@ -2,6 +2,8 @@
 naming the option, the value and what was expected, exit code 2, in CLI syntax, before
 anything is computed and with no output left behind."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -248,3 +250,40 @@ def test_montecarlo_matchers_take_noiseless_readings_and_default_sizes(tmp_path,
     assert main(["montecarlo", "--method", "dense", "--runs", "2", "--noise", "0", "--out",
                  str(out), "--no-progress", "--fixes", "10"]) == 0, capsys.readouterr().err
     assert 0.53e9 <= BYTES_PER_FIX["dense"] * 500 * 114 <= 2.5 * 0.53e9
+
+
+def test_map_units_must_match_the_readings_field(sim, tmp_path, capsys):
+    """A magnetic map (nT) with gravity readings is refused by name (it ran as mGal with
+    an Eötvös correction); a file with both gravity and magnetic columns is matched on
+    the one the map's units name (it was matched on the magnetic column)."""
+    xr = pytest.importorskip("xarray")
+    from jaxgrav import datasets
+
+    grid = datasets.load("ryukyu")["anomaly_2p5min"]
+    xr.Dataset({"f": (("lat", "lon"), np.asarray(grid.values), {"units": "nT"})},
+               coords={"lat": np.asarray(grid.lat), "lon": np.asarray(grid.lon)}).to_netcdf(
+        tmp_path / "mag.nc")
+    for cmd in (["match"], ["filter", "--method", "ukf"]):
+        out = tmp_path / "o.out"
+        assert main([*cmd, "--map", str(tmp_path / "mag.nc"), "--track", str(sim / "t.csv"),
+                     "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert "is a magnetic map (units 'nT') and the readings are gravity" in err, err
+        assert not out.exists()
+    track = read_track_csv(sim / "t.csv", required=("t", "lat", "lon", "gravity"))
+    both = tmp_path / "both.csv"
+    write_track_csv(both, {**track.columns(), "magnetic": 40000.0 + np.arange(20.0)})
+    out = tmp_path / "m.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(both), "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["field"] == "gravity"
+
+
+@pytest.mark.parametrize("cmd", [["filter", "--method", "pf", "--map", "ryukyu"],
+                                 ["navigate", "--method", "rbpf"]])
+def test_seed_beyond_int64_is_refused(sim, tmp_path, capsys, cmd):
+    """2**63 ended in an OverflowError traceback (exit 1) in jax.random.PRNGKey."""
+    out = tmp_path / "o.csv"
+    assert main([*cmd, "--track", str(sim / "t.csv"), "--seed", str(2**63),
+                 "--out", str(out)]) == 2
+    assert "--seed must be an integer from 0 to 9223372036854775807" in capsys.readouterr().err
+    assert not out.exists()

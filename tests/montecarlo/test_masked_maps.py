@@ -26,6 +26,7 @@ def _west_land(fraction=0.6):
     return Grid(v, GRID.lat0, GRID.dlat, GRID.lon0, GRID.dlon, GRID.name, GRID.units)
 
 
+@pytest.mark.long
 def test_a_complete_map_gives_the_runs_of_one_try():
     scen = MatchingScenario(region=region_of(GRID), n_fixes=10)
     many = dataclasses.replace(scen, start_tries=16)
@@ -36,6 +37,7 @@ def test_a_complete_map_gives_the_runs_of_one_try():
     np.testing.assert_array_equal(np.asarray(a.readings), np.asarray(b.readings))
 
 
+@pytest.mark.long
 def test_starts_are_drawn_again_off_the_land():
     land = _west_land()
     scen = MatchingScenario(region=region_of(GRID), n_fixes=10)
