@@ -264,6 +264,8 @@ def cmd_navigate(args):
                          f"more than {segment_rows}")
     ins = Track(*(np.asarray(track[k]) for k in ("t", "lat", "lon", "v_east", "v_north")))
     gravity = np.asarray(track["gravity"])
+    if args.method in LOOSE_MATCHERS:
+        _check_fix_blocks(gravity, args.fix_every, track.path)
     e_ins = np.asarray(eotvos_jit(ins.lat, ins.v_east, ins.v_north))
     check_readings(gravity, np.asarray(grid.sample(ins.lat, ins.lon, "bicubic")), args.noise,
                    column="gravity", where=f"--track {track.path!r}",
@@ -334,6 +336,22 @@ def _tight(args, voyage, grid, n_missing, n_off):
     fit_warning = nis_warning(res.innovation, innovation_sigma)
     if fit_warning is not None:
         print(f"warning: {fit_warning}", file=sys.stderr)
+
+
+def _check_fix_blocks(gravity, fix_every, path):
+    """The loose loop averages ``--fix-every`` rows into a fix and does not match a
+    segment with a missing one: refuse a log where most blocks miss a reading (a reading
+    every few rows: no segment was ever matched, exit 0), warn where some do."""
+    m = len(gravity) // fix_every * fix_every
+    holed = ~np.all(np.isfinite(gravity[:m].reshape(-1, fix_every)), axis=1)
+    if holed.mean() > 0.5:
+        raise ValueError(f"track file {path!r}: {100 * holed.mean():.0f} % of the blocks of "
+                         f"--fix-every {fix_every} rows miss a reading, and a segment with one "
+                         "is not matched by the loosely coupled methods; give a reading on "
+                         "every row, or use a tightly coupled --method (ukf, pmf ...)")
+    if holed.any():
+        print(f"warning: {int(holed.sum())} of {holed.size} blocks of --fix-every {fix_every} "
+              "rows miss a reading; the segments holding one are not matched", file=sys.stderr)
 
 
 def nis_warning(innovation, innovation_sigma):

@@ -221,3 +221,19 @@ def test_an_implausible_fit_is_flagged_on_its_rows(voyage_log, tmp_path, capsys)
     captured = capsys.readouterr()
     assert "implausible_fit" in captured.out and "innovations are" in captured.err
     assert (pd.read_csv(out)["status"].to_numpy() & 128).mean() > 0.5
+
+
+def test_loose_methods_refuse_a_log_with_a_reading_every_few_rows(voyage_log, tmp_path,
+                                                                   capsys):
+    """A reading every 5th row (simulate-filter's default): no segment was ever matched
+    by dense, exit 0; now refused, and a few missing readings are warned of."""
+    pd = pytest.importorskip("pandas")
+    log = pd.read_csv(voyage_log[0])
+    sparse = log.copy()
+    sparse.loc[np.arange(len(log)) % 5 != 4, "gravity"] = np.nan
+    path, out = tmp_path / "s.csv", tmp_path / "n.csv"
+    sparse.to_csv(path, index=False)
+    assert main(["navigate", "--track", str(path), "--out", str(out), "--method", "dense",
+                 "--fix-every", "5"]) == 2
+    assert "of the blocks of --fix-every 5 rows miss a reading" in capsys.readouterr().err
+    assert not out.exists()
