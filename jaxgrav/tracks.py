@@ -76,7 +76,8 @@ class TrackTable(dict):
     renamed : dict of str to str
         Canonical name → the header it was read from, when they differ.
     cells : dict of str to numpy.ndarray
-        The text of the numeric columns that no command reads (for :meth:`columns`).
+        The text of the numeric columns that no command reads, and the longitudes as
+        read (before they are made contiguous), for :meth:`columns`.
     """
 
     path = ""
@@ -96,7 +97,8 @@ class TrackTable(dict):
         """Every column in file order, for :func:`write_track_csv` to pass a track through.
 
         The columns the commands read (:data:`KNOWN_COLUMNS`, ``--columns``) as float
-        arrays, normalised (``t`` in seconds, ``lon`` contiguous); text columns and other
+        arrays, normalised (``t`` in seconds), ``lon`` as read (not made contiguous: a
+        user's convention is kept); text columns and other
         numeric columns as the file's own text (str arrays), so that identifiers such as
         ``0012`` or long integers come out as they went in.
         """
@@ -290,6 +292,10 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
             track[name] = values
             if j not in canonical and name not in KNOWN_COLUMNS:
                 track.cells[name] = np.asarray(cells, dtype=str)
+            elif name == "lon":  # passed through as read (the reader makes it contiguous)
+                track.cells[name] = np.asarray(
+                    [np.format_float_positional(v, trim="-") if np.isfinite(v) else ""
+                     for v in values], dtype=str)
         track.order.append(name)
     _check_columns(track, required, allow_nan, label)
     return track

@@ -397,3 +397,15 @@ def test_pass_through_keeps_the_files_text_and_epoch_seconds(tmp_path):
     text = (tmp_path / "out.csv").read_text().splitlines()
     assert text[0] == "t,lat,lon,station,count"
     assert text[1] == "1714564800.125,30,130,0012,7", text
+
+
+def test_pass_through_keeps_the_users_longitudes(tmp_path):
+    """The reader makes longitudes contiguous for the commands; what a command passes
+    through (sample, dov) is the user's column: 0, 120, -120 came out as 0, 120, 240."""
+    path = tmp_path / "w.csv"
+    path.write_text("lat,lon\n10,0\n10,120\n10,-120\n10,179.9\n")
+    track = read_track_csv(path, required=("lat", "lon"))
+    assert track["lon"][2] == 240.0  # contiguous for the commands
+    write_track_csv(tmp_path / "out.csv", track.columns())
+    assert (tmp_path / "out.csv").read_text().splitlines()[1:] == [
+        "10,0", "10,120", "10,-120", "10,179.9"]
