@@ -49,10 +49,13 @@ from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import STATUS, MatchResult
 from jaxgrav.prepared import prepare_map
 
-__all__ = ["COMBINED_STATUS", "match_entropy_iccp"]
+__all__ = ["COMBINED_STATUS", "FAR_FIX", "match_entropy_iccp"]
 
-COMBINED_STATUS = {bit: STATUS[bit] for bit in (128,)}
-"""The status bit raised by the combined matcher only (an excerpt of
+FAR_FIX = 65536
+"""Status bit: the fix lies beyond ``IccpConfig.max_offset_m`` from the INS track."""
+
+COMBINED_STATUS = {bit: STATUS[bit] for bit in (128, FAR_FIX)}
+"""The status bits raised by the combined matcher only (an excerpt of
 :data:`~jaxgrav.match.result.STATUS`); it also raises the entropy and ICCP bits."""
 
 _DEFAULT_ENTROPY = EntropyConfig()
@@ -155,6 +158,11 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
                                 t_fix, j_fix, use_fine, post, j_grid, g_n, g_e, entropy, iccp,
                                 dof - n)
     reject = integrity_status(cov, post.second_mode_ratio, chi2, post.edge_mass, iccp)
+    # ICCP can walk a weak or biased fix far past the drift the search was sized for
+    # (15 km at a 4.7 km drift radius, accepted): beyond max_offset_m it is rejected
+    off = jnp.hypot(pick(jnp.mean(f_n), coarse.offset_north_m),
+                    pick(jnp.mean(f_e), coarse.offset_east_m))
+    reject = reject | jnp.where(off > iccp.max_offset_m, FAR_FIX, 0).astype(reject.dtype)
     accepted = found & (reject == 0)
     keep = lambda a, b: jnp.where(accepted, pick(a, b), jnp.zeros_like(a))  # noqa: E731
     status = (

@@ -54,6 +54,11 @@ class IccpConfig:
         :func:`~jaxgrav.match.combined.match_entropy_iccp` only (its docstring): map error
         σ (map units), L (m) of its GLS score (σ = 0: white ``noise``), the coarse fix
         (entropy's, or the GLS posterior mean), integrity thresholds (status 512–4096).
+    max_offset_m : float
+        :func:`~jaxgrav.match.combined.match_entropy_iccp` only: a fix farther than
+        this from the INS track (m, the mean offset) is rejected (status 65536);
+        :func:`~jaxgrav.match.sizing.iccp_config_for` sets 1.5 × the drift radius for
+        the fine stage (default ``inf``: no test).
     bias_sigma : float
         The combined matcher only: σ (map units) of a common reading bias, e.g. a
         gravimeter's offset or the Eötvös error of a velocity error; 0 (default):
@@ -84,6 +89,7 @@ class IccpConfig:
     max_second_mode: float = float("inf")
     max_chi2_per_dof: float = float("inf")
     max_edge_mass: float = float("inf")
+    max_offset_m: float = float("inf")
 
     def __post_init__(self):
         if isinstance(self.fix, str) and self.fix not in ("coarse", "posterior"):

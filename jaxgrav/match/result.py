@@ -43,6 +43,8 @@ STATUS = {
            "fix and its covariance are not trustworthy as stated",
     32768: "fix rejected: more than half of the fix's readings lie over survey gaps of the "
            "map (missing='gaps'); INS track kept",
+    65536: "fix rejected: the fix lies farther from the INS track than the drift allows "
+           "(max_offset_m, 1.5 x the drift radius); INS track kept",
 }
 """Bit flags of :attr:`MatchResult.status`, for every method (one table).
 
@@ -50,8 +52,9 @@ STATUS = {
 rejected fix: :attr:`MatchResult.accepted` false), and with survey gaps 32768
 (rejected too); ``chains`` 1, 2, 4, 8, 256 and the
 integrity bits 512, 1024, 2048; ``entropy`` 1, 8 and 32;
-``iccp`` 1, 16 and 64; ``entropy+iccp`` those of entropy and ICCP, 128 and the
-integrity bits 512–4096. Every method, through :func:`~jaxgrav.match.match_track`:
+``iccp`` 1, 16 and 64; ``entropy+iccp`` those of entropy and ICCP, 128, the
+integrity bits 512–4096 and 65536 (a fix beyond ``max_offset_m``, rejected). Every
+method, through :func:`~jaxgrav.match.match_track`:
 8192 when the map has missing nodes within the drift radius of the track, and 16384
 when the fix's χ² is implausible for the stated error model (:func:`fit_p_value`
 below :data:`P_IMPLAUSIBLE`; a warning, not a rejection: ``accepted`` is unchanged).

@@ -16,6 +16,7 @@ from jaxgrav.prepared import as_grid
 
 __all__ = [
     "CHAIN_MAP_ERROR_INTEGRITY",
+    "FAR_FIX_RADII",
     "ICCP_MAP_ERROR_INTEGRITY",
     "MAP_ERROR_INTEGRITY",
     "WHITE_INTEGRITY",
@@ -38,6 +39,11 @@ the search), the fix still the refined best offset (paper A's)."""
 CHAIN_MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
 """ChainConfig fields :func:`config_for` sets with a map error (σ > 0), measured with
 ``examples/map_error_matchers.py`` (see the README)."""
+
+FAR_FIX_RADII = 1.5
+""":func:`iccp_config_for` (``stage="fine"``) sets ``max_offset_m`` to this many drift
+radii: the entropy stage searches 1.2 radii; a fix beyond 1.5 the INS cannot have
+drifted to is rejected."""
 
 ICCP_MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
 """IccpConfig fields :func:`iccp_config_for` sets with a map error (σ > 0), measured
@@ -185,5 +191,7 @@ def iccp_config_for(grid, drift_radius_m, *, stage="alone", noise=1.0, max_rotat
     kw.setdefault("contour_tol", 3.0 * float(noise) + 1e-6)
     kw.setdefault("noise", float(noise))
     kw.setdefault("refine_steps", 10 if stage == "fine" else 0)
+    if stage == "fine":  # the combined matcher rejects a fix beyond the drift allowed
+        kw.setdefault("max_offset_m", FAR_FIX_RADII * float(drift_radius_m))
     config = IccpConfig(max_rotation_deg=max_rotation_deg, **kw)
     return _with_map_error(config, map_error, ICCP_MAP_ERROR_INTEGRITY)

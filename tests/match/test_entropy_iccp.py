@@ -13,7 +13,7 @@ from jaxgrav.grid import make_sampler
 from jaxgrav.match import entropy as entropy_mod
 from jaxgrav.match import shifted_tracks
 from jaxgrav.match.api import match_track
-from jaxgrav.match.combined import match_entropy_iccp
+from jaxgrav.match.combined import FAR_FIX, match_entropy_iccp
 from jaxgrav.match.contour import local_field, patch_coefficients, value_grad
 from jaxgrav.match.entropy import EntropyConfig, entropy_config_for
 from jaxgrav.match.iccp import (
@@ -24,7 +24,7 @@ from jaxgrav.match.iccp import (
     match_iccp_batch,
 )
 from jaxgrav.match.rigid import refine_local, rotation_matrix, solve3
-from jaxgrav.match.sizing import iccp_config_for
+from jaxgrav.match.sizing import FAR_FIX_RADII, iccp_config_for
 from jaxgrav.prepared import prepare_map
 from jaxgrav.sim import Track, track_error_m
 
@@ -300,6 +300,15 @@ def test_combined_keeps_coarse_unless_significantly_better(smooth_grid):
     kept = match_entropy_iccp(smooth_grid, lat, lon, z, ENT, dataclasses.replace(ICP, noise=1e3))
     assert int(kept.chosen) == 0 and int(kept.status) & 128
     np.testing.assert_allclose(kept.lat, kept.topk_lat[0])
+    # a fix (here 600 m out) beyond max_offset_m is rejected: status 65536, the INS track
+    assert bool(fine.accepted) and not int(fine.status) & FAR_FIX
+    far = match_entropy_iccp(smooth_grid, lat, lon, z, ENT,
+                             dataclasses.replace(ICP, max_offset_m=400.0))
+    assert not bool(far.accepted) and int(far.status) & FAR_FIX
+    np.testing.assert_allclose(far.lat, lat)
+    cfg = iccp_config_for(smooth_grid, 3000.0, stage="fine")
+    assert cfg.max_offset_m == FAR_FIX_RADII * 3000.0
+    assert iccp_config_for(smooth_grid, 3000.0).max_offset_m == np.inf  # alone: no test
 
 
 @pytest.mark.long
