@@ -37,7 +37,7 @@ from jaxgrav.match.dense import DenseConfig, match_dense
 from jaxgrav.match.entropy import EntropyConfig
 from jaxgrav.match.iccp_config import IccpConfig
 from jaxgrav.match.integrity import largest_sigma
-from jaxgrav.match.sizing import iccp_config_for
+from jaxgrav.match.sizing import FAR_FIX_RADII, iccp_config_for
 from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, innovation_nis, spread
 from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance
@@ -279,8 +279,12 @@ def _match(cfg, grid, lat, lon, g, reach, sigma_eotvos):
             cfg.matcher, spacing_m=spacing, map_error_mgal=told))
     entropy, iccp = cfg.matcher
     window = jnp.maximum(iccp.window_m, 1.2 * spacing * entropy.half_size)
+    # a fix beyond 1.5 searched reaches is rejected (the config's own bound is for a
+    # nominal 1 km reach)
+    far = FAR_FIX_RADII * spacing * entropy.half_size
     return match_entropy_iccp(grid, lat, lon, g, dataclasses.replace(entropy, spacing_m=spacing),
-                              dataclasses.replace(iccp, window_m=window, map_error_mgal=told))
+                              dataclasses.replace(iccp, window_m=window, map_error_mgal=told,
+                                                  max_offset_m=far))
 
 
 def fix_segment(config, tables, grid, ins, gravity, x, p, end):
