@@ -210,6 +210,15 @@ def _cmd_match(args):
     )
     n_fix = len(track["lat"])
     p_fit, fit_warning = fit_check(result.chi2_per_dof, n_fix - 3, args.noise)
+    # with velocities the bias prior is 3 mGal (match_track): a gravimeter offset far
+    # beyond it shows as a bad fit, which the advice above would blame on noise
+    sigma_b = args.bias_sigma if args.bias_sigma is not None else 3.0 if has_v else math.inf
+    bias = float(result.bias)
+    if (fit_warning is not None and args.method in ("dense", "chains") and math.isfinite(sigma_b)
+            and abs(bias) > 3.0 * sigma_b):
+        fit_warning += (f"; the fitted bias {bias:+.3g} mGal is {abs(bias) / sigma_b:.1f} sigma "
+                        f"of the bias prior ({sigma_b:g} mGal): a gravimeter offset? give "
+                        "--bias-sigma inf to estimate it freely")
     # the implausible-fit bit's message is the fit check's own line, with its numbers
     messages = status_messages(int(result.status) & ~IMPLAUSIBLE_FIT)
     if fit_warning is not None:

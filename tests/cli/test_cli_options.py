@@ -287,3 +287,15 @@ def test_seed_beyond_int64_is_refused(sim, tmp_path, capsys, cmd):
                  "--out", str(out)]) == 2
     assert "--seed must be an integer from 0 to 9223372036854775807" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_large_gravimeter_offset_is_named_in_the_fit_warning(sim, tmp_path, capsys):
+    """+250 mGal on raw readings (the bias prior is 3 mGal with velocities): the warning
+    blamed the noise or the map error only; it now names the fitted bias and the option."""
+    track = read_track_csv(sim / "t.csv", required=("t", "lat", "lon", "gravity"))
+    biased = tmp_path / "b.csv"
+    write_track_csv(biased, {**track.columns(), "gravity": track["gravity"] + 250.0})
+    out = tmp_path / "m.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(biased), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "sigma of the bias prior (3 mGal): a gravimeter offset? give --bias-sigma inf" in err
