@@ -181,8 +181,9 @@ def check_log(track, grid, max_gap, max_speed):
     if long.size:
         i = int(long[0])
         raise ValueError(f"{label}: a gap of {d[i]:g} s between lines {csv_line(i)} and "
-                         f"{csv_line(i + 1)} (t {t[i]:g} -> {t[i + 1]:g}); --max-gap is "
-                         f"{max_gap:g} s ({long.size} such gap(s))")
+                         f"{csv_line(i + 1)} (t {t[i]:g} -> {t[i + 1]:g}; {long.size} such "
+                         f"gap(s), --max-gap {max_gap:g} s); the log needs a uniform step: "
+                         "split it at the gap and navigate each part")
     dt = float(np.median(d))
     bad = np.flatnonzero(np.abs(d - dt) > 1e-3 * dt)
     if bad.size:
