@@ -214,7 +214,7 @@ def test_the_filter_equals_filterpy_with_scipy_spline_map(smooth_grid, voyages):
     dt = float(v.ins.t[1] - v.ins.t[0])
     f, q = transition(NAVIGATION_GRADE, float(lat.mean()), dt)
     p0 = initial_covariance(NAVIGATION_GRADE, CONFIG.sigma_pos_m, CONFIG.sigma_vel)
-    speed = float(np.median(np.hypot(ve, vn)))
+    speed = float(np.mean(np.hypot(ve, vn)))  # the filter model's: the mean speed
     dyn, x0, p0, _ = augment(cfg.map_error, Dynamics(f, q, dt), np.zeros(13), p0, speed)
     spline = RectBivariateSpline(np.asarray(smooth_grid.lat), np.asarray(smooth_grid.lon),
                                  np.asarray(smooth_grid.values), kx=3, ky=3)
