@@ -57,7 +57,7 @@ def filterpy_voyage(grid, voyage, cfg):
     dt = float(ins.t[1] - ins.t[0])
     f, q = transition(cfg.ins, float(lat.mean()), dt)
     p0 = initial_covariance(cfg.ins, cfg.sigma_pos_m, cfg.sigma_vel)
-    speed = float(np.median(np.hypot(ve, vn)))
+    speed = float(np.mean(np.hypot(ve, vn)))  # the library model's mean speed
     dyn, x0, p0, _ = augment(cfg.map_error, Dynamics(f, q, dt), np.zeros(13), p0, speed)
     f, q = np.asarray(dyn.f), np.asarray(dyn.q)
     n = f.shape[0]
