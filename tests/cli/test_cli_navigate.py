@@ -188,6 +188,7 @@ def test_a_position_jump_in_the_log_is_refused(voyage_log, tmp_path, capsys):
         assert not out.exists()
 
 
+@pytest.mark.long
 def test_a_log_mostly_in_port_then_sailing(voyage_log, tmp_path, capsys):
     """A ship at rest for longer than it then sails: the median speed was 0, and the
     tight filter's map-error state and curvature count with it gave innovation 1-sigmas of

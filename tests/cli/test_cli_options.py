@@ -242,6 +242,7 @@ def test_atomic_output_and_check_outputs_refuse_folders_and_inputs(tmp_path):
     check_outputs([tmp_path / "ryukyu"], names=["--out"], inputs={"--map": "ryukyu"})
 
 
+@pytest.mark.long
 def test_montecarlo_matchers_take_noiseless_readings_and_default_sizes(tmp_path, capsys):
     """Paper A's noiseless readings run (the matchers weight by at least 0.1 mGal), and
     the memory estimate of a run measured at 1.43 GB peak (dense, --fixes 500, chunks of

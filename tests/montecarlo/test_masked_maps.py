@@ -68,6 +68,7 @@ def test_dense_runs_on_a_masked_map_read_no_missing_node():
     assert np.all(out["start_lon"] > east_edge - 0.1)
 
 
+@pytest.mark.long
 def test_cli_takes_a_masked_map_for_dense_and_refuses_it_for_the_filters(tmp_path, capsys):
     v = np.array(GRID.values)
     v[:, :120] = np.nan
