@@ -34,6 +34,7 @@ def _user_log(path, track):
     path.write_text("\n".join(rows) + "\n")
 
 
+@pytest.mark.long
 def test_match_reads_a_user_log_with_columns(sim, tmp_path):
     d, track = sim
     _user_log(tmp_path / "log.csv", track)
@@ -70,6 +71,7 @@ def _holey_map(path, hole):
                coords={"lat": np.asarray(grid.lat), "lon": np.asarray(grid.lon)}).to_netcdf(path)
 
 
+@pytest.mark.long
 def test_sample_and_match_use_a_map_with_missing_nodes_away_from_the_track(sim, tmp_path,
                                                                            capsys):
     d, track = sim

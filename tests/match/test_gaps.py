@@ -185,6 +185,7 @@ def _banded(grid, lon0, half_width):
     return dataclasses.replace(grid, values=jnp.asarray(v))
 
 
+@pytest.mark.long
 def test_refinement_moves_from_a_start_with_gaps(smooth_grid):
     """Gauss–Newton from a start whose fixes cross a gap: finite Jacobian, steps taken.
 

@@ -45,7 +45,8 @@ def test_the_old_import_path_reexports():
     assert old.lattice_values is lattice_values and old.patch_values is patch_values
 
 
-@pytest.mark.parametrize("method", ["bicubic", "bilinear"])
+@pytest.mark.parametrize("method", ["bicubic",
+                                    pytest.param("bilinear", marks=pytest.mark.long)])
 def test_lattice_nan_cells_equal_pointwise(method):
     """With ``nan_cells`` a missing node makes exactly the points of its cells NaN, as the
     point-wise interpolants do (without it, it spreads along the lattice rows)."""
