@@ -13,15 +13,16 @@ import os
 
 from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M, check_seed
 from jaxgrav.fields.map_error import map_error
+from jaxgrav.match import METHODS
 from jaxgrav.montecarlo import DEFAULT_CHUNK
+from jaxgrav.montecarlo.filter_runs import FILTER_METHODS
 from jaxgrav.sim import DEG_ARC_M
 
 __all__ = ["BYTES_PER_FIX", "PAPER_D_AREA_DEG", "check_drift", "check_options",
            "told_from_args"]
 
 BYTES_PER_FIX = {"dense": 20e3, "chains": 20e3, "entropy+iccp": 40e3, "entropy": 15e3,
-                 "iccp": 5e3, **dict.fromkeys(("ukf", "ekf", "gsf", "ukf-guard", "gsf-guard",
-                                               "pmf", "pf", "rbpf"), 2e3)}
+                 "iccp": 5e3, **dict.fromkeys(FILTER_METHODS, 2e3)}
 """Memory a run takes per fix (bytes; filters: per reading), by method: the growth of
 the process's peak resident memory over a one-run baseline (about 0.9 GB), measured
 with ``--fixes`` 150–7200 and chunks of 64–256 runs (dense 9.4 kB, entropy+iccp 31 kB,
@@ -30,7 +31,7 @@ run (110 kB for dense) counts buffers that are never live at once and refused ru
 needed 1.5 GB. :func:`check_options` refuses a ``--fixes`` or ``--chunk`` the user gave
 whose estimate exceeds 80 % of the machine's memory."""
 
-MATCHER_METHODS = ("dense", "chains", "entropy", "iccp", "entropy+iccp")
+MATCHER_METHODS = METHODS
 """Methods that take noiseless readings (``--noise 0``: paper A's setting; the matchers
 weight by at least 0.1 mGal)."""
 
