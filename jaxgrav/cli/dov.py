@@ -4,12 +4,14 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``; the command
 function is :func:`cmd_dov`.
 """
 
+import sys
+
 import numpy as np
 
 from jaxgrav import dov
 from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import add_columns_option, read_track
-from jaxgrav.dov import DEFAULT_METHOD, METHODS
+from jaxgrav.dov import DEFAULT_METHOD, HARMONIC_GAP_LIMIT, METHODS
 from jaxgrav.tracks import write_track_csv
 
 __all__ = ["add_parser", "cmd_dov"]
@@ -63,6 +65,26 @@ def _check_points(args, track, layers):
         f"{bad.size} point(s) out of range")
 
 
+def _gap_warning(layers, h, method):
+    """The warning for track points in a layer gap too wide for ``harmonic``, or None."""
+    if not method.endswith("-harmonic"):
+        return None
+    ratio = np.asarray(dov.harmonic_gap_ratio(layers))
+    hs = np.asarray(layers.heights)
+    h = np.asarray(h, float)
+    for k in np.flatnonzero(ratio > HARMONIC_GAP_LIMIT):
+        n = int(np.count_nonzero((h > hs[k]) & (h < hs[k + 1])))
+        if n:
+            width = HARMONIC_GAP_LIMIT / ratio[k] * (hs[k + 1] - hs[k])
+            return (f"{n} point(s) lie between the layers at {hs[k]:g} and {hs[k + 1]:g} m, "
+                    f"where k*gap = {ratio[k]:.1f} (k: the layers' effective wavenumber; "
+                    f"trusted up to {HARMONIC_GAP_LIMIT:g}): {method}'s vertical "
+                    f"continuation is unreliable there (it can leave the layers' range); use "
+                    f"layers at most about {width:.0f} m apart (--layers) or "
+                    f"--method bicubic-linear")
+    return None
+
+
 def cmd_dov(args):
     """Run ``jaxgrav dov`` (x64 is enabled by the CLI entry point)."""
     check_outputs([args.out], force=args.force, names=["--out"],
@@ -88,3 +110,6 @@ def cmd_dov(args):
     write_track_csv(args.out, cols, force=args.force)
     print(f"wrote {args.out}: {vals.shape[1]} fixes, {', '.join(layers.channels)} (arcsec) "
           f"by {args.method} from layers at {np.asarray(layers.heights).tolist()} m")
+    warning = _gap_warning(layers, track["h"], args.method)
+    if warning is not None:
+        print(f"warning: {warning}", file=sys.stderr)

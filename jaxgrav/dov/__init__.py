@@ -16,7 +16,7 @@ from jaxgrav.dov.interpolate import (
     make_interpolator,
     scan_track,
 )
-from jaxgrav.dov.kernels import DEFAULT_METHOD, METHODS
+from jaxgrav.dov.kernels import DEFAULT_METHOD, HARMONIC_GAP_LIMIT, METHODS, harmonic_gap_ratio
 from jaxgrav.dov.layers import PAPER_HEIGHTS, LayeredGrid, paper_c_layers
 from jaxgrav.dov.sensitivity import (
     HeightStudy,
@@ -30,6 +30,7 @@ from jaxgrav.dov.sensitivity import (
 
 __all__ = [
     "DEFAULT_METHOD",
+    "HARMONIC_GAP_LIMIT",
     "METHODS",
     "PAPER_HEIGHTS",
     "HeightStudy",
@@ -37,6 +38,7 @@ __all__ = [
     "LayeredGrid",
     "PreparedLayers",
     "SchulerError",
+    "harmonic_gap_ratio",
     "harmonic_layers",
     "interpolate",
     "make_interpolator",

@@ -32,13 +32,19 @@ import numpy as np
 from jaxgrav import interp
 from jaxgrav.constants import DEG
 
-__all__ = ["DEFAULT_METHOD", "HORIZONTAL", "METHODS", "VERTICAL", "check_method"]
+__all__ = ["DEFAULT_METHOD", "HARMONIC_GAP_LIMIT", "HORIZONTAL", "METHODS", "VERTICAL",
+           "check_method", "harmonic_gap_ratio"]
 
 HORIZONTAL = ("bilinear", "bicubic")
 VERTICAL = ("linear", "lagrange", "harmonic")
 METHODS = tuple(f"{a}-{b}" for a in HORIZONTAL for b in VERTICAL)
 DEFAULT_METHOD = "bicubic-harmonic"  # the most accurate on paper C's trajectory
 _RADIUS = 6378136.3  # reference sphere of the layers (m), as the shipped qinling data
+HARMONIC_GAP_LIMIT = 2.0
+"""Largest :func:`harmonic_gap_ratio` ``k·Δ`` at which ``harmonic`` is trusted: for a field
+``exp(−k h)`` its segment error is 0.8 % of the amplitude at ``k·Δ = 1``, 8 % at 2, 29 %
+at 3 (no better than ``linear``'s 32 %) and 180 % at 6 (it then extrapolates far outside
+the layers' values)."""
 
 
 def check_method(method, n_layers):
@@ -73,6 +79,36 @@ def _curvature(layers):
     sec = jnp.diff(v, axis=0) / dh  # (L-1, ...)
     f_r = jnp.concatenate([sec[:1], 0.5 * (sec[1:] + sec[:-1]), sec[-1:]], axis=0)
     return -lap_s / r**2 - 2.0 * f_r / r
+
+
+@jax.jit
+def harmonic_gap_ratio(layers):
+    """``k·Δ`` of every layer gap: how far ``harmonic``'s continuation is stretched.
+
+    The ``harmonic`` segment continues each layer upward to second order; for a field
+    component ``exp(−k h)`` that is good while ``k·Δ`` is small and diverges beyond about 3
+    (see :data:`HARMONIC_GAP_LIMIT`). ``k`` is each layer's effective wavenumber
+    ``sqrt(rms(∂²f/∂r²) / rms(f − mean f))`` (weighted to the short wavelengths that carry
+    the curvature), the larger of the gap's two layers and of the channels.
+
+    Parameters
+    ----------
+    layers : LayeredGrid
+        Values ``(L, C, ny, nx)``, ``L ≥ 2``; NaN nodes are left out of the RMS.
+
+    Returns
+    -------
+    Array, shape ``(L − 1,)``
+        ``k·Δ`` (dimensionless) of the gaps between consecutive layers; 0 for flat layers.
+    """
+    curv = _curvature(layers)
+    v = layers.values.astype(curv.dtype)
+    dev = v - jnp.nanmean(v, axis=(-2, -1), keepdims=True)
+    rms_c = jnp.sqrt(jnp.nanmean(curv**2, axis=(-2, -1)))
+    rms_f = jnp.sqrt(jnp.nanmean(dev**2, axis=(-2, -1)))
+    k = jnp.sqrt(jnp.where(rms_f > 0, rms_c / jnp.where(rms_f > 0, rms_f, 1.0), 0.0))
+    k = jnp.max(k, axis=1)  # (L,)
+    return jnp.diff(layers.heights.astype(curv.dtype)) * jnp.maximum(k[:-1], k[1:])
 
 
 def prepare(layers, horiz, vert):

@@ -246,3 +246,49 @@ def test_paper_layers_and_builders():
     pm = LayeredGrid.from_point_masses(masses, LAT[:5], LON[:6], [0.0, 1000.0])
     ref = deflection(masses, LAT[2], LON[3], 1000.0)
     np.testing.assert_allclose(pm.values[1, :, 2, 3], [ref.xi, ref.eta], rtol=1e-12)
+
+
+def _wave_layers(heights, wavelength=40e3):
+    """One harmonic component ``cos(k y) exp(−k h)`` near the equator (k·Δ known)."""
+    lat = np.linspace(0.0, 1.0, 61)
+    lon = np.linspace(10.0, 11.0, 61)
+    k = 2 * np.pi / wavelength
+    y = np.deg2rad(lat)[:, None] * 6378136.3 + 0.0 * lon[None, :]
+    vals = np.stack([np.stack([np.cos(k * y) * np.exp(-k * hh)] * 2) for hh in heights])
+    return LayeredGrid.from_arrays(lat, lon, heights, vals), k
+
+
+def test_harmonic_gap_ratio_is_k_times_the_gap():
+    heights = np.array([0.0, 5000.0, 30000.0])
+    layers, k = _wave_layers(heights)
+    np.testing.assert_allclose(dov.harmonic_gap_ratio(layers), k * np.diff(heights), rtol=0.05)
+    # the shipped paper-C layers (10 km apart) are well inside the trusted range
+    assert np.all(np.asarray(dov.harmonic_gap_ratio(dov.paper_c_layers())) < 0.5)
+
+
+@pytest.mark.long
+def test_dov_command_warns_when_a_gap_is_too_wide_for_harmonic(tmp_path, capsys):
+    from jaxgrav.cli import main
+    from jaxgrav.tracks import write_track_csv
+
+    heights = np.array([0.0, 2000.0, 40000.0])  # k·Δ 0.31 and 6.0 at a 40 km wavelength
+    layers, k = _wave_layers(heights)
+    layers.to_netcdf(tmp_path / "layers.nc")
+    write_track_csv(tmp_path / "low.csv", {"lat": [0.3, 0.6], "lon": [10.4, 10.6],
+                                           "h": [500.0, 1500.0]})
+    write_track_csv(tmp_path / "high.csv", {"lat": [0.3, 0.6], "lon": [10.4, 10.6],
+                                            "h": [500.0, 20000.0]})
+    args = ["dov", "--grid", str(tmp_path / "layers.nc"), "--track"]
+    assert main([*args, str(tmp_path / "low.csv"), "--out", str(tmp_path / "a.csv")]) == 0
+    assert "warning" not in capsys.readouterr().err
+    assert main([*args, str(tmp_path / "high.csv"), "--out", str(tmp_path / "b.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "1 point(s) lie between the layers at 2000 and 40000 m" in err, err
+    assert "--method bicubic-linear" in err
+    # the warning is deserved: the harmonic value there is far off the exact field
+    out = dov.interpolate(layers, 0.6, 10.6, 20000.0).values[0]
+    exact = np.cos(k * np.deg2rad(0.6) * 6378136.3) * np.exp(-k * 20000.0)
+    assert abs(float(out) - exact) > 0.3
+    assert main([*args, str(tmp_path / "high.csv"), "--out", str(tmp_path / "c.csv"),
+                 "--method", "bicubic-linear"]) == 0
+    assert "warning" not in capsys.readouterr().err
