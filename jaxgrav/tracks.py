@@ -342,7 +342,7 @@ def _check_columns(track, required, allow_nan, label):
         track["lon"] = lon
 
 
-def write_track_csv(path, columns, *, force=False, precision=9):
+def write_track_csv(path, columns, *, force=False, precision=12):
     """Write equal-length columns to a CSV file atomically.
 
     Parameters
@@ -356,7 +356,9 @@ def write_track_csv(path, columns, *, force=False, precision=9):
     force : bool
         Overwrite an existing file.
     precision : int
-        Significant digits (at least 3 decimals for large values, e.g. epoch seconds).
+        Significant digits (at least 3 decimals for large values, e.g. epoch seconds);
+        the default 12 keeps 1e-10° of a latitude (below a millimetre), so columns read
+        from a user's log are passed through as precisely as any log gives them.
     """
     arrays, digits = {}, {}
     for k, v in columns.items():

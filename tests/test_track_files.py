@@ -409,3 +409,12 @@ def test_pass_through_keeps_the_users_longitudes(tmp_path):
     write_track_csv(tmp_path / "out.csv", track.columns())
     assert (tmp_path / "out.csv").read_text().splitlines()[1:] == [
         "10,0", "10,120", "10,-120", "10,179.9"]
+
+
+def test_pass_through_keeps_twelve_significant_digits(tmp_path):
+    """A log's coordinates to 1e-9° (0.1 mm) came out rounded to 9 significant digits
+    (36.1234568: 1e-7°, about a centimetre lost per value; 1e-6° in a longitude of 120°)."""
+    path = tmp_path / "p.csv"
+    path.write_text("lat,lon\n36.123456789,120.123456789\n")
+    write_track_csv(tmp_path / "out.csv", read_track_csv(path, required=("lat", "lon")).columns())
+    assert (tmp_path / "out.csv").read_text().splitlines()[1] == "36.123456789,120.123456789"
