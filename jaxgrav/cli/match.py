@@ -237,7 +237,8 @@ def _cmd_match(args):
                               radius_deg * DEG_ARC_M)
     r.update(method=args.method, missing=args.missing, missing_read_as=read_as,
              field=field, map=str(args.map),
-             track=str(args.track), drift_radius_deg=radius_deg, eotvos_corrected=has_v)
+             track=str(args.track), drift_radius_deg=radius_deg, eotvos_applied_here=has_v,
+             eotvos=_eotvos_note(args, field, track, has_v))
     if args.method in CONTOUR_METHODS:
         r.update(max_rotation_deg=max_rotation, entropy_half_size=args.entropy_half_size)
     with atomic_output(args.out, force=args.force) as tmp:
@@ -249,6 +250,18 @@ def _cmd_match(args):
           f"{float(result.score):.3g}{score_unit}")
     for msg in r["status_messages"]:
         print(f"warning: {msg}", file=sys.stderr)
+
+
+def _eotvos_note(args, field, track, has_v):
+    """What was done about Eötvös, for the JSON (``eotvos_applied_here`` alone read as
+    "the input was corrected" beside the option ``--eotvos-corrected``)."""
+    if field != "gravity":
+        return "not applicable (magnetic readings)"
+    if has_v:
+        return "corrected here with the track's v_east, v_north"
+    if "v_east" in track and "v_north" in track:
+        return "given corrected (--eotvos-corrected): readings used as they are"
+    return "no velocity columns: readings taken as Eötvös-corrected"
 
 
 _MAX_REFINED_NODES = 2e7

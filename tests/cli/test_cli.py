@@ -32,7 +32,9 @@ def test_match_eotvos_corrected_takes_the_column_as_is(track):
         out = track / f"r{flag}.json"
         assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"),
                      "--out", str(out), flag]) == 0
-        assert json.loads(out.read_text())["eotvos_corrected"] is False
+        r = json.loads(out.read_text())
+        assert r["eotvos_applied_here"] is False
+        assert r["eotvos"].startswith("given corrected (--eotvos-corrected)"), r["eotvos"]
 
 
 @pytest.mark.long
@@ -47,7 +49,8 @@ def test_simulate_then_match_beats_ins(track):
     err = np.hypot(np.subtract(r["lat"], truth["lat"]), np.subtract(r["lon"], truth["lon"]))
     ins_err = np.hypot(ins["lat"] - truth["lat"], ins["lon"] - truth["lon"])
     assert np.mean(err) < np.mean(ins_err) / 3
-    assert r["status"] == 0 and r["eotvos_corrected"] is True
+    assert r["status"] == 0 and r["eotvos_applied_here"] is True
+    assert r["eotvos"] == "corrected here with the track's v_east, v_north"
     # existing output is not overwritten without --force
     assert main(["match", "--map", "ryukyu", "--track", str(track / "t.csv"),
                  "--out", str(out)]) == 2

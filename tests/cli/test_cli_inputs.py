@@ -49,7 +49,7 @@ def test_match_reads_a_user_log_with_columns(sim, tmp_path):
     a, b = json.loads(ref.read_text()), json.loads(out.read_text())
     np.testing.assert_allclose(b["lat"], a["lat"], atol=1e-7)
     np.testing.assert_allclose(b["lon"], a["lon"], atol=1e-7)
-    assert b["eotvos_corrected"] is True
+    assert b["eotvos_applied_here"] is True
 
 
 def test_columns_option_errors_are_one_line(sim, tmp_path, capsys):
