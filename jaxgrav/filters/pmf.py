@@ -54,9 +54,10 @@ the state is the mixture's moments: :mod:`~jaxgrav.filters.pmf_linear`). A missi
 reading skips the update; a cell whose map value is unknown (off a Grid map, or a NaN
 node within the interpolation's reach) gets the known cells' mean likelihood, so the
 reading moves no mass between known and unknown cells, and keeps its bias and linear
-part (no cell on the map: no update). The estimate is the posterior mean; its position
-covariance is the grid's plus the cell's own ``cell²/12`` (for NEES; after a
-``predict``, plus the pending spread).
+part (no cell on the map: no update); with ``missing="land"`` a cell on a NaN node
+within the map gets none: the vehicle cannot be there. The estimate is the posterior
+mean; its position covariance is the grid's plus the cell's own ``cell²/12`` (for NEES;
+after a ``predict``, plus the pending spread).
 
 **Map-error state** (Rao–Blackwellised, like the bias). When the prior and the
 dynamics carry one more state after the 13 INS error states — a first-order
@@ -85,6 +86,7 @@ from jaxgrav.filters.model import (
     run_filter,
 )
 from jaxgrav.filters.pmf_cells import (
+    MISSING,
     PMFState,
     cell_fields,
     cell_values,
@@ -94,6 +96,7 @@ from jaxgrav.filters.pmf_cells import (
     mix_cells,
     resize_cells,
     sync_gaussian,
+    weigh_cells,
     with_cells,
 )
 from jaxgrav.filters.pmf_linear import conditional_reading, mixture_update
@@ -107,7 +110,7 @@ from jaxgrav.filters.pmf_predict import (
 )
 from jaxgrav.sim.ins import GRAV, N_STATES, INSErrorModel, transition
 
-__all__ = ["PMFDynamics", "PMFFilter", "PMFState", "diffusion_kernel", "pmf", "run_pmf"]
+__all__ = ["PMFFilter", "PMFState", "diffusion_kernel", "pmf", "run_pmf"]
 
 EDGE_MASS = 1e-3
 """``grid_edge`` is flagged when the outermost cells hold more than this mass."""
@@ -119,9 +122,6 @@ RECENTRE_LOSS = 1e-5
 """Re-centring may push at most this mass off the grid."""
 _DEFAULT_INS = INSErrorModel()
 _TINY = 1e-13  # cells below this fraction of the total weight take the global bias moments
-
-
-PMFDynamics = Dynamics  # kept for one release: a Dynamics with its dt
 
 
 class PMFFilter(NamedTuple):
@@ -148,7 +148,8 @@ class PMFFilter(NamedTuple):
 
 
 def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
-        measurement=gravity_measurement, adapt_span=None, min_cell_m=None, max_cell_m=None):
+        measurement=gravity_measurement, adapt_span=None, min_cell_m=None, max_cell_m=None,
+        missing="gaps"):
     """Grid point-mass filter with the INS error model's drift.
 
     Parameters
@@ -174,6 +175,9 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         of the weights per axis (cells within ``[min_cell_m, max_cell_m]``, default
         ``cell_m/4`` and ``8·cell_m``; see :data:`REGRID_RATIO`,
         :func:`~jaxgrav.filters.pmf_cells.regrid_cells`). None (default): the fixed grid.
+    missing : {"gaps", "land"}
+        A cell on a missing (NaN) node of a Grid map: a survey gap (default) or land,
+        where the vehicle cannot be (:data:`~jaxgrav.filters.pmf_cells.MISSING`).
 
     Returns
     -------
@@ -182,6 +186,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         grid starts centred on zero error. Run it with
         ``run_filter(filt, field, filt.dynamics(lat, dt), x0, p0, steps, every=k)``.
     """
+    if missing not in MISSING:
+        raise ValueError(f"missing must be one of {MISSING}; got {missing!r}")
     if n_cells % 2 != 1 or n_cells < 3:
         raise ValueError(f"n_cells must be an odd integer >= 3; got {n_cells!r}")
     half = (n_cells - 1) / 2
@@ -215,11 +221,8 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         w = w / w.sum()
         shape = (n_cells, n_cells)
         n = _n_map_states(x0.shape[0])
-        extra = ()
-        if n:
-            e = N_STATES
-            extra = (jnp.full(shape, x0[e]), jnp.full(shape, p0[e, e]),
-                     jnp.full(shape, p0[GRAV, e]))
+        extra = () if not n else tuple(jnp.full(shape, v) for v in (
+            x0[N_STATES], p0[N_STATES, N_STATES], p0[GRAV, N_STATES]))
         size = None if adapt_span is None else jnp.full(2, cell_m, x0.dtype)
         state = PMFState(w, jnp.full(shape, x0[GRAV]), jnp.full(shape, p0[GRAV, GRAV]), centre,
                          x0[:N_STATES], p0[:N_STATES, :N_STATES], *extra, cell=size,
@@ -354,12 +357,10 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         loglik = jnp.where(on_map, -0.5 * (nu**2 / var + jnp.log(var)), -jnp.inf)
         any_on = jnp.any(on_map)
         lik = jnp.exp(loglik - jnp.max(jnp.where(on_map, loglik, -jnp.inf)))
-        # a cell of unknown map value takes the known cells' mean likelihood (zero piled the
-        # mass onto a NaN hole's rim: 10 km off with a 450 m σ)
-        w_on = jnp.where(on_map, w, 0.0)
-        lik_unknown = jnp.sum(w_on * lik) / jnp.maximum(jnp.sum(w_on), jnp.finfo(w.dtype).tiny)
+        # a gap's cell takes the known cells' mean likelihood (zero piled the mass onto a
+        # NaN hole's rim: 10 km off with a 450 m σ); land's, zero
         do = has & any_on
-        w_new = jnp.where(do, w * jnp.where(on_map, lik, lik_unknown), w)
+        w_new = jnp.where(do, weigh_cells(w, lik, on_map, field, step, dn, de, missing), w)
         total = w_new.sum()
         do = do & (total > 0)
         w_new = jnp.where(do, w_new / jnp.where(total > 0, total, 1.0), w)
@@ -383,14 +384,13 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
 
         # the predictive moments of the reading: the known cells' (an unknown cell predicts
         # what the known ones do, as in its likelihood)
+        w_on = jnp.where(on_map, w, 0.0)
         w_known = w_on / jnp.maximum(jnp.sum(w_on), jnp.finfo(w.dtype).tiny)
         pred = jnp.where(on_map, g + pred_m, 0.0)
         z_hat = jnp.sum(w_known * pred)
         z_var = jnp.sum(w_known * (var + (pred - z_hat) ** 2))
-        flags = (
-            jnp.where(~has, STATUS_FILTER["no_reading"], 0)
-            | jnp.where(has & ~jnp.all(on_map), STATUS_FILTER["off_map"], 0)
-        )
+        flags = (jnp.where(~has, STATUS_FILTER["no_reading"], 0)
+                 | jnp.where(has & ~jnp.all(on_map), STATUS_FILTER["off_map"], 0))
         used = has & any_on  # no cell on the map: the reading was not used, no innovation
         return state, _info(state, mean, cov, jnp.where(used, step.z - z_hat, jnp.nan),
                             jnp.where(used, z_var, jnp.nan), flags)

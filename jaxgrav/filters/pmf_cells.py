@@ -26,6 +26,7 @@ from jaxgrav.sim.drift import apply_drift
 from jaxgrav.sim.ins import N_STATES
 
 __all__ = [
+    "MISSING",
     "PMFState",
     "cell_fields",
     "cell_values",
@@ -37,8 +38,15 @@ __all__ = [
     "regrid_matrix",
     "resize_cells",
     "sync_gaussian",
+    "weigh_cells",
     "with_cells",
 ]
+
+MISSING = ("gaps", "land")
+"""How the point-mass filter reads a cell on a missing map node (``pmf(missing=...)``):
+``"gaps"``, a survey gap (the known cells' mean likelihood: the reading moves no mass
+between known and unknown cells); ``"land"``, where the vehicle cannot be (likelihood 0).
+A cell off the map's extent is a gap either way."""
 
 
 class PMFState(NamedTuple):
@@ -207,6 +215,29 @@ def cell_values(field, step, dn, de, measurement, span_m=None):
         return measurement(field, x.at[0].set(a).at[1].set(b), step.lat, step.lon)
 
     return jax.vmap(jax.vmap(one))(dn, de)
+
+
+def weigh_cells(w, lik, on_map, field, step, dn, de, missing):
+    """The cells' weights times the reading's likelihood, not normalised, ``(G, G)``.
+
+    Parameters
+    ----------
+    w, lik : Array, shape ``(G, G)``
+        Weights, and the likelihood of the reading in each cell with a known map value.
+    on_map : Array of bool, shape ``(G, G)``
+        The cell's map value is known (:func:`cell_values` finite).
+    field, step, dn, de
+        As :func:`cell_values` (to tell a missing node from a cell off the map).
+    missing : {"gaps", "land"}
+        See :data:`MISSING`.
+    """
+    w_on = jnp.where(on_map, w, 0.0)
+    lik_gap = jnp.sum(w_on * lik) / jnp.maximum(jnp.sum(w_on), jnp.finfo(w.dtype).tiny)
+    land = jnp.zeros(on_map.shape, bool)
+    if missing == "land" and isinstance(field, PreparedMap):
+        lat, lon = apply_drift(step.lat, step.lon, -dn[:, 0], -de[0, :])
+        land = ~on_map & field.grid.contains(lat[:, None], lon[None, :])
+    return w * jnp.where(on_map, lik, jnp.where(land, 0.0, lik_gap))
 
 
 def lattice_block(grid, span_m, largest=64):

@@ -21,8 +21,8 @@ from jaxgrav import filters as fl
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
 from jaxgrav.filters.map_state import augment, map_error_state
-from jaxgrav.filters.pmf import PMFDynamics, diffusion_kernel
-from jaxgrav.filters.pmf_cells import cell_values
+from jaxgrav.filters.pmf import diffusion_kernel
+from jaxgrav.filters.pmf_cells import cell_values, weigh_cells
 from jaxgrav.grid import Grid
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios.paper_d import MASS_LON
@@ -505,18 +505,16 @@ def test_bad_arguments(prior):
 def test_dynamics_arguments():
     d = PMF.dynamics(LAT, DT)
     f, q = ins.transition(ins.INSErrorModel(), LAT, DT)
-    assert isinstance(d, PMFDynamics)
+    assert isinstance(d, fl.Dynamics)
     np.testing.assert_allclose(np.asarray(d.f), np.asarray(f))
     np.testing.assert_allclose(np.asarray(d.q), np.asarray(q))
     rw = PMF_RW.dynamics(LAT, DT)
     np.testing.assert_array_equal(np.asarray(rw.f), np.eye(ins.N_STATES))
 
 
-def test_cells_of_unknown_map_value_neither_gain_nor_lose_mass(prior):
-    """A NaN hole in a real map under part of the grid: the reading reweights the known
-    cells among themselves (Bayes, by hand), the unknown cells keep their prior share of
-    the mass and their bias, and the predicted reading is the known cells' (zero likelihood
-    for the unknown cells piled the mass on the hole's rim: 10 km off with a 450 m σ)."""
+def _through_a_hole(filt, prior, z, r):
+    """One reading over the ryukyu map with a NaN hole south of the INS position: the
+    settled prediction, the posterior, its info and the cells' map values."""
     grid = datasets.load("ryukyu")["anomaly_2p5min"]
     iy, ix = int((30.3 - grid.lat0) / grid.dlat), int((129.7 - grid.lon0) / grid.dlon)
     lat, lon = float(grid.lat0 + (iy + 1) * grid.dlat), 129.7  # on a row of nodes
@@ -524,17 +522,63 @@ def test_cells_of_unknown_map_value_neither_gain_nor_lose_mass(prior):
     values[iy, ix - 4:ix + 5] = np.nan  # unknown: the two rows of cells south of the INS
     field = prepare_map(Grid(jnp.asarray(values), grid.lat0, grid.dlat, grid.lon0, grid.dlon))
     x0, p0 = prior
-    dyn = PMF.dynamics(lat, DT)
-    state = init(PMF, x0, p0)
-    pred, _ = predict_settled(PMF, state, dyn)
-    z, r = 12.0, 0.7
+    dyn = filt.dynamics(lat, DT)
+    state = init(filt, x0, p0)
+    pred, _ = predict_settled(filt, state, dyn)
     step = _step(z, lat, lon, r)
-    new, info = update(PMF, state, step, field, dyn)
-
-    w, m, s = (np.asarray(a) for a in (pred.w, pred.bias_mean, pred.bias_var))
+    new, info = update(filt, state, step, field, dyn)
     offsets = (np.arange(G) - (G - 1) / 2) * CELL
     dn, de = jnp.meshgrid(pred.centre[0] + offsets, pred.centre[1] + offsets, indexing="ij")
-    g = np.asarray(cell_values(field, step, dn, de, fl.gravity_measurement))
+    return pred, new, info, np.asarray(cell_values(field, step, dn, de, fl.gravity_measurement))
+
+
+@pytest.mark.long
+def test_cells_on_land_take_no_mass(prior):
+    """missing="land": a NaN node inside the map is where the vehicle cannot be, so its
+    cells get zero likelihood (Bayes by hand, the hole of the test below)."""
+    land = fl.pmf(n_cells=G, cell_m=CELL, q_pos=Q_POS, missing="land")
+    z, r = 12.0, 0.7
+    pred, new, _, g = _through_a_hole(land, prior, z, r)
+    w, m, s = (np.asarray(a) for a in (pred.w, pred.bias_mean, pred.bias_var))
+    known = np.isfinite(g)
+    post = w * np.where(known, np.exp(-0.5 * (z - np.where(known, g, 0) - m) ** 2 / (s + r))
+                        / np.sqrt(s + r), 0.0)
+    np.testing.assert_allclose(np.asarray(new.w), post / post.sum(), rtol=1e-9, atol=1e-15)
+    assert np.asarray(new.w)[~known].sum() == 0.0 and w[~known].sum() > 0.2
+
+
+def test_land_cells_are_missing_nodes_inside_the_map_and_others_gaps():
+    """weigh_cells: with missing="land" only an unknown cell inside the map's extent is
+    land (likelihood 0); one off the extent is a gap either way."""
+    # a 1° map whose southern edge cuts a grid of 3 × 3 cells of 60 km: the cells south
+    # of it are gaps (the known cells' mean likelihood), an unknown cell inside is land
+    values = np.zeros((4, 4))
+    values[1, 2] = np.nan
+    field = prepare_map(Grid(jnp.asarray(values), 10.0, 1.0, 20.0, 1.0))
+    dn, de = jnp.meshgrid(jnp.array([60e3, 0.0, -60e3]), jnp.array([-60e3, 0.0, 60e3]),
+                          indexing="ij")  # cell (i, j): offset north, east
+    step = _step(1.0, 10.3, 21.0)  # rows at 9.76° (south of the map), 10.3°, 10.84°
+    on_map = jnp.ones((3, 3), bool).at[0, :].set(False).at[1, 2].set(False)
+    w = jnp.full((3, 3), 1 / 9)
+    lik = jnp.arange(1.0, 10.0).reshape(3, 3)
+    out = {mode: np.asarray(weigh_cells(w, lik, on_map, field, step, dn, de, mode))
+           for mode in ("gaps", "land")}
+    gap = float(np.sum(np.where(on_map, lik, 0.0)) / 5)  # the known cells' mean likelihood
+    np.testing.assert_allclose(out["gaps"] * 9, np.where(on_map, lik, gap))
+    np.testing.assert_allclose(out["land"][0] * 9, gap)  # south of the map: still a gap
+    assert out["land"][1, 2] == 0.0  # the truth cannot sit on the NaN node
+    with pytest.raises(ValueError, match="missing must be one of"):
+        fl.pmf(missing="sea")
+
+
+def test_cells_of_unknown_map_value_neither_gain_nor_lose_mass(prior):
+    """A NaN hole in a real map under part of the grid: the reading reweights the known
+    cells among themselves (Bayes, by hand), the unknown cells keep their prior share of
+    the mass and their bias, and the predicted reading is the known cells' (zero likelihood
+    for the unknown cells piled the mass on the hole's rim: 10 km off with a 450 m σ)."""
+    z, r = 12.0, 0.7
+    pred, new, info, g = _through_a_hole(PMF, prior, z, r)
+    w, m, s = (np.asarray(a) for a in (pred.w, pred.bias_mean, pred.bias_var))
     known = np.isfinite(g)
     assert 0.2 < 1 - known.mean() < 0.8
     like = np.where(known, np.exp(-0.5 * (z - np.where(known, g, 0) - m) ** 2 / (s + r))
