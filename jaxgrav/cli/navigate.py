@@ -149,6 +149,10 @@ def add_parser(sub):
     p.add_argument("--stride", type=int, default=None,
                    help="dense, entropy+iccp: fixes between segment ends (default = "
                         "--n-fixes: consecutive)")
+    p.add_argument("--missing", choices=("gaps", "land"), default=None,
+                   help="pmf: a map's missing (NaN) nodes are survey gaps (default: unknown "
+                        "values) or land (the vehicle cannot be there: give it only for a "
+                        "land mask the voyage never crosses)")
     p.add_argument("--max-gap", type=float, default=60.0,
                    help="longest allowed step between rows (s); the step must be uniform")
     p.add_argument("--max-speed", type=float, default=30.0,
@@ -211,6 +215,10 @@ def _method_options(args):
     tightly coupled method (None if not). Fills in the defaults."""
     if args.particles is not None and args.method != "rbpf":
         raise ValueError(f"--particles is for --method rbpf; got --method {args.method}")
+    if args.missing is not None and args.method != "pmf":
+        raise ValueError(f"--missing {args.missing} is for --method pmf (the other methods "
+                         f"skip a reading whose map value is missing); got --method "
+                         f"{args.method}")
     loose = [f"--{k.replace('_', '-')}" for k in ("fix_every", "n_fixes", "stride")
              if getattr(args, k) is not None]
     warning = None
@@ -309,9 +317,10 @@ def _tight(args, voyage, grid, n_missing, n_off):
     order = 1 if args.method == "pmf" else 2  # the point-mass filter's is per cell
     told = (map_error_state(args.map_error, args.map_error_length, order=order)
             if args.map_error > 0 else None)
+    missing = args.missing or "gaps"
     cfg = TightConfig(ins=INS_GRADES[args.ins], sigma_pos_m=args.sigma_pos,
                       sigma_vel=args.sigma_vel, noise_mgal=args.noise, map_error=told,
-                      method=args.method, n_particles=args.particles)
+                      method=args.method, n_particles=args.particles, pmf_missing=missing)
     res = executables.call(_tight_program, grid, voyage, cfg, jax.random.PRNGKey(args.seed))
     cov = np.asarray(res.cov_north_east)
     sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
@@ -332,7 +341,9 @@ def _tight(args, voyage, grid, n_missing, n_off):
     used = np.isfinite(np.asarray(res.innovation)) & (status & skipped == 0)
     print(f"wrote {args.out}: {status.size} rows, {int(used.sum())} reading(s) used "
           f"by the {args.method} filter; {n_missing} missing reading(s) skipped, {n_off} "
-          f"row(s) without a map value at the INS position; flags seen: "
+          f"row(s) without a map value at the INS position; "
+          + (f"missing map nodes read as {missing}; " if args.method == "pmf"
+             and grid.n_missing else "") + "flags seen: "
           f"{', '.join(status_messages_filter(flags)) or 'none'}")
     fit_warning = nis_warning(res.innovation, innovation_sigma)
     if fit_warning is not None:

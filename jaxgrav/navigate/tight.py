@@ -123,6 +123,9 @@ class TightConfig:
     pmf_q_pos : float
         Its extra random-walk density of the position error (m²/s; default 0.25, the
         ``jaxgrav filter`` value at this ``sigma_vel``).
+    pmf_missing : {"gaps", "land"}
+        How ``pmf`` reads a cell on a missing (NaN) map node (static; default "gaps":
+        unknown; "land": the vehicle cannot be there; :func:`~jaxgrav.filters.pmf`).
     curvature_cells : float
         Map cells over which the map's linearisation error is taken as correlated (see
         the module notes; ``ukf`` and ``gsf``); 0: off, as before.
@@ -145,6 +148,7 @@ class TightConfig:
     pmf_cells: int = static_field(61)
     pmf_span: float = static_field(4.0)
     pmf_cell_m: float = static_field(100.0)
+    pmf_missing: str = static_field("gaps")
     eotvos_velocity: bool = static_field(True)
 
     def __post_init__(self):
@@ -162,6 +166,8 @@ class TightConfig:
         cell = self.pmf_cell_m
         if isinstance(cell, bool) or not isinstance(cell, numbers.Real) or not cell > 0:
             raise ValueError(f"pmf_cell_m must be a number > 0 (m; static); got {cell!r}")
+        if self.pmf_missing not in ("gaps", "land"):
+            raise ValueError(f"pmf_missing must be 'gaps' or 'land'; got {self.pmf_missing!r}")
         if (self.method == "pmf" and self.map_error is not None
                 and isinstance(self.map_error.order, int) and self.map_error.order != 1):
             raise ValueError("method 'pmf' carries a first-order map-error state only (per "
@@ -201,7 +207,7 @@ def _filter(cfg, measurement, count):
     method, gate = cfg.method, cfg.gate
     if method == "pmf":  # its map-error state is per cell: the map alone per cell
         return pmf(cfg.pmf_cells, cfg.pmf_cell_m, q_pos=cfg.pmf_q_pos, ins=cfg.ins,
-                   adapt_span=cfg.pmf_span or None)
+                   adapt_span=cfg.pmf_span or None, missing=cfg.pmf_missing)
     if method == "ukf":
         return ukf(measurement, gate=gate, curvature_count=count)
     if method == "ekf":
