@@ -28,7 +28,11 @@ Without velocity columns the gravity column must be Eötvös-corrected already.
 
 The prior is the INS error at one step before the first row (zero mean, the
 ``--sigma-*`` standard deviations); every row's reading updates the estimate, and
-row ``k`` of the output is the causal posterior after row ``k``.
+row ``k`` of the output is the causal posterior after row ``k``. The INS error model is
+paper D's (``--ins strategic``, the default) or the navigation grade of ``jaxgrav
+simulate-voyage`` logs (``--ins navigation``; :data:`jaxgrav.scenarios.INS_GRADES`): a
+model better than the log's INS leaves the 1-σ over-confident, and the readings' fit does
+not show it.
 
 The map is a NetCDF grid (``--map``), paper D's three masses (``--point-masses
 paper-d``) or a fitted point-mass model file (``--point-masses MODEL.json``, see
@@ -62,6 +66,7 @@ from jaxgrav.cli.sanity import (
     innovation_check,
 )
 from jaxgrav.cli.simulate import check_seed
+from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
 from jaxgrav.filters import STATUS_FILTER, map_anomaly, status_messages_filter
@@ -74,9 +79,10 @@ from jaxgrav.filters.api import (
 )
 from jaxgrav.filters.map_state import map_error_state
 from jaxgrav.geodesy import eotvos_jacobian, eotvos_jit
+from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.tracks import csv_line, write_track_csv
 
-__all__ = ["MIN_PARTICLES", "add_parser", "check_particles", "cmd_filter"]
+__all__ = ["MIN_PARTICLES", "add_parser", "check_particles", "cmd_filter", "ins_label"]
 
 DT_RTOL = 1e-3
 """Relative tolerance of a uniform time step."""
@@ -148,6 +154,11 @@ def add_parser(subparsers):
     f.add_argument("--sigma-vel", type=float, default=0.1414,
                    help="initial INS velocity error, 1-σ per axis (m/s); default 0.14, "
                         "i.e. 0.2 m/s RMS horizontal (navigation-grade INS)")
+    f.add_argument("--ins", choices=sorted(INS_GRADES), default="strategic",
+                   help=f"the filter's INS error model: strategic, the {ins_label('strategic')}"
+                        " of paper D and simulate-filter (default), or navigation, the "
+                        f"{ins_label('navigation')} of simulate-voyage logs; a model better "
+                        "than the log's INS leaves the 1-sigma over-confident")
     f.add_argument("--sigma-gravity", type=float, default=1.0,
                    help="reading noise, 1-σ (mGal); default 1 (marine gravimeter)")
     f.add_argument("--guard", type=float, nargs="?", const=0.2, default=None,
@@ -211,6 +222,25 @@ def _output_columns(t, track, res):
     keys += ["map_error", "sigma_map_error"] if "map_error" in res else []
     cols.update({k: res[k] for k in (*keys, "innovation", "innovation_sigma", "status")})
     return cols
+
+
+def ins_label(name):
+    """How ``--ins`` and the summary line name an INS grade.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`jaxgrav.scenarios.INS_GRADES`.
+
+    Returns
+    -------
+    str
+        E.g. ``"strategic INS (0.001 deg/h gyro, 10 ug accelerometer biases)"``, from
+        the model's own values.
+    """
+    model = INS_GRADES[name]  # rad/s and m/s² (1 ug = 9.80665e-6 m/s²)
+    return (f"{name} INS ({model.gyro_sigma / DEG * 3600.0:.3g} deg/h gyro, "
+            f"{model.accel_sigma / 9.80665e-6:.3g} ug accelerometer biases)")
 
 
 def _check_sigma(name, value):
@@ -342,7 +372,7 @@ def cmd_filter(args):
     res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
                        guard=args.guard, map_error=fogm, eotvos_velocity=jac, where=where,
-                       **_particle_options(args))
+                       ins=INS_GRADES[args.ins], **_particle_options(args))
     res["status"] = res["status"] | np.where(
         implausible_rows(res["innovation"], res["innovation_sigma"]),
         STATUS_FILTER["implausible_fit"], 0)
@@ -359,8 +389,9 @@ def cmd_filter(args):
                    + (" per cell" if args.method == "pmf" else "")
                    + (", second order" if args.map_error_order == 2 else ""))
     print(f"wrote {args.out}: {args.method} over {t.size} rows ({n_read} readings{stride}) "
-          f"on {field_name}; final 1-sigma {res['sigma_north'][-1]:.0f} m north, "
-          f"{res['sigma_east'][-1]:.0f} m east; {eotvos_note}")
+          f"on {field_name}, {ins_label(args.ins)}; final 1-sigma "
+          f"{res['sigma_north'][-1]:.0f} m north, {res['sigma_east'][-1]:.0f} m east; "
+          f"{eotvos_note}")
     _, _, fit_warning = innovation_check(res["innovation"], res["innovation_sigma"])
     if fit_warning is not None:
         print(f"warning: {fit_warning}", file=sys.stderr)

@@ -33,6 +33,7 @@ __all__ = [
     "PMF_CELLS",
     "PMF_Q_POS",
     "PMF_SPAN_SIGMA",
+    "STRATEGIC_INS",
     "eotvos_part",
     "filter_track",
     "pad_to_stride",
@@ -51,6 +52,10 @@ hold 0.2 % of the prior (the ``grid_edge`` flag's threshold is 0.1 %)."""
 PMF_Q_POS = 4.0
 """The point-mass filter's random-walk density (m²/s) at ``sigma_vel = 0.2/√2 m/s``;
 it scales with ``sigma_vel²``."""
+STRATEGIC_INS = INSErrorModel()
+""":func:`filter_track`'s default INS error model: paper D's, the default
+:class:`~jaxgrav.sim.ins.INSErrorModel` (0.001 °/h gyro, 10 µg accelerometer biases), the
+``strategic`` grade of :data:`jaxgrav.scenarios.INS_GRADES`."""
 
 
 def pad_to_stride(steps, every, first=None):
@@ -148,8 +153,8 @@ def eotvos_part(jacobian, n_states):
 
 
 @jax.jit
-def _prior_and_dynamics(lat_mean, dt, sigma_pos, sigma_vel):
-    model = INSErrorModel()
+def _prior_and_dynamics(model, lat_mean, dt, sigma_pos, sigma_vel):
+    # model: traced leaves, so one compilation serves every INS grade
     return initial_covariance(model, sigma_pos, sigma_vel), Dynamics(*transition(model,
                                                                                lat_mean, dt))
 
@@ -187,7 +192,8 @@ def _pmf_run(program, field, dt, p0, cell_m, q_pos, steps, map_error, speed):
 
 def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
                  sigma_vel=0.1414, sigma_gravity=1.0, guard=None, map_error=None,
-                 eotvos_velocity=None, where="track", n_particles=None, seed=0):
+                 eotvos_velocity=None, where="track", n_particles=None, seed=0,
+                 ins=STRATEGIC_INS):
     """Filter one track; the engine of ``jaxgrav filter`` (inputs already validated).
 
     Run with x64 enabled (the CLI does): positions are in degrees.
@@ -229,6 +235,12 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         ``pf``, ``rbpf``: the particle count (default :data:`PARTICLES`).
     seed : int
         ``pf``, ``rbpf``: the seed of the filter's PRNG key (the run is reproducible).
+    ins : INSErrorModel
+        The filter's INS error model (:class:`~jaxgrav.sim.ins.INSErrorModel`: gyro
+        and accelerometer biases in rad/s and m/s², their correlation times in s, the
+        gravimeter's systematic error in mGal). Default :data:`STRATEGIC_INS`, paper
+        D's; a log from a navigation-grade INS (``jaxgrav simulate-voyage``) needs
+        ``jaxgrav.scenarios.INS_GRADES["navigation"]``, or the 1-σ is over-confident.
 
     Returns
     -------
@@ -247,16 +259,28 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     ------
     ValueError
         For ``pmf``: readings not on a fixed row stride; ``n_particles`` for a filter
-        without particles, or not an int >= 2.
+        without particles, or not an int >= 2; a field of ``ins`` out of range (a σ or
+        noise not finite and ≥ 0, a ``*_tau`` not > 0; ``inf`` allowed).
+    TypeError
+        ``ins`` not an :class:`~jaxgrav.sim.ins.INSErrorModel`.
     """
+    if not isinstance(ins, INSErrorModel):
+        raise TypeError(f"ins must be an INSErrorModel (e.g. jaxgrav.scenarios.INS_GRADES"
+                        f"['navigation']); got {type(ins).__name__}")
     if n_particles is not None and method not in PARTICLES:
         raise ValueError(f"n_particles is for the particle filters {tuple(PARTICLES)}; got "
                          f"method={method!r}")
     dt = float(np.median(np.diff(t)))
     n = t.size
     r = float(sigma_gravity) ** 2
-    p0, dynamics = executables.call(_prior_and_dynamics, float(np.mean(lat)), dt, sigma_pos,
-                                    sigma_vel)
+    ins = INSErrorModel(*(float(v) for v in ins))
+    for name, value in ins._asdict().items():
+        tau = name.endswith("_tau")
+        if not (value > 0 if tau else np.isfinite(value) and value >= 0):
+            want = "> 0 (s; inf: a random constant)" if tau else "a finite number >= 0"
+            raise ValueError(f"ins.{name} must be {want}; got {value!r}")
+    p0, dynamics = executables.call(_prior_and_dynamics, ins, float(np.mean(lat)), dt,
+                                    sigma_pos, sigma_vel)
     every = None
     meas = gravity_measurement
     speed = 0.0

@@ -18,7 +18,9 @@ from jaxgrav.cli import main
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
 from jaxgrav.fields.pointmass_fit import save_point_masses
+from jaxgrav.filters import filter_track
 from jaxgrav.geodesy import eotvos, meridian_radius, prime_vertical_radius
+from jaxgrav.sim.ins import INSErrorModel
 from jaxgrav.tracks import read_track_csv, write_track_csv
 
 OUT_COLUMNS = ["t", "lat", "lon", "sigma_north", "sigma_east", "cov_north_east", "v_east",
@@ -374,7 +376,7 @@ def _traces():
 
 def test_a_second_run_with_new_values_does_not_retrace(sim, stride_track, tmp_path):
     """filter_track's and simulate-filter's jitted runners are module functions: a second
-    call with the same shapes (new values) traces nothing."""
+    call with the same shapes (new values, another INS model) traces nothing."""
     with _traces() as names:
         jax.jit(lambda x: x + 1.0)(1.0)
     assert names == ["<lambda>"]  # the counter sees a trace
@@ -382,7 +384,8 @@ def test_a_second_run_with_new_values_does_not_retrace(sim, stride_track, tmp_pa
                 "--geometry", "east-west"]
     runs = [
         (_filter, (sim / "track.csv", tmp_path / "a.csv", "--method", "ukf"),
-         (sim / "track.csv", tmp_path / "b.csv", "--method", "ukf", "--guard", "0.5")),
+         (sim / "track.csv", tmp_path / "b.csv", "--method", "ukf", "--guard", "0.5",
+          "--ins", "navigation")),
         (_filter, (stride_track, tmp_path / "c.csv", "--method", "pmf"),
          (stride_track, tmp_path / "d.csv", "--method", "pmf", "--sigma-pos", "1500")),
         (main, ([*sim_args, "--out", str(tmp_path / "e.csv"), "--seed", "3"],),
@@ -441,3 +444,34 @@ def test_eotvos_corrected_needs_the_velocity_columns(stride_track, tmp_path, cap
     assert not out.exists()
     assert _filter(stride_track, out) == 0
     assert "no velocity columns: gravity taken as Eötvös-corrected" in capsys.readouterr().out
+
+
+def test_ins_option_names_the_model(sim, tmp_path, capsys):
+    """--ins: the filter's INS error model, named on the summary line; strategic (paper D's,
+    the default) and navigation grade (simulate-voyage's INS, whose larger biases the filter
+    must be told or its 1-sigma is over-confident)."""
+    a, b = tmp_path / "s.csv", tmp_path / "n.csv"
+    assert _filter(sim / "track.csv", a) == 0
+    assert "strategic INS (0.001 deg/h gyro, 10 ug accelerometer biases)" in (
+        capsys.readouterr().out)
+    assert _filter(sim / "track.csv", b, "--ins", "navigation") == 0
+    assert "navigation INS (0.01 deg/h gyro, 25 ug accelerometer biases)" in (
+        capsys.readouterr().out)
+    strategic, navigation = read_track_csv(a), read_track_csv(b)
+    # the worse INS drifts more between readings: the filter trusts its prediction less
+    assert navigation["sigma_north"][-1] > strategic["sigma_north"][-1]
+    assert navigation["sigma_v_east"][-1] > strategic["sigma_v_east"][-1]
+
+
+def test_filter_track_refuses_a_bad_ins_model():
+    t = np.arange(3) * 10.0
+    args = (paper_d(), t, np.full(3, 30.0), np.full(3, 130.0), np.zeros(3))
+    with pytest.raises(TypeError, match=r"ins must be an INSErrorModel .*; got dict"):
+        filter_track(*args, ins={"gyro_sigma": 1e-8})
+    with pytest.raises(ValueError, match=r"ins.accel_sigma must be a finite number >= 0; "
+                                         r"got -1.0"):
+        filter_track(*args, ins=INSErrorModel(accel_sigma=-1.0))
+    with pytest.raises(ValueError, match=r"ins.gyro_tau must be > 0 \(s; inf: a random "
+                                         r"constant\); got 0.0"):
+        filter_track(*args, ins=INSErrorModel(gyro_tau=0.0))
+
