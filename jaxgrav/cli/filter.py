@@ -174,9 +174,9 @@ def add_parser(subparsers):
                         "a first-order one per grid cell. Default 0: the map is the truth")
     f.add_argument("--map-error-length", type=float, default=10e3, metavar="L",
                    help="correlation length of that state over the distance travelled (m, "
-                        "default 10000; time constant L / ground speed). For a map error "
-                        "with covariance s^2 (1 + r/L) e^(-r/L) use order 2 with L, or order "
-                        "1 with 2 L")
+                        "default 10000; time constant L / the mean ground speed). For a map "
+                        "error with covariance s^2 (1 + r/L) e^(-r/L) use order 2 with L, or "
+                        "order 1 with 2 L")
     add_map_error_var_option(f)
     f.add_argument("--map-error-order", type=int, default=1, choices=(1, 2),
                    help="order of the map-error state: 1 first-order Gauss-Markov (default), "

@@ -219,8 +219,10 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     map_error : MapErrorState, optional
         The map's error (:func:`~jaxgrav.filters.map_state.map_error_state`: σ mGal,
         L m, order). A Gauss–Markov map-error state over the distance travelled,
-        ``τ = L / speed`` with the track's median ground speed (from the INS
-        positions); ``pmf``: first order only, per grid cell.
+        ``τ = L / speed`` with the track's mean ground speed (m/s, from the INS
+        positions: distance over time, so the time at rest counts, as in
+        :func:`~jaxgrav.navigate.navigate_tight`); ``pmf``: first order only, per grid
+        cell.
         None or σ = 0: today's filters.
     eotvos_velocity : numpy.ndarray, shape ``(T, 2)``, optional
         ``∂E/∂v`` (mGal per m/s, north then east;
@@ -288,7 +290,10 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         dn = np.diff(lat) * DEG * np.asarray(meridian_radius(lat[1:]))
         de = (np.diff(lon) * DEG * np.asarray(prime_vertical_radius(lat[1:]))
               * np.cos(lat[1:] * DEG))
-        speed = float(np.median(np.hypot(dn, de))) / dt if n > 1 else 0.0
+        # the map error decorrelates at the distance travelled per time: the mean speed, as
+        # navigate's tight filter (the median of a track mostly at rest was 0: a map error
+        # that never decorrelates while moving; a singular second-order prior)
+        speed = float(np.mean(np.hypot(dn, de))) / dt if n > 1 else 0.0
     if map_error is not None and method != "pmf":
         dynamics = dynamics._replace(dt=jnp.asarray(dt))
         dynamics, _, p0, meas = augment(map_error, dynamics, jnp.zeros(p0.shape[0]), p0, speed)

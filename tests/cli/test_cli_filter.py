@@ -18,7 +18,7 @@ from jaxgrav.cli import main
 from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
 from jaxgrav.fields.pointmass_fit import save_point_masses
-from jaxgrav.filters import filter_track
+from jaxgrav.filters import STATUS_FILTER, filter_track
 from jaxgrav.geodesy import eotvos, meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import INSErrorModel
 from jaxgrav.tracks import read_track_csv, write_track_csv
@@ -475,3 +475,31 @@ def test_filter_track_refuses_a_bad_ins_model():
                                          r"constant\); got 0.0"):
         filter_track(*args, ins=INSErrorModel(gyro_tau=0.0))
 
+
+@pytest.mark.long
+def test_a_track_mostly_at_rest_then_moving_with_a_map_error(sim, tmp_path, capsys):
+    """At rest for twice as long as it then moves: the median speed was 0, so the map-error
+    state's time constant L / speed was infinite; the second-order state's prior, diag(s^2,
+    (speed / L)^2 s^2), was singular, and every row needed a covariance repair. The mean
+    speed (as navigate's tight filter) keeps it regular."""
+    cols = read_track_csv(sim / "track.csv")
+    k = 2 * cols["t"].size
+    first = {c: float(v[0]) for c, v in cols.items()}
+    # at rest the raw reading is the anomaly there (no Eötvös effect), plus noise
+    anomaly = first["gravity"] + float(eotvos(first["lat"], first["v_east"], first["v_north"]))
+    port = {"t": np.arange(k) * 10.0, "lat": np.full(k, first["lat"]),
+            "lon": np.full(k, first["lon"]), "v_east": np.zeros(k), "v_north": np.zeros(k),
+            "gravity": anomaly + np.random.default_rng(0).normal(0.0, 1.0, k)}
+    cols["t"] = cols["t"] + k * 10.0
+    track, out = tmp_path / "port.csv", tmp_path / "o.csv"
+    write_track_csv(track, {c: np.concatenate([port[c], cols[c]]) for c in port},
+                    precision=15)
+    assert _filter(track, out, "--map-error", "3", "--map-error-length", "10000",
+                   "--map-error-order", "2") == 0
+    cap = capsys.readouterr()
+    assert "covariance_repaired" not in cap.err, cap.err
+    res = read_track_csv(out)
+    assert not (res["status"].astype(int) & STATUS_FILTER["covariance_repaired"]).any()
+    assert np.all(res["innovation_sigma"] < 10.0), np.max(res["innovation_sigma"])
+    nis = (res["innovation"] / res["innovation_sigma"]) ** 2
+    assert 0.3 < nis.mean() < 3.0, nis.mean()
