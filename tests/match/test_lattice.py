@@ -50,14 +50,17 @@ def test_the_old_import_path_reexports():
 def test_lattice_nan_cells_equal_pointwise(method):
     """With ``nan_cells`` a missing node makes exactly the points of its cells NaN, as the
     point-wise interpolants do (without it, it spreads along the lattice rows)."""
+    # jitted, as the matchers call them: eager dispatch of their many small ops took 7 s
+    lattice = jax.jit(lattice_values, static_argnums=(3, 4), static_argnames="nan_cells")
     missing = ([5, 12, 6, 17], [7, 20, 8, 3])
-    coef = interp.bicubic_coefficients(VALUES).at[missing].set(jnp.nan)
+    coef = jax.jit(interp.bicubic_coefficients)(VALUES).at[missing].set(jnp.nan)
     values = VALUES.at[missing].set(jnp.nan)
     table = interleave(coef) if method == "bicubic" else values
     rows, cols = _lattices(80, 9, 7, 3.7, 2.2, margin=1.5)
-    v, in_y, in_x = lattice_values(table, rows, cols, 6, method, nan_cells=True)
+    v, in_y, in_x = lattice(table, rows, cols, 6, method, nan_cells=True)
     iy, ix = rows[:, :, None], cols[:, None, :]
-    ref = interp.bicubic(coef, iy, ix) if method == "bicubic" else interp.bilinear(values, iy, ix)
+    ref = jax.jit(interp.bicubic if method == "bicubic" else interp.bilinear)(
+        coef if method == "bicubic" else values, iy, ix)
     inside = np.asarray(in_y[:, :, None] & in_x[:, None, :])
     v, ref = np.asarray(v)[inside], np.asarray(ref)[inside]
     np.testing.assert_array_equal(np.isnan(v), np.isnan(ref))
@@ -65,7 +68,7 @@ def test_lattice_nan_cells_equal_pointwise(method):
     ok = np.isfinite(ref)
     np.testing.assert_allclose(v[ok], ref[ok], rtol=0, atol=1e-12)
     # the matchers' default keeps its hot path: NaN spreads along the rows
-    spread, _, _ = lattice_values(table, rows, cols, 6, method)
+    spread, _, _ = lattice(table, rows, cols, 6, method)
     assert np.isnan(np.asarray(spread)[inside]).sum() > np.isnan(v).sum()
 
 
