@@ -155,7 +155,7 @@ def test_scenario_with_a_fixed_start_draws_the_rest_as_without():
     runs = jax.jit(jax.vmap(fixed))(keys, starts[:, 0], starts[:, 1])
     np.testing.assert_allclose(runs.truth.lat[:, 0], starts[:, 0])
     np.testing.assert_allclose(runs.truth.lon[:, 0], starts[:, 1])
-    free = jax.vmap(matching_scenario, in_axes=(0, None, None))(keys, grid, scen)
+    free = jax.jit(jax.vmap(matching_scenario, in_axes=(0, None, None)))(keys, grid, scen)
     np.testing.assert_allclose(runs.drift_north_m, free.drift_north_m)
     assert not np.allclose(free.truth.lat[:, 0], starts[:, 0])
     with pytest.raises(ValueError, match="start_lat and start_lon must both be finite"):
