@@ -63,6 +63,7 @@ from jaxgrav.cli.sanity import (
     check_positions,
     check_readings,
     implausible_rows,
+    information_warning,
     innovation_check,
 )
 from jaxgrav.cli.simulate import check_seed
@@ -258,6 +259,17 @@ def _map_at_ins(field, lat, lon):
     return np.asarray(_map_anomaly(field, jnp.asarray(lat), jnp.asarray(lon)))
 
 
+def _gradient_at_ins(field, lat, lon, step_m=500.0):
+    """The map's north and east gradient at the INS positions (mGal/m), central
+    differences over ``step_m`` each way."""
+    dlat = step_m / 111195.0
+    dlon = dlat / np.cos(np.radians(lat))
+    return ((_map_at_ins(field, lat + dlat, lon) - _map_at_ins(field, lat - dlat, lon))
+            / (2 * step_m),
+            (_map_at_ins(field, lat, lon + dlon) - _map_at_ins(field, lat, lon - dlon))
+            / (2 * step_m))
+
+
 _FILTER_MARGIN_M = 20e3
 """Reach of a filter beyond its point-mass grid (m): the INS drift over a few hours."""
 
@@ -368,6 +380,9 @@ def cmd_filter(args):
     g, jac, eotvos_note = _eotvos(args, track, g)
     check_readings(g_raw, _map_at_ins(field, lat, lon) + offset, args.sigma_gravity,
                    column="gravity", where=where, correction=g - g_raw)
+    flat = information_warning(*_gradient_at_ins(field, lat[np.isfinite(g)],
+                                                 lon[np.isfinite(g)]),
+                               args.sigma_gravity, args.sigma_pos)
     # the model is masses + offset: z − (masses + offset + bias) = (z − offset) − (masses + bias)
     res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
@@ -393,8 +408,9 @@ def cmd_filter(args):
           f"{res['sigma_north'][-1]:.0f} m north, {res['sigma_east'][-1]:.0f} m east; "
           f"{eotvos_note}")
     _, _, fit_warning = innovation_check(res["innovation"], res["innovation_sigma"])
-    if fit_warning is not None:
-        print(f"warning: {fit_warning}", file=sys.stderr)
+    for warning in (flat, fit_warning):
+        if warning is not None:
+            print(f"warning: {warning}", file=sys.stderr)
     status = res["status"]
     for name in status_messages_filter(int(np.bitwise_or.reduce(status))):
         if name == "no_reading":

@@ -463,6 +463,21 @@ def test_ins_option_names_the_model(sim, tmp_path, capsys):
     assert navigation["sigma_v_east"][-1] > strategic["sigma_v_east"][-1]
 
 
+def test_a_track_far_from_the_masses_is_warned_of(sim, tmp_path, capsys):
+    """600 km north of paper D's masses the model is flat: no reading can tell the position,
+    and the filter said nothing (its output is the INS's). The clean track is not warned."""
+    cols = read_track_csv(sim / "track.csv").columns()
+    cols["lat"] = cols["lat"] + 5.4
+    cols["gravity"] = np.random.default_rng(0).normal(0.0, 1.0, cols["lat"].size)
+    write_track_csv(tmp_path / "far.csv", cols)
+    assert _filter(tmp_path / "far.csv", tmp_path / "f.csv", "--eotvos-corrected") == 0
+    err = capsys.readouterr().err
+    assert "the map is too flat along the track for its readings to tell the position" in err
+    assert "more than the prior 1414.2 m" in err, err
+    assert _filter(sim / "track.csv", tmp_path / "n.csv", "--eotvos-corrected") == 0
+    assert "too flat" not in capsys.readouterr().err
+
+
 def test_filter_track_refuses_a_bad_ins_model():
     t = np.arange(3) * 10.0
     args = (paper_d(), t, np.full(3, 30.0), np.full(3, 130.0), np.zeros(3))
