@@ -32,7 +32,7 @@ the filter estimates the velocity error from it instead of taking it for map or 
 
 **Map error.** With ``map_error`` set, a first- or second-order Gauss–Markov map-error
 state (:func:`~jaxgrav.filters.augment`) over the distance sailed (τ = L / the INS's
-median speed) is appended after the 13 INS states.
+mean speed, time at rest included) is appended after the 13 INS states.
 
 **Linearisation error, correlated.** Where the map is flat against its error the position
 error grows to kilometres, and the filter linearises the map at its own, wrong, position.
@@ -42,8 +42,9 @@ independent it is counted ~90 times, and the filter locks confidently onto a wro
 track with white innovations (an EKF linearised at the *true* position does not drift).
 The UKF (``ukf``, ``gsf``) therefore adds the map's second-order term over the predicted
 position covariance, ``½ tr((∇²Δg_M P)²)``, times the readings per map cell
-(``curvature_cells`` cells of the map's mean node spacing over the INS's median distance
-per step, times the share of steps that carry a reading), to the reading variance:
+(``curvature_cells`` cells of the map's mean node spacing over the INS's mean distance
+per step while sailing, above :data:`MOVING_MS`, times the share of steps that carry a
+reading), to the reading variance:
 nothing where the position is well known, the reading's share of a cell where it is not.
 
 A missing reading (NaN) or a sigma point off the map skips the update (status flags of
