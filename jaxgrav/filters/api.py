@@ -182,8 +182,8 @@ def _gaussian_run(program, field, dynamics, p0, steps, guard, meas, key=None):
 
 
 @jax.jit
-def _pmf_run(program, field, dt, p0, cell_m, q_pos, steps, map_error, speed):
-    filt = pmf(PMF_CELLS, cell_m, q_pos=q_pos)
+def _pmf_run(program, field, dt, p0, cell_m, q_pos, steps, map_error, speed, ins):
+    filt = pmf(PMF_CELLS, cell_m, q_pos=q_pos, ins=ins)  # ins: traced, one compilation
     dynamics = filt.dynamics(jnp.mean(steps.lat), dt)
     dynamics, x0, p0, _ = augment(map_error, dynamics, jnp.zeros(p0.shape[0]), p0, speed)
     _, infos = run_filter(filt, field, dynamics, x0, p0, steps, program.every)
@@ -309,7 +309,7 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         q_pos = PMF_Q_POS * (sigma_vel / 0.1414) ** 2
         padded, start = pad_to_stride(steps, every, rows[0])
         infos = executables.call(_pmf_run, _Program("pmf", every=every), field, dt, p0,
-                                 cell_m, q_pos, padded, map_error, speed)
+                                 cell_m, q_pos, padded, map_error, speed, ins)
         # causal: rows between readings show the prediction
         infos = jax.tree.map(lambda a: np.asarray(a)[start:start + n], infos)
     else:

@@ -518,3 +518,19 @@ def test_a_track_mostly_at_rest_then_moving_with_a_map_error(sim, tmp_path, caps
     assert np.all(res["innovation_sigma"] < 10.0), np.max(res["innovation_sigma"])
     nis = (res["innovation"] / res["innovation_sigma"]) ** 2
     assert 0.3 < nis.mean() < 3.0, nis.mean()
+
+
+@pytest.mark.long
+def test_pmf_predicts_with_the_ins_model_it_is_given(stride_track):
+    """filter_track(..., "pmf", ins=...) built the point-mass filter with paper D's model
+    whatever ``ins`` said (only the prior took it): before the first reading the PMF's
+    Gaussian part is the Kalman prediction, the UKF's too, with the same model."""
+    from jaxgrav.scenarios import INS_GRADES
+
+    c = read_track_csv(stride_track, allow_nan=("gravity",))
+    args = (paper_d(), c["t"], c["lat"], c["lon"], c["gravity"])
+    for grade in ("navigation", "strategic"):
+        res = {m: filter_track(*args, m, ins=INS_GRADES[grade]) for m in ("pmf", "ukf")}
+        for k in ("sigma_v_north", "sigma_v_east", "sigma_gravimeter_bias"):
+            np.testing.assert_allclose(res["pmf"][k][:2], res["ukf"][k][:2], rtol=1e-9,
+                                       err_msg=f"{grade} {k}")
