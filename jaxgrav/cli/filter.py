@@ -47,11 +47,20 @@ Gauss–Markov state, matched to the default map-error model). Tracks to try it 
 
 import sys
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav._io import check_outputs
+from jaxgrav.cli.filter_checks import (
+    MIN_PARTICLES,
+    check_on_map,
+    check_particles,
+    check_sigma,
+    gradient_at_ins,
+    ins_label,
+    map_at_ins,
+    offset_warning,
+    uniform_dt,
+)
 from jaxgrav.cli.inputs import (
     add_columns_option,
     add_map_error_var_option,
@@ -67,10 +76,9 @@ from jaxgrav.cli.sanity import (
     innovation_check,
 )
 from jaxgrav.cli.simulate import check_seed
-from jaxgrav.constants import DEG
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
-from jaxgrav.filters import STATUS_FILTER, map_anomaly, status_messages_filter
+from jaxgrav.filters import STATUS_FILTER, status_messages_filter
 from jaxgrav.filters.api import (
     FILTER_METHODS,
     PARTICLES,
@@ -83,24 +91,7 @@ from jaxgrav.geodesy import eotvos_jacobian, eotvos_jit
 from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.tracks import csv_line, write_track_csv
 
-__all__ = ["MIN_PARTICLES", "add_parser", "check_particles", "cmd_filter", "ins_label"]
-
-DT_RTOL = 1e-3
-"""Relative tolerance of a uniform time step."""
-
-MIN_PARTICLES = 100
-"""Fewest particles ``--particles`` takes (``filter`` and ``navigate``): with fewer, the
-particles cannot represent the position's posterior and the filter degenerates with no
-flag (paper D's track, rbpf: 2 to 30 particles ended 1.5-1.9 km off with a 1-sigma of
-12-44 m; 100 particles 0.3 km with 0.6 km). The SIR pf needs more for a 1-sigma to
-trust (NEES 15 at 300, 2.2 at 1000, 2 expected); its default is 2000."""
-
-
-def check_particles(n):
-    """ValueError naming ``--particles`` for a count below :data:`MIN_PARTICLES`."""
-    if n < MIN_PARTICLES:
-        raise ValueError(f"--particles must be an integer >= {MIN_PARTICLES} (fewer cannot "
-                         f"represent the position's posterior); got {n}")
+__all__ = ["add_parser", "cmd_filter"]
 
 _WARN = {
     "off_map": "the estimate, its sigma points or a particle left the map or met a missing "
@@ -192,25 +183,6 @@ def add_parser(subparsers):
 
 
 # ------------------------------------------------------------------------ checks
-def _uniform_dt(t, where):
-    """The step of a uniform time column, or a ValueError naming the first bad row."""
-    if t.size < 2:
-        raise ValueError(f"{where} has {t.size} row; the filter needs at least 2 "
-                         "(the time step is taken from column t)")
-    d = np.diff(t)
-    dt = float(np.median(d))
-    if not dt > 0:
-        raise ValueError(f"{where}: column t must increase; median step {dt:g} s")
-    bad = np.flatnonzero(np.abs(d - dt) > DT_RTOL * dt)
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(
-            f"{where}: column t must have a uniform step; t goes {t[i]:g} -> {t[i + 1]:g} s "
-            f"(step {d[i]:g} s) on lines {csv_line(i)}-{csv_line(i + 1)}, expected {dt:g} s "
-            f"(the median) within {DT_RTOL:.1%}; {bad.size} bad step(s)")
-    return dt
-
-
 def _output_columns(t, track, res):
     """The output CSV's columns: position and its covariance, velocity, biases, status."""
     cols = {"t": t, "lat": res["lat"], "lon": res["lon"]}
@@ -223,51 +195,6 @@ def _output_columns(t, track, res):
     keys += ["map_error", "sigma_map_error"] if "map_error" in res else []
     cols.update({k: res[k] for k in (*keys, "innovation", "innovation_sigma", "status")})
     return cols
-
-
-def ins_label(name):
-    """How ``--ins`` and the summary line name an INS grade.
-
-    Parameters
-    ----------
-    name : str
-        A key of :data:`jaxgrav.scenarios.INS_GRADES`.
-
-    Returns
-    -------
-    str
-        E.g. ``"strategic INS (0.001 deg/h gyro, 10 ug accelerometer biases)"``, from
-        the model's own values.
-    """
-    model = INS_GRADES[name]  # rad/s and m/s² (1 ug = 9.80665e-6 m/s²)
-    return (f"{name} INS ({model.gyro_sigma / DEG * 3600.0:.3g} deg/h gyro, "
-            f"{model.accel_sigma / 9.80665e-6:.3g} ug accelerometer biases)")
-
-
-def _check_sigma(name, value):
-    if not (np.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive, finite standard deviation; got {value!r}")
-
-
-_map_anomaly = jax.jit(map_anomaly)  # the filters' own map evaluation, one compile per field
-
-
-def _map_at_ins(field, lat, lon):
-    """The map (or point-mass model) at the INS positions, as the filters evaluate it
-    (:func:`~jaxgrav.filters.map_anomaly`; mGal, NaN off a map or in a cell with a missing
-    node)."""
-    return np.asarray(_map_anomaly(field, jnp.asarray(lat), jnp.asarray(lon)))
-
-
-def _gradient_at_ins(field, lat, lon, step_m=500.0):
-    """The map's north and east gradient at the INS positions (mGal/m), central
-    differences over ``step_m`` each way."""
-    dlat = step_m / 111195.0
-    dlon = dlat / np.cos(np.radians(lat))
-    return ((_map_at_ins(field, lat + dlat, lon) - _map_at_ins(field, lat - dlat, lon))
-            / (2 * step_m),
-            (_map_at_ins(field, lat, lon + dlon) - _map_at_ins(field, lat, lon - dlon))
-            / (2 * step_m))
 
 
 _FILTER_MARGIN_M = 20e3
@@ -305,17 +232,6 @@ def _eotvos(args, track, g):
     return g, jac, f"readings {how} with the INS velocity, its error in the filter"
 
 
-def _check_on_map(grid, lat, lon, where, name):
-    inside = np.asarray(grid.contains(lat, lon))
-    if not inside.all():
-        i = int(np.flatnonzero(~inside)[0])
-        w, e, s, n = grid.extent
-        raise ValueError(
-            f"{where}: {int((~inside).sum())} of {lat.size} positions are off the map --map "
-            f"{name} (lat {s:g}..{n:g}, lon {w:g}..{e:g}), first on line {csv_line(i)} "
-            f"(lat {lat[i]:g}, lon {lon[i]:g})")
-
-
 def _particle_options(args):
     """``filter_track``'s particle settings from the arguments (empty for other methods)."""
     if args.method not in PARTICLES:
@@ -337,12 +253,12 @@ def cmd_filter(args):
                           "--point-masses": args.point_masses})
     for name, value in (("--sigma-pos", args.sigma_pos), ("--sigma-vel", args.sigma_vel),
                         ("--sigma-gravity", args.sigma_gravity)):
-        _check_sigma(name, value)
+        check_sigma(name, value)
     check_seed(args.seed)
     where = f"--track {str(args.track)!r}"
     track = read_track(args, required=("t", "lat", "lon", "gravity"), allow_nan=("gravity",))
     t, lat, lon, g = (track[k] for k in ("t", "lat", "lon", "gravity"))
-    _uniform_dt(t, where)
+    uniform_dt(t, where)
     if np.any(np.abs(lat) > 90):
         i = int(np.flatnonzero(np.abs(lat) > 90)[0])
         raise ValueError(f"{where}: latitude {lat[i]:g} on line {csv_line(i)} is outside "
@@ -375,14 +291,17 @@ def cmd_filter(args):
     fogm = (map_error_state(me_sigma, me_length, args.map_error_order) if me_sigma > 0
             else None)
     if args.map is not None:
-        _check_on_map(field, lat, lon, where, args.map)
+        check_on_map(field, lat, lon, where, args.map)
     g_raw = g
     g, jac, eotvos_note = _eotvos(args, track, g)
-    check_readings(g_raw, _map_at_ins(field, lat, lon) + offset, args.sigma_gravity,
-                   column="gravity", where=where, correction=g - g_raw)
-    flat = information_warning(*_gradient_at_ins(field, lat[np.isfinite(g)],
-                                                 lon[np.isfinite(g)]),
+    expected = map_at_ins(field, lat, lon) + offset
+    check_readings(g_raw, expected, args.sigma_gravity, column="gravity", where=where,
+                   correction=g - g_raw)
+    read = np.isfinite(g)
+    flat = information_warning(*gradient_at_ins(field, lat[read], lon[read]),
                                args.sigma_gravity, args.sigma_pos)
+    level = offset_warning(g, expected, INS_GRADES[args.ins].gravimeter_sigma, me_sigma,
+                           args.sigma_gravity)
     # the model is masses + offset: z − (masses + offset + bias) = (z − offset) − (masses + bias)
     res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
@@ -408,7 +327,7 @@ def cmd_filter(args):
           f"{res['sigma_north'][-1]:.0f} m north, {res['sigma_east'][-1]:.0f} m east; "
           f"{eotvos_note}")
     _, _, fit_warning = innovation_check(res["innovation"], res["innovation_sigma"])
-    for warning in (flat, fit_warning):
+    for warning in (flat, level, fit_warning):
         if warning is not None:
             print(f"warning: {warning}", file=sys.stderr)
     status = res["status"]

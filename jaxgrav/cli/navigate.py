@@ -54,7 +54,7 @@ import numpy as np
 
 from jaxgrav import executables
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.filter import MIN_PARTICLES, check_particles
+from jaxgrav.cli.filter_checks import MIN_PARTICLES, check_particles, offset_warning
 from jaxgrav.cli.inputs import (
     add_columns_option,
     add_map_error_var_option,
@@ -279,6 +279,12 @@ def cmd_navigate(args):
     check_readings(gravity, np.asarray(grid.sample(ins.lat, ins.lon, "bicubic")), args.noise,
                    column="gravity", where=f"--track {track.path!r}",
                    correction=0.0 if args.eotvos_corrected else e_ins)
+    if args.method in TIGHT_METHODS:  # its bias state allows a constant offset of σ_b
+        level = offset_warning(gravity + (0.0 if args.eotvos_corrected else e_ins),
+                               np.asarray(grid.sample(ins.lat, ins.lon, "bicubic")),
+                               INS_GRADES[args.ins].gravimeter_sigma, args.map_error, args.noise)
+        if level is not None:
+            print(f"warning: {level}", file=sys.stderr)
     if args.eotvos_corrected:  # back to the raw reading: the loop corrects it itself
         gravity = gravity - e_ins
     voyage = Voyage(ins, gravity)

@@ -7,6 +7,7 @@ NetCDF map; gsf (one more compilation) runs with ``JAXGRAV_SLOW=1``.
 
 import contextlib
 import os
+import re
 
 import jax
 import numpy as np
@@ -476,6 +477,20 @@ def test_a_track_far_from_the_masses_is_warned_of(sim, tmp_path, capsys):
     assert "more than the prior 1414.2 m" in err, err
     assert _filter(sim / "track.csv", tmp_path / "n.csv", "--eotvos-corrected") == 0
     assert "too flat" not in capsys.readouterr().err
+
+
+def test_readings_offset_from_the_map_are_warned_of(sim, tmp_path, capsys):
+    """+250 mGal (an untied gravimeter) passed the readings' checks (below their 300 mGal
+    floor) and the filter moved the position to explain it, blamed on the noise."""
+    cols = read_track_csv(sim / "track.csv").columns()
+    cols["gravity"] = cols["gravity"] + 250.0
+    write_track_csv(tmp_path / "b.csv", cols)
+    assert _filter(tmp_path / "b.csv", tmp_path / "f.csv") == 0
+    err = capsys.readouterr().err
+    assert re.search(r"the readings sit \+2\d\d mGal from the map along the INS track", err)
+    assert "subtract the offset from the gravity column" in err, err
+    assert _filter(sim / "track.csv", tmp_path / "n.csv") == 0
+    assert "the readings sit" not in capsys.readouterr().err
 
 
 def test_filter_track_refuses_a_bad_ins_model():

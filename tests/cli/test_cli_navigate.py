@@ -1,5 +1,7 @@
 """``jaxgrav navigate``: a simulated log navigated end to end, and every bad input named."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -222,6 +224,9 @@ def test_an_implausible_fit_is_flagged_on_its_rows(voyage_log, tmp_path, capsys)
     captured = capsys.readouterr()
     assert "implausible_fit" in captured.out and "innovations are" in captured.err
     assert (pd.read_csv(out)["status"].to_numpy() & 128).mean() > 0.5
+    # and named for what it is before the run (filter_checks.offset_warning)
+    assert re.search(r"the readings sit \+2\d\d mGal from the map", captured.err)
+    assert "a datum or an untied" in captured.err
 
 
 def test_loose_methods_refuse_a_log_with_a_reading_every_few_rows(voyage_log, tmp_path,

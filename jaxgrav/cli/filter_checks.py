@@ -1,0 +1,157 @@
+"""Checks of ``jaxgrav filter``'s inputs and of what its readings can tell.
+
+The one-line errors of :mod:`jaxgrav.cli.filter` (time step, particle count, standard
+deviations, the track on the map), the map as the filters evaluate it at the INS
+positions, and two warnings that a run cannot give a trustworthy answer: a map too flat
+to tell the position (:func:`~jaxgrav.cli.sanity.information_warning` from
+:func:`gradient_at_ins`) and readings offset from the map by more than the filter's
+gravimeter bias allows (:func:`offset_warning`).
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrav.constants import DEG
+from jaxgrav.filters import map_anomaly
+from jaxgrav.scenarios import INS_GRADES
+from jaxgrav.tracks import csv_line
+
+__all__ = ["DT_RTOL", "MIN_PARTICLES", "OFFSET_FLOOR", "OFFSET_SIGMAS", "check_on_map",
+           "check_particles", "check_sigma", "gradient_at_ins", "ins_label", "map_at_ins",
+           "offset_warning", "uniform_dt"]
+
+DT_RTOL = 1e-3
+"""Relative tolerance of a uniform time step."""
+
+MIN_PARTICLES = 100
+"""Fewest particles ``--particles`` takes (``filter`` and ``navigate``): with fewer, the
+particles cannot represent the position's posterior and the filter degenerates with no
+flag (paper D's track, rbpf: 2 to 30 particles ended 1.5-1.9 km off with a 1-sigma of
+12-44 m; 100 particles 0.3 km with 0.6 km). The SIR pf needs more for a 1-sigma to
+trust (NEES 15 at 300, 2.2 at 1000, 2 expected); its default is 2000."""
+
+OFFSET_SIGMAS = 5.0
+"""Readings whose median offset from the map exceeds this many 1-σ of what the filter
+allows for it (gravimeter bias, map error, the noise of the median) are warned of."""
+OFFSET_FLOOR = 25.0
+"""... and at least this offset (mGal): the map at a wrong INS position differs too (paper
+D's track, INS 2 km off: a median of 2.5 mGal; along a slope of 5 mGal/km, 3 km off: 15)."""
+
+
+def check_particles(n):
+    """ValueError naming ``--particles`` for a count below :data:`MIN_PARTICLES`."""
+    if n < MIN_PARTICLES:
+        raise ValueError(f"--particles must be an integer >= {MIN_PARTICLES} (fewer cannot "
+                         f"represent the position's posterior); got {n}")
+
+
+def uniform_dt(t, where):
+    """The step of a uniform time column (s), or a ValueError naming the first bad row."""
+    if t.size < 2:
+        raise ValueError(f"{where} has {t.size} row; the filter needs at least 2 "
+                         "(the time step is taken from column t)")
+    d = np.diff(t)
+    dt = float(np.median(d))
+    if not dt > 0:
+        raise ValueError(f"{where}: column t must increase; median step {dt:g} s")
+    bad = np.flatnonzero(np.abs(d - dt) > DT_RTOL * dt)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"{where}: column t must have a uniform step; t goes {t[i]:g} -> {t[i + 1]:g} s "
+            f"(step {d[i]:g} s) on lines {csv_line(i)}-{csv_line(i + 1)}, expected {dt:g} s "
+            f"(the median) within {DT_RTOL:.1%}; {bad.size} bad step(s)")
+    return dt
+
+
+def ins_label(name):
+    """How ``--ins`` and the summary line name an INS grade.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`jaxgrav.scenarios.INS_GRADES`.
+
+    Returns
+    -------
+    str
+        E.g. ``"strategic INS (0.001 deg/h gyro, 10 ug accelerometer biases)"``, from
+        the model's own values.
+    """
+    model = INS_GRADES[name]  # rad/s and m/s² (1 ug = 9.80665e-6 m/s²)
+    return (f"{name} INS ({model.gyro_sigma / DEG * 3600.0:.3g} deg/h gyro, "
+            f"{model.accel_sigma / 9.80665e-6:.3g} ug accelerometer biases)")
+
+
+def check_sigma(name, value):
+    """ValueError naming the option ``name`` unless ``value`` is a positive, finite σ."""
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a positive, finite standard deviation; got {value!r}")
+
+
+_map_anomaly = jax.jit(map_anomaly)  # the filters' own map evaluation, one compile per field
+
+
+def map_at_ins(field, lat, lon):
+    """The map (or point-mass model) at the INS positions, as the filters evaluate it
+    (:func:`~jaxgrav.filters.map_anomaly`; mGal, NaN off a map or in a cell with a missing
+    node), shape of ``lat``."""
+    return np.asarray(_map_anomaly(field, jnp.asarray(lat), jnp.asarray(lon)))
+
+
+def gradient_at_ins(field, lat, lon, step_m=500.0):
+    """The map's north and east gradient at the INS positions (mGal/m, each the shape of
+    ``lat``), central differences over ``step_m`` (m) each way."""
+    dlat = step_m / 111195.0
+    dlon = dlat / np.cos(np.radians(lat))
+    return ((map_at_ins(field, lat + dlat, lon) - map_at_ins(field, lat - dlat, lon))
+            / (2 * step_m),
+            (map_at_ins(field, lat, lon + dlon) - map_at_ins(field, lat, lon - dlon))
+            / (2 * step_m))
+
+
+def offset_warning(readings, expected, bias_sigma, map_error_sigma, noise):
+    """A warning when the readings sit further from the map than the filter allows, or None.
+
+    The filter explains a constant offset of the readings by its gravimeter-bias state,
+    whose prior is ``bias_sigma``; an offset far beyond it (an untied gravimeter, another
+    datum) is explained by moving the position instead (paper D's track with +250 mGal
+    ended 36 km off). Warned when the median of ``readings − expected`` exceeds
+    :data:`OFFSET_SIGMAS` × ``sqrt(bias² + map_error² + (1.25 noise)² / K)`` and
+    :data:`OFFSET_FLOOR`.
+
+    Parameters
+    ----------
+    readings, expected : array_like, shape ``(N,)``
+        Eötvös-corrected readings and the map at the INS positions (mGal; NaN: left out).
+    bias_sigma, map_error_sigma, noise : float
+        1-σ of the gravimeter-bias prior, of the map error told and of a reading (mGal).
+    """
+    d = np.asarray(readings, float) - np.asarray(expected, float)
+    d = d[np.isfinite(d)]
+    if d.size == 0:
+        return None
+    offset = float(np.median(d))
+    allowed = math.sqrt(bias_sigma**2 + map_error_sigma**2 + (1.25 * noise) ** 2 / d.size)
+    if abs(offset) <= max(OFFSET_SIGMAS * allowed, OFFSET_FLOOR):
+        return None
+    return (f"the readings sit {offset:+.4g} mGal from the map along the INS track (median "
+            f"of {d.size}), {abs(offset) / allowed:.0f} × the 1-sigma the filter allows for "
+            f"a constant offset ({allowed:.3g} mGal: gravimeter bias {bias_sigma:g}, map "
+            f"error {map_error_sigma:g}); a datum or an untied gravimeter? subtract the "
+            "offset from the gravity column, or the filter moves the position to explain it")
+
+
+def check_on_map(grid, lat, lon, where, name):
+    """ValueError naming the first of the INS positions off the map ``--map name``."""
+    inside = np.asarray(grid.contains(lat, lon))
+    if not inside.all():
+        i = int(np.flatnonzero(~inside)[0])
+        w, e, s, n = grid.extent
+        raise ValueError(
+            f"{where}: {int((~inside).sum())} of {lat.size} positions are off the map --map "
+            f"{name} (lat {s:g}..{n:g}, lon {w:g}..{e:g}), first on line {csv_line(i)} "
+            f"(lat {lat[i]:g}, lon {lon[i]:g})")
