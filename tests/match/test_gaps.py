@@ -36,8 +36,9 @@ M = RNG.normal(size=(7, N))
 W = np.exp(-0.5 * np.linspace(0.0, 1.0, N))
 W = W / W.sum()
 UNIT = 0.7**2 * np.sum(W**2)  # σ_n² Σμ²
-COV = np.asarray(track_covariance(1000.0 * np.arange(N), np.zeros(N), 0.7, 2.0, 5000.0,
-                                  weights=W))
+# jitted: op by op (at every collection, in each pytest-xdist worker) it took 1.1 s
+COV = np.asarray(jax.jit(track_covariance)(1000.0 * np.arange(N), np.zeros(N), 0.7, 2.0,
+                                           5000.0, weights=W))
 
 
 def _holey():
@@ -85,11 +86,12 @@ def test_gap_score_against_a_numpy_loop(kind):
 
 GLS_GAP = jax.jit(gls_gap_score, static_argnums=3)
 GLS = jax.jit(gls_score)
+WHITENER = jax.jit(gls_whitener)  # op by op its Cholesky scan compiled again at every call
 
 
 @pytest.mark.parametrize("sigma_b", [np.inf, 2.0, 0.0])
 def test_gls_gap_score_is_the_restricted_covariance_score_plus_one_per_gap(sigma_b):
-    wh = gls_whitener(COV)
+    wh = WHITENER(COV)
     a = GLS_GAP(wh, G - M, sigma_b, 3)
     b = GLS(wh, G - M, sigma_b)
     np.testing.assert_allclose(np.asarray(a[0]), np.asarray(b[0]), rtol=1e-10)
@@ -101,14 +103,14 @@ def test_gls_gap_score_is_the_restricted_covariance_score_plus_one_per_gap(sigma
         if (~ok).sum() > 3:
             assert score[k] == np.inf
             continue
-        ref, ref_b = GLS(gls_whitener(COV[np.ix_(ok, ok)]), (G - m[k])[ok], sigma_b)
+        ref, ref_b = GLS(WHITENER(COV[np.ix_(ok, ok)]), (G - m[k])[ok], sigma_b)
         np.testing.assert_allclose(score[k], float(ref) + (~ok).sum(), rtol=1e-10)
         np.testing.assert_allclose(bias[k], float(ref_b), rtol=1e-10, atol=1e-13)
 
 
 def test_the_truths_expected_score_does_not_depend_on_its_gaps():
     """Candidates with and without gaps compare on one scale: E[J] = N − 1 (flat bias)."""
-    wh = gls_whitener(COV)
+    wh = WHITENER(COV)
     chol = np.linalg.cholesky(COV)
     draws = 4000
     r = (chol @ RNG.standard_normal((N, draws))).T + 5.0  # any bias
@@ -120,7 +122,7 @@ def test_the_truths_expected_score_does_not_depend_on_its_gaps():
 
 
 def test_gap_scores_jit_vmap_and_grad():
-    wh = gls_whitener(COV)
+    wh = WHITENER(COV)
     m = jnp.asarray(_holey())
     f = jax.jit(lambda r: gls_gap_score(wh, r, 2.0, 3)[0])
     np.testing.assert_allclose(np.asarray(f(G - m)),
