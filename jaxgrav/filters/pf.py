@@ -16,8 +16,11 @@ PRNG key, so a run is reproducible from the key given to ``init``.
 Its :class:`~jaxgrav.filters.model.StepInfo` is the weighted posterior mean and
 covariance; the innovation is the reading minus the predicted mean reading, its
 variance the particles' spread of predicted readings plus ``r``. Status flags as the
-UKF's: a missing reading, a particle off the map (``off_map``), a gated innovation or
-a non-positive reading variance (``covariance_failed``) skip the weighting.
+UKF's: a missing reading, every particle off the map (``off_map``), a gated innovation
+or a non-positive reading variance (``covariance_failed``) skip the weighting. A particle
+off the map or on a missing node while others are on it takes their mean likelihood (it
+neither gains nor loses weight against them, as the point-mass filter's unknown cells),
+and the reading's moments are the others'; ``off_map`` is flagged.
 """
 
 from typing import NamedTuple
@@ -26,7 +29,7 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import psd_sqrt
-from jaxgrav.filters.model import Filter, StepInfo, gravity_measurement
+from jaxgrav.filters.model import STATUS_FILTER, Filter, StepInfo, gravity_measurement
 from jaxgrav.filters.particles import (
     check_particle_settings,
     normalise_log_weights,
@@ -125,15 +128,24 @@ def pf(n_particles=1000, measurement=gravity_measurement, *, resample="systemati
         zs = jax.vmap(lambda xi: measurement(field, xi, step.lat, step.lon))(x)
         if step.h_lin is not None:
             zs = zs + x @ step.h_lin
-        off_map = ~jnp.all(jnp.isfinite(zs))
-        zs = jnp.where(jnp.isfinite(zs), zs, 0.0)  # double-where: no NaN into the weights
-        s, nu, z = reading_moments(state.log_w, zs, step.r, step.z)
-        flags, skip = particle_flags(step.z, step.r, s, nu, gate, off_map)
+        known = jnp.isfinite(zs)
+        none_known = ~jnp.any(known)
+        zs = jnp.where(known, zs, 0.0)  # double-where: no NaN into the weights
+        # the reading's moments over the particles with a map value (renormalised)
+        lw_known = normalise_log_weights(jnp.where(known | none_known, state.log_w, -jnp.inf))
+        s, nu, z = reading_moments(lw_known, zs, step.r, step.z)
+        flags, skip = particle_flags(step.z, step.r, s, nu, gate, none_known)
+        flags = flags | jnp.where(jnp.isfinite(step.z) & ~jnp.all(known),
+                                  STATUS_FILTER["off_map"], 0).astype(flags.dtype)
         r = jnp.where(step.r > 0.0, step.r, 1.0)
-        log_w = normalise_log_weights(state.log_w - 0.5 * (z - zs) ** 2 / r)
+        loglik = -0.5 * (z - zs) ** 2 / r
+        # a particle without a map value takes the others' mean likelihood: the reading
+        # moves no weight between particles with and without one (as the PMF's gaps)
+        gap = jax.nn.logsumexp(jnp.where(known, lw_known + loglik, -jnp.inf))
+        log_w = normalise_log_weights(state.log_w + jnp.where(known, loglik, gap))
         log_w = jnp.where(skip, state.log_w, log_w)
         weighted = ParticleState(x, log_w, state.key)
-        nu_out = jnp.where(jnp.isfinite(step.z) & ~off_map, nu, jnp.nan)  # none off map
+        nu_out = jnp.where(jnp.isfinite(step.z) & ~none_known, nu, jnp.nan)
         info = _info(weighted, nu_out, s, flags)  # the posterior, before resampling
         return resample_if_degenerate(weighted), info
 

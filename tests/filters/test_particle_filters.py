@@ -205,6 +205,35 @@ def test_off_map_particles_skip_the_reading():
 
 
 @pytest.mark.long
+def test_pf_particles_without_a_map_value_take_the_others_mean_likelihood():
+    """A map edge through the cloud: the particles beyond it neither gain nor lose weight
+    against the rest (Bayes by hand), and the reading is used, flagged off_map (it was
+    skipped whenever one particle of the cloud met a missing value)."""
+    from jaxgrav.filters import gravity_measurement
+
+    dyn, x0, p0, steps = _linear_problem(5)
+
+    def edge(lat, lon):  # "map" that ends 200 m north of the track start
+        return jnp.where(lat < LAT0 + 0.0018, _linear_field(lat, lon), jnp.nan)
+
+    filt = pf(256, ess_threshold=0.0)  # no resampling: the weights stay comparable
+    state = filt.init(x0, p0, jax.random.PRNGKey(3))
+    step = jax.tree.map(lambda a: a[0], steps)
+    new, info = jax.jit(filt.update, static_argnums=2)(state, step, edge, dyn)
+    zs = np.asarray(jax.vmap(lambda x: gravity_measurement(edge, x, step.lat, step.lon))(
+        new.particles))
+    known = np.isfinite(zs)
+    assert 0.2 < known.mean() < 0.8
+    w = np.exp(np.asarray(state.log_w))
+    lik = np.where(known, np.exp(-0.5 * (float(step.z) - np.where(known, zs, 0.0)) ** 2), 0.0)
+    post = w * np.where(known, lik, np.sum(w * lik) / np.sum(w[known]))
+    post /= post.sum()
+    np.testing.assert_allclose(np.exp(np.asarray(new.log_w)), post, rtol=1e-9, atol=1e-300)
+    assert post[~known].sum() == pytest.approx(w[~known].sum(), rel=1e-9)
+    assert int(info.status) & STATUS_FILTER["off_map"] and np.isfinite(float(info.innovation))
+
+
+@pytest.mark.long
 def test_bad_settings_are_clear_errors():
     with pytest.raises(ValueError, match="n_particles"):
         pf(1)
