@@ -177,6 +177,10 @@ def add_parser(subparsers):
     f.add_argument("--eotvos-corrected", action="store_true",
                    help="the gravity column is already Eötvös-corrected with the INS velocity "
                         "of v_east, v_north (default: raw, corrected here)")
+    f.add_argument("--missing", choices=("gaps", "land"), default=None,
+                   help="pmf: a map's missing (NaN) nodes are survey gaps (default: unknown "
+                        "values) or land (the vehicle cannot be there: only for a land mask "
+                        "the track never crosses)")
     f.add_argument("--force", action="store_true", help="overwrite an existing output")
     f.set_defaults(func=cmd_filter)
     return f
@@ -276,6 +280,10 @@ def cmd_filter(args):
                              f"INS, e.g. 0.2); got {args.guard!r}")
     if args.method == "pmf":
         reading_stride(np.flatnonzero(np.isfinite(g)), where)
+    if args.missing is not None and args.method != "pmf":
+        raise ValueError(f"--missing {args.missing} is for --method pmf (the other methods "
+                         f"skip a reading whose map value is missing); got --method "
+                         f"{args.method}")
     if args.particles is not None:
         if args.method not in PARTICLES:
             raise ValueError(f"--particles is for --method pf or rbpf; got --method "
@@ -306,7 +314,8 @@ def cmd_filter(args):
     res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
                        guard=args.guard, map_error=fogm, eotvos_velocity=jac, where=where,
-                       ins=INS_GRADES[args.ins], **_particle_options(args))
+                       ins=INS_GRADES[args.ins], missing=args.missing or "gaps",
+                       **_particle_options(args))
     res["status"] = res["status"] | np.where(
         implausible_rows(res["innovation"], res["innovation_sigma"]),
         STATUS_FILTER["implausible_fit"], 0)

@@ -166,6 +166,7 @@ class _Program:
     kind: str = static_field("ukf")
     n_particles: int = static_field(0)
     every: int = static_field(1)
+    missing: str = static_field("gaps")
 
 
 @jax.jit
@@ -183,7 +184,8 @@ def _gaussian_run(program, field, dynamics, p0, steps, guard, meas, key=None):
 
 @jax.jit
 def _pmf_run(program, field, dt, p0, cell_m, q_pos, steps, map_error, speed, ins):
-    filt = pmf(PMF_CELLS, cell_m, q_pos=q_pos, ins=ins)  # ins: traced, one compilation
+    # ins: traced, one compilation for every grade
+    filt = pmf(PMF_CELLS, cell_m, q_pos=q_pos, ins=ins, missing=program.missing)
     dynamics = filt.dynamics(jnp.mean(steps.lat), dt)
     dynamics, x0, p0, _ = augment(map_error, dynamics, jnp.zeros(p0.shape[0]), p0, speed)
     _, infos = run_filter(filt, field, dynamics, x0, p0, steps, program.every)
@@ -193,7 +195,7 @@ def _pmf_run(program, field, dt, p0, cell_m, q_pos, steps, map_error, speed, ins
 def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
                  sigma_vel=0.1414, sigma_gravity=1.0, guard=None, map_error=None,
                  eotvos_velocity=None, where="track", n_particles=None, seed=0,
-                 ins=STRATEGIC_INS):
+                 ins=STRATEGIC_INS, missing="gaps"):
     """Filter one track; the engine of ``jaxgrav filter`` (inputs already validated).
 
     Run with x64 enabled (the CLI does): positions are in degrees.
@@ -243,6 +245,8 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         gravimeter's systematic error in mGal). Default :data:`STRATEGIC_INS`, paper
         D's; a log from a navigation-grade INS (``jaxgrav simulate-voyage``) needs
         ``jaxgrav.scenarios.INS_GRADES["navigation"]``, or the 1-σ is over-confident.
+    missing : {"gaps", "land"}
+        ``pmf``: how a cell on a missing (NaN) map node is read (:func:`~jaxgrav.filters.pmf`).
 
     Returns
     -------
@@ -269,6 +273,8 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     if not isinstance(ins, INSErrorModel):
         raise TypeError(f"ins must be an INSErrorModel (e.g. jaxgrav.scenarios.INS_GRADES"
                         f"['navigation']); got {type(ins).__name__}")
+    if missing != "gaps" and method != "pmf":
+        raise ValueError(f"missing={missing!r} is for method 'pmf'; got method={method!r}")
     if n_particles is not None and method not in PARTICLES:
         raise ValueError(f"n_particles is for the particle filters {tuple(PARTICLES)}; got "
                          f"method={method!r}")
@@ -308,8 +314,8 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         cell_m = 2.0 * PMF_SPAN_SIGMA * sigma_pos / (PMF_CELLS - 1)
         q_pos = PMF_Q_POS * (sigma_vel / 0.1414) ** 2
         padded, start = pad_to_stride(steps, every, rows[0])
-        infos = executables.call(_pmf_run, _Program("pmf", every=every), field, dt, p0,
-                                 cell_m, q_pos, padded, map_error, speed, ins)
+        infos = executables.call(_pmf_run, _Program("pmf", every=every, missing=missing),
+                                 field, dt, p0, cell_m, q_pos, padded, map_error, speed, ins)
         # causal: rows between readings show the prediction
         infos = jax.tree.map(lambda a: np.asarray(a)[start:start + n], infos)
     else:

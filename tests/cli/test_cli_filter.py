@@ -333,6 +333,8 @@ def _bad(kind, cols):
      "--particles is for --method pf or rbpf; got --method ukf"),
     ("ok", ("--method", "rbpf", "--particles", "1"), "--particles must be an integer >= 100"),
     ("ok", ("--guard", "-0.5"), "--guard must be a positive variance ratio"),
+    ("ok", ("--method", "ukf", "--missing", "land"),
+     "--missing land is for --method pmf (the other methods skip a reading"),
     ("ok", ("--map-error", "-1"), "--map-error must be a finite map-error sigma >= 0 (mGal); "
                                   "got -1.0"),
     ("ok", ("--map-error", "nan"), "--map-error must be a finite map-error sigma >= 0"),
