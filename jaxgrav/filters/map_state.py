@@ -45,6 +45,8 @@ from jaxgrav._validate import concrete
 from jaxgrav.filters.model import Dynamics, MapPlusBias, gravity_measurement
 
 __all__ = [
+    "ORDERS",
+    "SOGM_MIN_SPEED",
     "MapErrorState",
     "augment",
     "fogm_length",
@@ -57,6 +59,10 @@ __all__ = [
 
 ORDERS = (1, 2)
 """Gauss–Markov orders of the map-error state."""
+SOGM_MIN_SPEED = 0.01
+"""Least speed (m/s) of a second-order state's ``β = speed / L``: at rest its rate's
+prior ``β² σ²`` and noise were zero, a singular covariance that the UKF repaired (and
+flagged) on every row; at 1 cm/s ``τ = L / speed`` is 12 days for L = 10 km."""
 
 
 @pytree_dataclass
@@ -246,6 +252,7 @@ def _transition(config, speed, dt):
     if config.order == 1:
         phi, q = fogm_transition(config.sigma, config.length_m, speed, dt)
         return phi[None, None], q[None, None], s2[None, None]
+    speed = jnp.maximum(speed, SOGM_MIN_SPEED)  # at rest the rate's prior was singular
     phi, q = sogm_transition(config.sigma, config.length_m, speed, dt)
     beta = jnp.asarray(speed) / jnp.asarray(config.length_m)
     return phi, q, jnp.diag(jnp.stack([s2, jnp.square(beta) * s2]))
@@ -292,7 +299,8 @@ def augment(config, dynamics, x0, p0, speed, measurement=gravity_measurement):
     p0 : Array, shape ``(n, n)``
     speed : float or Array
         Speed over ground (m/s) for ``τ = L / speed``; finite and ≥ 0 (0: a platform at
-        rest, whose map error stays what it is). A concrete bad value is a ValueError.
+        rest, whose map error stays what it is; order 2 takes at least
+        :data:`SOGM_MIN_SPEED`). A concrete bad value is a ValueError.
     measurement : MapPlusBias
         The measurement to extend.
 

@@ -96,8 +96,12 @@ def test_augment_refuses_a_bad_speed():
     for bad in (-5.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="speed must be a finite number >= 0"):
             augment(map_error_state(3.0, 1e4, 2), dyn, x0, p0, bad)
-    d, *_ = augment(map_error_state(3.0, 1e4, 2), dyn, x0, p0, 0.0)  # at rest: constant
-    np.testing.assert_allclose(np.asarray(d.q[13:, 13:]), 0.0, atol=0)
+    # at rest: the value constant (to 1 cm/s, SOGM_MIN_SPEED: tau 12 days at L = 10 km),
+    # its prior positive definite (it was singular: the UKF repaired it on every row)
+    d, _, p1, _ = augment(map_error_state(3.0, 1e4, 2), dyn, x0, p0, 0.0)
+    np.testing.assert_allclose(np.asarray(d.q[13:, 13:]), 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(d.f[13, 13]), 1.0, atol=1e-10)
+    assert np.all(np.linalg.eigvalsh(np.asarray(p1[13:, 13:])) > 0)
 
 
 def test_fogm_length_matches_the_integral_scale():
