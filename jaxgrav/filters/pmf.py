@@ -54,8 +54,8 @@ the state is the mixture's moments: :mod:`~jaxgrav.filters.pmf_linear`). A missi
 reading skips the update; a cell whose map value is unknown (off a Grid map, or a NaN
 node within the interpolation's reach) gets the known cells' mean likelihood, so the
 reading moves no mass between known and unknown cells, and keeps its bias and linear
-part (no cell on the map: no update); with ``missing="land"`` a cell on a NaN node
-within the map gets none: the vehicle cannot be there. The estimate is the posterior
+part (no cell on the map: no update); with ``missing="land"`` a cell whose nearest
+node is NaN gets none: the vehicle cannot be there. The estimate is the posterior
 mean; its position covariance is the grid's plus the cell's own ``cell²/12`` (for NEES;
 after a ``predict``, plus the pending spread).
 

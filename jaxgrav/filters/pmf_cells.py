@@ -45,8 +45,9 @@ __all__ = [
 MISSING = ("gaps", "land")
 """How the point-mass filter reads a cell on a missing map node (``pmf(missing=...)``):
 ``"gaps"``, a survey gap (the known cells' mean likelihood: the reading moves no mass
-between known and unknown cells); ``"land"``, where the vehicle cannot be (likelihood 0).
-A cell off the map's extent is a gap either way."""
+between known and unknown cells); ``"land"``, where the vehicle cannot be (likelihood 0)
+for a cell whose nearest node is missing; a cell beside one (its interpolation needs the
+missing node) and a cell off the map's extent are gaps either way."""
 
 
 class PMFState(NamedTuple):
@@ -235,8 +236,15 @@ def weigh_cells(w, lik, on_map, field, step, dn, de, missing):
     lik_gap = jnp.sum(w_on * lik) / jnp.maximum(jnp.sum(w_on), jnp.finfo(w.dtype).tiny)
     land = jnp.zeros(on_map.shape, bool)
     if missing == "land" and isinstance(field, PreparedMap):
+        # land where the cell's nearest node is missing: a cell beside a missing node
+        # (a corner of its interpolation cell, up to a node spacing seaward) is a gap
+        grid = field.grid
         lat, lon = apply_drift(step.lat, step.lon, -dn[:, 0], -de[0, :])
-        land = ~on_map & field.grid.contains(lat[:, None], lon[None, :])
+        iy, ix = grid.fractional_index(lat[:, None], lon[None, :])
+        inside = grid.contains(lat[:, None], lon[None, :])
+        iy = jnp.clip(jnp.round(iy), 0, grid.ny - 1).astype(jnp.int32)
+        ix = jnp.clip(jnp.round(ix), 0, grid.nx - 1).astype(jnp.int32)
+        land = ~on_map & inside & ~jnp.isfinite(jnp.asarray(grid.values)[iy, ix])
     return w * jnp.where(on_map, lik, jnp.where(land, 0.0, lik_gap))
 
 

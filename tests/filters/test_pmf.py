@@ -548,25 +548,34 @@ def test_cells_on_land_take_no_mass(prior):
 
 
 def test_land_cells_are_missing_nodes_inside_the_map_and_others_gaps():
-    """weigh_cells: with missing="land" only an unknown cell inside the map's extent is
-    land (likelihood 0); one off the extent is a gap either way."""
-    # a 1° map whose southern edge cuts a grid of 3 × 3 cells of 60 km: the cells south
-    # of it are gaps (the known cells' mean likelihood), an unknown cell inside is land
-    values = np.zeros((4, 4))
-    values[1, 2] = np.nan
+    """weigh_cells with missing="land": a cell whose nearest node is missing is land
+    (likelihood 0); a cell beside it, whose interpolation needs that node, and a cell off
+    the map's extent are gaps (the known cells' mean likelihood). Counting every cell
+    without a map value inside the map as land put land up to a node spacing out to sea
+    and dropped a truth 3 km from the nearest missing node (4 σ off, NEES 20)."""
+    values = np.zeros((8, 8))
+    values[3, 4] = np.nan  # the node at 13° N, 24° E
     field = prepare_map(Grid(jnp.asarray(values), 10.0, 1.0, 20.0, 1.0))
-    dn, de = jnp.meshgrid(jnp.array([60e3, 0.0, -60e3]), jnp.array([-60e3, 0.0, 60e3]),
+    step = _step(1.0, 13.0, 24.0)
+    east = 0.6 * np.cos(np.radians(13.0)) * 111.3e3  # 0.6° of longitude (m)
+    dn, de = jnp.meshgrid(jnp.array([389e3, 0.0, -222e3]), jnp.array([0.0, east, -east]),
                           indexing="ij")  # cell (i, j): offset north, east
-    step = _step(1.0, 10.3, 21.0)  # rows at 9.76° (south of the map), 10.3°, 10.84°
-    on_map = jnp.ones((3, 3), bool).at[0, :].set(False).at[1, 2].set(False)
+    on_map = jnp.asarray(np.isfinite(np.asarray(
+        cell_values(field, step, dn, de, fl.gravity_measurement))))
+    # (0, ·) at 9.5° N, off the map; (1, 0) on the missing node; (1, 1) at 23.4° E, whose
+    # nearest node (23° E) is known but whose bicubic cell holds the missing one; (2, ·)
+    # at 15° N, known
+    assert not np.asarray(on_map)[:2].any() and np.asarray(on_map)[2].all()
     w = jnp.full((3, 3), 1 / 9)
     lik = jnp.arange(1.0, 10.0).reshape(3, 3)
     out = {mode: np.asarray(weigh_cells(w, lik, on_map, field, step, dn, de, mode))
            for mode in ("gaps", "land")}
-    gap = float(np.sum(np.where(on_map, lik, 0.0)) / 5)  # the known cells' mean likelihood
-    np.testing.assert_allclose(out["gaps"] * 9, np.where(on_map, lik, gap))
-    np.testing.assert_allclose(out["land"][0] * 9, gap)  # south of the map: still a gap
-    assert out["land"][1, 2] == 0.0  # the truth cannot sit on the NaN node
+    known = np.asarray(on_map)
+    gap = float(np.sum(np.where(known, lik, 0.0)) / known.sum())  # known cells' mean
+    np.testing.assert_allclose(out["gaps"] * 9, np.where(known, lik, gap))
+    assert out["land"][1, 0] == 0.0  # the truth cannot sit on the missing node
+    np.testing.assert_allclose(out["land"][1, 1] * 9, gap)  # beside it: a gap
+    np.testing.assert_allclose(out["land"][0] * 9, gap)  # off the map: a gap
     with pytest.raises(ValueError, match="missing must be one of"):
         fl.pmf(missing="sea")
 
