@@ -49,6 +49,7 @@ __all__ = [
 ]
 
 from jaxgrav.montecarlo.draws import scenario_draws
+from jaxgrav.montecarlo.matcher_runs import MISSING_MAP_START_TRIES
 from jaxgrav.montecarlo.spec import MethodSpec, check_settings, cpu_options_for
 from jaxgrav.scenarios import (
     FilterScenario,
@@ -90,14 +91,17 @@ def _told_steps(run, scenario, told):
     return dynamics, steps, x0, p0, meas
 
 
-def _with_bound(metrics, run, field, dynamics, steps, p0, meas):
+def _with_bound(metrics, run, field, dynamics, steps, p0, meas, every):
     """``metrics`` plus ``bound_m``: the PCRLB of the horizontal position error, RMS over
     the second half of the run (as ``err_m``), of the model the filter is told
-    (``dynamics, steps, p0, meas`` from :func:`_told_steps`); and the run's draws
-    (:func:`~jaxgrav.montecarlo.draws.scenario_draws`)."""
+    (``dynamics, steps, p0, meas`` from :func:`_told_steps`); ``readings_on_map`` (every
+    reading, one each ``every`` steps, finite: the true track read no missing map node);
+    and the run's draws (:func:`~jaxgrav.montecarlo.draws.scenario_draws`)."""
     rms = pcrlb(field, dynamics, p0, steps, run.errors[1:, :2], meas).position_rms
     half = rms.shape[0] // 2
+    between = jnp.arange(run.readings.shape[0]) % every != 0
     return dict(metrics, bound_m=jnp.sqrt(jnp.mean(rms[half:] ** 2)),
+                readings_on_map=jnp.all(jnp.isfinite(run.readings) | between),
                 **scenario_draws(run.truth.lat, run.truth.lon, run.ins_lat, run.ins_lon))
 
 
@@ -112,7 +116,8 @@ def _kalman_run(key, field, scenario, make, guard=False, map_error=None, told=No
                           key=fkey)
     if guard:
         infos = guard_run(infos, dynamics, p0, GuardConfig())
-    return _with_bound(run_metrics(run, infos), run, field, dynamics, steps, p0, meas)
+    return _with_bound(run_metrics(run, infos), run, field, dynamics, steps, p0, meas,
+                       scenario.reading_every)
 
 
 def ukf_run(key, field, scenario, map_error=None, told=None):
@@ -138,7 +143,10 @@ def ukf_run(key, field, scenario, map_error=None, told=None):
         flags without ``no_reading``; int32), ``nees`` (mean position NEES over the
         second half; 2 for a consistent filter), ``bound_m`` (the posterior
         Cramér–Rao bound of the position error, :func:`~jaxgrav.filters.pcrlb` with the
-        model the filter is told, RMS over the second half, m).
+        model the filter is told, RMS over the second half, m), ``readings_on_map``
+        (bool: every reading finite, the true track read no missing map node) and the
+        run's draws (``start_lat``, ``start_lon``, ``ins_offset_north_m``,
+        ``ins_offset_east_m``).
     """
     return _kalman_run(key, field, scenario, ukf, False, map_error, told)
 
@@ -215,7 +223,7 @@ def pmf_run(key, field, scenario, map_error=None, told=None):
     # the bound is of the 13-state model the other filters are told, not the PMF's grid
     bound_dyn, bound_steps, _, bound_p0, meas = _told_steps(run, scenario, told)
     return _with_bound(run_metrics(run, jax.tree.map(lambda a: a[:t], infos)), run, field,
-                       bound_dyn, bound_steps, bound_p0, meas)
+                       bound_dyn, bound_steps, bound_p0, meas, every)
 
 
 _FILTER_RUNS = {
@@ -285,7 +293,12 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None, map_
     over a map it is ``"random"`` (straight tracks, uniform heading, as
     ``examples/paper_d_ukf.py --map ryukyu``) from starts at least the track length
     + 3 × the initial error + 10 km inside the map, so the truth, the INS track,
-    the sigma points and the point-mass filter's grid stay on it.
+    the sigma points and the point-mass filter's grid stay on it. On a map with
+    missing (NaN, land-masked) nodes a run's true track is drawn again, up to
+    :data:`~jaxgrav.montecarlo.matcher_runs.MISSING_MAP_START_TRIES` times
+    (``FilterScenario.start_tries``), until it reads none; the filters read the missing
+    nodes near it as a mask (``off_map`` rows), and ``readings_on_map`` records
+    whether the run found such a track.
 
     Parameters
     ----------
@@ -347,8 +360,11 @@ def filter_builder(grid, *, kind, drift_deg=None, noise=None, n_fixes=None, map_
         field, where, extra = paper_d(), "the 3 point masses", dict(field="paper-d point masses")
     else:
         margin_m = scen.speed * scen.dt * (n - 1) + 3.0 * pos_error + 10e3
+        # land masked on the map: a run's track is drawn again (up to 16 times) until it
+        # reads no missing node (a complete map: the same runs as one try)
         scen = dataclasses.replace(scen, geometry="random",
-                                   region=_innerregion_of(grid, margin_m))
+                                   region=_innerregion_of(grid, margin_m),
+                                   start_tries=MISSING_MAP_START_TRIES if grid.n_missing else 1)
         field, where = grid, f"the map {grid.name or 'grid'}"
         extra = dict(field=f"grid {grid.name}".strip(),
                      region=",".join(f"{v:.4f}" for v in scen.region))

@@ -57,7 +57,9 @@ __all__ = [
 
 
 MISSING_MAP_START_TRIES = 16
-"""Random starts a paper-A run tries on a map with missing nodes (``start_tries``)."""
+"""Random starts (true tracks) a run tries on a map with missing nodes: the
+``start_tries`` the builders of paper A's, B's and D's methods set then
+(:func:`~jaxgrav.scenarios.paper_a.first_clear_draw`)."""
 
 
 # ------------------------------------------------------------ metrics of every matcher
@@ -340,6 +342,9 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
     Returns
     -------
     MethodSpec
+        On a ``grid`` with missing (land) nodes its scenario's ``start_tries`` is
+        :data:`MISSING_MAP_START_TRIES` (each run's start and heading drawn again until
+        its true track reads no missing node; ``readings_on_map`` per run), else 1.
     """
     fn, label = _B_RUNS[stage]
     grid = default_grid() if grid is None else grid
@@ -348,8 +353,10 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
     noise = 1.0 if noise is None else float(noise)
     n = 60 if n_fixes is None else int(n_fixes)
     check_settings(drift, noise, n)
+    # land masked: a run's start and heading are drawn again, as paper A's (dense_builder)
     scen = PaperBScenario(region=region_of(grid), offset_min_deg=2.0 * drift / 3.0,
-                          offset_max_deg=drift, noise=noise, n_fixes=n)
+                          offset_max_deg=drift, noise=noise, n_fixes=n,
+                          start_tries=MISSING_MAP_START_TRIES if grid.n_missing else 1)
     reach_m = (drift + 0.005) * DEG_ARC_M
     settings = dict(description=f"paper B: {label}; offset and rotated INS track",
                     drift_deg=drift, offset_min_deg=scen.offset_min_deg, noise_mgal=noise,

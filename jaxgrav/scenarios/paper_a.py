@@ -23,7 +23,15 @@ from jaxgrav.geodesy import meridian_radius
 from jaxgrav.grid import Grid
 
 __all__ = ["POLE_LIMIT_DEG", "MatchingRun", "MatchingScenario", "check_region_covered",
-           "matching_scenario", "max_fixes", "placement_region", "scenario_truth"]
+           "check_start_tries", "first_clear_draw", "matching_scenario", "max_fixes",
+           "placement_region", "scenario_truth"]
+
+
+def check_start_tries(value):
+    """Raise ``ValueError`` unless ``value`` (a scenario's ``start_tries``) is an int >= 1."""
+    if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+        raise ValueError(f"start_tries must be an integer >= 1; got {value!r}")
+
 
 @pytree_dataclass
 class MatchingScenario:
@@ -83,8 +91,7 @@ class MatchingScenario:
     start_tries: int = static_field(1)
 
     def __post_init__(self):
-        if not (isinstance(self.start_tries, int) and self.start_tries >= 1):
-            raise ValueError(f"start_tries must be an integer >= 1; got {self.start_tries!r}")
+        check_start_tries(self.start_tries)
         lat, lon = concrete(self.start_lat), concrete(self.start_lon)
         if lat is None or lon is None or lat.dtype == object or lon.dtype == object:
             return  # traced, or a pytree placeholder
@@ -256,21 +263,44 @@ def scenario_truth(key, truth_field, map_error, region):
     return map_errors.truth_field(map_error_key(key), truth_field, map_error)
 
 
-def _clear_start(k_start, lat0, lon0, margin, truth_field, s):
-    """The first of ``s.start_tries`` starts (``lat0, lon0`` first, then draws from keys
-    folded from ``k_start``) whose true track reads no NaN of ``truth_field``."""
-    alt = jax.random.split(jax.random.fold_in(k_start, 1), s.start_tries - 1)
-    alt_lat, alt_lon = jax.vmap(lambda k: sim.random_start(k, s.region, margin))(alt)
-    lats = jnp.concatenate([jnp.reshape(lat0, (1,)), alt_lat])
-    lons = jnp.concatenate([jnp.reshape(lon0, (1,)), alt_lon])
+def first_clear_draw(key, first, draw, clear, tries):
+    """The first of ``tries`` random draws (``first``, then ``draw`` of keys folded from
+    ``key``) that ``clear`` accepts: the start-redraw of a scenario on a map with missing
+    (NaN, land-masked) nodes.
 
-    def clear(lat, lon):
-        t = sim.straight_track(lat, lon, s.v_east, s.v_north, s.n_fixes, s.dt)
-        return jnp.all(jnp.isfinite(sim.field_along(truth_field, t.lat, t.lon,
-                                                    s.truth_method)))
+    All tries are drawn and checked at once (``vmap``: no loop), and the first clear one
+    is picked, so ``first`` is kept whenever it is clear, and runs on a complete map are
+    those of a single try. With ``tries`` 1 ``first`` is returned unchanged and nothing
+    more is drawn.
 
-    first = jnp.argmax(jax.vmap(clear)(lats, lons))  # 0 when none is clear
-    return lats[first], lons[first]
+    Parameters
+    ----------
+    key : PRNG key
+        The key ``first`` was drawn from; the other ``tries - 1`` draws use the keys of
+        ``split(fold_in(key, 1), tries - 1)``.
+    first : pytree of Array
+        The single try's draw (e.g. a start ``(lat0, lon0)``, or a whole true track).
+    draw : callable
+        ``draw(key) -> pytree`` shaped as ``first``: one more draw.
+    clear : callable
+        ``clear(pytree) -> bool Array, shape ()``: the draw's true track reads no missing
+        node.
+    tries : int
+        Draws tried (static, >= 1).
+
+    Returns
+    -------
+    pytree of Array
+        The first clear draw; ``first`` when none is clear (its NaN readings then say
+        so).
+    """
+    check_start_tries(tries)
+    if tries == 1:
+        return first
+    alt = jax.vmap(draw)(jax.random.split(jax.random.fold_in(key, 1), tries - 1))
+    every = jax.tree.map(lambda a, b: jnp.concatenate([jnp.asarray(a)[None], b]), first, alt)
+    pick = jnp.argmax(jax.vmap(clear)(every))  # 0 when none is clear
+    return jax.tree.map(lambda c: c[pick], every)
 
 
 def matching_scenario(key, truth_field, scenario=MatchingScenario(), map_error=None):  # noqa: B008
@@ -314,8 +344,14 @@ def matching_scenario(key, truth_field, scenario=MatchingScenario(), map_error=N
         jnp.where(s.v_east >= 0, 0.0, dlon), jnp.where(s.v_east >= 0, dlon, 0.0),
     ]) + 1.5 * s.drift_deg
     lat0, lon0 = sim.random_start(k_start, s.region, margin)
-    if s.start_tries > 1:
-        lat0, lon0 = _clear_start(k_start, lat0, lon0, margin, truth_field, s)
+
+    def clear(start):
+        t = sim.straight_track(*start, s.v_east, s.v_north, s.n_fixes, s.dt)
+        return jnp.all(jnp.isfinite(sim.field_along(truth_field, t.lat, t.lon, s.truth_method)))
+
+    lat0, lon0 = first_clear_draw(k_start, (lat0, lon0),
+                                  lambda k: sim.random_start(k, s.region, margin), clear,
+                                  s.start_tries)
     fixed = jnp.isfinite(s.start_lat) & jnp.isfinite(s.start_lon)
     lat0 = jnp.where(fixed, s.start_lat, lat0)
     lon0 = jnp.where(fixed, s.start_lon, lon0)

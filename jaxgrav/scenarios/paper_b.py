@@ -19,7 +19,12 @@ from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.iccp import iccp_result
 from jaxgrav.prepared import prepare_map
-from jaxgrav.scenarios.paper_a import MatchingRun, scenario_truth
+from jaxgrav.scenarios.paper_a import (
+    MatchingRun,
+    check_start_tries,
+    first_clear_draw,
+    scenario_truth,
+)
 from jaxgrav.sim import track_error_m
 
 __all__ = ["PaperBErrors", "PaperBScenario", "paper_b_errors", "paper_b_scenario"]
@@ -45,6 +50,13 @@ class PaperBScenario:
         Reading noise σ (field units).
     n_fixes : int
         Fixes per track (static).
+    start_tries : int
+        Starts (and headings) tried per run (static, default 1): the first whose true
+        track reads no missing (NaN) node of the truth field is taken, the first draw
+        being the one of a single try (so runs on a complete map are the same for any
+        value); for maps with land masked
+        (:func:`~jaxgrav.scenarios.paper_a.first_clear_draw`). A run none of whose tries
+        is clear keeps the first, and its NaN readings say so.
     """
 
     region: tuple = static_field((39.0, 41.0, 115.0, 117.0))
@@ -55,6 +67,10 @@ class PaperBScenario:
     rotation_deg: float = 1.5
     noise: float = 1.0
     n_fixes: int = static_field(60)
+    start_tries: int = static_field(1)
+
+    def __post_init__(self):
+        check_start_tries(self.start_tries)
 
 
 def paper_b_scenario(key, truth_field, scenario=PaperBScenario(), map_error=None):  # noqa: B008
@@ -84,9 +100,25 @@ def paper_b_scenario(key, truth_field, scenario=PaperBScenario(), map_error=None
     length_m = (s.n_fixes - 1) * s.dt * s.speed
     m_lat = (length_m + s.offset_max_deg * sim.DEG_ARC_M) / sim.DEG_ARC_M * 1.05
     m_lon = m_lat / math.cos(math.radians(max(abs(s.region[0]), abs(s.region[1]))))
-    lat0, lon0 = sim.random_start(k_start, s.region, (m_lat, m_lat, m_lon, m_lon))
-    heading = jax.random.uniform(k_head, (), minval=0.0, maxval=360.0)
-    truth = sim.track_from_heading(lat0, lon0, s.speed, jnp.full((s.n_fixes,), heading), s.dt)
+    margin = (m_lat, m_lat, m_lon, m_lon)
+
+    def track(lat0, lon0, heading):
+        return sim.track_from_heading(lat0, lon0, s.speed, jnp.full((s.n_fixes,), heading),
+                                      s.dt)
+
+    def draw(k):  # one more try: a start and a heading
+        k_s, k_h = jax.random.split(k)
+        return (*sim.random_start(k_s, s.region, margin),
+                jax.random.uniform(k_h, (), minval=0.0, maxval=360.0))
+
+    def clear(start):
+        t = track(*start)
+        return jnp.all(jnp.isfinite(sim.field_along(truth_field, t.lat, t.lon, "bicubic")))
+
+    first = (*sim.random_start(k_start, s.region, margin),
+             jax.random.uniform(k_head, (), minval=0.0, maxval=360.0))
+    lat0, lon0, heading = first_clear_draw(k_start, first, draw, clear, s.start_tries)
+    truth = track(lat0, lon0, heading)
     north, east = local_offsets_m(truth.lat, truth.lon, lat0, lon0)
     theta = jnp.deg2rad(s.rotation_deg) * jnp.where(jax.random.bernoulli(k_sign), 1.0, -1.0)
     radius = jax.random.uniform(k_off, (), minval=s.offset_min_deg, maxval=s.offset_max_deg)

@@ -21,6 +21,7 @@ from jaxgrav.fields.map_error import map_error_key, truth_field
 from jaxgrav.filters.model import STATUS_FILTER, Dynamics, Step, map_anomaly
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.grid import Grid
+from jaxgrav.scenarios.paper_a import check_start_tries, first_clear_draw
 from jaxgrav.sim.ins import (
     INSErrorModel,
     initial_covariance,
@@ -70,6 +71,12 @@ class FilterScenario:
         ``(lat_min, lat_max, lon_min, lon_max)`` of ``"random"`` starts (static).
     ins : INSErrorModel
         Sensor error parameters.
+    start_tries : int
+        True tracks tried per run (static, default 1): the first that reads no missing
+        (NaN) node of the truth field is taken, the first draw being the one of a single
+        try (so runs on a complete map are the same for any value); for maps with land
+        masked (:func:`~jaxgrav.scenarios.paper_a.first_clear_draw`). A run none of whose
+        tries is clear keeps the first, and its NaN readings say so.
     """
 
     speed: float = 5.0
@@ -83,6 +90,10 @@ class FilterScenario:
     geometry: str = static_field("mixed")
     region: tuple = static_field((24.5, 35.5, 124.5, 135.5))
     ins: INSErrorModel = _DEFAULT_INS
+    start_tries: int = static_field(1)
+
+    def __post_init__(self):
+        check_start_tries(self.start_tries)
 
 
 class FilterRun(NamedTuple):
@@ -170,7 +181,9 @@ def filter_scenario(key, field, scenario=None, map_error=None):
                 "error on: pass the truth as the field instead)")
         field = truth_field(map_error_key(key), field, map_error)
     k_track, k_err0, k_err, k_noise = jax.random.split(key, 4)
-    truth = _true_track(k_track, s)
+    truth = first_clear_draw(
+        k_track, _true_track(k_track, s), lambda k: _true_track(k, s),
+        lambda t: jnp.all(jnp.isfinite(map_anomaly(field, t.lat, t.lon))), s.start_tries)
     f, q = transition(s.ins, jnp.mean(truth.lat), s.dt)
     x0 = sample_initial_error(k_err0, s.ins, s.pos_error, s.vel_error).at[12].set(s.bias_mgal)
     errors = simulate_errors(k_err, f, q, x0, s.n_steps)

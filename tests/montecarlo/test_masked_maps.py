@@ -1,6 +1,7 @@
 """Monte Carlo runs on a map with land masked (missing nodes): a run's start is drawn
 again until its true track reads no missing node; on a complete map the runs are those
-of a single try, and the CLI takes such maps for ``dense`` (and ``chains``) only."""
+of a single try, and the CLI takes such maps for paper A's, B's and D's methods (not the
+voyages, which follow their preset routes)."""
 
 import dataclasses
 
@@ -11,6 +12,7 @@ import xarray as xr
 
 from jaxgrav import datasets, montecarlo
 from jaxgrav.cli import main
+from jaxgrav.cli.montecarlo import summarize
 from jaxgrav.grid import Grid
 from jaxgrav.montecarlo import methods as montecarlo_methods
 from jaxgrav.montecarlo.spec import region_of
@@ -56,11 +58,12 @@ def test_starts_are_drawn_again_off_the_land():
 
 
 @pytest.mark.long
-def test_dense_runs_on_a_masked_map_read_no_missing_node():
+@pytest.mark.parametrize("method, fixes", [("dense", 10), ("iccp", 20), ("ukf", 31)])
+def test_runs_on_a_masked_map_read_no_missing_node(method, fixes):
     land = _west_land()
-    spec = montecarlo_methods.build("dense", land, n_fixes=10)
+    spec = montecarlo_methods.build(method, land, n_fixes=fixes)
     assert spec.args[1].start_tries > 1
-    out = montecarlo.run(spec.fn, jax.random.key(1), 12, chunk=12, args=spec.args,
+    out = montecarlo.run(spec.fn, jax.random.key(1), 8, chunk=8, args=spec.args,
                          progress=False)
     assert np.all(out["readings_on_map"])
     assert np.all(np.isfinite(out["err_m"]))
@@ -68,8 +71,17 @@ def test_dense_runs_on_a_masked_map_read_no_missing_node():
     assert np.all(out["start_lon"] > east_edge - 0.1)
 
 
+def test_runs_without_a_clear_start_count_as_failures():
+    results = dict(ins_err_m=np.full(4, 2000.0), err_m=np.full(4, 500.0),
+                   status=np.zeros(4, int), readings_on_map=np.array([True, True, False, True]))
+    assert summarize(results, "filter")["failure_rate"] == 0.25
+    del results["readings_on_map"]
+    assert summarize(results, "filter")["failure_rate"] == 0.0
+
+
 @pytest.mark.long
-def test_cli_takes_a_masked_map_for_dense_and_refuses_it_for_the_filters(tmp_path, capsys):
+def test_cli_takes_a_masked_map_for_dense_and_filters_and_refuses_it_for_voyages(tmp_path,
+                                                                                  capsys):
     v = np.array(GRID.values)
     v[:, :120] = np.nan
     xr.Dataset({"anomaly": (("lat", "lon"), v, {"units": "mGal"})},
@@ -81,6 +93,12 @@ def test_cli_takes_a_masked_map_for_dense_and_refuses_it_for_the_filters(tmp_pat
     with xr.open_dataset(out) as ds:
         assert bool(ds["readings_on_map"].all()) and "units" in ds["readings_on_map"].attrs
     capsys.readouterr()
-    assert main(["montecarlo", "--method", "ukf", "--runs", "4", "--map",
-                 str(tmp_path / "land.nc"), "--out", str(tmp_path / "u.nc")]) == 2
+    assert main(["montecarlo", "--method", "ukf", "--runs", "4", "--fixes", "31", "--map",
+                 str(tmp_path / "land.nc"), "--out", str(tmp_path / "u.nc"),
+                 "--no-progress"]) == 0
+    assert "clear starts: 4 of 4 runs" in capsys.readouterr().out
+    with xr.open_dataset(tmp_path / "u.nc") as ds:
+        assert bool(ds["readings_on_map"].all())
+    assert main(["montecarlo", "--method", "voyage-ukf", "--runs", "2", "--map",
+                 str(tmp_path / "land.nc"), "--out", str(tmp_path / "v.nc")]) == 2
     assert "needs a complete map" in capsys.readouterr().err
