@@ -200,3 +200,28 @@ def test_filters_skip_or_mask_missing_cells_and_flag_them(smooth_grid, method):
     else:  # pmf cells, pf particles without a map value take the others' mean likelihood:
         # the reading is used while some have one
         assert np.isfinite(innovation).any()
+
+
+@pytest.mark.long
+def test_pmf_reads_a_coast_as_land_without_dropping_the_truth(smooth_grid):
+    """filter_track(..., "pmf", missing="land") end to end: every node from 30.01° N is
+    land, 1.4 km north of a truth at 29.997° N whose own interpolation cell holds a land
+    node (a gap: its nearest node is at sea). Land changes the posterior (the plumbing
+    is used) and keeps the truth within 3 σ; counting every cell without a map value as
+    land dropped such a truth (the review's 3 km case: 4 σ off, NEES 20)."""
+    n = 240
+    t = 10.0 * np.arange(n)
+    lat = np.full(n, 30.0)
+    lon = 129.7 + 0.0005 * np.arange(n)
+    truth_lat = lat - 0.003
+    z = np.asarray(smooth_grid.sample(truth_lat, lon, "bicubic"))
+    coast = _with_hole(smooth_grid, (30.005, 31.0), (129.0, 131.0))
+    noisy = z + 0.3 * RNG.standard_normal(n)
+    res = {m: filter_track(coast, t, lat, lon, noisy, "pmf", sigma_pos=500.0,
+                           sigma_gravity=0.5, missing=m) for m in ("gaps", "land")}
+    assert not np.allclose(res["land"]["lat"], res["gaps"]["lat"])
+    land = res["land"]
+    dn = (land["lat"] - truth_lat) * 111.2e3
+    de = (land["lon"] - lon) * 111.2e3 * np.cos(np.radians(30.0))
+    assert np.all(np.abs(dn[-60:]) < 3 * land["sigma_north"][-60:]), dn[-60:]
+    assert np.all(np.abs(de[-60:]) < 3 * land["sigma_east"][-60:]), de[-60:]

@@ -65,24 +65,27 @@ def _check_points(args, track, layers):
         f"{bad.size} point(s) out of range")
 
 
-def _gap_warning(layers, h, method):
-    """The warning for track points in a layer gap too wide for ``harmonic``, or None."""
+def _gap_warning(layers, h, method, user_grid):
+    """The warning for track points in layer gaps too wide for ``harmonic``, or None."""
     if not method.endswith("-harmonic"):
         return None
     ratio = np.asarray(dov.harmonic_gap_ratio(layers))
     hs = np.asarray(layers.heights)
     h = np.asarray(h, float)
+    gaps, width = [], np.inf
     for k in np.flatnonzero(ratio > HARMONIC_GAP_LIMIT):
         n = int(np.count_nonzero((h > hs[k]) & (h < hs[k + 1])))
         if n:
-            width = HARMONIC_GAP_LIMIT / ratio[k] * (hs[k + 1] - hs[k])
-            return (f"{n} point(s) lie between the layers at {hs[k]:g} and {hs[k + 1]:g} m, "
-                    f"where k*gap = {ratio[k]:.1f} (k: the layers' effective wavenumber; "
-                    f"trusted up to {HARMONIC_GAP_LIMIT:g}): {method}'s vertical "
-                    f"continuation is unreliable there (it can leave the layers' range); use "
-                    f"layers at most about {width:.0f} m apart (--layers) or "
-                    f"--method bicubic-linear")
-    return None
+            gaps.append(f"{n} between {hs[k]:g} and {hs[k + 1]:g} m (k*gap = {ratio[k]:.1f})")
+            width = min(width, HARMONIC_GAP_LIMIT / ratio[k] * (hs[k + 1] - hs[k]))
+    if not gaps:
+        return None
+    closer = (f"a --grid with layers at most about {width:.0f} m apart" if user_grid else
+              f"--layers at most about {width:.0f} m apart")
+    return (f"track points lie in layer gaps too wide for {method}'s vertical continuation "
+            f"(k: the layers' effective wavenumber; k*gap trusted up to "
+            f"{HARMONIC_GAP_LIMIT:g}): {'; '.join(gaps)}; it is unreliable there and can "
+            f"leave the layers' range: use {closer} or --method bicubic-linear")
 
 
 def cmd_dov(args):
@@ -110,6 +113,6 @@ def cmd_dov(args):
     write_track_csv(args.out, cols, force=args.force)
     print(f"wrote {args.out}: {vals.shape[1]} fixes, {', '.join(layers.channels)} (arcsec) "
           f"by {args.method} from layers at {np.asarray(layers.heights).tolist()} m")
-    warning = _gap_warning(layers, track["h"], args.method)
+    warning = _gap_warning(layers, track["h"], args.method, args.grid is not None)
     if warning is not None:
         print(f"warning: {warning}", file=sys.stderr)

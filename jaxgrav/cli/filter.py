@@ -56,6 +56,7 @@ from jaxgrav.cli.filter_checks import (
     check_particles,
     check_sigma,
     gradient_at_ins,
+    information_warning,
     ins_label,
     map_at_ins,
     offset_warning,
@@ -64,6 +65,8 @@ from jaxgrav.cli.filter_checks import (
 from jaxgrav.cli.inputs import (
     add_columns_option,
     add_map_error_var_option,
+    add_missing_option,
+    check_missing_option,
     map_error_args,
     read_track,
     track_map,
@@ -72,7 +75,6 @@ from jaxgrav.cli.sanity import (
     check_positions,
     check_readings,
     implausible_rows,
-    information_warning,
     innovation_check,
 )
 from jaxgrav.cli.simulate import check_seed
@@ -94,10 +96,11 @@ from jaxgrav.tracks import csv_line, write_track_csv
 __all__ = ["add_parser", "cmd_filter"]
 
 _WARN = {
-    "off_map": "the estimate, its sigma points or a particle left the map or met a missing "
-               "(NaN) map cell, update skipped "
-               "(pmf: grid cells without a map value, which the reading neither confirms "
-               "nor rules out; the update is skipped only when no cell has one)",
+    "off_map": "the estimate or its sigma points (ukf, ekf, gsf) or a particle (rbpf) left "
+               "the map or met a missing (NaN) map cell: update skipped; pf particles and "
+               "pmf cells without a map value take the others' mean likelihood (pmf "
+               "--missing land: none where the nearest node is missing), the update is "
+               "skipped only when none has one",
     "covariance_repaired": "the covariance was not positive definite; jitter added",
     "covariance_failed": "the covariance could not be repaired, or the innovation variance "
                          "was not positive; update skipped",
@@ -177,10 +180,7 @@ def add_parser(subparsers):
     f.add_argument("--eotvos-corrected", action="store_true",
                    help="the gravity column is already Eötvös-corrected with the INS velocity "
                         "of v_east, v_north (default: raw, corrected here)")
-    f.add_argument("--missing", choices=("gaps", "land"), default=None,
-                   help="pmf: a map's missing (NaN) nodes are survey gaps (default: unknown "
-                        "values) or land (the vehicle cannot be there: only for a land mask "
-                        "the track never crosses)")
+    add_missing_option(f)
     f.add_argument("--force", action="store_true", help="overwrite an existing output")
     f.set_defaults(func=cmd_filter)
     return f
@@ -280,10 +280,7 @@ def cmd_filter(args):
                              f"INS, e.g. 0.2); got {args.guard!r}")
     if args.method == "pmf":
         reading_stride(np.flatnonzero(np.isfinite(g)), where)
-    if args.missing is not None and args.method != "pmf":
-        raise ValueError(f"--missing {args.missing} is for --method pmf (the other methods "
-                         f"skip a reading whose map value is missing); got --method "
-                         f"{args.method}")
+    missing = check_missing_option(args)
     if args.particles is not None:
         if args.method not in PARTICLES:
             raise ValueError(f"--particles is for --method pf or rbpf; got --method "
@@ -305,16 +302,13 @@ def cmd_filter(args):
     expected = map_at_ins(field, lat, lon) + offset
     check_readings(g_raw, expected, args.sigma_gravity, column="gravity", where=where,
                    correction=g - g_raw)
-    read = np.isfinite(g)
-    flat = information_warning(*gradient_at_ins(field, lat[read], lon[read]),
-                               args.sigma_gravity, args.sigma_pos)
     level = offset_warning(g, expected, INS_GRADES[args.ins].gravimeter_sigma, me_sigma,
                            args.sigma_gravity)
     # the model is masses + offset: z − (masses + offset + bias) = (z − offset) − (masses + bias)
     res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
                        sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
                        guard=args.guard, map_error=fogm, eotvos_velocity=jac, where=where,
-                       ins=INS_GRADES[args.ins], missing=args.missing or "gaps",
+                       ins=INS_GRADES[args.ins], missing=missing,
                        **_particle_options(args))
     res["status"] = res["status"] | np.where(
         implausible_rows(res["innovation"], res["innovation_sigma"]),
@@ -336,6 +330,11 @@ def cmd_filter(args):
           f"{res['sigma_north'][-1]:.0f} m north, {res['sigma_east'][-1]:.0f} m east; "
           f"{eotvos_note}")
     _, _, fit_warning = innovation_check(res["innovation"], res["innovation_sigma"])
+    read = np.isfinite(g)
+    flat = information_warning(
+        *gradient_at_ins(field, lat[read], lon[read]), float(np.hypot(args.sigma_gravity,
+                                                                      me_sigma)),
+        max(args.sigma_pos, float(np.max(np.maximum(res["sigma_north"], res["sigma_east"])))))
     for warning in (flat, level, fit_warning):
         if warning is not None:
             print(f"warning: {warning}", file=sys.stderr)

@@ -3,8 +3,8 @@
 The one-line errors of :mod:`jaxgrav.cli.filter` (time step, particle count, standard
 deviations, the track on the map), the map as the filters evaluate it at the INS
 positions, and two warnings that a run cannot give a trustworthy answer: a map too flat
-to tell the position (:func:`~jaxgrav.cli.sanity.information_warning` from
-:func:`gradient_at_ins`) and readings offset from the map by more than the filter's
+to tell the position (:func:`information_warning` from :func:`gradient_at_ins`) and
+readings offset from the map by more than the filter's
 gravimeter bias allows (:func:`offset_warning`).
 """
 
@@ -20,8 +20,8 @@ from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.tracks import csv_line
 
 __all__ = ["DT_RTOL", "MIN_PARTICLES", "OFFSET_FLOOR", "OFFSET_SIGMAS", "check_on_map",
-           "check_particles", "check_sigma", "gradient_at_ins", "ins_label", "map_at_ins",
-           "offset_warning", "uniform_dt"]
+           "check_particles", "check_sigma", "gradient_at_ins", "information_warning",
+           "ins_label", "map_at_ins", "offset_warning", "uniform_dt"]
 
 DT_RTOL = 1e-3
 """Relative tolerance of a uniform time step."""
@@ -111,6 +111,47 @@ def gradient_at_ins(field, lat, lon, step_m=500.0):
             / (2 * step_m),
             (map_at_ins(field, lat, lon + dlon) - map_at_ins(field, lat, lon - dlon))
             / (2 * step_m))
+
+
+def information_warning(grad_north, grad_east, noise, sigma_ref):
+    """A warning when the readings cannot tell the position better than the filter's own
+    1-σ, or None (``filter`` and ``navigate``, tightly coupled, after the run).
+
+    The bound is optimistic: the position's Fisher information from every reading of the
+    map's gradient, as if the readings' errors were independent (a correlated map error
+    is not), the bias known and the position the same for the whole track,
+    ``σ = noise / sqrt(λ_min(Σ ∇g ∇gᵀ))`` in the weakest direction. When even that
+    exceeds ``sigma_ref`` (the largest 1-σ of the run, or the prior) the readings cannot
+    correct the INS: a point-mass model hundreds of km away, a map flat against its
+    error, or a map that varies across one bearing only.
+
+    Parameters
+    ----------
+    grad_north, grad_east : array_like, shape ``(N,)``
+        The map's gradient at the readings' INS positions (mGal/m; NaN: left out).
+    noise : float
+        A reading's error, 1-σ (mGal): its noise and the map's error together.
+    sigma_ref : float
+        The 1-σ (m) the readings would have to beat.
+    """
+    gn, ge = np.asarray(grad_north, float), np.asarray(grad_east, float)
+    ok = np.isfinite(gn) & np.isfinite(ge)
+    n = int(ok.sum())
+    if n == 0:
+        return None
+    info = np.array([[np.sum(gn[ok] ** 2), np.sum(gn[ok] * ge[ok])],
+                     [np.sum(gn[ok] * ge[ok]), np.sum(ge[ok] ** 2)]])
+    lam, vec = np.linalg.eigh(info)
+    sigma = noise / math.sqrt(lam[0]) if lam[0] > 0 else math.inf
+    if sigma <= sigma_ref:
+        return None
+    bearing = math.degrees(math.atan2(vec[1, 0], vec[0, 0])) % 180.0
+    steepest = float(np.sqrt(np.max(gn[ok] ** 2 + ge[ok] ** 2))) * 1e3
+    return (f"the map along the track cannot tell the position: even {n} independent "
+            f"readings of {noise:.3g} mGal on its gradients (steepest "
+            f"{steepest:.3g} mGal/km) would fix it only to {sigma:.3g} m along bearing "
+            f"{bearing:.0f}°, more than the filter's own 1-sigma ({sigma_ref:.0f} m): "
+            "there its track is the INS's")
 
 
 def offset_warning(readings, expected, bias_sigma, map_error_sigma, noise):

@@ -16,6 +16,7 @@ its nodes missing.
 import numpy as np
 
 from jaxgrav.datasets import map_for_track
+from jaxgrav.filters.pmf_cells import MISSING
 from jaxgrav.tracks import parse_columns, read_track_csv
 
 __all__ = [
@@ -23,7 +24,9 @@ __all__ = [
     "MAX_MISSING",
     "add_columns_option",
     "add_map_error_var_option",
+    "add_missing_option",
     "check_map_field",
+    "check_missing_option",
     "map_error_args",
     "read_track",
     "track_map",
@@ -157,3 +160,22 @@ def add_map_error_var_option(parser):
              "grid (map units, e.g. an error grid from the map's compilation): the "
              "map-error sigma told to the method is its RMS over the track's region, "
              "instead of --map-error (with --map-error-length as the correlation length)")
+
+
+def add_missing_option(parser):
+    """Add ``--missing gaps|land`` (the point-mass filter's reading of missing map nodes,
+    :data:`~jaxgrav.filters.pmf_cells.MISSING`) to ``filter`` or ``navigate``."""
+    parser.add_argument(
+        "--missing", choices=MISSING, default=None,
+        help="pmf: a map's missing (NaN) nodes are survey gaps (default: unknown values) or "
+             "land (the vehicle cannot be where the nearest node is missing: only for a land "
+             "mask the track never crosses)")
+
+
+def check_missing_option(args):
+    """ValueError naming ``--missing`` given to a method other than ``pmf``; the value
+    (``"gaps"`` when not given)."""
+    if args.missing is not None and args.method != "pmf":
+        raise ValueError(f"--missing {args.missing} is for --method pmf; got --method "
+                         f"{args.method}")
+    return args.missing or "gaps"

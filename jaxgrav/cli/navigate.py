@@ -54,10 +54,18 @@ import numpy as np
 
 from jaxgrav import executables
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.filter_checks import MIN_PARTICLES, check_particles, offset_warning
+from jaxgrav.cli.filter_checks import (
+    MIN_PARTICLES,
+    check_particles,
+    gradient_at_ins,
+    information_warning,
+    offset_warning,
+)
 from jaxgrav.cli.inputs import (
     add_columns_option,
     add_map_error_var_option,
+    add_missing_option,
+    check_missing_option,
     read_track,
     track_map,
 )
@@ -149,10 +157,7 @@ def add_parser(sub):
     p.add_argument("--stride", type=int, default=None,
                    help="dense, entropy+iccp: fixes between segment ends (default = "
                         "--n-fixes: consecutive)")
-    p.add_argument("--missing", choices=("gaps", "land"), default=None,
-                   help="pmf: a map's missing (NaN) nodes are survey gaps (default: unknown "
-                        "values) or land (the vehicle cannot be there: give it only for a "
-                        "land mask the voyage never crosses)")
+    add_missing_option(p)
     p.add_argument("--max-gap", type=float, default=60.0,
                    help="longest allowed step between rows (s); the step must be uniform")
     p.add_argument("--max-speed", type=float, default=30.0,
@@ -215,10 +220,7 @@ def _method_options(args):
     tightly coupled method (None if not). Fills in the defaults."""
     if args.particles is not None and args.method != "rbpf":
         raise ValueError(f"--particles is for --method rbpf; got --method {args.method}")
-    if args.missing is not None and args.method != "pmf":
-        raise ValueError(f"--missing {args.missing} is for --method pmf (the other methods "
-                         f"skip a reading whose map value is missing); got --method "
-                         f"{args.method}")
+    check_missing_option(args)
     loose = [f"--{k.replace('_', '-')}" for k in ("fix_every", "n_fixes", "stride")
              if getattr(args, k) is not None]
     warning = None
@@ -276,12 +278,12 @@ def cmd_navigate(args):
     if args.method in LOOSE_MATCHERS:
         _check_fix_blocks(gravity, args.fix_every, track.path)
     e_ins = np.asarray(eotvos_jit(ins.lat, ins.v_east, ins.v_north))
-    check_readings(gravity, np.asarray(grid.sample(ins.lat, ins.lon, "bicubic")), args.noise,
-                   column="gravity", where=f"--track {track.path!r}",
+    expected = np.asarray(grid.sample(ins.lat, ins.lon, "bicubic"))
+    check_readings(gravity, expected, args.noise, column="gravity",
+                   where=f"--track {track.path!r}",
                    correction=0.0 if args.eotvos_corrected else e_ins)
     if args.method in TIGHT_METHODS:  # its bias state allows a constant offset of σ_b
-        level = offset_warning(gravity + (0.0 if args.eotvos_corrected else e_ins),
-                               np.asarray(grid.sample(ins.lat, ins.lon, "bicubic")),
+        level = offset_warning(gravity + (0.0 if args.eotvos_corrected else e_ins), expected,
                                INS_GRADES[args.ins].gravimeter_sigma, args.map_error, args.noise)
         if level is not None:
             print(f"warning: {level}", file=sys.stderr)
@@ -323,7 +325,7 @@ def _tight(args, voyage, grid, n_missing, n_off):
     order = 1 if args.method == "pmf" else 2  # the point-mass filter's is per cell
     told = (map_error_state(args.map_error, args.map_error_length, order=order)
             if args.map_error > 0 else None)
-    missing = args.missing or "gaps"
+    missing = check_missing_option(args)
     cfg = TightConfig(ins=INS_GRADES[args.ins], sigma_pos_m=args.sigma_pos,
                       sigma_vel=args.sigma_vel, noise_mgal=args.noise, map_error=told,
                       method=args.method, n_particles=args.particles, pmf_missing=missing)
@@ -352,8 +354,14 @@ def _tight(args, voyage, grid, n_missing, n_off):
              and grid.n_missing else "") + "flags seen: "
           f"{', '.join(status_messages_filter(flags)) or 'none'}")
     fit_warning = nis_warning(res.innovation, innovation_sigma)
-    if fit_warning is not None:
-        print(f"warning: {fit_warning}", file=sys.stderr)
+    read = np.isfinite(np.asarray(voyage.gravity))
+    lat, lon = np.asarray(voyage.ins.lat)[read], np.asarray(voyage.ins.lon)[read]
+    flat = information_warning(*gradient_at_ins(grid, lat, lon),
+                               float(np.hypot(args.noise, args.map_error)),
+                               max(args.sigma_pos, float(np.max(sd))))
+    for warning in (flat, fit_warning):
+        if warning is not None:
+            print(f"warning: {warning}", file=sys.stderr)
 
 
 def _check_fix_blocks(gravity, fix_every, path):

@@ -33,8 +33,7 @@ from jaxgrav.match.result import P_IMPLAUSIBLE, fit_p_value
 from jaxgrav.tracks import csv_line
 
 __all__ = ["FILL_VALUES", "INNOVATION_BLOCK", "P_IMPLAUSIBLE", "check_positions",
-           "check_readings", "fit_check", "implausible_rows", "information_warning",
-           "innovation_check"]
+           "check_readings", "fit_check", "implausible_rows", "innovation_check"]
 
 FILL_VALUES = (-9999.0, 9999.0, -99999.0, 99999.0, -999999.0, 999999.0, -32767.0, 32767.0,
                -32768.0)
@@ -271,39 +270,6 @@ def innovation_check(innovation, innovation_sigma, noise_option="--sigma-gravity
                     "readings do not fit the map as stated; state the map's error "
                     f"(--map-error), a larger {noise_option}, or check the map and the "
                     "units; the stated 1-sigma is not trustworthy")
-
-
-def information_warning(grad_north, grad_east, noise, sigma_pos):
-    """A warning when the readings cannot tell the position, or None.
-
-    The bound is optimistic: the position's Fisher information from every reading of the
-    map's gradient, as if the readings were independent, the bias known, the map exact and
-    the position the same for the whole track,
-    ``σ = noise / sqrt(λ_min(Σ ∇g ∇gᵀ))``. When even that exceeds the prior ``sigma_pos``
-    the filter cannot correct the INS (e.g. a point-mass model hundreds of km away).
-
-    Parameters
-    ----------
-    grad_north, grad_east : array_like, shape ``(N,)``
-        The map's gradient at the readings' INS positions (mGal/m; NaN: left out).
-    noise : float
-        A reading's 1-σ (mGal).
-    sigma_pos : float
-        The prior position 1-σ per axis (m).
-    """
-    gn, ge = np.asarray(grad_north, float), np.asarray(grad_east, float)
-    ok = np.isfinite(gn) & np.isfinite(ge)
-    info = np.array([[np.sum(gn[ok] ** 2), np.sum(gn[ok] * ge[ok])],
-                     [np.sum(gn[ok] * ge[ok]), np.sum(ge[ok] ** 2)]])
-    lam = float(np.linalg.eigvalsh(info)[0])
-    sigma = noise / math.sqrt(lam) if lam > 0 else math.inf
-    if sigma <= sigma_pos:
-        return None
-    steepest = float(np.sqrt(np.max(gn[ok] ** 2 + ge[ok] ** 2))) * 1e3 if ok.any() else 0.0
-    return (f"the map is too flat along the track for its readings to tell the position "
-            f"(steepest gradient {steepest:.3g} mGal/km; even {ok.sum()} independent readings "
-            f"of {noise:g} mGal would fix it only to {sigma:.3g} m in its weakest direction, "
-            f"more than the prior {sigma_pos:g} m): the filter's track is the INS's")
 
 
 def implausible_rows(innovation, innovation_sigma, block=INNOVATION_BLOCK):

@@ -94,7 +94,7 @@ def harmonic_gap_ratio(layers):
     Parameters
     ----------
     layers : LayeredGrid
-        Values ``(L, C, ny, nx)``, ``L ≥ 2``; NaN nodes are left out of the RMS.
+        Values ``(L, C, ny, nx)``, ``L ≥ 2``.
 
     Returns
     -------

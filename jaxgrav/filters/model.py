@@ -61,7 +61,7 @@ __all__ = [
 STATUS_FILTER = {
     "ok": 0,
     "no_reading": 1,  # reading NaN: prediction only
-    "off_map": 2,  # a sigma point / particle left the map or met a missing (NaN) cell: skipped
+    "off_map": 2,  # left the map / met a missing (NaN) cell (skipped; pf, pmf: see each)
     "covariance_repaired": 4,  # P was not positive definite; jitter was added
     "covariance_failed": 8,  # even the jittered P failed; update skipped
     "gated": 16,  # innovation outside the gate: update skipped

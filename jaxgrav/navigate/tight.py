@@ -73,6 +73,7 @@ from jaxgrav.filters import (
     run_filter,
     ukf,
 )
+from jaxgrav.filters.pmf_cells import MISSING
 from jaxgrav.geodesy import eotvos, eotvos_jacobian
 from jaxgrav.sim.drift import apply_drift
 from jaxgrav.sim.ins import VEL, INSErrorModel, initial_covariance, transition
@@ -167,8 +168,8 @@ class TightConfig:
         cell = self.pmf_cell_m
         if isinstance(cell, bool) or not isinstance(cell, numbers.Real) or not cell > 0:
             raise ValueError(f"pmf_cell_m must be a number > 0 (m; static); got {cell!r}")
-        if self.pmf_missing not in ("gaps", "land"):
-            raise ValueError(f"pmf_missing must be 'gaps' or 'land'; got {self.pmf_missing!r}")
+        if self.pmf_missing not in MISSING:
+            raise ValueError(f"pmf_missing must be one of {MISSING}; got {self.pmf_missing!r}")
         if (self.method == "pmf" and self.map_error is not None
                 and isinstance(self.map_error.order, int) and self.map_error.order != 1):
             raise ValueError("method 'pmf' carries a first-order map-error state only (per "

@@ -283,7 +283,8 @@ def test_dov_command_warns_when_a_gap_is_too_wide_for_harmonic(tmp_path, capsys)
     assert "warning" not in capsys.readouterr().err
     assert main([*args, str(tmp_path / "high.csv"), "--out", str(tmp_path / "b.csv")]) == 0
     err = capsys.readouterr().err
-    assert "1 point(s) lie between the layers at 2000 and 40000 m" in err, err
+    assert "1 between 2000 and 40000 m (k*gap = 6.3)" in err, err
+    assert "use a --grid with layers at most about 12" in err  # not --layers: refused there
     assert "--method bicubic-linear" in err
     # the warning is deserved: the harmonic value there is far off the exact field
     out = dov.interpolate(layers, 0.6, 10.6, 20000.0).values[0]
