@@ -313,7 +313,7 @@ def cmd_filter(args):
     res["status"] = res["status"] | np.where(
         implausible_rows(res["innovation"], res["innovation_sigma"]),
         STATUS_FILTER["implausible_fit"], 0)
-    write_track_csv(args.out, _output_columns(t, track, res), force=args.force, precision=12)
+    write_track_csv(args.out, _output_columns(t, track, res), force=args.force)
     n_read = int(np.isfinite(g).sum())
     stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""
     stride += f", no-harm guard {args.guard:g}" if args.guard is not None else ""
