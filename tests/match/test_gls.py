@@ -23,10 +23,10 @@ score_j = jax.jit(gls_score)
 _posterior_j = jax.jit(offset_posterior)
 
 
-def posterior_j(scores, on, oe, cell=0.0, dof=1.0, exclusion_m=0.0):
+def posterior_j(scores, on, oe, cell=0.0, dof=1.0, exclusion_m=0.0, edge=None):
     """One compiled posterior per shape: every argument passed, as floats."""
     return _posterior_j(scores, on, oe, float(cell), dof=float(dof),
-                        exclusion_m=float(exclusion_m))
+                        exclusion_m=float(exclusion_m), edge=edge)
 
 
 score_track_j = jax.jit(score_track, static_argnames=("kind", "axis"))
@@ -327,10 +327,10 @@ def test_edge_mass_of_a_disc_ring_equals_numpy():
     on, oe = _lattice()
     r2 = on**2 + oe**2
     j = np.where(r2 <= 3000.0**2, _quad(on, oe, np.array([2500.0, 1200.0]), K), np.inf)
-    post = offset_posterior(j, on, oe, edge=r2 > 2900.0**2)
+    post = posterior_j(j, on, oe, edge=r2 > 2900.0**2)
     w = np.exp(-0.5 * (j - j[np.isfinite(j)].min()))
     w = w / w.sum()
     np.testing.assert_allclose(post.edge_mass, w[r2 > 2900.0**2].sum(), rtol=1e-10)
     assert 0.05 < float(post.edge_mass) < 0.95
-    square = offset_posterior(j, on, oe)  # the lattice's outermost rows and columns
+    square = posterior_j(j, on, oe)  # the lattice's outermost rows and columns
     assert float(square.edge_mass) < 1e-12  # only the four axis ends of the disc
