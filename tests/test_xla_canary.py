@@ -41,6 +41,8 @@ def test_vmapped_matvec_then_sum(dtype, n):
     np.testing.assert_allclose(jitted, eager, rtol=1e-12 if dtype == jnp.float64 else 1e-6)
 
 
+@pytest.mark.long  # its op-by-op reference compiles ~170 programs (13 s alone, 16-53 s in
+# full runs); the fast tier keeps the fault's pattern in the weighted-sum canary above
 def test_dov_interpolation_at_many_points_float32():
     """Where jaxgrav met the fault (a float32 interpolator inside jit, as in
     ``benchmarks/dov.py``): both channels right at 2·10⁴ points."""
