@@ -50,10 +50,11 @@ from jaxgrav.scenarios import INS_GRADES
 __all__ = ["add_parser", "cmd_montecarlo", "format_summary", "summarize"]
 
 PERCENTILES = (5, 25, 50, 75, 95)
-MASKED_MAP_METHODS = ("dense", "chains", "entropy", "iccp", "entropy+iccp", *FILTER_METHODS)
-"""Methods whose runs take a map with missing (land) nodes: a run's start is drawn again
-until its true track reads none (:data:`MISSING_MAP_START_TRIES` tries); the voyages
-follow their preset routes and still need a complete map."""
+MASKED_MAP_METHODS = ("dense", "chains", "entropy", "iccp", "entropy+iccp", *FILTER_METHODS,
+                      *VOYAGE_METHODS)
+"""Methods whose runs take a map with missing (land) nodes: a run's start (a voyage's
+route) is drawn again until its true track reads none (:data:`MISSING_MAP_START_TRIES`
+tries)."""
 
 
 def add_parser(subparsers):
@@ -301,8 +302,8 @@ def cmd_montecarlo(args):
         map_name = str(args.map)
     else:  # the method's default (jaxgrav.montecarlo.build)
         map_name = "paper-d" if kind == "filter" else "ryukyu"
-    # paper A's, B's and D's methods draw each run's start again until its track reads no
-    # missing node (MISSING_MAP_START_TRIES); the voyages need a complete map
+    # every method draws each run's start (a voyage's route) again until its track reads
+    # no missing node (MISSING_MAP_START_TRIES)
     masked_ok = args.method in MASKED_MAP_METHODS
     grid = (None if args.map is None or (kind == "filter" and args.map == "paper-d")
             else load_map(args.map, None, allow_nan=masked_ok))

@@ -17,6 +17,10 @@ otherwise) whose readings see the map plus the run's map error, and returns, bes
 ``hourly_err_m``, ``hourly_ins_err_m``   RMS per hour (m), shape ``(H,)``
 ``err_series_m``, ``ins_err_series_m``, ``sigma_series_m``   every 10 min: radial error
                            of the solution, of the free INS, and the stated radial 1-σ (m)
+``readings_on_map``        every reading finite: the voyage's true track read no missing
+                           map node (on a map with missing nodes the route is drawn again,
+                           :data:`~jaxgrav.montecarlo.matcher_runs.MISSING_MAP_START_TRIES`
+                           times, until it reads none)
 ``status``                 tightly coupled: the filter's status bits OR-ed over the voyage;
                            loosely coupled: bit ``k`` set when a fix event ``k`` of
                            :data:`~jaxgrav.navigate.FIX_EVENTS` happened (bit 0: accepted)
@@ -30,6 +34,7 @@ import jax.numpy as jnp
 from jaxgrav.fields.map_error import CorrelatedMapError
 from jaxgrav.filters import STATUS_FILTER, matched_state
 from jaxgrav.montecarlo.draws import scenario_draws
+from jaxgrav.montecarlo.matcher_runs import MISSING_MAP_START_TRIES
 from jaxgrav.montecarlo.spec import (
     MethodSpec,
     check_map_error,
@@ -78,7 +83,7 @@ def _metrics(voyage, nav, cov, dt, status):
         status=status.astype(jnp.int32), nees=jnp.mean(err.nees),
         hourly_err_m=hourly_rms(err.nav_m, dt), hourly_ins_err_m=hourly_rms(err.free_m, dt),
         err_series_m=err.nav_m[::every], ins_err_series_m=err.free_m[::every],
-        sigma_series_m=sigma[::every],
+        sigma_series_m=sigma[::every], readings_on_map=jnp.all(jnp.isfinite(voyage.gravity)),
         **scenario_draws(voyage.truth.lat, voyage.truth.lon, voyage.ins.lat, voyage.ins.lon))
 
 
@@ -165,6 +170,15 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
         Length of each voyage (default 12).
     ins : INSErrorModel
         The INS (simulated and told to the navigator); default navigation grade.
+
+    Returns
+    -------
+    MethodSpec
+        On a ``grid`` (or a TruthGrid ``map_error``) with missing (NaN, land-masked)
+        nodes its scenario's ``start_tries`` is
+        :data:`~jaxgrav.montecarlo.matcher_runs.MISSING_MAP_START_TRIES` (each run's route
+        drawn again until its true track reads no missing node; ``readings_on_map`` per
+        run), else 1 (the voyages of a single try).
     """
     if kind not in VOYAGE_METHODS:
         raise ValueError(f"kind must be one of {', '.join(VOYAGE_METHODS)}; got {kind!r}")
@@ -177,7 +191,10 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
     if map_error_order not in (None, 1, 2):
         raise ValueError(f"map_error_order must be 1 or 2; got {map_error_order!r}")
     grid = default_grid() if grid is None else grid
-    changes = {"ins": ins}
+    # land masked (the map's or a truth grid's): a run's route is drawn again (up to 16
+    # times) until it reads no missing node (a complete map: the same voyages as one try)
+    missing = grid.n_missing or getattr(getattr(map_error, "grid", None), "n_missing", 0)
+    changes = {"ins": ins, "start_tries": MISSING_MAP_START_TRIES if missing else 1}
     if hours is not None:
         changes["hours"] = float(hours)
     if noise is not None:

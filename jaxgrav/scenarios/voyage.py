@@ -11,7 +11,9 @@ random constants, started 500 m and 0.05 m/s off in random directions:
 The route is drawn from the key (start, orientation, turns), placed so that it stays
 ``margin_deg`` inside ``region`` (room for the INS drift and the matcher's search);
 the readings see the map plus a correlated map error drawn per voyage when one is
-given (:func:`~jaxgrav.scenarios.paper_a.scenario_truth`).
+given (:func:`~jaxgrav.scenarios.paper_a.scenario_truth`). On a map with missing (NaN,
+land-masked) nodes ``start_tries`` routes are drawn at once and the first whose sailed
+track reads none is kept (:func:`~jaxgrav.scenarios.paper_a.first_clear_draw`).
 """
 
 import dataclasses
@@ -23,9 +25,10 @@ import numpy as np
 from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.constants import DEG, KNOT
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
-from jaxgrav.scenarios.paper_a import scenario_truth
+from jaxgrav.scenarios.paper_a import check_start_tries, first_clear_draw, scenario_truth
 from jaxgrav.sim.ins import INSErrorModel
-from jaxgrav.sim.route import Route
+from jaxgrav.sim.readings import field_along
+from jaxgrav.sim.route import Route, sail
 from jaxgrav.sim.voyage import simulate_voyage
 
 __all__ = ["INS_GRADES", "NAVIGATION_GRADE", "PRESETS", "VoyageScenario", "voyage_preset",
@@ -71,6 +74,12 @@ class VoyageScenario:
         Size of the initial INS position (m) and velocity (m/s) errors.
     noise_mgal : float
         Reading noise (mGal).
+    start_tries : int
+        Routes tried per voyage (static, default 1): the first whose sailed true track
+        reads no missing (NaN) node of the truth field is taken, the first draw being the
+        one of a single try (so voyages on a complete map are the same for any value); for
+        maps with land masked (:func:`~jaxgrav.scenarios.paper_a.first_clear_draw`). A
+        voyage none of whose tries is clear keeps the first, and its NaN readings say so.
     """
 
     region: tuple = static_field((25.0, 35.0, 125.0, 135.0))
@@ -87,8 +96,10 @@ class VoyageScenario:
     pos_error_m: float = 500.0
     vel_error: float = 0.05
     noise_mgal: float = 1.0
+    start_tries: int = static_field(1)
 
     def __post_init__(self):
+        check_start_tries(self.start_tries)
         if self.route not in ("patrol", "transit"):
             raise ValueError(f"route must be 'patrol' or 'transit'; got {self.route!r}")
         if not (isinstance(self.n_legs, int) and self.n_legs >= 2):
@@ -166,10 +177,19 @@ def voyage_scenario(key, field, scenario=VoyageScenario(), map_error=None):  # n
     Returns
     -------
     Voyage
+        ``gravity`` NaN where the route reads a missing map node (none of
+        ``scenario.start_tries`` routes was clear).
     """
-    truth = scenario_truth(key, field, map_error, scenario.region)
+    s = scenario
+    truth = scenario_truth(key, field, map_error, s.region)
     k_route, k_voyage = jax.random.split(key)
-    route = voyage_route(k_route, scenario)
+
+    def clear(route):  # the true track, sailed as simulate_voyage sails it, reads no NaN
+        track, _ = sail(route, s.n_steps, s.dt)
+        return jnp.all(jnp.isfinite(field_along(truth, track.lat, track.lon, "bicubic")))
+
+    route = first_clear_draw(k_route, voyage_route(k_route, s),
+                             lambda k: voyage_route(k, s), clear, s.start_tries)
     return simulate_voyage(k_voyage, truth, route, scenario.n_steps, scenario.dt, scenario.ins,
                            pos_error_m=scenario.pos_error_m, vel_error=scenario.vel_error,
                            noise_mgal=scenario.noise_mgal)
