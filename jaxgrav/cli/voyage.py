@@ -12,9 +12,13 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
 
 The voyage is :func:`~jaxgrav.scenarios.voyage_scenario` of the preset
 (:data:`~jaxgrav.scenarios.PRESETS`: ``patrol-12h``, ``transit-24h``) on ``--map``,
-the readings seeing the map plus ``--map-error`` (or ``--truth-map``).
+the readings seeing the map plus ``--map-error`` (or ``--truth-map``). On a map (or truth
+map) with missing (NaN, land-masked) nodes the route is drawn again, up to
+:data:`~jaxgrav.montecarlo.matcher_runs.MISSING_MAP_START_TRIES` times, until its true
+track reads none (the first route kept when it is clear); if none is, the command says so.
 """
 
+import dataclasses
 import math
 
 import jax
@@ -28,6 +32,7 @@ from jaxgrav.cli.simulate import (
     map_error_from_args,
 )
 from jaxgrav.datasets import load_map
+from jaxgrav.montecarlo.matcher_runs import MISSING_MAP_START_TRIES
 from jaxgrav.scenarios import PRESETS, voyage_preset, voyage_scenario
 from jaxgrav.scenarios.paper_a import check_region_covered
 from jaxgrav.tracks import write_track_csv
@@ -74,6 +79,10 @@ def cmd_simulate_voyage(args):
     grid = load_map(args.map, args.var, allow_nan=True)  # missing nodes: checked on the route
     check_region_covered(grid, scenario.region, f"--map {args.map}")
     model = map_error_from_args(args, grid, allow_nan=True)
+    # land masked: the route is drawn again until it reads no missing node
+    tries = (MISSING_MAP_START_TRIES if grid.n_missing or
+             getattr(getattr(model, "grid", None), "n_missing", 0) else 1)
+    scenario = dataclasses.replace(scenario, start_tries=tries)
     voyage = voyage_scenario(jax.random.key(args.seed), grid, scenario, model)
     bad = ~np.isfinite(np.asarray(voyage.gravity))
     if bad.any():
@@ -81,9 +90,9 @@ def cmd_simulate_voyage(args):
         source = f"--truth-map {args.truth_map}" if args.truth_map else f"--map {args.map}"
         raise ValueError(f"{source} has missing (NaN) values along the simulated route: "
                          f"{int(bad.sum())} of {bad.size} readings, the first at lat "
-                         f"{float(voyage.truth.lat[i]):.5g}, lon {float(voyage.truth.lon[i]):.5g}; "
-                         "choose another --seed or a map complete there (missing nodes away "
-                         "from the route are fine)")
+                         f"{float(voyage.truth.lat[i]):.5g}, lon {float(voyage.truth.lon[i]):.5g} "
+                         f"(none of the {tries} routes tried is clear); choose another --seed "
+                         "or a map complete there (missing nodes away from the route are fine)")
     ins, truth = voyage.ins, voyage.truth
     write_track_csv(args.out, {"t": ins.t, "lat": ins.lat, "lon": ins.lon,
                                "v_east": ins.v_east, "v_north": ins.v_north,

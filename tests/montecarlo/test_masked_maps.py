@@ -1,7 +1,7 @@
 """Monte Carlo runs on a map with land masked (missing nodes): a run's start is drawn
 again until its true track reads no missing node; on a complete map the runs are those
 of a single try, and the CLI takes such maps for every method (a voyage's route drawn
-again)."""
+again, also by ``simulate-voyage``)."""
 
 import dataclasses
 
@@ -16,7 +16,9 @@ from jaxgrav.cli.montecarlo import summarize
 from jaxgrav.grid import Grid
 from jaxgrav.montecarlo import methods as montecarlo_methods
 from jaxgrav.montecarlo.spec import region_of
+from jaxgrav.scenarios import voyage_preset, voyage_scenario
 from jaxgrav.scenarios.paper_a import MatchingScenario, matching_scenario
+from jaxgrav.tracks import read_track_csv
 
 GRID = datasets.load("ryukyu")["anomaly_2p5min"]
 
@@ -105,3 +107,20 @@ def test_cli_takes_a_masked_map_for_dense_filters_and_voyages(tmp_path, capsys):
     with xr.open_dataset(tmp_path / "v.nc") as ds:
         assert bool(ds["readings_on_map"].all()) and "units" in ds["readings_on_map"].attrs
         assert np.all(np.isfinite(ds["err_m"]))
+
+
+@pytest.mark.long
+def test_simulate_voyage_draws_its_route_again_off_the_land(tmp_path, capsys):
+    v = np.array(GRID.values)
+    v[:, :120] = np.nan  # west of 129 E
+    land = Grid(v, GRID.lat0, GRID.dlat, GRID.lon0, GRID.dlon, GRID.name, GRID.units)
+    xr.Dataset({"anomaly": (("lat", "lon"), v, {"units": "mGal"})},
+               coords={"lat": np.asarray(GRID.lat), "lon": np.asarray(GRID.lon)}).to_netcdf(
+        tmp_path / "land.nc")
+    one = voyage_scenario(jax.random.key(10), land, voyage_preset("patrol-12h", hours=1.0))
+    assert not np.all(np.isfinite(np.asarray(one.gravity)))  # seed 10's first route: land
+    log, truth = tmp_path / "log.csv", tmp_path / "truth.csv"
+    assert main(["simulate-voyage", "--hours", "1", "--seed", "10", "--map",
+                 str(tmp_path / "land.nc"), "--out", str(log), "--truth", str(truth)]) == 0
+    assert np.all(np.isfinite(read_track_csv(log)["gravity"]))
+    assert np.all(read_track_csv(truth)["lon"] > 129.0)
