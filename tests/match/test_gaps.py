@@ -246,7 +246,8 @@ def test_how_missing_nodes_are_read(smooth_grid):
     assert missing_reading(grid, lat[:MIN_FIXES], lon[:MIN_FIXES], "dense", "gaps",
                            reach) == "land"
     z = np.asarray(smooth_grid.sample(lat, lon, "bicubic"))[:MIN_FIXES]
-    with pytest.warns(RuntimeWarning, match="needs more than 5 fixes"):
+    with (pytest.warns(RuntimeWarning, match="needs more than 5 fixes"),
+          pytest.warns(RuntimeWarning, match="the search region holds missing")):
         jm.match_track(grid, lat[:MIN_FIXES], lon[:MIN_FIXES], z, drift_radius_m=reach,
                        noise=0.5, missing="gaps")
 
