@@ -230,8 +230,10 @@ def suitability(grid, *, heading_deg=45.0, n_fixes=30, spacing_m=1200.0, noise_m
                                  jnp.asarray(lon0.ravel()), jnp.asarray(north),
                                  jnp.asarray(east), whitener, float(bias_prior_sigma)))
     crlb = crlb.reshape(ny, nx, 2, 2)
-    sn, se = np.sqrt(crlb[..., 0, 0]), np.sqrt(crlb[..., 1, 1])
+    # a flat or confounded window's Fisher matrix is singular: its inverse's diagonal can
+    # come out negative, whose NaN the command reports as no_information
     with np.errstate(invalid="ignore", divide="ignore"):
+        sn, se = np.sqrt(crlb[..., 0, 0]), np.sqrt(crlb[..., 1, 1])
         corr = crlb[..., 0, 1] / (sn * se)
         precision = np.sqrt(crlb[..., 0, 0] + crlb[..., 1, 1])
     return Suitability(precision, sn, se, corr, _descriptors(grid, int(window_cells) // 2))
