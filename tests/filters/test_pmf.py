@@ -23,6 +23,7 @@ from jaxgrav.fields.pointmass import gravity_anomaly, paper_d
 from jaxgrav.filters.map_state import augment, map_error_state
 from jaxgrav.filters.pmf import diffusion_kernel
 from jaxgrav.filters.pmf_cells import cell_values, weigh_cells
+from jaxgrav.geodesy import meridian_radius
 from jaxgrav.grid import Grid
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios.paper_d import MASS_LON
@@ -514,7 +515,8 @@ def test_dynamics_arguments():
 
 def _through_a_hole(filt, prior, z, r):
     """One reading over the ryukyu map with a NaN hole south of the INS position: the
-    settled prediction, the posterior, its info and the cells' map values."""
+    settled prediction, the posterior, its info, the cells' map values and which cells'
+    nearest node is missing."""
     grid = datasets.load("ryukyu")["anomaly_2p5min"]
     iy, ix = int((30.3 - grid.lat0) / grid.dlat), int((129.7 - grid.lon0) / grid.dlon)
     lat, lon = float(grid.lat0 + (iy + 1) * grid.dlat), 129.7  # on a row of nodes
@@ -529,7 +531,11 @@ def _through_a_hole(filt, prior, z, r):
     new, info = update(filt, state, step, field, dyn)
     offsets = (np.arange(G) - (G - 1) / 2) * CELL
     dn, de = jnp.meshgrid(pred.centre[0] + offsets, pred.centre[1] + offsets, indexing="ij")
-    return pred, new, info, np.asarray(cell_values(field, step, dn, de, fl.gravity_measurement))
+    g = np.asarray(cell_values(field, step, dn, de, fl.gravity_measurement))
+    # the cells whose nearest node is in the hole (its row, south of the INS row by more
+    # than half a row; the hole's ±4 columns span every cell's longitude)
+    cell_lat = lat - np.asarray(dn) / float(meridian_radius(lat)) / DEG
+    return pred, new, info, g, cell_lat < lat - 0.5 * grid.dlat
 
 
 @pytest.mark.long
@@ -538,13 +544,17 @@ def test_cells_on_land_take_no_mass(prior):
     cells get zero likelihood (Bayes by hand, the hole of the test below)."""
     land = fl.pmf(n_cells=G, cell_m=CELL, q_pos=Q_POS, missing="land")
     z, r = 12.0, 0.7
-    pred, new, _, g = _through_a_hole(land, prior, z, r)
+    pred, new, _, g, on_hole = _through_a_hole(land, prior, z, r)
     w, m, s = (np.asarray(a) for a in (pred.w, pred.bias_mean, pred.bias_var))
     known = np.isfinite(g)
-    post = w * np.where(known, np.exp(-0.5 * (z - np.where(known, g, 0) - m) ** 2 / (s + r))
-                        / np.sqrt(s + r), 0.0)
+    land_cells = ~known & on_hole  # nearest node missing: land
+    assert land_cells.any() and (~known & ~on_hole).any()  # and unknown cells at sea
+    like = np.where(known, np.exp(-0.5 * (z - np.where(known, g, 0) - m) ** 2 / (s + r))
+                    / np.sqrt(s + r), 0.0)
+    gap = np.sum(w * like) / np.sum(w[known])  # the known cells' mean likelihood
+    post = w * np.where(known, like, np.where(land_cells, 0.0, gap))
     np.testing.assert_allclose(np.asarray(new.w), post / post.sum(), rtol=1e-9, atol=1e-15)
-    assert np.asarray(new.w)[~known].sum() == 0.0 and w[~known].sum() > 0.2
+    assert np.asarray(new.w)[land_cells].sum() == 0.0 and w[land_cells].sum() > 1e-3
 
 
 def test_land_cells_are_missing_nodes_inside_the_map_and_others_gaps():
@@ -586,7 +596,7 @@ def test_cells_of_unknown_map_value_neither_gain_nor_lose_mass(prior):
     the mass and their bias, and the predicted reading is the known cells' (zero likelihood
     for the unknown cells piled the mass on the hole's rim: 10 km off with a 450 m σ)."""
     z, r = 12.0, 0.7
-    pred, new, info, g = _through_a_hole(PMF, prior, z, r)
+    pred, new, info, g, _ = _through_a_hole(PMF, prior, z, r)
     w, m, s = (np.asarray(a) for a in (pred.w, pred.bias_mean, pred.bias_var))
     known = np.isfinite(g)
     assert 0.2 < 1 - known.mean() < 0.8
