@@ -522,7 +522,8 @@ def _through_a_hole(filt, prior, z, r):
     lat, lon = float(grid.lat0 + (iy + 1) * grid.dlat), 129.7  # on a row of nodes
     values = np.asarray(grid.values).copy()
     values[iy, ix - 4:ix + 5] = np.nan  # unknown: the two rows of cells south of the INS
-    field = prepare_map(Grid(jnp.asarray(values), grid.lat0, grid.dlat, grid.lon0, grid.dlon))
+    field = jax.jit(prepare_map)(Grid(jnp.asarray(values), grid.lat0, grid.dlat, grid.lon0,
+                                      grid.dlon))
     x0, p0 = prior
     dyn = filt.dynamics(lat, DT)
     state = init(filt, x0, p0)
@@ -531,7 +532,8 @@ def _through_a_hole(filt, prior, z, r):
     new, info = update(filt, state, step, field, dyn)
     offsets = (np.arange(G) - (G - 1) / 2) * CELL
     dn, de = jnp.meshgrid(pred.centre[0] + offsets, pred.centre[1] + offsets, indexing="ij")
-    g = np.asarray(cell_values(field, step, dn, de, fl.gravity_measurement))
+    g = np.asarray(jax.jit(cell_values, static_argnums=4)(field, step, dn, de,
+                                                          fl.gravity_measurement))
     # the cells whose nearest node is in the hole (its row, south of the INS row by more
     # than half a row; the hole's ±4 columns span every cell's longitude)
     cell_lat = lat - np.asarray(dn) / float(meridian_radius(lat)) / DEG
@@ -565,20 +567,22 @@ def test_land_cells_are_missing_nodes_inside_the_map_and_others_gaps():
     and dropped a truth 3 km from the nearest missing node (4 σ off, NEES 20)."""
     values = np.zeros((8, 8))
     values[3, 4] = np.nan  # the node at 13° N, 24° E
-    field = prepare_map(Grid(jnp.asarray(values), 10.0, 1.0, 20.0, 1.0))
+    # jitted (one program each; op by op this 8 x 8 map's ops took 5 s)
+    field = jax.jit(prepare_map)(Grid(jnp.asarray(values), 10.0, 1.0, 20.0, 1.0))
     step = _step(1.0, 13.0, 24.0)
     east = 0.6 * np.cos(np.radians(13.0)) * 111.3e3  # 0.6° of longitude (m)
     dn, de = jnp.meshgrid(jnp.array([389e3, 0.0, -222e3]), jnp.array([0.0, east, -east]),
                           indexing="ij")  # cell (i, j): offset north, east
-    on_map = jnp.asarray(np.isfinite(np.asarray(
-        cell_values(field, step, dn, de, fl.gravity_measurement))))
+    on_map = jnp.asarray(np.isfinite(np.asarray(jax.jit(cell_values, static_argnums=4)(
+        field, step, dn, de, fl.gravity_measurement))))
     # (0, ·) at 9.5° N, off the map; (1, 0) on the missing node; (1, 1) at 23.4° E, whose
     # nearest node (23° E) is known but whose bicubic cell holds the missing one; (2, ·)
     # at 15° N, known
     assert not np.asarray(on_map)[:2].any() and np.asarray(on_map)[2].all()
     w = jnp.full((3, 3), 1 / 9)
     lik = jnp.arange(1.0, 10.0).reshape(3, 3)
-    out = {mode: np.asarray(weigh_cells(w, lik, on_map, field, step, dn, de, mode))
+    weigh = jax.jit(weigh_cells, static_argnums=7)
+    out = {mode: np.asarray(weigh(w, lik, on_map, field, step, dn, de, mode))
            for mode in ("gaps", "land")}
     known = np.asarray(on_map)
     gap = float(np.sum(np.where(known, lik, 0.0)) / known.sum())  # known cells' mean
