@@ -3,6 +3,7 @@ naming the option, the value and what was expected, exit code 2, in CLI syntax, 
 anything is computed and with no output left behind."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -158,6 +159,61 @@ def test_particle_options(sim, tmp_path, capsys, argv, message):
     _refused(capsys, [*argv, "--track", str(sim / "t.csv"), "--out", str(out)], message, [out])
 
 
+@pytest.mark.parametrize("argv, message", [
+    # --missing is the point-mass filter's reading of missing map nodes: refused, not
+    # ignored, with any other method, in the same words by filter and navigate
+    (["filter", "--point-masses", "paper-d", "--method", "ukf", "--missing", "gaps"],
+     "--missing gaps is for --method pmf; got --method ukf"),
+    (["filter", "--map", "ryukyu", "--method", "pf", "--missing", "land"],
+     "--missing land is for --method pmf; got --method pf"),
+    (["filter", "--map", "ryukyu", "--method", "rbpf", "--ins", "navigation", "--missing",
+      "land"], "--missing land is for --method pmf; got --method rbpf"),
+    (["navigate", "--method", "ekf", "--missing", "gaps"],
+     "--missing gaps is for --method pmf; got --method ekf"),
+    (["navigate", "--method", "entropy+iccp", "--missing", "land"],
+     "--missing land is for --method pmf; got --method entropy+iccp"),
+    (["navigate", "--method", "ukf", "--ins", "strategic", "--missing", "land"],
+     "--missing land is for --method pmf; got --method ukf"),
+])
+def test_missing_option_with_another_method(sim, tmp_path, capsys, argv, message):
+    out = tmp_path / "f.csv"
+    _refused(capsys, [*argv, "--track", str(sim / "t.csv"), "--out", str(out)], message, [out])
+
+
+CHOICES = {"--ins": "'navigation', 'strategic'", "--missing": "'gaps', 'land'"}
+
+
+@pytest.mark.parametrize("argv, option, value", [
+    (["filter", "--point-masses", "paper-d", "--ins", "tactical"], "--ins", "tactical"),
+    (["filter", "--point-masses", "paper-d", "--ins", "Navigation"], "--ins", "Navigation"),
+    (["filter", "--point-masses", "paper-d", "--ins", ""], "--ins", ""),
+    (["navigate", "--ins", "tactical"], "--ins", "tactical"),
+    (["navigate", "--ins", "STRATEGIC"], "--ins", "STRATEGIC"),
+    (["filter", "--map", "ryukyu", "--method", "pmf", "--missing", "sea"], "--missing", "sea"),
+    (["filter", "--map", "ryukyu", "--method", "pmf", "--missing", "Land"], "--missing",
+     "Land"),
+    (["filter", "--map", "ryukyu", "--method", "pmf", "--missing", "auto"], "--missing",
+     "auto"),  # match's --missing auto is not the point-mass filter's
+    (["navigate", "--method", "pmf", "--missing", "sea"], "--missing", "sea"),
+    (["navigate", "--method", "pmf", "--missing", "auto"], "--missing", "auto"),
+    (["navigate", "--method", "ukf", "--missing", "nope"], "--missing", "nope"),
+])
+def test_choice_options_name_the_value_and_the_choices(sim, tmp_path, capsys, argv, option,
+                                                       value):
+    """A value outside --ins's or --missing's choices: argparse's exit 2 and, after its
+    usage, one error line naming the option, the value and the choices; nothing written."""
+    out = tmp_path / "f.csv"
+    with pytest.raises(SystemExit) as exc:
+        main([*argv, "--track", str(sim / "t.csv"), "--out", str(out)])
+    assert exc.value.code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    errors = [line for line in lines if line.startswith(f"jaxgrav {argv[0]}: error:")]
+    assert errors == [f"jaxgrav {argv[0]}: error: argument {option}: invalid choice: "
+                      f"{value!r} (choose from {CHOICES[option]})"], lines
+    assert lines[-1] == errors[0] and lines[0].startswith(f"usage: jaxgrav {argv[0]}")
+    assert not out.exists()
+
+
 def test_navigate_warns_of_loose_options_with_a_tight_method(sim, tmp_path, capsys):
     """6. --fix-every, --n-fixes, --stride set the loosely coupled fixes: named in one
     warning line with --method ukf (the run then stops at the log with no readings)."""
@@ -217,6 +273,64 @@ def test_bench_timeout(tmp_path, capsys, value):
     out = tmp_path / "b.md"
     _refused(capsys, ["bench", "--timeout", value, "--dir", str(tmp_path), "--out", str(out)],
              "--timeout must be a finite number of seconds > 0 per script; got", [out])
+
+
+# ------------------------------------------------------------------------------ dov
+@pytest.fixture(scope="module")
+def dov_track(tmp_path_factory):
+    """Two points over the shipped qinling layers: 5 km and 50 km up."""
+    d = tmp_path_factory.mktemp("dov")
+    write_track_csv(d / "d.csv", {"lat": [36.5, 36.6], "lon": [109.5, 109.6],
+                                  "h": [5000.0, 50000.0]})
+    return d / "d.csv"
+
+
+_NOT_NAMED = "the error does not name --layers (jaxgrav.cli.dov passes them to the library)"
+
+
+@pytest.mark.parametrize("layers, message", [
+    ("0", "--layers needs at least 2 heights; got '0'"),
+    ("a,b", "--layers must be comma-separated heights in m; got 'a,b'"),
+    ("0;10000", "--layers must be comma-separated heights in m; got '0;10000'"),
+    pytest.param("10000,0", "--layers 10000,0: heights must be strictly ascending",
+                 marks=pytest.mark.xfail(strict=True, reason=_NOT_NAMED)),
+    pytest.param("0,nan,20000", "--layers",
+                 marks=pytest.mark.xfail(strict=True, reason=_NOT_NAMED + "; it said 'h must "
+                                         "be finite', as if the track's h were")),
+])
+def test_dov_layers_values(dov_track, tmp_path, capsys, layers, message):
+    out = tmp_path / "d.csv"
+    _refused(capsys, ["dov", "--track", str(dov_track), "--out", str(out), "--layers", layers],
+             message, [out])
+
+
+@pytest.mark.parametrize("layers, method, warned", [
+    # 10-100 km: k*gap 3.2 over the 50 km point, beyond the trusted 2
+    ("0,10000,100000", "bicubic-harmonic", "1 between 10000 and 100000 m (k*gap = 3.2)"),
+    ("0,10000,100000", "bilinear-harmonic", "1 between 10000 and 100000 m (k*gap = 3.2)"),
+    ("0,10000,60000", "bicubic-harmonic", None),  # k*gap 1.75: trusted
+    ("0,10000,100000", "bicubic-linear", None),  # no vertical continuation to warn of
+    (None, "bicubic-harmonic", None),  # the shipped 0, 10, 20 km (50 km is refused there)
+])
+def test_dov_layers_gap_warning(dov_track, tmp_path, capsys, layers, method, warned):
+    """dov --layers with a gap too wide for the harmonic continuation: exit 0, the output
+    written, one warning naming the gap and asking for closer --layers (not a --grid)."""
+    out = tmp_path / "d.csv"
+    track = dov_track
+    if layers is None:  # the shipped layers end at 20 km: the low point only
+        track = tmp_path / "low.csv"
+        write_track_csv(track, {"lat": [36.5], "lon": [109.5], "h": [5000.0]})
+    argv = ["dov", "--track", str(track), "--out", str(out), "--method", method]
+    assert main([*argv, *(["--layers", layers] if layers else [])]) == 0
+    err = capsys.readouterr().err.strip()
+    assert out.is_file()
+    if warned is None:
+        assert err == "", err
+        return
+    assert err.count("\n") == 0 and err.startswith("warning: track points lie in layer gaps "
+                                                   f"too wide for {method}'s"), err
+    assert warned in err and "--method bicubic-linear" in err and "--grid" not in err
+    assert re.search(r"use --layers at most about 5\d{4} m apart", err), err
 
 
 # -------------------------------------------------------------------- 8. line ends
