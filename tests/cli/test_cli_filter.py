@@ -495,6 +495,64 @@ def test_readings_offset_from_the_map_are_warned_of(sim, tmp_path, capsys):
     assert "the readings sit" not in capsys.readouterr().err
 
 
+OFFSET = "warning: the readings sit "
+FLAT = "warning: the map along the track cannot tell the position"
+
+
+@pytest.mark.parametrize("shift, north, extra, offset, flat", [
+    (0.0, 0.0, ("--ins", "navigation"), None, False),  # the clean track, either grade
+    (0.0, 0.0, ("--ins", "strategic"), None, False),
+    (15.0, 0.0, (), None, False),  # below the 25 mGal floor (a wrong INS position differs)
+    (-15.0, 0.0, ("--ins", "navigation"), None, False),
+    (40.0, 0.0, (), r"\+4\d", False),
+    (-250.0, 0.0, ("--ins", "navigation"), r"-2\d\d", False),
+    (250.0, 0.0, ("--ins", "strategic"), r"\+2\d\d", False),
+    (None, 5.4, ("--ins", "navigation", "--eotvos-corrected"), None, True),  # 600 km north
+    (None, 5.4, ("--ins", "strategic", "--eotvos-corrected"), None, True),
+])
+def test_offset_and_information_warnings(sim, tmp_path, capsys, shift, north, extra, offset,
+                                         flat):
+    """filter_checks' warnings in filter, with either --ins grade: readings offset beyond
+    what the gravimeter-bias state allows (floor 25 mGal) and a map too flat to tell the
+    position, each one stderr line (the run still exits 0 and writes its track); none for
+    the clean track or an offset within the floor. The ukf compiles once for all rows."""
+    cols = read_track_csv(sim / "track.csv").columns()
+    cols["lat"] = cols["lat"] + north
+    cols["gravity"] = (np.random.default_rng(0).normal(0.0, 1.0, cols["lat"].size)
+                       if shift is None else cols["gravity"] + shift)
+    write_track_csv(tmp_path / "t.csv", cols)
+    out = tmp_path / "f.csv"
+    assert _filter(tmp_path / "t.csv", out, *extra) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert out.is_file()
+    offsets = [line for line in lines if line.startswith(OFFSET)]
+    if offset is None:
+        assert offsets == [], lines
+    else:
+        assert len(offsets) == 1, lines
+        assert re.match(OFFSET + offset + r"(\.\d+)? mGal from the map along the INS track",
+                        offsets[0]), offsets
+        assert "subtract the offset from the gravity column" in offsets[0]
+    flats = [line for line in lines if line.startswith(FLAT)]
+    assert len(flats) == int(flat), lines
+    if flat:
+        assert "more than the filter's own 1-sigma" in flats[0], flats
+
+
+@pytest.mark.long  # two compiles of the point-mass filter (missing is static)
+def test_pmf_missing_gaps_or_land_without_missing_nodes(stride_track, tmp_path, capsys):
+    """filter --method pmf --missing gaps|land are both accepted on a field without missing
+    nodes (paper D's point masses), and agree there: the reading of missing nodes changes
+    nothing where there are none."""
+    out = {m: tmp_path / f"{m}.csv" for m in ("gaps", "land")}
+    for m, path in out.items():
+        assert _filter(stride_track, path, "--method", "pmf", "--missing", m) == 0
+        assert "pmf over" in capsys.readouterr().out
+    gaps, land = (read_track_csv(out[m]) for m in ("gaps", "land"))
+    for k in ("lat", "lon", "sigma_north", "sigma_east", "status"):
+        np.testing.assert_array_equal(land[k], gaps[k], err_msg=k)
+
+
 def test_filter_track_refuses_a_bad_ins_model():
     t = np.arange(3) * 10.0
     args = (paper_d(), t, np.full(3, 30.0), np.full(3, 130.0), np.zeros(3))
