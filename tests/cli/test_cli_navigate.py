@@ -4,8 +4,11 @@ import re
 
 import numpy as np
 import pytest
+import xarray as xr
 
+from jaxgrav import datasets
 from jaxgrav.cli import main
+from jaxgrav.geodesy import eotvos
 from jaxgrav.tracks import read_track_csv, write_track_csv
 
 SHORT = ["--fix-every", "6", "--n-fixes", "10", "--stride", "10"]
@@ -227,6 +230,58 @@ def test_an_implausible_fit_is_flagged_on_its_rows(voyage_log, tmp_path, capsys)
     # and named for what it is before the run (filter_checks.offset_warning)
     assert re.search(r"the readings sit \+2\d\d mGal from the map", captured.err)
     assert "a datum or an untied" in captured.err
+
+
+OFFSET = "warning: the readings sit "
+FLAT = "warning: the map along the track cannot tell the position"
+
+
+@pytest.mark.parametrize("shift, flat_map, extra, offset, flat", [
+    (0.0, False, ("--ins", "navigation"), None, False),  # the clean log, either grade
+    (0.0, False, ("--ins", "strategic"), None, False),
+    (15.0, False, (), None, False),  # within the 25 mGal floor
+    (60.0, False, (), r"\+5\d", False),  # the clean log sits -7 mGal off (map error 3)
+    (-250.0, False, ("--ins", "strategic"), r"-2\d\d", False),
+    (0.0, True, ("--ins", "navigation"), None, True),  # a constant map at the readings' level
+    (0.0, True, ("--ins", "strategic"), None, True),
+])
+def test_offset_and_information_warnings(voyage_log, tmp_path, capsys, shift, flat_map, extra,
+                                         offset, flat):
+    """filter_checks' warnings in navigate (tightly coupled), with either --ins grade: the
+    readings' offset from the map before the run, a map too flat to tell the position
+    after it; one stderr line each, exit 0, the CSV written; none for the clean log or an
+    offset within the floor. The ukf compiles once for the rows (and the module)."""
+    pd = pytest.importorskip("pandas")
+    log = pd.read_csv(voyage_log[0])
+    log["gravity"] += shift
+    path, out = tmp_path / "log.csv", tmp_path / "n.csv"
+    log.to_csv(path, index=False)
+    source = ()
+    if flat_map:  # the map at the median Eötvös-corrected reading: no offset, no gradient
+        level = float(np.median(log["gravity"] + np.asarray(
+            eotvos(log["lat"].to_numpy(), log["v_east"].to_numpy(),
+                   log["v_north"].to_numpy()))))
+        grid = datasets.load("ryukyu")["anomaly_2p5min"]
+        xr.Dataset({"anomaly": (("lat", "lon"), np.full(np.shape(grid.values), level),
+                                {"units": "mGal"})},
+                   coords={"lat": np.asarray(grid.lat), "lon": np.asarray(grid.lon)}).to_netcdf(
+            tmp_path / "flat.nc")
+        source = ("--map", str(tmp_path / "flat.nc"))
+    assert main(["navigate", *source, "--track", str(path), "--out", str(out),
+                 "--method", "ukf", *extra]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert out.is_file()
+    offsets = [line for line in lines if line.startswith(OFFSET)]
+    if offset is None:
+        assert offsets == [], lines
+    else:
+        assert len(offsets) == 1, lines
+        assert re.match(OFFSET + offset + r"(\.\d+)? mGal from the map along the INS track",
+                        offsets[0]), offsets
+    flats = [line for line in lines if line.startswith(FLAT)]
+    assert len(flats) == int(flat), lines
+    if flat:
+        assert "more than the filter's own 1-sigma" in flats[0], flats
 
 
 def test_loose_methods_refuse_a_log_with_a_reading_every_few_rows(voyage_log, tmp_path,
