@@ -29,15 +29,15 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import psd_sqrt
-from jaxgrav.filters.model import STATUS_FILTER, Filter, StepInfo, gravity_measurement
+from jaxgrav.filters.model import Filter, StepInfo, gravity_measurement
 from jaxgrav.filters.particles import (
     check_particle_settings,
-    normalise_log_weights,
     particle_flags,
     particle_summary,
     prediction_flags,
-    reading_moments,
     resample_regularised,
+    standard_normal,
+    weigh_reading,
 )
 
 __all__ = ["ParticleState", "pf"]
@@ -102,13 +102,13 @@ def pf(n_particles=1000, measurement=gravity_measurement, *, resample="systemati
         key = jax.random.PRNGKey(0) if key is None else key
         x0, p0 = jnp.asarray(x0), jnp.asarray(p0)
         key, sub = jax.random.split(key)
-        eps = jax.random.normal(sub, (n_particles, x0.shape[0]), p0.dtype)
+        eps = standard_normal(sub, (n_particles, x0.shape[0]), p0.dtype)
         log_w = jnp.full(n_particles, -jnp.log(n_particles), p0.dtype)
         return ParticleState(x0 + eps @ psd_sqrt(p0).T, log_w, key)
 
     def _move(state, dynamics):
         key, sub = jax.random.split(state.key)
-        eps = jax.random.normal(sub, state.particles.shape, state.particles.dtype)
+        eps = standard_normal(sub, state.particles.shape, state.particles.dtype)
         moved = state.particles @ dynamics.f.T + eps @ psd_sqrt(dynamics.q).T
         return ParticleState(moved, state.log_w, key)
 
@@ -128,25 +128,12 @@ def pf(n_particles=1000, measurement=gravity_measurement, *, resample="systemati
         zs = jax.vmap(lambda xi: measurement(field, xi, step.lat, step.lon))(x)
         if step.h_lin is not None:
             zs = zs + x @ step.h_lin
-        known = jnp.isfinite(zs)
-        none_known = ~jnp.any(known)
-        zs = jnp.where(known, zs, 0.0)  # double-where: no NaN into the weights
-        # the reading's moments over the particles with a map value (renormalised)
-        lw_known = normalise_log_weights(jnp.where(known | none_known, state.log_w, -jnp.inf))
-        s, nu, z = reading_moments(lw_known, zs, step.r, step.z)
-        flags, skip = particle_flags(step.z, step.r, s, nu, gate, none_known)
-        flags = flags | jnp.where(jnp.isfinite(step.z) & ~jnp.all(known),
-                                  STATUS_FILTER["off_map"], 0).astype(flags.dtype)
-        r = jnp.where(step.r > 0.0, step.r, 1.0)
-        loglik = -0.5 * (z - zs) ** 2 / r
-        # a particle without a map value takes the others' mean likelihood: the reading
-        # moves no weight between particles with and without one (as the PMF's gaps)
-        gap = jax.nn.logsumexp(jnp.where(known, lw_known + loglik, -jnp.inf))
-        log_w = normalise_log_weights(state.log_w + jnp.where(known, loglik, gap))
-        log_w = jnp.where(skip, state.log_w, log_w)
+        wr = weigh_reading(state.log_w, zs, step.r, step.z)
+        flags, skip = particle_flags(step.z, step.r, wr.s, wr.nu, gate, wr.known)
+        log_w = jnp.where(skip, state.log_w, wr.log_w)
         weighted = ParticleState(x, log_w, state.key)
-        nu_out = jnp.where(jnp.isfinite(step.z) & ~none_known, nu, jnp.nan)
-        info = _info(weighted, nu_out, s, flags)  # the posterior, before resampling
+        nu_out = jnp.where(jnp.isfinite(step.z) & ~wr.none_known, wr.nu, jnp.nan)
+        info = _info(weighted, nu_out, wr.s, flags)  # the posterior, before resampling
         return resample_if_degenerate(weighted), info
 
     def resample_if_degenerate(state):

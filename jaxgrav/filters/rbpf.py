@@ -32,7 +32,11 @@ The measurement must be a :class:`~jaxgrav.filters.model.MapPlusBias` with two
 position states (the default :data:`~jaxgrav.filters.gravity_measurement`, with or
 without :func:`~jaxgrav.filters.augment`'s map-error state). The reported state is the
 mixture's mean and covariance (``P`` plus the spread of the means); flags as
-:func:`~jaxgrav.filters.pf`'s.
+:func:`~jaxgrav.filters.pf`'s. A particle off the map or on a missing node while others
+are on it takes their mean likelihood and keeps its mean (the reading says nothing about
+its linear states without a map value); the shared ``P`` then shrinks by the posterior
+weight share of the particles that have one. The reading is skipped (``off_map``) only
+when no particle has a map value.
 """
 
 from typing import NamedTuple
@@ -41,15 +45,20 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import inv_2x2, psd_sqrt
-from jaxgrav.filters.model import Filter, MapPlusBias, StepInfo, gravity_measurement
+from jaxgrav.filters.model import (
+    Filter,
+    MapPlusBias,
+    StepInfo,
+    gravity_measurement,
+)
 from jaxgrav.filters.particles import (
     check_particle_settings,
-    normalise_log_weights,
     particle_flags,
     particle_summary,
     prediction_flags,
-    reading_moments,
     resample_regularised,
+    standard_normal,
+    weigh_reading,
 )
 
 __all__ = ["RBPFState", "rbpf"]
@@ -152,7 +161,7 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
         key = jax.random.PRNGKey(0) if key is None else key
         x0, p0 = jnp.asarray(x0), jnp.asarray(p0)
         key, sub = jax.random.split(key)
-        eps = jax.random.normal(sub, (n_particles, _POS), p0.dtype)
+        eps = standard_normal(sub, (n_particles, _POS), p0.dtype)
         pos = x0[:_POS] + eps @ psd_sqrt(_position_block(p0)).T
         m, p = _condition(x0, p0, pos)
         log_w = jnp.full(n_particles, -jnp.log(n_particles), p0.dtype)
@@ -165,7 +174,7 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
         cov = f_lin @ state.p @ f_lin.T + q
         cov = 0.5 * (cov + cov.T)
         key, sub = jax.random.split(state.key)
-        eps = jax.random.normal(sub, state.position.shape, state.position.dtype)
+        eps = standard_normal(sub, state.position.shape, state.position.dtype)
         pos = mu[:, :_POS] + eps @ psd_sqrt(_position_block(cov)).T
         m, p = _condition(mu, cov, pos)
         return RBPFState(pos, m, p, state.log_w, key)
@@ -195,23 +204,23 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
         c, c_pos = _linear_row(step, state.mean)
         g = jax.vmap(lambda d: measurement.map_part(field, d, step.lat, step.lon))(state.position)
         zs = g + state.position @ c_pos + state.mean @ c
-        off_map = ~jnp.all(jnp.isfinite(zs))
-        zs = jnp.where(jnp.isfinite(zs), zs, 0.0)  # double-where: no NaN into the weights
         pc = state.p @ c
         s_lin = c @ pc + step.r  # each particle's innovation variance
-        s, nu, z = reading_moments(state.log_w, zs, s_lin, step.z)
-        flags, skip = particle_flags(step.z, s_lin, s, nu, gate, off_map)
+        wr = weigh_reading(state.log_w, zs, s_lin, step.z)
+        flags, skip = particle_flags(step.z, s_lin, wr.s, wr.nu, gate, wr.known)
         s_safe = jnp.where(s_lin > 0.0, s_lin, 1.0)
-        resid = z - zs
         gain = pc / s_safe
-        log_w = normalise_log_weights(state.log_w - 0.5 * resid**2 / s_safe)
-        mean = state.mean + resid[:, None] * gain
-        p = state.p - s_safe * jnp.outer(gain, gain)
+        # a particle without a map value learns nothing from the reading: its mean stays;
+        # the shared covariance shrinks by the posterior share of those that learn (the
+        # mixture's mean conditional covariance)
+        mean = state.mean + jnp.where(wr.known, wr.z - wr.zs, 0.0)[:, None] * gain
+        share = jnp.where(jnp.all(wr.known), 1.0, jnp.exp(wr.log_w) @ wr.known)
+        p = state.p - share * s_safe * jnp.outer(gain, gain)
         new = RBPFState(state.position, jnp.where(skip, state.mean, mean),
                         jnp.where(skip, state.p, 0.5 * (p + p.T)),
-                        jnp.where(skip, state.log_w, log_w), state.key)
-        nu_out = jnp.where(jnp.isfinite(step.z) & ~off_map, nu, jnp.nan)  # none off map
-        info = _info(new, nu_out, s, flags)  # the posterior, before resampling
+                        jnp.where(skip, state.log_w, wr.log_w), state.key)
+        nu_out = jnp.where(jnp.isfinite(step.z) & ~wr.none_known, wr.nu, jnp.nan)
+        info = _info(new, nu_out, wr.s, flags)  # the posterior, before resampling
         return resample_if_degenerate(new), info
 
     def resample_if_degenerate(state):

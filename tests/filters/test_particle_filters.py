@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy.stats
 
 from jaxgrav.filters import (
     STATUS_FILTER,
@@ -22,7 +23,12 @@ from jaxgrav.filters import (
     ukf,
 )
 from jaxgrav.filters.model import Dynamics
-from jaxgrav.filters.particles import kernel_bandwidth, roughen, weighted_moments
+from jaxgrav.filters.particles import (
+    kernel_bandwidth,
+    roughen,
+    standard_normal,
+    weighted_moments,
+)
 from jaxgrav.scenarios import FilterScenario, initial_state
 from jaxgrav.sim.ins import transition
 
@@ -45,6 +51,23 @@ def test_systematic_resample_equals_filterpy(seed, monkeypatch):
 
 
 @pytest.mark.long
+def test_standard_normal_is_a_standard_normal():
+    """The particles' Box–Muller sampler: Kolmogorov–Smirnov against SciPy's normal, the
+    first four moments, an odd count, the dtype, and reproducible for a key."""
+    key = jax.random.PRNGKey(7)
+    z = np.asarray(jax.jit(standard_normal, static_argnums=(1, 2))(key, (401, 251),
+                                                                   jnp.float64))
+    assert z.shape == (401, 251) and z.dtype == np.float64
+    flat = z.ravel()
+    assert scipy.stats.kstest(flat, "norm").pvalue > 0.01
+    assert abs(flat.mean()) < 5 / np.sqrt(flat.size)
+    assert flat.std() == pytest.approx(1.0, abs=0.01)
+    assert scipy.stats.kurtosis(flat, fisher=False) == pytest.approx(3.0, abs=0.05)
+    assert np.abs(flat).max() <= np.sqrt(2 * 23 * np.log(2)) + 1e-6
+    np.testing.assert_array_equal(np.asarray(standard_normal(key, (401, 251), jnp.float64)), z)
+    assert standard_normal(key, (3,), jnp.float32).dtype == jnp.float32
+
+
 def test_residual_resample_copies_and_is_unbiased():
     log_w = _log_w(4, 40)
     n = log_w.shape[0]
@@ -230,6 +253,49 @@ def test_pf_particles_without_a_map_value_take_the_others_mean_likelihood():
     post /= post.sum()
     np.testing.assert_allclose(np.exp(np.asarray(new.log_w)), post, rtol=1e-9, atol=1e-300)
     assert post[~known].sum() == pytest.approx(w[~known].sum(), rel=1e-9)
+    assert int(info.status) & STATUS_FILTER["off_map"] and np.isfinite(float(info.innovation))
+
+
+@pytest.mark.long
+def test_rbpf_particles_without_a_map_value_keep_their_mean():
+    """The RBPF at a map edge through the cloud: the reading is used (it was skipped
+    whenever one particle met a missing value); particles beyond the edge take the others'
+    mean likelihood and keep their Kalman mean, the others take the Kalman update, and
+    the shared covariance shrinks by the posterior share of those with a map value."""
+    from jaxgrav.filters import gravity_measurement
+
+    dyn, x0, p0, steps = _linear_problem(5)
+
+    def edge(lat, lon):  # "map" that ends 200 m north of the track start
+        return jnp.where(lat < LAT0 + 0.0018, _linear_field(lat, lon), jnp.nan)
+
+    filt = rbpf(256, ess_threshold=0.0)  # no resampling: the particles stay comparable
+    state = filt.init(x0, p0, jax.random.PRNGKey(3))
+    step = jax.tree.map(lambda a: a[0], steps)
+    moved, _ = filt.predict(state, step, edge, dyn)  # the same draw as update's
+    new, info = jax.jit(filt.update, static_argnums=2)(state, step, edge, dyn)
+    np.testing.assert_array_equal(np.asarray(new.position), np.asarray(moved.position))
+    x = np.concatenate([np.asarray(moved.position), np.asarray(moved.mean)], 1)
+    zs = np.asarray(jax.vmap(lambda xi: gravity_measurement(edge, xi, step.lat, step.lon))(x))
+    known = np.isfinite(zs)
+    assert 0.2 < known.mean() < 0.8
+    p = np.asarray(moved.p)
+    c = np.zeros(p.shape[0])
+    c[12 - 2] = 1.0  # the gravimeter bias, the linear states' only reading row
+    s = c @ p @ c + float(step.r)
+    resid = float(step.z) - np.where(known, zs, 0.0)
+    w = np.exp(np.asarray(moved.log_w))
+    lik = np.where(known, np.exp(-0.5 * resid**2 / s), 0.0)
+    post = w * np.where(known, lik, np.sum(w * lik) / np.sum(w[known]))
+    post /= post.sum()
+    np.testing.assert_allclose(np.exp(np.asarray(new.log_w)), post, rtol=1e-9, atol=1e-300)
+    gain = p @ c / s
+    want = np.asarray(moved.mean) + np.where(known, resid, 0.0)[:, None] * gain
+    np.testing.assert_allclose(np.asarray(new.mean), want, rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(np.asarray(new.mean)[~known], np.asarray(moved.mean)[~known])
+    share = post[known].sum()
+    np.testing.assert_allclose(np.asarray(new.p), p - share * s * np.outer(gain, gain),
+                               rtol=1e-9, atol=1e-12)
     assert int(info.status) & STATUS_FILTER["off_map"] and np.isfinite(float(info.innovation))
 
 
