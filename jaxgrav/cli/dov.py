@@ -4,6 +4,8 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``; the command
 function is :func:`cmd_dov`.
 """
 
+import itertools
+import math
 import sys
 
 import numpy as np
@@ -45,6 +47,10 @@ def _parse_heights(text):
         raise ValueError(f"--layers must be comma-separated heights in m; got {text!r}") from None
     if len(vals) < 2:
         raise ValueError(f"--layers needs at least 2 heights; got {text!r}")
+    if not all(math.isfinite(v) for v in vals):
+        raise ValueError(f"--layers {text}: heights must be finite numbers (m); got {vals}")
+    if any(b <= a for a, b in itertools.pairwise(vals)):
+        raise ValueError(f"--layers {text}: heights must be strictly ascending (m); got {vals}")
     return vals
 
 
