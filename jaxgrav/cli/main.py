@@ -66,9 +66,18 @@ def _version():
         return "unknown (not installed)"
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (exit code 2), as every
+    other bad input of the command: argparse's own prints the usage block first."""
+
+    def error(self, message):
+        """Print ``PROG: error: MESSAGE (PROG --help: the options)`` and exit with 2."""
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser():
     """The argument parser of the ``jaxgrav`` command."""
-    p = argparse.ArgumentParser(prog="jaxgrav", description=__doc__.split("\n")[0])
+    p = OneLineParser(prog="jaxgrav", description=__doc__.split("\n")[0])
     p.add_argument("--version", action="version", version=f"jaxgrav {_version()}")
     p.add_argument("--debug", action="store_true",
                    help="show the Python traceback of an error instead of one line")
