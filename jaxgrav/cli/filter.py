@@ -96,11 +96,11 @@ from jaxgrav.tracks import csv_line, write_track_csv
 __all__ = ["add_parser", "cmd_filter"]
 
 _WARN = {
-    "off_map": "the estimate or its sigma points (ukf, ekf, gsf) or a particle (rbpf) left "
-               "the map or met a missing (NaN) map cell: update skipped; pf particles and "
-               "pmf cells without a map value take the others' mean likelihood (pmf "
-               "--missing land: none where the nearest node is missing), the update is "
-               "skipped only when none has one",
+    "off_map": "the estimate or its sigma points (ukf, ekf, gsf) left the map or met a "
+               "missing (NaN) map cell: update skipped; pf and rbpf particles and pmf cells "
+               "without a map value take the others' mean likelihood (pmf --missing land: "
+               "none where the nearest node is missing), the update is skipped only when "
+               "none has one",
     "covariance_repaired": "the covariance was not positive definite; jitter added",
     "covariance_failed": "the covariance could not be repaired, or the innovation variance "
                          "was not positive; update skipped",
@@ -321,6 +321,8 @@ def cmd_filter(args):
         opts = _particle_options(args)
         stride += (f", {opts.get('n_particles', PARTICLES[args.method])} particles, "
                    f"seed {args.seed}")
+    if args.method == "pmf" and getattr(field, "n_missing", 0):
+        stride += f", missing map nodes read as {missing}"
     if fogm is not None:
         stride += (f", map-error state {me_sigma:g} mGal over {me_length:g} m"
                    + (" per cell" if args.method == "pmf" else "")
