@@ -46,8 +46,9 @@ def check_outputs(paths, *, force=False, names=None, inputs=None):
     FileExistsError
         If a path exists and ``force`` is false.
     ValueError
-        If two options name the same file, an output is an input, or a path is an
-        existing folder.
+        If two options name the same file, an output is an input, a path is an
+        existing folder, or its folder cannot be made or written (a file on the way,
+        no write permission).
     """
     names = [None] * len(paths) if names is None else list(names)
     seen = {Path(p).resolve(): f"the input {opt} {str(p)!r}"
@@ -63,9 +64,24 @@ def check_outputs(paths, *, force=False, names=None, inputs=None):
         seen[resolved] = label
         if Path(path).is_dir():
             raise ValueError(f"{label} is a folder; expected a file path")
+        _check_folder(Path(path), label)
         if Path(path).exists() and not force:
             raise FileExistsError(f"{label} exists; pass --force to overwrite it "
                                   "(nothing was written)")
+
+
+def _check_folder(path, label):
+    """ValueError when ``path``'s folder cannot be made or written: its nearest existing
+    ancestor is a file (``track.csv/out.json``) or a folder the user may not write."""
+    folder = path.absolute().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise ValueError(f"{label}: {str(folder)!r} is a file, not a folder; expected a path "
+                         "in an existing or new folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ValueError(f"{label}: the folder {str(folder)!r} is not writable; expected a "
+                         "path in a folder you may write")
 
 
 @contextlib.contextmanager
