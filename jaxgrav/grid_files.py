@@ -7,14 +7,17 @@ given as a map) in one line, finds the 1-D latitude and longitude coordinates (`
 dimensions (``time`` of length 1) and refuses other ones by name, makes the longitudes
 contiguous (a regional 0–360 map across 0°, 350 … 10, becomes −10 … 10) and checks both
 axes (a repeated, unsorted or irregular node is named with the file and its value).
-A gravity or magnetic map declared in other units (CF ``units`` ``m s-2``, ``uGal``,
-``uT`` …) is converted to mGal or nT (:func:`map_units`).
+Nodes holding a fill value the file does not declare (−9999, 99999, … beyond the range
+of every other node, or ``|v| >= 1e20``) are read as missing, with an
+:class:`UndeclaredFillWarning`. A gravity or magnetic map declared in other units (CF
+``units`` ``m s-2``, ``uGal``, ``uT`` …) is converted to mGal or nT (:func:`map_units`).
 It returns plain arrays; :meth:`Grid.from_netcdf` and :func:`jaxgrav.datasets.load_map`
 build the grid. :func:`write_netcdf` writes a grid with CF ``lat``/``lon`` coordinates,
 atomically. Both are package-internal: use the :class:`~jaxgrav.grid.Grid` methods or
 ``load_map``.
 """
 
+import warnings
 from pathlib import Path
 from typing import NamedTuple
 
@@ -43,6 +46,17 @@ _UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (facto
     **dict.fromkeys(("ut", "microtesla"), (1e3, "nT")),
     **dict.fromkeys(("t", "tesla"), (1e9, "nT")),
 }
+FILL_VALUES = (-9999.0, 9999.0, -99999.0, 99999.0, -999999.0, 999999.0, -32767.0, 32767.0,
+               -32768.0, 65535.0)
+"""Fill values a grid may hold without declaring them (no ``_FillValue`` or
+``missing_value`` attribute, e.g. a grid converted from ASCII); with ``|v| >= 1e20``."""
+
+
+class UndeclaredFillWarning(UserWarning):
+    """A map's nodes hold a fill value its file does not declare; they were read as
+    missing (NaN) nodes (:func:`read_netcdf`)."""
+
+
 _MAGIC = (b"CDF\x01", b"CDF\x02", b"CDF\x05", b"\x89HDF\r\n\x1a\n")
 """First bytes of NetCDF-3 (classic, 64-bit offset, 64-bit data) and NetCDF-4 (HDF5)."""
 
@@ -57,7 +71,8 @@ class GridArrays(NamedTuple):
     lon : ndarray, shape ``(nx,)``
         Longitudes (degrees), in the file's order, without 360° jumps.
     values : ndarray, shape ``(..., ny, nx)``
-        The variable (float; fill values as NaN), latitude and longitude last.
+        The variable (float; fill values as NaN, undeclared ones too), latitude and
+        longitude last.
     name, units : str
         The variable's name and its ``units`` attribute (``""`` if none; ``mGal`` or
         ``nT`` when the values were converted from other gravity or magnetic units).
@@ -174,6 +189,11 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
     GridArrays
         ``lat, lon, values (..., ny, nx), name, units``; coordinates checked regular.
 
+    Warns
+    -----
+    UndeclaredFillWarning
+        When nodes hold an undeclared fill value (read as NaN).
+
     Raises
     ------
     FileNotFoundError
@@ -212,9 +232,29 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
         units = str(da.attrs.get("units", ""))
     if values.dtype.kind not in "fc":
         values = values.astype(float)
+    values = _undeclared_fills(values, label, var)
     values, units = map_units(values, units)
     return GridArrays(*_checked_axes(lat, lon, label, lat_name, lon_name), values, str(var),
                       units)
+
+
+def _undeclared_fills(values, label, var):
+    """``values`` with undeclared fill values (:data:`FILL_VALUES` beyond the range of every
+    other node, ``|v| >= 1e20``) as NaN, and an :class:`UndeclaredFillWarning` naming them."""
+    finite = np.isfinite(values)
+    fill = finite & (np.abs(values) >= 1e20)
+    candidates = finite & np.isin(values, FILL_VALUES) & ~fill
+    others = values[finite & ~fill & ~candidates]
+    if candidates.any() and others.size:
+        low, high = others.min(), others.max()
+        fill |= candidates & ((values < low) | (values > high))
+    if not fill.any():
+        return values
+    found = ", ".join(f"{v:g}" for v in np.unique(values[fill])[:3])
+    warnings.warn(f"{label}: {int(fill.sum())} node(s) of variable {var!r} hold {found}, a fill "
+                  "value the file does not declare (no _FillValue or missing_value attribute); "
+                  "read as missing nodes", UndeclaredFillWarning, stacklevel=3)
+    return np.where(fill, np.nan, values)
 
 
 def _unit_key(units):

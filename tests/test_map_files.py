@@ -4,6 +4,7 @@ hypothesis-generated small NetCDF grids."""
 
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
@@ -436,3 +437,26 @@ def test_sample_command_reads_user_maps_and_refuses_bad_ones(tmp_path, capsys):
                      "--out", str(tmp_path / "x.csv")]) == 2
         err = capsys.readouterr().err
         assert phrase in err and err.count("\n") == 1 and not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.parametrize("fill", [-9999.0, 99999.0, 1e30])
+def test_undeclared_fill_values_read_as_missing_nodes(tmp_path, fill):
+    """A grid whose gaps hold -9999 (no _FillValue attribute: converted from ASCII) was
+    read as a field of -9999 mGal there (sample wrote -5194 mGal beside it, exit 0)."""
+    values = FIELD.copy()
+    values[4:6, 7:9] = fill
+    path = write(tmp_path / "f.nc", values=values)
+    expected = f"4 node.*hold {re.escape(f'{fill:g}')}"
+    with pytest.warns(jg.grid_files.UndeclaredFillWarning, match=expected):
+        grid = load_map(path, allow_nan=True)
+    v = np.asarray(grid.values)
+    assert grid.n_missing == 4 and np.isnan(v[4:6, 7:9]).all()
+    np.testing.assert_array_equal(np.isnan(v).sum(), 4)
+
+
+def test_a_fill_like_value_inside_the_map_range_is_data(tmp_path):
+    """-9999 among values that reach below it (a bathymetry in metres) is a value."""
+    values = np.linspace(-11000.0, 0.0, FIELD.size).reshape(FIELD.shape)
+    values[3, 3] = -9999.0
+    grid = load_map(write(tmp_path / "d.nc", values=values), allow_nan=True)
+    assert grid.n_missing == 0

@@ -23,8 +23,10 @@ are cached between calls (:mod:`jaxgrav.cli.cache`; ``--no-cache`` or
 """
 
 import argparse
+import functools
 import sys
 import traceback
+import warnings
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
@@ -45,6 +47,7 @@ from jaxgrav.cli import (
 from jaxgrav.cli import filter as filtering
 from jaxgrav.cli.cache import enable_cache
 from jaxgrav.fields import egm2008
+from jaxgrav.grid_files import UndeclaredFillWarning
 
 __all__ = ["build_parser", "main"]
 
@@ -109,11 +112,20 @@ def build_parser():
     return p
 
 
+def _one_line(message, category, filename, lineno, line=None, *, default):
+    """The command's warnings about the user's files as ``warning: ...`` (one line)."""
+    if issubclass(category, UndeclaredFillWarning):
+        return f"warning: {message}\n"
+    return default(message, category, filename, lineno, line)
+
+
 def main(argv=None):
     """Entry point of the ``jaxgrav`` command; returns the exit code."""
     args = build_parser().parse_args(argv)
     _enable_x64()
     enable_cache(off=args.no_cache)
+    default = warnings.formatwarning
+    warnings.formatwarning = functools.partial(_one_line, default=default)
     try:
         args.func(args)
     except (ValueError, FileExistsError, FileNotFoundError, ImportError) as err:
@@ -130,5 +142,7 @@ def main(argv=None):
         print(f"jaxgrav {args.command}: failed: {type(err).__name__}: {err} (run again with "
               "--debug for the traceback)", file=sys.stderr)
         return 1
+    finally:
+        warnings.formatwarning = default
     return 0
 

@@ -1,9 +1,16 @@
 """Inputs found by the issue-19 hunt of 2026-12-06: an output whose folder cannot be made
-(a file on its path) refused before anything is written."""
+(a file on its path) refused before anything is written; a map whose gaps hold an
+undeclared -9999 read as missing nodes by sample and match."""
 
+import json
+
+import numpy as np
 import pytest
+import xarray as xr
 
 from jaxgrav.cli import main
+from jaxgrav.datasets import load_map
+from jaxgrav.grid_files import UndeclaredFillWarning
 
 
 def _refused(capsys, argv, message):
@@ -32,3 +39,38 @@ def test_an_output_in_a_new_folder_is_written(tmp_path):
     out = tmp_path / "new" / "deeper" / "t.csv"
     assert main(["simulate", "--out", str(out), "--n", "5"]) == 0
     assert out.read_text().startswith("t,")
+
+
+def test_undeclared_fill_values_in_a_map_are_not_sampled_or_matched(tmp_path, capsys):
+    """A 3 x 3 block of -9999 (no _FillValue attribute) on the track: sample wrote values
+    down to -5194 mGal beside it (exit 0, no warning) and match refused the readings as
+    in other units ("a factor 0.00044"); now the block is a missing region: sample leaves
+    those cells empty (warned) and match masks it (exit 0, status bit 8192)."""
+    g = load_map("ryukyu")
+    lat, lon = np.asarray(g.lat), np.asarray(g.lon)
+    values = np.asarray(g.values).copy()
+    i, j = np.searchsorted(lat, 30.3), np.searchsorted(lon, 130.5)
+    values[i:i + 3, j:j + 3] = -9999.0
+    path = tmp_path / "m.nc"
+    xr.Dataset({"z": (("lat", "lon"), values, {"units": "mGal"})},
+               coords={"lat": lat, "lon": lon}).to_netcdf(path)
+    t = np.arange(30) * 120.0
+    tlat, tlon = 30.2 + t * 4e-5, 130.4 + t * 4.5e-5
+    truth = np.asarray(g.sample(tlat, tlon, "bicubic"))
+    track = tmp_path / "t.csv"
+    track.write_text("t,lat,lon,gravity\n" + "".join(
+        f"{a:g},{b:.6f},{c:.6f},{d:.4f}\n" for a, b, c, d in zip(t, tlat, tlon, truth,
+                                                                 strict=True)))
+    out = tmp_path / "s.csv"
+    with pytest.warns(UndeclaredFillWarning, match="9 node"):
+        assert main(["sample", "--map", str(path), "--track", str(track), "--out",
+                     str(out)]) == 0
+    sampled = np.genfromtxt(out, delimiter=",", names=True)["map"]
+    assert np.isnan(sampled).any()
+    assert np.nanmin(sampled) > -300.0, np.nanmin(sampled)
+    assert "left empty" in capsys.readouterr().err
+    res = tmp_path / "m.json"
+    with pytest.warns(UndeclaredFillWarning):
+        assert main(["match", "--map", str(path), "--track", str(track), "--out",
+                     str(res)]) == 0
+    assert json.loads(res.read_text())["status"] & 8192
