@@ -223,11 +223,19 @@ def _cmd_match(args):
     messages = status_messages(int(result.status) & ~IMPLAUSIBLE_FIT)
     if fit_warning is not None:
         messages = [*messages, fit_warning]
+    if has_v and args.method in ("dense", "chains"):
+        twice = _eotvos_twice(bias, correction, args.noise)
+        messages = messages if twice is None else [*messages, twice]
     r = {"t": np.asarray(track["t"], float).tolist()}
+    if track.time_origin is not None:  # ISO times: t counts from the first; both kept
+        r.update(time=[str(c) for c in track.text[track.time_text]],
+                 time_origin=track.time_origin)
     r.update({k: np.asarray(v).tolist() for k, v in result._asdict().items()})
     r.update(status_messages=messages, fit_p_value=p_fit,
              fit_plausible=None if math.isnan(p_fit) else fit_warning is None,
              units=_units(args.method, unit))
+    if track.time_origin is not None:
+        r["units"]["t"] = f"s since {track.time_origin}"
     cov = np.asarray(result.covariance_m2, float)
     r.update(accepted=bool(result.accepted), covariance_m2=cov.tolist(),
              sigma_north_m=float(np.sqrt(cov[0, 0])), sigma_east_m=float(np.sqrt(cov[1, 1])),
@@ -250,6 +258,17 @@ def _cmd_match(args):
           f"{float(result.score):.3g}{score_unit}")
     for msg in r["status_messages"]:
         print(f"warning: {msg}", file=sys.stderr)
+
+
+def _eotvos_twice(bias, correction, noise):
+    """A warning when the fitted bias is the Eötvös correction applied here (within 20 %,
+    over 10 mGal and 3 noise): readings corrected already, then again; else None."""
+    applied = float(np.mean(correction))
+    if abs(applied) > max(10.0, 3.0 * noise) and abs(bias - applied) < 0.2 * abs(applied):
+        return (f"the fitted bias {bias:+.3g} mGal is the Eötvös correction applied here "
+                f"with v_east, v_north (mean {applied:+.3g} mGal): were the readings "
+                "corrected already? then give --eotvos-corrected")
+    return None
 
 
 def _eotvos_note(args, field, track, has_v):

@@ -10,6 +10,7 @@ import xarray as xr
 
 from jaxgrav.cli import main
 from jaxgrav.datasets import load_map
+from jaxgrav.geodesy import eotvos
 from jaxgrav.grid_files import UndeclaredFillWarning
 
 
@@ -74,3 +75,54 @@ def test_undeclared_fill_values_in_a_map_are_not_sampled_or_matched(tmp_path, ca
         assert main(["match", "--map", str(path), "--track", str(track), "--out",
                      str(res)]) == 0
     assert json.loads(res.read_text())["status"] & 8192
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory):
+    """A simulated 30-fix track (raw readings, v_east = v_north = 10 kn) and its header."""
+    d = tmp_path_factory.mktemp("sim")
+    assert main(["simulate", "--out", str(d / "t.csv"), "--seed", "1"]) == 0
+    return np.genfromtxt(d / "t.csv", delimiter=",", names=True)
+
+
+def _write(path, data, t=None):
+    names = data.dtype.names
+    rows = [",".join([t[i] if t is not None else f"{row['t']:g}",
+                      *(f"{row[n]:.10g}" for n in names[1:])]) for i, row in enumerate(data)]
+    path.write_text(",".join(names) + "\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def test_readings_corrected_twice_for_eotvos_are_named(tmp_path, capsys, simulated):
+    """Readings already Eötvös-corrected, with velocity columns and no --eotvos-corrected:
+    match blamed the noise or a gravimeter offset ('give --bias-sigma inf', after which it
+    ran silently with a +63.7 mGal bias); now the bias is named as the correction."""
+    data = simulated.copy()
+    data["gravity"] += np.asarray(eotvos(data["lat"], data["v_east"], data["v_north"]))
+    track = _write(tmp_path / "c.csv", data)
+    for extra in ([], ["--bias-sigma", "inf"]):
+        out = tmp_path / f"m{len(extra)}.json"
+        assert main(["match", "--map", "ryukyu", "--track", str(track), "--out", str(out),
+                     *extra]) == 0
+        assert "give --eotvos-corrected" in capsys.readouterr().err
+        assert any("--eotvos-corrected" in m
+                   for m in json.loads(out.read_text())["status_messages"])
+    out = tmp_path / "ok.json"
+    raw = _write(tmp_path / "raw.csv", simulated)
+    assert main(["match", "--map", "ryukyu", "--track", str(raw), "--out", str(out),
+                 "--bias-sigma", "inf"]) == 0
+    assert "eotvos" not in capsys.readouterr().err.lower()
+
+
+def test_iso_times_are_kept_in_the_match_json(tmp_path, simulated):
+    """ISO-8601 times: the JSON's t counted seconds from an unstated first time (units
+    's'); now the times as given and their origin are kept."""
+    stamps = [f"2026-03-29T{1 + int(s) // 3600:02d}:{int(s) % 3600 // 60:02d}:00Z"
+              for s in simulated["t"]]
+    track = _write(tmp_path / "iso.csv", simulated, t=stamps)
+    out = tmp_path / "m.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(track), "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["time"] == stamps and r["t"][:2] == [0.0, 120.0]
+    assert r["time_origin"] == "2026-03-29T01:00:00+00:00"
+    assert r["units"]["t"] == "s since 2026-03-29T01:00:00+00:00"
