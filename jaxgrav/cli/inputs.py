@@ -27,6 +27,7 @@ __all__ = [
     "add_missing_option",
     "check_map_field",
     "check_missing_option",
+    "kept_columns",
     "map_error_args",
     "read_track",
     "track_map",
@@ -66,6 +67,29 @@ def read_track(args, required, optional=(), allow_nan=()):
 FIELD_UNITS = {"gravity": "mGal", "magnetic": "nT"}
 """The units of each field's readings and maps (a map declared in other gravity or
 magnetic units is converted on reading, :func:`jaxgrav.grid_files.map_units`)."""
+
+
+def kept_columns(track, columns):
+    """``columns`` (an output's, ``t`` first) with the track's text columns after ``t``.
+
+    The ISO-8601 times as given (``time``) and text columns such as a ship's name pass
+    through to a command's per-row output; one whose name the output uses already gets
+    ``_track`` appended.
+
+    Parameters
+    ----------
+    track : TrackTable
+        As read by :func:`read_track` (rows in the output's order).
+    columns : dict of str to array_like
+        The output's columns, ``t`` first.
+
+    Returns
+    -------
+    dict of str to array_like
+    """
+    kept = {(k if k not in columns else f"{k}_track"): v for k, v in (track.text or {}).items()}
+    first, *rest = columns
+    return {first: columns[first], **kept, **{k: columns[k] for k in rest}}
 
 
 def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False,

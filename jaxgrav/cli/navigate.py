@@ -66,6 +66,7 @@ from jaxgrav.cli.inputs import (
     add_map_error_var_option,
     add_missing_option,
     check_missing_option,
+    kept_columns,
     read_track,
     track_map,
 )
@@ -291,7 +292,7 @@ def cmd_navigate(args):
         gravity = gravity - e_ins
     voyage = Voyage(ins, gravity)
     if args.method in TIGHT_METHODS:
-        _tight(args, voyage, grid, n_missing, n_off)
+        _tight(args, voyage, grid, n_missing, n_off, track)
         return
     cfg = loose_config(INS_GRADES[args.ins], args.map_error, args.map_error_length, args.noise,
                        matcher=args.method, grid=grid, sigma_pos_m=args.sigma_pos,
@@ -300,7 +301,7 @@ def cmd_navigate(args):
     # not through executables: the loop's kept program crashes XLA:CPU when loaded
     # (jaxlib 0.10.2; its trial never passes), so keeping it would only cost a compile
     res = _loose(grid, voyage, cfg)
-    _write(args, ins, res, cfg)
+    _write(args, ins, res, cfg, track)
     events = np.asarray(res.fix_event)
     counts = ", ".join(f"{int(np.sum(events == k))} {FIX_EVENTS[k].split(':')[0]}"
                        for k in FIX_EVENTS if np.any(events == k))
@@ -320,7 +321,7 @@ def _tight_program(grid, voyage, cfg, key):
     return navigate_tight(prepare_map(grid), voyage, cfg, key)
 
 
-def _tight(args, voyage, grid, n_missing, n_off):
+def _tight(args, voyage, grid, n_missing, n_off, track):
     """Tightly coupled: the filter on every reading, and its CSV."""
     order = 1 if args.method == "pmf" else 2  # the point-mass filter's is per cell
     told = (map_error_state(args.map_error, args.map_error_length, order=order)
@@ -337,12 +338,12 @@ def _tight(args, voyage, grid, n_missing, n_off):
     # the rows of every block of readings whose innovations fail chi-squared, as filter does
     status = np.asarray(res.status) | np.where(
         implausible_rows(res.innovation, innovation_sigma), STATUS_FILTER["implausible_fit"], 0)
-    write_track_csv(args.out, {
+    write_track_csv(args.out, kept_columns(track, {
         "t": voyage.ins.t, "lat": res.nav.lat, "lon": res.nav.lon, "sigma_north": sd[:, 0],
         "sigma_east": sd[:, 1], "cov_north_east": cov[:, 0, 1], "v_east": res.nav.v_east,
         "v_north": res.nav.v_north, "status": status, "innovation": res.innovation,
         "innovation_sigma": innovation_sigma,
-        "gravimeter_bias": x[:, GRAV], "sigma_gravimeter_bias": sigma[:, GRAV]},
+        "gravimeter_bias": x[:, GRAV], "sigma_gravimeter_bias": sigma[:, GRAV]}),
         force=args.force)
     flags = np.bitwise_or.reduce(status)
     skipped = STATUS_FILTER["gated"] | STATUS_FILTER["covariance_failed"]
@@ -386,7 +387,7 @@ def nis_warning(innovation, innovation_sigma):
     return innovation_check(innovation, innovation_sigma, noise_option="--noise")[2]
 
 
-def _write(args, ins, res, cfg):
+def _write(args, ins, res, cfg, track):
     """The navigation CSV: every row, fix columns on the rows that end a segment."""
     n = len(ins.t)
     sd = np.sqrt(np.diagonal(np.asarray(res.cov_north_east), axis1=1, axis2=2))
@@ -397,7 +398,7 @@ def _write(args, ins, res, cfg):
     fix["fix_status"][rows[keep]] = np.asarray(res.fix_status)[keep]
     fix["fix_north"][rows[keep]] = np.asarray(res.fix_offset_m)[keep, 0]
     fix["fix_east"][rows[keep]] = np.asarray(res.fix_offset_m)[keep, 1]
-    write_track_csv(args.out, {
+    write_track_csv(args.out, kept_columns(track, {
         "t": ins.t, "lat": res.nav.lat, "lon": res.nav.lon, "sigma_north": sd[:, 0],
         "sigma_east": sd[:, 1], "cov_north_east": np.asarray(res.cov_north_east)[:, 0, 1],
-        "v_east": res.nav.v_east, "v_north": res.nav.v_north, **fix}, force=args.force)
+        "v_east": res.nav.v_east, "v_north": res.nav.v_north, **fix}), force=args.force)
