@@ -1,6 +1,8 @@
 """Inputs found by the issue-19 hunt of 2026-12-06: an output whose folder cannot be made
 (a file on its path) refused before anything is written; a map whose gaps hold an
-undeclared -9999 read as missing nodes by sample and match."""
+undeclared -9999 read as missing nodes by sample and match; readings Eötvös-corrected
+twice named by match; ISO times kept by match (JSON) and navigate (CSV, with the text
+columns)."""
 
 import json
 
