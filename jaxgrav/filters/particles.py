@@ -329,11 +329,17 @@ def resample_regularised(keys, log_w, x, resampler, roughening, ess_threshold):
     """
     n, d = x.shape
     k_idx, k_rough = keys
-    mean, cov = weighted_moments(log_w, x)
-    moved = roughen(k_rough, x[resampler(k_idx, log_w)], mean, cov,
-                    roughening * kernel_bandwidth(n, d))
+
+    def resampled(_):
+        mean, cov = weighted_moments(log_w, x)
+        moved = roughen(k_rough, x[resampler(k_idx, log_w)], mean, cov,
+                        roughening * kernel_bandwidth(n, d))
+        return moved, jnp.full_like(log_w, -jnp.log(n))
+
+    # a branch, so a single run skips the work when the weights are fine (under vmap
+    # both sides run, a select)
     do = effective_sample_size(log_w) < ess_threshold * n
-    return jnp.where(do, moved, x), jnp.where(do, jnp.full_like(log_w, -jnp.log(n)), log_w)
+    return jax.lax.cond(do, resampled, lambda _: (x, log_w), None)
 
 
 def roughen(key, x, mean, cov, bandwidth):
