@@ -244,10 +244,11 @@ def _undeclared_fills(values, label, var):
     finite = np.isfinite(values)
     fill = finite & (np.abs(values) >= 1e20)
     candidates = finite & np.isin(values, FILL_VALUES) & ~fill
-    others = values[finite & ~fill & ~candidates]
-    if candidates.any() and others.size:
-        low, high = others.min(), others.max()
-        fill |= candidates & ((values < low) | (values > high))
+    if candidates.any():  # the range of every other node, without copying a large map
+        others = finite & ~fill & ~candidates
+        low = values.min(where=others, initial=np.inf)
+        high = values.max(where=others, initial=-np.inf)
+        fill |= candidates & ((values < low) | (values > high)) & others.any()
     if not fill.any():
         return values
     found = ", ".join(f"{v:g}" for v in np.unique(values[fill])[:3])
