@@ -14,6 +14,7 @@ from jaxgrav.filters import (
     augment,
     effective_sample_size,
     ekf,
+    gravity_measurement,
     map_error_state,
     pf,
     rbpf,
@@ -227,23 +228,26 @@ def test_off_map_particles_skip_the_reading():
         assert np.all(np.isfinite(np.asarray(infos.x)))
 
 
+def _map_edge(lat, lon):
+    """A "map" that ends 200 m north of the linear problem's track start (NaN beyond)."""
+    return jnp.where(lat < LAT0 + 0.0018, _linear_field(lat, lon), jnp.nan)
+
+
+def _at_a_map_edge(filt):
+    """A particle filter's prior, the first step and the dynamics of the linear problem."""
+    dyn, x0, p0, steps = _linear_problem(5)
+    return filt.init(x0, p0, jax.random.PRNGKey(3)), jax.tree.map(lambda a: a[0], steps), dyn
+
+
 @pytest.mark.long
 def test_pf_particles_without_a_map_value_take_the_others_mean_likelihood():
     """A map edge through the cloud: the particles beyond it neither gain nor lose weight
     against the rest (Bayes by hand), and the reading is used, flagged off_map (it was
     skipped whenever one particle of the cloud met a missing value)."""
-    from jaxgrav.filters import gravity_measurement
-
-    dyn, x0, p0, steps = _linear_problem(5)
-
-    def edge(lat, lon):  # "map" that ends 200 m north of the track start
-        return jnp.where(lat < LAT0 + 0.0018, _linear_field(lat, lon), jnp.nan)
-
     filt = pf(256, ess_threshold=0.0)  # no resampling: the weights stay comparable
-    state = filt.init(x0, p0, jax.random.PRNGKey(3))
-    step = jax.tree.map(lambda a: a[0], steps)
-    new, info = jax.jit(filt.update, static_argnums=2)(state, step, edge, dyn)
-    zs = np.asarray(jax.vmap(lambda x: gravity_measurement(edge, x, step.lat, step.lon))(
+    state, step, dyn = _at_a_map_edge(filt)
+    new, info = jax.jit(filt.update, static_argnums=2)(state, step, _map_edge, dyn)
+    zs = np.asarray(jax.vmap(lambda x: gravity_measurement(_map_edge, x, step.lat, step.lon))(
         new.particles))
     known = np.isfinite(zs)
     assert 0.2 < known.mean() < 0.8
@@ -262,21 +266,14 @@ def test_rbpf_particles_without_a_map_value_keep_their_mean():
     whenever one particle met a missing value); particles beyond the edge take the others'
     mean likelihood and keep their Kalman mean, the others take the Kalman update, and
     the shared covariance shrinks by the posterior share of those with a map value."""
-    from jaxgrav.filters import gravity_measurement
-
-    dyn, x0, p0, steps = _linear_problem(5)
-
-    def edge(lat, lon):  # "map" that ends 200 m north of the track start
-        return jnp.where(lat < LAT0 + 0.0018, _linear_field(lat, lon), jnp.nan)
-
     filt = rbpf(256, ess_threshold=0.0)  # no resampling: the particles stay comparable
-    state = filt.init(x0, p0, jax.random.PRNGKey(3))
-    step = jax.tree.map(lambda a: a[0], steps)
-    moved, _ = filt.predict(state, step, edge, dyn)  # the same draw as update's
-    new, info = jax.jit(filt.update, static_argnums=2)(state, step, edge, dyn)
+    state, step, dyn = _at_a_map_edge(filt)
+    moved, _ = filt.predict(state, step, _map_edge, dyn)  # the same draw as update's
+    new, info = jax.jit(filt.update, static_argnums=2)(state, step, _map_edge, dyn)
     np.testing.assert_array_equal(np.asarray(new.position), np.asarray(moved.position))
     x = np.concatenate([np.asarray(moved.position), np.asarray(moved.mean)], 1)
-    zs = np.asarray(jax.vmap(lambda xi: gravity_measurement(edge, xi, step.lat, step.lon))(x))
+    zs = np.asarray(jax.vmap(
+        lambda xi: gravity_measurement(_map_edge, xi, step.lat, step.lon))(x))
     known = np.isfinite(zs)
     assert 0.2 < known.mean() < 0.8
     p = np.asarray(moved.p)
