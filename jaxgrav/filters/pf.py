@@ -30,14 +30,16 @@ import jax.numpy as jnp
 
 from jaxgrav._linalg import psd_sqrt
 from jaxgrav.filters.model import Filter, StepInfo, gravity_measurement
+from jaxgrav.filters.particle_reading import (
+    particle_flags,
+    prediction_flags,
+    weigh_reading,
+)
 from jaxgrav.filters.particles import (
     check_particle_settings,
-    particle_flags,
     particle_summary,
-    prediction_flags,
     resample_regularised,
     standard_normal,
-    weigh_reading,
 )
 
 __all__ = ["ParticleState", "pf"]

@@ -51,14 +51,16 @@ from jaxgrav.filters.model import (
     StepInfo,
     gravity_measurement,
 )
+from jaxgrav.filters.particle_reading import (
+    particle_flags,
+    prediction_flags,
+    weigh_reading,
+)
 from jaxgrav.filters.particles import (
     check_particle_settings,
-    particle_flags,
     particle_summary,
-    prediction_flags,
     resample_regularised,
     standard_normal,
-    weigh_reading,
 )
 
 __all__ = ["RBPFState", "rbpf"]
