@@ -67,6 +67,7 @@ from jaxgrav.cli.inputs import (
     add_map_error_var_option,
     add_missing_option,
     check_missing_option,
+    kept_columns,
     map_error_args,
     read_track,
     track_map,
@@ -313,7 +314,8 @@ def cmd_filter(args):
     res["status"] = res["status"] | np.where(
         implausible_rows(res["innovation"], res["innovation_sigma"]),
         STATUS_FILTER["implausible_fit"], 0)
-    write_track_csv(args.out, _output_columns(t, track, res), force=args.force)
+    write_track_csv(args.out, kept_columns(track, _output_columns(t, track, res)),
+                    force=args.force)
     n_read = int(np.isfinite(g).sum())
     stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""
     stride += f", no-harm guard {args.guard:g}" if args.guard is not None else ""

@@ -132,8 +132,8 @@ def test_iso_times_are_kept_in_the_match_json(tmp_path, simulated):
 
 @pytest.mark.long
 def test_navigate_keeps_iso_times_and_text_columns(tmp_path):
-    """A log with ISO-8601 times and a ship column: navigate's CSV had t from 0 and neither
-    the times nor the ship; now both follow t (and a 'status' text column, which the
+    """A log with ISO-8601 times and a ship column: navigate's and filter's CSVs had t from
+    0 and neither the times nor the ship; now both follow t (and a 'status' text column, which the
     output uses, comes out as 'status_track')."""
     log = tmp_path / "v.csv"
     assert main(["simulate-voyage", "--out", str(log), "--hours", "0.25", "--seed", "1"]) == 0
@@ -146,6 +146,14 @@ def test_navigate_keeps_iso_times_and_text_columns(tmp_path):
     iso.write_text(",".join([*names, "ship", "status"]) + "\n" + "\n".join(rows) + "\n")
     out = tmp_path / "n.csv"
     assert main(["navigate", "--map", "ryukyu", "--track", str(iso), "--out", str(out)]) == 0
+    lines = out.read_text().splitlines()
+    assert lines[0].startswith("t,time,ship,status_track,lat,lon,"), lines[0]
+    assert lines[1].startswith("0,2026-03-29T00:00:00Z,Kaiyo,ok,"), lines[1]
+    assert len(lines) == len(stamps) + 1
+    # filter on the same log: the same columns follow t (it dropped them too)
+    out = tmp_path / "f.csv"
+    assert main(["filter", "--map", "ryukyu", "--track", str(iso), "--out", str(out),
+                 "--ins", "navigation"]) == 0
     lines = out.read_text().splitlines()
     assert lines[0].startswith("t,time,ship,status_track,lat,lon,"), lines[0]
     assert lines[1].startswith("0,2026-03-29T00:00:00Z,Kaiyo,ok,"), lines[1]
