@@ -39,12 +39,14 @@ weight share of the particles that have one. The reading is skipped (``off_map``
 when no particle has a map value.
 """
 
+import math
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from jaxgrav._linalg import inv_2x2, psd_sqrt
+from jaxgrav._validate import concrete
 from jaxgrav.filters.model import (
     Filter,
     MapPlusBias,
@@ -117,7 +119,7 @@ def _position_block(cov):
 
 
 def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systematic",
-         ess_threshold=0.5, roughening=1.0, gate=jnp.inf):
+         ess_threshold=0.5, roughening=1.0, gate=jnp.inf, q_pos=0.0):
     """Rao–Blackwellised particle filter over the position error.
 
     Parameters
@@ -139,6 +141,12 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
         0.464 against 0.468 at 0.5 and 0.483 with the positions alone roughened at 0.5).
     gate : float
         Skip readings whose normalised innovation squared exceeds this.
+    q_pos : float or Array
+        An extra random walk of each particle's position error (m²/s per axis), added to
+        the step's position noise before the draw, as the point-mass filter's ``q_pos``:
+        the INS model's own position noise is tiny, so a particle's velocity is pinned
+        by its own trajectory and a cloud that lost the truth on a flat stretch may not
+        find it again. Default 0 (none); needs :attr:`Dynamics.dt` when not 0.
 
     Returns
     -------
@@ -154,6 +162,10 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
         Bad settings; a measurement that is not a MapPlusBias with two position states.
     """
     resampler = check_particle_settings(n_particles, resample, ess_threshold, roughening)
+    q_value = concrete(q_pos)
+    if q_value is not None and not (math.isfinite(float(q_value)) and float(q_value) >= 0.0):
+        raise ValueError(f"q_pos must be a finite number >= 0 (m^2/s); got {q_pos!r}")
+    no_walk = q_value is not None and float(q_value) == 0.0
     if not isinstance(measurement, MapPlusBias) or measurement.n_position != _POS:
         raise ValueError("rbpf needs a MapPlusBias measurement with n_position=2 (the map part "
                          "non-linear in the position error only, the rest additive); got "
@@ -175,6 +187,10 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
         mu = state.position @ f_pos.T + state.mean @ f_lin.T  # (N, n)
         cov = f_lin @ state.p @ f_lin.T + q
         cov = 0.5 * (cov + cov.T)
+        if not no_walk:
+            if dynamics.dt is None:
+                raise ValueError("rbpf's q_pos needs the step length: Dynamics(f, q, dt)")
+            cov = cov.at[:_POS, :_POS].add(q_pos * dynamics.dt * jnp.eye(_POS, dtype=cov.dtype))
         key, sub = jax.random.split(state.key)
         eps = standard_normal(sub, state.position.shape, state.position.dtype)
         pos = mu[:, :_POS] + eps @ psd_sqrt(_position_block(cov)).T

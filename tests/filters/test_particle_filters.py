@@ -297,6 +297,35 @@ def test_rbpf_particles_without_a_map_value_keep_their_mean():
 
 
 @pytest.mark.long
+def test_rbpf_q_pos_adds_a_position_random_walk():
+    """rbpf(q_pos=q): with no readings, the particles' position variance grows by q·dt per
+    step and axis beyond the error model's (the same draws with and without); q = 0 is
+    the old filter; a bad q_pos or a missing step length is a clear error."""
+    dyn, x0, p0, steps = _linear_problem(20)
+    steps = steps._replace(z=jnp.full_like(steps.z, jnp.nan))
+    q = 1e4  # m²/s: 2e6 m² over 20 steps of 10 s, against ~4e6 m² of the prior
+
+    @jax.jit
+    def var(q_pos):
+        _, info = run_filter(rbpf(4000, q_pos=q_pos), _linear_field, dyn, x0, p0, steps,
+                             key=jax.random.PRNGKey(5))
+        return info.sigma[:, :2] ** 2
+
+    grown = np.asarray(var(q) - var(0.0))
+    want = q * 10.0 * np.arange(1, 21)
+    want = np.stack([want, want], 1)
+    np.testing.assert_allclose(grown, want, rtol=0.3)  # 4000 particles: sampling noise
+    np.testing.assert_allclose(grown[-5:], want[-5:], rtol=0.15)
+    for bad in (-1.0, np.inf, np.nan):
+        with pytest.raises(ValueError, match=r"q_pos must be a finite number >= 0"):
+            rbpf(64, q_pos=bad)
+    filt = rbpf(64, q_pos=1.0)
+    with pytest.raises(ValueError, match="q_pos needs the step length"):
+        filt.predict(filt.init(x0, p0), jax.tree.map(lambda a: a[0], steps), _linear_field,
+                     Dynamics(dyn.f, dyn.q))
+
+
+@pytest.mark.long
 def test_bad_settings_are_clear_errors():
     with pytest.raises(ValueError, match="n_particles"):
         pf(1)

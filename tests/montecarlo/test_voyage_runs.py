@@ -40,7 +40,9 @@ def test_a_run_is_the_navigator_on_the_same_voyage(tight):
         float(jnp.sqrt(jnp.mean(err.free_m[-last:] ** 2))), rel=1e-6)
     np.testing.assert_allclose(res["hourly_err_m"][1], hourly_rms(err.nav_m, scenario.dt),
                                rtol=1e-6)
-    assert float(res["nees"][1]) == pytest.approx(float(jnp.mean(err.nees)), rel=1e-6)
+    # the NEES divides by the stated covariance, whose batched and single-run rounding
+    # differ (the RBPF's mixture of 500 particles): 1e-6 relative apart here
+    assert float(res["nees"][1]) == pytest.approx(float(jnp.mean(err.nees)), rel=1e-5)
     assert res["err_series_m"].shape == (2, 7)  # every 10 min over 1 h, start included
     assert np.all(res["status"] == 0)
     # the tracks of the figure are that run's: truth, free INS and the navigation solution
