@@ -225,12 +225,16 @@ def resample_regularised(keys, log_w, x, resampler, roughening, ess_threshold):
     """
     n, d = x.shape
     k_idx, k_rough = keys
+    # one dtype for both branches (float32 particles with float64 weights or a NumPy
+    # float64 bandwidth would make the branches differ, which lax.cond refuses)
+    dtype = jnp.result_type(x, log_w)
+    x, log_w = x.astype(dtype), log_w.astype(dtype)
 
     def resampled(_):
         mean, cov = weighted_moments(log_w, x)
         moved = roughen(k_rough, x[resampler(k_idx, log_w)], mean, cov,
                         roughening * kernel_bandwidth(n, d))
-        return moved, jnp.full_like(log_w, -jnp.log(n))
+        return moved.astype(dtype), jnp.full_like(log_w, -jnp.log(n))
 
     # a branch, so a single run skips the work when the weights are fine (under vmap
     # both sides run, a select)

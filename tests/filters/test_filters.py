@@ -854,25 +854,42 @@ def test_pad_to_stride_puts_the_readings_on_the_update_steps():
     np.testing.assert_array_equal(np.flatnonzero(np.isfinite(zp)), [2])
 
 
-def test_float32_inputs_under_x64_run_in_the_updates_precision():
-    """float32 state and dynamics with x64 on: the update promotes them (float64
-    geodesy), and run_filter starts its scan in that precision instead of failing on
-    the carry's type (review of 2026-12-06, helper-30)."""
+def _float32_problem(t=4):
+    """float32 dynamics, prior and steps of a short run (x64 on)."""
     f32 = jnp.float32
     model = ins.INSErrorModel()
     f, q = ins.transition(model, 24.3, 10.0)
     dyn = fl.Dynamics(f.astype(f32), q.astype(f32), jnp.asarray(10.0, f32))
     p0 = ins.initial_covariance(model, 1414.0, 0.14).astype(f32)
-    t = 4
     steps = fl.Step(jnp.full(t, 24.3, f32), jnp.full(t, 123.0, f32), jnp.ones(t, f32),
                     jnp.ones(t, f32))
+    return dyn, p0, steps
 
-    def field(lat, lon):
-        return 0.005 * (lat - 24.3) * 111000.0
 
+def _ramp(lat, lon):
+    """A map rising 0.005 mGal per metre north (mGal)."""
+    return 0.005 * (lat - 24.3) * 111000.0
+
+
+def test_float32_inputs_under_x64_run_in_the_updates_precision():
+    """float32 state and dynamics with x64 on: the update promotes them (float64
+    geodesy), and run_filter starts its scan in that precision instead of failing on
+    the carry's type (review of 2026-12-06, helper-30)."""
+    dyn, p0, steps = _float32_problem()
     for filt in (fl.ekf(), fl.ukf()):
-        state, infos = fl.run_filter(filt, field, dyn, jnp.zeros(13, f32), p0, steps)
+        state, infos = fl.run_filter(filt, _ramp, dyn, jnp.zeros(13, jnp.float32), p0, steps)
         assert state.x.dtype == jnp.float64 and np.all(np.isfinite(np.asarray(infos.x)))
+
+
+@pytest.mark.long
+def test_float32_inputs_under_x64_run_in_the_particle_filters():
+    """The same for the particle filters (the PF's resampling branch refused the mixed
+    dtypes: review of the nineteenth session, helper-43)."""
+    dyn, p0, steps = _float32_problem()
+    for filt in (fl.pf(64), fl.rbpf(64)):
+        _, infos = fl.run_filter(filt, _ramp, dyn, jnp.zeros(13, jnp.float32), p0, steps,
+                                 key=jax.random.PRNGKey(0))
+        assert infos.x.dtype == jnp.float64 and np.all(np.isfinite(np.asarray(infos.x)))
 
 
 _SMALL_ALPHA = """

@@ -51,7 +51,6 @@ def test_systematic_resample_equals_filterpy(seed, monkeypatch):
     np.testing.assert_array_equal(np.asarray(systematic_resample(key, log_w)), expected)
 
 
-@pytest.mark.long
 def test_standard_normal_is_a_standard_normal():
     """The particles' Box–Muller sampler: Kolmogorov–Smirnov against SciPy's normal, the
     first four moments, an odd count, the dtype, and reproducible for a key."""
@@ -69,6 +68,7 @@ def test_standard_normal_is_a_standard_normal():
     assert standard_normal(key, (3,), jnp.float32).dtype == jnp.float32
 
 
+@pytest.mark.long
 def test_residual_resample_copies_and_is_unbiased():
     log_w = _log_w(4, 40)
     n = log_w.shape[0]
