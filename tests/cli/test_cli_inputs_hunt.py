@@ -5,6 +5,8 @@ twice named by match; ISO times kept by match (JSON) and navigate (CSV, with the
 columns)."""
 
 import json
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -35,6 +37,20 @@ def test_an_output_under_a_file_is_refused_before_anything_is_written(tmp_path, 
     _refused(capsys, ["simulate", "--out", paths["--out"], "--truth", paths["--truth"]],
              f"{which} '{blocker / 'x.csv'}': '{blocker}' is a file, not a folder")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["track.csv"]
+
+
+def test_an_output_in_a_folder_that_is_not_writable_is_refused(tmp_path, capsys, monkeypatch):
+    """A folder the user may not write: refused before any work, naming the option and the
+    folder. The permission is denied through os.access (these machines run the tests as
+    root, for whom a 0o555 folder is writable)."""
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode: False if Path(p) == ro else real(p, mode))
+    out = ro / "sub" / "t.csv"
+    _refused(capsys, ["simulate", "--out", str(out), "--n", "5"],
+             f"--out '{out}': the folder '{ro}' is not writable")
+    assert list(ro.iterdir()) == []
 
 
 def test_an_output_in_a_new_folder_is_written(tmp_path):
