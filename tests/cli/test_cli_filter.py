@@ -554,6 +554,27 @@ def test_pmf_missing_gaps_or_land_without_missing_nodes(stride_track, tmp_path, 
         np.testing.assert_array_equal(land[k], gaps[k], err_msg=k)
 
 
+@pytest.mark.long
+def test_pmf_summary_names_how_missing_nodes_were_read(stride_track, tmp_path, capsys):
+    """filter --method pmf on a map with a missing node near the track: the summary says
+    how it was read (as navigate's does); the map without it says nothing of the kind."""
+    lat, lon = np.linspace(23.9, 24.7, 81), np.linspace(122.6, 123.3, 71)
+    nc = _anomaly_map(tmp_path / "pd.nc", lat, lon)
+    with xr.open_dataset(nc) as ds:
+        ds = ds.load()
+    var = next(iter(ds.data_vars))
+    track = read_track_csv(stride_track)
+    i = int(np.searchsorted(lat, track["lat"].max() + 0.03))
+    j = int(np.searchsorted(lon, np.median(track["lon"])))
+    ds[var][i, j] = np.nan  # one node ~3 km north of the track
+    ds.to_netcdf(tmp_path / "hole.nc")
+    for path, said in ((nc, False), (tmp_path / "hole.nc", True)):
+        assert _filter(stride_track, tmp_path / "o.csv", "--method", "pmf", "--missing",
+                       "land", "--force", source=("--map", str(path))) == 0
+        out = capsys.readouterr().out
+        assert ("missing map nodes read as land" in out) == said, out
+
+
 def test_filter_track_refuses_a_bad_ins_model():
     t = np.arange(3) * 10.0
     args = (paper_d(), t, np.full(3, 30.0), np.full(3, 130.0), np.zeros(3))
