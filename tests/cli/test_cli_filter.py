@@ -495,10 +495,6 @@ def test_readings_offset_from_the_map_are_warned_of(sim, tmp_path, capsys):
     assert "the readings sit" not in capsys.readouterr().err
 
 
-OFFSET = "warning: the readings sit "
-FLAT = "warning: the map along the track cannot tell the position"
-
-
 @pytest.mark.parametrize("shift, north, extra, offset, flat", [
     (0.0, 0.0, ("--ins", "navigation"), None, False),  # the clean track, either grade
     (0.0, 0.0, ("--ins", "strategic"), None, False),
@@ -510,8 +506,8 @@ FLAT = "warning: the map along the track cannot tell the position"
     (None, 5.4, ("--ins", "navigation", "--eotvos-corrected"), None, True),  # 600 km north
     (None, 5.4, ("--ins", "strategic", "--eotvos-corrected"), None, True),
 ])
-def test_offset_and_information_warnings(sim, tmp_path, capsys, shift, north, extra, offset,
-                                         flat):
+def test_offset_and_information_warnings(sim, tmp_path, capsys, check_filter_warnings, shift,
+                                         north, extra, offset, flat):
     """filter_checks' warnings in filter, with either --ins grade: readings offset beyond
     what the gravimeter-bias state allows (floor 25 mGal) and a map too flat to tell the
     position, each one stderr line (the run still exits 0 and writes its track); none for
@@ -525,18 +521,7 @@ def test_offset_and_information_warnings(sim, tmp_path, capsys, shift, north, ex
     assert _filter(tmp_path / "t.csv", out, *extra) == 0
     lines = capsys.readouterr().err.splitlines()
     assert out.is_file()
-    offsets = [line for line in lines if line.startswith(OFFSET)]
-    if offset is None:
-        assert offsets == [], lines
-    else:
-        assert len(offsets) == 1, lines
-        assert re.match(OFFSET + offset + r"(\.\d+)? mGal from the map along the INS track",
-                        offsets[0]), offsets
-        assert "subtract the offset from the gravity column" in offsets[0]
-    flats = [line for line in lines if line.startswith(FLAT)]
-    assert len(flats) == int(flat), lines
-    if flat:
-        assert "more than the filter's own 1-sigma" in flats[0], flats
+    check_filter_warnings(lines, offset, flat)
 
 
 @pytest.mark.long  # two compiles of the point-mass filter (missing is static)

@@ -232,10 +232,6 @@ def test_an_implausible_fit_is_flagged_on_its_rows(voyage_log, tmp_path, capsys)
     assert "a datum or an untied" in captured.err
 
 
-OFFSET = "warning: the readings sit "
-FLAT = "warning: the map along the track cannot tell the position"
-
-
 @pytest.mark.parametrize("shift, flat_map, extra, offset, flat", [
     (0.0, False, ("--ins", "navigation"), None, False),  # the clean log, either grade
     (0.0, False, ("--ins", "strategic"), None, False),
@@ -245,8 +241,8 @@ FLAT = "warning: the map along the track cannot tell the position"
     (0.0, True, ("--ins", "navigation"), None, True),  # a constant map at the readings' level
     (0.0, True, ("--ins", "strategic"), None, True),
 ])
-def test_offset_and_information_warnings(voyage_log, tmp_path, capsys, shift, flat_map, extra,
-                                         offset, flat):
+def test_offset_and_information_warnings(voyage_log, tmp_path, capsys, check_filter_warnings,
+                                         shift, flat_map, extra, offset, flat):
     """filter_checks' warnings in navigate (tightly coupled), with either --ins grade: the
     readings' offset from the map before the run, a map too flat to tell the position
     after it; one stderr line each, exit 0, the CSV written; none for the clean log or an
@@ -271,17 +267,7 @@ def test_offset_and_information_warnings(voyage_log, tmp_path, capsys, shift, fl
                  "--method", "ukf", *extra]) == 0
     lines = capsys.readouterr().err.splitlines()
     assert out.is_file()
-    offsets = [line for line in lines if line.startswith(OFFSET)]
-    if offset is None:
-        assert offsets == [], lines
-    else:
-        assert len(offsets) == 1, lines
-        assert re.match(OFFSET + offset + r"(\.\d+)? mGal from the map along the INS track",
-                        offsets[0]), offsets
-    flats = [line for line in lines if line.startswith(FLAT)]
-    assert len(flats) == int(flat), lines
-    if flat:
-        assert "more than the filter's own 1-sigma" in flats[0], flats
+    check_filter_warnings(lines, offset, flat)
 
 
 def test_loose_methods_refuse_a_log_with_a_reading_every_few_rows(voyage_log, tmp_path,

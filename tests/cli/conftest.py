@@ -1,0 +1,32 @@
+"""Fixtures shared by the command-line tests."""
+
+import re
+
+import pytest
+
+OFFSET = "warning: the readings sit "
+FLAT = "warning: the map along the track cannot tell the position"
+
+
+def _check_filter_warnings(lines, offset, flat):
+    """``filter_checks``' warnings among stderr ``lines``: one offset line matching the
+    regular expression ``offset`` (None: no such line) and ``flat`` flat-map lines (0 or 1)."""
+    offsets = [line for line in lines if line.startswith(OFFSET)]
+    if offset is None:
+        assert offsets == [], lines
+    else:
+        assert len(offsets) == 1, lines
+        assert re.match(OFFSET + offset + r"(\.\d+)? mGal from the map along the INS track",
+                        offsets[0]), offsets
+        assert "subtract the offset from the gravity column" in offsets[0]
+    flats = [line for line in lines if line.startswith(FLAT)]
+    assert len(flats) == int(flat), lines
+    if flat:
+        assert "more than the filter's own 1-sigma" in flats[0], flats
+
+
+@pytest.fixture
+def check_filter_warnings():
+    """The check of ``filter`` and ``navigate``'s offset and flat-map warnings, as a
+    callable ``(stderr lines, offset regex or None, flat: bool)``."""
+    return _check_filter_warnings
