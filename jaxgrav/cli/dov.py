@@ -6,6 +6,7 @@ function is :func:`cmd_dov`.
 
 import itertools
 import math
+import re
 import sys
 
 import numpy as np
@@ -26,7 +27,8 @@ def add_parser(subparsers):
     add_columns_option(d)
     d.add_argument("--out", required=True, help="output CSV: the track columns + xi, eta (arcsec)")
     d.add_argument("--layers", default=None,
-                   help="comma-separated layer heights in m (default: the grid's; other "
+                   help="comma-separated layer heights in m, e.g. -50,0,10000,20000 for a track "
+                        "below 0 m (default: the grid's; other "
                         "heights than the shipped 0,10000,20000 are synthesised from the "
                         "shipped degree-360 coefficients)")
     d.add_argument("--method", choices=METHODS, default=DEFAULT_METHOD,
@@ -36,6 +38,9 @@ def add_parser(subparsers):
                    help="NetCDF layers: xi, eta (arcsec) on (height, lat, lon), height in m "
                         "(default: the shipped qinling set)")
     d.add_argument("--force", action="store_true", help="overwrite an existing output")
+    # argparse reads "-50,0,10000" as an unknown option ("--layers: expected one argument");
+    # this parser has no option that starts with "-" and a digit, so such a word is a value.
+    d._negative_number_matcher = re.compile(r"^-\.?\d[\d.,eE+-]*$")
     d.set_defaults(func=cmd_dov)
     return d
 
@@ -55,10 +60,12 @@ def _parse_heights(text):
 
 
 def _check_points(args, track, layers):
-    """Refuse the first track point outside ``layers``, naming ``--track`` and its line."""
+    """Refuse the first track point outside ``layers``, naming ``--track``, its line and the
+    option that would take the track's heights in."""
     lat, lon, h = (np.asarray(track[k], float) for k in ("lat", "lon", "h"))
     hs = np.asarray(layers.heights)
-    bad = ~(np.asarray(layers.layer(0).contains(lat, lon)) & (h >= hs[0]) & (h <= hs[-1]))
+    off = ~np.asarray(layers.layer(0).contains(lat, lon))
+    bad = off | (h < hs[0]) | (h > hs[-1])
     if not bad.any():
         return
     i = int(np.flatnonzero(bad)[0])
@@ -68,7 +75,29 @@ def _check_points(args, track, layers):
         f"--track {str(args.track)!r}, line {track.line(i)}: point (lat={float(lat[i])!r}, "
         f"lon={float(lon[i])!r}, h={float(h[i])!r} m) is outside the layered grid of {source} (lat "
         f"{s:g}..{n:g}, lon {w:g}..{e:g}, h {hs[0]:g}..{hs[-1]:g} m); {int(bad.sum())} of "
-        f"{bad.size} point(s) out of range")
+        f"{bad.size} point(s) out of range{_height_fix(args, h[~off], hs)}")
+
+
+def _height_fix(args, h, hs):
+    """What takes the heights ``h`` (m) of the on-map points into layers at ``hs`` (m): for
+    the shipped set, ``--layers`` with a layer at the lowest (highest) height rounded down
+    (up) to 10 m, synthesised from the degree-360 model (no extrapolation); for a --grid, a
+    layer added to the file. Empty when every height is inside."""
+    lo, hi = (float(np.min(h)), float(np.max(h))) if h.size else (hs[0], hs[-1])
+    if hs[0] <= lo and hi <= hs[-1]:
+        return ""
+    below = math.floor(min(lo, hs[0]) / 10.0) * 10.0
+    above = math.ceil(max(hi, hs[-1]) / 10.0) * 10.0
+    need = " and ".join(([f"at or below {below:g} m"] if lo < hs[0] else [])
+                        + ([f"at or above {above:g} m"] if hi > hs[-1] else []))
+    if args.grid:
+        return (f"; the track needs a layer {need}: add one to --grid (a user grid cannot be "
+                f"re-layered with --layers)")
+    heights = sorted({*([below] if lo < hs[0] else []), *hs.tolist(),
+                      *([above] if hi > hs[-1] else [])})
+    return (f"; the track needs a layer {need}: give --layers="
+            f"{','.join(f'{v:g}' for v in heights)} (new heights are synthesised from the "
+            f"shipped degree-360 model)")
 
 
 def _gap_warning(layers, h, method, user_grid):
