@@ -62,19 +62,17 @@ def add_parser(subparsers):
     m = subparsers.add_parser("montecarlo", help="Monte Carlo runs of a method on all devices")
     m.add_argument("--method", required=True, choices=[*sorted(BUILDERS), *DEPRECATED_METHODS],
                    metavar="{" + ",".join(sorted(BUILDERS)) + "}",
-                   help="dense: paper A's dense-offset matcher (formerly 'correlation', "
-                        "still accepted); chains: paper A's iso-point "
-                        "chains (map refined to 0.005 deg nodes); entropy, iccp, "
-                        "entropy+iccp: paper B's stages alone and combined; ukf, ekf, gsf "
-                        "(Gaussian-sum UKF), pmf (grid point-mass filter), pf (SIR particle "
-                        "filter, 2000 particles), rbpf (Rao-Blackwellised particle filter, "
-                        "1000 particles) and the guarded "
-                        "ukf-guard, gsf-guard: paper D's filters (over its three point "
-                        "masses, or over --map); voyage-dense, voyage-entropy+iccp "
-                        "(loosely coupled, hourly fixes of that matcher), voyage-ukf, "
-                        "voyage-ekf, voyage-gsf, voyage-rbpf, voyage-pmf (tightly coupled; "
-                        "voyage-rbpf: 500 particles): 12 h "
-                        "patrols (--hours) navigated with a navigation-grade INS (--ins)")
+                   help="dense: paper A's dense-offset matcher (formerly 'correlation', still "
+                        "accepted); chains: paper A's iso-point chains (map refined to 0.005 deg "
+                        "nodes); entropy, iccp, entropy+iccp: paper B's stages alone and "
+                        "combined; ukf, ekf, gsf (Gaussian-sum UKF), pmf (grid point-mass "
+                        "filter), pf (SIR particle filter, 2000 particles), rbpf "
+                        "(Rao-Blackwellised particle filter, 1000 particles) and the guarded "
+                        "ukf-guard, gsf-guard: paper D's filters (over its three point masses, or "
+                        "over --map); voyage-dense, voyage-entropy+iccp (loosely coupled, hourly "
+                        "fixes of that matcher), voyage-ukf, voyage-ekf, voyage-gsf, voyage-rbpf, "
+                        "voyage-pmf (tightly coupled; voyage-rbpf: 500 particles): 12 h patrols "
+                        "(--hours) navigated with a navigation-grade INS (--ins)")
     m.add_argument("--runs", type=int, required=True, help="number of simulated runs")
     m.add_argument("--chunk", type=int, default=None,
                    help="runs per compiled call (bounds memory; default 256)")
@@ -88,11 +86,12 @@ def add_parser(subparsers):
                         "filters: default paper-d, paper D's three point masses; over a map "
                         "straight tracks in random directions inside it")
     m.add_argument("--drift", type=float, default=None,
-                   help="INS error (degrees of arc); dense: drift radius (default "
-                        "0.035, also chains); entropy, iccp, entropy+iccp: offset uniform in "
-                        "[2/3, 1] x drift (default 0.03); filters: initial position error "
-                        "(default 0.018 = 2 km); below half the map's shorter side (paper D's "
-                        "point masses: 0.35)")
+                   help="INS error (degrees of arc); dense: drift radius (default 0.035, also "
+                        "chains); entropy, iccp, entropy+iccp: offset uniform in [2/3, 1] x drift "
+                        "(default 0.03); filters: initial position error (default 0.018 = 2 km); "
+                        "voyage-*: initial position error (size; default 0.0045 = 500 m), not "
+                        "the INS drift over the hours (that is --ins); below half the map's "
+                        "shorter side (paper D's point masses: 0.35)")
     m.add_argument("--noise", type=float, default=None,
                    help="reading noise sigma (mGal, > 0, default 1)")
     m.add_argument("--fixes", type=int, default=None,
@@ -297,7 +296,7 @@ def cmd_montecarlo(args):
                   inputs={"--map": args.map, "--truth-map": args.truth_map})
     existing = [str(p) for p in targets.values() if p.exists()]
     if existing and not args.force:
-        raise FileExistsError(f"{existing} exist; pass --force to overwrite")
+        raise FileExistsError(f"{', '.join(existing)} exist; pass --force to overwrite")
     if args.map is not None:
         map_name = str(args.map)
     else:  # the method's default (jaxgrav.montecarlo.build)

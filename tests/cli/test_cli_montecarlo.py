@@ -104,13 +104,18 @@ def test_montecarlo_help_lists_the_methods_without_the_old_name(capsys):
         main(["montecarlo", "--help"])
     text = capsys.readouterr().out
     assert "{chains,dense,ekf," in text and "correlation," not in text
+    # --drift says what it is for the voyage methods (it named matchers and filters only)
+    drift = " ".join(text.split("--drift DRIFT")[-1].split("--noise")[0].split())
+    assert ("voyage-*: initial position error (size; default 0.0045 = 500 m), not the INS "
+            "drift over the hours (that is --ins)") in drift, drift
 
 
 def test_montecarlo_refuses_to_overwrite(mc_run, capsys):
     _, out = mc_run
     args = ["montecarlo", "--method", "dense", "--runs", "8", "--out", str(out)]
     assert main(args) == 2
-    assert "exist; pass --force" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"{out}, {out.with_suffix('.png')} exist; pass --force" in err, err  # not a list
 
 
 @pytest.mark.parametrize("args, match", [
