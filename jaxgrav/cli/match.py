@@ -18,6 +18,7 @@ from jaxgrav.cli.inputs import (
     read_track,
     track_map,
 )
+from jaxgrav.cli.match_missing import MISSING, missing_counts, missing_message
 from jaxgrav.cli.sanity import check_readings, fit_check
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import eotvos_jit
@@ -25,8 +26,8 @@ from jaxgrav.match import (
     ENTROPY_HALF_SIZE,
     IMPLAUSIBLE_FIT,
     METHODS,
+    STATUS,
     match_track,
-    status_messages,
 )
 from jaxgrav.match.api import MAP_ERROR_METHODS, missing_reading
 from jaxgrav.sim import DEG_ARC_M
@@ -219,8 +220,14 @@ def _cmd_match(args):
         fit_warning += (f"; the fitted bias {bias:+.3g} mGal is {abs(bias) / sigma_b:.1f} sigma "
                         f"of the bias prior ({sigma_b:g} mGal): a gravimeter offset? give "
                         "--bias-sigma inf to estimate it freely")
-    # the implausible-fit bit's message is the fit check's own line, with its numbers
-    messages = status_messages(int(result.status) & ~IMPLAUSIBLE_FIT)
+    read_as = missing_reading(grid, track["lat"], track["lon"], args.method, args.missing,
+                              radius_deg * DEG_ARC_M)
+    gap = missing_counts(grid, track, result, radius_deg * DEG_ARC_M)
+    # the implausible-fit bit's message is the fit check's own line, with its numbers; the
+    # missing-node bit's says how many nodes and fixes met missing nodes and what was done
+    messages = [missing_message(args, n_fix, gap, read_as, bool(result.accepted))
+                if bit == MISSING else msg for bit, msg in STATUS.items()
+                if int(result.status) & bit and bit != IMPLAUSIBLE_FIT]
     if fit_warning is not None:
         messages = [*messages, fit_warning]
     if has_v and args.method in ("dense", "chains"):
@@ -241,9 +248,7 @@ def _cmd_match(args):
              sigma_north_m=float(np.sqrt(cov[0, 0])), sigma_east_m=float(np.sqrt(cov[1, 1])),
              map_error_mgal=args.map_error, map_error_length_m=args.map_error_length,
              map_error_var=args.map_error_var)
-    read_as = missing_reading(grid, track["lat"], track["lon"], args.method, args.missing,
-                              radius_deg * DEG_ARC_M)
-    r.update(method=args.method, missing=args.missing, missing_read_as=read_as,
+    r.update(method=args.method, missing=args.missing, missing_read_as=read_as, **gap,
              field=field, map=str(args.map),
              track=str(args.track), drift_radius_deg=radius_deg, eotvos_applied_here=has_v,
              eotvos=_eotvos_note(args, field, track, has_v))

@@ -174,3 +174,65 @@ def test_navigate_keeps_iso_times_and_text_columns(tmp_path):
     assert lines[0].startswith("t,time,ship,status_track,lat,lon,"), lines[0]
     assert lines[1].startswith("0,2026-03-29T00:00:00Z,Kaiyo,ok,"), lines[1]
     assert len(lines) == len(stamps) + 1
+
+
+@pytest.fixture(scope="module")
+def holed(tmp_path_factory):
+    """A 30-fix track 1.5 km north of its truth (readings: ryukyu + 1 mGal noise) and two
+    maps with 2 x 2 missing nodes: 'near', 2 of the INS track's fixes in their cells (the
+    truth's none), 'under', 19 of them (the truth's too)."""
+    d = tmp_path_factory.mktemp("holed")
+    g = load_map("ryukyu")
+    lat, lon = np.asarray(g.lat), np.asarray(g.lon)
+    t = np.arange(30) * 120.0
+    tlat, tlon = 30.2 + t * 4e-5, 130.4 + t * 4.5e-5
+    readings = np.asarray(g.sample(tlat, tlon, "bicubic"))
+    readings = readings + np.random.default_rng(0).normal(size=t.size)
+    for name, (a, b) in {"near": (30.35, 130.45), "under": (30.26, 130.47)}.items():
+        values = np.asarray(g.values).copy()
+        i, j = np.searchsorted(lat, a), np.searchsorted(lon, b)
+        values[i:i + 2, j:j + 2] = np.nan
+        xr.Dataset({"z": (("lat", "lon"), values, {"units": "mGal"})},
+                   coords={"lat": lat, "lon": lon}).to_netcdf(d / f"{name}.nc")
+    (d / "t.csv").write_text("t,lat,lon,gravity\n" + "".join(
+        f"{a:g},{b + 0.0135:.6f},{c:.6f},{r:.4f}\n"
+        for a, b, c, r in zip(t, tlat, tlon, readings, strict=True)))
+    return d
+
+
+@pytest.mark.long
+@pytest.mark.parametrize("where, extra, said, counts", [
+    ("near", [], "fixes in a cell with one: 2 of 30 on the INS track, 0 on the matched track; "
+                 "read as survey gaps (--missing auto: the INS track crosses them): each "
+                 "candidate was scored on its fixes over present cells", (4, 2, 0)),
+    ("near", ["--missing", "land"],
+     "2 of 30 on the INS track, 0 on the matched track; read as land (--missing land): "
+     "candidates touching them were dropped, the fix is the best of the rest (if they are "
+     "survey gaps, not land, the truth may lie in the dropped part: --missing gaps)", (4, 2, 0)),
+    ("near", ["--method", "entropy+iccp"],
+     "read as land (--method entropy+iccp reads them so): candidates touching them were "
+     "dropped, the fix is the best of the rest", (4, 2, 0)),
+    ("under", ["--missing", "gaps"],
+     "19 of 30 on the INS track (the fix was rejected: the INS track is returned); read as "
+     "survey gaps (--missing gaps)", (4, 19, 19)),
+    ("under", ["--missing", "land"],
+     "19 of 30 on the INS track (the fix was rejected: the INS track is returned); read as "
+     "land (--missing land): candidates touching them were dropped (if they are", (4, 19, 19)),
+])
+def test_missing_map_nodes_are_reported_as_they_were_read(holed, tmp_path, capsys, where,
+                                                          extra, said, counts):
+    """match on a map with missing nodes in reach printed, whatever ran, one line naming
+    both readings (land: dropped; gaps: scored on present cells); now the line says which
+    reading ran and why, what it did, and how many fixes of the INS track and of the fix
+    lie in a cell with a missing node (counts in the JSON too)."""
+    out = tmp_path / "m.json"
+    assert main(["match", "--map", str(holed / f"{where}.nc"), "--track",
+                 str(holed / "t.csv"), "--out", str(out), *extra]) == 0
+    err = capsys.readouterr().err
+    line = [m for m in err.splitlines() if "missing (NaN) map nodes" in m]
+    assert len(line) == 1 and said in line[0], err
+    assert line[0].startswith("warning: missing (NaN) map nodes: 4 in the search region; "), err
+    r = json.loads(out.read_text())
+    assert r["status"] & 8192 and line[0].removeprefix("warning: ") in r["status_messages"]
+    assert (r["missing_nodes_in_reach"], r["ins_fixes_over_missing"],
+            r["fixes_over_missing"]) == counts
