@@ -323,6 +323,19 @@ def max_gap_fixes(n):
     return max(0, n - MIN_FIXES)
 
 
+def track_latitude(lat):
+    """The latitude (degrees) at which a track's search is sized: its mean, to a degree.
+
+    The search's offset spacing follows the map's node spacing, whose east–west part
+    shrinks with latitude; measured at the track, it does not depend on how far the
+    map extends (a map cropped to the track's region sizes the same search). Rounded
+    to a whole degree (the spacing changes by at most ~2.5 % within one, below 75°),
+    tracks in one band share the compiled program, as they shared it at the map's
+    centre.
+    """
+    return float(np.round(np.mean(np.asarray(lat, dtype=float))))
+
+
 def missing_in_reach(grid, lat, lon, reach_m):
     """Number of missing (NaN) map nodes within ``reach_m`` (plus a cell) of a track's box.
 
@@ -353,7 +366,7 @@ def _match_correlation(grid, lat, lon, readings, method, drift_radius_m, noise,
     sized = config is None
     if sized:
         config = config_for(method, grid, drift_radius_m, noise_mgal=noise,
-                            bias_sigma_mgal=bias_sigma_mgal,
+                            bias_sigma_mgal=bias_sigma_mgal, lat=track_latitude(lat),
                             **({"map_error": map_error} if map_error is not None else {}))
         if method == "chains":  # the displacement stencil, sized for this track
             tol = (float(v) for v in chain_tolerances(as_grid(grid), lat, config))
@@ -385,10 +398,12 @@ def _match_contour(grid, lat, lon, readings, method, drift_radius_m, noise, max_
         entropy, iccp = config
     if method != "iccp" and entropy is None:
         half = ENTROPY_HALF_SIZE if entropy_half_size is None else entropy_half_size
-        entropy = entropy_config_for(grid, drift_radius_m, max_half_size=half)
+        entropy = entropy_config_for(grid, drift_radius_m, max_half_size=half,
+                                     lat=track_latitude(lat))
     if method != "entropy" and iccp is None:
         stage = "alone" if method == "iccp" else "fine"
         iccp = iccp_config_for(grid, drift_radius_m, stage=stage, noise=noise,
+                               lat=track_latitude(lat),
                                max_rotation_deg=90.0 if max_rotation_deg is None
                                else max_rotation_deg, map_error=map_error)
     args = (grid, jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(readings))

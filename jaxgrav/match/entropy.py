@@ -192,7 +192,8 @@ class EntropyConfig:
             raise ValueError(f"k_best must be >= 1; got {self.k_best!r}")
 
 
-def entropy_config_for(grid, drift_radius_m, *, kind="difference", max_half_size=40, **kw):
+def entropy_config_for(grid, drift_radius_m, *, kind="difference", max_half_size=40,
+                       lat=None, **kw):
     """An :class:`EntropyConfig` whose offset grid covers 1.2 × the INS drift.
 
     Parameters
@@ -205,6 +206,9 @@ def entropy_config_for(grid, drift_radius_m, *, kind="difference", max_half_size
     kind : {"difference", "information"}
     max_half_size : int
         Cap on offsets per side; the spacing grows instead.
+    lat : float, optional
+        Latitude (degrees) at which the node spacing is measured; the map's central
+        latitude by default (:func:`~jaxgrav.match.api.match` passes the track's).
     **kw
         Other :class:`EntropyConfig` fields.
 
@@ -218,7 +222,7 @@ def entropy_config_for(grid, drift_radius_m, *, kind="difference", max_half_size
         raise ValueError(f"drift_radius_m must be positive (m); got {drift_radius_m!r}")
     reach = 1.2 * float(drift_radius_m)
     grid = as_grid(grid)
-    dy, dx = grid.spacing_m()
+    dy, dx = (float(s) for s in grid.spacing_m(lat))
     spacing = min(max(min(dy, dx) / 8.0, 50.0), reach / 3.0)
     half = math.ceil(reach / spacing)
     if half > max_half_size:

@@ -51,7 +51,8 @@ with ``examples/map_error_matchers.py`` (see the README)."""
 
 
 def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=math.inf,
-               n_rotations=1, score=None, step_m=None, map_error=None, region="disc"):
+               n_rotations=1, score=None, step_m=None, map_error=None, region="disc",
+               lat=None):
     """A matcher configuration whose search region covers the drift.
 
     Parameters
@@ -89,6 +90,11 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         by default the disc of the search's reach about the INS track (the drift is a
         radius; the square's corners are offsets it cannot reach). ``"square"`` is
         paper A's window. ``chains`` searches the square window either way.
+    lat : float, optional
+        Latitude (degrees) at which the map's node spacing sizes the search; the map's
+        central latitude by default. :func:`~jaxgrav.match.api.match` passes the
+        track's mean latitude, so the search does not depend on how far the map
+        extends (a cropped map sizes it the same).
 
     Returns
     -------
@@ -102,7 +108,7 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
     if not drift_radius_m > 0:
         raise ValueError(f"drift_radius_m must be positive (m); got {drift_radius_m!r}")
     reach = 1.2 * float(drift_radius_m)
-    dy, dx = grid.spacing_m()
+    dy, dx = (float(s) for s in grid.spacing_m(lat))
     if method == "dense":
         spacing = min(max(min(dy, dx) / 8.0, 50.0), reach / 3.0)
         half = math.ceil(reach / spacing)
@@ -150,7 +156,7 @@ def _with_map_error(config, map_error, integrity):
 
 
 def iccp_config_for(grid, drift_radius_m, *, stage="alone", noise=1.0, max_rotation_deg=90.0,
-                    map_error=None, **kw):
+                    map_error=None, lat=None, **kw):
     """An :class:`IccpConfig` sized to the expected error.
 
     Parameters
@@ -172,6 +178,9 @@ def iccp_config_for(grid, drift_radius_m, *, stage="alone", noise=1.0, max_rotat
         The map's error model, for the combined matcher's GLS score, covariance and
         integrity test (:func:`~jaxgrav.match.combined.match_entropy_iccp`): fills the
         ``map_error_*`` fields and, when σ > 0, :data:`ICCP_MAP_ERROR_INTEGRITY`.
+    lat : float, optional
+        Latitude (degrees) at which the map's node spacing is measured (as in
+        :func:`config_for`); the map's central latitude by default.
     **kw
         Other :class:`IccpConfig` fields.
 
@@ -183,7 +192,7 @@ def iccp_config_for(grid, drift_radius_m, *, stage="alone", noise=1.0, max_rotat
         raise ValueError(f"drift_radius_m must be positive (m); got {drift_radius_m!r}")
     if stage not in ("alone", "fine"):
         raise ValueError(f"stage must be 'alone' or 'fine'; got {stage!r}")
-    dy, dx = as_grid(grid).spacing_m()
+    dy, dx = (float(s) for s in as_grid(grid).spacing_m(lat))
     cell = math.hypot(dy, dx)
     window = 1.2 * float(drift_radius_m) if stage == "alone" else max(cell, 1.2 * drift_radius_m)
     kw.setdefault("window_m", window)

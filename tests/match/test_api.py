@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import jaxgrav as jg
 import jaxgrav.match as jm
 from jaxgrav.match import entropy_iccp, shifted_tracks
 from jaxgrav.match.combined import COMBINED_STATUS
@@ -78,3 +79,44 @@ def test_deprecated_shims_warn_and_equal_the_new_api(smooth_grid, track):
     np.testing.assert_array_equal(np.asarray(alias.lat), np.asarray(new.lat))
     with pytest.raises(AttributeError):
         jm.NOT_A_NAME  # noqa: B018
+
+
+def _crop(grid, rows):
+    """``grid``'s rows ``rows`` (a slice) as a Grid of their own."""
+    lat = np.asarray(grid.lat)[rows]
+    return jg.Grid.from_arrays(lat, np.asarray(grid.lon), np.asarray(grid.values)[rows],
+                               units=grid.units)
+
+
+def test_the_search_is_sized_at_the_track_not_the_map_centre(smooth_grid):
+    # a 1° map cut to its northern half moves the central latitude 0.25° north: at
+    # the map's centre the east–west node spacing (and so the dense offset spacing)
+    # differs; at the track's latitude it is the same map geometry either way
+    north = _crop(smooth_grid, slice(50, None))
+    lat = 30.2
+    for method in ("dense", "chains"):
+        whole = jm.config_for(method, smooth_grid, 4000.0, lat=lat)
+        part = jm.config_for(method, north, 4000.0, lat=lat)
+        assert whole == part
+    assert jm.config_for("dense", smooth_grid, 4000.0) != jm.config_for("dense", north, 4000.0)
+    assert (jm.entropy_config_for(smooth_grid, 4000.0, lat=lat)
+            == jm.entropy_config_for(north, 4000.0, lat=lat))
+    assert (jm.iccp_config_for(smooth_grid, 4000.0, lat=lat)
+            == jm.iccp_config_for(north, 4000.0, lat=lat))
+
+
+@pytest.mark.long
+def test_match_track_does_not_depend_on_how_far_the_map_extends(smooth_grid):
+    # the command line cuts a map with missing nodes to the track's region: the fix
+    # must be the one the whole map gives (it was not: the search was sized at the
+    # map's central latitude, 502.5 vs 479.5 m offsets on the ryukyu map)
+    lat = 30.1 + 0.0045 * np.arange(20)
+    lon = 129.85 + 0.0035 * np.arange(20)
+    t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), -200.0, 400.0, 0.0)
+    z = np.asarray(smooth_grid.sample(t_lat, t_lon, "bicubic"))
+    north = _crop(smooth_grid, slice(40, None))
+    a, b = (jm.match_track(g, lat, lon, z, method="dense", drift_radius_m=3000.0, warn=False)
+            for g in (smooth_grid, north))
+    for name, x, y in zip(a._fields, a, b, strict=True):  # the lattice too: top-k, σ
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-9, atol=1e-9,
+                                   err_msg=name)
