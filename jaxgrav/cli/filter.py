@@ -6,7 +6,7 @@ Wire into :mod:`jaxgrav.cli` with ``cli_filter.add_parser(sub)``.
 anomaly readings, runs a filter of :mod:`jaxgrav.filters` over the 13-state
 INS error model of :mod:`jaxgrav.sim.ins` and writes the filtered track::
 
-    TRACK.csv  t (s, uniform step), lat, lon (INS, degrees), gravity (the
+    TRACK.csv  t (s, a regular step), lat, lon (INS, degrees), gravity (the
                gravimeter's anomaly, mGal; empty where there is no reading),
                optional v_east, v_north (INS, m/s)
     OUT.csv    t, lat, lon (INS position − estimated INS error, degrees),
@@ -25,6 +25,11 @@ the INS velocity (``--eotvos-corrected``: it already was, with that velocity); t
 UKF, EKF and Gaussian sum then carry the Eötvös error of the INS velocity error,
 ``∂E/∂v · δv``, in their measurement (the point-mass filter does not, and says so).
 Without velocity columns the gravity column must be Eötvös-corrected already.
+
+Times: the filters run on a regular step (:mod:`jaxgrav.cli.time_steps`): clock jitter
+of up to 10 % of a step is absorbed, and a gap of whole steps up to ``--max-gap``
+seconds is predicted through (positions interpolated, no reading; not with ``--method
+pmf``, whose readings must keep a fixed row stride). The output has the log's own rows.
 
 The prior is the INS error at one step before the first row (zero mean, the
 ``--sigma-*`` standard deviations); every row's reading updates the estimate, and
@@ -60,7 +65,6 @@ from jaxgrav.cli.filter_checks import (
     ins_label,
     map_at_ins,
     offset_warning,
-    uniform_dt,
 )
 from jaxgrav.cli.inputs import (
     add_columns_option,
@@ -79,6 +83,7 @@ from jaxgrav.cli.sanity import (
     innovation_check,
 )
 from jaxgrav.cli.simulate import check_seed
+from jaxgrav.cli.time_steps import at_rows, on_steps, time_steps
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
 from jaxgrav.filters import STATUS_FILTER, status_messages_filter
@@ -126,7 +131,8 @@ def add_parser(subparsers):
                         "examples/paper_d_pointmass_fit.py --out-model)")
     f.add_argument("--var", default=None, help="variable to read when the file has several")
     f.add_argument("--track", required=True,
-                   help="CSV: t (s, uniform step), lat, lon (INS, degrees), gravity "
+                   help="CSV: t (s, a regular step; jitter up to 10 %% of it absorbed, gaps "
+                        "up to --max-gap predicted through), lat, lon (INS, degrees), gravity "
                         "(mGal; empty where no reading; raw when v_east, v_north are given, "
                         "else Eötvös-corrected); optional v_east, v_north (INS, m/s)")
     add_columns_option(f)
@@ -182,6 +188,9 @@ def add_parser(subparsers):
                    help="the gravity column is already Eötvös-corrected with the INS velocity "
                         "of v_east, v_north (default: raw, corrected here)")
     add_missing_option(f)
+    f.add_argument("--max-gap", type=float, default=60.0, metavar="S",
+                   help="longest gap between rows (s) the filter predicts through, the "
+                        "missing rows' positions interpolated (default 60); not pmf")
     f.add_argument("--force", action="store_true", help="overwrite an existing output")
     f.set_defaults(func=cmd_filter)
     return f
@@ -263,7 +272,11 @@ def cmd_filter(args):
     where = f"--track {str(args.track)!r}"
     track = read_track(args, required=("t", "lat", "lon", "gravity"), allow_nan=("gravity",))
     t, lat, lon, g = (track[k] for k in ("t", "lat", "lon", "gravity"))
-    uniform_dt(t, where)
+    if not (np.isfinite(args.max_gap) and args.max_gap > 0):
+        raise ValueError(f"--max-gap must be a finite time > 0 (s); got {args.max_gap!r}")
+    steps = time_steps(t, where, max_gap=args.max_gap, line=track.line,
+                       gaps="--method pmf needs its readings on a fixed row stride"
+                       if args.method == "pmf" else None)
     if np.any(np.abs(lat) > 90):
         i = int(np.flatnonzero(np.abs(lat) > 90)[0])
         raise ValueError(f"{where}: latitude {lat[i]:g} on line {csv_line(i)} is outside "
@@ -306,18 +319,25 @@ def cmd_filter(args):
     level = offset_warning(g, expected, INS_GRADES[args.ins].gravimeter_sigma, me_sigma,
                            args.sigma_gravity)
     # the model is masses + offset: z − (masses + offset + bias) = (z − offset) − (masses + bias)
-    res = filter_track(field, t, lat, lon, g - offset, args.method, sigma_pos=args.sigma_pos,
-                       sigma_vel=args.sigma_vel, sigma_gravity=args.sigma_gravity,
-                       guard=args.guard, map_error=fogm, eotvos_velocity=jac, where=where,
-                       ins=INS_GRADES[args.ins], missing=missing,
+    # on the regular step: the log's rows, and interpolated positions without a reading
+    # in its gaps; the result at the log's rows
+    res = filter_track(field, t[0] + steps.dt * np.arange(steps.n_steps),
+                       on_steps(steps, lat), on_steps(steps, lon, period=360.0),
+                       on_steps(steps, g - offset, fill=np.nan), args.method,
+                       sigma_pos=args.sigma_pos, sigma_vel=args.sigma_vel,
+                       sigma_gravity=args.sigma_gravity, guard=args.guard, map_error=fogm,
+                       eotvos_velocity=None if jac is None else on_steps(steps, jac, fill=0.0),
+                       where=where, ins=INS_GRADES[args.ins], missing=missing,
                        **_particle_options(args))
+    every = res.pop("pmf_every")
+    res = at_rows(steps, res)
     res["status"] = res["status"] | np.where(
         implausible_rows(res["innovation"], res["innovation_sigma"]),
         STATUS_FILTER["implausible_fit"], 0)
     write_track_csv(args.out, kept_columns(track, _output_columns(t, track, res)),
                     force=args.force)
     n_read = int(np.isfinite(g).sum())
-    stride = f", updates every {res['pmf_every']} rows" if args.method == "pmf" else ""
+    stride = f", updates every {every} rows" if args.method == "pmf" else ""
     stride += f", no-harm guard {args.guard:g}" if args.guard is not None else ""
     if args.method in PARTICLES:
         opts = _particle_options(args)
@@ -332,7 +352,8 @@ def cmd_filter(args):
     print(f"wrote {args.out}: {args.method} over {t.size} rows ({n_read} readings{stride}) "
           f"on {field_name}, {ins_label(args.ins)}; final 1-sigma "
           f"{res['sigma_north'][-1]:.0f} m north, {res['sigma_east'][-1]:.0f} m east; "
-          f"{eotvos_note}")
+          f"{eotvos_note}" + ("" if steps.jitter == 0 and not steps.n_gaps
+                              else f"; {steps.describe()}"))
     _, _, fit_warning = innovation_check(res["innovation"], res["innovation_sigma"])
     read = np.isfinite(g)
     flat = information_warning(

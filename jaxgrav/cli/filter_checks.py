@@ -1,6 +1,6 @@
 """Checks of ``jaxgrav filter``'s inputs and of what its readings can tell.
 
-The one-line errors of :mod:`jaxgrav.cli.filter` (time step, particle count, standard
+The one-line errors of :mod:`jaxgrav.cli.filter` (particle count, standard
 deviations, the track on the map), the map as the filters evaluate it at the INS
 positions, and two warnings that a run cannot give a trustworthy answer: a map too flat
 to tell the position (:func:`information_warning` from :func:`gradient_at_ins`) and
@@ -19,12 +19,9 @@ from jaxgrav.filters import map_anomaly
 from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.tracks import csv_line
 
-__all__ = ["DT_RTOL", "MIN_PARTICLES", "OFFSET_FLOOR", "OFFSET_SIGMAS", "check_on_map",
+__all__ = ["MIN_PARTICLES", "OFFSET_FLOOR", "OFFSET_SIGMAS", "check_on_map",
            "check_particles", "check_sigma", "gradient_at_ins", "information_warning",
-           "ins_label", "map_at_ins", "offset_warning", "uniform_dt"]
-
-DT_RTOL = 1e-3
-"""Relative tolerance of a uniform time step."""
+           "ins_label", "map_at_ins", "offset_warning"]
 
 MIN_PARTICLES = 100
 """Fewest particles ``--particles`` takes (``filter`` and ``navigate``): with fewer, the
@@ -46,25 +43,6 @@ def check_particles(n):
     if n < MIN_PARTICLES:
         raise ValueError(f"--particles must be an integer >= {MIN_PARTICLES} (fewer cannot "
                          f"represent the position's posterior); got {n}")
-
-
-def uniform_dt(t, where):
-    """The step of a uniform time column (s), or a ValueError naming the first bad row."""
-    if t.size < 2:
-        raise ValueError(f"{where} has {t.size} row; the filter needs at least 2 "
-                         "(the time step is taken from column t)")
-    d = np.diff(t)
-    dt = float(np.median(d))
-    if not dt > 0:
-        raise ValueError(f"{where}: column t must increase; median step {dt:g} s")
-    bad = np.flatnonzero(np.abs(d - dt) > DT_RTOL * dt)
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(
-            f"{where}: column t must have a uniform step; t goes {t[i]:g} -> {t[i + 1]:g} s "
-            f"(step {d[i]:g} s) on lines {csv_line(i)}-{csv_line(i + 1)}, expected {dt:g} s "
-            f"(the median) within {DT_RTOL:.1%}; {bad.size} bad step(s)")
-    return dt
 
 
 def ins_label(name):

@@ -4,7 +4,7 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
 
 ::
 
-    LOG.csv   t (s, a uniform step), lat, lon (INS, degrees), v_east, v_north (INS,
+    LOG.csv   t (s, a regular step), lat, lon (INS, degrees), v_east, v_north (INS,
               m/s), gravity (the gravimeter's anomaly, mGal, RAW: Eötvös not corrected,
               unless --eotvos-corrected says it was, with the INS velocity; empty where
               there is no reading: skipped and counted)
@@ -44,6 +44,12 @@ INS velocity and the Eötvös effect of its velocity error is part of the measur
 (over-confident with a navigation-grade INS: one Gaussian velocity for the whole grid
 cannot hold what each cell's Eötvös residual says; see the README).
 Readings that are missing or off the map are skipped and flagged row by row.
+
+Times (:mod:`jaxgrav.cli.time_steps`): clock jitter of up to 10 % of the log's step is
+absorbed; the tightly coupled filters except ``pmf`` predict through a gap of whole steps
+up to ``--max-gap`` seconds (the missing rows' INS positions and velocities
+interpolated, no reading), the loosely coupled loop and ``pmf`` need every row. The output
+has the log's own rows.
 """
 
 import math
@@ -77,6 +83,7 @@ from jaxgrav.cli.sanity import (
     innovation_check,
 )
 from jaxgrav.cli.simulate import check_seed
+from jaxgrav.cli.time_steps import at_rows, on_steps, time_steps
 from jaxgrav.filters import STATUS_FILTER, map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
@@ -93,7 +100,7 @@ from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.sim.ins import GRAV
 from jaxgrav.sim.trajectory import Track
 from jaxgrav.sim.voyage_log import Voyage
-from jaxgrav.tracks import csv_line, write_track_csv
+from jaxgrav.tracks import write_track_csv
 
 __all__ = ["DEFAULT_PARTICLES", "LOOSE_DEFAULTS", "METHODS", "add_parser", "check_log",
            "cmd_navigate", "nis_warning"]
@@ -160,7 +167,9 @@ def add_parser(sub):
                         "--n-fixes: consecutive)")
     add_missing_option(p)
     p.add_argument("--max-gap", type=float, default=60.0,
-                   help="longest allowed step between rows (s); the step must be uniform")
+                   help="longest gap between rows (s) the tightly coupled filters (not pmf) "
+                        "predict through, the INS interpolated over the missing rows "
+                        "(default 60); the loosely coupled methods and pmf need every row")
     p.add_argument("--max-speed", type=float, default=30.0,
                    help="largest plausible speed of the platform (m/s, default 30)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
@@ -175,44 +184,33 @@ def _positive(name, value, unit, allow_zero=False):
         raise ValueError(f"{name} must be a finite value {sign} ({unit}); got {value!r}")
 
 
-def check_log(track, grid, max_gap, max_speed):
-    """Check an INS log for navigation; returns ``(dt, n_missing, n_off_map)``.
+def check_log(track, grid, max_gap, max_speed, gaps=None):
+    """Check an INS log for navigation; returns ``(steps, n_missing, n_off_map)``.
 
-    Raises ValueError naming the file, the line and the value: a step longer than
-    ``max_gap`` or not uniform (within 0.1 %), a speed above ``max_speed``, a position
-    jump (:func:`~jaxgrav.cli.sanity.check_positions`), a log with no row on the map.
+    ``steps`` is the log's :class:`~jaxgrav.cli.time_steps.TimeSteps`. Raises ValueError
+    naming the file, the line and the value: times not on a regular step (jitter up to
+    10 % of it, :func:`~jaxgrav.cli.time_steps.time_steps`), a gap longer than
+    ``max_gap`` or, when ``gaps`` gives the reason, any gap; a speed above
+    ``max_speed``, a position jump (:func:`~jaxgrav.cli.sanity.check_positions`), a log
+    with no row on the map.
     """
     label = f"track file {track.path!r}"
     t = np.asarray(track["t"])
     if t.size < 2:
         raise ValueError(f"{label} has {t.size} row; navigation needs at least 2")
-    d = np.diff(t)
-    long = np.flatnonzero(d > max_gap)
-    if long.size:
-        i = int(long[0])
-        raise ValueError(f"{label}: a gap of {d[i]:g} s between lines {csv_line(i)} and "
-                         f"{csv_line(i + 1)} (t {t[i]:g} -> {t[i + 1]:g}; {long.size} such "
-                         f"gap(s), --max-gap {max_gap:g} s); the log needs a uniform step: "
-                         "split it at the gap and navigate each part")
-    dt = float(np.median(d))
-    bad = np.flatnonzero(np.abs(d - dt) > 1e-3 * dt)
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(f"{label}: column t must have a uniform step; step {d[i]:g} s on "
-                         f"lines {csv_line(i)}-{csv_line(i + 1)}, expected {dt:g} s (the "
-                         f"median) within 0.1 %")
+    steps = time_steps(t, label, max_gap=max_gap, gaps=gaps, line=track.line)
     speed = np.hypot(track["v_east"], track["v_north"])
     fast = np.flatnonzero(~(speed <= max_speed))
     if fast.size:
         i = int(fast[0])
-        raise ValueError(f"{label}, line {csv_line(i)}: speed {speed[i]:.3g} m/s is "
+        raise ValueError(f"{label}, line {track.line(i)}: speed {speed[i]:.3g} m/s is "
                          f"implausible for the platform (--max-speed {max_speed:g} m/s; "
                          f"{fast.size} such row(s))")
     on_map = np.isfinite(np.asarray(grid.sample(track["lat"], track["lon"])))
     if not on_map.any():
         raise ValueError(f"{label}: no row lies on the map (extent {grid.extent})")
     check_positions(track, where=label)
-    return dt, int(np.sum(~np.isfinite(track["gravity"]))), int(np.sum(~on_map))
+    return steps, int(np.sum(~np.isfinite(track["gravity"]))), int(np.sum(~on_map))
 
 
 def _method_options(args):
@@ -268,18 +266,22 @@ def cmd_navigate(args):
                                 sigma_given=args.map_error is not None)
     args.map_error = (sigma_var if sigma_var is not None
                       else 3.0 if args.map_error is None else args.map_error)
-    _, n_missing, n_off = check_log(track, grid, args.max_gap, args.max_speed)
+    every_row = args.method in LOOSE_MATCHERS or args.method == "pmf"
+    steps, n_missing, n_off = check_log(
+        track, grid, args.max_gap, args.max_speed,
+        gaps=f"--method {args.method} needs every row (use ukf, ekf, gsf or rbpf, which "
+             "predict through gaps)" if every_row else None)
     segment_rows = args.n_fixes * args.fix_every
     if args.method in LOOSE_MATCHERS and len(track["t"]) <= segment_rows:
         raise ValueError(f"track file {track.path!r} has {len(track['t'])} rows; one segment "
                          f"of --n-fixes {args.n_fixes} x --fix-every {args.fix_every} needs "
                          f"more than {segment_rows}")
-    ins = Track(*(np.asarray(track[k]) for k in ("t", "lat", "lon", "v_east", "v_north")))
+    log = Track(*(np.asarray(track[k]) for k in ("t", "lat", "lon", "v_east", "v_north")))
     gravity = np.asarray(track["gravity"])
     if args.method in LOOSE_MATCHERS:
         _check_fix_blocks(gravity, args.fix_every, track.path)
-    e_ins = np.asarray(eotvos_jit(ins.lat, ins.v_east, ins.v_north))
-    expected = np.asarray(grid.sample(ins.lat, ins.lon, "bicubic"))
+    e_ins = np.asarray(eotvos_jit(log.lat, log.v_east, log.v_north))
+    expected = np.asarray(grid.sample(log.lat, log.lon, "bicubic"))
     check_readings(gravity, expected, args.noise, column="gravity",
                    where=f"--track {track.path!r}",
                    correction=0.0 if args.eotvos_corrected else e_ins)
@@ -290,9 +292,13 @@ def cmd_navigate(args):
             print(f"warning: {level}", file=sys.stderr)
     if args.eotvos_corrected:  # back to the raw reading: the loop corrects it itself
         gravity = gravity - e_ins
-    voyage = Voyage(ins, gravity)
+    # the log on its regular step: jitter gone, gaps (tight filters) interpolated
+    ins = Track(log.t[0] + steps.dt * np.arange(steps.n_steps), on_steps(steps, log.lat),
+                on_steps(steps, log.lon, period=360.0), on_steps(steps, log.v_east),
+                on_steps(steps, log.v_north))
+    voyage = Voyage(ins, on_steps(steps, gravity, fill=np.nan))
     if args.method in TIGHT_METHODS:
-        _tight(args, voyage, grid, n_missing, n_off, track)
+        _tight(args, voyage, grid, n_missing, n_off, track, steps)
         return
     cfg = loose_config(INS_GRADES[args.ins], args.map_error, args.map_error_length, args.noise,
                        matcher=args.method, grid=grid, sigma_pos_m=args.sigma_pos,
@@ -301,12 +307,13 @@ def cmd_navigate(args):
     # not through executables: the loop's kept program crashes XLA:CPU when loaded
     # (jaxlib 0.10.2; its trial never passes), so keeping it would only cost a compile
     res = _loose(grid, voyage, cfg)
-    _write(args, ins, res, cfg, track)
+    _write(args, log, res, cfg, track)
     events = np.asarray(res.fix_event)
     counts = ", ".join(f"{int(np.sum(events == k))} {FIX_EVENTS[k].split(':')[0]}"
                        for k in FIX_EVENTS if np.any(events == k))
     print(f"wrote {args.out}: {len(ins.t)} rows, {events.size} segment ends ({counts}); "
-          f"{n_missing} missing reading(s) skipped, {n_off} row(s) off the map (not aided)")
+          f"{n_missing} missing reading(s) skipped, {n_off} row(s) off the map (not aided)"
+          + ("" if steps.jitter == 0 else f"; {steps.describe()}"))
 
 
 @jax.jit
@@ -321,7 +328,7 @@ def _tight_program(grid, voyage, cfg, key):
     return navigate_tight(prepare_map(grid), voyage, cfg, key)
 
 
-def _tight(args, voyage, grid, n_missing, n_off, track):
+def _tight(args, voyage, grid, n_missing, n_off, track, steps):
     """Tightly coupled: the filter on every reading, and its CSV."""
     order = 1 if args.method == "pmf" else 2  # the point-mass filter's is per cell
     told = (map_error_state(args.map_error, args.map_error_length, order=order)
@@ -338,23 +345,28 @@ def _tight(args, voyage, grid, n_missing, n_off, track):
     # the rows of every block of readings whose innovations fail chi-squared, as filter does
     status = np.asarray(res.status) | np.where(
         implausible_rows(res.innovation, innovation_sigma), STATUS_FILTER["implausible_fit"], 0)
-    write_track_csv(args.out, kept_columns(track, {
-        "t": voyage.ins.t, "lat": res.nav.lat, "lon": res.nav.lon, "sigma_north": sd[:, 0],
+    # the log's rows (not the gaps' predicted ones), with the log's own times
+    out = at_rows(steps, {
+        "lat": res.nav.lat, "lon": res.nav.lon, "sigma_north": sd[:, 0],
         "sigma_east": sd[:, 1], "cov_north_east": cov[:, 0, 1], "v_east": res.nav.v_east,
         "v_north": res.nav.v_north, "status": status, "innovation": res.innovation,
         "innovation_sigma": innovation_sigma,
-        "gravimeter_bias": x[:, GRAV], "sigma_gravimeter_bias": sigma[:, GRAV]}),
-        force=args.force)
+        "gravimeter_bias": x[:, GRAV], "sigma_gravimeter_bias": sigma[:, GRAV]})
+    write_track_csv(args.out, kept_columns(track, {"t": np.asarray(track["t"]), **out}),
+                    force=args.force)
+    status, innovation, innovation_sigma = (out[k] for k in ("status", "innovation",
+                                                             "innovation_sigma"))
     flags = np.bitwise_or.reduce(status)
     skipped = STATUS_FILTER["gated"] | STATUS_FILTER["covariance_failed"]
-    used = np.isfinite(np.asarray(res.innovation)) & (status & skipped == 0)
+    used = np.isfinite(innovation) & (status & skipped == 0)
     print(f"wrote {args.out}: {status.size} rows, {int(used.sum())} reading(s) used "
           f"by the {args.method} filter; {n_missing} missing reading(s) skipped, {n_off} "
           f"row(s) without a map value at the INS position; "
           + (f"missing map nodes read as {missing}; " if args.method == "pmf"
              and grid.n_missing else "") + "flags seen: "
-          f"{', '.join(status_messages_filter(flags)) or 'none'}")
-    fit_warning = nis_warning(res.innovation, innovation_sigma)
+          f"{', '.join(status_messages_filter(flags)) or 'none'}"
+          + ("" if steps.jitter == 0 and not steps.n_gaps else f"; {steps.describe()}"))
+    fit_warning = nis_warning(innovation, innovation_sigma)
     read = np.isfinite(np.asarray(voyage.gravity))
     lat, lon = np.asarray(voyage.ins.lat)[read], np.asarray(voyage.ins.lon)[read]
     flat = information_warning(*gradient_at_ins(grid, lat, lon),

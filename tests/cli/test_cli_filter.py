@@ -305,6 +305,12 @@ def _bad(kind, cols):
         cols.pop("gravity")
     elif kind == "nonuniform":
         cols["t"][7:] += 3.0
+    elif kind == "backwards":
+        cols["t"][7] = cols["t"][5]
+    elif kind == "gap":  # 20 s without a row
+        cols = {k: np.delete(v, [30, 31]) for k, v in cols.items()}
+    elif kind == "long gap":  # 100 s
+        cols = {k: np.delete(v, np.arange(30, 39)) for k, v in cols.items()}
     elif kind == "no readings":
         cols["gravity"][:] = np.nan
     elif kind == "nan lat":
@@ -317,8 +323,16 @@ def _bad(kind, cols):
 
 @pytest.mark.parametrize(("kind", "extra", "message"), [
     ("missing", (), "lacks column(s) ['gravity']"),
-    ("nonuniform", (), "column t must have a uniform step; t goes 60 -> 73 s (step 13 s) on "
-                       "lines 8-9, expected 10 s"),
+    ("nonuniform", (), "column t must have a regular step; a step of 13 s on lines 8-9 (t 60 "
+                       "-> 73 s) is not within 10% of the step 10.025 s or a whole number of "
+                       "steps (a gap); 1 such step(s)"),
+    ("backwards", (), "line 9, column 't': time 50 is earlier than 60 on line 8; times must "
+                      "increase"),
+    ("gap", ("--method", "pmf"), "a gap of 2 missing row(s) on lines 31-32 (t 290 -> 320 s) "
+                                 "(step 10 s; 1 gap(s)), and --method pmf needs its readings"),
+    ("long gap", (), "a gap of 100 s on lines 31-32 (t 290 -> 390 s) is longer than --max-gap "
+                     "60 s (1 such gap(s)); split the log at the gap, or raise --max-gap"),
+    ("ok", ("--max-gap", "0"), "--max-gap must be a finite time > 0 (s); got 0.0"),
     ("no readings", (), "column 'gravity' has no readings (all 121 cells empty or NaN)"),
     ("nan lat", (), "column 'lat' has 1 missing or NaN value(s), first on line 5"),
     ("stride", ("--method", "pmf"), "--method pmf needs gravity readings at a fixed row stride"),
@@ -616,3 +630,32 @@ def test_pmf_predicts_with_the_ins_model_it_is_given(stride_track):
         for k in ("sigma_v_north", "sigma_v_east", "sigma_gravimeter_bias"):
             np.testing.assert_allclose(res["pmf"][k][:2], res["ukf"][k][:2], rtol=1e-9,
                                        err_msg=f"{grade} {k}")
+
+
+def test_clock_jitter_and_gaps_are_filtered_on_the_regular_step(sim, tmp_path, capsys):
+    # a logger's jitter (±0.5 s on 10 s) and dropped records (2 rows, then 3): the filter
+    # runs on the regular step, predicts through the gaps, writes the log's own rows
+    cols = read_track_csv(sim / "track.csv")
+    clean = tmp_path / "clean.csv"
+    assert _filter(sim / "track.csv", clean) == 0
+    jittered = dict(cols)
+    jittered["t"] = cols["t"] + np.random.default_rng(1).uniform(-0.5, 0.5, cols["t"].size)
+    write_track_csv(tmp_path / "jitter.csv", jittered)
+    assert _filter(tmp_path / "jitter.csv", tmp_path / "j.csv") == 0
+    assert "time step 10.0006 s (steps jitter by up to 0.878 s)" in capsys.readouterr().out
+    a, b = read_track_csv(clean), read_track_csv(tmp_path / "j.csv")
+    # the log's times, not the grid's
+    np.testing.assert_array_equal(b["t"], read_track_csv(tmp_path / "jitter.csv")["t"])
+    assert np.max(np.abs(a["lat"] - b["lat"])) * DEG * 6.4e6 < 1.0  # metres
+    drop = [40, 41, 80, 81, 82]
+    gapped = {k: np.delete(np.asarray(v), drop) for k, v in cols.items()}
+    write_track_csv(tmp_path / "gaps.csv", gapped)
+    assert _filter(tmp_path / "gaps.csv", tmp_path / "g.csv") == 0
+    assert "2 gap(s) bridged by prediction over 5 missing row(s)" in capsys.readouterr().out
+    g = read_track_csv(tmp_path / "g.csv")
+    np.testing.assert_array_equal(g["t"], read_track_csv(tmp_path / "gaps.csv")["t"])
+    keep = np.delete(np.arange(cols["t"].size), drop)
+    # the same filter less 5 of 121 readings: before the first gap identical, after it close
+    np.testing.assert_allclose(g["lat"][:40], a["lat"][:40], rtol=0, atol=1e-12)
+    assert np.isfinite(g["sigma_north"]).all() and np.all(g["status"] == 0)
+    assert np.max(np.abs(g["lat"] - a["lat"][keep])) * DEG * 6.4e6 < 200.0

@@ -111,8 +111,8 @@ def _off_map(c):
 
 
 @pytest.mark.parametrize(("edit", "message"), [
-    (_gap, "a gap of 130 s between lines"),
-    (_uneven, "column t must have a uniform step"),
+    (_gap, "a gap of 130 s on lines 201-202 (t 1990 -> 2120 s) is longer than --max-gap 60 s"),
+    (_uneven, "column t must have a regular step; a step of 13 s on lines 201-202"),
     (_fast, "is implausible for the platform"),
     (_off_map, "no row lies on the map"),
 ])
@@ -284,3 +284,44 @@ def test_loose_methods_refuse_a_log_with_a_reading_every_few_rows(voyage_log, tm
                  "--fix-every", "5"]) == 2
     assert "of the blocks of --fix-every 5 rows miss a reading" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.long
+def test_a_jittered_log_with_dropped_records_is_navigated_on_its_rows(voyage_log, tmp_path,
+                                                                      capsys):
+    # a logger stamping 10 s records ±1 s late or early, and 5 records lost (two gaps):
+    # the tight filter runs on the regular step, predicts through the gaps, and writes the
+    # log's own rows and times, as good as on the clean log
+    log = voyage_log[0]
+    names = ("t", "lat", "lon", "v_east", "v_north", "gravity")
+    cols = {k: np.asarray(v) for k, v in read_track_csv(log, names).items()}
+    cols["t"] = cols["t"] + np.random.default_rng(3).uniform(-1.0, 1.0, cols["t"].size) * 0.45
+    drop = [100, 101, 300, 301, 302]
+    cols = {k: np.delete(v, drop) for k, v in cols.items()}
+    path = tmp_path / "jittered.csv"
+    write_track_csv(path, cols)
+    clean, out = tmp_path / "clean.csv", tmp_path / "n.csv"
+    assert main(["navigate", "--track", str(log), "--out", str(clean)]) == 0
+    assert main(["navigate", "--track", str(path), "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "536 rows" in said and "2 gap(s) bridged by prediction over 5 missing row(s)" in said
+    nav, ref = read_track_csv(out, names[:3]), read_track_csv(clean, names[:3])
+    np.testing.assert_array_equal(nav["t"], read_track_csv(path, ("t",))["t"])
+    keep = np.delete(np.arange(541), drop)
+    d_km = np.hypot(nav["lat"] - ref["lat"][keep],
+                    (nav["lon"] - ref["lon"][keep]) * np.cos(np.deg2rad(nav["lat"]))) * 111.0
+    assert np.max(d_km) < 0.3, np.max(d_km)
+
+
+def test_the_loose_methods_and_pmf_refuse_a_gap(voyage_log, tmp_path, capsys):
+    path = _edited(voyage_log[0], tmp_path, lambda c: c["t"].__setitem__(slice(200, None),
+                                                                         c["t"][200:] + 20.0))
+    for method in ("dense", "pmf"):
+        out = tmp_path / "n.csv"
+        assert main(["navigate", "--track", str(path), "--out", str(out), "--method",
+                     method, *SHORT]) == 2
+        err = capsys.readouterr().err
+        assert (f"a gap of 2 missing row(s) on lines 201-202 (t 1990 -> 2020 s) (step 10 s; 1 "
+                f"gap(s)), and --method {method} needs every row (use ukf, ekf, gsf or rbpf, "
+                "which predict through gaps)") in err, err
+        assert not out.exists()

@@ -1,0 +1,87 @@
+"""The regular step of a log (jaxgrav.cli.time_steps): jitter absorbed, gaps bridged or named."""
+
+import numpy as np
+import pytest
+
+from jaxgrav.cli.time_steps import JITTER, at_rows, on_steps, time_steps
+
+
+def test_jitter_within_a_tenth_of_a_step_is_absorbed():
+    rng = np.random.default_rng(0)
+    t = 100.0 + 10.0 * np.arange(500) + rng.uniform(-0.5, 0.5, 500)
+    steps = time_steps(t, "log")
+    np.testing.assert_array_equal(steps.rows, np.arange(500))
+    assert steps.n_steps == 500 and steps.n_gaps == 0 and steps.n_inserted == 0
+    assert steps.dt == pytest.approx((t[-1] - t[0]) / 499, rel=1e-12)  # no clock drift
+    assert 0.5 < steps.jitter <= 1.0
+    assert "(steps jitter by up to" in steps.describe()
+
+
+def test_decimal_times_have_no_jitter():
+    t = np.round(0.3 + 0.1 * np.arange(2000), 1)  # 0.1 s steps as written in a CSV
+    steps = time_steps(t, "log")
+    assert steps.jitter == 0.0 and steps.describe() == "time step 0.1 s"
+
+
+def test_a_clock_running_slow_is_followed_not_refused():
+    # 10.002 s steps for a day: 0.2 % off the median would be 17 s (1.7 steps) at the end
+    t = 10.002 * np.arange(8640)
+    steps = time_steps(t, "log")
+    assert steps.dt == pytest.approx(10.002) and steps.jitter < 1e-6
+
+
+def test_gaps_are_whole_steps_and_the_rows_keep_their_place():
+    t = 10.0 * np.array([0, 1, 2, 5, 6, 9, 10], float)
+    t[3] += 0.4  # jitter on a gap's far side
+    steps = time_steps(t, "log")
+    np.testing.assert_array_equal(steps.rows, [0, 1, 2, 5, 6, 9, 10])
+    assert (steps.n_steps, steps.n_gaps, steps.n_inserted) == (11, 2, 4)
+    assert "2 gap(s) bridged by prediction over 4 missing row(s)" in steps.describe()
+    lat = np.array([0, 1, 2, 5, 6, 9, 10], float)
+    np.testing.assert_allclose(on_steps(steps, lat), np.arange(11.0))
+    reading = on_steps(steps, lat + 100, fill=np.nan)
+    assert np.isnan(reading[[3, 4, 7, 8]]).all() and reading[5] == 105
+    back = at_rows(steps, {"x": on_steps(steps, lat)})["x"]
+    np.testing.assert_array_equal(back, lat)
+
+
+def test_longitudes_are_interpolated_across_the_antimeridian():
+    steps = time_steps(np.array([0.0, 10.0, 20.0, 40.0]), "log")
+    lon = on_steps(steps, np.array([178.9, 179.4, 179.9, -179.1]), period=360.0)
+    np.testing.assert_allclose(lon, [178.9, 179.4, 179.9, 180.4, -179.1])  # rows as read
+
+
+def test_a_gap_with_several_columns_is_interpolated_per_column():
+    steps = time_steps(np.array([0.0, 1.0, 2.0, 4.0]), "log")
+    jac = on_steps(steps, np.array([[0.0, 1.0], [1.0, 2.0], [2.0, 3.0], [4.0, 5.0]]))
+    np.testing.assert_allclose(jac, [[0, 1], [1, 2], [2, 3], [3, 4], [4, 5]])
+    assert on_steps(steps, np.ones((4, 2)), fill=0.0).shape == (5, 2)
+
+
+@pytest.mark.parametrize(("t", "kw", "message"), [
+    ([0.0], {}, "log has 1 row; the filter needs at least 2"),
+    ([0, 10, 10, 20], {}, "column t must increase; it repeats on lines 3-4 (t 10 -> 10 s); 1 "
+                          "such step(s)"),
+    ([0, 10, 5, 20], {}, "it goes backwards on lines 3-4 (t 10 -> 5 s)"),
+    ([0, 10, 13, 20, 30, 40, 50], {}, "a step of 3 s on lines 3-4 (t 10 -> 13 s) is under half the "
+                              "log's step (10 s, the median)"),
+    ([0, 10, 20, 32, 40, 50], {}, "column t must have a regular step; a step of 12 s on lines "
+                                  "4-5 (t 20 -> 32 s) is not within 10% of the step 10 s"),
+    ([0, 10, 20, 34, 40, 50], {}, "a step of 14 s on lines 4-5"),  # 1.4 steps: not a gap
+    ([0, 10, 20, 50, 60], {"gaps": "pmf needs every row"},
+     "log: a gap of 2 missing row(s) on lines 4-5 (t 20 -> 50 s) (step 10 s; 1 gap(s)), and "
+     "pmf needs every row; split the log at the gap"),
+    ([0, 10, 20, 100, 110], {"max_gap": 60.0},
+     "a gap of 80 s on lines 4-5 (t 20 -> 100 s) is longer than --max-gap 60 s"),
+])
+def test_bad_times_are_named_with_their_lines(t, kw, message):
+    with pytest.raises(ValueError) as err:
+        time_steps(np.asarray(t, float), "log", **kw)
+    assert message in str(err.value)
+
+
+def test_the_file_lines_come_from_the_reader():
+    lines = np.array([5, 6, 9, 10])  # comments or blank lines in the file
+    with pytest.raises(ValueError, match="on lines 9-10"):
+        time_steps(np.array([0, 10, 20, 33.0]), "log", line=lambda i: int(lines[i]))
+    assert JITTER == 0.1
