@@ -145,6 +145,9 @@ def test_an_unwritable_folder_still_gives_the_result(tmp_path):
     assert float(out["sum"]) == pytest.approx(60.5)
 
 
+@pytest.mark.long  # waits for a detached process to compile match_track (the slowest fast
+# test); the fast tier keeps the keep-then-load path by test_a_program_is_kept_by_a_process_of_
+# its_own_then_loaded, and the key of pytree settings by test_the_key_tells_programs_apart
 def test_match_track_gives_the_same_fix_through_a_kept_executable(kept):
     from jaxgrav.match import match_track
 
