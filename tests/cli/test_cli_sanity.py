@@ -4,6 +4,7 @@ against SciPy's χ² distribution and synthetic columns, then ``match``, ``filte
 ``navigate`` in-process, one case per bad input of the issue, with the exit code, the
 message and no output left behind."""
 
+import argparse
 import csv
 import json
 
@@ -11,7 +12,9 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from jaxgrav import datasets
 from jaxgrav.cli import main
+from jaxgrav.cli.match import _check_search
 from jaxgrav.cli.sanity import (
     check_positions,
     check_readings,
@@ -193,11 +196,34 @@ def test_match_flags_an_implausible_fit_and_writes_time_and_units(tracks, tmp_pa
     assert "far worse than the stated noise" in capsys.readouterr().err
 
 
+@pytest.mark.long  # a whole chains match on the unrefined map (a program of its own) for a
+# warning: the fast tier keeps the warning by test_chains_warning_is_decided_before_the_run,
+# and match's call of _check_search by the "search wider than the map" case above
 def test_chains_without_refine_on_a_coarse_map_warns(tracks, tmp_path, capsys):
     out = tmp_path / "r.json"
     assert main(["match", "--map", "ryukyu", "--track", str(tracks / "t.csv"), "--out",
                  str(out), "--method", "chains"]) == 0
     assert "without --refine" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("method", "refine", "fine", "warned"), [
+    ("chains", 1, False, True),  # the shipped 2.5' map: 4.0 km cells (east, the finer)
+    ("chains", 1, True, False),  # the same map refined x8: 0.5 km cells
+    ("chains", 4, False, False),  # --refine asked for
+    ("dense", 1, False, False),  # continuous sampling: no node lattice
+])
+def test_chains_warning_is_decided_before_the_run(capsys, method, refine, fine, warned):
+    """match's check of the search region (run before any matching) warns of chains on
+    cells coarser than 1 km without --refine, and only then."""
+    grid = datasets.load("ryukyu")["anomaly_2p5min"]
+    if fine:
+        grid = grid.refine(8)
+    args = argparse.Namespace(method=method, refine=refine)
+    _check_search(args, grid, 0.05, np.array([26.0, 26.1]))
+    err = capsys.readouterr().err
+    assert ("without --refine" in err) is warned, err
+    if warned:
+        assert "--method chains on a map of 4.0 km cells" in err and "--refine 8" in err
 
 
 @pytest.mark.parametrize(("change", "phrases"), [
