@@ -20,6 +20,7 @@ compile up, about a second for a matcher; a kept executable skips all three.
 """
 
 import os
+import sys
 from pathlib import Path
 
 import jax
@@ -28,7 +29,7 @@ from filelock import FileLock
 from jaxgrav import executables
 
 __all__ = ["MAX_BYTES", "MAX_ENTRY_BYTES", "MIN_COMPILE_SECONDS", "cache_dir",
-           "enable_cache", "prune_large_entries"]
+           "enable_cache", "prune_large_entries", "unusable"]
 
 MAX_BYTES = 2 * 2**30
 """Size bound of the cache folder (bytes); also what turns JAX's file lock on."""
@@ -56,9 +57,35 @@ def cache_dir(environ=None):
     if env.get("JAXGRAV_CACHE", "").strip().lower() in ("off", "0", "no", "false"):
         return None
     if env.get("JAXGRAV_CACHE_DIR"):
-        return Path(env["JAXGRAV_CACHE_DIR"]).expanduser()
+        try:
+            return Path(env["JAXGRAV_CACHE_DIR"]).expanduser()
+        except RuntimeError:  # "~name/..." of an unknown user: was a traceback, exit 1
+            raise ValueError(f"JAXGRAV_CACHE_DIR={env['JAXGRAV_CACHE_DIR']!r}: its '~' names "
+                             "no home folder") from None
     base = env.get("XDG_CACHE_HOME") or Path.home() / ".cache"
     return Path(base) / "jaxgrav" / "xla"
+
+
+def unusable(folder):
+    """Why ``folder`` cannot hold the cache (it is made if missing), or None if it can.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+
+    Returns
+    -------
+    str or None
+    """
+    if folder.exists() and not folder.is_dir():
+        return "it is a file, not a folder"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        return f"it cannot be made ({err.strerror or err})"
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return "it is not writable"
+    return None
 
 
 def enable_cache(off=False):
@@ -74,9 +101,20 @@ def enable_cache(off=False):
     str or None
         The cache folder in use (possibly the caller's own), or None.
     """
-    folder = None if off else cache_dir()
-    executables.use_folder(None if folder is None else folder / "executables")
     current = jax.config.jax_compilation_cache_dir
+    try:
+        folder = None if off else cache_dir()
+        why = None if folder is None else unusable(folder)
+    except ValueError as err:
+        folder, why = None, str(err)
+    if why is not None:  # a file, a folder under a file, read-only: JAX warned at each
+        # compile ("Error reading persistent compilation cache entry"), a dozen tracebacks
+        where = f"folder {str(folder)!r}" if folder else "folder"
+        print(f"warning: the compilation cache {where} is not usable: {why}; compiled programs "
+              "are not kept (set JAXGRAV_CACHE_DIR to a writable folder, or JAXGRAV_CACHE=off)",
+              file=sys.stderr)
+        folder = None
+    executables.use_folder(None if folder is None else folder / "executables")
     if current:  # configured by the caller or JAX_COMPILATION_CACHE_DIR: keep it
         return current
     if folder is None:
