@@ -26,7 +26,7 @@ UKF, EKF and Gaussian sum then carry the Eötvös error of the INS velocity erro
 ``∂E/∂v · δv``, in their measurement (the point-mass filter does not, and says so).
 Without velocity columns the gravity column must be Eötvös-corrected already.
 
-Times: the filters run on a regular step (:mod:`jaxgrav.cli.time_steps`): clock jitter
+Times: the filters run on a regular step (:mod:`jaxgrav.time_steps`): clock jitter
 of up to 10 % of a step is absorbed, and a gap of whole steps up to ``--max-gap``
 seconds is predicted through (positions interpolated, no reading; not with ``--method
 pmf``, whose readings must keep a fixed row stride). The output has the log's own rows.
@@ -83,7 +83,6 @@ from jaxgrav.cli.sanity import (
     innovation_check,
 )
 from jaxgrav.cli.simulate import check_seed
-from jaxgrav.cli.time_steps import at_rows, on_steps, time_steps
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
 from jaxgrav.filters import STATUS_FILTER, status_messages_filter
@@ -97,6 +96,7 @@ from jaxgrav.filters.api import (
 from jaxgrav.filters.map_state import map_error_state
 from jaxgrav.geodesy import eotvos_jacobian, eotvos_jit
 from jaxgrav.scenarios import INS_GRADES
+from jaxgrav.time_steps import at_rows, on_steps, time_steps
 from jaxgrav.tracks import csv_line, write_track_csv
 
 __all__ = ["add_parser", "cmd_filter"]

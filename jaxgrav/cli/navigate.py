@@ -45,7 +45,7 @@ INS velocity and the Eötvös effect of its velocity error is part of the measur
 cannot hold what each cell's Eötvös residual says; see the README).
 Readings that are missing or off the map are skipped and flagged row by row.
 
-Times (:mod:`jaxgrav.cli.time_steps`): clock jitter of up to 10 % of the log's step is
+Times (:mod:`jaxgrav.time_steps`): clock jitter of up to 10 % of the log's step is
 absorbed; the tightly coupled filters except ``pmf`` predict through a gap of whole steps
 up to ``--max-gap`` seconds (the missing rows' INS positions and velocities
 interpolated, no reading), the loosely coupled loop and ``pmf`` need every row. The output
@@ -83,7 +83,6 @@ from jaxgrav.cli.sanity import (
     innovation_check,
 )
 from jaxgrav.cli.simulate import check_seed
-from jaxgrav.cli.time_steps import at_rows, on_steps, time_steps
 from jaxgrav.filters import STATUS_FILTER, map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
@@ -100,6 +99,7 @@ from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.sim.ins import GRAV
 from jaxgrav.sim.trajectory import Track
 from jaxgrav.sim.voyage_log import Voyage
+from jaxgrav.time_steps import at_rows, on_steps, time_steps
 from jaxgrav.tracks import write_track_csv
 
 __all__ = ["DEFAULT_PARTICLES", "LOOSE_DEFAULTS", "METHODS", "add_parser", "check_log",
@@ -187,9 +187,9 @@ def _positive(name, value, unit, allow_zero=False):
 def check_log(track, grid, max_gap, max_speed, gaps=None):
     """Check an INS log for navigation; returns ``(steps, n_missing, n_off_map)``.
 
-    ``steps`` is the log's :class:`~jaxgrav.cli.time_steps.TimeSteps`. Raises ValueError
+    ``steps`` is the log's :class:`~jaxgrav.time_steps.TimeSteps`. Raises ValueError
     naming the file, the line and the value: times not on a regular step (jitter up to
-    10 % of it, :func:`~jaxgrav.cli.time_steps.time_steps`), a gap longer than
+    10 % of it, :func:`~jaxgrav.time_steps.time_steps`), a gap longer than
     ``max_gap`` or, when ``gaps`` gives the reason, any gap; a speed above
     ``max_speed``, a position jump (:func:`~jaxgrav.cli.sanity.check_positions`), a log
     with no row on the map.

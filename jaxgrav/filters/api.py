@@ -25,6 +25,7 @@ from jaxgrav.filters.pmf import pmf
 from jaxgrav.filters.rbpf import rbpf
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import GRAV, N_STATES, VEL, INSErrorModel, initial_covariance, transition
+from jaxgrav.time_steps import time_steps
 from jaxgrav.tracks import csv_line
 
 __all__ = [
@@ -205,7 +206,8 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     field : Grid or PointMasses
         Anomaly map (mGal).
     t : numpy.ndarray, shape ``(T,)``
-        Times (s), uniform step.
+        Times (s) on a regular step (:func:`~jaxgrav.time_steps.time_steps`: jitter up
+        to a tenth of a step; a gap is refused).
     lat, lon : numpy.ndarray, shape ``(T,)``
         INS-indicated position (degrees).
     gravity : numpy.ndarray, shape ``(T,)``
@@ -264,7 +266,8 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     Raises
     ------
     ValueError
-        For ``pmf``: readings not on a fixed row stride; ``n_particles`` for a filter
+        Times not on a regular step, or with gaps; for ``pmf``: readings not on a fixed
+        row stride; ``n_particles`` for a filter
         without particles, or not an int >= 2; a field of ``ins`` out of range (a σ or
         noise not finite and ≥ 0, a ``*_tau`` not > 0; ``inf`` allowed).
     TypeError
@@ -278,7 +281,12 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     if n_particles is not None and method not in PARTICLES:
         raise ValueError(f"n_particles is for the particle filters {tuple(PARTICLES)}; got "
                          f"method={method!r}")
-    dt = float(np.median(np.diff(t)))
+    steps = time_steps(t, where)  # jitter up to a tenth of a step; gaps refused below
+    if steps.n_inserted:
+        raise ValueError(f"{where}: filter_track needs a row on every step; {steps.n_gaps} "
+                         f"gap(s) of {steps.n_inserted} step(s) of {steps.dt:g} s (fill them "
+                         "with rows without a reading: jaxgrav.time_steps.on_steps)")
+    dt = steps.dt
     n = t.size
     r = float(sigma_gravity) ** 2
     ins = INSErrorModel(*(float(v) for v in ins))

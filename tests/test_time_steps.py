@@ -1,9 +1,10 @@
-"""The regular step of a log (jaxgrav.cli.time_steps): jitter absorbed, gaps bridged or named."""
+"""The regular step of a log (jaxgrav.time_steps): jitter absorbed, gaps bridged or named."""
 
 import numpy as np
 import pytest
 
-from jaxgrav.cli.time_steps import JITTER, at_rows, on_steps, time_steps
+from jaxgrav.filters import filter_track
+from jaxgrav.time_steps import JITTER, at_rows, on_steps, time_steps
 
 
 def test_jitter_within_a_tenth_of_a_step_is_absorbed():
@@ -85,3 +86,13 @@ def test_the_file_lines_come_from_the_reader():
     with pytest.raises(ValueError, match="on lines 9-10"):
         time_steps(np.array([0, 10, 20, 33.0]), "log", line=lambda i: int(lines[i]))
     assert JITTER == 0.1
+
+
+def test_filter_track_refuses_a_gap_and_takes_jitter():
+    t = 10.0 * np.array([0, 1, 2, 4, 5, 6], float)
+    z = np.zeros(6)
+    with pytest.raises(ValueError, match=r"track: filter_track needs a row on every step; 1 "
+                                         r"gap\(s\) of 1 step\(s\) of 10 s"):
+        filter_track(None, t, z, z, z)
+    with pytest.raises(ValueError, match="a step of 14 s on lines 4-5"):
+        filter_track(None, t[:3].tolist() + [34.0, 40.0, 50.0], z, z, z)

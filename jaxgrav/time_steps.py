@@ -8,12 +8,13 @@ otherwise, naming its file lines. A step of two or more is a gap: the filters pr
 through its missing rows (made by :func:`on_steps`: positions and velocities
 interpolated, no reading) when the caller allows gaps, up to ``max_gap`` seconds.
 
-Why a whole step of jitter is harmless: the filters propagate the INS *error*, whose
-dynamics change on the Schuler time scale (84.4 min / 2π = 806 s); a step propagated
-over ``dt`` instead of ``dt ± 0.1 dt`` moves a 10 s step's prediction by about
-``0.1 · 10 / 806`` (0.1 %) of the state's change, and the readings are compared with
-the map at their own row's position, whatever its time. ``dt`` is the log's duration
-over its number of steps, so the filter's clock does not drift from the log's.
+Why a tenth of a step of jitter is harmless: the filters propagate the INS *error*,
+whose dynamics are slow (the Schuler rate, 1/806 s⁻¹, is the fastest); a step
+propagated over ``dt`` instead of ``dt ± ε`` is off by ``Φ(dt)·F·ε``, for a 10 s step
+and ε = 1 s about 0.1 % of the state, and the readings are compared with the map at
+their own row's position, whatever its time. ``dt`` is the log's duration over its
+number of steps, so the filter's clock does not drift from the log's.
+:func:`~jaxgrav.filters.filter_track` reads its times with :func:`time_steps` too.
 """
 
 from typing import NamedTuple
