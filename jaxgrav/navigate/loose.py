@@ -371,7 +371,7 @@ def navigate_loose(grid, voyage, config):
     pad = n_seg * steps_between + 1 - n
     ins_p = Track(*(jnp.concatenate([a, jnp.repeat(a[-1:], pad)]) for a in ins))
     grav_p = jnp.concatenate([voyage.gravity, jnp.full((pad,), jnp.nan, voyage.gravity.dtype)])
-    dt = ins.t[1] - ins.t[0]
+    dt = (ins.t[-1] - ins.t[0]) / (ins.t.shape[0] - 1)  # the mean step, not the first's
     tables = error_kf_tables(cfg.ins, jnp.mean(ins.lat), dt, steps_between, cfg.n_fixes * m)
     p0 = initial_covariance(cfg.ins, cfg.sigma_pos_m, cfg.sigma_vel)
     x0 = jnp.zeros(p0.shape[0], p0.dtype)

@@ -263,7 +263,7 @@ def navigate_tight(grid, voyage, config, key=None):
     """
     cfg = config
     ins = voyage.ins
-    dt = ins.t[1] - ins.t[0]
+    dt = (ins.t[-1] - ins.t[0]) / (ins.t.shape[0] - 1)  # the mean step, not the first's
     f, q = transition(cfg.ins, jnp.mean(ins.lat), dt)
     p0 = initial_covariance(cfg.ins, cfg.sigma_pos_m, cfg.sigma_vel)
     x0 = jnp.zeros(p0.shape[0], p0.dtype)

@@ -21,7 +21,10 @@ class Voyage(NamedTuple):
     ----------
     ins : Track
         INS-indicated trajectory: time (s), position (degrees) and velocity (m/s), each
-        shape ``(N,)``. This is all a real navigation system sees, with ``gravity``.
+        shape ``(N,)``. This is all a real navigation system sees, with ``gravity``. The
+        navigation loops step at the mean step, ``(t[-1] − t[0]) / (N − 1)``: a row per
+        step, no gaps (``jaxgrav navigate`` fills a log's with
+        :func:`~jaxgrav.time_steps.on_steps`).
     gravity : Array, shape ``(N,)``
         Raw gravimeter anomaly (mGal) at the true position, Eötvös effect of the true
         velocity *not* corrected; NaN where there is no reading.
