@@ -170,7 +170,9 @@ def cmd_bench(args):
                          f"{args.timeout!r}")
     bdir, out = (default_bench_dir() if args.dir is None else Path(args.dir)), Path(args.out)
     if not bdir.is_dir():
-        raise FileNotFoundError(f"--dir {str(bdir)!r} is not a folder of benchmark scripts")
+        what = ("a file: give the folder of the scripts, e.g. "
+                f"{str(bdir.parent)!r}" if bdir.is_file() else "not a folder of benchmark scripts")
+        raise FileNotFoundError(f"--dir {str(bdir)!r} is {what}")
     scripts = sorted(p for p in bdir.glob("*.py") if not p.name.startswith("_"))
     if not scripts:
         raise ValueError(f"--dir {str(bdir)!r} has no benchmark scripts (*.py not starting "
@@ -207,7 +209,7 @@ def cmd_bench(args):
         rows += found
         if code != 0:
             why = code if isinstance(code, str) else f"exit code {code}"
-            tail = "\n".join((stderr or stdout).strip().splitlines()[-15:])
+            tail = "\n".join((stderr or stdout).strip().splitlines()[-15:]) or "(no output)"
             failures.append((script.name, why, tail))
             runs.append((script.name, f"FAILED ({why})", sec, len(found)))
             print(f"FAILED ({why}, {sec:.0f} s)")

@@ -71,6 +71,9 @@ def check_options(args):
                                        and (args.noise >= 0 if zero_ok else args.noise > 0)):
         raise ValueError(f"--noise must be a finite standard deviation {'>=' if zero_ok else '>'}"
                          f" 0 (mGal) for --method {args.method}; got {args.noise:g}")
+    if args.fixes is not None and args.method.startswith("voyage-"):
+        raise ValueError(f"--fixes is not an option of {args.method}: a voyage runs over "
+                         "--hours (default 12)")  # (--fixes 3 was refused as below 5)
     if args.fixes is not None and args.fixes < 5:
         raise ValueError(f"--fixes must be at least 5 per track (filters: readings per run); "
                          f"got {args.fixes}")

@@ -88,6 +88,9 @@ def cmd_suitability(args):
     """Run ``jaxgrav suitability`` (x64 is enabled by the CLI entry point)."""
     png = Path(args.out).with_suffix(".png")
     _check_args(args)
+    if Path(args.out).suffix.lower() == ".png":
+        raise ValueError(f"--out {str(args.out)!r} is the NetCDF output; the PNG is written "
+                         f"next to it with suffix .png: give --out {str(png.with_suffix('.nc'))!r}")
     check_outputs([args.out, png], force=args.force, names=["--out", "its PNG"],
                   inputs={"--map": args.map})
     grid = load_map(args.map, args.var, allow_nan=True)
@@ -97,6 +100,14 @@ def cmd_suitability(args):
     if args.window is not None and args.window > side:
         raise ValueError(f"--window must be at most the map's shorter side ({side} nodes); "
                          f"got {args.window}")
+    cell_m = grid.dlat * DEG * float(meridian_radius(np.mean(np.asarray(grid.lat))))
+    nodes = (args.fixes - 1) * args.spacing / cell_m  # the segment, in the map's nodes
+    if nodes >= side:  # every segment leaves the map (and the default window is too wide)
+        raise ValueError(f"--fixes {args.fixes} readings --spacing {args.spacing:g} m apart make "
+                         f"a segment of {(args.fixes - 1) * args.spacing / 1e3:.4g} km, "
+                         f"{nodes:.0f} nodes of the map, longer than its shorter side ({side} "
+                         "nodes): every segment would leave the map; give fewer --fixes or a "
+                         "shorter --spacing")
     with np.errstate(invalid="ignore"):  # NaN nodes: the descriptors' bins of missing values
         suit = suitability(grid, heading_deg=args.heading, n_fixes=args.fixes,
                            spacing_m=args.spacing, noise_mgal=args.noise,
@@ -190,8 +201,9 @@ def _check_args(args):
         if not (np.isfinite(value) and (value >= 0 if zero_ok else value > 0)):
             bound = ">= 0" if zero_ok else "> 0"
             raise ValueError(f"{name} must be a finite number {bound} ({unit}); got {value!r}")
-    if not np.isfinite(args.heading):
-        raise ValueError(f"--heading must be finite (degrees from north); got {args.heading!r}")
+    if not (np.isfinite(args.heading) and abs(args.heading) <= 360.0):
+        raise ValueError(f"--heading must be an angle from -360 to 360 (degrees clockwise from "
+                         f"north); got {args.heading!r}")
     if args.window is not None and (args.window < 3 or args.window % 2 == 0):
         raise ValueError(f"--window must be an odd number of nodes >= 3; got {args.window}")
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from jaxgrav.cli import main
+from jaxgrav.cli import bench, main
 from jaxgrav.datasets import load_map
 from jaxgrav.geodesy import eotvos
 from jaxgrav.grid_files import UndeclaredFillWarning
@@ -236,3 +236,69 @@ def test_missing_map_nodes_are_reported_as_they_were_read(holed, tmp_path, capsy
     assert r["status"] & 8192 and line[0].removeprefix("warning: ") in r["status_messages"]
     assert (r["missing_nodes_in_reach"], r["ins_fixes_over_missing"],
             r["fixes_over_missing"]) == counts
+
+
+# refused before any work: (argv, the message; {d} is the test's folder). What each did:
+REFUSED = [
+    # named --preset for a --hours below two readings ("--preset 'patrol-12h': hours must
+    # cover at least two steps of dt = 10.0 s; got hours=0.001")
+    (["simulate-voyage", "--out", "{d}/v.csv", "--hours", "0.001"],
+     "--hours must cover at least two readings 10 s apart (>= 0.00556 h); got 0.001"),
+    # an unknown preset: "preset must be one of ['patrol-12h', 'transit-24h']" (a list)
+    (["simulate-voyage", "--out", "{d}/v.csv", "--preset", "nope"],
+     "argument --preset: invalid choice: 'nope' (choose from 'patrol-12h', 'transit-24h')"),
+    # a segment longer than the map: "window_cells=25981 is larger than the map (289 x 289
+    # nodes)", naming no option
+    (["suitability", "--map", "ryukyu", "--out", "{d}/s.nc", "--fixes", "100000"],
+     "--fixes 100000 readings --spacing 1200 m apart make a segment of 1.2e+05 km, 25980 "
+     "nodes of the map, longer than its shorter side (289 nodes): every segment would leave "
+     "the map; give fewer --fixes or a shorter --spacing"),
+    (["suitability", "--map", "ryukyu", "--out", "{d}/s.nc", "--spacing", "1e7"],
+     "--spacing 1e+07 m apart make a segment of 2.9e+05 km"),
+    # 1e300 degrees was accepted (its remainder by 360 is noise)
+    (["suitability", "--map", "ryukyu", "--out", "{d}/s.nc", "--heading", "1e300"],
+     "--heading must be an angle from -360 to 360 (degrees clockwise from north); got 1e+300"),
+    # --out x.png: "its PNG 'x.png' and --out 'x.png' are the same file"
+    (["suitability", "--map", "ryukyu", "--out", "{d}/s.png"],
+     "--out '{d}/s.png' is the NetCDF output; the PNG is written next to it with suffix .png: "
+     "give --out '{d}/s.nc'"),
+    # a voyage given --fixes 3: "--fixes must be at least 5 per track" (--fixes 10 was
+    # refused as not a voyage option)
+    (["montecarlo", "--method", "voyage-ukf", "--runs", "2", "--out", "{d}/m.nc", "--fixes",
+      "3"], "--fixes is not an option of voyage-ukf: a voyage runs over --hours (default 12)"),
+]
+
+
+@pytest.mark.parametrize("argv, message", REFUSED,
+                         ids=[f"{a[0]}-{i}" for i, (a, _) in enumerate(REFUSED)])
+def test_hunted_inputs_are_refused_in_one_line(tmp_path, capsys, argv, message):
+    """Exit 2 and one line (argparse's refusals exit through SystemExit), nothing written."""
+    try:
+        code = main([a.format(d=tmp_path) for a in argv])
+    except SystemExit as exit_:
+        code = exit_.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and message.format(d=tmp_path) in err, err
+    assert "\n" not in err and "Traceback" not in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bench_names_a_script_that_failed_silently(tmp_path, capsys, monkeypatch):
+    """A script that exits 3 with no output: stderr ended in 'failed (exit code 3):' and an
+    empty line, the report in an empty code block; now '(no output)'. --dir naming a script:
+    'is not a folder of benchmark scripts'; now its folder is named."""
+    monkeypatch.setattr(bench, "machine_info", lambda: {  # no roofline: 3 s saved
+        "cpu": "c", "arch": "a", "cores": 1, "load_average": [0, 0, 0], "jax": "j",
+        "jaxgrav": "g", "devices": ["d"], "roofline": {"n": 1, "float64_gflops": 1.0,
+                                                       "float32_gflops": 1.0}})
+    d = tmp_path / "b"
+    d.mkdir()
+    (d / "quiet.py").write_text("raise SystemExit(3)\n")
+    out = tmp_path / "bench.md"
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "--dir", str(d), "--out", str(out)])
+    assert exc.value.code == 1
+    assert "### quiet.py: exit code 3\n\n```\n(no output)\n```" in out.read_text()
+    assert capsys.readouterr().err == "jaxgrav bench: quiet.py failed (exit code 3):\n(no output)\n"
+    _refused(capsys, ["bench", "--dir", d / "quiet.py", "--out", tmp_path / "b2.md"],
+             f"--dir '{d / 'quiet.py'}' is a file: give the folder of the scripts, e.g. '{d}'")
