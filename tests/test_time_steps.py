@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from jaxgrav.filters import filter_track
+from jaxgrav.filters.api import reading_stride
 from jaxgrav.time_steps import JITTER, at_rows, on_steps, time_steps
 
 
@@ -95,4 +96,10 @@ def test_filter_track_refuses_a_gap_and_takes_jitter():
                                          r"gap\(s\) of 1 step\(s\) of 10 s"):
         filter_track(None, t, z, z, z)
     with pytest.raises(ValueError, match="a step of 14 s on lines 4-5"):
-        filter_track(None, t[:3].tolist() + [34.0, 40.0, 50.0], z, z, z)
+        filter_track(None, np.array([0, 10, 20, 34, 40, 50.0]), z, z, z)
+
+
+def test_the_point_mass_stride_is_the_readings_common_stride():
+    assert reading_stride(np.array([2, 5, 8, 14, 17])) == 3  # one missing on the stride
+    assert reading_stride(np.array([2, 5, 8, 9])) == 1  # an irregular one: every row
+    assert reading_stride(np.array([4])) == 1

@@ -28,8 +28,10 @@ Without velocity columns the gravity column must be Eötvös-corrected already.
 
 Times: the filters run on a regular step (:mod:`jaxgrav.time_steps`): clock jitter
 of up to 10 % of a step is absorbed, and a gap of whole steps up to ``--max-gap``
-seconds is predicted through (positions interpolated, no reading; not with ``--method
-pmf``, whose readings must keep a fixed row stride). The output has the log's own rows.
+seconds is predicted through (positions interpolated, no reading). The output has the
+log's own rows. ``--method pmf`` updates on the stride all its readings sit on (the
+greatest common divisor of the rows between them: a missing reading is an update
+without one) and predicts between.
 
 The prior is the INS error at one step before the first row (zero mean, the
 ``--sigma-*`` standard deviations); every row's reading updates the estimate, and
@@ -91,7 +93,6 @@ from jaxgrav.filters.api import (
     PARTICLES,
     PMF_SPAN_SIGMA,
     filter_track,
-    reading_stride,
 )
 from jaxgrav.filters.map_state import map_error_state
 from jaxgrav.geodesy import eotvos_jacobian, eotvos_jit
@@ -274,9 +275,7 @@ def cmd_filter(args):
     t, lat, lon, g = (track[k] for k in ("t", "lat", "lon", "gravity"))
     if not (np.isfinite(args.max_gap) and args.max_gap > 0):
         raise ValueError(f"--max-gap must be a finite time > 0 (s); got {args.max_gap!r}")
-    steps = time_steps(t, where, max_gap=args.max_gap, line=track.line,
-                       gaps="--method pmf needs its readings on a fixed row stride"
-                       if args.method == "pmf" else None)
+    steps = time_steps(t, where, max_gap=args.max_gap, line=track.line)
     if np.any(np.abs(lat) > 90):
         i = int(np.flatnonzero(np.abs(lat) > 90)[0])
         raise ValueError(f"{where}: latitude {lat[i]:g} on line {csv_line(i)} is outside "
@@ -292,8 +291,6 @@ def cmd_filter(args):
         if not (np.isfinite(args.guard) and args.guard > 0):
             raise ValueError(f"--guard must be a positive variance ratio (posterior / free "
                              f"INS, e.g. 0.2); got {args.guard!r}")
-    if args.method == "pmf":
-        reading_stride(np.flatnonzero(np.isfinite(g)), where)
     missing = check_missing_option(args)
     if args.particles is not None:
         if args.method not in PARTICLES:

@@ -46,10 +46,9 @@ cannot hold what each cell's Eötvös residual says; see the README).
 Readings that are missing or off the map are skipped and flagged row by row.
 
 Times (:mod:`jaxgrav.time_steps`): clock jitter of up to 10 % of the log's step is
-absorbed; the tightly coupled filters except ``pmf`` predict through a gap of whole steps
-up to ``--max-gap`` seconds (the missing rows' INS positions and velocities
-interpolated, no reading), the loosely coupled loop and ``pmf`` need every row. The output
-has the log's own rows.
+absorbed; the tightly coupled filters predict through a gap of whole steps up to
+``--max-gap`` seconds (the missing rows' INS positions and velocities interpolated, no
+reading), the loosely coupled loop needs every row. The output has the log's own rows.
 """
 
 import math
@@ -167,9 +166,9 @@ def add_parser(sub):
                         "--n-fixes: consecutive)")
     add_missing_option(p)
     p.add_argument("--max-gap", type=float, default=60.0,
-                   help="longest gap between rows (s) the tightly coupled filters (not pmf) "
-                        "predict through, the INS interpolated over the missing rows "
-                        "(default 60); the loosely coupled methods and pmf need every row")
+                   help="longest gap between rows (s) the tightly coupled filters predict "
+                        "through, the INS interpolated over the missing rows (default 60); "
+                        "the loosely coupled methods need every row")
     p.add_argument("--max-speed", type=float, default=30.0,
                    help="largest plausible speed of the platform (m/s, default 30)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
@@ -266,11 +265,10 @@ def cmd_navigate(args):
                                 sigma_given=args.map_error is not None)
     args.map_error = (sigma_var if sigma_var is not None
                       else 3.0 if args.map_error is None else args.map_error)
-    every_row = args.method in LOOSE_MATCHERS or args.method == "pmf"
     steps, n_missing, n_off = check_log(
         track, grid, args.max_gap, args.max_speed,
-        gaps=f"--method {args.method} needs every row (use ukf, ekf, gsf or rbpf, which "
-             "predict through gaps)" if every_row else None)
+        gaps=f"--method {args.method} needs every row (a tightly coupled --method, e.g. ukf, "
+             "predicts through gaps)" if args.method in LOOSE_MATCHERS else None)
     segment_rows = args.n_fixes * args.fix_every
     if args.method in LOOSE_MATCHERS and len(track["t"]) <= segment_rows:
         raise ValueError(f"track file {track.path!r} has {len(track['t'])} rows; one segment "

@@ -26,7 +26,6 @@ from jaxgrav.filters.rbpf import rbpf
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 from jaxgrav.sim.ins import GRAV, N_STATES, VEL, INSErrorModel, initial_covariance, transition
 from jaxgrav.time_steps import time_steps
-from jaxgrav.tracks import csv_line
 
 __all__ = [
     "FILTER_METHODS",
@@ -98,39 +97,28 @@ def pad_to_stride(steps, every, first=None):
                 jnp.asarray(steps.r)[idx], h_lin), start
 
 
-def reading_stride(rows, where):
-    """Rows between readings for the point-mass filter.
+def reading_stride(rows):
+    """Rows between the point-mass filter's updates: the stride every reading sits on.
+
+    The point-mass filter updates every ``k`` rows and predicts the rows between in one
+    step (:func:`~jaxgrav.filters.model.run_filter` ``every=k``). ``k`` is the greatest
+    common divisor of the rows between readings, so a reading missing on the stride (a
+    gap, a dropped record) is an update without a reading, and irregular readings are
+    taken too: at worst ``k = 1``, an update on every row, slower but the same filter.
 
     Parameters
     ----------
     rows : numpy.ndarray of int, shape ``(R,)``
         Rows with a reading, ascending.
-    where : str
-        How error messages name the track.
 
     Returns
     -------
     int
-        The fixed stride (1 for a single reading).
-
-    Raises
-    ------
-    ValueError
-        The readings are not on a fixed stride (the message names the CSV lines).
+        The stride (1 for a single reading).
     """
     if rows.size < 2:
         return 1
-    gaps = np.diff(rows)
-    every = int(gaps[0])
-    bad = np.flatnonzero(gaps != every)
-    if bad.size:
-        i = int(bad[0])
-        raise ValueError(
-            f"{where}: --method pmf needs gravity readings at a fixed row stride; readings on "
-            f"lines {csv_line(rows[0])} and {csv_line(rows[1])} set a stride of {every} rows, but "
-            f"the next reading after line {csv_line(rows[i])} is on line {csv_line(rows[i + 1])} "
-            "(use ukf, ekf or gsf for irregular readings)")
-    return every
+    return int(np.gcd.reduce(np.diff(rows)))
 
 
 def eotvos_part(jacobian, n_states):
@@ -266,8 +254,7 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     Raises
     ------
     ValueError
-        Times not on a regular step, or with gaps; for ``pmf``: readings not on a fixed
-        row stride; ``n_particles`` for a filter
+        Times not on a regular step, or with gaps; ``n_particles`` for a filter
         without particles, or not an int >= 2; a field of ``ins`` out of range (a σ or
         noise not finite and ≥ 0, a ``*_tau`` not > 0; ``inf`` allowed).
     TypeError
@@ -318,7 +305,7 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
                  h_lin)
     if method == "pmf":
         rows = np.flatnonzero(np.isfinite(gravity))
-        every = reading_stride(rows, where)
+        every = reading_stride(rows)
         cell_m = 2.0 * PMF_SPAN_SIGMA * sigma_pos / (PMF_CELLS - 1)
         q_pos = PMF_Q_POS * (sigma_vel / 0.1414) ** 2
         padded, start = pad_to_stride(steps, every, rows[0])

@@ -307,17 +307,12 @@ def _bad(kind, cols):
         cols["t"][7:] += 3.0
     elif kind == "backwards":
         cols["t"][7] = cols["t"][5]
-    elif kind == "gap":  # 20 s without a row
-        cols = {k: np.delete(v, [30, 31]) for k, v in cols.items()}
     elif kind == "long gap":  # 100 s
         cols = {k: np.delete(v, np.arange(30, 39)) for k, v in cols.items()}
     elif kind == "no readings":
         cols["gravity"][:] = np.nan
     elif kind == "nan lat":
         cols["lat"][3] = np.nan
-    elif kind == "stride":
-        cols["gravity"][:] = np.nan
-        cols["gravity"][[0, 5, 10, 16]] = 1.0
     return cols
 
 
@@ -328,14 +323,11 @@ def _bad(kind, cols):
                        "steps (a gap); 1 such step(s)"),
     ("backwards", (), "line 9, column 't': time 50 is earlier than 60 on line 8; times must "
                       "increase"),
-    ("gap", ("--method", "pmf"), "a gap of 2 missing row(s) on lines 31-32 (t 290 -> 320 s) "
-                                 "(step 10 s; 1 gap(s)), and --method pmf needs its readings"),
     ("long gap", (), "a gap of 100 s on lines 31-32 (t 290 -> 390 s) is longer than --max-gap "
                      "60 s (1 such gap(s)); split the log at the gap, or raise --max-gap"),
     ("ok", ("--max-gap", "0"), "--max-gap must be a finite time > 0 (s); got 0.0"),
     ("no readings", (), "column 'gravity' has no readings (all 121 cells empty or NaN)"),
     ("nan lat", (), "column 'lat' has 1 missing or NaN value(s), first on line 5"),
-    ("stride", ("--method", "pmf"), "--method pmf needs gravity readings at a fixed row stride"),
     ("ok", ("--map", "ryukyu"), "121 of 121 positions are off the map --map ryukyu"),
     ("ok", ("--map", "ryukyu", "--point-masses", "paper-d"),
      "give exactly one of --map MAP.nc and --point-masses paper-d|MODEL.json; got both"),
@@ -659,3 +651,32 @@ def test_clock_jitter_and_gaps_are_filtered_on_the_regular_step(sim, tmp_path, c
     np.testing.assert_allclose(g["lat"][:40], a["lat"][:40], rtol=0, atol=1e-12)
     assert np.isfinite(g["sigma_north"]).all() and np.all(g["status"] == 0)
     assert np.max(np.abs(g["lat"] - a["lat"][keep])) * DEG * 6.4e6 < 200.0
+
+
+@pytest.mark.long
+def test_pmf_takes_missing_and_irregular_readings_and_gaps(stride_track, tmp_path, capsys):
+    # the point-mass filter updates on the readings' common stride: a dropped record (rows
+    # 30-32, a reading among them) and a missing reading (row 50) keep it at 3; an extra
+    # reading off the stride (row 51) makes it 1, the same filter updating every row
+    clean, out = tmp_path / "clean.csv", tmp_path / "o.csv"
+    assert _filter(stride_track, clean, "--method", "pmf") == 0
+    cols = {k: np.asarray(v).copy() for k, v in read_track_csv(stride_track).items()}
+    cols["gravity"][50] = np.nan
+    holed = {k: np.delete(v, [30, 31, 32]) for k, v in cols.items()}
+    write_track_csv(tmp_path / "holed.csv", holed)
+    capsys.readouterr()
+    assert _filter(tmp_path / "holed.csv", out, "--method", "pmf") == 0
+    said = capsys.readouterr().out
+    assert "(38 readings, updates every 3 rows)" in said and "1 gap(s) bridged" in said
+    a, b = read_track_csv(clean), read_track_csv(out)
+    assert b["t"].size == 118
+    np.testing.assert_allclose(b["lat"][:30], a["lat"][:30], rtol=0, atol=1e-12)
+    assert np.all(np.isfinite(b["sigma_north"]))
+    cols["gravity"][51] = cols["gravity"][50 - 3]  # a reading off the stride
+    write_track_csv(tmp_path / "odd.csv", cols)
+    assert _filter(tmp_path / "odd.csv", tmp_path / "odd_out.csv", "--method", "pmf") == 0
+    assert "updates every 1 rows" in capsys.readouterr().out
+    odd = read_track_csv(tmp_path / "odd_out.csv")
+    # every row an update: the same filter (the pending spread settled at each step, not
+    # three steps at once: within a centimetre, 1e-7 degrees)
+    np.testing.assert_allclose(odd["lat"][:50], a["lat"][:50], rtol=0, atol=1e-7)

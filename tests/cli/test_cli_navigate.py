@@ -313,15 +313,15 @@ def test_a_jittered_log_with_dropped_records_is_navigated_on_its_rows(voyage_log
     assert np.max(d_km) < 0.3, np.max(d_km)
 
 
-def test_the_loose_methods_and_pmf_refuse_a_gap(voyage_log, tmp_path, capsys):
+def test_the_loose_methods_refuse_a_gap(voyage_log, tmp_path, capsys):
     path = _edited(voyage_log[0], tmp_path, lambda c: c["t"].__setitem__(slice(200, None),
                                                                          c["t"][200:] + 20.0))
-    for method in ("dense", "pmf"):
+    for method in ("dense", "entropy+iccp"):
         out = tmp_path / "n.csv"
         assert main(["navigate", "--track", str(path), "--out", str(out), "--method",
                      method, *SHORT]) == 2
         err = capsys.readouterr().err
         assert (f"a gap of 2 missing row(s) on lines 201-202 (t 1990 -> 2020 s) (step 10 s; 1 "
-                f"gap(s)), and --method {method} needs every row (use ukf, ekf, gsf or rbpf, "
-                "which predict through gaps)") in err, err
+                f"gap(s)), and --method {method} needs every row (a tightly coupled --method, "
+                "e.g. ukf, predicts through gaps)") in err, err
         assert not out.exists()
