@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from jaxgrav.filters import filter_track
 from jaxgrav.filters.api import reading_stride
@@ -103,3 +105,21 @@ def test_the_point_mass_stride_is_the_readings_common_stride():
     assert reading_stride(np.array([2, 5, 8, 14, 17])) == 3  # one missing on the stride
     assert reading_stride(np.array([2, 5, 8, 9])) == 1  # an irregular one: every row
     assert reading_stride(np.array([4])) == 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.05, 600.0), st.integers(8, 400),
+       st.floats(0.0, 0.04), st.floats(0.0, 1.0))
+def test_any_jittered_log_with_gaps_gives_back_its_steps(seed, dt, n, jitter, drop):
+    # a regular clock t0 + k·dt, each stamp off by up to 4 % of a step (a step off by
+    # at most 8 %), rows dropped at random among every fourth (single steps stay the
+    # median, which the step's first guess is)
+    rng = np.random.default_rng(seed)
+    k = np.arange(n)
+    keep = k[~((k % 4 == 1) & (k < n - 1) & (rng.random(n) < drop))]
+    t = 1e5 + keep * dt + rng.uniform(-jitter, jitter, keep.size) * dt
+    steps = time_steps(t, "log")
+    np.testing.assert_array_equal(steps.rows, keep)
+    assert steps.n_steps == n and steps.n_inserted == n - keep.size
+    assert abs(steps.dt - dt) <= 2 * jitter * dt / (n - 1) + 1e-9 * dt
+    assert steps.jitter <= 2 * jitter * dt + 1e-9 * dt
