@@ -191,7 +191,7 @@ def add_parser(subparsers):
     add_missing_option(f)
     f.add_argument("--max-gap", type=float, default=60.0, metavar="S",
                    help="longest gap between rows (s) the filter predicts through, the "
-                        "missing rows' positions interpolated (default 60); not pmf")
+                        "missing rows' positions interpolated (default 60)")
     f.add_argument("--force", action="store_true", help="overwrite an existing output")
     f.set_defaults(func=cmd_filter)
     return f
