@@ -23,11 +23,16 @@ import numpy as np
 
 from jaxgrav.tracks import csv_line
 
-__all__ = ["JITTER", "TimeSteps", "at_rows", "on_steps", "time_steps"]
+__all__ = ["JITTER", "MAX_INSERTED", "TimeSteps", "at_rows", "on_steps", "time_steps"]
 
 JITTER = 0.1
 """Largest deviation of a step between rows from a whole number of steps, as a fraction
 of the step."""
+
+MAX_INSERTED = 10
+"""Most steps without a row, as a multiple of the log's rows: more is refused (a time
+column in the wrong unit or a stray stamp years off would otherwise allocate and
+predict through millions of steps)."""
 
 
 class TimeSteps(NamedTuple):
@@ -101,7 +106,8 @@ def time_steps(t, where, *, max_gap=None, gaps=None, line=csv_line):
     ValueError
         Times that do not increase, a step shorter than half the median step, a step
         not within :data:`JITTER` of a whole number of steps, a gap longer than
-        ``max_gap`` or not allowed; each naming the lines, the times and the step.
+        ``max_gap`` or not allowed, more steps without a row than :data:`MAX_INSERTED`
+        times the rows; each naming the lines, the times and the step.
     """
     t = np.asarray(t, dtype=float)
     if t.size < 2:
@@ -148,8 +154,14 @@ def time_steps(t, where, *, max_gap=None, gaps=None, line=csv_line):
         raise ValueError(f"{where}: a gap of {d[i]:g} s on {lines(i)} is longer than "
                          f"--max-gap {max_gap:g} s ({long.size} such gap(s)); split the "
                          "log at the gap, or raise --max-gap to predict through it")
+    n_steps = int(rows[-1]) + 1
+    if n_steps - t.size > MAX_INSERTED * t.size:
+        i = int(np.argmax(m))
+        raise ValueError(f"{where}: {n_steps - t.size} steps of {dt:.6g} s without a row, more "
+                         f"than {MAX_INSERTED} x the log's {t.size} rows (the longest gap on "
+                         f"{lines(i)}); split the log, or check the time column's unit")
     jitter = float(off.max())  # below 1 ppm of a step: the decimals the times were written in
-    return TimeSteps(dt=dt, rows=rows, n_steps=int(rows[-1]) + 1,
+    return TimeSteps(dt=dt, rows=rows, n_steps=n_steps,
                      jitter=jitter if jitter > 1e-6 * dt else 0.0,
                      n_gaps=int(gap.size))
 

@@ -75,6 +75,9 @@ def test_a_gap_with_several_columns_is_interpolated_per_column():
     ([0, 10, 20, 50, 60], {"gaps": "pmf needs every row"},
      "log: a gap of 2 missing row(s) on lines 4-5 (t 20 -> 50 s) (step 10 s; 1 gap(s)), and "
      "pmf needs every row; split the log at the gap"),
+    ([0, 10, 20, 1e6, 1e6 + 10], {},
+     "log: 99997 steps of 10 s without a row, more than 10 x the log's 5 rows (the longest "
+     "gap on lines 4-5 (t 20 -> 1e+06 s)); split the log"),
     ([0, 10, 20, 100, 110], {"max_gap": 60.0},
      "a gap of 80 s on lines 4-5 (t 20 -> 100 s) is longer than --max-gap 60 s"),
 ])
