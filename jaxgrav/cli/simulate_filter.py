@@ -143,7 +143,7 @@ def cmd_simulate_filter(args):
                   inputs={"--map": args.map})
     existing = [str(p) for p in (args.out, args.truth) if p is not None and Path(p).exists()]
     if existing and not args.force:
-        raise FileExistsError(f"{existing} exist(s); pass --force to overwrite")
+        raise FileExistsError(f"{', '.join(existing)} exist(s); pass --force to overwrite")
     if not (np.isfinite(args.dt) and args.dt > 0):
         raise ValueError(f"--dt must be a positive step (s); got {args.dt!r}")
     if args.reading_every < 1:

@@ -11,7 +11,9 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
                position error d_north, d_east (m, INS − true)
 
 The voyage is :func:`~jaxgrav.scenarios.voyage_scenario` of the preset
-(:data:`~jaxgrav.scenarios.PRESETS`: ``patrol-12h``, ``transit-24h``) on ``--map``,
+(:data:`~jaxgrav.scenarios.PRESETS`: ``patrol-12h``, ``transit-24h``) on ``--map`` (in the
+preset's region, or the map's own extent when the map does not cover it, as
+``montecarlo --method voyage-*`` does),
 the readings seeing the map plus ``--map-error`` (or ``--truth-map``). On a map (or truth
 map) with missing (NaN, land-masked) nodes the route is drawn again, up to
 :data:`~jaxgrav.montecarlo.matcher_runs.MISSING_MAP_START_TRIES` times, until its true
@@ -33,6 +35,7 @@ from jaxgrav.cli.simulate import (
 )
 from jaxgrav.datasets import load_map
 from jaxgrav.montecarlo.matcher_runs import MISSING_MAP_START_TRIES
+from jaxgrav.montecarlo.spec import region_of
 from jaxgrav.scenarios import PRESETS, voyage_preset, voyage_scenario
 from jaxgrav.scenarios.paper_a import check_region_covered
 from jaxgrav.tracks import write_track_csv
@@ -47,7 +50,8 @@ def add_parser(sub):
     """Add the ``simulate-voyage`` sub-command to an ``argparse`` sub-parser set."""
     p = sub.add_parser("simulate-voyage",
                        help="write a voyage's INS log (raw readings) and truth from a preset")
-    p.add_argument("--preset", default="patrol-12h", help=f"one of {sorted(PRESETS)}")
+    p.add_argument("--preset", default="patrol-12h", choices=sorted(PRESETS),
+                   help="the voyage (default patrol-12h)")
     p.add_argument("--map", default="ryukyu",
                    help="map the readings are simulated from: NetCDF grid or shipped map "
                         "(default ryukyu, 2.5')")
@@ -69,21 +73,37 @@ def cmd_simulate_voyage(args):
         raise ValueError(f"--hours must be a positive length of at most {MAX_HOURS:g} h; "
                          f"got {args.hours!r}")
     check_seed(args.seed)
-    changes = {} if args.hours is None else {"hours": args.hours}
-    try:
-        scenario = voyage_preset(args.preset, **changes)
-    except ValueError as err:
-        raise ValueError(f"--preset {args.preset!r}: {err}") from None
+    scenario = voyage_preset(args.preset)
+    if args.hours is not None:
+        if not args.hours * 3600.0 >= 2 * scenario.dt:  # the preset said "hours must cover"
+            raise ValueError(f"--hours must cover at least two readings {scenario.dt:g} s apart "
+                             f"(>= {2 * scenario.dt / 3600.0:.3g} h); got {args.hours!r}")
+        scenario = dataclasses.replace(scenario, hours=args.hours)
     check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"],
                   inputs={"--map": args.map, "--truth-map": args.truth_map})
     grid = load_map(args.map, args.var, allow_nan=True)  # missing nodes: checked on the route
-    check_region_covered(grid, scenario.region, f"--map {args.map}")
+    try:
+        check_region_covered(grid, scenario.region, f"--map {args.map}")
+        own = ""
+    except ValueError:  # a regional map (a user's own): refused; montecarlo voyage-* ran
+        # on it (voyage_builder), so the voyage keeps to the map's own extent, as there
+        scenario = dataclasses.replace(scenario, region=region_of(grid))
+        s, n, w, e = scenario.region
+        own = f" on the map's own region (lat {s:.4g}..{n:.4g}, lon {w:.4g}..{e:.4g})"
     model = map_error_from_args(args, grid, allow_nan=True)
     # land masked: the route is drawn again until it reads no missing node
     tries = (MISSING_MAP_START_TRIES if grid.n_missing or
              getattr(getattr(model, "grid", None), "n_missing", 0) else 1)
     scenario = dataclasses.replace(scenario, start_tries=tries)
     voyage = voyage_scenario(jax.random.key(args.seed), grid, scenario, model)
+    off = ~np.asarray(grid.contains(voyage.truth.lat, voyage.truth.lon))
+    if off.any():  # was reported as missing (NaN) map values along the route
+        i = int(np.flatnonzero(off)[0])
+        raise ValueError(f"the {args.preset} route leaves --map {args.map} after "
+                         f"{float(voyage.truth.t[i]) / 3600:.3g} h (at lat "
+                         f"{float(voyage.truth.lat[i]):.5g}, lon {float(voyage.truth.lon[i]):.5g}; "
+                         f"{int(off.sum())} of {off.size} readings off the map){own}; give a "
+                         "shorter --hours, another --preset or a larger map")
     bad = ~np.isfinite(np.asarray(voyage.gravity))
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
@@ -104,6 +124,6 @@ def cmd_simulate_voyage(args):
                                      "d_east": voyage.ins_error[:, 1]}, force=args.force)
     end = float(np.hypot(voyage.ins_error[-1, 0], voyage.ins_error[-1, 1]))
     also = f" and {args.truth}" if args.truth else ""
-    print(f"wrote {args.out}{also}: {args.preset}, {scenario.hours:g} h, "
+    print(f"wrote {args.out}{also}: {args.preset}{own}, {scenario.hours:g} h, "
           f"{ins.t.shape[0]} rows every {scenario.dt:g} s, free INS error at the end "
           f"{end / 1000:.1f} km, {describe_map_error(args)}")

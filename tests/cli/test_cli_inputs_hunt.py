@@ -262,6 +262,8 @@ REFUSED = [
     (["suitability", "--map", "ryukyu", "--out", "{d}/s.png"],
      "--out '{d}/s.png' is the NetCDF output; the PNG is written next to it with suffix .png: "
      "give --out '{d}/s.nc'"),
+    # "['{d}/f.csv'] exist(s)": a Python list
+    (["simulate-filter", "--out", "{d}/f.csv"], "error: {d}/f.csv exist(s); pass --force"),
     # a voyage given --fixes 3: "--fixes must be at least 5 per track" (--fixes 10 was
     # refused as not a voyage option)
     (["montecarlo", "--method", "voyage-ukf", "--runs", "2", "--out", "{d}/m.nc", "--fixes",
@@ -273,6 +275,9 @@ REFUSED = [
                          ids=[f"{a[0]}-{i}" for i, (a, _) in enumerate(REFUSED)])
 def test_hunted_inputs_are_refused_in_one_line(tmp_path, capsys, argv, message):
     """Exit 2 and one line (argparse's refusals exit through SystemExit), nothing written."""
+    existing = tmp_path / "f.csv"
+    if "simulate-filter" in argv:
+        existing.write_text("t\n")
     try:
         code = main([a.format(d=tmp_path) for a in argv])
     except SystemExit as exit_:
@@ -280,7 +285,7 @@ def test_hunted_inputs_are_refused_in_one_line(tmp_path, capsys, argv, message):
     err = capsys.readouterr().err.strip()
     assert code == 2 and message.format(d=tmp_path) in err, err
     assert "\n" not in err and "Traceback" not in err, err
-    assert list(tmp_path.iterdir()) == []
+    assert list(tmp_path.iterdir()) == ([existing] if existing.exists() else [])
 
 
 def test_bench_names_a_script_that_failed_silently(tmp_path, capsys, monkeypatch):
