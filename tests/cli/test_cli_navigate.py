@@ -165,6 +165,8 @@ def test_navigate_on_a_map_with_missing_nodes_by_the_track(voyage_log, tmp_path,
         nav = read_track_csv(out, ("t", "lat", "lon", "sigma_north", "sigma_east"))
         for k in ("lat", "lon", "sigma_north", "sigma_east"):
             assert np.isfinite(nav[k]).all(), (method, k)
+        # the point-mass filter's 1-sigma is not to be trusted on a voyage, and says so
+        assert ("pmf's 1-sigma is over-confident" in capsys.readouterr().err) == (method == "pmf")
     # the point-mass filter across the hole stays with the truth (its cells over the hole
     # once took zero likelihood: the mass piled on the hole's rim, 10 km off)
     truth = read_track_csv(voyage_log[1], ("t", "lat", "lon"))
