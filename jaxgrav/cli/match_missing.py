@@ -35,6 +35,9 @@ def missing_counts(grid, track, result, reach_m):
         ``missing_nodes_in_reach``, ``ins_fixes_over_missing`` (fixes of the INS track in
         a cell with a missing corner) and ``fixes_over_missing`` (of the returned track).
     """
+    if not grid.n_missing:  # a complete map: no sampling (nor its compile) needed
+        return dict(missing_nodes_in_reach=0, ins_fixes_over_missing=0, fixes_over_missing=0)
+
     def over(lat, lon):
         return int(np.isnan(np.asarray(grid.sample(lat, lon, "bilinear"))).sum())
 
