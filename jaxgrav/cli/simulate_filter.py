@@ -150,6 +150,10 @@ def cmd_simulate_filter(args):
         raise ValueError(f"--reading-every must be a positive number of rows; got "
                          f"{args.reading_every}")
     n = _steps(args)
+    if (n - 1) // args.reading_every + 1 < 2:  # one reading at the start: ran, exit 0
+        raise ValueError(f"--reading-every {args.reading_every} leaves one reading in the {n} "
+                         f"rows of --minutes {args.minutes:g} every --dt {args.dt:g} s; expected "
+                         f"at most {n - 1} rows between readings")
     me_sigma, me_length = map_error_args(args)
     if args.map is None:
         if me_sigma > 0:

@@ -262,6 +262,10 @@ REFUSED = [
     (["suitability", "--map", "ryukyu", "--out", "{d}/s.png"],
      "--out '{d}/s.png' is the NetCDF output; the PNG is written next to it with suffix .png: "
      "give --out '{d}/s.nc'"),
+    # one reading at the start in 3601 rows: written, exit 0
+    (["simulate-filter", "--out", "{d}/g.csv", "--reading-every", "100000"],
+     "--reading-every 100000 leaves one reading in the 3601 rows of --minutes 120 every --dt "
+     "2 s; expected at most 3600 rows between readings"),
     # "['{d}/f.csv'] exist(s)": a Python list
     (["simulate-filter", "--out", "{d}/f.csv"], "error: {d}/f.csv exist(s); pass --force"),
     # a voyage given --fixes 3: "--fixes must be at least 5 per track" (--fixes 10 was
@@ -276,7 +280,7 @@ REFUSED = [
 def test_hunted_inputs_are_refused_in_one_line(tmp_path, capsys, argv, message):
     """Exit 2 and one line (argparse's refusals exit through SystemExit), nothing written."""
     existing = tmp_path / "f.csv"
-    if "simulate-filter" in argv:
+    if "{d}/f.csv" in argv:
         existing.write_text("t\n")
     try:
         code = main([a.format(d=tmp_path) for a in argv])
