@@ -6,7 +6,6 @@ function is :func:`cmd_dov`.
 
 import itertools
 import math
-import re
 import sys
 
 import numpy as np
@@ -38,9 +37,6 @@ def add_parser(subparsers):
                    help="NetCDF layers: xi, eta (arcsec) on (height, lat, lon), height in m "
                         "(default: the shipped qinling set)")
     d.add_argument("--force", action="store_true", help="overwrite an existing output")
-    # argparse reads "-50,0,10000" as an unknown option ("--layers: expected one argument");
-    # this parser has no option that starts with "-" and a digit, so such a word is a value.
-    d._negative_number_matcher = re.compile(r"^-\.?\d[\d.,eE+-]*$")
     d.set_defaults(func=cmd_dov)
     return d
 

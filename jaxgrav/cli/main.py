@@ -24,6 +24,7 @@ are cached between calls (:mod:`jaxgrav.cli.cache`; ``--no-cache`` or
 
 import argparse
 import functools
+import re
 import sys
 import traceback
 import warnings
@@ -119,9 +120,31 @@ def _one_line(message, category, filename, lineno, line=None, *, default):
     return default(message, category, filename, lineno, line)
 
 
+NEGATIVE_LIST = re.compile(r"^-\.?\d[\d.eE+-]*(,[\d.eE+-]*)+$")
+"""A comma-separated value that starts with a minus, e.g. ``-50,0,10000``."""
+
+
+def joined_negative_lists(argv):
+    """``--opt -50,0`` as ``--opt=-50,0``.
+
+    argparse reads a word that starts with a minus and is not a plain number as an
+    option, so ``--layers -50,0,10000`` ended in "expected one argument"; joined to its
+    option it is that option's value.
+    """
+    out = []
+    for word in argv:
+        if (out and NEGATIVE_LIST.match(word) and out[-1].startswith("--")
+                and "=" not in out[-1]):
+            out[-1] = f"{out[-1]}={word}"
+        else:
+            out.append(word)
+    return out
+
+
 def main(argv=None):
     """Entry point of the ``jaxgrav`` command; returns the exit code."""
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(joined_negative_lists(argv))
     _enable_x64()
     enable_cache(off=args.no_cache)
     default = warnings.formatwarning

@@ -10,6 +10,7 @@ import pytest
 
 from jaxgrav import datasets, dov
 from jaxgrav.cli import main
+from jaxgrav.cli.main import joined_negative_lists
 from jaxgrav.fields import harmonics
 from jaxgrav.tracks import read_track_csv, write_track_csv
 
@@ -82,3 +83,12 @@ def test_the_advised_layers_take_a_submarine_track_in(tmp_path, capsys):
     xi, eta = harmonics.deflection(datasets.load("qinling")["coefficients"], lat, lon, h)
     np.testing.assert_allclose(res["xi"], xi, atol=0.02)
     np.testing.assert_allclose(res["eta"], eta, atol=0.02)
+
+
+def test_a_list_starting_with_a_minus_is_the_option_s_value():
+    # argparse took "-50,0" for an unknown option; joined before parsing, without a
+    # private attribute of argparse
+    assert joined_negative_lists(["dov", "--layers", "-50,0,1e4", "--force"]) == [
+        "dov", "--layers=-50,0,1e4", "--force"]
+    same = ["dov", "--layers=-50,0", "--x", "-5", "--y", "-a,b", "-50,0"]
+    assert joined_negative_lists(same) == same  # joined already; a number; not a list
