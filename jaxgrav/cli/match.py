@@ -33,7 +33,7 @@ from jaxgrav.match.api import MAP_ERROR_METHODS, missing_reading
 from jaxgrav.sim import DEG_ARC_M
 from jaxgrav.tracks import csv_line, write_track_csv
 
-__all__ = ["CONTOUR_METHODS", "ENTROPY_HALF_SIZE", "add_parsers"]
+__all__ = ["CONTOUR_METHODS", "ENTROPY_HALF_SIZE", "add_parsers", "check_search"]
 
 CONTOUR_METHODS = ("entropy", "iccp", "entropy+iccp")
 """Methods that match magnetic as well as gravity tracks (they estimate no bias)."""
@@ -185,7 +185,7 @@ def _cmd_match(args):
     check_readings(track[field], np.asarray(grid.sample(track["lat"], track["lon"], "bicubic")),
                    args.noise, column=field, where=f"--track {str(args.track)!r}", unit=unit,
                    correction=correction, missing_skipped=False)
-    _check_search(args, grid, radius_deg, track["lat"])
+    check_search(args, grid, radius_deg, track["lat"])
     if args.refine > 1:
         grid = grid.refine(args.refine)
     if field != "gravity" and args.method not in CONTOUR_METHODS:
@@ -292,7 +292,7 @@ _MAX_REFINED_NODES = 2e7
 """Nodes of a refined map above which ``--refine`` is refused (160 MB in float64)."""
 
 
-def _check_search(args, grid, radius_deg, lat):
+def check_search(args, grid, radius_deg, lat):
     """The search region and ``--refine``: a region larger than the map, a refinement that
     makes the result worse or cannot fit in memory are refused; chains on coarse cells
     without ``--refine`` are warned."""

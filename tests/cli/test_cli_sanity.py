@@ -14,7 +14,7 @@ from scipy.stats import chi2
 
 from jaxgrav import datasets
 from jaxgrav.cli import main
-from jaxgrav.cli.match import _check_search
+from jaxgrav.cli.match import check_search
 from jaxgrav.cli.sanity import (
     check_positions,
     check_readings,
@@ -198,7 +198,7 @@ def test_match_flags_an_implausible_fit_and_writes_time_and_units(tracks, tmp_pa
 
 @pytest.mark.long  # a whole chains match on the unrefined map (a program of its own) for a
 # warning: the fast tier keeps the warning by test_chains_warning_is_decided_before_the_run,
-# and match's call of _check_search by the "search wider than the map" case above
+# and match's call of check_search by the "search wider than the map" case above
 def test_chains_without_refine_on_a_coarse_map_warns(tracks, tmp_path, capsys):
     out = tmp_path / "r.json"
     assert main(["match", "--map", "ryukyu", "--track", str(tracks / "t.csv"), "--out",
@@ -219,7 +219,7 @@ def test_chains_warning_is_decided_before_the_run(capsys, method, refine, fine, 
     if fine:
         grid = grid.refine(8)
     args = argparse.Namespace(method=method, refine=refine)
-    _check_search(args, grid, 0.05, np.array([26.0, 26.1]))
+    check_search(args, grid, 0.05, np.array([26.0, 26.1]))
     err = capsys.readouterr().err
     assert ("without --refine" in err) is warned, err
     if warned:
