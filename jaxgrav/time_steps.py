@@ -23,7 +23,8 @@ import numpy as np
 
 from jaxgrav.tracks import csv_line
 
-__all__ = ["JITTER", "MAX_INSERTED", "TimeSteps", "at_rows", "on_steps", "time_steps"]
+__all__ = ["JITTER", "MAX_INSERTED", "TimeSteps", "at_rows", "first_step", "on_steps",
+           "time_steps"]
 
 JITTER = 0.1
 """Largest deviation of a step between rows from a whole number of steps, as a fraction
@@ -84,7 +85,8 @@ def time_steps(t, where, *, max_gap=None, gaps=None, line=csv_line):
     where : str
         How error messages name the log (e.g. ``"--track 'log.csv'"``).
     max_gap : float, optional
-        Longest step between rows (s); longer ones are refused, naming ``--max-gap``.
+        Longest gap between rows (s), and longest step: longer ones are refused, naming
+        ``--max-gap`` (a log whose every step is longer may have its times in ms).
     gaps : str, optional
         None: gaps are bridged. Else they are refused, and this says why (e.g. ``"--method
         pmf updates on a fixed row stride"``).
@@ -95,24 +97,30 @@ def time_steps(t, where, *, max_gap=None, gaps=None, line=csv_line):
     -------
     TimeSteps
 
-    Notes
-    -----
-    The step's first guess is the median step between rows, so gaps must be the
-    exception (fewer than half the steps); each step then counts as its nearest whole
-    number of steps, and ``dt`` is the duration over their sum.
-
     Raises
     ------
     ValueError
-        Times that do not increase, a step shorter than half the median step, a step
-        not within :data:`JITTER` of a whole number of steps, a gap longer than
-        ``max_gap`` or not allowed, more steps without a row than :data:`MAX_INSERTED`
-        times the rows; each naming the lines, the times and the step.
+        Missing or non-finite times, times that do not increase, a step shorter than
+        half the log's step, a step not within :data:`JITTER` of a whole number of
+        steps, a step or gap longer than ``max_gap``, a gap not allowed, more steps
+        without a row than :data:`MAX_INSERTED` times the rows; each naming the lines,
+        the times and the step.
+
+    Notes
+    -----
+    The step's first guess is the median step between rows, or the median of the short
+    ones (within 1.5 × the shortest) when more steps are a whole number of those (a log
+    with more gaps than single steps); each step then counts as its nearest whole number
+    of steps, and ``dt`` is the duration over their sum.
     """
     t = np.asarray(t, dtype=float)
     if t.size < 2:
         raise ValueError(f"{where} has {t.size} row; the filter needs at least 2 (the time "
                          "step is taken from column t)")
+    nan = np.flatnonzero(~np.isfinite(t))
+    if nan.size:
+        raise ValueError(f"{where}: column t has {nan.size} missing or non-finite time(s), "
+                         f"the first on line {line(int(nan[0]))}")
     d = np.diff(t)
 
     def lines(i):
@@ -124,16 +132,27 @@ def time_steps(t, where, *, max_gap=None, gaps=None, line=csv_line):
         what = "repeats" if d[i] == 0 else "goes backwards"
         raise ValueError(f"{where}: column t must increase; it {what} on {lines(i)}; "
                          f"{back.size} such step(s)")
-    median = float(np.median(d))
-    m = np.rint(d / median).astype(np.int64)
+    guess = first_step(d)
+    ratio = d / guess
+    if np.sum(np.rint(ratio)) + 1 - t.size > MAX_INSERTED * t.size:
+        i = int(np.argmax(d))
+        raise ValueError(f"{where}: {np.sum(np.rint(ratio)) + 1 - t.size:.6g} steps of "
+                         f"{guess:.6g} s without a row, more than {MAX_INSERTED} x the log's "
+                         f"{t.size} rows (the longest gap on {lines(i)}); split the log, or "
+                         "check the time column's unit")
+    m = np.rint(ratio).astype(np.int64)
     short = np.flatnonzero(m < 1)
     if short.size:
         i = int(short[0])
         raise ValueError(f"{where}: a step of {d[i]:g} s on {lines(i)} is under half the "
-                         f"log's step ({median:g} s, the median): rows must be one step apart "
-                         f"or a whole number of steps (gaps); {short.size} such step(s)")
+                         f"log's step ({guess:g} s): rows must be one step apart or a whole "
+                         f"number of steps (gaps); {short.size} such step(s)")
     rows = np.concatenate([[0], np.cumsum(m)])
     dt = float((t[-1] - t[0]) / rows[-1])
+    if max_gap is not None and dt > max_gap:
+        raise ValueError(f"{where}: the log's step, {dt:.6g} s, is longer than --max-gap "
+                         f"{max_gap:g} s: is column t in seconds? (raise --max-gap if the "
+                         "step is right)")
     off = np.abs(d - m * dt)
     bad = np.flatnonzero(off > JITTER * dt)
     if bad.size:
@@ -155,15 +174,34 @@ def time_steps(t, where, *, max_gap=None, gaps=None, line=csv_line):
                          f"--max-gap {max_gap:g} s ({long.size} such gap(s)); split the "
                          "log at the gap, or raise --max-gap to predict through it")
     n_steps = int(rows[-1]) + 1
-    if n_steps - t.size > MAX_INSERTED * t.size:
-        i = int(np.argmax(m))
-        raise ValueError(f"{where}: {n_steps - t.size} steps of {dt:.6g} s without a row, more "
-                         f"than {MAX_INSERTED} x the log's {t.size} rows (the longest gap on "
-                         f"{lines(i)}); split the log, or check the time column's unit")
     jitter = float(off.max())  # below 1 ppm of a step: the decimals the times were written in
     return TimeSteps(dt=dt, rows=rows, n_steps=n_steps,
                      jitter=jitter if jitter > 1e-6 * dt else 0.0,
                      n_gaps=int(gap.size))
+
+
+def first_step(d):
+    """The first guess of a log's step from the steps between its rows (s).
+
+    The median step, or the median of the short steps (within 1.5 × the shortest) when
+    more steps are within :data:`JITTER` of a whole number (≥ 1) of those: a log with
+    more gaps than single steps.
+
+    Parameters
+    ----------
+    d : numpy.ndarray, shape ``(R − 1,)``
+        Positive steps between rows (s).
+
+    Returns
+    -------
+    float
+    """
+    def fits(step):
+        k = np.rint(d / step)
+        return int(np.sum((k >= 1) & (np.abs(d - k * step) <= JITTER * step)))
+
+    median, short = float(np.median(d)), float(np.median(d[d < 1.5 * d.min()]))
+    return short if fits(short) > fits(median) else median
 
 
 def on_steps(steps, values, *, fill=None, period=None):
@@ -172,6 +210,7 @@ def on_steps(steps, values, *, fill=None, period=None):
     Parameters
     ----------
     steps : TimeSteps
+        The log's steps (:func:`time_steps`).
     values : array_like, shape ``(R, ...)``
         The column at the log's rows.
     fill : float, optional

@@ -21,6 +21,17 @@ def test_jitter_within_a_tenth_of_a_step_is_absorbed():
     assert "(steps jitter by up to" in steps.describe()
 
 
+def test_a_log_with_more_gaps_than_single_steps_is_read():
+    # 1-row gaps between most rows: the median step is two steps, the short ones say one
+    steps = time_steps(np.array([0, 10, 30, 40, 60, 70, 90.0]), "log")
+    np.testing.assert_array_equal(steps.rows, [0, 1, 3, 4, 6, 7, 9])
+    assert steps.dt == 10.0 and steps.n_gaps == 3
+    steps = time_steps(np.array([0, 10, 30, 50, 70, 80.0]), "log")
+    np.testing.assert_array_equal(steps.rows, [0, 1, 3, 5, 7, 8])
+    # a regular 20 s log is not read as a 10 s log with gaps
+    np.testing.assert_array_equal(time_steps(20.0 * np.arange(6), "log").rows, np.arange(6))
+
+
 def test_decimal_times_have_no_jitter():
     t = np.round(0.3 + 0.1 * np.arange(2000), 1)  # 0.1 s steps as written in a CSV
     steps = time_steps(t, "log")
@@ -68,7 +79,12 @@ def test_a_gap_with_several_columns_is_interpolated_per_column():
                           "such step(s)"),
     ([0, 10, 5, 20], {}, "it goes backwards on lines 3-4 (t 10 -> 5 s)"),
     ([0, 10, 13, 20, 30, 40, 50], {}, "a step of 3 s on lines 3-4 (t 10 -> 13 s) is under half the "
-                              "log's step (10 s, the median)"),
+                              "log's step (10 s)"),
+    ([0, 10, float("nan"), 30], {}, "log: column t has 1 missing or non-finite time(s), the "
+                                    "first on line 4"),
+    ([0, 120, 240, 360], {"max_gap": 60.0},
+     "log: the log's step, 120 s, is longer than --max-gap 60 s: is column t in seconds?"),
+    ([0, 10, 20, 1e20], {}, "steps of 10 s without a row, more than 10 x"),
     ([0, 10, 20, 32, 40, 50], {}, "column t must have a regular step; a step of 12 s on lines "
                                   "4-5 (t 20 -> 32 s) is not within 10% of the step 10 s"),
     ([0, 10, 20, 34, 40, 50], {}, "a step of 14 s on lines 4-5"),  # 1.4 steps: not a gap

@@ -98,7 +98,7 @@ from jaxgrav.filters.map_state import map_error_state
 from jaxgrav.geodesy import eotvos_jacobian, eotvos_jit
 from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.time_steps import at_rows, on_steps, time_steps
-from jaxgrav.tracks import csv_line, write_track_csv
+from jaxgrav.tracks import write_track_csv
 
 __all__ = ["add_parser", "cmd_filter"]
 
@@ -278,7 +278,7 @@ def cmd_filter(args):
     steps = time_steps(t, where, max_gap=args.max_gap, line=track.line)
     if np.any(np.abs(lat) > 90):
         i = int(np.flatnonzero(np.abs(lat) > 90)[0])
-        raise ValueError(f"{where}: latitude {lat[i]:g} on line {csv_line(i)} is outside "
+        raise ValueError(f"{where}: latitude {lat[i]:g} on line {track.line(i)} is outside "
                          "[-90, 90] degrees")
     if "v_east" in track and "v_north" in track:
         check_positions(track, where=where)
@@ -312,6 +312,7 @@ def cmd_filter(args):
     g, jac, eotvos_note = _eotvos(args, track, g)
     expected = map_at_ins(field, lat, lon) + offset
     check_readings(g_raw, expected, args.sigma_gravity, column="gravity", where=where,
+                   line=track.line,
                    correction=g - g_raw)
     level = offset_warning(g, expected, INS_GRADES[args.ins].gravimeter_sigma, me_sigma,
                            args.sigma_gravity)
@@ -349,8 +350,7 @@ def cmd_filter(args):
     print(f"wrote {args.out}: {args.method} over {t.size} rows ({n_read} readings{stride}) "
           f"on {field_name}, {ins_label(args.ins)}; final 1-sigma "
           f"{res['sigma_north'][-1]:.0f} m north, {res['sigma_east'][-1]:.0f} m east; "
-          f"{eotvos_note}" + ("" if steps.jitter == 0 and not steps.n_gaps
-                              else f"; {steps.describe()}"))
+          f"{eotvos_note}; {steps.describe()}")
     _, _, fit_warning = innovation_check(res["innovation"], res["innovation_sigma"])
     read = np.isfinite(g)
     flat = information_warning(

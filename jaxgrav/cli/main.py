@@ -50,7 +50,7 @@ from jaxgrav.cli.cache import enable_cache
 from jaxgrav.fields import egm2008
 from jaxgrav.grid_files import UndeclaredFillWarning
 
-__all__ = ["build_parser", "main"]
+__all__ = ["NEGATIVE_LIST", "build_parser", "joined_negative_lists", "main"]
 
 
 def _enable_x64():
@@ -130,6 +130,17 @@ def joined_negative_lists(argv):
     argparse reads a word that starts with a minus and is not a plain number as an
     option, so ``--layers -50,0,10000`` ended in "expected one argument"; joined to its
     option it is that option's value.
+
+    Parameters
+    ----------
+    argv : list of str
+        The command line's words after the program's name.
+
+    Returns
+    -------
+    list of str
+        The same words, each :data:`NEGATIVE_LIST` after a ``--option`` (without ``=``)
+        joined to it.
     """
     out = []
     for word in argv:

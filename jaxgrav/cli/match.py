@@ -184,7 +184,7 @@ def _cmd_match(args):
                   if has_v else 0.0)
     check_readings(track[field], np.asarray(grid.sample(track["lat"], track["lon"], "bicubic")),
                    args.noise, column=field, where=f"--track {str(args.track)!r}", unit=unit,
-                   correction=correction, missing_skipped=False)
+                   correction=correction, missing_skipped=False, line=track.line)
     check_search(args, grid, radius_deg, track["lat"])
     if args.refine > 1:
         grid = grid.refine(args.refine)

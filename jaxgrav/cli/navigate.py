@@ -100,8 +100,8 @@ from jaxgrav.sim.voyage_log import Voyage
 from jaxgrav.time_steps import at_rows, on_steps, time_steps
 from jaxgrav.tracks import write_track_csv
 
-__all__ = ["DEFAULT_PARTICLES", "LOOSE_DEFAULTS", "METHODS", "add_parser", "check_log",
-           "cmd_navigate", "nis_warning"]
+__all__ = ["DEFAULT_PARTICLES", "LOOSE_DEFAULTS", "METHODS", "PMF_WARNING", "add_parser",
+           "check_log", "cmd_navigate", "nis_warning"]
 
 METHODS = (*LOOSE_MATCHERS, *TIGHT_METHODS)
 """Navigation methods of the command: loosely coupled with a matcher of
@@ -280,7 +280,7 @@ def cmd_navigate(args):
         _check_fix_blocks(gravity, args.fix_every, track.path)
     e_ins = np.asarray(eotvos_jit(log.lat, log.v_east, log.v_north))
     expected = np.asarray(grid.sample(log.lat, log.lon, "bicubic"))
-    check_readings(gravity, expected, args.noise, column="gravity",
+    check_readings(gravity, expected, args.noise, column="gravity", line=track.line,
                    where=f"--track {track.path!r}",
                    correction=0.0 if args.eotvos_corrected else e_ins)
     if args.method in TIGHT_METHODS:  # its bias state allows a constant offset of σ_b
@@ -311,7 +311,7 @@ def cmd_navigate(args):
                        for k in FIX_EVENTS if np.any(events == k))
     print(f"wrote {args.out}: {len(ins.t)} rows, {events.size} segment ends ({counts}); "
           f"{n_missing} missing reading(s) skipped, {n_off} row(s) off the map (not aided)"
-          + ("" if steps.jitter == 0 else f"; {steps.describe()}"))
+          f"; {steps.describe()}")
 
 
 @jax.jit
@@ -363,7 +363,7 @@ def _tight(args, voyage, grid, n_missing, n_off, track, steps):
           + (f"missing map nodes read as {missing}; " if args.method == "pmf"
              and grid.n_missing else "") + "flags seen: "
           f"{', '.join(status_messages_filter(flags)) or 'none'}"
-          + ("" if steps.jitter == 0 and not steps.n_gaps else f"; {steps.describe()}"))
+          f"; {steps.describe()}")
     fit_warning = nis_warning(innovation, innovation_sigma)
     read = np.isfinite(np.asarray(voyage.gravity))
     lat, lon = np.asarray(voyage.ins.lat)[read], np.asarray(voyage.ins.lon)[read]

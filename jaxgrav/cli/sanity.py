@@ -58,7 +58,7 @@ def _iqr(a):
 
 
 def check_readings(readings, expected, noise, *, column, where, unit="mGal", correction=0.0,
-                   missing_skipped=True):
+                   missing_skipped=True, line=csv_line):
     """Refuse readings that cannot be anomalies of the map (see the module notes).
 
     Parameters
@@ -80,6 +80,8 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
     missing_skipped : bool
         The command skips an empty cell (filters); False: it needs every reading
         (matchers), and the messages say to remove the row.
+    line : callable
+        Row index → the file's line number (a reader's ``TrackTable.line``).
 
     Raises
     ------
@@ -96,7 +98,7 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
         i = int(np.flatnonzero(fill)[0])
         raise ValueError(
             f"{where}: column {column!r} has {int(fill.sum())} fill value(s) ({z[i]:g} on line "
-            f"{csv_line(i)}); {fix}")
+            f"{line(i)}); {fix}")
     raw = z
     z = z + np.broadcast_to(np.asarray(correction, float), z.shape)
     both = ok & np.isfinite(e) & np.isfinite(z)
@@ -159,7 +161,8 @@ def check_positions(track, *, where):
     Parameters
     ----------
     track : mapping
-        ``t`` (s), ``lat``, ``lon`` (degrees), ``v_east``, ``v_north`` (m/s), ``(N,)``.
+        ``t`` (s), ``lat``, ``lon`` (degrees), ``v_east``, ``v_north`` (m/s), ``(N,)``;
+        a :class:`~jaxgrav.tracks.TrackTable`'s own file lines name the rows.
     where : str
         The file, for messages.
 
@@ -178,6 +181,7 @@ def check_positions(track, *, where):
     ve, vn = np.asarray(track["v_east"], float), np.asarray(track["v_north"], float)
     if t.size < 2:
         return
+    line = getattr(track, "line", csv_line)  # the file's own lines (comments skipped)
     dt = np.diff(t)
     north, east = (np.asarray(a) for a in local_offsets_m(lat[1:], lon[1:], lat[:-1], lon[:-1]))
     miss_n = north - 0.5 * (vn[1:] + vn[:-1]) * dt
@@ -190,8 +194,8 @@ def check_positions(track, *, where):
     if jump.size:
         i = int(jump[0])
         raise ValueError(
-            f"{where}: the position jumps by {miss[i]:.4g} m between lines {csv_line(i)} and "
-            f"{csv_line(i + 1)} (t {t[i]:g} -> {t[i + 1]:g} s) beyond what v_east/v_north "
+            f"{where}: the position jumps by {miss[i]:.4g} m between lines {line(i)} and "
+            f"{line(i + 1)} (t {t[i]:g} -> {t[i + 1]:g} s) beyond what v_east/v_north "
             f"allow ({jump.size} such jump(s)); a reset or glitch of the INS position: split "
             "the log there or remove the row")
 

@@ -97,7 +97,7 @@ def pad_to_stride(steps, every, first=None):
                 jnp.asarray(steps.r)[idx], h_lin), start
 
 
-def reading_stride(rows):
+def reading_stride(rows, where=None):
     """Rows between the point-mass filter's updates: the stride every reading sits on.
 
     The point-mass filter updates every ``k`` rows and predicts the rows between in one
@@ -110,6 +110,8 @@ def reading_stride(rows):
     ----------
     rows : numpy.ndarray of int, shape ``(R,)``
         Rows with a reading, ascending.
+    where : str, optional
+        Unused: kept for callers of the version that refused irregular readings.
 
     Returns
     -------

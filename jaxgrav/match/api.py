@@ -32,7 +32,7 @@ from jaxgrav.prepared import as_grid
 
 __all__ = ["ENTROPY_HALF_SIZE", "MAP_ERROR_METHODS", "MASKED", "METHODS", "MIN_FIXES",
            "ins_over_missing", "match_track", "max_gap_fixes", "missing_in_reach",
-           "missing_reading", "validate_track"]
+           "missing_reading", "track_latitude", "validate_track"]
 
 METHODS = ("dense", "chains", "entropy", "iccp", "entropy+iccp")
 """``dense``: offset grid + Gauss–Newton (default, most accurate on real maps);
@@ -326,12 +326,18 @@ def max_gap_fixes(n):
 def track_latitude(lat):
     """The latitude (degrees) at which a track's search is sized: its mean, to a degree.
 
-    The search's offset spacing follows the map's node spacing, whose east–west part
-    shrinks with latitude; measured at the track, it does not depend on how far the
-    map extends (a map cropped to the track's region sizes the same search). Rounded
-    to a whole degree (the spacing changes by at most ~2.5 % within one, below 75°),
-    tracks in one band share the compiled program, as they shared it at the map's
-    centre.
+    The offset spacing follows the map's east–west node spacing, which shrinks with
+    latitude; measured at the track, a map cropped to the track's region sizes the same
+    search. To a whole degree (≤ 2.5 % within one below 75°), tracks in one band share
+    the compiled program.
+
+    Parameters
+    ----------
+    lat : array_like, shape ``(N,)``
+
+    Returns
+    -------
+    float
     """
     return float(np.round(np.mean(np.asarray(lat, dtype=float))))
 

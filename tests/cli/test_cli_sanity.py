@@ -23,6 +23,7 @@ from jaxgrav.cli.sanity import (
     innovation_check,
 )
 from jaxgrav.match import IMPLAUSIBLE_FIT, fit_p_value
+from jaxgrav.tracks import read_track_csv
 
 # ------------------------------------------------------------------ the functions
 
@@ -309,3 +310,17 @@ def test_check_positions_refuses_a_jump_in_the_ins_log():
     with pytest.raises(ValueError,
                        match=r"jumps by 3\d\d(\.\d)? m between lines 21 and 22.*2 such"):
         check_positions(track, where="--track 'L.csv'")
+
+
+def test_a_jump_is_named_by_the_file_s_own_lines(tmp_path):
+    # two comment lines above the header: the rows' file lines are 4, 5, ... (csv_line's
+    # count from a bare header said 41-42 for what the file has on lines 43-44)
+    path = tmp_path / "log.csv"
+    ve = 1e-4 * np.radians(1.0) * 6378137.0 / np.sqrt(1 - 0.00669438 * 0.25) * np.cos(
+        np.radians(30.0)) / 10.0  # 1e-4 degrees of longitude per 10 s at 30° N (m/s)
+    rows = "\n".join(f"{10 * i},30.0,{130.0 + 1e-4 * i + (0.01 if i >= 40 else 0.0)},{ve},0.0"
+                     for i in range(60))
+    path.write_text("# a logger's header\n# another\nt,lat,lon,v_east,v_north\n" + rows + "\n")
+    track = read_track_csv(path, ("t", "lat", "lon", "v_east", "v_north"))
+    with pytest.raises(ValueError, match=r"jumps by 96\d\.\d m between lines 43 and 44 "):
+        check_positions(track, where="log")
