@@ -75,7 +75,7 @@ class TimeSteps(NamedTuple):
         return text
 
 
-def time_steps(t, where, *, max_gap=None, gaps=None, line=csv_line):
+def time_steps(t, where, *, max_gap=None, max_step=None, gaps=None, line=csv_line):
     """Read a log's time column as a regular step.
 
     Parameters
@@ -85,8 +85,10 @@ def time_steps(t, where, *, max_gap=None, gaps=None, line=csv_line):
     where : str
         How error messages name the log (e.g. ``"--track 'log.csv'"``).
     max_gap : float, optional
-        Longest gap between rows (s), and longest step: longer ones are refused, naming
-        ``--max-gap`` (a log whose every step is longer may have its times in ms).
+        Longest gap between rows (s); longer ones are refused, naming ``--max-gap``.
+    max_step : float, optional
+        Longest step of the log itself (s), refused naming ``--max-gap`` too (``navigate``:
+        a log whose every step is longer may have its times in ms).
     gaps : str, optional
         None: gaps are bridged. Else they are refused, and this says why (e.g. ``"--method
         pmf updates on a fixed row stride"``).
@@ -102,7 +104,8 @@ def time_steps(t, where, *, max_gap=None, gaps=None, line=csv_line):
     ValueError
         Missing or non-finite times, times that do not increase, a step shorter than
         half the log's step, a step not within :data:`JITTER` of a whole number of
-        steps, a step or gap longer than ``max_gap``, a gap not allowed, more steps
+        steps, a step longer than ``max_step``, a gap longer than ``max_gap``, a gap not
+        allowed, more steps
         without a row than :data:`MAX_INSERTED` times the rows; each naming the lines,
         the times and the step.
 
@@ -149,9 +152,9 @@ def time_steps(t, where, *, max_gap=None, gaps=None, line=csv_line):
                          f"number of steps (gaps); {short.size} such step(s)")
     rows = np.concatenate([[0], np.cumsum(m)])
     dt = float((t[-1] - t[0]) / rows[-1])
-    if max_gap is not None and dt > max_gap:
+    if max_step is not None and dt > max_step:
         raise ValueError(f"{where}: the log's step, {dt:.6g} s, is longer than --max-gap "
-                         f"{max_gap:g} s: is column t in seconds? (raise --max-gap if the "
+                         f"{max_step:g} s: is column t in seconds? (raise --max-gap if the "
                          "step is right)")
     off = np.abs(d - m * dt)
     bad = np.flatnonzero(off > JITTER * dt)

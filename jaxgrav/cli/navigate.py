@@ -197,7 +197,7 @@ def check_log(track, grid, max_gap, max_speed, gaps=None):
     t = np.asarray(track["t"])
     if t.size < 2:
         raise ValueError(f"{label} has {t.size} row; navigation needs at least 2")
-    steps = time_steps(t, label, max_gap=max_gap, gaps=gaps, line=track.line)
+    steps = time_steps(t, label, max_gap=max_gap, max_step=max_gap, gaps=gaps, line=track.line)
     speed = np.hypot(track["v_east"], track["v_north"])
     fast = np.flatnonzero(~(speed <= max_speed))
     if fast.size:
