@@ -240,3 +240,15 @@ def test_the_filter_equals_filterpy_with_scipy_spline_map(smooth_grid, voyages):
     sd = np.sqrt(np.diag(ukf.P))
     assert np.max(np.abs(ours[-1] - ref[-1]) / sd) < 1e-4
     assert np.max(np.abs(ours[:, :2] - ref[:, :2])) < 0.5  # metres, at every step
+
+
+@pytest.mark.long
+def test_the_step_is_the_log_s_mean_not_its_first(smooth_grid, voyages):
+    # a logger's stamp on the second row 3 s late (a 13 s then a 7 s step): the filter
+    # steps at the mean step, as on the regular log (the first step set dt before)
+    pm = prepare_map(smooth_grid)
+    v = _first(voyages)
+    late = v._replace(ins=v.ins._replace(t=v.ins.t.at[1].add(3.0)))
+    a, b = navigate_tight(pm, v, CONFIG), navigate_tight(pm, late, CONFIG)
+    np.testing.assert_allclose(b.nav.lat, a.nav.lat, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(b.cov_north_east, a.cov_north_east, rtol=1e-12, atol=1e-9)
