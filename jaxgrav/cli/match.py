@@ -18,7 +18,7 @@ from jaxgrav.cli.inputs import (
     read_track,
     track_map,
 )
-from jaxgrav.cli.match_missing import MISSING, missing_counts, missing_message
+from jaxgrav.cli.match_missing import missing_counts, missing_message
 from jaxgrav.cli.sanity import check_readings, fit_check
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import eotvos_jit
@@ -29,7 +29,7 @@ from jaxgrav.match import (
     STATUS,
     match_track,
 )
-from jaxgrav.match.api import MAP_ERROR_METHODS, missing_reading
+from jaxgrav.match.api import MAP_ERROR_METHODS, MASKED, missing_reading
 from jaxgrav.sim import DEG_ARC_M
 from jaxgrav.tracks import csv_line, write_track_csv
 
@@ -226,7 +226,7 @@ def _cmd_match(args):
     # the implausible-fit bit's message is the fit check's own line, with its numbers; the
     # missing-node bit's says how many nodes and fixes met missing nodes and what was done
     messages = [missing_message(args, n_fix, gap, read_as, bool(result.accepted))
-                if bit == MISSING else msg for bit, msg in STATUS.items()
+                if bit == MASKED else msg for bit, msg in STATUS.items()
                 if int(result.status) & bit and bit != IMPLAUSIBLE_FIT]
     if fit_warning is not None:
         messages = [*messages, fit_warning]

@@ -1,19 +1,16 @@
 """What ``jaxgrav match`` says of missing (NaN) map nodes in its search region.
 
-:data:`jaxgrav.match.STATUS` bit 8192 describes both readings of missing nodes (land,
-survey gaps); the command's line says which one ran, why, what it did and how many
-fixes met them (:func:`missing_message`), and its JSON holds the counts
-(:func:`missing_counts`).
+:data:`jaxgrav.match.STATUS` bit 8192 (:data:`~jaxgrav.match.api.MASKED`) describes
+both readings of missing nodes (land, survey gaps); the command's line says which one
+ran, why, what it did and how many fixes met them (:func:`missing_message`), and its JSON
+holds the counts (:func:`missing_counts`).
 """
 
 import numpy as np
 
 from jaxgrav.match.api import max_gap_fixes, missing_in_reach
 
-__all__ = ["MISSING", "missing_counts", "missing_message"]
-
-MISSING = 8192
-"""The status bit of missing (NaN) map nodes in the search region (:data:`STATUS`)."""
+__all__ = ["missing_counts", "missing_message"]
 
 
 def missing_counts(grid, track, result, reach_m):

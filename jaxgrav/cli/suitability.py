@@ -100,7 +100,7 @@ def cmd_suitability(args):
     if args.window is not None and args.window > side:
         raise ValueError(f"--window must be at most the map's shorter side ({side} nodes); "
                          f"got {args.window}")
-    cell_m = grid.dlat * DEG * float(meridian_radius(np.mean(np.asarray(grid.lat))))
+    cell_m = grid.spacing_m()[0]  # north-south node spacing at the map's centre (m)
     nodes = (args.fixes - 1) * args.spacing / cell_m  # the segment, in the map's nodes
     if nodes >= side:  # every segment leaves the map (and the default window is too wide)
         raise ValueError(f"--fixes {args.fixes} readings --spacing {args.spacing:g} m apart make "
