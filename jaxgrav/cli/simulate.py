@@ -13,6 +13,7 @@ from jaxgrav._io import check_outputs
 from jaxgrav.constants import KNOT
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import TruthGrid, map_error, truth_grid
+from jaxgrav.match import MIN_FIXES
 from jaxgrav.montecarlo.spec import region_of
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
 from jaxgrav.scenarios.paper_a import check_region_covered, max_fixes, placement_region
@@ -119,7 +120,8 @@ def add_parser(sub):
     sim_p.add_argument("--var", default=None)
     sim_p.add_argument("--out", required=True, help="track CSV (INS fixes and readings)")
     sim_p.add_argument("--truth", default=None, help="also write the true track here")
-    sim_p.add_argument("--n", type=int, default=30, help="fixes (default 30)")
+    sim_p.add_argument("--n", type=int, default=30,
+                       help=f"fixes (default 30, at least {MIN_FIXES}: the fewest match takes)")
     sim_p.add_argument("--dt", type=float, default=120.0, help="interval (s, default 120)")
     sim_p.add_argument("--v-east", type=float, default=10.0, help="knots (default 10)")
     sim_p.add_argument("--v-north", type=float, default=10.0, help="knots (default 10)")
@@ -151,8 +153,9 @@ def _check_simulate_args(args):
         if not (math.isfinite(value) and ok(value)):
             raise ValueError(f"{name} must be {expected}; got {value!r}")
     check_seed(args.seed)
-    if args.n < 2:
-        raise ValueError(f"--n must be at least 2 fixes; got {args.n}")
+    if args.n < MIN_FIXES:  # jaxgrav match refuses a shorter track
+        raise ValueError(f"--n must be at least {MIN_FIXES} fixes (the fewest jaxgrav match "
+                         f"takes); got {args.n}")
     finite("--dt", args.dt, lambda v: v > 0, "a positive interval between fixes (s)")
     finite("--v-east", args.v_east, lambda v: abs(v) <= 100, "a speed within ±100 knots")
     finite("--v-north", args.v_north, lambda v: abs(v) <= 100, "a speed within ±100 knots")
@@ -175,8 +178,9 @@ def _check_track_fits(args, scen, grid):
     fit = max_fixes(scen)
     if fit >= args.n:
         return
-    if fit < 2:
-        raise ValueError(f"{where} is too small for a track of 2 fixes {scen.step_m / 1000:.3g} "
+    if fit < MIN_FIXES:
+        raise ValueError(f"{where} is too small for a track of {MIN_FIXES} fixes "
+                         f"{scen.step_m / 1000:.3g} "
                          f"km apart kept 1.5 x --drift ({args.drift:g} degrees) from each edge; "
                          "use a larger map, a shorter --dt or a smaller --drift")
     span = (args.n - 1) * args.dt

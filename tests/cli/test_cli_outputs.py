@@ -40,7 +40,7 @@ def test_simulate_same_file_twice(tmp_path, capsys):
     (["--bias", "inf"], "--bias must be a finite"),
     (["--v-east", "0", "--v-north", "0"], "must move"),
     (["--v-east", "500"], "--v-east must be a speed within"),
-    (["--n", "1"], "--n must be at least 2"),
+    (["--n", "1"], "--n must be at least 5"),
 ])
 def test_simulate_numeric_options_checked(tmp_path, capsys, args, match):
     out = tmp_path / "t.csv"

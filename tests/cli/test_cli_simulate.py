@@ -5,6 +5,7 @@ import pytest
 
 from jaxgrav.cli import main
 from jaxgrav.datasets import load_map
+from jaxgrav.match import MIN_FIXES
 from jaxgrav.tracks import read_track_csv
 
 
@@ -68,3 +69,14 @@ def test_simulate_truth_map_must_cover(tmp_path, capsys):
     assert code == 2
     err = capsys.readouterr().err
     assert f"--truth-map {tmp_path / 'small.nc'} must cover the scenario's region" in err
+
+
+@pytest.mark.parametrize("n", [2, 3, MIN_FIXES - 1])
+def test_simulate_refuses_n_match_cannot_use(tmp_path, capsys, n):
+    """Issue 19: ``--n 2`` .. ``4`` wrote a track ``jaxgrav match`` then refused; now
+    simulate refuses it first, naming --n, the value and match's minimum."""
+    out, truth = tmp_path / "t.csv", tmp_path / "truth.csv"
+    assert main(["simulate", "--out", str(out), "--truth", str(truth), "--n", str(n)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"--n must be at least {MIN_FIXES} fixes" in err and f"got {n}" in err, err
+    assert err.count("\n") == 0 and not out.exists() and not truth.exists()
