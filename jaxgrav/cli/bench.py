@@ -18,7 +18,8 @@ import jax.numpy as jnp
 import jaxgrav
 from jaxgrav._io import atomic_output, check_outputs
 
-__all__ = ["add_parser", "cmd_bench", "default_bench_dir", "machine_info", "matmul_roofline"]
+__all__ = ["add_parser", "cmd_bench", "default_bench_dir", "is_result", "machine_info",
+           "matmul_roofline"]
 
 
 def add_parser(subparsers):
@@ -37,6 +38,50 @@ def add_parser(subparsers):
 
 
 _COLS = ("bench", "case", "n", "jaxgrav_s", "baseline", "baseline_s", "ratio")
+"""The fields of a result line (``benchmarks/_common.py``'s ``emit``), the table's columns."""
+
+
+def _number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def is_result(row):
+    """Whether a parsed JSON line is a benchmark result in ``emit``'s format.
+
+    Parameters
+    ----------
+    row : object
+        One JSON line of a script's output, parsed.
+
+    Returns
+    -------
+    bool
+        A dict with every field of the table (bench, case, n, jaxgrav_s, baseline,
+        baseline_s, ratio): bench and case strings, n a number, jaxgrav_s a number >= 0,
+        baseline_s and ratio numbers or null (a baseline that did not finish).
+    """
+    if not (isinstance(row, dict) and all(c in row for c in _COLS)):
+        return False
+    return (isinstance(row["bench"], str) and isinstance(row["case"], str)
+            and _number(row["n"]) and _number(row["jaxgrav_s"]) and row["jaxgrav_s"] >= 0
+            and all(row[c] is None or _number(row[c]) for c in ("baseline_s", "ratio")))
+
+
+def _json_lines(stdout):
+    """The JSON objects among ``stdout``'s lines: (results, other objects)."""
+    results, others = [], []
+    for line in stdout.splitlines():
+        line = line.strip()
+        if line.startswith("{"):
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if is_result(row):
+                results.append(row)
+            elif isinstance(row, dict):
+                others.append(row)
+    return results, others
 
 
 def _fmt(v):
@@ -112,7 +157,7 @@ def _machine_lines(before, after):
     ]
 
 
-def _report(command, rows, runs, failures, before, after):
+def _report(command, rows, runs, failures, before, after, others):
     lines = [
         "# jaxgrav benchmarks", "",
         f"Command: `{command}`, {time.strftime('%Y-%m-%d %H:%M')}. `ratio` = baseline_s / "
@@ -128,7 +173,7 @@ def _report(command, rows, runs, failures, before, after):
         other = other if len(other) <= 160 else other[:157] + "..."  # all in the JSON below
         lines.append(f"| {script} | " + " | ".join(_fmt(row.get(c)) for c in _COLS)
                      + f" | {other} |")
-    lines += ["", "## Scripts", "", "| script | status | seconds | JSON lines |",
+    lines += ["", "## Scripts", "", "| script | status | seconds | result lines |",
               "|---|---|---|---|"]
     lines += [f"| {s} | {st} | {sec:.1f} | {n} |" for s, st, sec, n in runs]
     if failures:
@@ -137,6 +182,10 @@ def _report(command, rows, runs, failures, before, after):
             lines += [f"### {script}: {why}", "", "```", tail, "```", ""]
     lines += ["", "## Raw JSON lines", "", "```jsonl"]
     lines += [json.dumps(row) for _, row in rows]
+    if others:
+        lines += ["```", "", "## Other JSON lines (not results: without emit's fields)", "",
+                  "```jsonl"]
+        lines += [json.dumps({"script": script, **row}) for script, row in others]
     lines += ["```", "", "## Machine (JSON)", "", "```json", json.dumps(before), "```", ""]
     return "\n".join(lines)
 
@@ -183,7 +232,7 @@ def cmd_bench(args):
     before = machine_info()
     print(f"machine: {before['cpu']}, {before['cores']} cores, load {before['load_average']}, "
           f"roofline float64 {before['roofline']['float64_gflops']:.1f} GFLOP/s", flush=True)
-    rows, runs, failures = [], [], []
+    rows, runs, failures, others = [], [], [], []
     for i, script in enumerate(scripts, 1):
         cmd = [sys.executable, str(script), *(["--quick"] if args.quick else [])]
         print(f"[{i}/{len(scripts)}] {' '.join(cmd[1:])} ...", end=" ", flush=True)
@@ -196,19 +245,17 @@ def cmd_bench(args):
             stderr = err.stderr.decode() if isinstance(err.stderr, bytes) else err.stderr or ""
             code = f"timeout after {args.timeout:g} s"
         sec = time.perf_counter() - t0
-        found = []
-        for line in stdout.splitlines():
-            line = line.strip()
-            if line.startswith("{"):
-                try:
-                    row = json.loads(line)
-                except json.JSONDecodeError:
-                    continue
-                if isinstance(row, dict) and "bench" in row:
-                    found.append((script.name, row))
-        rows += found
+        found, other = _json_lines(stdout)
+        rows += [(script.name, row) for row in found]
+        others += [(script.name, row) for row in other]
+        why = None
         if code != 0:
             why = code if isinstance(code, str) else f"exit code {code}"
+        elif not found:
+            why = ("exit code 0 but no result line: no JSON line with "
+                   + ", ".join(_COLS) + (f"; {len(other)} JSON line(s) without them"
+                                         if other else ""))
+        if why is not None:
             tail = "\n".join((stderr or stdout).strip().splitlines()[-15:]) or "(no output)"
             failures.append((script.name, why, tail))
             runs.append((script.name, f"FAILED ({why})", sec, len(found)))
@@ -219,7 +266,7 @@ def cmd_bench(args):
     command = "jaxgrav bench" + (" --quick" if args.quick else "")
     after = {"load_average": [round(x, 2) for x in os.getloadavg()]}
     with atomic_output(out, force=args.force) as tmp:
-        tmp.write_text(_report(command, rows, runs, failures, before, after))
+        tmp.write_text(_report(command, rows, runs, failures, before, after, others))
     print(f"wrote {out}: {len(rows)} results from {len(scripts) - len(failures)} of "
           f"{len(scripts)} scripts")
     if failures:

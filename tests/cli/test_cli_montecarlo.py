@@ -12,7 +12,7 @@ import xarray as xr
 
 import jaxgrav
 from jaxgrav import Grid, montecarlo
-from jaxgrav.cli import main
+from jaxgrav.cli import bench, main
 from jaxgrav.cli.bench import default_bench_dir
 from jaxgrav.cli.montecarlo import summarize
 from jaxgrav.montecarlo import methods as montecarlo_methods
@@ -430,3 +430,42 @@ def test_montecarlo_told_map_error_parsing(tmp_path, capsys):
                  "--out", str(tmp_path / "d.nc")])
     assert code == 2
     assert "--map-error-order is a filter option" in capsys.readouterr().err
+
+
+_EMITS = f"""
+import sys
+sys.path.insert(0, {str(Path(__file__).resolve().parents[2] / "benchmarks")!r})
+from _common import emit
+emit("real", "the shipped emit", 3, 0.1, "numpy", 0.2, extra=1)
+"""
+
+
+def test_bench_script_without_result_line_fails(tmp_path, capsys, monkeypatch):
+    """Issue 19: a script exiting 0 with no JSON line was 'ok', and any JSON line with a
+    "bench" key was a result; now only lines with emit's fields count, and a script
+    with none fails, named."""
+    monkeypatch.setattr(bench, "machine_info", lambda: {  # no roofline: 3 s saved
+        "cpu": "c", "arch": "a", "cores": 1, "load_average": [0, 0, 0], "jax": "j",
+        "jaxgrav": "g", "devices": ["d"], "roofline": {"n": 1, "float64_gflops": 1.0,
+                                                       "float32_gflops": 1.0}})
+    d = tmp_path / "b"
+    d.mkdir()
+    (d / "emits.py").write_text(_EMITS)
+    (d / "profile.py").write_text("print('{\"bench\": \"p_profile\", \"part\": \"x\"}')\n")
+    (d / "silent.py").write_text("print('done')\n")
+    out = tmp_path / "bench.md"
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "--dir", str(d), "--out", str(out)])
+    assert exc.value.code == 1
+    err = capsys.readouterr().err
+    for script in ("profile.py", "silent.py"):
+        assert f"jaxgrav bench: {script} failed (exit code 0 but no result line: no JSON " \
+               "line with bench, case, n, jaxgrav_s, baseline, baseline_s, ratio" in err, err
+    assert "emits.py failed" not in err and "1 JSON line(s) without them" in err
+    md = out.read_text()
+    assert "| emits.py | real | the shipped emit | 3 | 0.1 | numpy | 0.2 | 2 |" in md
+    assert "| emits.py | ok |" in md and "| silent.py | FAILED (exit code 0" in md
+    assert "| profile.py | p_profile" not in md  # not a result row ...
+    assert '{"script": "profile.py", "bench": "p_profile", "part": "x"}' in md  # ... kept aside
+    assert not bench.is_result({"bench": "x", "case": "c", "n": 1, "jaxgrav_s": "fast",
+                                "baseline": "b", "baseline_s": None, "ratio": None})
