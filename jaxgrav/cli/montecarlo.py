@@ -78,8 +78,8 @@ def add_parser(subparsers):
                    help="runs per compiled call (bounds memory; default 256)")
     m.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
     m.add_argument("--devices", type=int, default=None,
-                   help="use this many devices (default all; on a CPU the host is split "
-                        "into this many devices when JAX has not started yet)")
+                   help="use this many devices, at most --runs (default all; on a CPU the "
+                        "host is split into this many when JAX has not started yet)")
     m.add_argument("--map", default=None,
                    help="map simulated and matched or filtered, a NetCDF grid or shipped "
                         "map (mGal); matchers: default ryukyu, the 2.5' EGM2008 anomaly; "

@@ -1,15 +1,16 @@
 """``jaxgrav montecarlo``'s numeric options, range-checked in one place.
 
 :func:`check_options` refuses a run count, chunk, device count, drift, noise or fix count
-out of range, and a ``--fixes`` x ``--chunk`` whose runs would not fit in memory, with
-one line naming the option (``--noise``, not the library's ``noise``), before any map
-is read or anything compiled; :func:`check_drift` refuses a ``--drift`` whose search or
-initial error does not fit on the map, once the map is known; :func:`told_from_args`
-parses ``--told-map-error SIGMA[,L]``.
+out of range, more ``--devices`` than ``--runs``, and a ``--fixes`` x ``--chunk`` whose
+runs would not fit in memory, with one line naming the option (``--noise``, not the
+library's ``noise``), before any map is read or anything compiled; :func:`check_drift`
+refuses a ``--drift`` whose search or initial error does not fit on the map, once the
+map is known; :func:`told_from_args` parses ``--told-map-error SIGMA[,L]``.
 """
 
 import math
 import os
+import sys
 
 from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M, check_seed
 from jaxgrav.fields.map_error import map_error
@@ -49,6 +50,8 @@ def check_options(args):
     """ValueError naming the option for a numeric option out of range.
 
     ``--seed`` from 0 to 2**63 - 1; ``--runs``, ``--chunk``, ``--devices`` at least 1;
+    ``--devices`` at most ``--runs`` (a warning for a ``--chunk`` rounded up to a multiple
+    of ``--devices``, see :func:`_check_devices`);
     ``--drift`` a finite angle > 0; ``--noise`` a finite standard deviation > 0 (>= 0 for
     the matchers); ``--fixes`` at least 5 (unset options take the method's defaults and
     are not checked here); a
@@ -78,6 +81,34 @@ def check_options(args):
         raise ValueError(f"--fixes must be at least 5 per track (filters: readings per run); "
                          f"got {args.fixes}")
     _check_memory(args)
+    _check_devices(args)  # last: its warning only for options that are otherwise fine
+
+
+def _check_devices(args):
+    """Refuse ``--devices`` above ``--runs``; warn of a ``--chunk`` rounded up to a
+    multiple of ``--devices``.
+
+    Each device takes whole runs: a call of the runner holds ``min(--chunk, --runs)``
+    runs rounded up to a multiple of the devices, the extra slots filled with copies of
+    a run whose results are dropped. With more devices than runs, the extra devices only
+    compute such copies (and the summary and the file would name devices that did no
+    run), so it is refused. A ``--chunk`` below ``--runs`` that is not a multiple of
+    ``--devices`` is merely enlarged (more runs and memory a call than asked): one
+    warning line on stderr.
+    """
+    if args.devices is None:
+        return
+    if args.devices > args.runs:
+        raise ValueError(f"--devices {args.devices} is more than --runs {args.runs}: each "
+                         "device takes whole runs, so the extra devices would only compute "
+                         f"copies that are dropped; give --devices at most {args.runs} (or "
+                         "more --runs)")
+    chunk = args.chunk or DEFAULT_CHUNK
+    if chunk < args.runs and chunk % args.devices:
+        size = math.ceil(chunk / args.devices) * args.devices
+        print(f"jaxgrav montecarlo: warning: --chunk {chunk} is not a multiple of --devices "
+              f"{args.devices}: each compiled call holds {size} runs (and their memory), not "
+              f"{chunk}; give a --chunk that is a multiple of --devices", file=sys.stderr)
 
 
 def _memory_bytes():

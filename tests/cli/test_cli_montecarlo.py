@@ -1,5 +1,6 @@
 """``jaxgrav montecarlo`` and ``jaxgrav bench``, in-process through ``jaxgrav.cli.main``."""
 
+import argparse
 import json
 import os
 import textwrap
@@ -15,6 +16,7 @@ from jaxgrav import Grid, montecarlo
 from jaxgrav.cli import bench, main
 from jaxgrav.cli.bench import default_bench_dir
 from jaxgrav.cli.montecarlo import summarize
+from jaxgrav.cli.montecarlo_options import check_options
 from jaxgrav.montecarlo import methods as montecarlo_methods
 from jaxgrav.sim import DEG_ARC_M
 
@@ -121,7 +123,10 @@ def test_montecarlo_refuses_to_overwrite(mc_run, capsys):
 @pytest.mark.parametrize("args, match", [
     (["--runs", "0"], "--runs must be a positive number of runs; got 0"),
     (["--runs", "8", "--chunk", "0"], "--chunk must be a positive number of runs; got 0"),
-    (["--runs", "8", "--devices", "64"], "devices=64 but JAX sees 1 device"),
+    (["--runs", "80", "--devices", "64"], "devices=64 but JAX sees 1 device"),
+    (["--runs", "1", "--devices", "3"], "--devices 3 is more than --runs 1: each device takes "
+     "whole runs, so the extra devices would only compute copies that are dropped; give "
+     "--devices at most 1 (or more --runs)"),
     (["--runs", "8", "--devices", "0"], "--devices must be at least 1; got 0"),
     (["--runs", "8", "--noise", "-1"], "--noise must be a finite standard deviation >= 0"),
     (["--runs", "8", "--noise", "nan"], "--noise must be a finite standard deviation >= 0"),
@@ -136,6 +141,27 @@ def test_montecarlo_bad_input(tmp_path, capsys, args, match):
     assert code == 2
     assert match in capsys.readouterr().err
     assert not (tmp_path / "x.nc").exists()
+
+
+def test_montecarlo_devices_and_runs(capsys):
+    """Issue 19: ``--devices 3 --runs 1`` ran silently (two devices computed dropped
+    copies): refused above (test_montecarlo_bad_input). A ``--chunk`` that is not a
+    multiple of ``--devices`` is rounded up by the runner: one warning line, no refusal."""
+    def args(**kw):
+        base = dict(method="dense", runs=7, chunk=None, seed=0, devices=None, drift=None,
+                    noise=None, fixes=None)
+        return argparse.Namespace(**{**base, **kw})
+    check_options(args(devices=3, chunk=4))
+    err = capsys.readouterr().err
+    assert err == ("jaxgrav montecarlo: warning: --chunk 4 is not a multiple of --devices 3: "
+                   "each compiled call holds 6 runs (and their memory), not 4; give a --chunk "
+                   "that is a multiple of --devices\n"), err
+    for ok in (args(devices=3, chunk=6), args(devices=3), args(devices=7, chunk=8),
+               args(devices=None, chunk=4)):
+        check_options(ok)
+        assert capsys.readouterr().err == ""
+    with pytest.raises(ValueError, match="--devices 8 is more than --runs 7"):
+        check_options(args(devices=8))
 
 
 @pytest.mark.long
