@@ -65,7 +65,8 @@ def add_parser(subparsers):
     s.add_argument("--var", default=None, help="variable to read when the file has several")
     s.add_argument("--out", required=True, help="output NetCDF; the PNG is written next to it")
     s.add_argument("--heading", type=float, default=45.0,
-                   help="segment heading, degrees clockwise from north (default 45)")
+                   help="segment heading, degrees clockwise from north, -360 to 360 "
+                        "(default 45; -90 is 270)")
     s.add_argument("--fixes", type=int, default=30, help="readings per segment (default 30)")
     s.add_argument("--spacing", type=float, default=1200.0,
                    help="distance between readings (m, default 1200)")

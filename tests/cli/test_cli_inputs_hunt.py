@@ -258,6 +258,11 @@ REFUSED = [
     # 1e300 degrees was accepted (its remainder by 360 is noise)
     (["suitability", "--map", "ryukyu", "--out", "{d}/s.nc", "--heading", "1e300"],
      "--heading must be an angle from -360 to 360 (degrees clockwise from north); got 1e+300"),
+    # issue 19: 400 (one turn and 40 degrees) and just below -360, refused the same way
+    (["suitability", "--map", "ryukyu", "--out", "{d}/s.nc", "--heading", "400"],
+     "--heading must be an angle from -360 to 360 (degrees clockwise from north); got 400.0"),
+    (["suitability", "--map", "ryukyu", "--out", "{d}/s.nc", "--heading", "-360.5"],
+     "--heading must be an angle from -360 to 360 (degrees clockwise from north); got -360.5"),
     # --out x.png: "its PNG 'x.png' and --out 'x.png' are the same file"
     (["suitability", "--map", "ryukyu", "--out", "{d}/s.png"],
      "--out '{d}/s.png' is the NetCDF output; the PNG is written next to it with suffix .png: "
