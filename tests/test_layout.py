@@ -15,7 +15,7 @@ LAYERS = {
     # bottom: no jaxgrav imports but each other
     "constants": 0, "_io": 0, "_linalg": 0, "_pytree": 0, "_validate": 0, "_fusion": 0,
     "lattice": 0, "interp": 0, "fill": 0,
-    "executables": 0, "xla_options": 0,
+    "executables": 0, "xla_options": 0, "rare_cond": 0,
     "geodesy": 0,
     "grid": 1, "grid_axes": 1, "grid_files": 1, "grid_windows": 1, "prepared": 1, "tracks": 1,
     "track_files": 1, "time_steps": 1,

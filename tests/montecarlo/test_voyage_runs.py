@@ -34,12 +34,16 @@ def test_a_run_is_the_navigator_on_the_same_voyage(tight):
     nav = navigate_tight(pm, voyage, config, jax.random.fold_in(key, 1))  # particles' key
     err = voyage_errors(voyage, nav.nav, nav.cov_north_east)
     last = round(3600.0 / scenario.dt)
+    # batched and single-run rounding differ from the first step (1e-12 relative); the
+    # particle filter's resampling carries that to 2.4e-6 relative over the hour (4e-7
+    # before its batched resampling ran only on the runs that resample, rare_cond)
+    rel = 1e-5 if config.method == "rbpf" else 1e-6
     assert float(res["err_m"][1]) == pytest.approx(
-        float(jnp.sqrt(jnp.mean(err.nav_m[-last:] ** 2))), rel=1e-6)
+        float(jnp.sqrt(jnp.mean(err.nav_m[-last:] ** 2))), rel=rel)
     assert float(res["ins_err_m"][1]) == pytest.approx(
         float(jnp.sqrt(jnp.mean(err.free_m[-last:] ** 2))), rel=1e-6)
     np.testing.assert_allclose(res["hourly_err_m"][1], hourly_rms(err.nav_m, scenario.dt),
-                               rtol=1e-6)
+                               rtol=rel)
     # the NEES divides by the stated covariance, whose batched and single-run rounding
     # differ (the RBPF's mixture of 500 particles): 1e-6 relative apart here
     assert float(res["nees"][1]) == pytest.approx(float(jnp.mean(err.nees)), rel=1e-5)
