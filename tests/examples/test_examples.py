@@ -11,22 +11,35 @@ exercised by the ``jaxgrav demo`` smoke test and its library functions' tests in
 import itertools
 import json
 import re
+import subprocess
+import sys
 
 import pytest
-from _examples import run_example
+from _examples import EXAMPLES, run_example
 
 pytestmark = pytest.mark.long  # runs an example script end to end (a process of its own)
 
 
 def test_paper_b_failures_smoke():
     out = run_example("paper_b_failures.py")
-    assert "gravity, seed 0, 32 tracks" in out
-    row = r"^(significance test only|\+ rival).*?(\d+)\s+(\d+)\s+([\d.]+)%\s+([\d.]+)%$"
+    assert "gravity, seed 0, 32 tracks, Δχ² ≥ 7.81" in out  # the library's default test
+    assert re.search(r"^combined matcher: ICCP fix on \d+, entropy track on \d+, rejected "
+                     r"\(INS track\) on \d+ tracks \(\d+ of them a far fix", out, flags=re.M)
+    row = r"^(library decision|\+ rival).*?(\d+)\s+(\d+)\s+([\d.]+)%\s+([\d.]+)%$"
     rows = re.findall(row, out, flags=re.M)
     assert len(rows) == 6
     median_default = int(rows[0][1])
     entropy_median = float(re.search(r"entropy alone: median (\d+) m", out).group(1))
     assert median_default < entropy_median / 2  # the combined matcher's median goal
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "inf"])
+def test_paper_b_failures_refuses_bad_accept_chi2(value):
+    proc = subprocess.run([sys.executable, str(EXAMPLES / "paper_b_failures.py"),
+                           "--accept-chi2", value], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and not proc.stdout
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--accept-chi2" in lines[0] and value in lines[0], proc.stderr
 
 
 def test_paper_b_entropy_iccp_smoke():
