@@ -36,13 +36,22 @@ def rare_cond(pred, true_fun, false_fun, operand, *, share=0.1):
     operand : pytree of arrays
     share : float
         Under ``vmap`` over ``B`` runs, the capacity of the true side's block is
-        ``max(1, ceil(share · B))`` runs (at most ``B``).
+        ``max(1, ceil(share · B))`` runs (at most ``B``); in ``(0, 1]``.
 
     Returns
     -------
     pytree
         ``true_fun(operand)`` where ``pred``, else ``false_fun(operand)``.
+
+    Raises
+    ------
+    ValueError
+        ``share`` not a number in ``(0, 1]``.
     """
+    if not (isinstance(share, int | float) and 0.0 < share <= 1.0):
+        raise ValueError(f"share must be a number in (0, 1] (a share of the batch's runs); "
+                         f"got {share!r}")
+
     def plain(pred, operand):
         return jax.lax.cond(pred, true_fun, false_fun, operand)
 

@@ -106,3 +106,9 @@ def test_grad_is_lax_cond_s_and_against_finite_differences():
     gl = np.stack([np.asarray(jax.grad(f)(a, p, jax.lax.cond))
                    for a, p in zip(xs, preds, strict=True)])
     np.testing.assert_allclose(np.asarray(gb), gl, rtol=1e-12)
+
+
+@pytest.mark.parametrize("share", [0.0, 1.5, float("nan"), "0.1"])
+def test_a_bad_share_is_a_clear_error(share):
+    with pytest.raises(ValueError, match=r"share must be a number in \(0, 1\]"):
+        rare_cond(True, _noisy, _kept, (jnp.ones(2), jax.random.PRNGKey(0)), share=share)
