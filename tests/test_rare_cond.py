@@ -1,6 +1,8 @@
 """rare_cond: lax.cond for one run; under vmap the taken side runs on the runs that take
 it only (a padded block), and every run gets what it gets alone."""
 
+from functools import partial
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -60,11 +62,11 @@ def test_unbatched_predicate_or_operand():
     key = jax.random.PRNGKey(2)
     keys = jax.random.split(key, 3)
     # the predicate shared by the runs: an ordinary cond over the batch
-    got = jax.vmap(lambda x, k: rare_cond(True, _noisy, _kept, (x, k))[0])(xs, keys)
+    got = jax.jit(jax.vmap(lambda x, k: rare_cond(True, _noisy, _kept, (x, k))[0]))(xs, keys)
     np.testing.assert_array_equal(np.asarray(got), _loop([True] * 3, xs, keys))
     # the operand shared, the predicate batched: broadcast, then the block
     preds = jnp.asarray([False, True, False])
-    got = jax.vmap(lambda p: rare_cond(p, _noisy, _kept, (xs[0], key))[0])(preds)
+    got = jax.jit(jax.vmap(lambda p: rare_cond(p, _noisy, _kept, (xs[0], key))[0]))(preds)
     np.testing.assert_array_equal(np.asarray(got), _loop(preds, [xs[0]] * 3, [key] * 3))
 
 
@@ -72,7 +74,7 @@ def test_nested_vmap():
     preds = jnp.asarray([[False, True, False], [False, False, False]])
     xs = jnp.arange(18.0).reshape(2, 3, 3)
     keys = jax.random.split(jax.random.PRNGKey(3), 6).reshape(2, 3, -1)
-    got = jax.vmap(jax.vmap(lambda p, x, k: rare_cond(p, _noisy, _kept, (x, k))[0]))(
+    got = jax.jit(jax.vmap(jax.vmap(lambda p, x, k: rare_cond(p, _noisy, _kept, (x, k))[0])))(
         preds, xs, keys)
     want = _loop(preds.reshape(-1), xs.reshape(6, 3), keys.reshape(6, -1)).reshape(2, 3, 3)
     np.testing.assert_array_equal(np.asarray(got), want)
@@ -84,6 +86,7 @@ def _scaled(op):
 
 
 def test_grad_is_lax_cond_s_and_against_finite_differences():
+    @partial(jax.jit, static_argnums=2)
     def f(x, p, cond):
         return jnp.sum(cond(p, _scaled, _kept, (x, 3.0))[0] ** 2)
 
@@ -102,7 +105,7 @@ def test_grad_is_lax_cond_s_and_against_finite_differences():
     # batched gradients: each run's as alone
     xs = jnp.stack([x, 2 * x, -x])
     preds = jnp.asarray([True, False, True])
-    gb = jax.vmap(jax.grad(f), (0, 0, None))(xs, preds, ours)
+    gb = jax.jit(jax.vmap(jax.grad(f), (0, 0, None)), static_argnums=2)(xs, preds, ours)
     gl = np.stack([np.asarray(jax.grad(f)(a, p, jax.lax.cond))
                    for a, p in zip(xs, preds, strict=True)])
     np.testing.assert_allclose(np.asarray(gb), gl, rtol=1e-12)
