@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from jaxgrav.cli import bench, main
+from jaxgrav.cli import main
 from jaxgrav.datasets import load_map
 from jaxgrav.geodesy import eotvos
 from jaxgrav.grid_files import UndeclaredFillWarning
@@ -297,14 +297,10 @@ def test_hunted_inputs_are_refused_in_one_line(tmp_path, capsys, argv, message):
     assert list(tmp_path.iterdir()) == ([existing] if existing.exists() else [])
 
 
-def test_bench_names_a_script_that_failed_silently(tmp_path, capsys, monkeypatch):
+def test_bench_names_a_script_that_failed_silently(tmp_path, capsys, quick_machine_info):
     """A script that exits 3 with no output: stderr ended in 'failed (exit code 3):' and an
     empty line, the report in an empty code block; now '(no output)'. --dir naming a script:
     'is not a folder of benchmark scripts'; now its folder is named."""
-    monkeypatch.setattr(bench, "machine_info", lambda: {  # no roofline: 3 s saved
-        "cpu": "c", "arch": "a", "cores": 1, "load_average": [0, 0, 0], "jax": "j",
-        "jaxgrav": "g", "devices": ["d"], "roofline": {"n": 1, "float64_gflops": 1.0,
-                                                       "float32_gflops": 1.0}})
     d = tmp_path / "b"
     d.mkdir()
     (d / "quiet.py").write_text("raise SystemExit(3)\n")

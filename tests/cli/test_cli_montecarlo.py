@@ -466,14 +466,10 @@ emit("real", "the shipped emit", 3, 0.1, "numpy", 0.2, extra=1)
 """
 
 
-def test_bench_script_without_result_line_fails(tmp_path, capsys, monkeypatch):
+def test_bench_script_without_result_line_fails(tmp_path, capsys, quick_machine_info):
     """Issue 19: a script exiting 0 with no JSON line was 'ok', and any JSON line with a
     "bench" key was a result; now only lines with emit's fields count, and a script
     with none fails, named."""
-    monkeypatch.setattr(bench, "machine_info", lambda: {  # no roofline: 3 s saved
-        "cpu": "c", "arch": "a", "cores": 1, "load_average": [0, 0, 0], "jax": "j",
-        "jaxgrav": "g", "devices": ["d"], "roofline": {"n": 1, "float64_gflops": 1.0,
-                                                       "float32_gflops": 1.0}})
     d = tmp_path / "b"
     d.mkdir()
     (d / "emits.py").write_text(_EMITS)
