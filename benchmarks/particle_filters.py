@@ -22,16 +22,21 @@ jaxgrav's compile time is separate (``compile_s``); each filter is compiled with
 options the Monte Carlo runner gives its method
 (:func:`jaxgrav.montecarlo.spec.cpu_options_for`).
 
+A ``particle_filters_profile`` line per filter gives how often it resamples (the share
+of steps at which a run does, and at which one of a batch of 25 does).
+
 Run ``python benchmarks/particle_filters.py [--quick]``; JSON lines on stdout, progress
 on stderr. Compare ratios within one run (shared machine).
 """
 
 import argparse
+import json
 import math
 import sys
 import time
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from _common import best_time, emit
 
@@ -216,6 +221,35 @@ def main():
     for kind, make, ref in (("rbpf", fl.rbpf, numpy_rbpf), ("pf", fl.pf, numpy_pf)):
         bench_one(kind, make(N_PARTICLES), ref, field, anomaly, dyn, steps, truth, x0, p0,
                   n_np, 1 if a.quick else 2)
+        resampling_shares(kind, make(N_PARTICLES), field, dyn, steps, x0, p0)
+
+
+def resampling_shares(kind, filt, field, dyn, steps, x0, p0):
+    """How often the filter resamples: the share of steps at which a run resamples, and
+    at which at least one run of a batch of ``CHUNK`` does (what a batched resampling
+    that runs every run whenever one needs it would pay). A JSON line of its own."""
+    n = min(CHUNK, steps.z.shape[0])
+
+    @jax.jit
+    def flags(field, dyn, steps, keys):
+        def one(d, s, k):
+            def body(state, step):
+                state, _ = filt.update(state, step, field, d)
+                return state, jnp.max(state.log_w) == jnp.min(state.log_w)  # reset weights
+
+            return jax.lax.scan(body, filt.init(x0, p0, key=k), s)[1]
+
+        return jax.vmap(one)(dyn, steps, keys)
+
+    def first(tree):
+        return jax.tree.map(lambda v: v[:n], tree)
+
+    done = np.asarray(flags(field, first(dyn), first(steps),
+                            jax.random.split(jax.random.PRNGKey(1), n)))
+    print(json.dumps({"bench": f"{BENCH}_profile", "case": f"{kind}-resampling", "n": n,
+                      "share_of_steps_a_run_resamples": round(float(done.mean()), 4),
+                      f"share_of_steps_one_of_{n}_runs_resamples":
+                          round(float(done.any(0).mean()), 4)}), flush=True)
 
 
 def bench_one(kind, filt, ref, field, anomaly, dyn, steps, truth, x0, p0, n_np, repeats):

@@ -9,8 +9,9 @@ heading error ≤ 2°), it runs the library's combined matcher
 ``Δχ² ≥ --accept-chi2``, the integrity test and the far-fix rejection, status bit
 :data:`~jaxgrav.match.combined.FAR_FIX`, beyond ``IccpConfig.max_offset_m`` = 1.5 drift
 radii; a rejected fix is the INS track), and beside it the entropy stage and ICCP from
-every start the matcher uses (the entropy stage's best offsets and the INS track),
-keeping every start's fit, and reports:
+the entropy stage's best offsets and the INS track (the matcher also starts from the
+coarse fix, which here, without a map error and so without a posterior fix, is the best
+offset again), keeping every start's fit, and reports:
 
 - on the tracks where the combined match is worse than entropy alone: the normalised
   misfit ``N·m/σ²`` of the truth and of the returned fix, and whether any ICCP start

@@ -9,14 +9,23 @@ gathers the runs whose predicate is true into a padded block of ``capacity`` lan
 (``jnp.nonzero(size=...)``, jax-md's neighbour-list pattern), runs the true side on
 that block only and scatters the results back. No run takes it: the false side
 alone. More than ``capacity`` runs take it (the overflow): both sides on every run
-and a select, as ``lax.cond`` under ``vmap``. Each run's result is the result it gets
-alone (its own operand, its own keys), so ``vmap`` equals the loop.
+and a select, as ``lax.cond`` under ``vmap``. Each run's side is computed on its own
+operand (its own keys), so ``vmap`` equals the loop up to rounding; the rounding of a
+batched computation may depend on how many other runs take the branch at that step
+(8e-7 relative on float32 particles, 1e-14 on float64 ones: a particle filter then
+differs between chunk sizes of the Monte Carlo runner at that level).
 
-Differentiable like ``lax.cond`` (its derivative is ``lax.cond``'s: ``custom_vmap``
-has no reverse mode of its own, so a ``custom_jvp`` differentiates the plain branch).
+Limits: the sparsity is the innermost ``vmap``'s (under an outer ``vmap`` the choice
+of block is itself batched and all three ways run: correct, not faster);
+``true_fun`` and ``false_fun`` may close over constants and unbatched values only
+(``custom_vmap`` refuses a batched closure with an ``AssertionError``; pass such values
+in ``operand``). Differentiable in both modes, batched or not: the derivative is
+computed from both sides and a select (``custom_vmap`` has no reverse mode of its own),
+so a side that is not taken must have a finite derivative, as with ``jnp.where``.
 """
 
 import math
+import numbers
 
 import jax
 import jax.numpy as jnp
@@ -48,7 +57,8 @@ def rare_cond(pred, true_fun, false_fun, operand, *, share=0.1):
     ValueError
         ``share`` not a number in ``(0, 1]``.
     """
-    if not (isinstance(share, int | float) and 0.0 < share <= 1.0):
+    if not (isinstance(share, numbers.Real) and not isinstance(share, bool)
+            and 0.0 < float(share) <= 1.0):
         raise ValueError(f"share must be a number in (0, 1] (a share of the batch's runs); "
                          f"got {share!r}")
 
@@ -68,7 +78,7 @@ def rare_cond(pred, true_fun, false_fun, operand, *, share=0.1):
         if not pred_batched:
             out = jax.lax.cond(pred, jax.vmap(true_fun), jax.vmap(false_fun), operand)
         else:
-            out = batched_branches(pred, true_fun, false_fun, operand, axis_size,
+            out = _batched_branches(pred, true_fun, false_fun, operand, axis_size,
                                    min(axis_size, max(1, math.ceil(share * axis_size))))
         return out, jax.tree.map(lambda _: True, out)
 
@@ -78,15 +88,44 @@ def rare_cond(pred, true_fun, false_fun, operand, *, share=0.1):
 
     @branch.defjvp
     def branch_jvp(primals, tangents):
+        # both sides and a select, not lax.cond: a lax.cond on a batched predicate
+        # inside a custom_jvp cannot be transposed (grad of vmap failed; JAX issues
+        # 22011 and 39219)
         pred, operand = primals
-        return jax.jvp(lambda op: plain(pred, op), (operand,), (tangents[1],))
+        taken = jax.jvp(true_fun, (operand,), (tangents[1],))
+        other = jax.jvp(false_fun, (operand,), (tangents[1],))
+        return tuple(jax.tree.map(lambda a, b: _select(pred, a, b), t, o)
+                     for t, o in zip(taken, other, strict=True))
 
     return branch(pred, operand)
 
 
-def batched_branches(pred, true_fun, false_fun, operand, size, capacity):
-    """The batched rule of :func:`rare_cond`: ``operand``'s leaves have a leading
-    axis of ``size`` runs, ``pred`` shape ``(size,)``."""
+def _select(pred, a, b):
+    """``a`` where ``pred`` else ``b``; a float0 tangent (of an integer or key leaf) is
+    zero on both sides and passes as it is."""
+    if jnp.asarray(a).dtype == jax.dtypes.float0:
+        return a
+    return jnp.where(pred, a, b)
+
+
+def _batched_branches(pred, true_fun, false_fun, operand, size, capacity):
+    """The batched rule of :func:`rare_cond`.
+
+    Parameters
+    ----------
+    pred : Array, shape ``(size,)``, bool
+    true_fun, false_fun : callable
+        As :func:`rare_cond`'s, on one run.
+    operand : pytree of arrays
+        Every leaf with a leading axis of ``size`` runs.
+    size, capacity : int
+        Runs, and lanes of the true side's block.
+
+    Returns
+    -------
+    pytree
+        Every leaf with a leading axis of ``size`` runs.
+    """
     def none(op):
         return jax.vmap(false_fun)(op)
 

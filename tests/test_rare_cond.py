@@ -111,7 +111,36 @@ def test_grad_is_lax_cond_s_and_against_finite_differences():
     np.testing.assert_allclose(np.asarray(gb), gl, rtol=1e-12)
 
 
-@pytest.mark.parametrize("share", [0.0, 1.5, float("nan"), "0.1"])
+def test_grad_of_vmap_and_through_keys():
+    # grad of a batched rare_cond (a lax.cond in the jvp failed to transpose here)
+    preds = jnp.asarray([True, False, False])
+
+    def total(x, cond):
+        return jnp.sum(jax.vmap(lambda p, a: cond(p, _scaled, _kept, (a, 3.0))[0])(preds, x))
+
+    def ours(p, t, e, o):
+        return rare_cond(p, t, e, o, share=0.5)
+
+    x = jnp.asarray([0.3, -1.2, 2.0])
+    g = jax.jit(jax.grad(total), static_argnums=1)(x, ours)
+    np.testing.assert_allclose(np.asarray(g), [3.0 * np.cos(0.3), 1.0, 1.0], rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(g), np.asarray(jax.grad(total)(x, jax.lax.cond)),
+                               rtol=1e-12)
+    # a PRNG key in the operand (a float0 tangent) and in the output
+    keys = jax.random.split(jax.random.PRNGKey(4), 3)
+    gk = jax.jit(jax.grad(lambda x: jnp.sum(jax.vmap(
+        lambda p, a, k: rare_cond(p, _noisy, _kept, (a, k), share=0.5)[0])(preds, x, keys))))(x)
+    np.testing.assert_allclose(np.asarray(gk), [2.0, 1.0, 1.0], rtol=1e-12)
+
+
+@pytest.mark.parametrize("share", [0.0, 1.5, float("nan"), "0.1", True])
 def test_a_bad_share_is_a_clear_error(share):
     with pytest.raises(ValueError, match=r"share must be a number in \(0, 1\]"):
         rare_cond(True, _noisy, _kept, (jnp.ones(2), jax.random.PRNGKey(0)), share=share)
+
+
+def test_numpy_shares_are_numbers():
+    x, k = jnp.ones(2), jax.random.PRNGKey(0)
+    for share in (np.float32(0.2), np.float64(0.5), 1):
+        np.testing.assert_array_equal(np.asarray(rare_cond(False, _noisy, _kept, (x, k),
+                                                           share=share)[0]), np.ones(2))
