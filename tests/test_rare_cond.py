@@ -30,14 +30,17 @@ def _loop(preds, xs, keys):
                      for p, x, k in zip(preds, xs, keys, strict=True)])
 
 
+_batched_quarter = jax.jit(jax.vmap(
+    lambda p, x, k: rare_cond(p, _noisy, _kept, (x, k), share=0.25)[0]))  # compiled once
+
+
 @pytest.mark.parametrize("taken", [[], [3], [0, 7], [1, 2, 5, 6], list(range(8))])
 def test_vmap_equals_the_loop_below_at_and_over_the_capacity(taken):
     # 8 runs, share 0.25: a block of 2; none, 1, 2 (full), 4 and 8 (overflow) taken
     preds = jnp.zeros(8, bool).at[jnp.asarray(taken, int)].set(True)
     xs = jnp.arange(24.0).reshape(8, 3)
     keys = jax.random.split(jax.random.PRNGKey(0), 8)
-    batched = jax.jit(jax.vmap(
-        lambda p, x, k: rare_cond(p, _noisy, _kept, (x, k), share=0.25)[0]))(preds, xs, keys)
+    batched = _batched_quarter(preds, xs, keys)
     np.testing.assert_array_equal(np.asarray(batched), _loop(preds, xs, keys))
     assert np.all(np.asarray(batched)[~np.asarray(preds)] == np.asarray(xs)[~np.asarray(preds)])
 

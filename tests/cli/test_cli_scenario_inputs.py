@@ -105,8 +105,13 @@ REFUSED = [
 ]
 
 
-@pytest.mark.parametrize("argv, message", [c[1:] for c in REFUSED],
-                         ids=[c[0] for c in REFUSED])
+SLOW_REFUSALS = {"voyage-nan-on-route"}
+"""Cases that simulate a whole voyage before refusing (11 s): in the long tier."""
+
+
+@pytest.mark.parametrize("argv, message", [
+    pytest.param(*c[1:], id=c[0], marks=[pytest.mark.long] if c[0] in SLOW_REFUSALS else [])
+    for c in REFUSED])
 def test_refused_in_one_line_and_nothing_written(maps, tmp_path, capsys, argv, message):
     out = tmp_path / "out.nc" if argv[0] == "suitability" else tmp_path / "out.csv"
     assert main(_args(argv, maps, out)) == 2
