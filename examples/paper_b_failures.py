@@ -98,6 +98,12 @@ def every_start(key, grid, scenario, entropy, fine):
                 fit_n=off_n.mean(-1), fit_e=off_e.mean(-1))
 
 
+def iccp_taken(r):
+    """Tracks where the matcher accepted its ICCP fix (``chosen`` 1), from
+    :func:`every_start`'s outputs."""
+    return r["accepted"] & (r["chosen"] == 1)
+
+
 def combine(r, n_fix, sigma2, rule=None):
     """Per-track error of the library's combined decision, with a rival rule on top.
 
@@ -122,7 +128,7 @@ def combine(r, n_fix, sigma2, rule=None):
     if rule is None:
         return err
     dist_max, chi2_max = rule
-    fine = r["accepted"] & (r["chosen"] == 1)
+    fine = iccp_taken(r)
     mis = np.where(np.isfinite(r["fit_mis"]), r["fit_mis"], np.inf)
     dist = np.hypot(r["fit_n"] - r["comb_n"][:, None], r["fit_e"] - r["comb_e"][:, None])
     rival = (dist > dist_max) & (n_fix * (mis - r["comb_mis"][:, None]) / sigma2 < chi2_max)
@@ -169,7 +175,7 @@ def main():
           f"({time.perf_counter() - t0:.0f} s); entropy alone: median "
           f"{np.median(r['entropy_err']):.0f} m")
     far = (r["status"] & FAR_FIX) != 0
-    fine_taken = r["accepted"] & (r["chosen"] == 1)
+    fine_taken = iccp_taken(r)
     print(f"combined matcher: ICCP fix on {fine_taken.sum()}, entropy track on "
           f"{(r['accepted'] & (r['chosen'] == 0)).sum()}, rejected (INS track) on "
           f"{(~r['accepted']).sum()} tracks ({far.sum()} of them a far fix, beyond "

@@ -137,9 +137,10 @@ def time_steps(t, where, *, max_gap=None, max_step=None, gaps=None, line=csv_lin
                          f"{back.size} such step(s)")
     guess = first_step(d)
     ratio = d / guess
-    if np.sum(np.rint(ratio)) + 1 - t.size > MAX_INSERTED * t.size:
+    inserted = np.sum(np.rint(ratio)) + 1 - t.size  # float: 1e20 s must not overflow
+    if inserted > MAX_INSERTED * t.size:
         i = int(np.argmax(d))
-        raise ValueError(f"{where}: {np.sum(np.rint(ratio)) + 1 - t.size:.6g} steps of "
+        raise ValueError(f"{where}: {inserted:.6g} steps of "
                          f"{guess:.6g} s without a row, more than {MAX_INSERTED} x the log's "
                          f"{t.size} rows (the longest gap on {lines(i)}); split the log, or "
                          "check the time column's unit")

@@ -180,9 +180,9 @@ def _check_track_fits(args, scen, grid):
         return
     if fit < MIN_FIXES:
         raise ValueError(f"{where} is too small for a track of {MIN_FIXES} fixes "
-                         f"{scen.step_m / 1000:.3g} "
-                         f"km apart kept 1.5 x --drift ({args.drift:g} degrees) from each edge; "
-                         "use a larger map, a shorter --dt or a smaller --drift")
+                         f"{scen.step_m / 1000:.3g} km apart kept 1.5 x --drift "
+                         f"({args.drift:g} degrees) from each edge; use a larger map, a "
+                         "shorter --dt or a smaller --drift")
     span = (args.n - 1) * args.dt
     dlat = abs(scen.v_north) * span / DEG_ARC_M
     north = placement_region(scen)[1]  # the northern edge where tracks start (±89° at most)
