@@ -36,12 +36,15 @@ run adds float32 cases (``jax_enable_x64`` off).
 * ``montecarlo_options`` (``--compile-only``, nothing else): for every method, compile
   (as above) and the run time of one chunk of 16 runs with the method's own XLA options
   (:attr:`jaxgrav.montecarlo.MethodSpec.cpu_options`, what the runner and the command
-  use: LLVM ``-O2`` on CPU, :mod:`jaxgrav.xla_options`) against the other setting —
-  XLA's default options (``-O3``), or ``-O2`` for a method that keeps XLA's defaults
-  (rbpf) — each in a fresh process with its own cache folder; ratio = other / own (> 1:
-  the method's own options are faster).
+  use: :mod:`jaxgrav.xla_options`) against another setting — with ``--against defaults``
+  XLA's default options (``-O3``, fusion emitters), or jaxgrav's ``CPU_OPTIONS`` for a
+  method that keeps XLA's defaults (rbpf); with ``--against emitters`` the method's own
+  options with the other kernel emitters (``xla_cpu_use_fusion_emitters``) — each in a
+  fresh process with its own cache folder; ratio = other / own (> 1: the method's own
+  options are faster). ``--methods`` limits the methods.
 
-Run ``python benchmarks/montecarlo_scaling.py [--quick | --compile-only]``. Absolute
+Run ``python benchmarks/montecarlo_scaling.py [--quick | --compile-only [--against
+defaults|emitters] [--methods M ...]]``. Absolute
 times on a shared machine are noise; compare within one run.
 """
 
@@ -73,7 +76,7 @@ def child(spec):
     jax.monitoring.register_event_duration_secs_listener(
         lambda name, secs, fun_name="", **kw: events.append((name, fun_name))
         if name in (TRACE_EVENT, COMPILE_EVENT) else None)
-    from jaxgrav import montecarlo, xla_options
+    from jaxgrav import montecarlo
     from jaxgrav.montecarlo import methods as montecarlo_methods
 
     def maxrss_mb():
@@ -92,8 +95,8 @@ def child(spec):
         # the method's own XLA options, or the other setting (the baseline of
         # --compile-only): XLA's defaults, or level 2 for a method whose own are the defaults
         options = spec_.cpu_options
-        if spec.get("other_options"):
-            options = () if options else xla_options.CPU_OPTIONS
+        if spec.get("other_options") is not None:
+            options = tuple(tuple(kv) for kv in spec["other_options"])
         montecarlo.run(spec_.fn, key, n_runs, chunk=ch, progress=False, args=spec_.args,
                        cpu_options=options)
         return time.perf_counter() - t0
@@ -136,21 +139,38 @@ def montecarlo_methods_names():
     return ["dense", *(m for m in BUILDERS if m != "dense")]
 
 
-def compile_options_rows(emit, methods, chunk):
+EMITTERS = "xla_cpu_use_fusion_emitters"
+
+
+def other_options(own, against):
+    """The baseline's XLA options for a method whose own are ``own``, and its label."""
+    from jaxgrav import xla_options
+
+    if against == "emitters":  # the same options, the other kernel emitters
+        if (EMITTERS, False) in own:
+            return tuple(kv for kv in own if kv[0] != EMITTERS), \
+                f"{own} without {EMITTERS}=False (XLA's fusion emitters)"
+        return (*own, (EMITTERS, False)), f"{own} + {EMITTERS}=False (elemental emitters)"
+    if not own:
+        return xla_options.CPU_OPTIONS, \
+            "jaxgrav's CPU_OPTIONS (this method keeps XLA's defaults)"
+    return (), "XLA default options (LLVM -O3, fusion emitters)"
+
+
+def compile_options_rows(emit, methods, chunk, against):
     """``montecarlo_options`` rows: compile and run time of each method's chunk function
-    with its own XLA options (what the runner uses) against the other setting."""
+    with its own XLA options (what the runner uses) against another setting."""
     from jaxgrav.montecarlo.spec import cpu_options_for
 
     with tempfile.TemporaryDirectory(prefix="jaxgrav-cc-") as cache:
         for method in methods:
             r = {}
-            for name, other in (("jaxgrav", False), ("other", True)):
+            own = cpu_options_for(method)
+            other, label = other_options(own, against)
+            for name, opts in (("jaxgrav", None), ("other", other)):
                 r[name] = spawn(1, method=method, chunk=chunk, n=chunk, compile=True,
                                 cache=os.path.join(cache, f"{method}-{name}"),
-                                other_options=other)
-            own = cpu_options_for(method)
-            label = ("LLVM -O2 (jaxgrav's CPU_OPTIONS; this method keeps XLA's defaults)"
-                     if not own else "XLA default options (LLVM -O3)")
+                                other_options=opts)
             jc, xc = (r[k]["first_s"] - r[k]["second_s"] for k in ("jaxgrav", "other"))
             emit("montecarlo_options", f"{method} chunk={chunk} compile", chunk, jc, label, xc,
                  recompiled=r["jaxgrav"]["recompiled"])
@@ -164,7 +184,11 @@ def main():
     p.add_argument("--quick", action="store_true", help="CI-sized run")
     p.add_argument("--compile-only", action="store_true",
                    help="only every method's compile and run time, jaxgrav's XLA options "
-                        "against XLA's defaults")
+                        "against another setting (--against)")
+    p.add_argument("--against", choices=("defaults", "emitters"), default="defaults",
+                   help="--compile-only's baseline: XLA's defaults, or the method's own "
+                        "options with the other kernel emitters (default: %(default)s)")
+    p.add_argument("--methods", nargs="+", help="--compile-only: these methods only")
     p.add_argument("--child", help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child:
@@ -173,7 +197,8 @@ def main():
     from _common import emit
 
     if args.compile_only:
-        return compile_options_rows(emit, montecarlo_methods_names(), chunk=16)
+        return compile_options_rows(emit, args.methods or montecarlo_methods_names(),
+                                    chunk=16, against=args.against)
 
     if args.quick:
         n, repeats, mem_chunk = 256, 2, 16

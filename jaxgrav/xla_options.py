@@ -7,30 +7,54 @@ Monte Carlo method's chunk function, same results to rounding) compile took 0.2�
 less, and the Kalman filters' runs took less than half the time (UKF 0.49 → 0.21 s,
 EKF 0.28 → 0.13 s for 64 and 32 of paper D's runs; ``-O3`` unrolls and vectorises
 their 13 × 13 loops into slower code), the point-mass filter 6 % less; the particle
-filter ran as fast, the matchers within ±10 % (dense 0.039 → 0.041 s for 256 runs in a
-paired A/B), and the Rao–Blackwellised particle filter 7–15 % slower (its random numbers: JAX's
-threefry and float64 inverse-error-function normals vectorise better at ``-O3``). So
-jaxgrav compiles at level 2 on CPU where it compiles a program itself: the Monte Carlo
-runner (:func:`jaxgrav.montecarlo.run`; a method whose runs are long and slower at level
-2, the RBPF's, asks for XLA's defaults with :data:`XLA_DEFAULTS`) and the command
-line's programs (:mod:`jaxgrav.executables`; one command's run is short next to its
-compile, so level 2 is used there for every method, the RBPF's too). Other platforms keep
-XLA's defaults (not measured). An option XLA does not know fails when the program is
-compiled (``jax.errors.JaxRuntimeError``: "No such compile option").
+filters and the matchers ran within ±10 %.
+
+Most of what is left of a compile is XLA's per-kernel code generation: XLA's newer MLIR
+fusion emitters spend ~20 ms of MLIR passes on every kernel, even an 8-operation one
+(a ``jax.profiler`` trace of ``entropy+iccp``'s compile: 439 kernels, 9.4 s of
+``FusionCompiler::Compile`` over the two cores). ``xla_cpu_use_fusion_emitters=False``
+selects XLA's older elemental emitters: 27–42 % less compile time for every Monte Carlo
+method (each method's 16-run chunk function in a fresh process, compile without
+tracing, 2026-12-06: dense 4.4 → 2.6 s, entropy+iccp 6.6 → 4.2 s, ukf 2.7 → 1.6 s,
+voyage-dense 7.1 → 4.3 s), runs as fast (±5 %) and results equal to rounding — except
+the point-mass filter's runs, 28 % slower (1.70 → 2.19 s for 16 of paper D's runs,
+twice) and the Rao–Blackwellised particle filter's, 65 % slower (16 patrols).
+
+So :data:`CPU_OPTIONS` (``-O2``, elemental emitters) is what jaxgrav compiles with on
+CPU where it compiles a program itself: the Monte Carlo runner
+(:func:`jaxgrav.montecarlo.run`; the point-mass and Rao–Blackwellised particle filters'
+methods ask for :data:`FUSION_EMITTER_OPTIONS`,
+:func:`jaxgrav.montecarlo.spec.cpu_options_for`) and the command line's programs
+(:mod:`jaxgrav.executables`; one command's run is short next to its compile, so
+:data:`CPU_OPTIONS` is used there for every method). Other platforms keep XLA's
+defaults (not measured). An option XLA does not know fails when the program is compiled
+(``jax.errors.JaxRuntimeError``: "No such compile option") — except in jaxgrav's own
+two sets: should a later XLA drop one of their options, it is left out (each probed
+once per process by compiling an identity, ~10 ms) rather than fail.
 
 A program of your own that calls jaxgrav inside its ``jax.jit`` is compiled with
 *your* options: pass ``jax.jit(f, compiler_options=compiler_options())`` for the same.
 """
 
+import functools
+
 import jax
+import jax.numpy as jnp
 
-__all__ = ["CPU_OPTIONS", "XLA_DEFAULTS", "check_cpu_options", "compiled", "compiler_options"]
+__all__ = ["CPU_OPTIONS", "FUSION_EMITTER_OPTIONS", "XLA_DEFAULTS", "check_cpu_options",
+           "compiled", "compiler_options"]
 
-CPU_OPTIONS = (("xla_backend_optimization_level", 2),)
-"""``(name, value)`` pairs of the XLA options on CPU (a tuple: immutable, hashable)."""
+CPU_OPTIONS = (("xla_backend_optimization_level", 2), ("xla_cpu_use_fusion_emitters", False))
+"""``(name, value)`` pairs of the XLA options on CPU (a tuple: immutable, hashable):
+LLVM ``-O2`` and XLA's elemental kernel emitters."""
+
+FUSION_EMITTER_OPTIONS = (("xla_backend_optimization_level", 2),)
+"""LLVM ``-O2`` with XLA's (default) MLIR fusion emitters, for the point-mass and the
+Rao–Blackwellised particle filters, whose runs are slower with the elemental emitters."""
 
 XLA_DEFAULTS = ()
-"""No options: XLA's own defaults, for programs measured to run faster with them."""
+"""No options: XLA's own defaults (``-O3``, fusion emitters), for a program measured to
+run faster with them (none of jaxgrav's Monte Carlo methods today)."""
 
 
 def check_cpu_options(cpu_options):
@@ -59,7 +83,8 @@ def compiler_options(platform=None, cpu_options=CPU_OPTIONS):
         ``"cpu"``, ``"gpu"``, …, a device (its platform), or None for
         :func:`jax.default_backend` at the time of the call.
     cpu_options : tuple of (str, value)
-        The options on CPU (:data:`CPU_OPTIONS`, or :data:`XLA_DEFAULTS`).
+        The options on CPU (:data:`CPU_OPTIONS`, :data:`FUSION_EMITTER_OPTIONS` or
+        :data:`XLA_DEFAULTS`; of jaxgrav's own two, only those this XLA knows).
 
     Returns
     -------
@@ -71,7 +96,25 @@ def compiler_options(platform=None, cpu_options=CPU_OPTIONS):
         platform = jax.default_backend()
     elif not isinstance(platform, str):
         platform = platform.platform
-    return dict(check_cpu_options(cpu_options)) if platform == "cpu" else {}
+    if platform != "cpu":
+        return {}
+    pairs = check_cpu_options(cpu_options)
+    if pairs in (CPU_OPTIONS, FUSION_EMITTER_OPTIONS):  # ours: leave out what XLA dropped
+        pairs = tuple(p for p in pairs if _cpu_xla_knows(p))
+    return dict(pairs)
+
+
+@functools.cache
+def _cpu_xla_knows(option):
+    """Whether this XLA's CPU compiler takes ``option`` (a ``(name, value)`` pair)."""
+    x = jax.device_put(jnp.zeros(()), jax.devices("cpu")[0])
+    try:
+        jax.jit(lambda v: v).lower(x).compile(dict([option]))
+    except jax.errors.JaxRuntimeError as err:
+        if "No such compile option" in str(err):
+            return False
+        raise
+    return True
 
 
 def compiled(fn, *args):

@@ -12,7 +12,10 @@ from jaxgrav.montecarlo.spec import cpu_options_for
 
 
 def test_options_on_cpu_only():
-    assert xla_options.compiler_options("cpu") == {"xla_backend_optimization_level": 2}
+    assert xla_options.compiler_options("cpu") == {"xla_backend_optimization_level": 2,
+                                                   "xla_cpu_use_fusion_emitters": False}
+    assert xla_options.compiler_options("cpu", xla_options.FUSION_EMITTER_OPTIONS) == \
+        {"xla_backend_optimization_level": 2}
     assert xla_options.compiler_options("gpu") == {}
     assert xla_options.compiler_options(jax.devices("cpu")[0]) == \
         xla_options.compiler_options("cpu")
@@ -70,7 +73,22 @@ def test_the_options_reach_xla():
 def test_methods_choose_their_options():
     assert cpu_options_for("ukf") == xla_options.CPU_OPTIONS
     assert cpu_options_for("voyage-dense") == xla_options.CPU_OPTIONS
-    assert cpu_options_for("rbpf") == cpu_options_for("voyage-rbpf") == xla_options.XLA_DEFAULTS
+    for kind in ("pmf", "voyage-pmf", "rbpf", "voyage-rbpf"):
+        assert cpu_options_for(kind) == xla_options.FUSION_EMITTER_OPTIONS
+
+
+@pytest.mark.skipif(jax.default_backend() != "cpu", reason="the options are for CPU")
+def test_an_option_of_ours_that_xla_dropped_is_left_out(monkeypatch):
+    """jaxgrav's own option sets keep working on an XLA without one of their options;
+    an unknown option a user passes still fails (test_the_options_reach_xla)."""
+    gone = ("xla_cpu_no_such_emitters", False)
+    mine = (*xla_options.CPU_OPTIONS, gone)
+    monkeypatch.setattr(xla_options, "CPU_OPTIONS", mine)
+    assert xla_options.compiler_options("cpu", mine) == {"xla_backend_optimization_level": 2,
+                                                         "xla_cpu_use_fusion_emitters": False}
+    with pytest.raises(jax.errors.JaxRuntimeError, match="No such compile option"):
+        jax.jit(lambda v: v).lower(1.0).compile(dict([gone]))
+    assert xla_options.compiler_options("cpu", (gone,)) == {gone[0]: False}  # not ours
 
 
 @pytest.mark.skipif(jax.default_backend() != "cpu", reason="the options are for CPU")

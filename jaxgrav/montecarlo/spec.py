@@ -9,7 +9,7 @@ from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.fields.map_error import CorrelatedMapError, TruthGrid
 from jaxgrav.fields.map_error_estimate import estimate_map_error
 from jaxgrav.scenarios.paper_a import check_region_covered
-from jaxgrav.xla_options import CPU_OPTIONS, XLA_DEFAULTS
+from jaxgrav.xla_options import CPU_OPTIONS, FUSION_EMITTER_OPTIONS
 
 __all__ = ["METRICS", "MethodSpec", "check_map_error", "check_settings", "cpu_options_for",
            "default_grid",
@@ -37,8 +37,9 @@ class MethodSpec:
         Meaning of the ``status`` bits.
     cpu_options : tuple of (str, value)
         XLA options to compile ``fn``'s runs with on CPU (``run(..., cpu_options=)``):
-        :data:`jaxgrav.xla_options.CPU_OPTIONS`, or
-        :data:`~jaxgrav.xla_options.XLA_DEFAULTS` for a method measured faster with them.
+        :data:`jaxgrav.xla_options.CPU_OPTIONS`, or another set of
+        :mod:`jaxgrav.xla_options` for a method measured faster with it
+        (:func:`cpu_options_for`).
     """
 
     fn: Callable = static_field()
@@ -51,12 +52,20 @@ class MethodSpec:
 def cpu_options_for(kind):
     """XLA options on CPU of a method's runs (:attr:`MethodSpec.cpu_options`).
 
-    :data:`~jaxgrav.xla_options.CPU_OPTIONS` (LLVM ``-O2``), except the Rao–Blackwellised
-    particle filter's (``rbpf``, ``voyage-rbpf``), whose long runs took 7–15 % longer at
-    ``-O2`` in three paired measurements (``python benchmarks/montecarlo_scaling.py
-    --compile-only`` compares them with ``-O2``): XLA's defaults.
+    :data:`~jaxgrav.xla_options.CPU_OPTIONS` (LLVM ``-O2``, XLA's elemental kernel
+    emitters), except the point-mass filter's (``pmf``, ``voyage-pmf``) and the
+    Rao–Blackwellised particle filter's (``rbpf``, ``voyage-rbpf``):
+    :data:`~jaxgrav.xla_options.FUSION_EMITTER_OPTIONS` (``-O2``, XLA's fusion emitters),
+    since their runs were 28 % (``pmf``) and 65 % (``voyage-rbpf``) slower with the
+    elemental emitters (16 runs in one chunk, twice; ``python
+    benchmarks/montecarlo_scaling.py --compile-only --against emitters`` measures it).
+    The RBPF kept XLA's defaults (``-O3``) until 2026-12-06, when its runs were as fast
+    at ``-O2`` (2.82 / 2.70 s against 2.76 / 2.84 s for 16 of paper D's runs, 6.67
+    against 6.90 s for 16 patrols) and compiled 1.5 s faster.
     """
-    return XLA_DEFAULTS if kind.removeprefix("voyage-") == "rbpf" else CPU_OPTIONS
+    if kind.removeprefix("voyage-") in ("pmf", "rbpf"):
+        return FUSION_EMITTER_OPTIONS
+    return CPU_OPTIONS
 
 
 def default_grid():
