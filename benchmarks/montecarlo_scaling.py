@@ -41,7 +41,10 @@ run adds float32 cases (``jax_enable_x64`` off).
   method that keeps XLA's defaults (rbpf); with ``--against emitters`` the method's own
   options with the other kernel emitters (``xla_cpu_use_fusion_emitters``) — each in a
   fresh process with its own cache folder; ratio = other / own (> 1: the method's own
-  options are faster). ``--methods`` limits the methods.
+  options are faster). ``--methods`` limits the methods. The compile rows split each
+  setting's first call into ``*_trace``, ``*_lower`` and ``*_xla`` seconds (JAX's
+  ``jax.monitoring`` durations of tracing, lowering to MLIR and XLA's compile, summed over
+  every program the call ran, the key split's too).
 
 Run ``python benchmarks/montecarlo_scaling.py [--quick | --compile-only [--against
 defaults|emitters] [--methods M ...]]``. Absolute
@@ -60,6 +63,7 @@ import time
 BENCH = "montecarlo_scaling"
 TRACE_EVENT = "/jax/core/compile/jaxpr_trace_duration"
 """``jax.monitoring`` duration event of every trace of a jitted function (any cache aside)."""
+LOWER_EVENT = "/jax/core/compile/jaxpr_to_mlir_module_duration"
 COMPILE_EVENT = "/jax/core/compile/backend_compile_duration"
 """Duration event of XLA compilation; in JAX 0.10 it wraps ``compile_or_get_cached``, so a
 load from the persistent cache records it too."""
@@ -73,9 +77,11 @@ def child(spec):
     jax.config.update("jax_compilation_cache_dir", spec["cache"])
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     events = []  # (event, function) of every trace and every compile-or-cache-load
+    seconds = {TRACE_EVENT: 0.0, LOWER_EVENT: 0.0, COMPILE_EVENT: 0.0}  # summed durations
     jax.monitoring.register_event_duration_secs_listener(
-        lambda name, secs, fun_name="", **kw: events.append((name, fun_name))
-        if name in (TRACE_EVENT, COMPILE_EVENT) else None)
+        lambda name, secs, fun_name="", **kw: (
+            seconds.__setitem__(name, seconds[name] + secs) if name in seconds else None,
+            events.append((name, fun_name)) if name in (TRACE_EVENT, COMPILE_EVENT) else None))
     from jaxgrav import montecarlo
     from jaxgrav.montecarlo import methods as montecarlo_methods
 
@@ -102,6 +108,9 @@ def child(spec):
         return time.perf_counter() - t0
 
     out["first_s"] = go(chunk, chunk)  # trace + compile + one chunk
+    # the first call's share of tracing, lowering and XLA compiling (every program it ran)
+    out["first_trace_s"], out["first_lower_s"], out["first_xla_s"] = (
+        round(seconds[e], 3) for e in (TRACE_EVENT, LOWER_EVENT, COMPILE_EVENT))
     out["maxrss_one_chunk_mb"] = maxrss_mb()
     if spec.get("compile"):
         other = montecarlo_methods.build(method, grid, noise=1.5)  # new parameter values
@@ -173,7 +182,9 @@ def compile_options_rows(emit, methods, chunk, against):
                                 other_options=opts)
             jc, xc = (r[k]["first_s"] - r[k]["second_s"] for k in ("jaxgrav", "other"))
             emit("montecarlo_options", f"{method} chunk={chunk} compile", chunk, jc, label, xc,
-                 recompiled=r["jaxgrav"]["recompiled"])
+                 recompiled=r["jaxgrav"]["recompiled"],
+                 **{f"{k}_{part}": r[k][f"first_{part}_s"] for k in ("jaxgrav", "other")
+                    for part in ("trace", "lower", "xla")})
             emit("montecarlo_options", f"{method} chunk={chunk} run", chunk,
                  r["jaxgrav"]["run_s"], label, r["other"]["run_s"],
                  runs_per_s=round(chunk / r["jaxgrav"]["run_s"], 2))
