@@ -93,6 +93,10 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
     ok = np.isfinite(z)
     fix = ("leave the cell empty (the reading is skipped)" if missing_skipped else
            "remove the row (matching needs a reading at every fix)")
+    if not missing_skipped and not ok.all():  # the matcher's "readings has NaN at fix 5"
+        i = int(np.flatnonzero(~ok)[0])
+        raise ValueError(f"{where}: column {column!r} has {int((~ok).sum())} empty, NaN or inf "
+                         f"cell(s), first on line {line(i)}; {fix}")
     fill = ok & (np.isin(z, FILL_VALUES) | (np.abs(z) >= 1e20))
     if fill.any():
         i = int(np.flatnonzero(fill)[0])
@@ -140,7 +144,7 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
         rows = np.flatnonzero(both)[far]
         raise ValueError(
             f"{where}: {rows.size} reading(s) in column {column!r} lie far outside what the "
-            f"map and the noise allow ({z[rows[0]]:g} on line {csv_line(int(rows[0]))}, "
+            f"map and the noise allow ({z[rows[0]]:g} on line {line(int(rows[0]))}, "
             f"{dev[far][0]:.3g} {unit} from the rest): fill values or spikes? {fix[0].upper()}"
             f"{fix[1:]}")
 

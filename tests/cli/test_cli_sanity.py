@@ -125,6 +125,24 @@ def test_check_readings_units_hints_and_what_passes(column):
     check_readings(quiet + rng.standard_normal(40), quiet, 1.0, column="gravity", where="w")
 
 
+def test_check_readings_names_the_file_s_own_line_for_a_gap_or_a_spike(column):
+    """Issue 19: an empty reading reached the matcher ("readings has 1 NaN/inf value(s),
+    first at fix 5", no file, column or line), and a spike was named by its row + 2, not
+    by the file's line (two comment lines above the header: line 12 for line 14)."""
+    z, expected = column
+    own = lambda i: i + 4  # noqa: E731 (two comment lines and the header)
+    with pytest.raises(ValueError) as err:
+        check_readings(np.where(np.arange(z.size) == 5, np.nan, z), expected, 1.0,
+                       column="gravity", where="--track 'T.csv'", missing_skipped=False,
+                       line=own)
+    assert str(err.value) == ("--track 'T.csv': column 'gravity' has 1 empty, NaN or inf "
+                              "cell(s), first on line 9; remove the row (matching needs a "
+                              "reading at every fix)")
+    with pytest.raises(ValueError, match="4000 on line 15,"):
+        check_readings(np.where(np.arange(z.size) == 11, 4000.0, z), expected, 1.0,
+                       column="gravity", where="w", line=own)
+
+
 # ------------------------------------------------------------------ the commands
 
 
@@ -151,6 +169,8 @@ def _edited(src, dst, change):
 _MATCH_BAD = {
     "fill": (lambda i, g: -9999.0 if i == 5 else g, [], ["fill value", "-9999", "remove the row"]),
     "absolute": (lambda i, g: g + 979_741.0, [], ["absolute gravity"]),
+    "empty reading": (lambda i, g: float("nan") if i == 5 else g, [],
+                      ["column 'gravity' has 1 empty, NaN or inf cell(s), first on line 7"]),
     "m/s2": (lambda i, g: g * 1e-5, [], ["other units", "m/s²"]),
     "dense refined": (lambda i, g: g, ["--refine", "8"], ["--refine 8 is for --method chains",
                                                           "worse"]),
