@@ -127,10 +127,13 @@ def cmd_dov(args):
     heights = _parse_heights(args.layers) if args.layers else None
     if args.grid:
         layers = dov.LayeredGrid.from_netcdf(args.grid)
-        if heights is not None and not np.allclose(heights, np.asarray(layers.heights)):
+        own = np.asarray(layers.heights, float)
+        # a count that differs was NumPy's "operands could not be broadcast together"
+        if heights is not None and (len(heights) != own.size or not np.allclose(heights, own)):
             raise ValueError(
-                f"--layers {heights} differs from the heights of --grid "
-                f"{np.asarray(layers.heights).tolist()}; a user grid cannot be re-layered"
+                f"--layers {args.layers} differs from the heights of --grid {args.grid!r} "
+                f"({', '.join(f'{h:g}' for h in own)} m); a user grid cannot be re-layered: "
+                "leave --layers out"
             )
     else:
         layers = dov.paper_c_layers(heights if heights is not None else dov.PAPER_HEIGHTS)

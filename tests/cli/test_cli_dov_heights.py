@@ -67,6 +67,22 @@ def test_a_height_below_a_user_grid_asks_for_a_layer_in_the_file(tmp_path, capsy
              "cannot be re-layered with --layers)", [out])
 
 
+@pytest.mark.parametrize("layers", ["0,1000", "0,500,1000", "0,1000,2000"])
+def test_layers_other_than_a_user_grid_s_are_refused_by_name(tmp_path, capsys, layers):
+    """Issue 19: --layers with another count of heights than the --grid's ended in NumPy's
+    "operands could not be broadcast together with shapes (2,) (3,)"."""
+    lat, lon = np.linspace(0.0, 1.0, 11), np.linspace(10.0, 11.0, 11)
+    values = np.zeros((2, 2, 11, 11))
+    grid = tmp_path / "l.nc"
+    dov.LayeredGrid.from_arrays(lat, lon, [0.0, 500.0], values).to_netcdf(grid)
+    track = tmp_path / "t.csv"
+    write_track_csv(track, {"lat": [0.5], "lon": [10.5], "h": [20.0]})
+    out = tmp_path / "o.csv"
+    _refused(capsys, ["dov", "--track", track, "--out", out, "--grid", grid, "--layers", layers],
+             f"--layers {layers} differs from the heights of --grid {str(grid)!r} (0, 500 m); "
+             "a user grid cannot be re-layered: leave --layers out", [out])
+
+
 @pytest.mark.long
 def test_the_advised_layers_take_a_submarine_track_in(tmp_path, capsys):
     """The --layers the refusal names, written as a user would (a space, not '='), run and
