@@ -311,6 +311,12 @@ def _check_columns(track, required, allow_nan, label):
             raise ValueError(
                 f"{label}, column {name!r} has {int(bad.sum())} missing or NaN value(s), "
                 f"first on line {lines[i]}; this column must be complete")
+        inf = np.isinf(track[name])  # "no reading" is an empty cell; inf was read as one
+        if name in allow_nan and inf.any():
+            i = int(np.flatnonzero(inf)[0])
+            raise ValueError(
+                f"{label}, line {lines[i]}, column {track.renamed.get(name, name)!r}: "
+                f"{track[name][i]:g} is not a value; leave the cell empty where there is none")
     if "t" in track:
         t = track["t"]
         if np.isfinite(t).all():

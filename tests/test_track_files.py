@@ -125,6 +125,11 @@ INVALID = [
      ["line 3", "longitude 400 is outside [-180, 360]"]),
     ("nan-in-required", "a.csv", b"t,lat,gravity\n0,30,1\n10,30,\n", {"required": ("gravity",)},
      ValueError, ["column 'gravity' has 1 missing", "line 3", "must be complete"]),
+    # issue 19: an inf reading was skipped as "no reading" (filter, navigate), with NumPy's
+    # "RuntimeWarning: invalid value encountered in subtract" on stderr
+    ("inf-where-empty-is-allowed", "a.csv", b"t,lat,FAA\n0,30,1\n10,30,\n20,30,-inf\n",
+     {"required": ("gravity",), "allow_nan": ("gravity",), "columns": {"gravity": "FAA"}},
+     ValueError, ["line 4, column 'FAA': -inf is not a value", "leave the cell empty"]),
     ("row-too-long", "a.csv", b"t,lat,lon\n0,30,130\n10,30,130,5\n", {}, ValueError,
      ["line 3 has 4 cells but the header has 3", "comma"]),
     ("duplicate-header", "a.csv", b"t,lat,lat\n0,30,31\n", {}, ValueError,
