@@ -31,7 +31,7 @@ from jaxgrav.match import (
 )
 from jaxgrav.match.api import MAP_ERROR_METHODS, MASKED, missing_reading
 from jaxgrav.sim import DEG_ARC_M
-from jaxgrav.tracks import csv_line, write_track_csv
+from jaxgrav.tracks import write_track_csv
 
 __all__ = ["CONTOUR_METHODS", "ENTROPY_HALF_SIZE", "add_parsers", "check_search"]
 
@@ -118,7 +118,7 @@ def _cmd_sample(args):
         raise ValueError(f"--column {args.column!r} is the name of a column of --track "
                          f"{str(args.track)!r} ({taken[args.column.strip().lower()]!r}); "
                          "expected a new name (the track's columns are kept)")
-    grid, _ = track_map(args, track, 0.0)
+    grid, _ = track_map(args, track, 0.0, field=None)  # any map: nT was refused as not mGal
     values = np.asarray(grid.sample(track["lat"], track["lon"], args.method, strict=True))
     cols[args.column] = values
     write_track_csv(args.out, cols, force=args.force)
@@ -126,7 +126,7 @@ def _cmd_sample(args):
     masked = ~np.isfinite(values)
     if masked.any():
         print(f"warning: {int(masked.sum())} of {values.size} points lie in map cells with a "
-              f"missing (NaN) node (first on line {csv_line(int(np.flatnonzero(masked)[0]))}); "
+              f"missing (NaN) node (first on line {track.line(int(np.flatnonzero(masked)[0]))}); "
               f"their {args.column!r} cells are left empty", file=sys.stderr)
 
 

@@ -95,6 +95,25 @@ def test_undeclared_fill_values_in_a_map_are_not_sampled_or_matched(tmp_path, ca
     assert json.loads(res.read_text())["status"] & 8192
 
 
+def test_sample_takes_a_magnetic_map_and_names_the_file_s_own_line(tmp_path, capsys):
+    """Issue 19: sample refused any map in nT ("is a magnetic map (units 'nT') and the
+    readings are gravity"), even for a track with no readings; and its warning of a point
+    beside a missing node named the row + 2, not the file's line (a comment line above)."""
+    lat, lon = np.linspace(30.0, 30.9, 10), np.linspace(130.0, 130.9, 10)
+    values = np.add.outer(lat, lon) * 100.0
+    values[5, 5] = np.nan
+    path = tmp_path / "mag.nc"
+    xr.Dataset({"f": (("lat", "lon"), values, {"units": "uT"})},
+               coords={"lat": lat, "lon": lon}).to_netcdf(path)
+    track = tmp_path / "t.csv"
+    track.write_text("# ship log\nlat,lon\n30.12,130.12\n30.52,130.52\n")
+    out = tmp_path / "s.csv"
+    assert main(["sample", "--map", str(path), "--track", str(track), "--out", str(out)]) == 0
+    assert "(first on line 4)" in capsys.readouterr().err
+    sampled = np.genfromtxt(out, delimiter=",", names=True)["map"]
+    assert sampled[0] == pytest.approx(16.024e6) and np.isnan(sampled[1])  # uT -> nT
+
+
 @pytest.fixture(scope="module")
 def simulated(tmp_path_factory):
     """A simulated 30-fix track (raw readings, v_east = v_north = 10 kn) and its header."""
