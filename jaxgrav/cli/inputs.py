@@ -13,6 +13,8 @@ refused only when the track's own region is unusable: more than :data:`MAX_MISSI
 its nodes missing.
 """
 
+import sys
+
 import numpy as np
 
 from jaxgrav.datasets import map_for_track
@@ -67,6 +69,8 @@ def read_track(args, required, optional=(), allow_nan=()):
 FIELD_UNITS = {"gravity": "mGal", "magnetic": "nT"}
 """The units of each field's readings and maps (a map declared in other gravity or
 magnetic units is converted on reading, :func:`jaxgrav.grid_files.map_units`)."""
+_UNIT_NAMES = {"gravity": "a gravity unit (mGal, Gal, uGal, m s-2, gu)",
+               "magnetic": "a magnetic unit (nT, uT, T)"}
 
 
 def kept_columns(track, columns):
@@ -151,12 +155,17 @@ def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False,
 
 def check_map_field(grid, field, map_name):
     """ValueError when ``grid`` is declared in the other field's units (``nT`` for
-    gravity readings, ``mGal`` for magnetic ones); a map without units passes."""
+    gravity readings, ``mGal`` for magnetic ones); a map without units passes, one in
+    units of neither field (a geoid in ``m``, DOV in ``arcsec``) is warned of on stderr."""
     other = {u: f for f, u in FIELD_UNITS.items() if f != field}
     if grid.units in other:
         raise ValueError(f"--map {str(map_name)!r} is a {other[grid.units]} map (units "
                          f"{grid.units!r}) and the readings are {field} "
                          f"({FIELD_UNITS[field]}); give a {field} map")
+    if grid.units and grid.units != FIELD_UNITS[field]:  # was read as mGal with no word
+        print(f"warning: --map {str(map_name)!r} declares units {grid.units!r}, not "
+              f"{_UNIT_NAMES[field]}: its values are read as {FIELD_UNITS[field]}",
+              file=sys.stderr)
 
 
 def map_error_args(args):

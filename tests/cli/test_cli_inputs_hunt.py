@@ -7,12 +7,14 @@ columns)."""
 import json
 import os
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import xarray as xr
 
 from jaxgrav.cli import main
+from jaxgrav.cli.inputs import check_map_field
 from jaxgrav.datasets import load_map
 from jaxgrav.geodesy import eotvos
 from jaxgrav.grid_files import UndeclaredFillWarning
@@ -112,6 +114,21 @@ def test_sample_takes_a_magnetic_map_and_names_the_file_s_own_line(tmp_path, cap
     assert "(first on line 4)" in capsys.readouterr().err
     sampled = np.genfromtxt(out, delimiter=",", names=True)["map"]
     assert sampled[0] == pytest.approx(16.024e6) and np.isnan(sampled[1])  # uT -> nT
+
+
+@pytest.mark.parametrize(("units", "field", "warned"), [
+    ("m", "gravity", "declares units 'm', not a gravity unit (mGal, Gal, uGal, m s-2, gu): "
+                     "its values are read as mGal"),
+    ("arcsec", "magnetic", "declares units 'arcsec', not a magnetic unit (nT, uT, T): its "
+                           "values are read as nT"),
+    ("mGal", "gravity", None), ("", "gravity", None), ("nT", "magnetic", None),
+])
+def test_a_map_in_units_of_neither_field_is_warned_of(capsys, units, field, warned):
+    """Issue 19: a geoid (m) or DOV (arcsec) map given to match, filter or navigate was
+    read as mGal with no word (match: exit 0, a χ² warning at most)."""
+    check_map_field(SimpleNamespace(units=units), field, "g.nc")
+    err = capsys.readouterr().err
+    assert (warned in err and err.startswith("warning: --map 'g.nc' ")) if warned else not err
 
 
 @pytest.fixture(scope="module")
