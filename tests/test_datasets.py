@@ -53,6 +53,16 @@ def test_unknown_name_lists_available(func):
         func("etopo")
 
 
+def test_a_variable_named_for_a_shipped_map_is_its_own_or_refused():
+    """Issue 19: ``--map ryukyu --var nope`` ran on the shipped map, exit 0."""
+    fine = datasets.load_map("ryukyu")
+    for var in ("gravity_anomaly", "anomaly_2p5min"):
+        assert datasets.load_map("ryukyu", var).name == fine.name
+    with pytest.raises(ValueError, match="the shipped map 'ryukyu' has one variable, "
+                                         "'gravity_anomaly'; got the variable 'nope'"):
+        datasets.load_map("ryukyu", "nope")
+
+
 def test_paths_exist_and_match_builder_specs():
     for name in datasets.available():
         paths = datasets.path(name)

@@ -233,6 +233,10 @@ def load_map(path, var=None, dataset_default="anomaly_2p5min", *, error_var=None
         key = key or dataset_default
         if key not in maps:
             raise ValueError(f"dataset {name!r} has no map {key!r}; it has {sorted(maps)}")
+        if var is not None and var not in (maps[key].name, key):  # was ignored, exit 0
+            raise ValueError(f"the shipped map {str(path)!r} has one variable, "
+                             f"{maps[key].name!r}; got the variable {var!r} to read (leave it "
+                             "out, or give a NetCDF file that holds it)")
         return maps[key]
     label = f"map {str(path)!r}"
     exclude = () if error_var is None else (error_var,)
