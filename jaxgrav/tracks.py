@@ -143,7 +143,7 @@ def parse_columns(text):
     return out
 
 
-def _match_columns(header, wanted, columns, label):
+def _match_columns(header, wanted, columns, label, required=()):
     """Header index of each canonical name found: ``--columns``, exact name, aliases."""
     keys = [column_key(h) for h in header]
     found = {}
@@ -169,6 +169,14 @@ def _match_columns(header, wanted, columns, label):
             if hits:
                 found[name] = hits[0]
                 break
+        # was "lacks column(s) ['lat']; it has ['lat', ...]"
+        taken = [n for n, j in found.items() if n in columns
+                 and keys[j] in ALIASES.get(name, (name,))]
+        if name in required and name not in found and taken:
+            raise ValueError(f"{label}: column {header[found[taken[0]]]!r} would be read as "
+                             f"{name!r}, but --columns {taken[0]}={columns[taken[0]]} reads "
+                             f"it as {taken[0]!r}; give {name!r} its own column with "
+                             f"--columns {name}=COLUMN")
     used = {}
     for name, j in found.items():
         if j in used:
@@ -251,7 +259,7 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
     table = read_table(path, label)
     columns = dict(columns or {})
     wanted = [*required, *optional, *(c for c in KNOWN_COLUMNS if c not in required)]
-    found = _match_columns(table.header, wanted, columns, label)
+    found = _match_columns(table.header, wanted, columns, label, required)
     missing = [c for c in required if c not in found]
     if missing:
         raise ValueError(

@@ -130,6 +130,11 @@ INVALID = [
     ("inf-where-empty-is-allowed", "a.csv", b"t,lat,FAA\n0,30,1\n10,30,\n20,30,-inf\n",
      {"required": ("gravity",), "allow_nan": ("gravity",), "columns": {"gravity": "FAA"}},
      ValueError, ["line 4, column 'FAA': -inf is not a value", "leave the cell empty"]),
+    # issue 19: "lacks column(s) ['lon']; it has ['t', 'lat', 'lon']"
+    ("columns-take-a-required-column", "a.csv", b"t,lat,lon\n0,30,130\n",
+     {"required": ("lat", "lon"), "columns": {"lat": "lon"}}, ValueError,
+     ["column 'lon' would be read as 'lon', but --columns lat=lon reads it as 'lat'",
+      "--columns lon=COLUMN"]),
     ("row-too-long", "a.csv", b"t,lat,lon\n0,30,130\n10,30,130,5\n", {}, ValueError,
      ["line 3 has 4 cells but the header has 3", "comma"]),
     ("duplicate-header", "a.csv", b"t,lat,lat\n0,30,31\n", {}, ValueError,
