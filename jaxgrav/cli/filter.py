@@ -307,7 +307,7 @@ def cmd_filter(args):
     fogm = (map_error_state(me_sigma, me_length, args.map_error_order) if me_sigma > 0
             else None)
     if args.map is not None:
-        check_on_map(field, lat, lon, where, args.map)
+        check_on_map(field, lat, lon, where, args.map, line=track.line)
     g_raw = g
     g, jac, eotvos_note = _eotvos(args, track, g)
     expected = map_at_ins(field, lat, lon) + offset

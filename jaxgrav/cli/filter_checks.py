@@ -164,13 +164,14 @@ def offset_warning(readings, expected, bias_sigma, map_error_sigma, noise):
             "offset from the gravity column, or the filter moves the position to explain it")
 
 
-def check_on_map(grid, lat, lon, where, name):
-    """ValueError naming the first of the INS positions off the map ``--map name``."""
+def check_on_map(grid, lat, lon, where, name, line=csv_line):
+    """ValueError naming the first of the INS positions off the map ``--map name``
+    (``line``: row index → the file's line, e.g. a reader's ``TrackTable.line``)."""
     inside = np.asarray(grid.contains(lat, lon))
     if not inside.all():
         i = int(np.flatnonzero(~inside)[0])
         w, e, s, n = grid.extent
         raise ValueError(
             f"{where}: {int((~inside).sum())} of {lat.size} positions are off the map --map "
-            f"{name} (lat {s:g}..{n:g}, lon {w:g}..{e:g}), first on line {csv_line(i)} "
+            f"{name} (lat {s:g}..{n:g}, lon {w:g}..{e:g}), first on line {line(i)} "
             f"(lat {lat[i]:g}, lon {lon[i]:g})")

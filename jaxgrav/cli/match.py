@@ -10,6 +10,7 @@ import sys
 import numpy as np
 
 from jaxgrav._io import atomic_output, check_outputs
+from jaxgrav.cli.filter_checks import check_on_map
 from jaxgrav.cli.inputs import (
     FIELD_UNITS,
     add_columns_option,
@@ -119,6 +120,9 @@ def _cmd_sample(args):
                          f"{str(args.track)!r} ({taken[args.column.strip().lower()]!r}); "
                          "expected a new name (the track's columns are kept)")
     grid, _ = track_map(args, track, 0.0, field=None)  # any map: nT was refused as not mGal
+    # off the map: was "point (lat=…) is outside the grid", naming neither file nor line
+    check_on_map(grid, track["lat"], track["lon"], f"--track {str(args.track)!r}", args.map,
+                 line=track.line)
     values = np.asarray(grid.sample(track["lat"], track["lon"], args.method, strict=True))
     cols[args.column] = values
     write_track_csv(args.out, cols, force=args.force)

@@ -97,7 +97,7 @@ def test_undeclared_fill_values_in_a_map_are_not_sampled_or_matched(tmp_path, ca
     assert json.loads(res.read_text())["status"] & 8192
 
 
-def test_sample_takes_a_magnetic_map_and_names_the_file_s_own_line(tmp_path, capsys):
+def test_sample_takes_a_magnetic_map_and_names_the_file_s_own_lines(tmp_path, capsys):
     """Issue 19: sample refused any map in nT ("is a magnetic map (units 'nT') and the
     readings are gravity"), even for a track with no readings; and its warning of a point
     beside a missing node named the row + 2, not the file's line (a comment line above)."""
@@ -114,6 +114,11 @@ def test_sample_takes_a_magnetic_map_and_names_the_file_s_own_line(tmp_path, cap
     assert "(first on line 4)" in capsys.readouterr().err
     sampled = np.genfromtxt(out, delimiter=",", names=True)["map"]
     assert sampled[0] == pytest.approx(16.024e6) and np.isnan(sampled[1])  # uT -> nT
+    # a point off the map: "point (lat=31.5, lon=130.5) is outside the grid", no file or line
+    track.write_text("# ship log\nlat,lon\n30.12,130.12\n31.5,130.5\n")
+    _refused(capsys, ["sample", "--map", path, "--track", track, "--out", tmp_path / "o.csv"],
+             f"--track {str(track)!r}: 1 of 2 positions are off the map --map {path} (lat "
+             "30..30.9, lon 130..130.9), first on line 4 (lat 31.5, lon 130.5)")
 
 
 @pytest.mark.parametrize(("units", "field", "warned"), [
