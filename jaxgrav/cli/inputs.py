@@ -97,7 +97,7 @@ def kept_columns(track, columns):
 
 
 def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False,
-              field="gravity"):
+              field="gravity", bicubic=True):
     """The ``--map`` of a command, cut to what ``track`` needs, and ``--map-error-var``'s σ.
 
     Parameters
@@ -116,6 +116,8 @@ def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False,
     field : {"gravity", "magnetic"} or None
         What the readings measure: a map declared in the other field's units is refused
         (:func:`check_map_field`); None: not checked here.
+    bicubic : bool
+        The command interpolates bicubically: fewer than 4 nodes along an axis is refused.
 
     Returns
     -------
@@ -140,6 +142,11 @@ def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False,
     loaded = map_for_track(args.map, args.var, track["lat"], track["lon"], margin_m,
                            max_missing=MAX_MISSING, option="--map", error_var=error_var)
     grid, err = (loaded, None) if error_var is None else loaded
+    shape = (np.size(grid.lat), np.size(grid.lon))
+    if bicubic and min(shape) < 4:  # was "bicubic interpolation needs at least 4 nodes per axis"
+        raise ValueError(f"--map {str(args.map)!r} has {shape[0]} x {shape[1]} nodes (lat x lon) "
+                         "where the track needs it; bicubic interpolation needs at least 4 "
+                         "along each axis: give a larger map")
     if field is not None:
         check_map_field(grid, field, args.map)
     if error_var is None:

@@ -119,7 +119,8 @@ def _cmd_sample(args):
         raise ValueError(f"--column {args.column!r} is the name of a column of --track "
                          f"{str(args.track)!r} ({taken[args.column.strip().lower()]!r}); "
                          "expected a new name (the track's columns are kept)")
-    grid, _ = track_map(args, track, 0.0, field=None)  # any map: nT was refused as not mGal
+    grid, _ = track_map(args, track, 0.0, field=None,  # any map: nT was refused as not mGal
+                        bicubic=args.method == "bicubic")
     # off the map: was "point (lat=…) is outside the grid", naming neither file nor line
     check_on_map(grid, track["lat"], track["lon"], f"--track {str(args.track)!r}", args.map,
                  line=track.line)

@@ -121,6 +121,25 @@ def test_sample_takes_a_magnetic_map_and_names_the_file_s_own_lines(tmp_path, ca
              "30..30.9, lon 130..130.9), first on line 4 (lat 31.5, lon 130.5)")
 
 
+def test_a_map_too_small_for_bicubic_is_named(tmp_path, capsys):
+    """Issue 19: a 3 x 3 map ended in "bicubic interpolation needs at least 4 nodes per
+    axis; got 3" (no option, no file); sample's bilinear still takes it."""
+    lat, lon = np.array([30.0, 30.1, 30.2]), np.array([130.0, 130.1, 130.2])
+    path = tmp_path / "m.nc"
+    xr.Dataset({"g": (("lat", "lon"), np.arange(9.0).reshape(3, 3), {"units": "mGal"})},
+               coords={"lat": lat, "lon": lon}).to_netcdf(path)
+    track = tmp_path / "t.csv"
+    track.write_text("lat,lon\n30.05,130.05\n30.15,130.12\n")
+    out = tmp_path / "s.csv"
+    _refused(capsys, ["sample", "--map", path, "--track", track, "--out", out],
+             f"--map {str(path)!r} has 3 x 3 nodes (lat x lon) where the track needs it; "
+             "bicubic interpolation needs at least 4 along each axis: give a larger map")
+    assert not out.exists()
+    assert main(["sample", "--map", str(path), "--track", str(track), "--out", str(out),
+                 "--method", "bilinear"]) == 0
+    assert np.genfromtxt(out, delimiter=",", names=True)["map"][0] == pytest.approx(2.0)
+
+
 @pytest.mark.parametrize(("units", "field", "warned"), [
     ("m", "gravity", "declares units 'm', not a gravity unit (mGal, Gal, uGal, m s-2, gu): "
                      "its values are read as mGal"),
