@@ -82,6 +82,12 @@ def _check_folder(path, label):
     if not os.access(folder, os.W_OK | os.X_OK):
         raise ValueError(f"{label}: the folder {str(folder)!r} is not writable; expected a "
                          "path in a folder you may write")
+    try:  # access() passes root, and folders that refuse files anyway (/proc, some mounts)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as err:  # was the first output written, then "[Errno 2] ... '/proc/x'"
+        raise ValueError(f"{label}: a file cannot be created in the folder {str(folder)!r} "
+                         f"({err.strerror}); expected a path in a folder you may write") from None
 
 
 @contextlib.contextmanager

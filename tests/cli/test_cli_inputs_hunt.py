@@ -55,6 +55,16 @@ def test_an_output_in_a_folder_that_is_not_writable_is_refused(tmp_path, capsys,
     assert list(ro.iterdir()) == []
 
 
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+def test_a_folder_that_refuses_files_is_refused_before_the_first_output(tmp_path, capsys):
+    """Issue 19: os.access lets root (and /proc) pass: simulate wrote --out, then failed on
+    --truth with "[Errno 2] No such file or directory: '/proc/nope'"."""
+    out = tmp_path / "t.csv"
+    _refused(capsys, ["simulate", "--out", out, "--truth", "/proc/nope/truth.csv", "--n", "5"],
+             "--truth '/proc/nope/truth.csv': a file cannot be created in the folder '/proc' (")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_an_output_in_a_new_folder_is_written(tmp_path):
     """A missing folder on the output's path is made (not refused)."""
     out = tmp_path / "new" / "deeper" / "t.csv"
