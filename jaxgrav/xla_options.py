@@ -39,7 +39,7 @@ A program of your own that calls jaxgrav inside its ``jax.jit`` is compiled with
 import functools
 
 import jax
-import jax.numpy as jnp
+import numpy as np
 
 __all__ = ["CPU_OPTIONS", "FUSION_EMITTER_OPTIONS", "XLA_DEFAULTS", "check_cpu_options",
            "compiled", "compiler_options"]
@@ -107,7 +107,9 @@ def compiler_options(platform=None, cpu_options=CPU_OPTIONS):
 @functools.cache
 def _cpu_xla_knows(option):
     """Whether this XLA's CPU compiler takes ``option`` (a ``(name, value)`` pair)."""
-    x = jax.device_put(jnp.zeros(()), jax.devices("cpu")[0])
+    # a shape on a CPU device, not an array: no data, and callable inside a trace too
+    x = jax.ShapeDtypeStruct((), np.float32,
+                             sharding=jax.sharding.SingleDeviceSharding(jax.devices("cpu")[0]))
     try:
         jax.jit(lambda v: v).lower(x).compile(dict([option]))
     except jax.errors.JaxRuntimeError as err:
