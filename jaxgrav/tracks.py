@@ -170,9 +170,9 @@ def _match_columns(header, wanted, columns, label, required=()):
                 found[name] = hits[0]
                 break
         # was "lacks column(s) ['lat']; it has ['lat', ...]"
-        taken = [n for n, j in found.items() if n in columns
-                 and keys[j] in ALIASES.get(name, (name,))]
-        if name in required and name not in found and taken:
+        taken = [] if name in found or name not in required else [
+            n for n, j in found.items() if n in columns and keys[j] in ALIASES.get(name, (name,))]
+        if taken:
             raise ValueError(f"{label}: column {header[found[taken[0]]]!r} would be read as "
                              f"{name!r}, but --columns {taken[0]}={columns[taken[0]]} reads "
                              f"it as {taken[0]!r}; give {name!r} its own column with "
@@ -319,9 +319,10 @@ def _check_columns(track, required, allow_nan, label):
             raise ValueError(
                 f"{label}, column {name!r} has {int(bad.sum())} missing or NaN value(s), "
                 f"first on line {lines[i]}; this column must be complete")
-        inf = np.isinf(track[name])  # "no reading" is an empty cell; inf was read as one
-        if name in allow_nan and inf.any():
-            i = int(np.flatnonzero(inf)[0])
+        # "no reading" is an empty cell; inf was read as one
+        inf = np.flatnonzero(np.isinf(track[name])) if name in allow_nan else ()
+        if len(inf):
+            i = int(inf[0])
             raise ValueError(
                 f"{label}, line {lines[i]}, column {track.renamed.get(name, name)!r}: "
                 f"{track[name][i]:g} is not a value; leave the cell empty where there is none")
