@@ -31,8 +31,10 @@ an hour, so filterpy is timed on a few runs and its time per run scaled to ``n``
 ``max_diff_m`` in metres). Every line's baseline is the filterpy UKF.
 
 jaxgrav's compile time is separate (``compile_s``); timed calls are compiled already,
-with jaxgrav's XLA options (:func:`jaxgrav.xla_options.compiler_options`: LLVM ``-O2``
-on CPU, what the Monte Carlo runner and the command use).
+with the XLA options the Monte Carlo runner gives the method
+(:func:`jaxgrav.montecarlo.spec.cpu_options_for`: LLVM ``-O2`` with XLA's elemental
+kernel emitters for the Kalman filters, with its fusion emitters for the point-mass
+filter; field ``cpu_options``). ``--filters`` runs some of them only.
 ``--profile`` adds lines (bench ``filters_profile``) with the cost per run-step of the
 parts of a filter step (prediction, factorisation, map evaluations, a whole update,
 the generic 27-point update), timed as scans over 600 steps of all runs, and XLA's
@@ -66,11 +68,13 @@ from jaxgrav._linalg import modified_cholesky  # noqa: E402
 from jaxgrav.fields.pointmass import paper_d  # noqa: E402
 from jaxgrav.filters import kalman  # noqa: E402
 from jaxgrav.geodesy import geodetic_to_ecef  # noqa: E402
+from jaxgrav.montecarlo.spec import cpu_options_for  # noqa: E402
 from jaxgrav.xla_options import compiler_options  # noqa: E402
 
 BENCH = "filters"
 CHUNK = 25  # runs per vmapped chunk (divides 1000: no remainder program to compile)
 ALPHA, BETA, KAPPA = 0.5, 2.0, 0.0
+FILTERS = ("ukf", "ekf", "pmf", "ukf-float32")
 
 
 _T0 = time.perf_counter()
@@ -85,6 +89,8 @@ def parse_args():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="CI-sized run (~1–2 min)")
     p.add_argument("--profile", action="store_true", help="time the parts of a UKF step")
+    p.add_argument("--filters", nargs="+", choices=FILTERS, default=list(FILTERS),
+                   help="these filters only (default: all)")
     return p.parse_args()
 
 
@@ -225,10 +231,12 @@ def monte_carlo_pmf(filt, dt, every, chunk=None):
     return mc
 
 
-def time_compiled(fn, args, repeats):
-    """(compile_s, best run s, output)."""
+def time_compiled(fn, args, repeats, kind="ukf"):
+    """(compile_s, best run s, output), compiled with the options the runner gives
+    the method ``kind``."""
     t0 = time.perf_counter()
-    compiled = fn.lower(*args).compile(compiler_options() or None)  # as the runner does
+    options = compiler_options(cpu_options=cpu_options_for(kind))  # as the runner does
+    compiled = fn.lower(*args).compile(options or None)
     compile_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     out = jax.block_until_ready(compiled(*args))
@@ -389,32 +397,41 @@ def main():
     args64 = (field, dyn, x0, p0, steps)
     # chunks pay off only for large batches (cache); --quick runs one vmap
     chunk_best = CHUNK if n_runs >= 10 * CHUNK else None
-    progress("ukf-float64")
-    compile_s, secs, out64 = time_compiled(monte_carlo(ukf, chunk_best, every), args64, repeats)
-    line(cname("ukf-float64", chunk_best), n_runs, secs, compile_s, out64, chunk=chunk_best,
-         every=every, **agreement(out64[0][0], out64[1][0], fp_pos, fp_sig))
-    progress("ukf-float64-every1")
-    compile_s, secs, out1 = time_compiled(monte_carlo(ukf, chunk_best, 1), args64, repeats)
-    line(cname("ukf-float64-every1", chunk_best), n_runs, secs, compile_s, out1,
-         chunk=chunk_best, every=1, **agreement(out1[0][0], out1[1][0], fp_pos, fp_sig),
-         every5_vs_every1_max_diff_m=float(f"{np.max(np.abs(out64[0] - out1[0])):.3g}"))
+    ukf_opts = dict(cpu_options=str(cpu_options_for("ukf")))
+    out64 = None
+    if {"ukf", "ekf", "ukf-float32"} & set(args.filters):
+        progress("ukf-float64")
+        compile_s, secs, out64 = time_compiled(monte_carlo(ukf, chunk_best, every), args64,
+                                               repeats)
+        line(cname("ukf-float64", chunk_best), n_runs, secs, compile_s, out64, chunk=chunk_best,
+             every=every, **agreement(out64[0][0], out64[1][0], fp_pos, fp_sig), **ukf_opts)
+    if "ukf" in args.filters:
+        progress("ukf-float64-every1")
+        compile_s, secs, out1 = time_compiled(monte_carlo(ukf, chunk_best, 1), args64, repeats)
+        line(cname("ukf-float64-every1", chunk_best), n_runs, secs, compile_s, out1,
+             chunk=chunk_best, every=1, **agreement(out1[0][0], out1[1][0], fp_pos, fp_sig),
+             every5_vs_every1_max_diff_m=float(f"{np.max(np.abs(out64[0] - out1[0])):.3g}"),
+             **ukf_opts)
 
     # EKF, float64 -----------------------------------------------------------------
-    progress("ekf")
-    compile_s, secs, oute = time_compiled(monte_carlo(fl.ekf(), chunk_best, every), args64,
-                                          repeats)
-    line(cname("ekf-float64", chunk_best), n_runs, secs, compile_s, oute, chunk=chunk_best,
-         every=every,
-         ekf_vs_ukf_max_diff_sigma=float(f"{np.max(np.abs(oute[0] - out64[0]) / out64[1]):.3g}"))
+    if "ekf" in args.filters:
+        progress("ekf")
+        compile_s, secs, oute = time_compiled(monte_carlo(fl.ekf(), chunk_best, every), args64,
+                                              repeats, kind="ekf")
+        line(cname("ekf-float64", chunk_best), n_runs, secs, compile_s, oute, chunk=chunk_best,
+             every=every, ekf_vs_ukf_max_diff_sigma=float(
+                 f"{np.max(np.abs(oute[0] - out64[0]) / out64[1]):.3g}"),
+             cpu_options=str(cpu_options_for("ekf")))
 
     # PMF, float64 -----------------------------------------------------------------
-    progress("pmf")
-    sub = jax.tree.map(lambda a: a[:n_pmf], steps)
-    pmf_chunk = CHUNK if n_pmf > CHUNK else None
-    compile_s, secs, outp = time_compiled(monte_carlo_pmf(fl.pmf(), dt, every, pmf_chunk),
-                                          (field, x0, p0, sub), repeats)
-    line(cname("pmf-float64", pmf_chunk), n_pmf, secs, compile_s, outp, chunk=pmf_chunk,
-         pmf_grid="61 x 61 cells of 200 m")
+    if "pmf" in args.filters:
+        progress("pmf")
+        sub = jax.tree.map(lambda a: a[:n_pmf], steps)
+        pmf_chunk = CHUNK if n_pmf > CHUNK else None
+        compile_s, secs, outp = time_compiled(monte_carlo_pmf(fl.pmf(), dt, every, pmf_chunk),
+                                              (field, x0, p0, sub), repeats, kind="pmf")
+        line(cname("pmf-float64", pmf_chunk), n_pmf, secs, compile_s, outp, chunk=pmf_chunk,
+             pmf_grid="61 x 61 cells of 200 m", cpu_options=str(cpu_options_for("pmf")))
 
     # the profile runs on at most 600 steps of the timed runs
     prof_t = min(n_steps, 600)
@@ -424,6 +441,8 @@ def main():
         profile(field, dyn, prof_steps, x0, p0, every, "float64", prof_repeats)
 
     # UKF, float32 -----------------------------------------------------------------
+    if "ukf-float32" not in args.filters:
+        return
     progress("ukf float32")
     jax.config.update("jax_enable_x64", False)
     try:
@@ -435,7 +454,7 @@ def main():
              every=every, **agreement(out32[0][0], out32[1][0], fp_pos, fp_sig),
              f32_vs_f64_max_diff_m=float(f"{diff.max():.3g}"),
              f32_vs_f64_median_max_diff_m=float(f"{np.median(diff.max(axis=(1, 2))):.3g}"),
-             f32_vs_f64_max_diff_sigma=float(f"{np.max(diff / out64[1]):.3g}"))
+             f32_vs_f64_max_diff_sigma=float(f"{np.max(diff / out64[1]):.3g}"), **ukf_opts)
         if args.profile:
             profile(*as_float32((field, dyn, prof_steps, x0, p0)), every, "float32",
                     prof_repeats)
