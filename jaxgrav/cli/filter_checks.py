@@ -9,6 +9,7 @@ gravimeter bias allows (:func:`offset_warning`).
 """
 
 import math
+import os
 
 import jax
 import jax.numpy as jnp
@@ -19,9 +20,10 @@ from jaxgrav.filters import map_anomaly
 from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.tracks import csv_line
 
-__all__ = ["MIN_PARTICLES", "OFFSET_FLOOR", "OFFSET_SIGMAS", "check_on_map",
-           "check_particles", "check_sigma", "gradient_at_ins", "information_warning",
-           "ins_label", "map_at_ins", "offset_warning"]
+__all__ = ["BYTES_PER_PARTICLE", "MIN_PARTICLES", "OFFSET_FLOOR", "OFFSET_SIGMAS",
+           "check_on_map", "check_particles", "check_positive", "check_sigma", "extent_text",
+           "gradient_at_ins", "information_warning", "ins_label", "map_at_ins", "memory_bytes",
+           "offset_warning"]
 
 MIN_PARTICLES = 100
 """Fewest particles ``--particles`` takes (``filter`` and ``navigate``): with fewer, the
@@ -38,11 +40,38 @@ OFFSET_FLOOR = 25.0
 D's track, INS 2 km off: a median of 2.5 mGal; along a slope of 5 mGal/km, 3 km off: 15)."""
 
 
+BYTES_PER_PARTICLE = 700.0
+"""Memory a particle takes in a run of ``pf`` or ``rbpf`` (bytes): the growth of the
+process's peak resident memory from 1000 to 1.6 million particles (filter pf 620-660 B,
+rbpf 550-570 B, navigate rbpf 450 B a particle, 13-15 states in float64: the state and
+its moved, drawn, weighed and resampled copies), rounded up."""
+
+_BASELINE_BYTES = 0.5e9  # a filter run with few particles (JAX, the map, the program)
+
+
+def memory_bytes():
+    """The machine's physical memory (bytes), or None where it cannot be read."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
 def check_particles(n):
-    """ValueError naming ``--particles`` for a count below :data:`MIN_PARTICLES`."""
+    """ValueError naming ``--particles`` for a count below :data:`MIN_PARTICLES`, or one
+    whose particles (:data:`BYTES_PER_PARTICLE`) need more than 80 % of the machine's
+    memory: refused before the filter is compiled (1e8 particles ran out of memory
+    after compiling, exit 1)."""
     if n < MIN_PARTICLES:
         raise ValueError(f"--particles must be an integer >= {MIN_PARTICLES} (fewer cannot "
                          f"represent the position's posterior); got {n}")
+    total, need = memory_bytes(), _BASELINE_BYTES + BYTES_PER_PARTICLE * n
+    if total and need > 0.8 * total:
+        fit = int((0.8 * total - _BASELINE_BYTES) // BYTES_PER_PARTICLE)
+        raise ValueError(f"--particles {n} needs about {need / 1e9:.3g} GB "
+                         f"({BYTES_PER_PARTICLE:g} bytes a particle), more than 80 % of this "
+                         f"machine's {total / 1e9:.3g} GB of memory; expected at most "
+                         f"{fit:d} particles (the defaults are 500 to 2000)")
 
 
 def ins_label(name):
@@ -62,6 +91,14 @@ def ins_label(name):
     model = INS_GRADES[name]  # rad/s and m/s² (1 ug = 9.80665e-6 m/s²)
     return (f"{name} INS ({model.gyro_sigma / DEG * 3600.0:.3g} deg/h gyro, "
             f"{model.accel_sigma / 9.80665e-6:.3g} ug accelerometer biases)")
+
+
+def check_positive(name, value, unit, allow_zero=False):
+    """ValueError naming the option ``name`` unless ``value`` is finite and > 0 (``>= 0``
+    with ``allow_zero``); ``unit`` is said in the message."""
+    if not (math.isfinite(value) and (value >= 0 if allow_zero else value > 0)):
+        sign = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name} must be a finite value {sign} ({unit}); got {value!r}")
 
 
 def check_sigma(name, value):
@@ -170,8 +207,13 @@ def check_on_map(grid, lat, lon, where, name, line=csv_line):
     inside = np.asarray(grid.contains(lat, lon))
     if not inside.all():
         i = int(np.flatnonzero(~inside)[0])
-        w, e, s, n = grid.extent
         raise ValueError(
             f"{where}: {int((~inside).sum())} of {lat.size} positions are off the map --map "
-            f"{name} (lat {s:g}..{n:g}, lon {w:g}..{e:g}), first on line {line(i)} "
+            f"{name} ({extent_text(grid)}), first on line {line(i)} "
             f"(lat {lat[i]:g}, lon {lon[i]:g})")
+
+
+def extent_text(grid):
+    """A map's extent as a message says it, e.g. ``"lat 24..36, lon 124..136"`` (degrees)."""
+    w, e, s, n = (float(v) for v in grid.extent)
+    return f"lat {s:g}..{n:g}, lon {w:g}..{e:g}"

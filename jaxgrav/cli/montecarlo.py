@@ -98,7 +98,7 @@ def add_parser(subparsers):
                    help="fixes per track (default 30 dense and chains, 60 entropy, "
                         "iccp and entropy+iccp); "
                         "filters: readings 10 s apart, start included (default 721 = 2 h); "
-                        "with --chunk, refused beyond half the machine's memory")
+                        "with --chunk, refused beyond 80 %% of the machine's memory")
     m.add_argument("--out", required=True,
                    help="results NetCDF (one value per run); a PNG of the errors is written "
                         "next to it with suffix .png")

@@ -9,9 +9,9 @@ map is known; :func:`told_from_args` parses ``--told-map-error SIGMA[,L]``.
 """
 
 import math
-import os
 import sys
 
+from jaxgrav.cli.filter_checks import memory_bytes
 from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M, check_seed
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match import METHODS
@@ -111,17 +111,9 @@ def _check_devices(args):
               f"{chunk}; give a --chunk that is a multiple of --devices", file=sys.stderr)
 
 
-def _memory_bytes():
-    """The machine's physical memory (bytes), or None where it cannot be read."""
-    try:
-        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        return None
-
-
 def _check_memory(args):
     """Refuse a ``--fixes`` or ``--chunk`` given that needs more than 80 % of the memory."""
-    per_fix, total = BYTES_PER_FIX.get(args.method), _memory_bytes()
+    per_fix, total = BYTES_PER_FIX.get(args.method), memory_bytes()
     if per_fix is None or not total or (args.fixes is None and args.chunk is None):
         return  # a voyage (sized by --hours), a method registered elsewhere, the defaults
     fixes = args.fixes or _DEFAULT_FIXES.get(args.method, 721)

@@ -50,7 +50,6 @@ filters predict through gaps up to ``--max-gap`` s (the INS interpolated, no rea
 the loose loop needs every row. The output has the log's own rows.
 """
 
-import math
 import sys
 
 import jax
@@ -61,6 +60,8 @@ from jaxgrav._io import check_outputs
 from jaxgrav.cli.filter_checks import (
     MIN_PARTICLES,
     check_particles,
+    check_positive,
+    extent_text,
     gradient_at_ins,
     information_warning,
     offset_warning,
@@ -176,14 +177,7 @@ def add_parser(sub):
     return p
 
 
-def _positive(name, value, unit, allow_zero=False):
-    ok = math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
-    if not ok:
-        sign = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{name} must be a finite value {sign} ({unit}); got {value!r}")
-
-
-def check_log(track, grid, max_gap, max_speed, gaps=None):
+def check_log(track, grid, max_gap, max_speed, gaps=None, map_name="map"):
     """Check an INS log for navigation; returns ``(steps, n_missing, n_off_map)``.
 
     ``steps`` is the log's :class:`~jaxgrav.time_steps.TimeSteps`. Raises ValueError
@@ -191,7 +185,7 @@ def check_log(track, grid, max_gap, max_speed, gaps=None):
     10 % of it, :func:`~jaxgrav.time_steps.time_steps`), a gap longer than
     ``max_gap`` or, when ``gaps`` gives the reason, any gap; a speed above
     ``max_speed``, a position jump (:func:`~jaxgrav.cli.sanity.check_positions`), a log
-    with no row on the map.
+    with no row on the map (``map_name``, e.g. ``--map 'M.nc'``).
     """
     label = f"track file {track.path!r}"
     t = np.asarray(track["t"])
@@ -207,7 +201,7 @@ def check_log(track, grid, max_gap, max_speed, gaps=None):
                          f"{fast.size} such row(s))")
     on_map = np.isfinite(np.asarray(grid.sample(track["lat"], track["lon"])))
     if not on_map.any():
-        raise ValueError(f"{label}: no row lies on the map (extent {grid.extent})")
+        raise ValueError(f"{label}: no row lies on the {map_name} ({extent_text(grid)})")
     check_positions(track, where=label)
     return steps, int(np.sum(~np.isfinite(track["gravity"]))), int(np.sum(~on_map))
 
@@ -236,14 +230,14 @@ def _method_options(args):
 def cmd_navigate(args):
     """Run ``navigate`` (see the module notes)."""
     unused = _method_options(args)
-    _positive("--sigma-pos", args.sigma_pos, "m")
-    _positive("--sigma-vel", args.sigma_vel, "m/s")
-    _positive("--noise", args.noise, "mGal")
+    check_positive("--sigma-pos", args.sigma_pos, "m")
+    check_positive("--sigma-vel", args.sigma_vel, "m/s")
+    check_positive("--noise", args.noise, "mGal")
     if args.map_error is not None:
-        _positive("--map-error", args.map_error, "mGal", allow_zero=True)
-    _positive("--map-error-length", args.map_error_length, "m")
-    _positive("--max-gap", args.max_gap, "s")
-    _positive("--max-speed", args.max_speed, "m/s")
+        check_positive("--map-error", args.map_error, "mGal", allow_zero=True)
+    check_positive("--map-error-length", args.map_error_length, "m")
+    check_positive("--max-gap", args.max_gap, "s")
+    check_positive("--max-speed", args.max_speed, "m/s")
     check_seed(args.seed)
     check_particles(args.particles)
     for name, value in (("--fix-every", args.fix_every), ("--n-fixes", args.n_fixes),
@@ -266,7 +260,7 @@ def cmd_navigate(args):
     args.map_error = (sigma_var if sigma_var is not None
                       else 3.0 if args.map_error is None else args.map_error)
     steps, n_missing, n_off = check_log(
-        track, grid, args.max_gap, args.max_speed,
+        track, grid, args.max_gap, args.max_speed, map_name=f"map --map {str(args.map)!r}",
         gaps=f"--method {args.method} needs every row (a tightly coupled --method, e.g. ukf, "
              "predicts through gaps)" if args.method in LOOSE_MATCHERS else None)
     segment_rows = args.n_fixes * args.fix_every

@@ -1,0 +1,70 @@
+"""Inputs found by the third issue-19 hunt (2026-12-07): a particle count that cannot fit
+in memory refused before compiling; navigate's map extent in words; match's --noise
+that hides the map named as the noise; library parameter names kept out of match's
+warnings; "exist(s)" made grammatical; and the odd files users have."""
+
+import numpy as np
+import pytest
+
+from jaxgrav.cli import filter_checks, main
+
+
+def _refused(capsys, argv, message):
+    """``argv`` exits 2 with one stderr line holding ``message``."""
+    assert main([str(a) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err, err
+    assert "\n" not in err and "Traceback" not in err, err
+    return err
+
+
+@pytest.fixture(scope="module")
+def filter_log(tmp_path_factory):
+    """A 6-row filter log over paper D's point masses (readings every 2 s)."""
+    path = tmp_path_factory.mktemp("log") / "f.csv"
+    t = np.arange(6) * 2.0
+    path.write_text("t,lat,lon,gravity\n" + "".join(
+        f"{a:g},{24.3 + 1e-5 * a:.7f},{122.74 + 1e-5 * a:.7f},{-30 + 0.1 * a:.3f}\n"
+        for a in t))
+    return path
+
+
+@pytest.mark.parametrize("method", ["pf", "rbpf"])
+def test_particles_beyond_the_machine_s_memory_are_refused(tmp_path, capsys, filter_log,
+                                                           method):
+    """``filter --method pf --particles 100000000`` compiled, then ran out of memory
+    (exit 1); now the count is refused first, naming the estimate and the memory."""
+    out = tmp_path / "o.csv"
+    _refused(capsys, ["filter", "--point-masses", "paper-d", "--track", filter_log, "--out",
+                      out, "--method", method, "--particles", 10**12],
+             "--particles 1000000000000 needs about 7e+05 GB (700 bytes a particle), more "
+             "than 80 % of this machine's ")
+    assert not out.exists()
+
+
+def test_particles_are_checked_against_the_memory_of_the_machine(tmp_path, capsys,
+                                                                 monkeypatch):
+    """On a 4 GB machine 10 million particles (7.5 GB) are refused, with the most that fit;
+    navigate's rbpf too, before its log is read."""
+    monkeypatch.setattr(filter_checks, "memory_bytes", lambda: 4e9)
+    out = tmp_path / "n.csv"
+    _refused(capsys, ["navigate", "--track", tmp_path / "none.csv", "--out", out, "--method",
+                      "rbpf", "--particles", 10_000_000],
+             "--particles 10000000 needs about 7.5 GB (700 bytes a particle), more than 80 % "
+             "of this machine's 4 GB of memory; expected at most 3857142 particles")
+    filter_checks.check_particles(3_857_142)  # the most that fit pass
+    monkeypatch.setattr(filter_checks, "memory_bytes", lambda: None)  # unknown: not checked
+    filter_checks.check_particles(10**12)
+
+
+def test_navigate_names_the_map_s_extent_in_words(tmp_path, capsys):
+    """A log off the map: "no row lies on the map (extent (124.0, 136.0, 24.0, 36.0))", a
+    Python tuple in west, east, south, north order; now the map and its extent in words."""
+    log = tmp_path / "v.csv"
+    log.write_text("t,lat,lon,v_east,v_north,gravity\n" + "".join(
+        f"{10 * i},{50 + 1e-4 * i:.4f},{130:.4f},1,1,5\n" for i in range(10)))
+    out = tmp_path / "n.csv"
+    _refused(capsys, ["navigate", "--track", log, "--out", out],
+             f"track file {str(log)!r}: no row lies on the map --map 'ryukyu' (lat 24..36, "
+             "lon 124..136)")
+    assert not out.exists()
