@@ -312,7 +312,7 @@ def cmd_filter(args):
     g, jac, eotvos_note = _eotvos(args, track, g)
     expected = map_at_ins(field, lat, lon) + offset
     check_readings(g_raw, expected, args.sigma_gravity, column="gravity", where=where,
-                   line=track.line,
+                   line=track.line, noise_option="--sigma-gravity",
                    correction=g - g_raw)
     level = offset_warning(g, expected, INS_GRADES[args.ins].gravimeter_sigma, me_sigma,
                            args.sigma_gravity)

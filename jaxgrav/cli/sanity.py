@@ -58,7 +58,7 @@ def _iqr(a):
 
 
 def check_readings(readings, expected, noise, *, column, where, unit="mGal", correction=0.0,
-                   missing_skipped=True, line=csv_line):
+                   missing_skipped=True, line=csv_line, noise_option="--noise"):
     """Refuse readings that cannot be anomalies of the map (see the module notes).
 
     Parameters
@@ -82,6 +82,8 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
         (matchers), and the messages say to remove the row.
     line : callable
         Row index → the file's line number (a reader's ``TrackTable.line``).
+    noise_option : str
+        The option that stated ``noise``, for messages (``filter``: ``--sigma-gravity``).
 
     Raises
     ------
@@ -123,6 +125,15 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
     spread = _iqr(zb)
     # the raw readings' spread too: a correction in mGal added to readings in m/s² hides it
     small = min(spread, _iqr(raw[both]))
+    if small < allowed / _SPREAD_FACTOR and small >= _iqr(eb) / _SPREAD_FACTOR:
+        # the readings vary as the map does: it is the noise that dwarfs them (--noise 1e30
+        # was met with "are the readings in other units?")
+        raise ValueError(
+            f"{noise_option} {float(noise):g} {unit} is implausibly large: column {column!r} of "
+            f"{where} varies by only {small:.3g} {unit} (interquartile range; the map by "
+            f"{_iqr(eb):.3g} {unit} along the track), where readings with that noise would "
+            f"vary by about {1.35 * float(noise):.3g} {unit}; give the sensor's noise, 1-sigma, "
+            f"in {unit}")
     for value, bad in ((small, small < allowed / _SPREAD_FACTOR),
                        (spread, spread > allowed * _SPREAD_FACTOR)):
         if bad:

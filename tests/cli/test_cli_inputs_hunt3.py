@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from jaxgrav.cli import filter_checks, main
+from jaxgrav.datasets import load_map
 
 
 def _refused(capsys, argv, message):
@@ -67,4 +68,33 @@ def test_navigate_names_the_map_s_extent_in_words(tmp_path, capsys):
     _refused(capsys, ["navigate", "--track", log, "--out", out],
              f"track file {str(log)!r}: no row lies on the map --map 'ryukyu' (lat 24..36, "
              "lon 124..136)")
+    assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def map_track(tmp_path_factory):
+    """A 30-fix track on the shipped ryukyu map (readings: the map + 1 mGal noise)."""
+    g = load_map("ryukyu")
+    t = np.arange(30) * 120.0
+    lat, lon = 30.2 + t * 4e-5, 130.4 + t * 4.5e-5
+    z = np.asarray(g.sample(lat, lon, "bicubic")) + np.random.default_rng(0).normal(size=30)
+    path = tmp_path_factory.mktemp("track") / "t.csv"
+    path.write_text("t,lat,lon,gravity\n" + "".join(
+        f"{a:g},{b:.6f},{c:.6f},{d:.4f}\n" for a, b, c, d in zip(t, lat, lon, z, strict=True)))
+    return path
+
+
+@pytest.mark.parametrize(("command", "option"), [("match", "--noise"),
+                                                 ("filter", "--sigma-gravity")])
+def test_a_noise_that_dwarfs_the_readings_is_named(tmp_path, capsys, map_track, command,
+                                                   option):
+    """``match --noise 1e30``: "... a factor 8.1e-30; are the readings in other units, e.g.
+    m/s²?"; now the noise is named as implausibly large."""
+    out = tmp_path / "o.out"
+    err = _refused(capsys, [command, "--map", "ryukyu", "--track", map_track, "--out", out,
+                            option, "1e30"],
+                   f"{option} 1e+30 mGal is implausibly large: column 'gravity' of --track "
+                   f"{str(map_track)!r} varies by only ")
+    assert "other units" not in err and "where readings with that noise would vary by about "\
+        "1.35e+30 mGal" in err
     assert not out.exists()
