@@ -20,6 +20,7 @@ from jaxgrav.cli.inputs import (
     track_map,
 )
 from jaxgrav.cli.match_missing import missing_counts, missing_message
+from jaxgrav.cli.match_status import status_text
 from jaxgrav.cli.sanity import check_readings, fit_check
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import eotvos_jit
@@ -231,7 +232,7 @@ def _cmd_match(args):
     # the implausible-fit bit's message is the fit check's own line, with its numbers; the
     # missing-node bit's says how many nodes and fixes met missing nodes and what was done
     messages = [missing_message(args, n_fix, gap, read_as, bool(result.accepted))
-                if bit == MASKED else msg for bit, msg in STATUS.items()
+                if bit == MASKED else status_text(bit) for bit in STATUS
                 if int(result.status) & bit and bit != IMPLAUSIBLE_FIT]
     if fit_warning is not None:
         messages = [*messages, fit_warning]

@@ -3,11 +3,16 @@ in memory refused before compiling; navigate's map extent in words; match's --no
 that hides the map named as the noise; library parameter names kept out of match's
 warnings; "exist(s)" made grammatical; and the odd files users have."""
 
+import re
+
 import numpy as np
 import pytest
 
 from jaxgrav.cli import filter_checks, main
+from jaxgrav.cli.match_status import status_text
 from jaxgrav.datasets import load_map
+from jaxgrav.match import IMPLAUSIBLE_FIT, STATUS
+from jaxgrav.match.api import MASKED
 
 
 def _refused(capsys, argv, message):
@@ -98,3 +103,23 @@ def test_a_noise_that_dwarfs_the_readings_is_named(tmp_path, capsys, map_track, 
     assert "other units" not in err and "where readings with that noise would vary by about "\
         "1.35e+30 mGal" in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("bit", sorted(set(STATUS) - {MASKED, IMPLAUSIBLE_FIT}))
+def test_match_status_texts_name_no_library_setting(bit):
+    """match's warnings said "ICCP did not converge within max_iter iterations", "(max_sigma_m,
+    or max_sigma_ratio ...)", "raise stencil_size": settings a command-line user cannot
+    give. (The missing-node and implausible-fit bits have the command's own lines.)"""
+    text = status_text(bit)
+    assert not re.search(r"\b[a-z]+_[a-z_]+\b|=", text), text
+
+
+@pytest.mark.long  # a dense match: 3-4 s with its compile
+def test_a_rejected_fix_is_said_in_plain_words(tmp_path, capsys, map_track):
+    """--noise 100 on 1 mGal readings: the fix is rejected as too wide, in plain words."""
+    out = tmp_path / "m.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(map_track), "--out", str(out),
+                 "--noise", "100"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: fix rejected: the readings do not pin the position down" in err, err
+    assert "max_sigma" not in err and "max_sigma" not in out.read_text()
