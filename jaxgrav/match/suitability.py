@@ -85,8 +85,15 @@ def _track_offsets(n_fixes, spacing_m, heading_deg):
 
 
 @jax.jit
-def _precision(prepared, lat0, lon0, north, east, whitener, bias_prior_sigma):
-    """Offset CRLB (2 × 2, m²) of the segments starting at ``lat0, lon0`` (P,)."""
+def _precision(grid, lat0, lon0, north, east, noise, map_sigma, length, bias_prior_sigma):
+    """Offset CRLB (2 × 2, m²) of the segments starting at ``lat0, lon0`` (P,).
+
+    One compiled program with the map's preparation and the track's covariance and
+    whitener (eagerly, these were ~80 programs compiled one by one: 4.5 s of a
+    ``jaxgrav suitability`` call).
+    """
+    prepared = prepare_map(grid)
+    whitener = gls_whitener(track_covariance(north, east, noise, map_sigma, length))
 
     def one(la, lo):
         m = meridian_radius(la)
@@ -223,12 +230,10 @@ def suitability(grid, *, heading_deg=45.0, n_fixes=30, spacing_m=1200.0, noise_m
         raise ValueError(f"window_cells={window_cells} is larger than the map ({ny} x {nx} "
                          "nodes)")
     north, east = _track_offsets(n_fixes, spacing_m, heading)
-    cov = track_covariance(jnp.asarray(north), jnp.asarray(east), noise, map_sigma, length)
-    whitener = gls_whitener(cov)
     lat0, lon0 = np.meshgrid(lat, np.asarray(grid.lon), indexing="ij")
-    crlb = np.asarray(_precision(prepare_map(grid), jnp.asarray(lat0.ravel()),
-                                 jnp.asarray(lon0.ravel()), jnp.asarray(north),
-                                 jnp.asarray(east), whitener, float(bias_prior_sigma)))
+    crlb = np.asarray(_precision(grid, jnp.asarray(lat0.ravel()), jnp.asarray(lon0.ravel()),
+                                 jnp.asarray(north), jnp.asarray(east), noise, map_sigma, length,
+                                 float(bias_prior_sigma)))
     crlb = crlb.reshape(ny, nx, 2, 2)
     # a flat or confounded window's Fisher matrix is singular: its inverse's diagonal can
     # come out negative, whose NaN the command reports as no_information
