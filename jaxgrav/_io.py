@@ -44,7 +44,8 @@ def check_outputs(paths, *, force=False, names=None, inputs=None):
     Raises
     ------
     FileExistsError
-        If a path exists and ``force`` is false.
+        If a path exists and ``force`` is false (naming every one that exists, after
+        the checks below have passed for all).
     ValueError
         If two options name the same file, an output is an input, a path is an
         existing folder, or its folder cannot be made or written (a file on the way,
@@ -53,6 +54,7 @@ def check_outputs(paths, *, force=False, names=None, inputs=None):
     names = [None] * len(paths) if names is None else list(names)
     seen = {Path(p).resolve(): f"the input {opt} {str(p)!r}"
             for opt, p in (inputs or {}).items() if p is not None and Path(p).is_file()}
+    existing = []
     for path, name in zip(paths, names, strict=True):
         if path is None:
             continue
@@ -66,8 +68,13 @@ def check_outputs(paths, *, force=False, names=None, inputs=None):
             raise ValueError(f"{label} is a folder; expected a file path")
         _check_folder(Path(path), label)
         if Path(path).exists() and not force:
-            raise FileExistsError(f"{label} exists; pass --force to overwrite it "
-                                  "(nothing was written)")
+            existing.append(label)
+    if existing:  # every one named, in one sentence ("a, b exist(s)" was the old wording)
+        listed = (existing[0] if len(existing) == 1
+                  else f"{', '.join(existing[:-1])} and {existing[-1]}")
+        verb, them = ("exists", "it") if len(existing) == 1 else ("exist", "them")
+        raise FileExistsError(f"{listed} {verb}; pass --force to overwrite {them} "
+                              "(nothing was written)")
 
 
 def _check_folder(path, label):

@@ -19,7 +19,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from jaxgrav import datasets
-from jaxgrav._io import atomic_output
+from jaxgrav._io import atomic_output, check_outputs
+from jaxgrav.cli.simulate import check_seed
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match.api import config_for
 from jaxgrav.montecarlo import paper_a_table1
@@ -93,9 +94,7 @@ def run_demo(out_dir, *, force=False, runs=200, seed=0, smoke=False):
     out_dir = Path(out_dir)
     if runs < 5:
         raise ValueError(f"runs must be at least 5; got {runs}")
-    existing = [str(out_dir / f) for f in OUTPUTS if (out_dir / f).exists()]
-    if existing and not force:
-        raise FileExistsError(f"{existing} exist; pass --force to overwrite them")
+    check_outputs([out_dir / f for f in OUTPUTS], force=force)  # every one that exists named
     t0 = time.perf_counter()
     key = jax.random.key(seed)
     maps = datasets.load("ryukyu")
@@ -167,4 +166,12 @@ def add_parser(subparsers):
 
 
 def _cmd_demo(args):
+    """Run ``jaxgrav demo``: its options checked by name (the library's ``runs must be at
+    least 5``, a negative seed run, an --out file ended in "[Errno 17] File exists")."""
+    if args.runs < 5:
+        raise ValueError(f"--runs must be at least 5 Monte Carlo runs; got {args.runs}")
+    check_seed(args.seed)
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise ValueError(f"--out {args.out!r} is a file; expected a folder (the demo writes "
+                         f"{', '.join(OUTPUTS)} into it)")
     run_demo(Path(args.out), force=args.force, runs=args.runs, seed=args.seed, smoke=args.smoke)

@@ -291,12 +291,9 @@ def cmd_montecarlo(args):
     targets = {"--out": out, "the PNG next to --out": png}
     if kind == "voyage":
         targets["the tracks PNG next to --out"] = tracks_path(out)
-    # folders, inputs and repeats first, whatever --force; then every existing output named
-    check_outputs(list(targets.values()), force=True, names=list(targets),
+    # folders, inputs and repeats first; then every existing output named
+    check_outputs(list(targets.values()), force=args.force, names=list(targets),
                   inputs={"--map": args.map, "--truth-map": args.truth_map})
-    existing = [str(p) for p in targets.values() if p.exists()]
-    if existing and not args.force:
-        raise FileExistsError(f"{', '.join(existing)} exist; pass --force to overwrite")
     if args.map is not None:
         map_name = str(args.map)
     else:  # the method's default (jaxgrav.montecarlo.build)

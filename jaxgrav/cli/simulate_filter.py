@@ -8,7 +8,6 @@ over a map (``--map``) whose readings may see a drawn map error (``--map-error S
 """
 
 import dataclasses
-from pathlib import Path
 
 import jax
 import numpy as np
@@ -138,12 +137,9 @@ def _check_readings(args, run, grid):
 def cmd_simulate_filter(args):
     """Run ``jaxgrav simulate-filter``: paper D's scenario over its three point masses."""
     check_seed(args.seed)
-    # folders, inputs and repeats first, whatever --force; then every existing output named
-    check_outputs([args.out, args.truth], force=True, names=["--out", "--truth"],
+    # folders, inputs and repeats first; then every existing output named
+    check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"],
                   inputs={"--map": args.map})
-    existing = [str(p) for p in (args.out, args.truth) if p is not None and Path(p).exists()]
-    if existing and not args.force:
-        raise FileExistsError(f"{', '.join(existing)} exist(s); pass --force to overwrite")
     if not (np.isfinite(args.dt) and args.dt > 0):
         raise ValueError(f"--dt must be a positive step (s); got {args.dt!r}")
     if args.reading_every < 1:

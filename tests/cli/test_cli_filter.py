@@ -287,7 +287,7 @@ def test_force_overwrites_and_its_absence_protects(sim, tmp_path, capsys):
     # simulate-filter refuses to overwrite either output without --force
     assert main(["simulate-filter", "--out", str(tmp_path / "new.csv"), "--truth", str(out),
                  "--minutes", "20", "--dt", "10", "--reading-every", "1"]) == 2
-    assert "exist(s); pass --force" in capsys.readouterr().err
+    assert f"--truth {str(out)!r} exists; pass --force" in capsys.readouterr().err
     assert not (tmp_path / "new.csv").exists()
 
 

@@ -341,8 +341,9 @@ REFUSED = [
     (["simulate-filter", "--out", "{d}/g.csv", "--reading-every", "100000"],
      "--reading-every 100000 leaves one reading in the 3601 rows of --minutes 120 every --dt "
      "2 s; expected at most 3600 rows between readings"),
-    # "['{d}/f.csv'] exist(s)": a Python list
-    (["simulate-filter", "--out", "{d}/f.csv"], "error: {d}/f.csv exist(s); pass --force"),
+    # "['{d}/f.csv'] exist(s)": a Python list (then "{d}/f.csv exist(s)", unnamed)
+    (["simulate-filter", "--out", "{d}/f.csv"],
+     "error: --out '{d}/f.csv' exists; pass --force to overwrite it (nothing was written)"),
     # a voyage given --fixes 3: "--fixes must be at least 5 per track" (--fixes 10 was
     # refused as not a voyage option)
     (["montecarlo", "--method", "voyage-ukf", "--runs", "2", "--out", "{d}/m.nc", "--fixes",

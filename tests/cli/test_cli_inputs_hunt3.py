@@ -123,3 +123,43 @@ def test_a_rejected_fix_is_said_in_plain_words(tmp_path, capsys, map_track):
     err = capsys.readouterr().err
     assert "warning: fix rejected: the readings do not pin the position down" in err, err
     assert "max_sigma" not in err and "max_sigma" not in out.read_text()
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    # "A, B exist(s); pass --force to overwrite": unnamed, "(s)"
+    (["simulate-filter", "--out", "{d}/a.csv", "--truth", "{d}/b.csv"],
+     "--out '{d}/a.csv' and --truth '{d}/b.csv' exist; pass --force to overwrite them "
+     "(nothing was written)"),
+    # simulate named only the first of two
+    (["simulate", "--out", "{d}/a.csv", "--truth", "{d}/b.csv"],
+     "--out '{d}/a.csv' and --truth '{d}/b.csv' exist; pass --force to overwrite them"),
+    (["simulate", "--out", "{d}/a.csv", "--truth", "{d}/new.csv"],
+     "--out '{d}/a.csv' exists; pass --force to overwrite it (nothing was written)"),
+])
+def test_existing_outputs_are_named_in_one_grammatical_sentence(tmp_path, capsys, argv,
+                                                                 message):
+    for name in ("a.csv", "b.csv"):
+        (tmp_path / name).write_text("keep\n")
+    _refused(capsys, [a.format(d=tmp_path) for a in argv], message.format(d=tmp_path))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.csv"]
+    assert (tmp_path / "a.csv").read_text() == "keep\n"
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    # the library's "runs must be at least 5; got 4"
+    (["--runs", "4"], "--runs must be at least 5 Monte Carlo runs; got 4"),
+    # ran (a negative seed repeats a large one), where every other command refuses it
+    (["--seed", "-1"], "--seed must be an integer from 0 to 9223372036854775807"),
+    # "[Errno 17] File exists: '.../t.csv'"
+    (["--out", "{d}/t.csv"], "--out '{d}/t.csv' is a file; expected a folder (the demo "
+                             "writes table1.md, summary.json, tracks.png into it)"),
+    # "['{d}/table1.md'] exist; pass --force to overwrite them": a Python list
+    (["--out", "{d}"], "'{d}/table1.md' exists; pass --force to overwrite it (nothing was "
+                       "written)"),
+])
+def test_demo_options_are_named(tmp_path, capsys, extra, message):
+    (tmp_path / "t.csv").write_text("t\n")
+    (tmp_path / "table1.md").write_text("keep\n")
+    _refused(capsys, ["demo", "--smoke", "--out", tmp_path / "new",
+                      *[a.format(d=tmp_path) for a in extra]], message.format(d=tmp_path))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv", "table1.md"]

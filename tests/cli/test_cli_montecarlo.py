@@ -117,7 +117,8 @@ def test_montecarlo_refuses_to_overwrite(mc_run, capsys):
     args = ["montecarlo", "--method", "dense", "--runs", "8", "--out", str(out)]
     assert main(args) == 2
     err = capsys.readouterr().err
-    assert f"{out}, {out.with_suffix('.png')} exist; pass --force" in err, err  # not a list
+    assert (f"--out {str(out)!r} and the PNG next to --out {str(out.with_suffix('.png'))!r} "
+            "exist; pass --force to overwrite them") in err, err  # not a list
 
 
 @pytest.mark.parametrize("args, match", [
