@@ -56,10 +56,17 @@ _OTHER_ATTRS = {
 
 _VOYAGE_ATTRS = {
     "err_m": dict(units="m", long_name="RMS radial error of the navigation solution over the "
-                                       "last hour"),
+                                       "last whole hour"),
     "ins_err_m": dict(units="m", long_name="RMS radial error of the free INS over the last "
-                                           "hour"),
+                                           "whole hour"),
     "nees": dict(units="1", long_name="mean position NEES over the voyage (2 expected)"),
+}
+
+_FILTER_ATTRS = {  # paper D's runs (scenarios.paper_d): the second hour's RMS
+    "err_m": dict(units="m", long_name="RMS horizontal error of the filter's position over "
+                                       "the second half of the run"),
+    "ins_err_m": dict(units="m", long_name="RMS horizontal error of the INS over the second "
+                                           "half of the run"),
 }
 
 
@@ -97,4 +104,6 @@ def variable_attrs(kind):
     out = {**FIX_METRIC_ATTRS, **_OTHER_ATTRS, **DRAW_ATTRS}
     if kind == "voyage":
         out.update(_VOYAGE_ATTRS)
+    elif kind == "filter":
+        out.update(_FILTER_ATTRS)
     return out

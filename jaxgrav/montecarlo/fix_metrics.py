@@ -1,8 +1,9 @@
 """Per-run fix metrics of a matcher: accepted, size of the fix's covariance, coverage.
 
 :func:`fix_metrics` is computed in JAX inside the vmapped run (one run, scalars), for
-every matcher: a matcher that gives no covariance (NaN, the chain and entropy/ICCP
-paths) reports ``sigma_max_m`` NaN and ``covered95`` NaN. :data:`FIX_METRIC_ATTRS`
+every matcher: a matcher that gives no covariance (NaN: ``entropy`` and ``iccp`` alone;
+``dense``, ``chains`` and ``entropy+iccp`` give one) reports ``sigma_max_m`` NaN and
+``covered95`` NaN. :data:`FIX_METRIC_ATTRS`
 holds the NetCDF ``units``/``long_name`` of the metrics, and
 :func:`fix_summary` the shares the summaries print (a rejected fix counts at the INS
 error: its track *is* the INS track).

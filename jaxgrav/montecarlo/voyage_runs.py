@@ -12,7 +12,8 @@ otherwise) whose readings see the map plus the run's map error, and returns, bes
 :data:`~jaxgrav.montecarlo.spec.METRICS`:
 
 ``ins_err_m``, ``err_m``   RMS radial error of the free INS and of the navigation solution
-                           over the last hour (m)
+                           over the last whole hour (m; the last bin of the hourly RMS, a
+                           partial hour at the end left out as there)
 ``nees``                   mean position NEES over the voyage (2 expected)
 ``hourly_err_m``, ``hourly_ins_err_m``   RMS per hour (m), shape ``(H,)``
 ``err_series_m``, ``ins_err_series_m``, ``sigma_series_m``   every 10 min: radial error
@@ -75,13 +76,16 @@ state for the filters, the GLS score for the matcher) or nothing."""
 def _metrics(voyage, nav, cov, dt, status):
     err = voyage_errors(voyage, nav, cov)
     every = round(SERIES_EVERY_S / dt)
-    last = round(3600.0 / dt)
     sigma = jnp.sqrt(jnp.trace(cov, axis1=1, axis2=2))
+    hourly_nav, hourly_free = hourly_rms(err.nav_m, dt), hourly_rms(err.free_m, dt)
+    if hourly_nav.shape[-1]:  # the last whole hour, as the hourly figures (a partial one
+        last_nav, last_free = hourly_nav[-1], hourly_free[-1]  # at the end is left out)
+    else:  # a voyage shorter than an hour: all of it
+        last_nav, last_free = (jnp.sqrt(jnp.mean(e[1:] ** 2)) for e in (err.nav_m, err.free_m))
     return dict(
-        ins_err_m=jnp.sqrt(jnp.mean(err.free_m[-last:] ** 2)),
-        err_m=jnp.sqrt(jnp.mean(err.nav_m[-last:] ** 2)),
+        ins_err_m=last_free, err_m=last_nav,
         status=status.astype(jnp.int32), nees=jnp.mean(err.nees),
-        hourly_err_m=hourly_rms(err.nav_m, dt), hourly_ins_err_m=hourly_rms(err.free_m, dt),
+        hourly_err_m=hourly_nav, hourly_ins_err_m=hourly_free,
         err_series_m=err.nav_m[::every], ins_err_series_m=err.free_m[::every],
         sigma_series_m=sigma[::every], readings_on_map=jnp.all(jnp.isfinite(voyage.gravity)),
         **scenario_draws(voyage.truth.lat, voyage.truth.lon, voyage.ins.lat, voyage.ins.lon))

@@ -82,6 +82,8 @@ def test_montecarlo_command_with_a_filter(tmp_path, capsys):
         assert ds.sizes["run"] == 2 and ds["nees"].dims == ("run",)
         assert ds["bound_m"].attrs["units"] == "m" and "Cramer-Rao" in ds["bound_m"].attrs[
             "long_name"]
+        assert "RMS" in ds["err_m"].attrs["long_name"]  # not a matcher's mean error
+        assert "second half" in ds["ins_err_m"].attrs["long_name"]
         assert ds.attrs["setting_field"] == "paper-d point masses"
         assert ds.attrs["setting_n_steps"] == N_FIXES
         spec = montecarlo_methods.build("ukf", n_fixes=N_FIXES)

@@ -57,6 +57,17 @@ def test_a_run_is_the_navigator_on_the_same_voyage(tight):
 
 
 @pytest.mark.long
+def test_the_last_hour_is_the_last_whole_hour_of_the_hourly_figures():
+    # 1.5 h: the hourly figures keep one whole hour (the partial one left out); the
+    # per-run last-hour errors were the last 3600 s (0.5-1.5 h) and disagreed with them
+    spec = montecarlo.build("voyage-ukf", None, map_error=MODEL, hours=1.5)
+    res = montecarlo.run(spec.fn, jax.random.key(3), 2, args=spec.args, progress=False)
+    assert res["hourly_err_m"].shape == (2, 1)
+    np.testing.assert_array_equal(res["err_m"], res["hourly_err_m"][:, -1])
+    np.testing.assert_array_equal(res["ins_err_m"], res["hourly_ins_err_m"][:, -1])
+
+
+@pytest.mark.long
 @pytest.mark.parametrize("kind", ["voyage-dense", "voyage-entropy+iccp"])
 def test_loose_runs_record_their_fix_events(kind):
     spec = montecarlo.build(kind, None, map_error=MODEL, hours=1.0)
@@ -93,7 +104,7 @@ def test_cli_voyage_method_writes_results_and_figure(tmp_path, capsys):
     assert ds["hourly_err_m"].shape == (2, 1) and ds.attrs["method"] == "voyage-ukf"
     assert "--hours 1" in ds.attrs["command"]
     assert ds["start_lat"].attrs["units"] == "degrees_north"
-    assert "last hour" in ds["err_m"].attrs["long_name"]
+    assert "last whole hour" in ds["err_m"].attrs["long_name"]
     bare = [v for v in ds.data_vars if not {"units", "long_name"} <= set(ds[v].attrs)]
     assert not bare
     ds.close()
