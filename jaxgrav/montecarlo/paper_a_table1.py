@@ -156,7 +156,7 @@ def summarize(out, success_deg=0.01):
     ins, err = out["ins_err_m"], out["err_m"]
     wu = out["work_unconstrained"]
     wc = out["work_constrained"]
-    failed = err > ins / 3
+    failed = ~np.isfinite(err) | (err > ins / 3)  # no error to show: failed
     slope = out["slope_mgal_km"]
     bands = {}
     for lo, hi in ((0, 1), (1, 2), (2, 4), (4, np.inf)):
@@ -176,8 +176,10 @@ def summarize(out, success_deg=0.01):
         error_m_median=float(np.median(err)),
         median_ratio=float(np.median(err) / np.median(ins)),
         success_rate=float(np.mean(err < success_deg * DEG_ARC_M)),
-        improved_rate=float(np.mean(err < ins)),
-        worse_rate=float(np.mean(err > ins * (1 + 1e-9))),  # a returned INS track: not worse
+        improved_rate=float(np.mean(err < ins * (1 - 1e-9))),  # a returned INS track: not
+        # improved (it equals the INS only to rounding, ~1e-13, either side)
+        worse_rate=float(np.mean(~np.isfinite(err) | (err > ins * (1 + 1e-9)))),  # NaN: worse,
+        # as in jaxgrav montecarlo's summary; a returned INS track: not worse
         accepted_rate=float(np.mean((np.asarray(out["status"]) & REJECTED_BITS) == 0)),
         coverage95_accepted=fix_summary(out).get("coverage95_accepted", float("nan")),
         flagged_rate=float(np.mean(out["status"] != 0)),

@@ -57,7 +57,7 @@ def test_fix_metrics_equal_numpy():
                                    np.sqrt(np.linalg.eigvalsh(cov).max()), rtol=1e-6)
         assert float(out["covered95"]) == float(inside)
         assert bool(out["accepted"])
-    # no covariance (the chain and entropy/ICCP paths): NaN, not False
+    # no covariance (entropy or ICCP alone): NaN, not False
     nan = fix_metrics(_Run(lat0, lon0), _Result(lat0, lon0, np.full((2, 2), np.nan), False))
     assert np.isnan(nan["sigma_max_m"]) and np.isnan(nan["covered95"])
     assert not bool(nan["accepted"])
@@ -128,3 +128,17 @@ def test_coverage_on_a_small_monte_carlo():
     assert s["worse_rate"] <= 0.2
     # rejected runs return the INS track
     np.testing.assert_allclose(out["err_m"][~acc], out["ins_err_m"][~acc], rtol=1e-6)
+
+
+def test_table_summary_counts_a_returned_ins_track_as_neither_improved_nor_worse():
+    # a rejected fix returns the INS track, equal to it only to rounding (~1e-13 either
+    # side): counted as improved, half of them were (5 of 7 rejected tracks in one batch)
+    ins = np.full(6, 1000.0)
+    err = np.array([1000.0 * (1 - 1e-13), 1000.0 * (1 + 1e-13), 500.0, 2000.0, 100.0, np.nan])
+    s = table_summarize(dict(ins_err_m=ins, err_m=err, status=np.zeros(6, int),
+                             work_unconstrained=np.ones(6), work_constrained=np.ones(6),
+                             slope_mgal_km=np.ones(6), score=np.zeros(6),
+                             true_score=np.zeros(6)))
+    assert s["improved_rate"] == pytest.approx(2 / 6)
+    assert s["worse_rate"] == pytest.approx(2 / 6)  # 2000 m, and no error (NaN): as the CLI
+    assert s["failure_rate"] == pytest.approx(5 / 6)  # > INS/3, and the NaN run
