@@ -106,7 +106,9 @@ def voyage_summary(nav_hourly, free_hourly, nees):
         voyages; 2 expected) and ``nees_median`` (median of the voyages' means). A
         figure the voyage does not have is NaN: ``last_over_second_hour`` needs three
         whole hours (with two, the last hour is the second), the hours from the second
-        need two.
+        need two. ``nonfinite_voyages``: voyages with a non-finite hourly error or NEES;
+        such a voyage counts as worse than the free INS, and makes the hourly RMS and
+        the NEES over voyages NaN (nothing is dropped unannounced).
     """
     nav, free = np.asarray(nav_hourly, float), np.asarray(free_hourly, float)
     nees = np.asarray(nees, float)
@@ -114,13 +116,16 @@ def voyage_summary(nav_hourly, free_hourly, nees):
     ratio = nav / free
     later = ratio[:, 1:]
     nan = float("nan")
+    nonfinite = ~np.all(np.isfinite(nav) & np.isfinite(free), axis=1) | ~np.isfinite(nees)
     return {"hourly_rms_nav_m": rms_nav.round(0).tolist(),
             "hourly_rms_free_m": rms_free.round(0).tolist(),
             "last_hour_ratio": float(rms_nav[-1] / rms_free[-1]),
             "last_over_second_hour": (float(rms_nav[-1] / rms_nav[1]) if rms_nav.size >= 3
                                       else nan),
-            "share_worse_than_free_some_hour": (float(np.mean(np.any(later > 1.0, axis=1)))
-                                                if later.shape[1] else nan),
+            "share_worse_than_free_some_hour": (
+                float(np.mean(np.any(~np.isfinite(later) | (later > 1.0), axis=1)))
+                if later.shape[1] else nan),
             "worst_hourly_ratio": float(later.max()) if later.size else nan,
             "nees": float(np.mean(nees)),
-            "nees_median": float(np.median(nees))}
+            "nees_median": float(np.median(nees)),
+            "nonfinite_voyages": int(np.sum(nonfinite))}
