@@ -174,7 +174,10 @@ def _check_simulate_args(args):
            "a positive INS drift of at most 5 degrees of arc")
     finite("--probability", args.probability, lambda v: 0 < v < 1,
            "a probability strictly between 0 and 1")
-    finite("--noise", args.noise, lambda v: v >= 0, "a reading noise >= 0 (mGal)")
+    # 1e30 was written (exit 0), readings that every command then refuses
+    finite("--noise", args.noise, lambda v: 0 <= v <= MAX_BIAS_MGAL,
+           f"a reading noise >= 0 and at most {MAX_BIAS_MGAL:g} mGal (a marine gravimeter's "
+           "is about 1)")
     finite("--bias", args.bias, lambda v: abs(v) <= MAX_BIAS_MGAL,
            f"a finite gravimeter bias within ±{MAX_BIAS_MGAL:g} mGal (a tied gravimeter is "
            "off by a few mGal; free-air anomalies stay within a few hundred)")

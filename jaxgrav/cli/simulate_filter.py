@@ -111,10 +111,12 @@ def _check_rows(args, n):
     """Refuse more than :data:`MAX_ROWS` rows, naming the longest ``--minutes`` at ``--dt``."""
     if n > MAX_ROWS:
         most = np.floor((MAX_ROWS - 1) * args.dt / 6.0) / 10.0  # down to 0.1 min
+        least_dt = 60.0 * args.minutes / (MAX_ROWS - 1) * 1.001  # rounded up
+        # "at this --dt at most --minutes 0" (below 0.1 min) named no usable value
+        shorter = f"at most --minutes {most:g} at this --dt, or " if most > 0 else ""
         raise ValueError(f"--minutes {args.minutes:g} at --dt {args.dt:g} s makes {n} rows; at "
                          f"most {MAX_ROWS} (a million take about 0.5 GB and 20 s to simulate, "
-                         f"70 MB of CSV): at this --dt at most --minutes {most:g}, or a longer "
-                         "--dt")
+                         f"70 MB of CSV): give {shorter}a --dt of at least {least_dt:.3g} s")
 
 
 def _check_readings(args, run, grid):

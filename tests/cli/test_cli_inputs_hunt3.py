@@ -163,3 +163,20 @@ def test_demo_options_are_named(tmp_path, capsys, extra, message):
     _refused(capsys, ["demo", "--smoke", "--out", tmp_path / "new",
                       *[a.format(d=tmp_path) for a in extra]], message.format(d=tmp_path))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv", "table1.md"]
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    # written with readings of noise 1e30 (exit 0), which every command then refuses
+    (["simulate", "--out", "{d}/s.csv", "--noise", "1e30"],
+     "--noise must be a reading noise >= 0 and at most 1000 mGal (a marine gravimeter's is "
+     "about 1); got 1e+30"),
+    # "at this --dt at most --minutes 0, or a longer --dt": no value that works
+    (["simulate-filter", "--out", "{d}/s.csv", "--dt", "1e-9"],
+     "makes 7200000000001 rows; at most 1000000 (a million take about 0.5 GB and 20 s to "
+     "simulate, 70 MB of CSV): give a --dt of at least 0.00721 s"),
+    (["simulate-filter", "--out", "{d}/s.csv", "--dt", "0.001"],
+     "give at most --minutes 16.6 at this --dt, or a --dt of at least 0.00721 s"),
+])
+def test_simulators_name_a_value_that_works(tmp_path, capsys, argv, message):
+    _refused(capsys, [a.format(d=tmp_path) for a in argv], message)
+    assert list(tmp_path.iterdir()) == []
