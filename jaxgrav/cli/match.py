@@ -28,6 +28,7 @@ from jaxgrav.match import (
     ENTROPY_HALF_SIZE,
     IMPLAUSIBLE_FIT,
     METHODS,
+    MIN_FIXES,
     STATUS,
     match_track,
 )
@@ -165,6 +166,10 @@ def _cmd_match(args):
     _check_match_args(args)
     _check_out(args)
     track = read_track(args, required=("t", "lat", "lon"))
+    n_rows = len(track["lat"])
+    if n_rows < MIN_FIXES:  # was the library's "the track is too short: 1 fixes", no file
+        raise ValueError(f"--track {str(args.track)!r} has {n_rows} row{'s' * (n_rows != 1)}; "
+                         f"match needs at least {MIN_FIXES} fixes")
     fields = [f for f in FIELD_UNITS if f in track]
     if not fields:
         raise ValueError(f"track file {str(args.track)!r} needs a 'gravity' (mGal) or "

@@ -92,7 +92,8 @@ def test_match_reads_a_user_netcdf_map(track, tmp_path):
     (lambda c: c["gravity"].__setitem__(3, np.nan),
      "column 'gravity' has 1 empty, NaN or inf cell(s), first on line 5"),
     (lambda c: c["lon"].__setitem__(slice(None), c["lon"] + 20.0), "leaves the map"),
-    (lambda c: [c.__setitem__(k, v[:3]) for k, v in list(c.items())], "too short"),
+    (lambda c: [c.__setitem__(k, v[:3]) for k, v in list(c.items())],
+     "has 3 rows; match needs at least 5 fixes"),
 ])
 def test_match_bad_tracks_get_clear_errors(track, tmp_path, capsys, edit, message):
     cols = read_track_csv(track / "t.csv")

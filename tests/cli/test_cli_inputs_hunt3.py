@@ -180,3 +180,12 @@ def test_demo_options_are_named(tmp_path, capsys, extra, message):
 def test_simulators_name_a_value_that_works(tmp_path, capsys, argv, message):
     _refused(capsys, [a.format(d=tmp_path) for a in argv], message)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_match_names_a_track_too_short(tmp_path, capsys):
+    """One row: "the track is too short: 1 fixes, need at least 5" (no file named)."""
+    track = tmp_path / "t.csv"
+    track.write_text("t,lat,lon,gravity\n0,30.2,130.4,5\n")
+    _refused(capsys, ["match", "--map", "ryukyu", "--track", track, "--out", tmp_path / "m.json"],
+             f"--track {str(track)!r} has 1 row; match needs at least 5 fixes")
+    assert list(tmp_path.iterdir()) == [track]
