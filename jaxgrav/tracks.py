@@ -316,8 +316,10 @@ def _check_columns(track, required, allow_nan, label):
         bad = ~np.isfinite(track[name])
         if name not in allow_nan and bad.any():
             i = int(np.flatnonzero(bad)[0])
+            what = ("missing, NaN or infinite" if np.isinf(track[name]).any()  # 1e400
+                    else "missing or NaN")
             raise ValueError(
-                f"{label}, column {name!r} has {int(bad.sum())} missing or NaN value(s), "
+                f"{label}, column {name!r} has {int(bad.sum())} {what} value(s), "
                 f"first on line {lines[i]}; this column must be complete")
         # "no reading" is an empty cell; inf was read as one
         inf = np.flatnonzero(np.isinf(track[name])) if name in allow_nan else ()

@@ -189,3 +189,17 @@ def test_match_names_a_track_too_short(tmp_path, capsys):
     _refused(capsys, ["match", "--map", "ryukyu", "--track", track, "--out", tmp_path / "m.json"],
              f"--track {str(track)!r} has 1 row; match needs at least 5 fixes")
     assert list(tmp_path.iterdir()) == [track]
+
+
+def test_an_infinite_position_is_called_so(tmp_path, capsys):
+    """lat 1e400 (read as inf) was reported as "1 missing or NaN value(s)"; and sample's
+    summary of one point said "1 samples"."""
+    track = tmp_path / "t.csv"
+    track.write_text("lat,lon\n1e400,130.1\n30.2,130.2\n")
+    _refused(capsys, ["sample", "--map", "ryukyu", "--track", track, "--out", tmp_path / "o.csv"],
+             f"track file {str(track)!r}, column 'lat' has 1 missing, NaN or infinite value(s), "
+             "first on line 2; this column must be complete")
+    track.write_text("lat,lon\n30.2,130.2\n")
+    assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out",
+                 str(tmp_path / "o.csv"), "--method", "bilinear"]) == 0
+    assert ": 1 sample of " in capsys.readouterr().out
