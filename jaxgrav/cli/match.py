@@ -129,7 +129,8 @@ def _cmd_sample(args):
     values = np.asarray(grid.sample(track["lat"], track["lon"], args.method, strict=True))
     cols[args.column] = values
     write_track_csv(args.out, cols, force=args.force)
-    print(f"wrote {args.out}: {values.size} sample{'s' * (values.size != 1)} of {grid.name or 'map'} ({args.method})")
+    print(f"wrote {args.out}: {values.size} sample{'s' * (values.size != 1)} of "
+          f"{grid.name or 'map'} ({args.method})")
     masked = ~np.isfinite(values)
     if masked.any():
         print(f"warning: {int(masked.sum())} of {values.size} points lie in map cells with a "
