@@ -14,6 +14,7 @@ from jaxgrav import dov
 from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import add_columns_option, read_track
 from jaxgrav.dov import DEFAULT_METHOD, HARMONIC_GAP_LIMIT, METHODS
+from jaxgrav.grid_files import check_netcdf_file
 from jaxgrav.tracks import write_track_csv
 
 __all__ = ["add_parser", "cmd_dov"]
@@ -126,7 +127,15 @@ def cmd_dov(args):
     track = read_track(args, required=("lat", "lon", "h"))
     heights = _parse_heights(args.layers) if args.layers else None
     if args.grid:
-        layers = dov.LayeredGrid.from_netcdf(args.grid)
+        # a CSV or an empty file ended in xarray's three-line "did not find a match in any
+        # of xarray's currently installed IO backends"; the layers' own errors named no option
+        check_netcdf_file(args.grid, what="--grid")
+        try:
+            layers = dov.LayeredGrid.from_netcdf(args.grid)
+        except ValueError as err:
+            text = str(err)
+            raise ValueError(f"--grid {text}" if text.startswith(repr(str(args.grid)))
+                             else f"--grid {args.grid!r}: {text}") from None
         own = np.asarray(layers.heights, float)
         # a count that differs was NumPy's "operands could not be broadcast together"
         if heights is not None and (len(heights) != own.size or not np.allclose(heights, own)):

@@ -7,6 +7,7 @@ import re
 
 import numpy as np
 import pytest
+import xarray as xr
 
 from jaxgrav.cli import filter_checks, main
 from jaxgrav.cli.match_status import status_text
@@ -203,3 +204,26 @@ def test_an_infinite_position_is_called_so(tmp_path, capsys):
     assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out",
                  str(tmp_path / "o.csv"), "--method", "bilinear"]) == 0
     assert ": 1 sample of " in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("content", "message"), [
+    # xarray's three lines: "did not find a match in any of xarray's currently installed IO
+    # backends ['netcdf4', 'scipy']. Consider explicitly selecting one ..."
+    ("lat,lon,xi\n35,110,1\n", "--grid '{p}' is not a NetCDF file (it is a text file "
+                                "starting 'lat,lon,xi', a CSV track or table?)"),
+    ("", "--grid '{p}' is not a NetCDF file (it is empty)"),
+    # "'{p}' needs dimensions ...": the option unnamed
+    (None, "--grid '{p}' needs dimensions ('height', 'lat', 'lon'); it has ('lat', 'lon')"),
+])
+def test_dov_names_a_grid_that_is_not_layers(tmp_path, capsys, content, message):
+    grid = tmp_path / "g.nc"
+    if content is None:
+        xr.Dataset({"xi": (("lat", "lon"), np.zeros((4, 4)))},
+                   coords={"lat": np.arange(4.0), "lon": np.arange(4.0)}).to_netcdf(grid)
+    else:
+        grid.write_text(content)
+    track = tmp_path / "t.csv"
+    track.write_text("lat,lon,h\n35.1,110.1,100\n35.2,110.2,200\n")
+    _refused(capsys, ["dov", "--track", track, "--out", tmp_path / "o.csv", "--grid", grid],
+             message.format(p=grid))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["g.nc", "t.csv"]
