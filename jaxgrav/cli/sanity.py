@@ -125,6 +125,11 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
     spread = _iqr(zb)
     # the raw readings' spread too: a correction in mGal added to readings in m/s² hides it
     small = min(spread, _iqr(raw[both]))
+    if np.ptp(raw[both]) == 0:  # was "varies by 0 ... are the readings in other units?"
+        raise ValueError(
+            f"{where}: column {column!r} holds one value, {raw_level:g}, in all {int(both.sum())}"
+            f" readings on the map, where the map varies by {_iqr(eb):.3g} {unit} along the "
+            "track: a placeholder column? expected the sensor's readings")
     if small < allowed / _SPREAD_FACTOR and small >= _iqr(eb) / _SPREAD_FACTOR:
         # the readings vary as the map does: it is the noise that dwarfs them (--noise 1e30
         # was met with "are the readings in other units?")

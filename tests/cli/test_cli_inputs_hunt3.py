@@ -227,3 +227,17 @@ def test_dov_names_a_grid_that_is_not_layers(tmp_path, capsys, content, message)
     _refused(capsys, ["dov", "--track", track, "--out", tmp_path / "o.csv", "--grid", grid],
              message.format(p=grid))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["g.nc", "t.csv"]
+
+
+def test_a_constant_readings_column_is_called_a_placeholder(tmp_path, capsys, map_track):
+    """A gravity column of zeros: "varies by 0 ... a factor 0; are the readings in other
+    units, e.g. m/s²?"; now it is named as one value throughout."""
+    track = tmp_path / "z.csv"
+    lines = map_track.read_text().splitlines()
+    track.write_text("\n".join([lines[0], *(ln.rsplit(",", 1)[0] + ",0" for ln in lines[1:])])
+                     + "\n")
+    err = _refused(capsys, ["match", "--map", "ryukyu", "--track", track, "--out",
+                            tmp_path / "m.json"],
+                   f"--track {str(track)!r}: column 'gravity' holds one value, 0, in all 30 "
+                   "readings on the map, where the map varies by ")
+    assert "a placeholder column? expected the sensor's readings" in err
