@@ -20,6 +20,7 @@ from jaxgrav.cli.inputs import (
     track_map,
 )
 from jaxgrav.cli.match_missing import missing_counts, missing_message
+from jaxgrav.cli.match_size import check_fixes_memory
 from jaxgrav.cli.match_status import status_text
 from jaxgrav.cli.sanity import check_readings, fit_check
 from jaxgrav.fields.map_error import map_error
@@ -171,6 +172,7 @@ def _cmd_match(args):
     if n_rows < MIN_FIXES:  # was the library's "the track is too short: 1 fixes", no file
         raise ValueError(f"--track {str(args.track)!r} has {n_rows} row{'s' * (n_rows != 1)}; "
                          f"match needs at least {MIN_FIXES} fixes")
+    check_fixes_memory(args.method, n_rows, f"--track {str(args.track)!r}")
     fields = [f for f in FIELD_UNITS if f in track]
     if not fields:
         raise ValueError(f"track file {str(args.track)!r} needs a 'gravity' (mGal) or "

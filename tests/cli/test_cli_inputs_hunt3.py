@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from jaxgrav.cli import filter_checks, main
+from jaxgrav.cli import filter_checks, main, match_size
 from jaxgrav.cli.match_status import status_text
 from jaxgrav.datasets import load_map
 from jaxgrav.match import IMPLAUSIBLE_FIT, STATUS
@@ -241,3 +241,21 @@ def test_a_constant_readings_column_is_called_a_placeholder(tmp_path, capsys, ma
                    f"--track {str(track)!r}: column 'gravity' holds one value, 0, in all 30 "
                    "readings on the map, where the map varies by ")
     assert "a placeholder column? expected the sensor's readings" in err
+
+
+@pytest.mark.parametrize("method", ["chains", "entropy+iccp"])
+def test_a_track_too_long_for_a_quadratic_matcher_is_refused(tmp_path, capsys, monkeypatch,
+                                                             method):
+    """20 000 fixes by chains or entropy+iccp: killed by the system at 13 GB (signal 9, no
+    message); now refused before any work, naming the fixes, the estimate and the cure.
+    Here on a 4 GB machine, 7000 fixes."""
+    monkeypatch.setattr(match_size, "memory_bytes", lambda: 4e9)
+    track = tmp_path / "t.csv"
+    track.write_text("t,lat,lon,gravity\n" + "".join(
+        f"{10 * i},{30 + 1e-5 * i:.6f},{130 + 1e-5 * i:.6f},{i % 7}\n" for i in range(7000)))
+    _refused(capsys, ["match", "--map", "ryukyu", "--track", track, "--out", tmp_path / "m.json",
+                      "--method", method],
+             f"--track {str(track)!r} has 7000 fixes: --method {method} needs about 3.54 GB "
+             "for them (its memory grows with the square of the fixes), more than 80 % of this "
+             "machine's 4 GB; match pieces of at most 6582 fixes, or use --method dense")
+    match_size.check_fixes_memory("dense", 10**6, "t")  # linear methods pass
