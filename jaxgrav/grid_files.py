@@ -201,8 +201,8 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
     ValueError
         Not a NetCDF file, no latitude/longitude coordinates (or 2-D ones), ``var``
         missing, ambiguous or not gridded, an extra dimension beyond ``ndim``, latitudes
-        outside ±90° or longitudes outside −360…720° (projected coordinates), or a
-        repeated, unsorted, irregular or non-finite coordinate node.
+        outside ±90° or longitudes outside −360…720° (projected coordinates), coordinates
+        declared in radians, or a repeated, unsorted, irregular or non-finite coordinate node.
     """
     check_netcdf_file(path)
     label = f"map {str(path)!r}"
@@ -230,6 +230,12 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
         lat = np.asarray(ds.variables[lat_name].values)
         lon = np.asarray(ds.variables[lon_name].values)
         units = str(da.attrs.get("units", ""))
+        for name in (lat_name, lon_name):  # were read as degrees: "off the map" at 0.5..2.3
+            declared = str(ds.variables[name].attrs.get("units", "")).strip()
+            if declared.lower() in ("rad", "radian", "radians"):
+                raise ValueError(f"{label}: coordinate {name!r} is in {declared!r}; jaxgrav "
+                                 "reads latitudes and longitudes in degrees: convert them "
+                                 "(x 180/pi) and set units 'degrees_north'/'degrees_east'")
     if values.dtype.kind not in "fc":
         values = values.astype(float)
     values = _undeclared_fills(values, label, var)

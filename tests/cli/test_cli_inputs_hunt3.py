@@ -259,3 +259,19 @@ def test_a_track_too_long_for_a_quadratic_matcher_is_refused(tmp_path, capsys, m
              "for them (its memory grows with the square of the fixes), more than 80 % of this "
              "machine's 4 GB; match pieces of at most 6582 fixes, or use --method dense")
     match_size.check_fixes_memory("dense", 10**6, "t")  # linear methods pass
+
+
+def test_a_map_in_radians_is_named(tmp_path, capsys):
+    """Coordinates declared in radians were read as degrees: "2 of 2 positions are off the
+    map (lat 0.514872..0.541052, lon 2.2602..2.28638)"; now the units are named."""
+    lat, lon = np.radians(np.linspace(29.5, 31.0, 7)), np.radians(np.linspace(129.5, 131, 7))
+    path = tmp_path / "m.nc"
+    xr.Dataset({"g": (("lat", "lon"), np.zeros((7, 7)))},
+               coords={"lat": ("lat", lat, {"units": "radians"}),
+                       "lon": ("lon", lon, {"units": "radians"})}).to_netcdf(path)
+    track = tmp_path / "t.csv"
+    track.write_text("lat,lon\n30.1,130.1\n30.2,130.2\n")
+    _refused(capsys, ["sample", "--map", path, "--track", track, "--out", tmp_path / "o.csv"],
+             f"map {str(path)!r}: coordinate 'lat' is in 'radians'; jaxgrav reads latitudes "
+             "and longitudes in degrees: convert them (x 180/pi)")
+    assert not (tmp_path / "o.csv").exists()
