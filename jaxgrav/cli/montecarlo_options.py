@@ -12,7 +12,7 @@ import math
 import sys
 
 from jaxgrav.cli.filter_checks import memory_bytes
-from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M, check_seed
+from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M, MAX_BIAS_MGAL, check_seed
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match import METHODS
 from jaxgrav.montecarlo import DEFAULT_CHUNK
@@ -70,10 +70,12 @@ def check_options(args):
     # 0 weights a filter's readings infinitely: its NEES reached 4e8, no flag; the
     # matchers take noiseless readings (paper A's) and weight them by at least 0.1 mGal
     zero_ok = args.method in MATCHER_METHODS
-    if args.noise is not None and not (math.isfinite(args.noise)
+    # 1e30 ran (every fix rejected, exit 0); simulate refuses above the same bound
+    if args.noise is not None and not (math.isfinite(args.noise) and args.noise <= MAX_BIAS_MGAL
                                        and (args.noise >= 0 if zero_ok else args.noise > 0)):
         raise ValueError(f"--noise must be a finite standard deviation {'>=' if zero_ok else '>'}"
-                         f" 0 (mGal) for --method {args.method}; got {args.noise:g}")
+                         f" 0 (mGal) for --method {args.method}, at most {MAX_BIAS_MGAL:g} (a "
+                         f"marine gravimeter's is about 1); got {args.noise:g}")
     if args.fixes is not None and args.method.startswith("voyage-"):
         raise ValueError(f"--fixes is not an option of {args.method}: a voyage runs over "
                          "--hours (default 12)")  # (--fixes 3 was refused as below 5)

@@ -177,6 +177,10 @@ def test_demo_options_are_named(tmp_path, capsys, extra, message):
      "simulate, 70 MB of CSV): give a --dt of at least 0.00721 s"),
     (["simulate-filter", "--out", "{d}/s.csv", "--dt", "0.001"],
      "give at most --minutes 16.6 at this --dt, or a --dt of at least 0.00721 s"),
+    # ran, every fix rejected (exit 0)
+    (["montecarlo", "--method", "dense", "--runs", "2", "--out", "{d}/m.nc", "--noise", "1e30"],
+     "--noise must be a finite standard deviation >= 0 (mGal) for --method dense, at most "
+     "1000 (a marine gravimeter's is about 1); got 1e+30"),
 ])
 def test_simulators_name_a_value_that_works(tmp_path, capsys, argv, message):
     _refused(capsys, [a.format(d=tmp_path) for a in argv], message)
