@@ -1,5 +1,6 @@
 """The voyage methods of ``jaxgrav montecarlo``: their options, summary lines and figure."""
 
+import json
 import math
 
 import jax
@@ -12,7 +13,7 @@ from jaxgrav.navigate import voyage_summary
 from jaxgrav.plot import plot_map, plot_voyage_errors, save_figure
 from jaxgrav.scenarios import INS_GRADES
 
-__all__ = ["plot_voyage_tracks", "plot_voyages", "tracks_path", "voyage_lines",
+__all__ = ["plot_voyage_tracks", "plot_voyages", "tracks_path", "voyage_attrs", "voyage_lines",
            "voyage_options"]
 
 
@@ -64,6 +65,14 @@ def voyage_lines(results):
     parts.append(f"NEES mean {vs['nees']:.2f} (median {vs['nees_median']:.2f}, 2 expected)")
     return (f"hourly RMS (km) navigation: {_km(vs['hourly_rms_nav_m'])}; free INS: "
             f"{_km(vs['hourly_rms_free_m'])}\n" + ", ".join(parts))
+
+
+def voyage_attrs(results):
+    """The voyage figures of :func:`~jaxgrav.navigate.voyage_summary` as NetCDF attributes
+    (``summary_voyage_*``; the hourly lists as JSON text)."""
+    vs = voyage_summary(results["hourly_err_m"], results["hourly_ins_err_m"], results["nees"])
+    return {f"summary_voyage_{k}": json.dumps(v) if isinstance(v, list) else v
+            for k, v in vs.items()}
 
 
 def plot_voyages(results, title, path, force):

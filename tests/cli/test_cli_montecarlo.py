@@ -15,7 +15,7 @@ import jaxgrav
 from jaxgrav import Grid, montecarlo
 from jaxgrav.cli import bench, main
 from jaxgrav.cli.bench import default_bench_dir
-from jaxgrav.cli.montecarlo import summarize
+from jaxgrav.cli.montecarlo import format_summary, summarize
 from jaxgrav.cli.montecarlo_options import check_options
 from jaxgrav.montecarlo import methods as montecarlo_methods
 from jaxgrav.sim import DEG_ARC_M
@@ -56,6 +56,8 @@ def test_montecarlo_writes_netcdf_png_and_summary(mc_run, capsys):
         assert a["setting_n_fixes"] == 20 and a["setting_drift_deg"] == 0.03
         assert 0 <= a["summary_failure_rate"] <= 1
         assert a["summary_err_m_p50"] == pytest.approx(float(np.median(ds["err_m"])))
+        assert a["summary_worse_rate"] == pytest.approx(  # the printed "worse than the INS"
+            float(np.mean(ds["err_m"] > ds["ins_err_m"] * (1 + 1e-9))))
         assert "--runs 8 --chunk 4" in a["command"]
         _every_variable_described(ds)
         # each run's draws: where its true track starts and the INS offset there
@@ -260,6 +262,24 @@ def test_summarize_failure_bounds():
     assert summarize(res, "filter")["failure_rate"] == pytest.approx(0.0)  # none > 315
     with pytest.raises(ValueError, match="kind must be one of"):
         summarize(res, "smoother")
+
+
+def test_summary_says_what_it_leaves_out_and_what_a_voyage_flags():
+    res = dict(ins_err_m=np.array([300.0, 300, 300]), err_m=np.array([90.0, np.nan, 310]),
+               status=np.zeros(3, np.int32), nees=np.array([2.0, np.inf, 1.5]))
+    s = summarize(res, "filter")
+    assert (s["nonfinite"], s["nees_nonfinite"]) == (1, 1)
+    assert s["nees"]["mean"] == pytest.approx(1.75)  # finite runs only, as said below
+    assert ("runs left out of the statistics above: 1 without a finite error (failures), "
+            "1 without a finite NEES") in format_summary(s)
+    assert "left out" not in format_summary(summarize(dict(res, err_m=np.full(3, 90.0),
+                                                           nees=np.ones(3)), "filter"))
+    # a loosely coupled voyage: bit 0 of its status is the "accepted" fix event
+    loose = dict(res, err_m=np.full(3, 90.0), status=np.array([1, 1 | 8, 2]),
+                 fix_event=np.zeros((3, 2), np.int32))
+    assert summarize(loose, "voyage")["flagged_rate"] == pytest.approx(2 / 3)
+    tight = {k: v for k, v in loose.items() if k != "fix_event"}  # filter flags: all count
+    assert summarize(tight, "voyage")["flagged_rate"] == 1.0
 
 
 @slow

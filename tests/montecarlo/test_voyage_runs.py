@@ -105,6 +105,11 @@ def test_cli_voyage_method_writes_results_and_figure(tmp_path, capsys):
     assert "--hours 1" in ds.attrs["command"]
     assert ds["start_lat"].attrs["units"] == "degrees_north"
     assert "last whole hour" in ds["err_m"].attrs["long_name"]
+    # the printed voyage figures are stored too
+    assert ds.attrs["summary_voyage_last_hour_ratio"] == pytest.approx(
+        float(np.sqrt(np.mean(ds["hourly_err_m"][:, -1] ** 2))
+              / np.sqrt(np.mean(ds["hourly_ins_err_m"][:, -1] ** 2))))
+    assert ds.attrs["summary_voyage_nonfinite_voyages"] == 0
     bare = [v for v in ds.data_vars if not {"units", "long_name"} <= set(ds[v].attrs)]
     assert not bare
     ds.close()
