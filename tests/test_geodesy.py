@@ -163,3 +163,14 @@ def test_enu_basis_is_a_right_handed_orthonormal_frame_with_up_normal_to_the_ell
     lo = np.stack(geodesy.geodetic_to_ecef(lat, lon, 0.0))
     hi = np.stack(geodesy.geodetic_to_ecef(lat, lon, 1.0))
     np.testing.assert_allclose(hi - lo, up, atol=1e-8)
+
+
+def test_compiled_host_forms_equal_the_functions():
+    """eotvos_jacobian_jit and local_offsets_m_jit: the functions as one program each."""
+    lat, ve, vn = np.array([0.0, 30.0, -60.0]), np.array([5.0, -3.0, 0.0]), np.array([1.0, 2, -4])
+    np.testing.assert_allclose(geodesy.eotvos_jacobian_jit(lat, ve, vn),
+                               geodesy.eotvos_jacobian(lat, ve, vn), rtol=1e-12)
+    lon = np.array([179.9, -10.0, 45.0])
+    got = geodesy.local_offsets_m_jit(lat + 0.01, lon + 0.2, lat, lon)
+    want = geodesy.local_offsets_m(lat + 0.01, lon + 0.2, lat, lon)
+    np.testing.assert_allclose(got, want, rtol=1e-12)

@@ -95,7 +95,7 @@ from jaxgrav.filters.api import (
     filter_track,
 )
 from jaxgrav.filters.map_state import map_error_state
-from jaxgrav.geodesy import eotvos_jacobian, eotvos_jit
+from jaxgrav.geodesy import eotvos_jacobian_jit, eotvos_jit
 from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.time_steps import at_rows, on_steps, time_steps
 from jaxgrav.tracks import write_track_csv
@@ -243,7 +243,7 @@ def _eotvos(args, track, g):
     if not args.eotvos_corrected:
         g = g + np.asarray(eotvos_jit(lat, ve, vn))
     how = "given corrected" if args.eotvos_corrected else "Eötvös-corrected here"
-    jac = np.asarray(eotvos_jacobian(lat, ve, vn))
+    jac = np.asarray(eotvos_jacobian_jit(lat, ve, vn))
     return g, jac, f"readings {how} with the INS velocity, its error in the filter"
 
 

@@ -28,7 +28,7 @@ import math
 import numpy as np
 from scipy.special import chdtrc
 
-from jaxgrav.geodesy import local_offsets_m
+from jaxgrav.geodesy import local_offsets_m_jit
 from jaxgrav.match.result import P_IMPLAUSIBLE, fit_p_value
 from jaxgrav.tracks import csv_line
 
@@ -203,7 +203,7 @@ def check_positions(track, *, where):
         return
     line = getattr(track, "line", csv_line)  # the file's own lines (comments skipped)
     dt = np.diff(t)
-    north, east = (np.asarray(a) for a in local_offsets_m(lat[1:], lon[1:], lat[:-1], lon[:-1]))
+    north, east = (np.asarray(a) for a in local_offsets_m_jit(lat[1:], lon[1:], lat[:-1], lon[:-1]))
     miss_n = north - 0.5 * (vn[1:] + vn[:-1]) * dt
     miss_e = east - 0.5 * (ve[1:] + ve[:-1]) * dt
     miss = np.hypot(miss_n, miss_e)
