@@ -31,7 +31,7 @@ def grid(smooth_grid):
 
 
 @pytest.mark.long
-def test_map_error_zero_is_todays_white_score_bit_for_bit(grid):
+def test_map_error_zero_is_todays_white_score(grid):
     gold = json.loads(GOLDEN.read_text())  # written by the matcher before map errors existed
     for name, nrot in (("plain", 1), ("rot", 3)):
         # the golden runs searched the whole square (config_for's default is now the disc)
@@ -42,8 +42,11 @@ def test_map_error_zero_is_todays_white_score_bit_for_bit(grid):
             r = match_dense(grid, run.ins_lat, run.ins_lon, run.readings, cfg)
             for f in FIELDS:
                 got, want = np.asarray(getattr(r, f)), np.asarray(gold[name][s][f])
-                if nrot == 1:
-                    np.testing.assert_array_equal(got, want, err_msg=f"{name} {s} {f}")
+                if nrot == 1:  # to rounding: the suite compiles with XLA's elemental
+                    # emitters (conftest), the golden runs had its defaults (bit for bit
+                    # then; now the scores up to 1.3e-13 relative apart)
+                    np.testing.assert_allclose(got, want, rtol=1e-10, atol=0,
+                                               err_msg=f"{name} {s} {f}")
                 else:  # XLA fuses the refinement's sums otherwise: last-bit differences
                     # (since the missing-node fallback after the refinement changed the
                     # program around it: up to 5e-10 relative, 0.5 µm in an offset)

@@ -145,7 +145,7 @@ def test_cli_writes_netcdf_and_png_and_refuses_overwrite(tmp_path, capsys):
         assert ds["precision_m"].dims == ("lat", "lon")
     assert out.with_suffix(".png").stat().st_size > 10_000
     assert main(["suitability", "--map", "ryukyu", "--out", str(out)]) == 2
-    assert "exists; pass --force" in capsys.readouterr().err
+    assert "exist; pass --force" in capsys.readouterr().err  # the NetCDF and its PNG
     assert main(["suitability", "--map", "ryukyu", "--out", str(tmp_path / "b.nc"),
                  "--fixes", "1"]) == 2
     err = capsys.readouterr().err
