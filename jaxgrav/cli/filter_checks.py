@@ -20,10 +20,25 @@ from jaxgrav.filters import map_anomaly
 from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.tracks import csv_line
 
-__all__ = ["BYTES_PER_PARTICLE", "MIN_PARTICLES", "OFFSET_FLOOR", "OFFSET_SIGMAS",
-           "check_on_map", "check_particles", "check_positive", "check_sigma", "extent_text",
-           "gradient_at_ins", "information_warning", "ins_label", "map_at_ins", "memory_bytes",
-           "offset_warning"]
+__all__ = [
+    "BYTES_PER_PARTICLE",
+    "MEMORY_SHARE",
+    "MIN_PARTICLES",
+    "OFFSET_FLOOR",
+    "OFFSET_SIGMAS",
+    "check_on_map",
+    "check_particles",
+    "check_positive",
+    "check_sigma",
+    "extent_text",
+    "gradient_at_ins",
+    "information_warning",
+    "ins_label",
+    "map_at_ins",
+    "memory_budget",
+    "memory_bytes",
+    "offset_warning",
+]
 
 MIN_PARTICLES = 100
 """Fewest particles ``--particles`` takes (``filter`` and ``navigate``): with fewer, the
@@ -49,12 +64,25 @@ its moved, drawn, weighed and resampled copies), rounded up."""
 _BASELINE_BYTES = 0.5e9  # a filter run with few particles (JAX, the map, the program)
 
 
+MEMORY_SHARE = 0.8
+"""Share of the machine's physical memory a command's run may need; beyond it the
+command refuses before any work (``--particles``, ``match``'s fixes, ``montecarlo``'s
+``--fixes`` and ``--chunk``)."""
+
+
 def memory_bytes():
     """The machine's physical memory (bytes), or None where it cannot be read."""
     try:
         return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (ValueError, OSError, AttributeError):
         return None
+
+
+def memory_budget():
+    """``(budget, total)``: :data:`MEMORY_SHARE` of the machine's memory and the memory
+    itself (bytes), or ``(None, None)`` where it cannot be read (nothing is refused)."""
+    total = memory_bytes()
+    return (MEMORY_SHARE * total, total) if total else (None, None)
 
 
 def check_particles(n):
@@ -65,9 +93,9 @@ def check_particles(n):
     if n < MIN_PARTICLES:
         raise ValueError(f"--particles must be an integer >= {MIN_PARTICLES} (fewer cannot "
                          f"represent the position's posterior); got {n}")
-    total, need = memory_bytes(), _BASELINE_BYTES + BYTES_PER_PARTICLE * n
-    if total and need > 0.8 * total:
-        fit = int((0.8 * total - _BASELINE_BYTES) // BYTES_PER_PARTICLE)
+    (budget, total), need = memory_budget(), _BASELINE_BYTES + BYTES_PER_PARTICLE * n
+    if budget and need > budget:
+        fit = int((budget - _BASELINE_BYTES) // BYTES_PER_PARTICLE)
         raise ValueError(f"--particles {n} needs about {need / 1e9:.3g} GB "
                          f"({BYTES_PER_PARTICLE:g} bytes a particle), more than 80 % of this "
                          f"machine's {total / 1e9:.3g} GB of memory; expected at most "

@@ -5,7 +5,7 @@
 :func:`check_fixes_memory` refuses such a track before anything is compiled.
 """
 
-from jaxgrav.cli.filter_checks import memory_bytes
+from jaxgrav.cli.filter_checks import memory_budget
 
 __all__ = ["BYTES_PER_FIX_SQUARED", "check_fixes_memory"]
 
@@ -32,13 +32,13 @@ def check_fixes_memory(method, n_fixes, where):
     where : str
         The track, for the message (e.g. ``"--track 'T.csv'"``).
     """
-    per, total = BYTES_PER_FIX_SQUARED.get(method), memory_bytes()
-    if per is None or not total:
+    per, (budget, total) = BYTES_PER_FIX_SQUARED.get(method), memory_budget()
+    if per is None or not budget:
         return
     need = _BASELINE_BYTES + per * float(n_fixes) ** 2
-    if need <= 0.8 * total:
+    if need <= budget:
         return
-    most = int(((0.8 * total - _BASELINE_BYTES) / per) ** 0.5)
+    most = int(((budget - _BASELINE_BYTES) / per) ** 0.5)
     raise ValueError(f"{where} has {n_fixes} fixes: --method {method} needs about "
                      f"{need / 1e9:.3g} GB for them (its memory grows with the square of the "
                      f"fixes), more than 80 % of this machine's {total / 1e9:.3g} GB; match "

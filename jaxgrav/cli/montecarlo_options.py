@@ -11,7 +11,7 @@ map is known; :func:`told_from_args` parses ``--told-map-error SIGMA[,L]``.
 import math
 import sys
 
-from jaxgrav.cli.filter_checks import memory_bytes
+from jaxgrav.cli.filter_checks import memory_budget
 from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M, MAX_BIAS_MGAL, check_seed
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match import METHODS
@@ -115,12 +115,12 @@ def _check_devices(args):
 
 def _check_memory(args):
     """Refuse a ``--fixes`` or ``--chunk`` given that needs more than 80 % of the memory."""
-    per_fix, total = BYTES_PER_FIX.get(args.method), memory_bytes()
-    if per_fix is None or not total or (args.fixes is None and args.chunk is None):
+    per_fix, (budget, total) = BYTES_PER_FIX.get(args.method), memory_budget()
+    if per_fix is None or not budget or (args.fixes is None and args.chunk is None):
         return  # a voyage (sized by --hours), a method registered elsewhere, the defaults
     fixes = args.fixes or _DEFAULT_FIXES.get(args.method, 721)
     chunk = min(args.chunk or DEFAULT_CHUNK, args.runs)
-    room = 0.8 * total - _BASELINE_BYTES
+    room = budget - _BASELINE_BYTES
     need = per_fix * fixes * chunk
     if need <= room:
         return

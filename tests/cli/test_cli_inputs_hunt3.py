@@ -253,7 +253,7 @@ def test_a_track_too_long_for_a_quadratic_matcher_is_refused(tmp_path, capsys, m
     """20 000 fixes by chains or entropy+iccp: killed by the system at 13 GB (signal 9, no
     message); now refused before any work, naming the fixes, the estimate and the cure.
     Here on a 4 GB machine, 7000 fixes."""
-    monkeypatch.setattr(match_size, "memory_bytes", lambda: 4e9)
+    monkeypatch.setattr(filter_checks, "memory_bytes", lambda: 4e9)
     track = tmp_path / "t.csv"
     track.write_text("t,lat,lon,gravity\n" + "".join(
         f"{10 * i},{30 + 1e-5 * i:.6f},{130 + 1e-5 * i:.6f},{i % 7}\n" for i in range(7000)))
