@@ -23,11 +23,17 @@ from jaxgrav.scenarios.paper_a import check_region_covered, max_fixes, placement
 from jaxgrav.sim import DEG_ARC_M, rayleigh_quantile
 from jaxgrav.tracks import write_track_csv
 
-__all__ = ["DEFAULT_MAP_ERROR_LENGTH_M", "MAX_BIAS_MGAL", "MAX_SEED", "add_map_error_options",
-           "add_parser", "check_seed", "describe_map_error", "map_error_from_args"]
+__all__ = ["DEFAULT_MAP_ERROR_LENGTH_M", "MAX_BIAS_MGAL", "MAX_MAP_ERROR", "MAX_SEED",
+           "add_map_error_options", "add_parser", "check_seed", "check_simulated_map_error",
+           "describe_map_error", "map_error_from_args"]
 
 DEFAULT_MAP_ERROR_LENGTH_M = 10000.0
 """Default correlation length of ``--map-error`` (m)."""
+
+MAX_MAP_ERROR = 1000.0
+"""Largest ``--map-error`` a simulator draws (map units): a marine gravity map is off by a
+few mGal, a magnetic map by tens of nT; 1e9 was drawn and written (exit 0), readings that
+every command then refused."""
 
 MAX_SEED = 2**63 - 1
 """Largest ``--seed``: ``jax.random.key`` takes a signed 64-bit integer."""
@@ -42,6 +48,15 @@ def check_seed(seed):
     if not 0 <= seed <= MAX_SEED:
         raise ValueError(f"--seed must be an integer from 0 to {MAX_SEED} (2**63 - 1); "
                          f"got {seed}")
+
+
+def check_simulated_map_error(sigma):
+    """ValueError naming ``--map-error`` when a simulator is asked to draw a map error
+    above :data:`MAX_MAP_ERROR` (``sigma`` None or at most that passes)."""
+    if sigma is not None and sigma > MAX_MAP_ERROR:
+        raise ValueError(f"--map-error must be at most {MAX_MAP_ERROR:g} (map units; a marine "
+                         "gravity map's error is a few mGal, a magnetic map's tens of nT); "
+                         f"got {sigma:g}")
 
 
 def add_map_error_options(parser):
@@ -78,8 +93,8 @@ def map_error_from_args(args, grid, *, allow_nan=False):
         None for a perfect map (``--map-error`` absent or 0 and no ``--truth-map``).
 
     Raises ValueError naming the option and the value for a negative, NaN or infinite
-    σ or L, both ``--map-error`` and ``--truth-map``, or a truth map that does not cover
-    the map.
+    σ or L, a σ above :data:`MAX_MAP_ERROR`, both ``--map-error`` and ``--truth-map``, or
+    a truth map that does not cover the map.
     """
     sigma, length = args.map_error, args.map_error_length
     if sigma is not None and not (math.isfinite(sigma) and sigma >= 0):
@@ -88,6 +103,7 @@ def map_error_from_args(args, grid, *, allow_nan=False):
     if length is not None and not (math.isfinite(length) and length > 0):
         raise ValueError(f"--map-error-length must be a finite correlation length > 0 (m); "
                          f"got {length!r}")
+    check_simulated_map_error(sigma)
     if args.truth_map is not None:
         if sigma is not None:
             raise ValueError(f"--truth-map {args.truth_map} and --map-error {sigma!r} exclude "

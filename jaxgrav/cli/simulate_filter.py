@@ -14,7 +14,7 @@ import numpy as np
 
 from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import map_error_args
-from jaxgrav.cli.simulate import check_seed
+from jaxgrav.cli.simulate import check_seed, check_simulated_map_error
 from jaxgrav.cli.voyage import MAX_HOURS
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import map_error
@@ -153,6 +153,7 @@ def cmd_simulate_filter(args):
                          f"rows of --minutes {args.minutes:g} every --dt {args.dt:g} s; expected "
                          f"at most {n - 1} rows between readings")
     me_sigma, me_length = map_error_args(args)
+    check_simulated_map_error(me_sigma)
     if args.map is None:
         if me_sigma > 0:
             raise ValueError("--map-error needs --map (paper D's point masses have no grid to "
