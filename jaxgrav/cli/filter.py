@@ -168,7 +168,8 @@ def add_parser(subparsers):
                    metavar="RATIO",
                    help="no-harm guard (ukf, ekf, gsf, pf, rbpf; not pmf): apply the position "
                         "correction only "
-                        "in directions whose variance fell below RATIO times the free INS's "
+                        "in directions whose variance fell below RATIO (0 < RATIO <= 1) times the "
+                        "free INS's "
                         "(default 0.2 when given without a value; chosen on paper D's "
                         "experiment); elsewhere the output stays the INS with its own 1-σ")
     f.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
@@ -288,9 +289,12 @@ def cmd_filter(args):
     if args.guard is not None:
         if args.method == "pmf":
             raise ValueError("--guard applies to ukf, ekf, gsf, pf and rbpf; got --method pmf")
-        if not (np.isfinite(args.guard) and args.guard > 0):
-            raise ValueError(f"--guard must be a positive variance ratio (posterior / free "
-                             f"INS, e.g. 0.2); got {args.guard!r}")
+        # the posterior / free variance ratio is at most 1: --guard 1e9 held nothing back
+        # while the summary said "no-harm guard 1e+09" (1 is the filter itself, tested)
+        if not (np.isfinite(args.guard) and 0 < args.guard <= 1):
+            raise ValueError(f"--guard must be a positive variance ratio of at most 1 "
+                             f"(posterior / free INS, e.g. 0.2; at 1 the guard holds nothing "
+                             f"back, and no ratio exceeds 1); got {args.guard:g}")
     missing = check_missing_option(args)
     if args.particles is not None:
         if args.method not in PARTICLES:

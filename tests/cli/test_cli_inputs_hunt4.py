@@ -28,3 +28,26 @@ def test_a_simulated_map_error_beyond_any_map_s_is_refused(tmp_path, capsys, arg
              "--map-error must be at most 1000 (map units; a marine gravity map's error is a "
              "few mGal, a magnetic map's tens of nT); got 1e+09")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.fixture(scope="module")
+def filter_log(tmp_path_factory):
+    """A 6-row filter log over paper D's point masses (readings every 2 s)."""
+    path = tmp_path_factory.mktemp("log") / "f.csv"
+    path.write_text("t,lat,lon,gravity\n" + "".join(
+        f"{2 * i},{24.3 + 2e-5 * i:.7f},{122.74 + 2e-5 * i:.7f},{-30 + 0.2 * i:.3f}\n"
+        for i in range(6)))
+    return path
+
+
+@pytest.mark.parametrize("ratio", ["1.5", "1e9"])
+def test_a_guard_ratio_above_one_is_refused(tmp_path, capsys, filter_log, ratio):
+    """``filter --guard 1e9``: the posterior/free variance ratio never exceeds 1, so the guard
+    held nothing back while the summary said "no-harm guard 1e+09" (exit 0)."""
+    out = tmp_path / "o.csv"
+    _refused(capsys, ["filter", "--point-masses", "paper-d", "--track", filter_log, "--out",
+                      out, "--guard", ratio],
+             "--guard must be a positive variance ratio of at most 1 (posterior / free INS, "
+             "e.g. 0.2; at 1 the guard holds nothing back, and no ratio exceeds 1); got "
+             f"{float(ratio):g}")
+    assert not out.exists()
