@@ -62,6 +62,7 @@ from jaxgrav.cli.filter_checks import (
     check_on_map,
     check_particles,
     check_sigma,
+    check_sigma_pos,
     gradient_at_ins,
     information_warning,
     ins_label,
@@ -270,6 +271,7 @@ def cmd_filter(args):
     for name, value in (("--sigma-pos", args.sigma_pos), ("--sigma-vel", args.sigma_vel),
                         ("--sigma-gravity", args.sigma_gravity)):
         check_sigma(name, value)
+    check_sigma_pos(args.sigma_pos)
     check_seed(args.seed)
     where = f"--track {str(args.track)!r}"
     track = read_track(args, required=("t", "lat", "lon", "gravity"), allow_nan=("gravity",))

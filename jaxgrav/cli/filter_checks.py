@@ -22,6 +22,7 @@ from jaxgrav.tracks import csv_line
 
 __all__ = [
     "BYTES_PER_PARTICLE",
+    "MAX_SIGMA_POS_M",
     "MEMORY_SHARE",
     "MIN_PARTICLES",
     "OFFSET_FLOOR",
@@ -30,6 +31,7 @@ __all__ = [
     "check_particles",
     "check_positive",
     "check_sigma",
+    "check_sigma_pos",
     "extent_text",
     "gradient_at_ins",
     "information_warning",
@@ -127,6 +129,22 @@ def check_positive(name, value, unit, allow_zero=False):
     if not (math.isfinite(value) and (value >= 0 if allow_zero else value > 0)):
         sign = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"{name} must be a finite value {sign} ({unit}); got {value!r}")
+
+
+MAX_SIGMA_POS_M = 200e3
+"""Largest ``--sigma-pos`` (m) of ``filter`` and ``navigate``: an INS unaided for days
+drifts tens of km; 1e9 m (and 1e6 m on a map) ran with every sigma point off the map,
+exit 0 with a 1-sigma of 1e9 m."""
+
+
+def check_sigma_pos(value):
+    """ValueError naming ``--sigma-pos`` above :data:`MAX_SIGMA_POS_M` (checked positive
+    and finite first by the command)."""
+    if value > MAX_SIGMA_POS_M:
+        raise ValueError(f"--sigma-pos must be at most {MAX_SIGMA_POS_M:.0f} m (200 km: a "
+                         "prior wider than that puts the filter's sigma points, particles or "
+                         "cells hundreds of km away, off any regional map; an INS unaided "
+                         f"for days drifts tens of km); got {value:g}")
 
 
 def check_sigma(name, value):

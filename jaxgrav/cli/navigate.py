@@ -61,6 +61,7 @@ from jaxgrav.cli.filter_checks import (
     MIN_PARTICLES,
     check_particles,
     check_positive,
+    check_sigma_pos,
     extent_text,
     gradient_at_ins,
     information_warning,
@@ -231,6 +232,7 @@ def cmd_navigate(args):
     """Run ``navigate`` (see the module notes)."""
     unused = _method_options(args)
     check_positive("--sigma-pos", args.sigma_pos, "m")
+    check_sigma_pos(args.sigma_pos)
     check_positive("--sigma-vel", args.sigma_vel, "m/s")
     check_positive("--noise", args.noise, "mGal")
     if args.map_error is not None:

@@ -51,3 +51,17 @@ def test_a_guard_ratio_above_one_is_refused(tmp_path, capsys, filter_log, ratio)
              "e.g. 0.2; at 1 the guard holds nothing back, and no ratio exceeds 1); got "
              f"{float(ratio):g}")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["filter", "navigate"])
+def test_a_position_prior_wider_than_any_map_is_refused(tmp_path, capsys, filter_log, command):
+    """``--sigma-pos 1e9`` ran with every sigma point off the map: filter wrote a 1-sigma of
+    1e9 m, navigate "0 reading(s) used", both exit 0."""
+    out = tmp_path / "o.csv"
+    source = ["--point-masses", "paper-d"] if command == "filter" else []
+    _refused(capsys, [command, *source, "--track", filter_log, "--out", out, "--sigma-pos",
+                      "1e9"],
+             "--sigma-pos must be at most 200000 m (200 km: a prior wider than that puts the "
+             "filter's sigma points, particles or cells hundreds of km away, off any regional "
+             "map; an INS unaided for days drifts tens of km); got 1e+09")
+    assert not out.exists()
