@@ -12,7 +12,7 @@ import numpy as np
 
 from jaxgrav import dov
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import add_columns_option, read_track
+from jaxgrav.cli.inputs import add_columns_option, check_out_format, read_track
 from jaxgrav.dov import DEFAULT_METHOD, HARMONIC_GAP_LIMIT, METHODS
 from jaxgrav.grid_files import check_netcdf_file
 from jaxgrav.tracks import write_track_csv
@@ -124,6 +124,7 @@ def cmd_dov(args):
     """Run ``jaxgrav dov`` (x64 is enabled by the CLI entry point)."""
     check_outputs([args.out], force=args.force, names=["--out"],
                   inputs={"--track": args.track, "--grid": args.grid})
+    check_out_format(args.out, "CSV")
     track = read_track(args, required=("lat", "lon", "h"))
     heights = _parse_heights(args.layers) if args.layers else None
     if args.grid:

@@ -74,6 +74,7 @@ from jaxgrav.cli.inputs import (
     add_map_error_var_option,
     add_missing_option,
     check_missing_option,
+    check_out_format,
     kept_columns,
     map_error_args,
     read_track,
@@ -268,6 +269,7 @@ def cmd_filter(args):
     check_outputs([args.out], force=args.force, names=["--out"],
                   inputs={"--track": args.track, "--map": args.map,
                           "--point-masses": args.point_masses})
+    check_out_format(args.out, "CSV")
     for name, value in (("--sigma-pos", args.sigma_pos), ("--sigma-vel", args.sigma_vel),
                         ("--sigma-gravity", args.sigma_gravity)):
         check_sigma(name, value)

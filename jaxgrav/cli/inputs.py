@@ -14,6 +14,7 @@ its nodes missing.
 """
 
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -29,11 +30,18 @@ __all__ = [
     "add_missing_option",
     "check_map_field",
     "check_missing_option",
+    "check_out_format",
     "kept_columns",
     "map_error_args",
     "read_track",
     "track_map",
 ]
+
+OUT_FORMATS = {".json": "JSON", ".csv": "CSV", ".nc": "NetCDF", ".nc4": "NetCDF",
+               ".grd": "NetCDF", ".png": "PNG", ".pdf": "PDF", ".xlsx": "Excel", ".md": "Markdown"}
+"""What a user expects in a file by its suffix (:func:`check_out_format`)."""
+
+_SUFFIX = {"JSON": ".json", "CSV": ".csv", "NetCDF": ".nc", "Markdown": ".md"}
 
 MAX_MISSING = 0.9
 """Largest fraction of missing (NaN) nodes accepted in the map region a track needs."""
@@ -173,6 +181,19 @@ def check_map_field(grid, field, map_name):
         print(f"warning: --map {str(map_name)!r} declares units {grid.units!r}, not "
               f"{_UNIT_NAMES[field]}: its values are read as {FIELD_UNITS[field]}",
               file=sys.stderr)
+
+
+def check_out_format(path, writes, option="--out"):
+    """ValueError naming ``option`` when ``path``'s suffix promises another format than the
+    ``writes`` one (``"JSON"``, ``"CSV"``, ``"NetCDF"`` or ``"Markdown"``): ``match --out
+    result.csv`` wrote JSON into it, exit 0. Suffixes of no known format pass."""
+    path = Path(path)
+    fmt = OUT_FORMATS.get(path.suffix.lower())
+    if fmt is not None and fmt != writes:
+        raise ValueError(f"{option} {str(path)!r} names a{'n' if fmt[0] in 'AEIOU' else ''} "
+                         f"{fmt} file, but this command writes {writes} there; give a name "
+                         f"ending {_SUFFIX[writes]}, e.g. "
+                         f"{str(path.with_suffix(_SUFFIX[writes]))!r}")
 
 
 def map_error_args(args):

@@ -16,6 +16,7 @@ from jaxgrav.cli.inputs import (
     add_columns_option,
     add_map_error_var_option,
     check_map_field,
+    check_out_format,
     read_track,
     track_map,
 )
@@ -114,7 +115,7 @@ def add_parsers(sub):
 def _cmd_sample(args):
     if not args.column.strip():
         raise ValueError(f"--column must be a non-empty column name; got {args.column!r}")
-    _check_out(args)
+    _check_out(args, "CSV")
     track = read_track(args, required=("lat", "lon"))
     cols = track.columns()
     taken = {c.lower(): c for c in (*cols, *track.renamed.values())}
@@ -139,10 +140,12 @@ def _cmd_sample(args):
               f"their {args.column!r} cells are left empty", file=sys.stderr)
 
 
-def _check_out(args):
-    """``--out`` before anything is computed: not a folder, not an input, no clobbering."""
+def _check_out(args, writes):
+    """``--out`` before anything is computed: not a folder, not an input, no clobbering,
+    its suffix fits ``writes`` (``"JSON"`` or ``"CSV"``)."""
     check_outputs([args.out], force=args.force, names=["--out"],
                   inputs={"--track": args.track, "--map": args.map})
+    check_out_format(args.out, writes)
 
 
 def _drift_radius(args, track):
@@ -166,7 +169,7 @@ def _drift_radius(args, track):
 
 def _cmd_match(args):
     _check_match_args(args)
-    _check_out(args)
+    _check_out(args, "JSON")
     track = read_track(args, required=("t", "lat", "lon"))
     n_rows = len(track["lat"])
     if n_rows < MIN_FIXES:  # was the library's "the track is too short: 1 fixes", no file

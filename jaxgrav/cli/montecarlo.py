@@ -15,6 +15,7 @@ import numpy as np
 
 from jaxgrav import __version__, montecarlo
 from jaxgrav._io import check_outputs
+from jaxgrav.cli.inputs import check_out_format
 from jaxgrav.cli.montecarlo_options import check_drift, check_options, told_from_args
 from jaxgrav.cli.montecarlo_summary import (
     fix_lines,
@@ -186,6 +187,7 @@ def cmd_montecarlo(args):
     # folders, inputs and repeats first; then every existing output named
     check_outputs(list(targets.values()), force=args.force, names=list(targets),
                   inputs={"--map": args.map, "--truth-map": args.truth_map})
+    check_out_format(out, "NetCDF")
     if args.map is not None:
         map_name = str(args.map)
     else:  # the method's default (jaxgrav.montecarlo.build)

@@ -72,6 +72,7 @@ from jaxgrav.cli.inputs import (
     add_map_error_var_option,
     add_missing_option,
     check_missing_option,
+    check_out_format,
     kept_columns,
     read_track,
     track_map,
@@ -253,6 +254,7 @@ def cmd_navigate(args):
         raise ValueError(f"--stride must be at most --n-fixes {args.n_fixes}; got {args.stride}")
     check_outputs([args.out], force=args.force, names=["--out"],
                   inputs={"--track": args.track, "--map": args.map})
+    check_out_format(args.out, "CSV")
     if unused is not None:
         print(unused, file=sys.stderr)
     track = read_track(args, ("t", "lat", "lon", "v_east", "v_north", "gravity"),

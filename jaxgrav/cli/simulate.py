@@ -13,6 +13,7 @@ import numpy as np
 
 from jaxgrav import executables
 from jaxgrav._io import check_outputs
+from jaxgrav.cli.inputs import check_out_format
 from jaxgrav.constants import KNOT
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import TruthGrid, map_error, truth_grid
@@ -244,6 +245,9 @@ def _cmd_simulate(args):
     _check_simulate_args(args)
     check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"],
                   inputs={"--map": args.map, "--truth-map": args.truth_map})
+    check_out_format(args.out, "CSV")
+    if args.truth is not None:
+        check_out_format(args.truth, "CSV", "--truth")
     grid = load_map(args.map, args.var, allow_nan=True)
     w, e, s, n = grid.extent
     scen = MatchingScenario(

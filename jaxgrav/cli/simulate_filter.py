@@ -13,7 +13,7 @@ import jax
 import numpy as np
 
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import map_error_args
+from jaxgrav.cli.inputs import check_out_format, map_error_args
 from jaxgrav.cli.simulate import check_seed, check_simulated_map_error
 from jaxgrav.cli.voyage import MAX_HOURS
 from jaxgrav.datasets import load_map
@@ -142,6 +142,9 @@ def cmd_simulate_filter(args):
     # folders, inputs and repeats first; then every existing output named
     check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"],
                   inputs={"--map": args.map})
+    check_out_format(args.out, "CSV")
+    if args.truth is not None:
+        check_out_format(args.truth, "CSV", "--truth")
     if not (np.isfinite(args.dt) and args.dt > 0):
         raise ValueError(f"--dt must be a positive step (s); got {args.dt!r}")
     if args.reading_every < 1:

@@ -34,6 +34,7 @@ import xarray as xr
 from matplotlib.colors import LogNorm
 
 from jaxgrav._io import atomic_output, check_outputs
+from jaxgrav.cli.inputs import check_out_format
 from jaxgrav.constants import DEG
 from jaxgrav.datasets import load_map
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
@@ -94,6 +95,7 @@ def cmd_suitability(args):
                          f"next to it with suffix .png: give --out {str(png.with_suffix('.nc'))!r}")
     check_outputs([args.out, png], force=args.force, names=["--out", "its PNG"],
                   inputs={"--map": args.map})
+    check_out_format(args.out, "NetCDF")
     grid = load_map(args.map, args.var, allow_nan=True)
     if grid.n_missing == np.asarray(grid.values).size:
         raise ValueError(f"--map {args.map} has no value: every node is missing (NaN)")

@@ -33,6 +33,7 @@ import numpy as np
 
 from jaxgrav import executables
 from jaxgrav._io import check_outputs
+from jaxgrav.cli.inputs import check_out_format
 from jaxgrav.cli.simulate import (
     add_map_error_options,
     check_seed,
@@ -94,6 +95,9 @@ def cmd_simulate_voyage(args):
                              f"(>= {2 * scenario.dt / 3600.0:.3g} h); got {args.hours!r}") from None
     check_outputs([args.out, args.truth], force=args.force, names=["--out", "--truth"],
                   inputs={"--map": args.map, "--truth-map": args.truth_map})
+    check_out_format(args.out, "CSV")
+    if args.truth is not None:
+        check_out_format(args.truth, "CSV", "--truth")
     grid = load_map(args.map, args.var, allow_nan=True)  # missing nodes: checked on the route
     try:
         check_region_covered(grid, scenario.region, f"--map {args.map}")

@@ -65,3 +65,34 @@ def test_a_position_prior_wider_than_any_map_is_refused(tmp_path, capsys, filter
              "filter's sigma points, particles or cells hundreds of km away, off any regional "
              "map; an INS unaided for days drifts tens of km); got 1e+09")
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["match", "--map", "ryukyu", "--track", "{d}/t.csv", "--out", "{d}/r.csv"],
+     "--out '{d}/r.csv' names a CSV file, but this command writes JSON there; give a name "
+     "ending .json, e.g. '{d}/r.json'"),
+    (["sample", "--map", "ryukyu", "--track", "{d}/t.csv", "--out", "{d}/r.nc"],
+     "--out '{d}/r.nc' names a NetCDF file, but this command writes CSV there"),
+    (["filter", "--point-masses", "paper-d", "--track", "{d}/t.csv", "--out", "{d}/r.json"],
+     "--out '{d}/r.json' names a JSON file, but this command writes CSV there; give a name "
+     "ending .csv, e.g. '{d}/r.csv'"),
+    (["navigate", "--track", "{d}/t.csv", "--out", "{d}/r.xlsx"],
+     "--out '{d}/r.xlsx' names an Excel file, but this command writes CSV there"),
+    (["dov", "--track", "{d}/t.csv", "--out", "{d}/r.json"], "--out '{d}/r.json' names a JSON"),
+    (["simulate", "--out", "{d}/r.csv", "--truth", "{d}/truth.json"],
+     "--truth '{d}/truth.json' names a JSON file, but this command writes CSV there"),
+    (["simulate-filter", "--out", "{d}/r.nc"], "--out '{d}/r.nc' names a NetCDF file"),
+    (["simulate-voyage", "--out", "{d}/r.json"], "--out '{d}/r.json' names a JSON file"),
+    (["suitability", "--map", "ryukyu", "--out", "{d}/r.csv"],
+     "--out '{d}/r.csv' names a CSV file, but this command writes NetCDF there; give a name "
+     "ending .nc, e.g. '{d}/r.nc'"),
+    (["montecarlo", "--method", "dense", "--runs", "5", "--out", "{d}/r.json"],
+     "--out '{d}/r.json' names a JSON file, but this command writes NetCDF there"),
+])
+def test_an_output_named_for_another_format_is_refused(tmp_path, capsys, argv, message):
+    """``match --out result.csv`` wrote JSON into result.csv (exit 0), ``filter --out r.json``
+    a CSV, ``montecarlo --out r.json`` NetCDF (and r.png): files other tools then misread.
+    A suffix of no known format (``.out``, ``.txt``, none) is still taken."""
+    (tmp_path / "t.csv").write_text("t,lat,lon,gravity,h\n0,30.2,130.4,5,0\n")
+    _refused(capsys, [a.format(d=tmp_path) for a in argv], message.format(d=tmp_path))
+    assert [p.name for p in tmp_path.iterdir()] == ["t.csv"]
