@@ -42,17 +42,34 @@ def add_parser(subparsers):
     return d
 
 
+LOWEST_LAYER_M = -11000.0
+"""Lowest ``--layers`` height (m): the deepest ocean floor; -1e9 ended in the harmonic
+synthesis's "h must be > -radius = -6378136.3 m", naming no option."""
+
+
 def _parse_heights(text):
+    """The heights (m) of ``--layers TEXT``: comma-separated, finite, strictly ascending,
+    none below :data:`LOWEST_LAYER_M`; an empty item (``0,,20000``: a height lost in
+    typing, which was dropped) is refused."""
+    items = [v.strip() for v in text.split(",")]
+    if "" in items and any(items):
+        raise ValueError(f"--layers {text!r}: item {items.index('') + 1} is empty; expected "
+                         "comma-separated heights in m, e.g. 0,10000,20000")
     try:
-        vals = [float(v) for v in text.split(",") if v.strip()]
+        vals = [float(v) for v in items if v]
     except ValueError:
         raise ValueError(f"--layers must be comma-separated heights in m; got {text!r}") from None
     if len(vals) < 2:
         raise ValueError(f"--layers needs at least 2 heights; got {text!r}")
+    got = ", ".join(f"{v:g}" for v in vals)
     if not all(math.isfinite(v) for v in vals):
-        raise ValueError(f"--layers {text}: heights must be finite numbers (m); got {vals}")
+        raise ValueError(f"--layers {text}: heights must be finite numbers (m); got {got}")
     if any(b <= a for a, b in itertools.pairwise(vals)):
-        raise ValueError(f"--layers {text}: heights must be strictly ascending (m); got {vals}")
+        raise ValueError(f"--layers {text}: heights must be strictly ascending (m); got {got}")
+    if vals[0] < LOWEST_LAYER_M:
+        raise ValueError(f"--layers {text}: heights must be at least {LOWEST_LAYER_M:g} m (the "
+                         f"deepest ocean floor; heights are in m above the ellipsoid); got "
+                         f"{vals[0]:g}")
     return vals
 
 
@@ -156,7 +173,8 @@ def cmd_dov(args):
         cols[name] = vals[i]
     write_track_csv(args.out, cols, force=args.force)
     print(f"wrote {args.out}: {vals.shape[1]} fixes, {', '.join(layers.channels)} (arcsec) "
-          f"by {args.method} from layers at {np.asarray(layers.heights).tolist()} m")
+          f"by {args.method} from layers at "
+          f"{', '.join(f'{h:g}' for h in np.asarray(layers.heights))} m")
     warning = _gap_warning(layers, track["h"], args.method, args.grid is not None)
     if warning is not None:
         print(f"warning: {warning}", file=sys.stderr)

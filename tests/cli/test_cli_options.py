@@ -289,10 +289,16 @@ def dov_track(tmp_path_factory):
     ("0", "--layers needs at least 2 heights; got '0'"),
     ("a,b", "--layers must be comma-separated heights in m; got 'a,b'"),
     ("0;10000", "--layers must be comma-separated heights in m; got '0;10000'"),
-    ("10000,0", "--layers 10000,0: heights must be strictly ascending (m); got [10000.0, 0.0]"),
+    ("10000,0", "--layers 10000,0: heights must be strictly ascending (m); got 10000, 0"),
     ("0,10000,10000", "--layers 0,10000,10000: heights must be strictly ascending"),
     ("0,nan,20000", "--layers 0,nan,20000: heights must be finite numbers (m)"),
     ("0,inf", "--layers 0,inf: heights must be finite numbers (m)"),
+    # issue 19 (helper-56): a lost height was dropped and the rest used (exit 0)
+    ("0,,20000", "--layers '0,,20000': item 2 is empty; expected comma-separated heights in "
+                 "m, e.g. 0,10000,20000"),
+    # the synthesis's "h must be > -radius = -6378136.3 m; got -1000000000.0": no option
+    ("-1e9,0,20000", "--layers -1e9,0,20000: heights must be at least -11000 m (the deepest "
+                     "ocean floor; heights are in m above the ellipsoid); got -1e+09"),
 ])
 def test_dov_layers_values(dov_track, tmp_path, capsys, layers, message):
     out = tmp_path / "d.csv"
