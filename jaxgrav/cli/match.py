@@ -179,7 +179,8 @@ def _cmd_match(args):
     fields = [f for f in FIELD_UNITS if f in track]
     if not fields:
         raise ValueError(f"track file {str(args.track)!r} needs a 'gravity' (mGal) or "
-                         f"'magnetic' (nT) column; it has {sorted(track)}")
+                         f"'magnetic' (nT) column; it has {', '.join(track.order)} (name "
+                         "the readings' column with --columns gravity=COLUMN)")
     radius_deg = _drift_radius(args, track)
     grid, sigma_var = track_map(args, track, radius_deg * DEG_ARC_M,
                                 sigma_given=args.map_error > 0, field=None)
