@@ -50,7 +50,8 @@ from jaxgrav.cli.cache import enable_cache
 from jaxgrav.fields import egm2008
 from jaxgrav.grid_files import UndeclaredFillWarning
 
-__all__ = ["NEGATIVE_LIST", "build_parser", "joined_negative_lists", "main"]
+__all__ = ["NEGATIVE_LIST", "build_parser", "check_special_outputs", "joined_negative_lists",
+           "main"]
 
 
 def _enable_x64():
@@ -152,6 +153,25 @@ def joined_negative_lists(argv):
     return out
 
 
+def check_special_outputs(args):
+    """ValueError when ``--out`` or ``--truth`` names an existing device, pipe or socket.
+
+    Outputs are written whole to a temporary file and moved into place, so ``--out
+    /dev/stdout --force`` (or a FIFO) was replaced by a regular file: as root, /dev/null
+    and /dev/stdout themselves. A missing path, a regular file (or a link to one) and a
+    folder (the demo's ``--out``) pass.
+    """
+    for name in ("out", "truth"):
+        value = getattr(args, name, None)
+        if value is None:
+            continue
+        path = Path(value)
+        if path.exists() and not (path.is_file() or path.is_dir()):
+            raise ValueError(f"--{name} {str(value)!r} is a device, pipe or socket, not a "
+                             "regular file: jaxgrav writes each output whole and then moves "
+                             "it into place, which would replace it; give another path")
+
+
 def main(argv=None):
     """Entry point of the ``jaxgrav`` command; returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -161,6 +181,7 @@ def main(argv=None):
     default = warnings.formatwarning
     warnings.formatwarning = functools.partial(_one_line, default=default)
     try:
+        check_special_outputs(args)
         args.func(args)
     except (ValueError, FileExistsError, FileNotFoundError, ImportError) as err:
         if args.debug:

@@ -1,6 +1,9 @@
 """Inputs found by the fourth issue-19 hunt (2026-12-07, helper-56): a simulated map error
 beyond any real map's refused by the four simulators."""
 
+import os
+import stat
+
 import pytest
 
 from jaxgrav.cli import main
@@ -109,3 +112,23 @@ def test_a_track_without_readings_names_its_columns_in_words(tmp_path, capsys):
                    "column; it has t, lat, lon, FAA (name the readings' column with --columns "
                    "gravity=COLUMN)")
     assert "[" not in err and not out.exists()
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs named pipes")
+@pytest.mark.parametrize("argv", [
+    ["sample", "--map", "ryukyu", "--track", "{d}/t.csv", "--out", "{d}/pipe", "--force"],
+    ["simulate", "--out", "{d}/s.csv", "--truth", "{d}/pipe", "--force"],
+])
+def test_an_output_that_is_a_pipe_or_device_is_never_replaced(tmp_path, capsys, argv):
+    """``--out /dev/stdout --force`` (or a named pipe) was replaced by a regular file, the
+    output written whole and moved into place: as root, /dev/stdout and /dev/null
+    themselves. Tried on a named pipe here, never on /dev."""
+    (tmp_path / "t.csv").write_text("lat,lon\n30.2,130.4\n")
+    os.mkfifo(tmp_path / "pipe")
+    option = "--out" if argv[0] == "sample" else "--truth"
+    _refused(capsys, [a.format(d=tmp_path) for a in argv],
+             f"{option} '{tmp_path}/pipe' is a device, pipe or socket, not a regular file: "
+             "jaxgrav writes each output whole and then moves it into place, which would "
+             "replace it; give another path")
+    assert stat.S_ISFIFO((tmp_path / "pipe").lstat().st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe", "t.csv"]
