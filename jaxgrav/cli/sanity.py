@@ -195,7 +195,8 @@ def check_positions(track, *, where):
         of the velocity change times the step (in a turn the mean velocity cuts the
         arc's chord short by about ``v Δt θ²/12`` for a heading change θ, which this
         covers up to θ ≈ 3 rad), with the line, the jump in metres and how many there
-        are.
+        are; when most steps (at least 3) depart so, the velocity columns are named
+        instead, with their likely unit or a swap (:func:`_velocity_cause`).
     """
     t, lat, lon = (np.asarray(track[k], float) for k in ("t", "lat", "lon"))
     ve, vn = np.asarray(track["v_east"], float), np.asarray(track["v_north"], float)
@@ -211,6 +212,12 @@ def check_positions(track, *, where):
     turn = np.hypot(np.diff(ve), np.diff(vn))
     allowed = np.maximum(np.maximum(POSITION_JUMP_MS, 0.1 * speed) * dt, POSITION_JUMP_M)
     jump = np.flatnonzero(miss > allowed + 0.25 * turn * dt)
+    if jump.size >= max(3, dt.size // 2):  # most steps: the velocity columns, not glitches
+        i = int(jump[0])
+        raise ValueError(
+            f"{where}: v_east/v_north disagree with the positions on {jump.size} of "
+            f"{dt.size} steps (first between lines {line(i)} and {line(i + 1)}): "
+            f"{_velocity_cause(north / dt, east / dt, vn, ve)}")
     if jump.size:
         i = int(jump[0])
         raise ValueError(
@@ -218,6 +225,30 @@ def check_positions(track, *, where):
             f"{line(i + 1)} (t {t[i]:g} -> {t[i + 1]:g} s) beyond what v_east/v_north "
             f"allow ({jump.size} such jump(s)); a reset or glitch of the INS position: split "
             "the log there or remove the row")
+
+
+VELOCITY_UNITS = {"knots (× 0.5144 gives m/s)": 1.943844, "km/h (÷ 3.6 gives m/s)": 3.6,
+                  "ft/s (× 0.3048 gives m/s)": 3.28084, "cm/s (÷ 100 gives m/s)": 100.0}
+"""Velocity units a log may hold instead of m/s, by their factor over m/s."""
+
+
+def _velocity_cause(pos_n, pos_e, vn, ve):
+    """What the velocity columns look like against the positions' own speed (m/s per step):
+    another unit (:data:`VELOCITY_UNITS`), east and north swapped, or neither."""
+    mid_n, mid_e = 0.5 * (vn[1:] + vn[:-1]), 0.5 * (ve[1:] + ve[:-1])
+    moving = np.hypot(pos_n, pos_e) > 0.1
+    said = f"the positions move at a median {np.median(np.hypot(pos_n, pos_e)):.3g} m/s, "
+    said += f"the velocity columns say {np.median(np.hypot(mid_n, mid_e)):.3g} m/s"
+    if moving.sum() >= 2:
+        ratio = float(np.median(np.hypot(mid_n, mid_e)[moving] / np.hypot(pos_n, pos_e)[moving]))
+        for unit, factor in VELOCITY_UNITS.items():
+            if abs(ratio / factor - 1.0) < 0.05:
+                return f"{said} (a factor {ratio:.3g}): are they in {unit}?"
+        swapped = np.hypot(pos_n - mid_e, pos_e - mid_n)
+        if np.median(swapped[moving] / np.hypot(pos_n, pos_e)[moving]) < 0.1:
+            return f"{said}, but along the other axis: are v_east and v_north swapped?"
+    return (f"{said}; expected the INS velocity of these rows, east and north, in m/s "
+            "(name the columns with --columns v_east=COLUMN,v_north=COLUMN)")
 
 
 def _level_cause(z, raw, both, expected, unit):
