@@ -23,7 +23,7 @@ from jaxgrav.cli.inputs import (
 from jaxgrav.cli.match_missing import missing_counts, missing_message
 from jaxgrav.cli.match_size import check_fixes_memory
 from jaxgrav.cli.match_status import status_text
-from jaxgrav.cli.sanity import check_readings, fit_check
+from jaxgrav.cli.sanity import check_readings, fit_check, time_gap_warning
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.match import (
@@ -251,6 +251,9 @@ def _cmd_match(args):
     if has_v and args.method in ("dense", "chains"):
         twice = _eotvos_twice(bias, correction, args.noise)
         messages = messages if twice is None else [*messages, twice]
+    time_gap = time_gap_warning(track["t"], where=f"--track {str(args.track)!r}",
+                                line=track.line)
+    messages = messages if time_gap is None else [*messages, time_gap]
     r = {"t": np.asarray(track["t"], float).tolist()}
     if track.time_origin is not None:  # ISO times: t counts from the first; both kept
         r.update(time=[str(c) for c in track.text[track.time_text]],

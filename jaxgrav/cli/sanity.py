@@ -32,8 +32,9 @@ from jaxgrav.geodesy import local_offsets_m_jit
 from jaxgrav.match.result import P_IMPLAUSIBLE, fit_p_value
 from jaxgrav.tracks import csv_line
 
-__all__ = ["FILL_VALUES", "INNOVATION_BLOCK", "P_IMPLAUSIBLE", "check_positions",
-           "check_readings", "fit_check", "implausible_rows", "innovation_check"]
+__all__ = ["FILL_VALUES", "GAP_STEPS", "INNOVATION_BLOCK", "P_IMPLAUSIBLE", "check_positions",
+           "check_readings", "fit_check", "implausible_rows", "innovation_check",
+           "time_gap_warning"]
 
 FILL_VALUES = (-9999.0, 9999.0, -99999.0, 99999.0, -999999.0, 999999.0, -32767.0, 32767.0,
                -32768.0)
@@ -249,6 +250,32 @@ def _velocity_cause(pos_n, pos_e, vn, ve):
             return f"{said}, but along the other axis: are v_east and v_north swapped?"
     return (f"{said}; expected the INS velocity of these rows, east and north, in m/s "
             "(name the columns with --columns v_east=COLUMN,v_north=COLUMN)")
+
+
+GAP_STEPS = 10.0
+"""A step between fixes longer than this many times the track's median step is a gap
+that :func:`time_gap_warning` names."""
+
+
+def time_gap_warning(t, *, where, line=csv_line):
+    """A warning (for match's status messages) when a track's times have a gap (a step longer than
+    :data:`GAP_STEPS` times the median step), else None.
+
+    The matchers fit one INS offset (and, ICCP, a rotation) to the whole track, which
+    holds only while the INS error barely changes; across a long gap it drifts on, and a
+    track with a 10 h gap among 2-minute fixes was matched as if continuous (exit 0).
+    """
+    step = np.diff(np.asarray(t, float))
+    if step.size < 2 or not np.median(step) > 0:
+        return None
+    long = np.flatnonzero(step > GAP_STEPS * np.median(step))
+    if not long.size:
+        return None
+    i = int(long[np.argmax(step[long])])
+    return (f"{where} has {long.size} gap(s) in time, the longest {step[i]:g} s "
+            f"between lines {line(i)} and {line(i + 1)}, where its fixes are {np.median(step):g} "
+            "s apart: the match fits one INS offset to the whole track, as if the INS error "
+            "did not change across the gap; match the parts on either side separately")
 
 
 def _level_cause(z, raw, both, expected, unit):

@@ -1,6 +1,7 @@
 """Inputs found by the fourth issue-19 hunt (2026-12-07, helper-56): a simulated map error
 beyond any real map's refused by the four simulators."""
 
+import json
 import os
 import stat
 
@@ -8,6 +9,8 @@ import numpy as np
 import pytest
 
 from jaxgrav.cli import main
+from jaxgrav.cli.sanity import time_gap_warning
+from jaxgrav.datasets import load_map
 
 
 def _refused(capsys, argv, message):
@@ -167,3 +170,38 @@ def test_velocity_columns_in_other_units_are_named(tmp_path, capsys, scale, swap
                    "8.07 m/s, the velocity columns say ")
     assert hint in err and "glitch" not in err, err
     assert not out.exists()
+
+
+def test_time_gap_warning_names_the_longest_gap():
+    """The warning's rule: steps over 10 x the median step; regular tracks pass."""
+    t = np.arange(30) * 120.0
+    assert time_gap_warning(t, where="T") is None
+    assert time_gap_warning(t[:2], where="T") is None  # one step: no median to compare
+    t[10:] += 1000.0  # 1120 s: 9.3 steps, not a gap
+    assert time_gap_warning(t, where="T") is None
+    t[20:] += 5000.0
+    assert time_gap_warning(t, where="T").startswith(
+        "T has 1 gap(s) in time, the longest 5120 s between lines 21 and 22, where its fixes "
+        "are 120 s apart")
+
+
+@pytest.mark.long  # a dense match: 3-4 s with its compile
+def test_a_time_gap_in_a_match_track_is_named(tmp_path, capsys):
+    """A 10 h gap among 2-minute fixes was matched as one rigid offset, silently (exit 0):
+    now named in the warnings and the JSON's status messages."""
+    g = load_map("ryukyu")
+    t = np.arange(30) * 120.0
+    lat, lon = 30.2 + t * 4e-5, 130.4 + t * 4.5e-5
+    z = np.asarray(g.sample(lat, lon, "bicubic"))
+    t[15:] += 36000.0
+    track = tmp_path / "t.csv"
+    track.write_text("t,lat,lon,gravity\n" + "".join(
+        f"{a:g},{b:.6f},{c:.6f},{d:.4f}\n" for a, b, c, d in zip(t, lat, lon, z, strict=True)))
+    out = tmp_path / "m.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(track), "--out", str(out)]) == 0
+    said = (f"--track {str(track)!r} has 1 gap(s) in time, the longest 36120 s between lines "
+            "16 and 17, where its fixes are 120 s apart: the match fits one INS offset to the "
+            "whole track, as if the INS error did not change across the gap; match the parts "
+            "on either side separately")
+    assert f"warning: {said}" in capsys.readouterr().err
+    assert said in json.loads(out.read_text())["status_messages"]
