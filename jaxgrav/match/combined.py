@@ -112,21 +112,29 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
                                        iccp.map_error_order))
     sb = jnp.asarray(iccp.bias_sigma, dtype)  # 0: bias-free readings (as ICCP assumes)
     gls_b = lambda f: gls_score(wh, z - f, sb)  # noqa: E731  (score, bias)
-    gls = lambda f: gls_b(f)[0]  # noqa: E731
     g_n, g_e = offset_grid(entropy, dtype)
-    j_grid = gls(value_grad(field, p0 + jnp.stack([g_n, g_e], -1)[:, None, :])[0])
+    starts = _starts(top_n, top_e, d_n, d_e, dtype)
+    # the map and the GLS scores along the grid's offsets and the ICCP starts (the last
+    # start is the coarse fix) in one evaluation, unless the posterior moves the fix
+    grid_off = jnp.stack([g_n, g_e], -1)
+    posterior = iccp.fix == "posterior"
+    f_s, g_s = value_grad(field, p0 + (grid_off if posterior else jnp.concatenate(
+        [grid_off, starts]))[:, None, :])
+    j_s, b_s = gls_b(f_s)
+    j_grid = j_s[:g_n.shape[0]]
     dof = gls_dof(n, sb)  # n, or n − 1 when a free bias takes one
     post = offset_posterior(j_grid, g_n, g_e, entropy.spacing_m, dof=dof)
-    if iccp.fix == "posterior":
+    if posterior:
         d_n = jnp.where(post.valid, post.mean_north_m, d_n).astype(d_n.dtype)
         d_e = jnp.where(post.valid, post.mean_east_m, d_e).astype(d_e.dtype)
-    starts = jnp.stack([jnp.concatenate([top_n, jnp.stack([zero, d_n])]),
-                        jnp.concatenate([top_e, jnp.stack([zero, d_e])])], -1).astype(dtype)
+        starts = _starts(top_n, top_e, d_n, d_e, dtype)
+        f_s, g_s = value_grad(field, p0 + starts[:, None, :])
+        j_s, b_s = gls_b(f_s)
+    f_s, g_s, j_s, b_s = (a[-starts.shape[0]:] for a in (f_s, g_s, j_s, b_s))
     # each start fits the readings less the GLS bias there (none when bias_sigma = 0)
-    b_starts = gls_b(value_grad(field, p0 + starts[:, None, :])[0])[1]
-    b_starts = jnp.where(jnp.isfinite(b_starts), b_starts, 0.0)
+    b_starts = jnp.where(jnp.isfinite(b_s), b_s, 0.0)
     fits = jax.vmap(lambda t0, b: iccp_fit(field, p0, z - b, iccp, t0=t0))(starts, b_starts)
-    f_fits = value_grad(field, _moved(p0, fits.rotation, fits.translation))[0]
+    f_fits, g_fits = value_grad(field, _moved(p0, fits.rotation, fits.translation))
     j_fits, b_fits = gls_b(f_fits)
     # with a bias: the misfit at each fit's own GLS bias, as the coarse one's below
     fits = fits._replace(misfit=jnp.where(
@@ -135,8 +143,7 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     best = jnp.argmin(jnp.where(told, jnp.where(jnp.isfinite(j_fits), j_fits, jnp.inf),
                                 misfits))
     st = jax.tree.map(lambda x: x[best], fits)
-    f_c, _ = value_grad(field, p0 + jnp.stack([d_n, d_e]).astype(dtype))
-    j_coarse, b_coarse = gls_b(f_c)
+    f_c, j_coarse, b_coarse = f_s[-1], j_s[-1], b_s[-1]
     coarse_misfit = jnp.mean((z - b_coarse - f_c) ** 2)
     gain = n * (coarse_misfit - st.misfit)
     use_fine = jnp.isfinite(st.misfit) & jnp.where(
@@ -154,9 +161,9 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     found = jnp.isfinite(st.misfit) | jnp.isfinite(coarse_misfit)
     t_fix = pick(st.translation, jnp.stack([d_n, d_e]).astype(dtype))
     j_fix = pick(j_fits[best], j_coarse)
-    cov, chi2 = _fix_covariance(field, p0, wh, pick(st.rotation, jnp.eye(2, dtype=dtype)),
-                                t_fix, j_fix, use_fine, post, j_grid, g_n, g_e, entropy, iccp,
-                                dof - n)
+    cov, chi2 = _fix_covariance(pick(g_fits[best], g_s[-1]), p0, wh,
+                                pick(st.rotation, jnp.eye(2, dtype=dtype)), t_fix, j_fix,
+                                use_fine, post, j_grid, g_n, g_e, entropy, iccp, dof - n)
     reject = integrity_status(cov, post.second_mode_ratio, chi2, post.edge_mass, iccp)
     # ICCP can walk a weak or biased fix far past the drift the search was sized for
     # (15 km at a 4.7 km drift radius, accepted): beyond max_offset_m it is rejected
@@ -205,12 +212,20 @@ def _moved(p0, rotation, translation):
     return jnp.einsum("...ij,nj->...ni", rotation, p0) + translation[..., None, :]
 
 
-def _fix_covariance(field, p0, wh, rotation, translation, j_fix, fine, post, j_grid, g_n,
+def _starts(top_n, top_e, d_n, d_e, dtype):
+    """ICCP's starts ``(k + 2, 2)`` (m): the coarse stage's best offsets, the INS track and
+    the coarse fix ``(d_n, d_e)``, last."""
+    zero = jnp.zeros((), top_n.dtype)
+    return jnp.stack([jnp.concatenate([top_n, jnp.stack([zero, d_n])]),
+                      jnp.concatenate([top_e, jnp.stack([zero, d_e])])], -1).astype(dtype)
+
+
+def _fix_covariance(g, p0, wh, rotation, translation, j_fix, fine, post, j_grid, g_n,
                     g_e, entropy, iccp, bias_dof=0):
     """2 × 2 covariance (m²) of the fix and its GLS χ² per fix (``bias_dof``: −1 when a
-    free bias takes a degree of freedom)."""
+    free bias takes a degree of freedom); ``g`` ``(N, 2)``: the map's gradient along the
+    fix's track ``rotation · p0 + translation``."""
     n = p0.shape[0]
-    _, g = value_grad(field, _moved(p0, rotation, translation))
     turned = p0 @ rotation.T
     d_theta = jnp.sum(g * jnp.stack([-turned[:, 1], turned[:, 0]], -1), axis=-1)
     info = gauss_newton_information(wh, jnp.concatenate([d_theta[:, None], g], -1),

@@ -141,19 +141,25 @@ def refine_local(field, p0, z, r, t, max_rotation_rad, steps):
         jtr = jnp.stack([jnp.sum(u * res) for u in cols])
         return jnp.mean((f - z) ** 2), jtj, jtr
 
-    def step(_, s):
-        theta, t, m, jtj, jtr, lam = s
+    def step(i, s):
+        # evaluate the trial point, keep it if it lowers the misfit (the first one, the
+        # starting point, always), then the next trial: one evaluation in the program
+        theta, t, m, jtj, jtr, lam, theta_n, t_n = s
+        m_n, jtj_n, jtr_n = (a.astype(dtype) for a in evaluate(theta_n, t_n))
+        first = i == 0
+        keep = first | (m_n < m)  # False for NaN
+        pick = lambda a, b: jnp.where(keep, a, b)  # noqa: E731
+        theta, t, m, jtj, jtr = (pick(theta_n, theta), pick(t_n, t), pick(m_n, m),
+                                 pick(jtj_n, jtj), pick(jtr_n, jtr))
+        lam = jnp.where(first, lam, jnp.where(keep, 0.3 * lam, 10.0 * lam))
         d = solve3(jtj + lam * jnp.diag(jnp.diag(jtj)), -jtr)
         theta_n = jnp.clip(theta + d[0], -max_rotation_rad, max_rotation_rad)
-        t_n = t + d[1:]
-        m_n, jtj_n, jtr_n = evaluate(theta_n, t_n)
-        keep = m_n < m  # False for NaN
-        pick = lambda a, b: jnp.where(keep, a, b)  # noqa: E731
-        return (pick(theta_n, theta), pick(t_n, t), pick(m_n, m), pick(jtj_n, jtj),
-                pick(jtr_n, jtr), jnp.where(keep, 0.3 * lam, 10.0 * lam))
+        return theta, t, m, jtj, jtr, lam, theta_n, t + d[1:]
 
-    init = (theta0, t, *evaluate(theta0, t), jnp.asarray(1e-3, p0.dtype))
-    theta, t, m, *_ = jax.lax.fori_loop(0, steps, step, init)
+    dtype = jnp.result_type(theta0, t, p0, z, *field)
+    init = (theta0, t, jnp.zeros((), dtype), jnp.zeros((3, 3), dtype), jnp.zeros(3, dtype),
+            jnp.asarray(1e-3, dtype), theta0, t)
+    theta, t, m, *_ = jax.lax.fori_loop(0, steps + 1, step, init)
     return rotation_matrix(theta), t, m
 
 
