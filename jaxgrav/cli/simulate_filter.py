@@ -34,7 +34,7 @@ def add_parser(subparsers):
     s.add_argument("--out", required=True, help="track CSV for jaxgrav filter")
     s.add_argument("--truth", default=None,
                    help="also write the true track (t, lat, lon, v_east, v_north) here")
-    s.add_argument("--geometry", choices=("east-west", "north-east"), default="east-west",
+    s.add_argument("--geometry", choices=("east-west", "north-east"), default=None,
                    help="east-west across the masses (default) or north along the mass "
                         "line for half the run, then east")
     s.add_argument("--minutes", type=float, default=120.0, help="duration (default 120)")
@@ -45,7 +45,7 @@ def add_parser(subparsers):
                    help="simulate over this anomaly map (NetCDF or a shipped map, e.g. "
                         "ryukyu) instead of paper D's point masses: straight tracks from a "
                         "random start at least the track length + 16 km inside the map, "
-                        "random heading (--geometry is then not used); missing (NaN) nodes "
+                        "random heading (--geometry is then refused); missing (NaN) nodes "
                         "are refused only where the track crosses them")
     s.add_argument("--var", default=None, help="variable of --map when the file has several")
     s.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
@@ -157,6 +157,11 @@ def cmd_simulate_filter(args):
                          f"at most {n - 1} rows between readings")
     me_sigma, me_length = map_error_args(args)
     check_simulated_map_error(me_sigma)
+    if args.map is not None and args.geometry is not None:  # was dropped without a word
+        raise ValueError(f"--geometry {args.geometry} shapes the track over paper D's point "
+                         "masses; with --map the track is a straight line of random heading: "
+                         "leave --geometry out")
+    args.geometry = args.geometry or "east-west"
     if args.map is None:
         if me_sigma > 0:
             raise ValueError("--map-error needs --map (paper D's point masses have no grid to "

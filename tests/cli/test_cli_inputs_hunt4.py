@@ -205,3 +205,14 @@ def test_a_time_gap_in_a_match_track_is_named(tmp_path, capsys):
             "on either side separately")
     assert f"warning: {said}" in capsys.readouterr().err
     assert said in json.loads(out.read_text())["status_messages"]
+
+
+def test_simulate_filter_refuses_a_geometry_it_would_not_use(tmp_path, capsys):
+    """``simulate-filter --map ryukyu --geometry north-east`` wrote a random straight track
+    (exit 0): the geometry is paper D's, dropped over a map without a word."""
+    out = tmp_path / "s.csv"
+    _refused(capsys, ["simulate-filter", "--map", "ryukyu", "--geometry", "north-east",
+                      "--out", out],
+             "--geometry north-east shapes the track over paper D's point masses; with --map "
+             "the track is a straight line of random heading: leave --geometry out")
+    assert not out.exists()
