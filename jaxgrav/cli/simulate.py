@@ -150,8 +150,9 @@ def add_parser(sub):
     sim_p.add_argument("--drift-law", choices=("fixed", "rayleigh"), default="fixed",
                        help="fixed: the drift is --drift; rayleigh: --drift is the Rayleigh "
                             "scale and the search radius its --probability quantile")
-    sim_p.add_argument("--probability", type=float, default=0.99,
-                       help="Rayleigh quantile written as drift_radius (default 0.99)")
+    sim_p.add_argument("--probability", type=float, default=None,
+                       help="with --drift-law rayleigh: the quantile written as "
+                            "drift_radius (default 0.99)")
     sim_p.add_argument("--noise", type=float, default=1.0, help="reading noise (mGal)")
     sim_p.add_argument("--bias", type=float, default=0.0, help="gravimeter bias (mGal)")
     sim_p.add_argument("--seed", type=int, default=0)
@@ -189,8 +190,14 @@ def _check_simulate_args(args):
         raise ValueError("--v-east and --v-north are both 0; a matching track must move")
     finite("--drift", args.drift, lambda v: 0 < v <= 5,
            "a positive INS drift of at most 5 degrees of arc")
-    finite("--probability", args.probability, lambda v: 0 < v < 1,
-           "a probability strictly between 0 and 1")
+    if args.probability is not None:
+        finite("--probability", args.probability, lambda v: 0 < v < 1,
+               "a probability strictly between 0 and 1")
+        if args.drift_law == "fixed":  # was not used, without a word
+            raise ValueError(f"--probability {args.probability:g} is the Rayleigh quantile of "
+                             "--drift-law rayleigh; with --drift-law fixed the search radius "
+                             "is 1.2 x --drift: give --drift-law rayleigh or leave it out")
+    args.probability = 0.99 if args.probability is None else args.probability
     # 1e30 was written (exit 0), readings that every command then refuses
     finite("--noise", args.noise, lambda v: 0 <= v <= MAX_BIAS_MGAL,
            f"a reading noise >= 0 and at most {MAX_BIAS_MGAL:g} mGal (a marine gravimeter's "

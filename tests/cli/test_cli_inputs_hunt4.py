@@ -216,3 +216,16 @@ def test_simulate_filter_refuses_a_geometry_it_would_not_use(tmp_path, capsys):
              "--geometry north-east shapes the track over paper D's point masses; with --map "
              "the track is a straight line of random heading: leave --geometry out")
     assert not out.exists()
+
+
+def test_simulate_refuses_a_probability_it_would_not_use(tmp_path, capsys):
+    """``simulate --probability 0.5`` (the default --drift-law fixed) wrote the same track as
+    without it (exit 0): the quantile only sets the radius of --drift-law rayleigh."""
+    out = tmp_path / "s.csv"
+    _refused(capsys, ["simulate", "--probability", "0.5", "--out", out],
+             "--probability 0.5 is the Rayleigh quantile of --drift-law rayleigh; with "
+             "--drift-law fixed the search radius is 1.2 x --drift: give --drift-law rayleigh "
+             "or leave it out")
+    assert not out.exists()
+    assert main(["simulate", "--probability", "0.5", "--drift-law", "rayleigh", "--n", "5",
+                 "--out", str(out)]) == 0
