@@ -148,7 +148,7 @@ def add_parser(subparsers):
                    help=f"pf, rbpf: number of particles, at least {MIN_PARTICLES} (default "
                         "2000 for pf, 1000 for rbpf; pf's 1-sigma is over-confident below "
                         "about 1000)")
-    f.add_argument("--seed", type=int, default=0,
+    f.add_argument("--seed", type=int, default=None,
                    help="pf, rbpf: seed of the particles' random numbers (default 0)")
     f.add_argument("--out", required=True,
                    help="output CSV: t, lat, lon, sigma_north, sigma_east (m), covariance, "
@@ -274,6 +274,10 @@ def cmd_filter(args):
                         ("--sigma-gravity", args.sigma_gravity)):
         check_sigma(name, value)
     check_sigma_pos(args.sigma_pos)
+    if args.seed is not None and args.method not in PARTICLES:  # was not used, no word
+        raise ValueError(f"--seed is for --method pf or rbpf (their particles' draws); got "
+                         f"--method {args.method}")
+    args.seed = 0 if args.seed is None else args.seed
     check_seed(args.seed)
     where = f"--track {str(args.track)!r}"
     track = read_track(args, required=("t", "lat", "lon", "gravity"), allow_nan=("gravity",))

@@ -140,7 +140,7 @@ def add_parser(sub):
     p.add_argument("--particles", type=int, default=None,
                    help=f"particles of --method rbpf, at least {MIN_PARTICLES} (default "
                         f"{DEFAULT_PARTICLES})")
-    p.add_argument("--seed", type=int, default=0, help="seed of --method rbpf's draws")
+    p.add_argument("--seed", type=int, default=None, help="seed of --method rbpf's draws")
     p.add_argument("--out", required=True, help="navigation CSV (see jaxgrav navigate docs)")
     p.add_argument("--eotvos-corrected", action="store_true",
                    help="the gravity column is already Eötvös-corrected with the INS velocity")
@@ -212,8 +212,9 @@ def _method_options(args):
     """Options that the method does not use: ``--particles`` (rbpf only) is refused;
     returns the warning for ``--fix-every``, ``--n-fixes``, ``--stride`` given to a
     tightly coupled method (None if not). Fills in the defaults."""
-    if args.particles is not None and args.method != "rbpf":
-        raise ValueError(f"--particles is for --method rbpf; got --method {args.method}")
+    for name in ("particles", "seed"):  # an unused --seed was dropped without a word
+        if getattr(args, name) is not None and args.method != "rbpf":
+            raise ValueError(f"--{name} is for --method rbpf; got --method {args.method}")
     check_missing_option(args)
     loose = [f"--{k.replace('_', '-')}" for k in ("fix_every", "n_fixes", "stride")
              if getattr(args, k) is not None]
@@ -223,6 +224,7 @@ def _method_options(args):
                    f"({', '.join(LOOSE_MATCHERS)}); --method {args.method} uses every reading "
                    "and ignores them")
     args.particles = DEFAULT_PARTICLES if args.particles is None else args.particles
+    args.seed = 0 if args.seed is None else args.seed
     for k, v in LOOSE_DEFAULTS.items():
         setattr(args, k, v if getattr(args, k) is None else getattr(args, k))
     args.stride = args.n_fixes if args.stride is None else args.stride

@@ -229,3 +229,18 @@ def test_simulate_refuses_a_probability_it_would_not_use(tmp_path, capsys):
     assert not out.exists()
     assert main(["simulate", "--probability", "0.5", "--drift-law", "rayleigh", "--n", "5",
                  "--out", str(out)]) == 0
+
+
+@pytest.mark.parametrize(("command", "message"), [
+    ("filter", "--seed is for --method pf or rbpf (their particles' draws); got --method ukf"),
+    ("navigate", "--seed is for --method rbpf; got --method ukf"),
+])
+def test_a_seed_the_method_does_not_draw_with_is_refused(tmp_path, capsys, filter_log,
+                                                         command, message):
+    """``filter --seed 5`` (ukf) gave the very run of seed 0, exit 0: a user trying seeds
+    saw identical results and no word; --particles was already refused so."""
+    out = tmp_path / "o.csv"
+    source = ["--point-masses", "paper-d"] if command == "filter" else []
+    _refused(capsys, [command, *source, "--track", filter_log, "--out", out, "--method", "ukf",
+                      "--seed", "5"], message)
+    assert not out.exists()
