@@ -178,7 +178,7 @@ def add_parser(subparsers):
                    help="the map's error, 1-sigma (mGal): ukf, ekf, gsf add a Gauss-Markov "
                         "map-error state over the distance travelled (--map-error-order); pmf "
                         "a first-order one per grid cell. Default 0: the map is the truth")
-    f.add_argument("--map-error-length", type=float, default=10e3, metavar="L",
+    f.add_argument("--map-error-length", type=float, default=None, metavar="L",
                    help="correlation length of that state over the distance travelled (m, "
                         "default 10000; time constant L / the mean ground speed). For a map "
                         "error with covariance s^2 (1 + r/L) e^(-r/L) use order 2 with L, or "

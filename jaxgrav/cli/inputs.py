@@ -31,6 +31,7 @@ __all__ = [
     "check_map_field",
     "check_missing_option",
     "check_out_format",
+    "fill_map_error_length",
     "kept_columns",
     "map_error_args",
     "read_track",
@@ -196,8 +197,24 @@ def check_out_format(path, writes, option="--out"):
                          f"{str(path.with_suffix(_SUFFIX[writes]))!r}")
 
 
+def fill_map_error_length(args, used, default=10_000.0):
+    """Fill ``args.map_error_length`` (None when not given) with ``default`` (m); a
+    ValueError naming it when it was given while no map error uses it (``used`` false):
+    ``--map-error-length 5000`` without ``--map-error`` ran on a perfect map, silently."""
+    if args.map_error_length is None:
+        args.map_error_length = default
+    elif not used:
+        raise ValueError(f"--map-error-length {args.map_error_length:g} is the correlation "
+                         "length of the map's error, and no map error is given: add "
+                         "--map-error SIGMA (or --map-error-var NAME where the command takes "
+                         "it), or leave it out")
+
+
 def map_error_args(args):
-    """Validated ``--map-error`` / ``--map-error-length`` (a ValueError naming the option)."""
+    """Validated ``--map-error`` / ``--map-error-length`` (a ValueError naming the option;
+    the length filled in, refused without a map error: :func:`fill_map_error_length`)."""
+    fill_map_error_length(args, args.map_error != 0
+                          or getattr(args, "map_error_var", None) is not None)
     if not (np.isfinite(args.map_error) and args.map_error >= 0):
         raise ValueError(f"--map-error must be a finite map-error sigma >= 0 (mGal); got "
                          f"{args.map_error!r}")

@@ -17,6 +17,7 @@ from jaxgrav.cli.inputs import (
     add_map_error_var_option,
     check_map_field,
     check_out_format,
+    fill_map_error_length,
     read_track,
     track_map,
 )
@@ -82,7 +83,7 @@ def add_parsers(sub):
                    help="dense, chains, entropy+iccp: σ of the map's error (map units, default "
                         "0 = white-noise score); "
                         "> 0 scores by GLS, returns the posterior fix and tests its integrity")
-    m.add_argument("--map-error-length", type=float, default=10000.0, metavar="L",
+    m.add_argument("--map-error-length", type=float, default=None, metavar="L",
                    help="dense, chains, entropy+iccp: correlation length of the map's error "
                         "(m, default 10000)")
     add_map_error_var_option(m)
@@ -392,6 +393,7 @@ def _check_match_args(args):
         bad("--refine", args.refine, "an integer factor >= 1")
     if not (math.isfinite(args.map_error) and args.map_error >= 0):
         bad("--map-error", args.map_error, "a finite standard deviation >= 0 (mGal)")
+    fill_map_error_length(args, args.map_error != 0 or args.map_error_var is not None)
     if not (math.isfinite(args.map_error_length) and args.map_error_length > 0):
         bad("--map-error-length", args.map_error_length, "a finite correlation length > 0 (m)")
     if args.map_error > 0 and args.method not in MAP_ERROR_METHODS:

@@ -200,7 +200,7 @@ def cmd_montecarlo(args):
     if grid is None and (kind == "voyage" or (kind == "matcher" and args.truth_map)):
         grid = default_grid()
     check_drift(args, default_grid() if grid is None and kind == "matcher" else grid, kind)
-    model = map_error_from_args(args, grid, allow_nan=masked_ok)
+    model = map_error_from_args(args, grid, allow_nan=masked_ok, length_alone=True)
     if model is not None and grid is None and kind == "filter":
         raise ValueError(f"--map-error and --truth-map need --map MAP with --method "
                          f"{args.method}: paper D's point masses have no grid to draw a map "

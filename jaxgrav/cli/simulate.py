@@ -75,7 +75,7 @@ def add_map_error_options(parser):
                              "with --map-error")
 
 
-def map_error_from_args(args, grid, *, allow_nan=False):
+def map_error_from_args(args, grid, *, allow_nan=False, length_alone=False):
     """The map-error model of ``--map-error``/``--map-error-length``/``--truth-map``.
 
     Parameters
@@ -87,6 +87,9 @@ def map_error_from_args(args, grid, *, allow_nan=False):
     allow_nan : bool
         Keep a ``--truth-map``'s missing (NaN) nodes (for a command that then checks
         the readings along its track); by default such a map is refused.
+    length_alone : bool
+        ``--map-error-length`` may come without ``--map-error`` (montecarlo: the length
+        of ``--told-map-error``); by default it is refused there (it was ignored).
 
     Returns
     -------
@@ -105,6 +108,10 @@ def map_error_from_args(args, grid, *, allow_nan=False):
         raise ValueError(f"--map-error-length must be a finite correlation length > 0 (m); "
                          f"got {length!r}")
     check_simulated_map_error(sigma)
+    if length is not None and not sigma and not length_alone:  # was ignored, silently
+        raise ValueError(f"--map-error-length {length:g} is the correlation length of the "
+                         "drawn map error, and no --map-error is given: add --map-error "
+                         "SIGMA, or leave it out")
     if args.truth_map is not None:
         if sigma is not None:
             raise ValueError(f"--truth-map {args.truth_map} and --map-error {sigma!r} exclude "

@@ -51,7 +51,7 @@ def add_parser(subparsers):
     s.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
                    help="with --map: the readings see the map + a drawn error field of this "
                         "1-sigma (mGal), covariance s^2 (1 + r/L) e^(-r/L) (default 0)")
-    s.add_argument("--map-error-length", type=float, default=10e3, metavar="L",
+    s.add_argument("--map-error-length", type=float, default=None, metavar="L",
                    help="the map error's correlation length L (m, default 10000)")
     s.add_argument("--seed", type=int, default=0, help="PRNG seed")
     s.add_argument("--force", action="store_true", help="overwrite existing outputs")

@@ -34,7 +34,7 @@ import xarray as xr
 from matplotlib.colors import LogNorm
 
 from jaxgrav._io import atomic_output, check_outputs
-from jaxgrav.cli.inputs import check_out_format
+from jaxgrav.cli.inputs import check_out_format, fill_map_error_length
 from jaxgrav.constants import DEG
 from jaxgrav.datasets import load_map
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
@@ -74,7 +74,7 @@ def add_parser(subparsers):
     s.add_argument("--noise", type=float, default=1.0, help="reading noise 1-sigma (mGal)")
     s.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
                    help="the map's error 1-sigma (mGal, default 0: the map is the truth)")
-    s.add_argument("--map-error-length", type=float, default=10e3, metavar="L",
+    s.add_argument("--map-error-length", type=float, default=None, metavar="L",
                    help="its correlation length along the track (m, default 10000)")
     s.add_argument("--window", type=int, default=None, metavar="NODES",
                    help="side of the descriptors' window (odd; default the segment length)")
@@ -197,6 +197,7 @@ def _check_args(args):
     if args.fixes < 2:
         raise ValueError(f"--fixes must be an integer >= 2 (readings per segment); got "
                          f"{args.fixes}")
+    fill_map_error_length(args, args.map_error != 0)
     for name, value, zero_ok, unit in (("--spacing", args.spacing, False, "m"),
                                        ("--noise", args.noise, False, "mGal"),
                                        ("--map-error", args.map_error, True, "mGal"),

@@ -244,3 +244,28 @@ def test_a_seed_the_method_does_not_draw_with_is_refused(tmp_path, capsys, filte
     _refused(capsys, [command, *source, "--track", filter_log, "--out", out, "--method", "ukf",
                       "--seed", "5"], message)
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("argv", "drawn"), [
+    (["match", "--map", "ryukyu", "--track", "{d}/t.csv", "--out", "{d}/m.json"], False),
+    (["filter", "--point-masses", "paper-d", "--track", "{d}/t.csv", "--out", "{d}/o.csv"],
+     False),
+    (["suitability", "--map", "ryukyu", "--out", "{d}/s.nc"], False),
+    (["simulate-filter", "--out", "{d}/o.csv"], False),
+    (["simulate", "--out", "{d}/o.csv"], True),
+    (["simulate-voyage", "--out", "{d}/o.csv", "--hours", "0.1"], True),
+])
+def test_a_map_error_length_without_a_map_error_is_refused(tmp_path, capsys, argv, drawn):
+    """``--map-error-length 5000`` alone ran on a perfect map (match, filter, suitability,
+    the simulators; exit 0): the user believed the map's error modelled. montecarlo keeps
+    it alone, as the length of --told-map-error."""
+    (tmp_path / "t.csv").write_text("t,lat,lon,gravity\n0,24.3,122.74,5\n2,24.3,122.7401,5.1\n"
+                                    "4,24.3,122.7402,5.3\n")
+    message = ("--map-error-length 5000 is the correlation length of the drawn map error, and "
+               "no --map-error is given: add --map-error SIGMA, or leave it out" if drawn else
+               "--map-error-length 5000 is the correlation length of the map's error, and no "
+               "map error is given: add --map-error SIGMA (or --map-error-var NAME where the "
+               "command takes it), or leave it out")
+    _refused(capsys, [a.format(d=tmp_path) for a in argv] + ["--map-error-length", "5000"],
+             message)
+    assert [p.name for p in tmp_path.iterdir()] == ["t.csv"]
