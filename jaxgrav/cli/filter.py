@@ -184,7 +184,7 @@ def add_parser(subparsers):
                         "error with covariance s^2 (1 + r/L) e^(-r/L) use order 2 with L, or "
                         "order 1 with 2 L")
     add_map_error_var_option(f)
-    f.add_argument("--map-error-order", type=int, default=1, choices=(1, 2),
+    f.add_argument("--map-error-order", type=int, default=None, choices=(1, 2),
                    help="order of the map-error state: 1 first-order Gauss-Markov (default), "
                         "2 second-order (value and rate; covariance s^2 (1 + r/L) e^(-r/L), "
                         "the model of simulate-filter --map-error); pmf: 1 only")

@@ -221,12 +221,18 @@ def map_error_args(args):
     if not (np.isfinite(args.map_error_length) and args.map_error_length > 0):
         raise ValueError(f"--map-error-length must be a finite correlation length > 0 (m); "
                          f"got {args.map_error_length!r}")
-    order = getattr(args, "map_error_order", 1)
-    if order not in (1, 2):
+    order = getattr(args, "map_error_order", None)  # None: not given, or no such option
+    if order is not None and order not in (1, 2):
         raise ValueError(f"--map-error-order must be 1 or 2; got {order!r}")
     if order == 2 and getattr(args, "method", None) == "pmf":
         raise ValueError("--map-error-order 2 is not available with --method pmf (its per-cell "
                          "map-error state is first order); use --map-error-order 1 with 2 L")
+    if order is not None and args.map_error == 0 and getattr(args, "map_error_var", None) is None:
+        raise ValueError(f"--map-error-order {order} is the order of the map-error state, and "
+                         "no map error is given (the filter carries none): add --map-error "
+                         "SIGMA or --map-error-var NAME, or leave it out")  # was ignored
+    if hasattr(args, "map_error_order"):
+        args.map_error_order = 1 if order is None else order
     return args.map_error, args.map_error_length
 
 

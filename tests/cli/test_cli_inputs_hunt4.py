@@ -269,3 +269,14 @@ def test_a_map_error_length_without_a_map_error_is_refused(tmp_path, capsys, arg
     _refused(capsys, [a.format(d=tmp_path) for a in argv] + ["--map-error-length", "5000"],
              message)
     assert [p.name for p in tmp_path.iterdir()] == ["t.csv"]
+
+
+def test_a_map_error_order_without_a_map_error_is_refused(tmp_path, capsys, filter_log):
+    """``filter --map-error-order 2`` alone ran with no map-error state at all (exit 0)."""
+    out = tmp_path / "o.csv"
+    _refused(capsys, ["filter", "--point-masses", "paper-d", "--track", filter_log, "--out", out,
+                      "--map-error-order", "2"],
+             "--map-error-order 2 is the order of the map-error state, and no map error is "
+             "given (the filter carries none): add --map-error SIGMA or --map-error-var NAME, "
+             "or leave it out")
+    assert not out.exists()
