@@ -200,7 +200,9 @@ def cmd_montecarlo(args):
     if grid is None and (kind == "voyage" or (kind == "matcher" and args.truth_map)):
         grid = default_grid()
     check_drift(args, default_grid() if grid is None and kind == "matcher" else grid, kind)
-    model = map_error_from_args(args, grid, allow_nan=masked_ok, length_alone=True)
+    # alone, --map-error-length is the length of --told-map-error SIGMA (dense)
+    model = map_error_from_args(args, grid, allow_nan=masked_ok,
+                                length_alone=args.told_map_error is not None)
     if model is not None and grid is None and kind == "filter":
         raise ValueError(f"--map-error and --truth-map need --map MAP with --method "
                          f"{args.method}: paper D's point masses have no grid to draw a map "
@@ -220,6 +222,10 @@ def cmd_montecarlo(args):
             extra["map_error_told"] = args.told_map_error
         if args.map_error_order not in (None, 1, 2):
             raise ValueError(f"--map-error-order must be 1 or 2; got {args.map_error_order}")
+        if args.map_error_order is not None and model is None:  # was ignored, silently
+            raise ValueError(f"--map-error-order {args.map_error_order} is the order of the "
+                             "map-error state the filters are told, and the runs draw no map "
+                             "error: add --map-error SIGMA or --truth-map MAP, or leave it out")
         if args.map_error_order is not None:
             extra["map_error_order"] = args.map_error_order
     else:

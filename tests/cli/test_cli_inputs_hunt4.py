@@ -254,11 +254,12 @@ def test_a_seed_the_method_does_not_draw_with_is_refused(tmp_path, capsys, filte
     (["simulate-filter", "--out", "{d}/o.csv"], False),
     (["simulate", "--out", "{d}/o.csv"], True),
     (["simulate-voyage", "--out", "{d}/o.csv", "--hours", "0.1"], True),
+    (["montecarlo", "--method", "ukf", "--runs", "5", "--out", "{d}/m.nc"], True),
 ])
 def test_a_map_error_length_without_a_map_error_is_refused(tmp_path, capsys, argv, drawn):
     """``--map-error-length 5000`` alone ran on a perfect map (match, filter, suitability,
     the simulators; exit 0): the user believed the map's error modelled. montecarlo keeps
-    it alone, as the length of --told-map-error."""
+    it alone only beside --told-map-error SIGMA, as its length."""
     (tmp_path / "t.csv").write_text("t,lat,lon,gravity\n0,24.3,122.74,5\n2,24.3,122.7401,5.1\n"
                                     "4,24.3,122.7402,5.3\n")
     message = ("--map-error-length 5000 is the correlation length of the drawn map error, and "
@@ -280,3 +281,14 @@ def test_a_map_error_order_without_a_map_error_is_refused(tmp_path, capsys, filt
              "given (the filter carries none): add --map-error SIGMA or --map-error-var NAME, "
              "or leave it out")
     assert not out.exists()
+
+
+def test_montecarlo_refuses_a_map_error_order_with_no_map_error(tmp_path, capsys):
+    """``montecarlo --method ukf --map-error-order 2`` on paper D's masses (no map error
+    drawn) ran, the order unused (exit 0)."""
+    _refused(capsys, ["montecarlo", "--method", "ukf", "--runs", "5", "--out",
+                      tmp_path / "m.nc", "--map-error-order", "2"],
+             "--map-error-order 2 is the order of the map-error state the filters are told, and "
+             "the runs draw no map error: add --map-error SIGMA or --truth-map MAP, or leave it "
+             "out")
+    assert list(tmp_path.iterdir()) == []
