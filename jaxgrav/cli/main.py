@@ -154,13 +154,22 @@ def joined_negative_lists(argv):
 
 
 def check_special_outputs(args):
-    """ValueError when ``--out`` or ``--truth`` names an existing device, pipe or socket.
+    """ValueError when ``--out`` or ``--truth`` names an existing device, pipe or socket, or
+    a path option (``--out``, ``--track``, ``--map``, ...) is an empty string.
 
     Outputs are written whole to a temporary file and moved into place, so ``--out
     /dev/stdout --force`` (or a FIFO) was replaced by a regular file: as root, /dev/null
     and /dev/stdout themselves. A missing path, a regular file (or a link to one) and a
     folder (the demo's ``--out``) pass.
     """
+    expected = {"map": "a NetCDF file or a shipped map's name", "point_masses": "paper-d "
+                "or a MODEL.json file", "truth_map": "a NetCDF file or a shipped map's name"}
+    for name in ("out", "truth", "track", "map", "truth_map", "grid", "dir", "point_masses"):
+        # --out '' was "--out '' is a folder" or "PosixPath('.') has an empty name", and the
+        # demo wrote into the working folder; --map '' read as "map '.' is a folder"
+        if getattr(args, name, None) == "":
+            raise ValueError(f"--{name.replace('_', '-')} is empty; expected "
+                             f"{expected.get(name, 'a path')}")
     for name in ("out", "truth"):
         value = getattr(args, name, None)
         if value is None:

@@ -297,3 +297,24 @@ def test_montecarlo_refuses_a_map_error_order_with_no_map_error(tmp_path, capsys
              "the runs draw no map error: add --map-error SIGMA or --truth-map MAP, or leave it "
              "out")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    # "PosixPath('.') has an empty name"
+    (["montecarlo", "--method", "dense", "--runs", "5", "--out="], "--out is empty; expected "
+                                                                   "a path"),
+    (["suitability", "--map", "ryukyu", "--out="], "--out is empty; expected a path"),
+    # "--out '' is a folder; expected a file path"
+    (["simulate", "--out="], "--out is empty; expected a path"),
+    # the demo ran and wrote table1.md, summary.json, tracks.png into the working folder
+    (["demo", "--smoke", "--out="], "--out is empty; expected a path"),
+    # "map '.' is a folder; expected a NetCDF file"
+    (["sample", "--map=", "--track", "t.csv", "--out", "s.csv"],
+     "--map is empty; expected a NetCDF file or a shipped map's name"),
+    (["filter", "--point-masses=", "--track", "t.csv", "--out", "s.csv"],
+     "--point-masses is empty; expected paper-d or a MODEL.json file"),
+])
+def test_an_empty_path_is_named(tmp_path, capsys, monkeypatch, argv, message):
+    monkeypatch.chdir(tmp_path)
+    _refused(capsys, argv, message)
+    assert list(tmp_path.iterdir()) == []
