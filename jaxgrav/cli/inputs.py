@@ -20,7 +20,7 @@ import numpy as np
 
 from jaxgrav.datasets import map_for_track
 from jaxgrav.filters.pmf_cells import MISSING
-from jaxgrav.tracks import parse_columns, read_track_csv
+from jaxgrav.tracks import KNOWN_COLUMNS, parse_columns, read_track_csv
 
 __all__ = [
     "FIELD_UNITS",
@@ -71,8 +71,15 @@ def read_track(args, required, optional=(), allow_nan=()):
     -------
     TrackTable
     """
+    columns = parse_columns(args.columns)
+    unknown = [k for k in columns if k not in KNOWN_COLUMNS]
+    if unknown:  # "foo=gravity" renamed the column; "LAT=lat" ended in a riddle
+        name = unknown[0]
+        raise ValueError(f"--columns {name}={columns[name]}: {name!r} is not a name the "
+                         f"commands read; the names are {', '.join(KNOWN_COLUMNS)} (lower "
+                         "case); COLUMN is the file's header or 1-based column number")
     return read_track_csv(args.track, required, optional, allow_nan=allow_nan,
-                          columns=parse_columns(args.columns))
+                          columns=columns)
 
 
 FIELD_UNITS = {"gravity": "mGal", "magnetic": "nT"}

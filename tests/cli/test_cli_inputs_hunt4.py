@@ -318,3 +318,19 @@ def test_an_empty_path_is_named(tmp_path, capsys, monkeypatch, argv, message):
     monkeypatch.chdir(tmp_path)
     _refused(capsys, argv, message)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(("columns", "name"), [("foo=gravity", "foo"), ("LAT=lat", "LAT")])
+def test_a_columns_name_the_commands_do_not_read_is_refused(tmp_path, capsys, columns, name):
+    """``sample --columns foo=gravity`` renamed the gravity column foo in the output (exit
+    0); ``--columns LAT=lat`` (upper case) ended in "column 'lat' would be read as 'lat', but
+    --columns LAT=lat reads it as 'LAT'"."""
+    track = tmp_path / "t.csv"
+    track.write_text("t,lat,lon,gravity\n0,30.2,130.4,5\n")
+    out = tmp_path / "s.csv"
+    _refused(capsys, ["sample", "--map", "ryukyu", "--track", track, "--out", out, "--columns",
+                      columns],
+             f"--columns {columns}: {name!r} is not a name the commands read; the names are t, "
+             "lat, lon, h, gravity, magnetic, v_east, v_north, drift_radius (lower case); "
+             "COLUMN is the file's header or 1-based column number")
+    assert not out.exists()
