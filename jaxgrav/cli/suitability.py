@@ -68,7 +68,8 @@ def add_parser(subparsers):
     s.add_argument("--heading", type=float, default=45.0,
                    help="segment heading, degrees clockwise from north, -360 to 360 "
                         "(default 45; -90 is 270)")
-    s.add_argument("--fixes", type=int, default=30, help="readings per segment (default 30)")
+    s.add_argument("--fixes", type=int, default=30,
+                   help="readings per segment (at least 3; default 30)")
     s.add_argument("--spacing", type=float, default=1200.0,
                    help="distance between readings (m, default 1200)")
     s.add_argument("--noise", type=float, default=1.0, help="reading noise 1-sigma (mGal)")
@@ -197,6 +198,9 @@ def _check_args(args):
     if args.fixes < 2:
         raise ValueError(f"--fixes must be an integer >= 2 (readings per segment); got "
                          f"{args.fixes}")
+    if args.fixes == 2:  # wrote a map of "no information" at every node, exit 0
+        raise ValueError("--fixes 2 places no segment: two readings cannot give the position "
+                         "(north, east) and the free gravimeter bias; give at least 3")
     fill_map_error_length(args, args.map_error != 0)
     for name, value, zero_ok, unit in (("--spacing", args.spacing, False, "m"),
                                        ("--noise", args.noise, False, "mGal"),

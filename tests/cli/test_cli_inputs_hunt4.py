@@ -334,3 +334,13 @@ def test_a_columns_name_the_commands_do_not_read_is_refused(tmp_path, capsys, co
              "lat, lon, h, gravity, magnetic, v_east, v_north, drift_radius (lower case); "
              "COLUMN is the file's header or 1-based column number")
     assert not out.exists()
+
+
+def test_suitability_refuses_two_readings_a_segment(tmp_path, capsys):
+    """``suitability --fixes 2`` wrote "0 of 83521 nodes have a bound" (every node
+    no_information, exit 0): two readings cannot fix two coordinates and a bias."""
+    out = tmp_path / "s.nc"
+    _refused(capsys, ["suitability", "--map", "ryukyu", "--out", out, "--fixes", "2"],
+             "--fixes 2 places no segment: two readings cannot give the position (north, east) "
+             "and the free gravimeter bias; give at least 3")
+    assert list(tmp_path.iterdir()) == []
