@@ -198,10 +198,11 @@ def _cmd_match(args):
     has_v = (field == "gravity" and "v_east" in track and "v_north" in track
              and not args.no_eotvos)
     unit = "nT" if field == "magnetic" else "mGal"
-    # compared with the map as the matcher will: Eötvös-corrected
+    # compared with the map as the matcher will: Eötvös-corrected (bilinear: levels and
+    # spreads need no spline, and the gap check compiled that program already)
     correction = (np.asarray(eotvos_jit(track["lat"], track["v_east"], track["v_north"]))
                   if has_v else 0.0)
-    check_readings(track[field], np.asarray(grid.sample(track["lat"], track["lon"], "bicubic")),
+    check_readings(track[field], np.asarray(grid.sample(track["lat"], track["lon"], "bilinear")),
                    args.noise, column=field, where=f"--track {str(args.track)!r}", unit=unit,
                    correction=correction, missing_skipped=False, line=track.line)
     check_search(args, grid, radius_deg, track["lat"])
