@@ -24,6 +24,7 @@ are cached between calls (:mod:`jaxgrav.cli.cache`; ``--no-cache`` or
 
 import argparse
 import functools
+import os
 import re
 import sys
 import traceback
@@ -179,6 +180,13 @@ def check_special_outputs(args):
             raise ValueError(f"--{name} {str(value)!r} is a device, pipe or socket, not a "
                              "regular file: jaxgrav writes each output whole and then moves "
                              "it into place, which would replace it; give another path")
+        # --out new/ wrote a file named 'new'; the demo's and data's --out are folders
+        if str(value).endswith(("/", os.sep)) and args.command not in ("demo", "data"):
+            suffix = {"match": ".json", "suitability": ".nc", "montecarlo": ".nc",
+                      "bench": ".md"}.get(args.command, ".csv")
+            raise ValueError(f"--{name} {str(value)!r} ends in a slash, a folder, and jaxgrav "
+                             f"{args.command} writes a file there: give a file name in it, "
+                             f"e.g. '{str(value).rstrip('/' + os.sep)}/NAME{suffix}'")
 
 
 def main(argv=None):

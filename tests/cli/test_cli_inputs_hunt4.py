@@ -344,3 +344,17 @@ def test_suitability_refuses_two_readings_a_segment(tmp_path, capsys):
              "--fixes 2 places no segment: two readings cannot give the position (north, east) "
              "and the free gravimeter bias; give at least 3")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["simulate", "--n", "5", "--out", "{d}/new/"],
+     "--out '{d}/new/' ends in a slash, a folder, and jaxgrav simulate writes a file there: "
+     "give a file name in it, e.g. '{d}/new/NAME.csv'"),
+    (["montecarlo", "--method", "dense", "--runs", "5", "--out", "{d}/new/"],
+     "e.g. '{d}/new/NAME.nc'"),
+])
+def test_an_output_ending_in_a_slash_is_not_written_as_a_file(tmp_path, capsys, argv, message):
+    """``simulate --out new/`` wrote a file named 'new' (montecarlo: 'new' and 'new.png'),
+    exit 0, where the user meant a folder."""
+    _refused(capsys, [a.format(d=tmp_path) for a in argv], message.format(d=tmp_path))
+    assert list(tmp_path.iterdir()) == []
