@@ -1,10 +1,11 @@
 """Inputs found by the fourth issue-19 hunt (2026-12-07, helper-56): a simulated map error
 beyond any real map's; a no-harm guard ratio above 1; a position prior wider than any map;
-an output named for another format, or that is a pipe or device; velocity columns in knots
-or swapped; a time gap in a match track; a missing readings column in words; options a run
-would not use (simulate-filter's --geometry over a map, simulate's --probability with a
-fixed drift, --seed without particles, --map-error-length or --map-error-order without a
-map error)."""
+an output named for another format, that is a pipe or device, or that ends in a slash; an
+empty path; velocity columns in knots or swapped; a time gap in a match track; a missing
+readings column in words; a --columns name no command reads; suitability's two-reading
+segments; options a run would not use (simulate-filter's --geometry over a map, simulate's
+--probability with a fixed drift, --seed without particles, --map-error-length or
+--map-error-order without a map error)."""
 
 import json
 import os
