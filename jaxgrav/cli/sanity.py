@@ -237,7 +237,7 @@ def _velocity_cause(pos_n, pos_e, vn, ve):
     """What the velocity columns look like against the positions' own speed (m/s per step):
     another unit (:data:`VELOCITY_UNITS`), east and north swapped, or neither."""
     mid_n, mid_e = 0.5 * (vn[1:] + vn[:-1]), 0.5 * (ve[1:] + ve[:-1])
-    moving = np.hypot(pos_n, pos_e) > 0.1
+    moving = (np.hypot(pos_n, pos_e) > 0) & (np.hypot(mid_n, mid_e) > 0.1)
     said = f"the positions move at a median {np.median(np.hypot(pos_n, pos_e)):.3g} m/s, "
     said += f"the velocity columns say {np.median(np.hypot(mid_n, mid_e)):.3g} m/s"
     if moving.sum() >= 2:
@@ -245,6 +245,9 @@ def _velocity_cause(pos_n, pos_e, vn, ve):
         for unit, factor in VELOCITY_UNITS.items():
             if abs(ratio / factor - 1.0) < 0.05:
                 return f"{said} (a factor {ratio:.3g}): are they in {unit}?"
+        for unit, factor in (("milliseconds", 1000.0), ("minutes", 1.0 / 60.0)):
+            if abs(ratio / factor - 1.0) < 0.05:
+                return f"{said} (a factor {ratio:.3g}): is column t in {unit}, not seconds?"
         swapped = np.hypot(pos_n - mid_e, pos_e - mid_n)
         if np.median(swapped[moving] / np.hypot(pos_n, pos_e)[moving]) < 0.1:
             return f"{said}, but along the other axis: are v_east and v_north swapped?"

@@ -144,36 +144,38 @@ def test_an_output_that_is_a_pipe_or_device_is_never_replaced(tmp_path, capsys, 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe", "t.csv"]
 
 
-def _velocity_log(path, ve, vn, scale=1.0, swap=False):
+def _velocity_log(path, ve, vn, scale=1.0, swap=False, t_unit=1.0):
     """Ten rows 60 s apart over paper D's masses, moving at (ve, vn) m/s; the velocity
-    columns times ``scale`` (and swapped with ``swap``)."""
+    columns times ``scale`` (and swapped with ``swap``), the times times ``t_unit``."""
     rows = []
     for i in range(10):
         lat = 24.3 + vn * 60 * i / 110_700.0
         lon = 122.74 + ve * 60 * i / (111_320.0 * np.cos(np.radians(24.3)))
         cols = (vn, ve) if swap else (ve, vn)
-        rows.append(f"{60 * i},{lat:.8f},{lon:.8f},{cols[0] * scale:.4f},"
+        rows.append(f"{60 * i * t_unit:g},{lat:.8f},{lon:.8f},{cols[0] * scale:.4f},"
                     f"{cols[1] * scale:.4f},{-30 + 0.3 * i:.2f}\n")
     path.write_text("t,lat,lon,v_east,v_north,gravity\n" + "".join(rows))
     return path
 
 
-@pytest.mark.parametrize(("scale", "swap", "hint"), [
-    (1.943844, False, "(a factor 1.94): are they in knots (× 0.5144 gives m/s)?"),
-    (3.6, False, "(a factor 3.6): are they in km/h (÷ 3.6 gives m/s)?"),
-    (1.0, True, "but along the other axis: are v_east and v_north swapped?"),
+@pytest.mark.parametrize(("scale", "swap", "t_unit", "hint"), [
+    (1.943844, False, 1.0, "(a factor 1.94): are they in knots (× 0.5144 gives m/s)?"),
+    (3.6, False, 1.0, "(a factor 3.6): are they in km/h (÷ 3.6 gives m/s)?"),
+    (1.0, True, 1.0, "but along the other axis: are v_east and v_north swapped?"),
+    (1.0, False, 1000.0, "is column t in milliseconds, not seconds?"),
 ])
-def test_velocity_columns_in_other_units_are_named(tmp_path, capsys, scale, swap, hint):
+def test_velocity_columns_in_other_units_are_named(tmp_path, capsys, scale, swap, t_unit,
+                                                   hint):
     """A log whose v_east/v_north were in knots: "the position jumps by 48.48 m between
     lines 2 and 3 ... (72 such jump(s)); a reset or glitch of the INS position: split the
     log there or remove the row" - every row blamed on a glitch of the positions."""
-    log = _velocity_log(tmp_path / "v.csv", 8.0, 1.0, scale, swap)
+    log = _velocity_log(tmp_path / "v.csv", 8.0, 1.0, scale, swap, t_unit)
     out = tmp_path / "o.csv"
     err = _refused(capsys, ["filter", "--point-masses", "paper-d", "--track", log, "--out",
                             out],
                    f"--track {str(log)!r}: v_east/v_north disagree with the positions on 9 of "
                    "9 steps (first between lines 2 and 3): the positions move at a median "
-                   "8.07 m/s, the velocity columns say ")
+                   f"{8.07 / t_unit:.3g} m/s, the velocity columns say ")
     assert hint in err and "glitch" not in err, err
     assert not out.exists()
 
