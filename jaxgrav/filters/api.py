@@ -144,6 +144,16 @@ def eotvos_part(jacobian, n_states):
 
 
 @jax.jit
+def _radii(lat):
+    """Meridian and prime-vertical radii (m) at ``lat`` (degrees), one compiled program for
+    the host's conversions (eager, they compiled five small programs per call)."""
+    return meridian_radius(lat), prime_vertical_radius(lat)
+
+
+_eotvos_part = jax.jit(eotvos_part, static_argnums=1)
+
+
+@jax.jit
 def _prior_and_dynamics(model, lat_mean, dt, sigma_pos, sigma_vel):
     # model: traced leaves, so one compilation serves every INS grade
     return initial_covariance(model, sigma_pos, sigma_vel), Dynamics(*transition(model,
@@ -290,9 +300,9 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     meas = gravity_measurement
     speed = 0.0
     if map_error is not None:
-        dn = np.diff(lat) * DEG * np.asarray(meridian_radius(lat[1:]))
-        de = (np.diff(lon) * DEG * np.asarray(prime_vertical_radius(lat[1:]))
-              * np.cos(lat[1:] * DEG))
+        m, e = (np.asarray(r)[1:] for r in _radii(lat))
+        dn = np.diff(lat) * DEG * m
+        de = np.diff(lon) * DEG * e * np.cos(lat[1:] * DEG)
         # the map error decorrelates at the distance travelled per time: the mean speed, as
         # navigate's tight filter (the median of a track mostly at rest was 0: a map error
         # that never decorrelates while moving; a singular second-order prior)
@@ -302,9 +312,9 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
         dynamics, _, p0, meas = augment(map_error, dynamics, jnp.zeros(p0.shape[0]), p0, speed)
     h_lin = None
     if eotvos_velocity is not None:
-        h_lin = eotvos_part(jnp.asarray(eotvos_velocity, p0.dtype), p0.shape[0])
-    steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity), jnp.full(n, r),
-                 h_lin)
+        h_lin = _eotvos_part(jnp.asarray(eotvos_velocity, p0.dtype), p0.shape[0])
+    steps = Step(jnp.asarray(lat), jnp.asarray(lon), jnp.asarray(gravity),
+                 jnp.asarray(np.full(n, r)), h_lin)  # np.full: jnp.full compiles a program
     if method == "pmf":
         rows = np.flatnonzero(np.isfinite(gravity))
         every = reading_stride(rows)
@@ -326,8 +336,8 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
                                  meas, key)
         infos = jax.tree.map(np.asarray, infos)
     x, sigma = infos.x, infos.sigma
-    m = np.asarray(meridian_radius(lat))
-    e = np.asarray(prime_vertical_radius(lat)) * np.cos(lat * DEG)
+    m, e = (np.asarray(r) for r in _radii(lat))
+    e = e * np.cos(lat * DEG)
     out = dict(lat=lat - x[:, 0] / m / DEG, lon=lon - x[:, 1] / e / DEG,
                sigma_north=sigma[:, 0], sigma_east=sigma[:, 1],
                cov_north_east=infos.p_pos[:, 0, 1],
