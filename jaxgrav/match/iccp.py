@@ -7,8 +7,8 @@ shift plus a rotation of the INS track about its centroid. Each iteration:
 1. Transform the INS points: ``y_n = R p_n + t``.
 2. Closest contour point: from ``y_n``, a few Newton projection steps onto the level
    set ``{x : f(x) = z_n}`` of the *bicubic interpolant* f of the map
-   (:func:`~jaxgrav.match.contour.project_to_contours`, on spline coefficients
-   prepared once per map, with the analytic gradient).
+   (the steps of :func:`~jaxgrav.match.contour.project_to_contours`, as a loop, on
+   spline coefficients prepared once per map, with the analytic gradient).
 3. Sliding window: a contour point is used only if it lies within ``window_m`` of
    its current point ``y_n`` (the window moves with the estimate) and the map there
    matches ``z_n`` within ``contour_tol``; others get weight 0.
