@@ -12,7 +12,9 @@ shared by the map and track readers).
 
 import dataclasses
 import math
+import numbers
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -178,15 +180,16 @@ class GeographicAxes:
         ----------
         lat : float or Array, optional
             Latitude (degrees) at which to measure; the grid's central latitude by
-            default, in which case Python floats are returned.
+            default. For the default or a Python (or NumPy scalar) float, Python floats
+            are returned, computed on the host (no device program; also under jit).
 
         Returns
         -------
         tuple
             North–south and east–west node spacing (m).
         """
-        if lat is None:  # static geometry: Python floats, also under jit, no device work
-            lat_c = self.lat0 + 0.5 * self.dlat * (self.ny - 1)
+        if lat is None or isinstance(lat, numbers.Real):  # static geometry: Python floats
+            lat_c = self.lat0 + 0.5 * self.dlat * (self.ny - 1) if lat is None else float(lat)
             s2 = math.sin(lat_c * DEG) ** 2
             w = 1.0 - WGS84_E2 * s2  # M and N of geodesy.meridian/prime_vertical_radius
             return (WGS84_A * (1.0 - WGS84_E2) / w**1.5 * self.dlat * DEG,
@@ -207,15 +210,21 @@ class GeographicAxes:
         -------
         tuple of Array
             ``(iy, ix)``; inside the grid when ``0 ≤ iy ≤ ny−1`` and ``0 ≤ ix ≤ nx−1``.
+            NumPy arrays for NumPy (or Python) points, computed on the host in the dtype
+            JAX would use (a check of a track compiles no device program); JAX arrays
+            for JAX arrays and under ``jit``.
         """
-        lat = jnp.asarray(lat)
-        lon = jnp.asarray(lon)
+        xp = jnp if any(isinstance(a, jax.Array) for a in (lat, lon)) else np
+        lat, lon = xp.asarray(lat), xp.asarray(lon)
         dtype = jnp.result_type(lat.dtype, lon.dtype, float)
-        lon_w = self.lon0 + jnp.mod(lon.astype(dtype) - self.lon0, 360.0)
-        return (lat.astype(dtype) - self.lat0) / self.dlat, (lon_w - self.lon0) / self.dlon
+        lat0, lon0, dlat, dlon = (np.asarray(v, dtype) for v in (self.lat0, self.lon0,
+                                                                 self.dlat, self.dlon))
+        lon_w = lon0 + xp.mod(lon.astype(dtype) - lon0, np.asarray(360.0, dtype))
+        return (lat.astype(dtype) - lat0) / dlat, (lon_w - lon0) / dlon
 
     def contains(self, lat, lon):
-        """Boolean mask of points inside the grid (edges included), points' broadcast shape."""
+        """Boolean mask of points inside the grid (edges included), points' broadcast shape
+        (NumPy for NumPy points, as :meth:`fractional_index`)."""
         iy, ix = self.fractional_index(lat, lon)
         eps = interp.edge_eps(iy.dtype, max(self.ny, self.nx))
         return (iy >= -eps) & (iy <= self.ny - 1 + eps) & (ix >= -eps) & (ix <= self.nx - 1 + eps)
