@@ -197,6 +197,8 @@ def main(argv=None):
     enable_cache(off=args.no_cache)
     default = warnings.formatwarning
     warnings.formatwarning = functools.partial(_one_line, default=default)
+    if getattr(args, "track", None) == "-" and Path("/dev/stdin").exists():
+        args.track = "/dev/stdin"  # the usual "-": was "track file '-' does not exist"
     try:
         check_special_outputs(args)
         args.func(args)

@@ -361,3 +361,22 @@ def test_an_output_ending_in_a_slash_is_not_written_as_a_file(tmp_path, capsys, 
     exit 0, where the user meant a folder."""
     _refused(capsys, [a.format(d=tmp_path) for a in argv], message.format(d=tmp_path))
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/stdin"), reason="needs /dev/stdin")
+def test_a_track_on_standard_input_is_read_with_a_dash(tmp_path, capsys):
+    """``cat log.csv | jaxgrav sample --track - ...``: "track file '-' does not exist"."""
+    track = tmp_path / "t.csv"
+    track.write_text("lat,lon\n30.2,130.4\n30.3,130.5\n")
+    out = tmp_path / "s.csv"
+    saved = os.dup(0)
+    with open(track, "rb") as f:
+        os.dup2(f.fileno(), 0)
+        try:
+            code = main(["sample", "--map", "ryukyu", "--track", "-", "--out", str(out)])
+        finally:
+            os.dup2(saved, 0)
+            os.close(saved)
+    assert code == 0, capsys.readouterr().err
+    assert out.read_text().splitlines()[0] == "lat,lon,map"
+    assert len(out.read_text().splitlines()) == 3
