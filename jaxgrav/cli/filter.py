@@ -266,6 +266,9 @@ def cmd_filter(args):
         given = "both" if args.map is not None else "neither"
         raise ValueError(f"give exactly one of --map MAP.nc and --point-masses "
                          f"paper-d|MODEL.json; got {given}")
+    if args.point_masses is not None and args.var is not None:  # was ignored, silently
+        raise ValueError(f"--var {args.var} names a variable of a --map file; --point-masses "
+                         f"{args.point_masses} has none: leave --var out")
     check_outputs([args.out], force=args.force, names=["--out"],
                   inputs={"--track": args.track, "--map": args.map,
                           "--point-masses": args.point_masses})

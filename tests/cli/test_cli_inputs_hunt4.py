@@ -380,3 +380,13 @@ def test_a_track_on_standard_input_is_read_with_a_dash(tmp_path, capsys):
     assert code == 0, capsys.readouterr().err
     assert out.read_text().splitlines()[0] == "lat,lon,map"
     assert len(out.read_text().splitlines()) == 3
+
+
+def test_filter_refuses_a_map_variable_with_point_masses(tmp_path, capsys, filter_log):
+    """``filter --point-masses paper-d --var z`` ran on the masses, --var unused (exit 0)."""
+    out = tmp_path / "o.csv"
+    _refused(capsys, ["filter", "--point-masses", "paper-d", "--var", "z", "--track", filter_log,
+                      "--out", out],
+             "--var z names a variable of a --map file; --point-masses paper-d has none: leave "
+             "--var out")
+    assert not out.exists()
