@@ -157,6 +157,10 @@ def cmd_simulate_filter(args):
                          f"at most {n - 1} rows between readings")
     me_sigma, me_length = map_error_args(args)
     check_simulated_map_error(me_sigma)
+    if args.map is None and args.var is not None:  # was ignored, silently
+        raise ValueError(f"--var {args.var} names a variable of --map; without --map the "
+                         "readings come from paper D's point masses: give --map or leave "
+                         "--var out")
     if args.map is not None and args.geometry is not None:  # was dropped without a word
         raise ValueError(f"--geometry {args.geometry} shapes the track over paper D's point "
                          "masses; with --map the track is a straight line of random heading: "

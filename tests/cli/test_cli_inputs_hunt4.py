@@ -390,3 +390,12 @@ def test_filter_refuses_a_map_variable_with_point_masses(tmp_path, capsys, filte
              "--var z names a variable of a --map file; --point-masses paper-d has none: leave "
              "--var out")
     assert not out.exists()
+
+
+def test_simulate_filter_refuses_a_map_variable_without_a_map(tmp_path, capsys):
+    """``simulate-filter --var z`` (no --map) simulated paper D's masses, --var unused."""
+    out = tmp_path / "s.csv"
+    _refused(capsys, ["simulate-filter", "--var", "z", "--out", out],
+             "--var z names a variable of --map; without --map the readings come from paper "
+             "D's point masses: give --map or leave --var out")
+    assert not out.exists()
