@@ -369,6 +369,9 @@ def load_point_masses(path):
     """
     path = Path(path)
     where = f"point-mass model {str(path)!r}"
+    expected = ('a point-mass model is a JSON object with "format": "jaxgrav.point_masses", '
+                '"version": 1, the lists "lat", "lon", "depth", "mass" and an "offset", as '
+                "written by jaxgrav.fields.pointmass_fit.save_point_masses in Python")
     if not path.exists():
         raise FileNotFoundError(f"{where}: no such file")
     if not path.is_file():
@@ -376,30 +379,39 @@ def load_point_masses(path):
     try:
         doc = json.loads(path.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise ValueError(f"{where} is not JSON ({err}); expected a file written by "
-                         "save_point_masses") from None
+        raise ValueError(f"{where} is not JSON ({err}); {expected}") from None
     if not isinstance(doc, dict) or doc.get("format") != MODEL_FORMAT:
-        got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
-        raise ValueError(f"{where}: format must be {MODEL_FORMAT!r}; got {got!r}")
+        got = (f"it holds {_json_text(doc)}, not a JSON object" if not isinstance(doc, dict)
+               else 'it has no "format" field' if "format" not in doc
+               else f"its \"format\" is {_json_text(doc['format'])}")
+        raise ValueError(f"{where} is not a jaxgrav point-mass model ({got}); {expected}")
     if doc.get("version") != _MODEL_VERSION:
         raise ValueError(f"{where}: version must be {_MODEL_VERSION}; got "
-                         f"{doc.get('version')!r}")
+                         f"{_json_text(doc.get('version'))}")
     missing = [k for k in (*_MODEL_FIELDS, "offset") if k not in doc]
     if missing:
-        raise ValueError(f"{where} lacks field(s) {missing}")
+        raise ValueError(f"{where} lacks field{'s' * (len(missing) > 1)} "
+                         f"{', '.join(missing)}; {expected}")
     values = {}
     for name in _MODEL_FIELDS:
         v = doc[name]
         if not (isinstance(v, list) and all(isinstance(a, int | float) and not isinstance(a, bool)
                                             for a in v)):
-            raise ValueError(f"{where}: {name} must be a list of numbers; got {v!r}")
+            raise ValueError(f"{where}: {name} must be a list of numbers; got {_json_text(v)}")
         values[name] = v
     offset = doc["offset"]
     if isinstance(offset, bool) or not isinstance(offset, int | float) or not math.isfinite(
             offset):
-        raise ValueError(f"{where}: offset must be a finite number of mGal; got {offset!r}")
+        raise ValueError(f"{where}: offset must be a finite number of mGal; got "
+                         f"{_json_text(offset)}")
     try:
         masses = PointMasses.create(**values)
     except ValueError as err:
         raise ValueError(f"{where}: {err}") from None
     return masses, float(offset)
+
+
+def _json_text(value):
+    """A value of a JSON file as the file writes it (``null``, ``"grid"``), shortened."""
+    text = json.dumps(value)
+    return text if len(text) <= 60 else text[:57] + "..."

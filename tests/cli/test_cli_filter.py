@@ -171,7 +171,8 @@ def test_point_mass_model_file(sim, tmp_path, capsys):
     # a bad model file: one clear line, no output
     bad = tmp_path / "bad.json"
     bad.write_text('{"format": "grid"}')
-    for path, message in ((bad, f"point-mass model {str(bad)!r}: format must be"),
+    for path, message in ((bad, f"model {str(bad)!r} is not a jaxgrav point-mass model (its "
+                                '"format" is "grid")'),
                           (tmp_path / "none.json", "none.json': no such file")):
         code = _filter(sim / "track.csv", tmp_path / "o.csv",
                        source=("--point-masses", str(path)))
@@ -317,7 +318,7 @@ def _bad(kind, cols):
 
 
 @pytest.mark.parametrize(("kind", "extra", "message"), [
-    ("missing", (), "lacks column(s) ['gravity']"),
+    ("missing", (), "lacks column gravity; it has "),
     ("nonuniform", (), "column t must have a regular step; a step of 13 s on lines 8-9 (t 60 "
                        "-> 73 s) is not within 10% of the step 10.025 s or a whole number of "
                        "steps (a gap); 1 such step(s)"),

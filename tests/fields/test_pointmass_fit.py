@@ -307,15 +307,17 @@ def _model_doc(**change):
 
 
 @pytest.mark.parametrize(("text", "match"), [
-    ("{not json", r"is not JSON .*expected a file written by save_point_masses"),
-    ('[1, 2]', r"format must be 'jaxgrav.point_masses'; got 'list'"),
-    (_model_doc(format="grid"), r"format must be 'jaxgrav.point_masses'; got 'grid'"),
+    ("{not json", r"is not JSON .*; a point-mass model is a JSON object with \"format\": "
+                  r"\"jaxgrav.point_masses\".*save_point_masses in Python$"),
+    ('[1, 2]', r"is not a jaxgrav point-mass model \(it holds \[1, 2\], not a JSON object\)"),
+    (_model_doc(format="grid"), r"not a jaxgrav point-mass model \(its \"format\" is \"grid\"\)"),
+    (_model_doc(format=None), r"\(it has no \"format\" field\); a point-mass model is a JSON"),
     (_model_doc(version=2), r"version must be 1; got 2"),
-    (_model_doc(mass=None), r"lacks field\(s\) \['mass'\]"),
+    (_model_doc(mass=None), r"lacks field mass; a point-mass model"),
     (_model_doc(depth=[3e4, "deep"]), r"depth must be a list of numbers"),
     (_model_doc(lat=[24.2]), r"same length K"),
     (_model_doc(lat=[24.2, 95.0]), r"[Ll]atitude"),
-    (_model_doc(offset=float("nan")), r"offset must be a finite number of mGal; got nan"),
+    (_model_doc(offset=float("nan")), r"offset must be a finite number of mGal; got NaN"),
     (_model_doc(mass=[1e16, float("inf")]), r"finite"),
 ])
 def test_load_rejects_bad_model_files(tmp_path, text, match):
