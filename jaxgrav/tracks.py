@@ -143,6 +143,14 @@ def parse_columns(text):
     return out
 
 
+def _listed(names, last=","):
+    """Names in plain words: ``a, b, c`` (``last="and"``: ``a, b and c``)."""
+    names = [str(n) for n in names]
+    if len(names) < 2 or last == ",":
+        return ", ".join(names)
+    return f"{', '.join(names[:-1])} {last} {names[-1]}"
+
+
 def _match_columns(header, wanted, columns, label, required=()):
     """Header index of each canonical name found: ``--columns``, exact name, aliases."""
     keys = [column_key(h) for h in header]
@@ -154,7 +162,7 @@ def _match_columns(header, wanted, columns, label, required=()):
             hits = [int(col) - 1]
         if not hits:
             raise ValueError(f"{label} has no column {col!r} (asked for by --columns "
-                             f"{name}={col}); it has {header}")
+                             f"{name}={col}); it has {_listed(header)}")
         found[name] = hits[0]
     for name in wanted:
         if name in found:
@@ -164,8 +172,9 @@ def _match_columns(header, wanted, columns, label, required=()):
             exact = [j for j in hits if header[j] == alias]
             hits = exact if len(exact) == 1 else hits
             if len(hits) > 1:
-                raise ValueError(f"{label}: columns {[header[j] for j in hits]} could all be "
-                                 f"{name!r}; choose one with --columns {name}=COLUMN")
+                both = _listed([header[j] for j in hits], "and")
+                raise ValueError(f"{label}: columns {both} could all be {name!r}; choose one "
+                                 f"with --columns {name}=COLUMN")
             if hits:
                 found[name] = hits[0]
                 break
@@ -263,9 +272,9 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
     missing = [c for c in required if c not in found]
     if missing:
         raise ValueError(
-            f"{label} lacks column(s) {missing}; it has {table.header}; required: "
-            f"{list(required)} (names in any case; aliases: time, latitude, longitude; "
-            f"others with --columns {missing[0]}=COLUMN)")
+            f"{label} lacks column{'s' * (len(missing) > 1)} {_listed(missing, 'and')}; it "
+            f"has {_listed(table.header)}; required: {_listed(required)} (names in any case; "
+            f"aliases: time, latitude, longitude; others with --columns {missing[0]}=COLUMN)")
     if not table.rows:
         raise ValueError(f"{label} has a header but no rows")
     track = TrackTable()

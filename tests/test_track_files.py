@@ -104,7 +104,7 @@ def test_line_numbers_count_comments_and_blank_lines(tmp_path):
 # (id, file name, bytes, kwargs, error class, phrases the message must hold)
 INVALID = [
     ("missing-column", "a.csv", b"lat,lon\n30,130\n", {"required": ("t", "lat")}, ValueError,
-     ["lacks column(s) ['t']", "--columns t=COLUMN"]),
+     ["lacks column t; it has lat, lon; required: t, lat", "--columns t=COLUMN"]),
     ("not-a-number", "a.csv", b"t,lat,lon\n0,30,130\n10,abc,130\n", {"required": ("lat",)},
      ValueError, ["line 3", "column 'lat'", "'abc' is not a number", "degrees"]),
     ("repeated-time", "a.csv", b"t,lat\n0,30\n10,30\n10,30\n", {}, ValueError,
@@ -140,14 +140,14 @@ INVALID = [
     ("duplicate-header", "a.csv", b"t,lat,lat\n0,30,31\n", {}, ValueError,
      ["column 'lat' appears twice"]),
     ("ambiguous-alias", "a.csv", b"t,LAT,Lat\n0,30,31\n", {}, ValueError,
-     ["could all be 'lat'", "--columns lat=COLUMN"]),
+     ["columns LAT and Lat could all be 'lat'", "--columns lat=COLUMN"]),
     ("netcdf-as-track", "a.nc", b"CDF\x01\x00\x00\x00\x00", {}, ValueError,
      ["NetCDF-3 file, not a text table"]),
     ("binary", "a.bin", b"\x00\x01\x02\x03", {}, ValueError, ["binary file"]),
     ("empty", "a.csv", b"\n\n", {}, ValueError, ["is empty; expected a header row"]),
     ("header-only", "a.csv", b"t,lat,lon\n", {}, ValueError, ["has a header but no rows"]),
     ("columns-missing", "a.csv", b"t,lat,lon\n0,30,130\n", {"columns": {"gravity": "FAA"}},
-     ValueError, ["has no column 'FAA'", "--columns gravity=FAA"]),
+     ValueError, ["has no column 'FAA'", "it has t, lat, lon", "--columns gravity=FAA"]),
     ("columns-same-column", "a.csv", b"t,lat,lon\n0,30,130\n",
      {"columns": {"lat": "lat", "lon": "lat"}}, ValueError, ["cannot be both 'lat' and 'lon'"]),
     ("unbalanced-quote-whitespace", "a.xyz", b"t lat name\n0 30 \"Maru\n", {}, ValueError,
@@ -288,7 +288,7 @@ def malformed(tr, fault, k):
     if fault == "drop":
         raw = raw.replace(tr["names"]["lat"].replace(" ", "" if tr["delimiter"] == " " else " ")
                           .encode(), b"northing", 1)
-        phrases = ["lacks column(s) ['lat']"]
+        phrases = ["lacks column lat; it has "]
     return raw, phrases
 
 

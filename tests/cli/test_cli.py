@@ -88,7 +88,7 @@ def test_match_reads_a_user_netcdf_map(track, tmp_path):
 
 @pytest.mark.parametrize(("edit", "message"), [
     (lambda c: c.pop("gravity"), "needs a 'gravity' (mGal) or 'magnetic' (nT) column"),
-    (lambda c: c.pop("t"), "lacks column(s) ['t']"),
+    (lambda c: c.pop("t"), "lacks column t; it has "),
     (lambda c: c["gravity"].__setitem__(3, np.nan),
      "column 'gravity' has 1 empty, NaN or inf cell(s), first on line 5"),
     (lambda c: c["lon"].__setitem__(slice(None), c["lon"] + 20.0), "leaves the map"),
