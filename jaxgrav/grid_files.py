@@ -122,6 +122,14 @@ def check_netcdf_file(path, what="map"):
                      "NetCDF grid (CF, GMT .nc/.grd) with lat/lon coordinates")
 
 
+def _listed(names, last=","):
+    """Names in plain words: ``a, b, c`` (``last="or"``: ``a, b or c``); ``none`` if empty."""
+    names = [str(n) for n in names]
+    if len(names) < 2 or last == ",":
+        return ", ".join(names) or "none"
+    return f"{', '.join(names[:-1])} {last} {names[-1]}"
+
+
 def _find_axis(ds, names, kind, label):
     """Name of the latitude or longitude coordinate: by name (any case), then CF attributes."""
     found = {str(n).lower(): n for n in [*ds.coords, *ds.dims, *ds.data_vars]}
@@ -133,9 +141,9 @@ def _find_axis(ds, names, kind, label):
         if (v.attrs.get("standard_name") == standard
                 or str(v.attrs.get("units", "")).lower() in units):
             return n
-    raise ValueError(f"{label} has no {kind} coordinate: expected one named one of {names} "
-                     f"(any case) or with CF standard_name '{standard}'; it has "
-                     f"{sorted(map(str, ds.variables))}")
+    raise ValueError(f"{label} has no {kind} coordinate: expected one named "
+                     f"{_listed(names, 'or')} (any case) or with CF standard_name {standard}; "
+                     f"it has {_listed(ds.variables)}")
 
 
 def _axis_dim(ds, name, label):
@@ -145,10 +153,23 @@ def _axis_dim(ds, name, label):
                          "file must store the node latitudes and longitudes")
     v = ds.variables[name]
     if v.ndim != 1:
-        raise ValueError(f"{label}: coordinate {name!r} is {v.ndim}-D {tuple(v.dims)}; jaxgrav "
-                         "reads regular latitude/longitude grids (1-D coordinates), not "
-                         "curvilinear or projected ones")
+        raise ValueError(f"{label}: coordinate {name!r} is {v.ndim}-D (along "
+                         f"{_listed(v.dims)}); jaxgrav reads regular latitude/longitude grids "
+                         "(1-D coordinates), not curvilinear or projected ones")
     return v.dims[0]
+
+
+def _grid_dims(ds, lat_name, lon_name, label):
+    """The latitude and longitude dimensions: two different 1-D axes (else ValueError)."""
+    lat_dim, lon_dim = _axis_dim(ds, lat_name, label), _axis_dim(ds, lon_name, label)
+    if lat_dim == lon_dim:  # a table of points, e.g. a montecarlo file's start_lat/start_lon
+        raise ValueError(
+            f"{label} is not a latitude/longitude grid: its latitudes {str(lat_name)!r} and "
+            f"longitudes {str(lon_name)!r} are both listed along one dimension, "
+            f"{str(lat_dim)!r} ({ds.sizes[lat_dim]} values), as in a table of points or runs "
+            "(e.g. a montecarlo result); expected a NetCDF grid with a 1-D latitude axis and "
+            "a separate 1-D longitude axis (e.g. lat, lon)")
+    return lat_dim, lon_dim
 
 
 def _choose_var(ds, var, dims, label, exclude):
@@ -156,16 +177,16 @@ def _choose_var(ds, var, dims, label, exclude):
                and str(v) not in exclude]
     if var is None:
         if len(gridded) != 1:
-            raise ValueError(f"{label} holds {len(gridded)} gridded variables {gridded}; "
-                             "choose one with --var NAME")
+            raise ValueError(f"{label} holds {len(gridded)} gridded variables "
+                             f"({_listed(gridded)}); choose one with --var NAME")
         return gridded[0]
     if var not in ds.variables:
         raise ValueError(f"{label} has no variable {var!r}; its gridded variables are "
-                         f"{gridded}")
+                         f"{_listed(gridded)}")
     if not set(dims) <= set(ds[var].dims):
         raise ValueError(f"variable {var!r} of {label} is not on the latitude/longitude grid "
-                         f"{tuple(dims)}: its dimensions are {tuple(ds[var].dims)}; gridded "
-                         f"variables: {gridded}")
+                         f"(dimensions {_listed(dims)}): its dimensions are "
+                         f"{_listed(ds[var].dims)}; gridded variables: {_listed(gridded)}")
     return var
 
 
@@ -214,7 +235,7 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
     with ds:
         lat_name = _find_axis(ds, LAT_NAMES, "latitude", label)
         lon_name = _find_axis(ds, LON_NAMES, "longitude", label)
-        lat_dim, lon_dim = _axis_dim(ds, lat_name, label), _axis_dim(ds, lon_name, label)
+        lat_dim, lon_dim = _grid_dims(ds, lat_name, lon_name, label)
         var = _choose_var(ds, var, (lat_dim, lon_dim), label, exclude)
         da = ds[var]
         extra = [d for d in da.dims if d not in (lat_dim, lon_dim)]
