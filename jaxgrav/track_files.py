@@ -36,6 +36,7 @@ _BINARY = {b"CDF": "a NetCDF-3 file", b"\x89HDF": "a NetCDF-4/HDF5 file",
 _UNITS = re.compile(r"\s*[(\[][^()\[\]]*[)\]]\s*$")
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
 _DELIMITER_NAMES = {",": "comma", ";": "semicolon", "\t": "tab", " ": "whitespace"}
+_SEP_LINE = re.compile(r'\s*"?sep=([,;\t])"?[,;\t]*\s*', re.IGNORECASE)  # Excel's first line
 
 
 class Table(NamedTuple):
@@ -164,11 +165,19 @@ def read_table(path, label=None):
     if path.is_dir():
         raise ValueError(f"{label} is a folder; expected a CSV file")
     text = _decode(path.read_bytes(), label)
-    first = next((s for s in (ln.strip() for ln in text.splitlines())
-                  if s and not s.startswith(("#", ">"))), None)
-    if first is None:
+    raw = text.splitlines()
+    k = next((k for k, ln in enumerate(raw) if ln.strip() and not ln.strip().startswith(
+        ("#", ">"))), None)
+    if k is None:
         raise ValueError(f"{label} is empty; expected a header row (e.g. t,lat,lon,gravity)")
-    delimiter = _sniff(first)
+    first, declared = raw[k].strip(), _SEP_LINE.fullmatch(raw[k])
+    if first.startswith(("{", "[")):
+        raise ValueError(f"{label} looks like JSON (it starts with {first[:20]!r}), not a "
+                         "track; a track is a CSV (or whitespace-separated) text file with a "
+                         "header row, e.g. t,lat,lon,gravity")
+    if declared:  # "sep=;": the delimiter, declared; blanked so line numbers stay the file's
+        text = "\n".join([*raw[:k], "", *raw[k + 1:]])
+    delimiter = declared.group(1) if declared else _sniff(first)
     rows = (_whitespace_rows(text, label) if delimiter == " "
             else _delimited_rows(text, delimiter, label))
     rows = [(n, [c.strip() for c in cells]) for n, cells in rows if not _skip(cells)]
@@ -195,7 +204,8 @@ def read_table(path, label=None):
         if len(cells) > len(header) and any(cells[len(header):]):
             raise ValueError(
                 f"{label}, line {n} has {len(cells)} cells but the header has {len(header)} "
-                f"columns ({_DELIMITER_NAMES[delimiter]}-separated); a quote missing around "
+                f"column{'s' * (len(header) != 1)} ({_DELIMITER_NAMES[delimiter]}-"
+                "separated); a quote missing around "
                 "a cell that holds the delimiter?")
         out.append(cells[:len(header)] + [""] * (len(header) - len(cells)))
         lines.append(n)
