@@ -134,14 +134,16 @@ def value_grad_ne(field, north, east):
     flat = field.coef.reshape((ny - 1) * (nx - 1), 16)
     # (..., 16): one gather; r0, c0 are clipped above, so no bounds handling is needed
     a = flat.at[(r0 * (nx - 1) + c0).astype(jnp.int32)].get(mode="promise_in_bounds")
-    u, du = [], []  # Σ_j a_ij tx^j and its tx-derivative, for i = 0..3
-    for i in range(4):
-        a0, a1, a2, a3 = (a[..., 4 * i + j] for j in range(4))
-        u.append(a0 + tx * (a1 + tx * (a2 + tx * a3)))
-        du.append(a1 + tx * (2.0 * a2 + tx * 3.0 * a3))
-    f = u[0] + ty * (u[1] + ty * (u[2] + ty * u[3]))
-    f_y = u[1] + ty * (2.0 * u[2] + ty * 3.0 * u[3])
-    f_x = du[0] + ty * (du[1] + ty * (du[2] + ty * du[3]))
+    # Horner in tx for the four rows i at once (the same arithmetic as row by row, in a
+    # quarter of the operations: a smaller program for every evaluation)
+    a = a.reshape((*a.shape[:-1], 4, 4))  # [..., i, j] = a_ij
+    t = tx[..., None]
+    u = a[..., 0] + t * (a[..., 1] + t * (a[..., 2] + t * a[..., 3]))  # Σ_j a_ij tx^j
+    du = a[..., 1] + t * (2.0 * a[..., 2] + t * 3.0 * a[..., 3])  # its tx-derivative
+    u0, u1, u2, u3 = (u[..., i] for i in range(4))
+    f = u0 + ty * (u1 + ty * (u2 + ty * u3))
+    f_y = u1 + ty * (2.0 * u2 + ty * 3.0 * u3)
+    f_x = du[..., 0] + ty * (du[..., 1] + ty * (du[..., 2] + ty * du[..., 3]))
     return (jnp.where(inside, f, jnp.nan), jnp.where(inside, f_y * field.sy, 0.0),
             jnp.where(inside, f_x * field.sx, 0.0))
 
