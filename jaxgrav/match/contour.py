@@ -197,11 +197,13 @@ def project_to_contours(field, y_n, y_e, z, steps, max_step_m):
     Each evaluation's outputs pass an optimisation barrier: without it XLA fuses the
     Horner sums into every consumer and recomputes them there (each step's ``f`` and
     gradient were evaluated three to four times; for the ICCP loop's final step, once
-    per Kabsch sum). Values are unchanged.
+    per Kabsch sum). The ``steps + 1`` evaluations are one loop (the last does not move
+    the points), so the map's Horner sums are compiled once, not ``steps + 1`` times.
+    Values are unchanged.
     """
-    x_n, x_e = y_n, y_e
-    f, g_n, g_e = jax.lax.optimization_barrier(value_grad_ne(field, x_n, x_e))
-    for _ in range(steps):
+    def step(i, s):
+        x_n, x_e = s[:2]
+        f, g_n, g_e = jax.lax.optimization_barrier(value_grad_ne(field, x_n, x_e))
         g2 = g_n * g_n + g_e * g_e
         ok = jnp.isfinite(f) & (g2 > 0)
         d = jnp.where(ok, z - f, 0.0) / jnp.where(ok, g2, 1.0)
@@ -209,6 +211,10 @@ def project_to_contours(field, y_n, y_e, z, steps, max_step_m):
         length2 = d * d * g2
         d = d * jnp.where(length2 > max_step_m**2,
                           max_step_m * jax.lax.rsqrt(jnp.where(length2 > 0, length2, 1.0)), 1.0)
-        x_n, x_e = jax.lax.optimization_barrier((x_n + d * g_n, x_e + d * g_e))
-        f, g_n, g_e = jax.lax.optimization_barrier(value_grad_ne(field, x_n, x_e))
-    return x_n, x_e, f, g_n, g_e
+        move = i < steps
+        x_n, x_e = jax.lax.optimization_barrier((jnp.where(move, x_n + d * g_n, x_n),
+                                                 jnp.where(move, x_e + d * g_e, x_e)))
+        return x_n, x_e, f, g_n, g_e
+
+    zero = jnp.zeros_like(y_n)
+    return jax.lax.fori_loop(0, steps + 1, step, (y_n, y_e, zero, zero, zero))

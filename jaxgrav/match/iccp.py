@@ -7,7 +7,7 @@ shift plus a rotation of the INS track about its centroid. Each iteration:
 1. Transform the INS points: ``y_n = R p_n + t``.
 2. Closest contour point: from ``y_n``, a few Newton projection steps onto the level
    set ``{x : f(x) = z_n}`` of the *bicubic interpolant* f of the map
-   (the steps of :func:`~jaxgrav.match.contour.project_to_contours`, as a loop, on
+   (:func:`~jaxgrav.match.contour.project_to_contours`, a loop of Newton steps, on
    spline coefficients prepared once per map, with the analytic gradient).
 3. Sliding window: a contour point is used only if it lies within ``window_m`` of
    its current point ``y_n`` (the window moves with the estimate) and the map there
@@ -33,7 +33,7 @@ import jax.numpy as jnp
 
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m, meridian_radius, prime_vertical_radius
-from jaxgrav.match.contour import local_field, value_grad_ne
+from jaxgrav.match.contour import local_field, project_to_contours, value_grad_ne
 from jaxgrav.match.iccp_config import IccpConfig
 from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import STATUS, MatchResult
@@ -98,32 +98,6 @@ def _local_frame(lat, lon):
     return lat_c, lon_c, m_c, n_c
 
 
-def _project(field, y_n, y_e, z, steps, max_step_m):
-    """:func:`~jaxgrav.match.contour.project_to_contours` with its evaluations in a loop.
-
-    The same Newton steps, evaluations and optimisation barriers, as a loop of
-    ``steps + 1`` evaluations (the last one does not move the points): the map's
-    Horner sums are compiled once instead of ``steps + 1`` times.
-    """
-    def step(i, s):
-        x_n, x_e = s[:2]
-        f, g_n, g_e = jax.lax.optimization_barrier(value_grad_ne(field, x_n, x_e))
-        g2 = g_n * g_n + g_e * g_e
-        ok = jnp.isfinite(f) & (g2 > 0)
-        d = jnp.where(ok, z - f, 0.0) / jnp.where(ok, g2, 1.0)
-        # step length |d|·|g|, limited to max_step_m: scale = min(1, max / (|d| |g|))
-        length2 = d * d * g2
-        d = d * jnp.where(length2 > max_step_m**2,
-                          max_step_m * jax.lax.rsqrt(jnp.where(length2 > 0, length2, 1.0)), 1.0)
-        move = i < steps
-        x_n, x_e = jax.lax.optimization_barrier((jnp.where(move, x_n + d * g_n, x_n),
-                                                 jnp.where(move, x_e + d * g_e, x_e)))
-        return x_n, x_e, f, g_n, g_e
-
-    zero = jnp.zeros_like(y_n)
-    return jax.lax.fori_loop(0, steps + 1, step, (y_n, y_e, zero, zero, zero))
-
-
 def iccp_local(field, p0, z, config, r0=None, t0=None):
     """ICCP on a map prepared in local metres (the jit-free core).
 
@@ -155,7 +129,7 @@ def iccp_local(field, p0, z, config, r0=None, t0=None):
         c, sn, t_n, t_e, _, k, it, _, starved = s
         y_n = c * p_n - sn * p_e + t_n
         y_e = sn * p_n + c * p_e + t_e
-        x_n, x_e, f, g_n, g_e = _project(field, y_n, y_e, z, config.newton_steps,
+        x_n, x_e, f, g_n, g_e = project_to_contours(field, y_n, y_e, z, config.newton_steps,
                                          config.max_step_m)
         ok = (jnp.isfinite(f) & (jnp.abs(f - z) <= config.contour_tol)
               & ((x_n - y_n) ** 2 + (x_e - y_e) ** 2 <= window2))
