@@ -299,10 +299,11 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     every = None
     meas = gravity_measurement
     speed = 0.0
+    m, e = (np.asarray(r) for r in _radii(lat))  # m per radian north; east, times cos(lat)
+    e = e * np.cos(lat * DEG)
     if map_error is not None:
-        m, e = (np.asarray(r)[1:] for r in _radii(lat))
-        dn = np.diff(lat) * DEG * m
-        de = np.diff(lon) * DEG * e * np.cos(lat[1:] * DEG)
+        dn = np.diff(lat) * DEG * m[1:]
+        de = np.diff(lon) * DEG * e[1:]
         # the map error decorrelates at the distance travelled per time: the mean speed, as
         # navigate's tight filter (the median of a track mostly at rest was 0: a map error
         # that never decorrelates while moving; a singular second-order prior)
@@ -336,8 +337,6 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
                                  meas, key)
         infos = jax.tree.map(np.asarray, infos)
     x, sigma = infos.x, infos.sigma
-    m, e = (np.asarray(r) for r in _radii(lat))
-    e = e * np.cos(lat * DEG)
     out = dict(lat=lat - x[:, 0] / m / DEG, lon=lon - x[:, 1] / e / DEG,
                sigma_north=sigma[:, 0], sigma_east=sigma[:, 1],
                cov_north_east=infos.p_pos[:, 0, 1],
