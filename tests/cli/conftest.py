@@ -4,7 +4,7 @@ import re
 
 import pytest
 
-from jaxgrav.cli import bench
+from jaxgrav.cli import bench, main
 
 OFFSET = "warning: the readings sit "
 FLAT = "warning: the map along the track cannot tell the position"
@@ -41,3 +41,17 @@ def quick_machine_info(monkeypatch):
         "cpu": "c", "arch": "a", "cores": 1, "load_average": [0, 0, 0], "jax": "j",
         "jaxgrav": "g", "devices": ["d"], "roofline": {"n": 1, "float64_gflops": 1.0,
                                                        "float32_gflops": 1.0}})
+
+
+@pytest.fixture
+def refused(capsys):
+    """``refused(argv, message)``: the command ``argv`` exits 2 with one stderr line (no
+    traceback) holding ``message``; returns that line."""
+    def check(argv, message):
+        assert main([str(a) for a in argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err, err
+        assert "\n" not in err and "Traceback" not in err, err
+        return err
+
+    return check

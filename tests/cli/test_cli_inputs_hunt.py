@@ -20,28 +20,20 @@ from jaxgrav.geodesy import eotvos
 from jaxgrav.grid_files import UndeclaredFillWarning
 
 
-def _refused(capsys, argv, message):
-    """``argv`` exits 2 with one stderr line holding ``message``."""
-    assert main([str(a) for a in argv]) == 2
-    err = capsys.readouterr().err.strip()
-    assert message in err, err
-    assert "\n" not in err and "Traceback" not in err, err
-
-
 @pytest.mark.parametrize("which", ["--out", "--truth"])
-def test_an_output_under_a_file_is_refused_before_anything_is_written(tmp_path, capsys, which):
+def test_an_output_under_a_file_is_refused_before_anything_is_written(tmp_path, refused, which):
     """``simulate --out new.csv --truth TRACK.csv/t.csv`` wrote new.csv, then failed on the
     truth with "[Errno 17] File exists: 'TRACK.csv'" (exit 2, one of two files left)."""
     blocker = tmp_path / "track.csv"
     blocker.write_text("t,lat,lon\n")
     out, truth = tmp_path / "new.csv", tmp_path / "truth.csv"
     paths = {"--out": out, "--truth": truth, which: blocker / "x.csv"}
-    _refused(capsys, ["simulate", "--out", paths["--out"], "--truth", paths["--truth"]],
-             f"{which} '{blocker / 'x.csv'}': '{blocker}' is a file, not a folder")
+    refused(["simulate", "--out", paths["--out"], "--truth", paths["--truth"]],
+            f"{which} '{blocker / 'x.csv'}': '{blocker}' is a file, not a folder")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["track.csv"]
 
 
-def test_an_output_in_a_folder_that_is_not_writable_is_refused(tmp_path, capsys, monkeypatch):
+def test_an_output_in_a_folder_that_is_not_writable_is_refused(tmp_path, refused, monkeypatch):
     """A folder the user may not write: refused before any work, naming the option and the
     folder. The permission is denied through os.access (these machines run the tests as
     root, for whom a 0o555 folder is writable)."""
@@ -50,18 +42,18 @@ def test_an_output_in_a_folder_that_is_not_writable_is_refused(tmp_path, capsys,
     real = os.access
     monkeypatch.setattr(os, "access", lambda p, mode: False if Path(p) == ro else real(p, mode))
     out = ro / "sub" / "t.csv"
-    _refused(capsys, ["simulate", "--out", str(out), "--n", "5"],
-             f"--out '{out}': the folder '{ro}' is not writable")
+    refused(["simulate", "--out", str(out), "--n", "5"],
+            f"--out '{out}': the folder '{ro}' is not writable")
     assert list(ro.iterdir()) == []
 
 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
-def test_a_folder_that_refuses_files_is_refused_before_the_first_output(tmp_path, capsys):
+def test_a_folder_that_refuses_files_is_refused_before_the_first_output(tmp_path, refused):
     """Issue 19: os.access lets root (and /proc) pass: simulate wrote --out, then failed on
     --truth with "[Errno 2] No such file or directory: '/proc/nope'"."""
     out = tmp_path / "t.csv"
-    _refused(capsys, ["simulate", "--out", out, "--truth", "/proc/nope/truth.csv", "--n", "5"],
-             "--truth '/proc/nope/truth.csv': a file cannot be created in the folder '/proc' (")
+    refused(["simulate", "--out", out, "--truth", "/proc/nope/truth.csv", "--n", "5"],
+            "--truth '/proc/nope/truth.csv': a file cannot be created in the folder '/proc' (")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -107,7 +99,7 @@ def test_undeclared_fill_values_in_a_map_are_not_sampled_or_matched(tmp_path, ca
     assert json.loads(res.read_text())["status"] & 8192
 
 
-def test_sample_takes_a_magnetic_map_and_names_the_file_s_own_lines(tmp_path, capsys):
+def test_sample_takes_a_magnetic_map_and_names_the_file_s_own_lines(tmp_path, capsys, refused):
     """Issue 19: sample refused any map in nT ("is a magnetic map (units 'nT') and the
     readings are gravity"), even for a track with no readings; and its warning of a point
     beside a missing node named the row + 2, not the file's line (a comment line above)."""
@@ -126,12 +118,12 @@ def test_sample_takes_a_magnetic_map_and_names_the_file_s_own_lines(tmp_path, ca
     assert sampled[0] == pytest.approx(16.024e6) and np.isnan(sampled[1])  # uT -> nT
     # a point off the map: "point (lat=31.5, lon=130.5) is outside the grid", no file or line
     track.write_text("# ship log\nlat,lon\n30.12,130.12\n31.5,130.5\n")
-    _refused(capsys, ["sample", "--map", path, "--track", track, "--out", tmp_path / "o.csv"],
-             f"--track {str(track)!r}: 1 of 2 positions are off the map --map {path} (lat "
-             "30..30.9, lon 130..130.9), first on line 4 (lat 31.5, lon 130.5)")
+    refused(["sample", "--map", path, "--track", track, "--out", tmp_path / "o.csv"],
+            f"--track {str(track)!r}: 1 of 2 positions are off the map --map {path} (lat "
+            "30..30.9, lon 130..130.9), first on line 4 (lat 31.5, lon 130.5)")
 
 
-def test_a_map_too_small_for_bicubic_is_named(tmp_path, capsys):
+def test_a_map_too_small_for_bicubic_is_named(tmp_path, refused):
     """Issue 19: a 3 x 3 map ended in "bicubic interpolation needs at least 4 nodes per
     axis; got 3" (no option, no file); sample's bilinear still takes it."""
     lat, lon = np.array([30.0, 30.1, 30.2]), np.array([130.0, 130.1, 130.2])
@@ -141,9 +133,9 @@ def test_a_map_too_small_for_bicubic_is_named(tmp_path, capsys):
     track = tmp_path / "t.csv"
     track.write_text("lat,lon\n30.05,130.05\n30.15,130.12\n")
     out = tmp_path / "s.csv"
-    _refused(capsys, ["sample", "--map", path, "--track", track, "--out", out],
-             f"--map {str(path)!r} has 3 x 3 nodes (lat x lon) where the track needs it; "
-             "bicubic interpolation needs at least 4 along each axis: give a larger map")
+    refused(["sample", "--map", path, "--track", track, "--out", out],
+            f"--map {str(path)!r} has 3 x 3 nodes (lat x lon) where the track needs it; "
+            "bicubic interpolation needs at least 4 along each axis: give a larger map")
     assert not out.exists()
     assert main(["sample", "--map", str(path), "--track", str(track), "--out", str(out),
                  "--method", "bilinear"]) == 0
@@ -368,7 +360,7 @@ def test_hunted_inputs_are_refused_in_one_line(tmp_path, capsys, argv, message):
     assert list(tmp_path.iterdir()) == ([existing] if existing.exists() else [])
 
 
-def test_bench_names_a_script_that_failed_silently(tmp_path, capsys, quick_machine_info):
+def test_bench_names_a_script_that_failed_silently(tmp_path, capsys, quick_machine_info, refused):
     """A script that exits 3 with no output: stderr ended in 'failed (exit code 3):' and an
     empty line, the report in an empty code block; now '(no output)'. --dir naming a script:
     'is not a folder of benchmark scripts'; now its folder is named."""
@@ -381,5 +373,5 @@ def test_bench_names_a_script_that_failed_silently(tmp_path, capsys, quick_machi
     assert exc.value.code == 1
     assert "### quiet.py: exit code 3\n\n```\n(no output)\n```" in out.read_text()
     assert capsys.readouterr().err == "jaxgrav bench: quiet.py failed (exit code 3):\n(no output)\n"
-    _refused(capsys, ["bench", "--dir", d / "quiet.py", "--out", tmp_path / "b2.md"],
-             f"--dir '{d / 'quiet.py'}' is a file: give the folder of the scripts, e.g. '{d}'")
+    refused(["bench", "--dir", d / "quiet.py", "--out", tmp_path / "b2.md"],
+            f"--dir '{d / 'quiet.py'}' is a file: give the folder of the scripts, e.g. '{d}'")

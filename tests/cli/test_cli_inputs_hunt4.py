@@ -19,27 +19,18 @@ from jaxgrav.cli.sanity import time_gap_warning
 from jaxgrav.datasets import load_map
 
 
-def _refused(capsys, argv, message):
-    """``argv`` exits 2 with one stderr line holding ``message``."""
-    assert main([str(a) for a in argv]) == 2
-    err = capsys.readouterr().err.strip()
-    assert message in err, err
-    assert "\n" not in err and "Traceback" not in err, err
-    return err
-
-
 @pytest.mark.parametrize("argv", [
     ["simulate", "--out", "{d}/s.csv"],
     ["simulate-filter", "--map", "ryukyu", "--out", "{d}/s.csv"],
     ["simulate-voyage", "--out", "{d}/s.csv", "--hours", "0.1"],
     ["montecarlo", "--method", "dense", "--runs", "5", "--out", "{d}/m.nc"],
 ])
-def test_a_simulated_map_error_beyond_any_map_s_is_refused(tmp_path, capsys, argv):
+def test_a_simulated_map_error_beyond_any_map_s_is_refused(tmp_path, refused, argv):
     """``--map-error 1e9``: readings off by 1e9 mGal were written (exit 0; montecarlo ran
     every fix rejected), readings every command then refuses; as --noise is capped."""
-    _refused(capsys, [a.format(d=tmp_path) for a in argv] + ["--map-error", "1e9"],
-             "--map-error must be at most 1000 (map units; a marine gravity map's error is a "
-             "few mGal, a magnetic map's tens of nT); got 1e+09")
+    refused([a.format(d=tmp_path) for a in argv] + ["--map-error", "1e9"],
+            "--map-error must be at most 1000 (map units; a marine gravity map's error is a "
+            "few mGal, a magnetic map's tens of nT); got 1e+09")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -54,29 +45,29 @@ def filter_log(tmp_path_factory):
 
 
 @pytest.mark.parametrize("ratio", ["1.5", "1e9"])
-def test_a_guard_ratio_above_one_is_refused(tmp_path, capsys, filter_log, ratio):
+def test_a_guard_ratio_above_one_is_refused(tmp_path, refused, filter_log, ratio):
     """``filter --guard 1e9``: the posterior/free variance ratio never exceeds 1, so the guard
     held nothing back while the summary said "no-harm guard 1e+09" (exit 0)."""
     out = tmp_path / "o.csv"
-    _refused(capsys, ["filter", "--point-masses", "paper-d", "--track", filter_log, "--out",
-                      out, "--guard", ratio],
-             "--guard must be a positive variance ratio of at most 1 (posterior / free INS, "
-             "e.g. 0.2; at 1 the guard holds nothing back, and no ratio exceeds 1); got "
-             f"{float(ratio):g}")
+    refused(["filter", "--point-masses", "paper-d", "--track", filter_log, "--out",
+             out, "--guard", ratio],
+            "--guard must be a positive variance ratio of at most 1 (posterior / free INS, "
+            "e.g. 0.2; at 1 the guard holds nothing back, and no ratio exceeds 1); got "
+            f"{float(ratio):g}")
     assert not out.exists()
 
 
 @pytest.mark.parametrize("command", ["filter", "navigate"])
-def test_a_position_prior_wider_than_any_map_is_refused(tmp_path, capsys, filter_log, command):
+def test_a_position_prior_wider_than_any_map_is_refused(tmp_path, refused, filter_log, command):
     """``--sigma-pos 1e9`` ran with every sigma point off the map: filter wrote a 1-sigma of
     1e9 m, navigate "0 reading(s) used", both exit 0."""
     out = tmp_path / "o.csv"
     source = ["--point-masses", "paper-d"] if command == "filter" else []
-    _refused(capsys, [command, *source, "--track", filter_log, "--out", out, "--sigma-pos",
-                      "1e9"],
-             "--sigma-pos must be at most 200000 m (200 km: a prior wider than that puts the "
-             "filter's sigma points, particles or cells hundreds of km away, off any regional "
-             "map; an INS unaided for days drifts tens of km); got 1e+09")
+    refused([command, *source, "--track", filter_log, "--out", out, "--sigma-pos",
+             "1e9"],
+            "--sigma-pos must be at most 200000 m (200 km: a prior wider than that puts the "
+            "filter's sigma points, particles or cells hundreds of km away, off any regional "
+            "map; an INS unaided for days drifts tens of km); got 1e+09")
     assert not out.exists()
 
 
@@ -102,25 +93,25 @@ def test_a_position_prior_wider_than_any_map_is_refused(tmp_path, capsys, filter
     (["montecarlo", "--method", "dense", "--runs", "5", "--out", "{d}/r.json"],
      "--out '{d}/r.json' names a JSON file, but this command writes NetCDF there"),
 ])
-def test_an_output_named_for_another_format_is_refused(tmp_path, capsys, argv, message):
+def test_an_output_named_for_another_format_is_refused(tmp_path, refused, argv, message):
     """``match --out result.csv`` wrote JSON into result.csv (exit 0), ``filter --out r.json``
     a CSV, ``montecarlo --out r.json`` NetCDF (and r.png): files other tools then misread.
     A suffix of no known format (``.out``, ``.txt``, none) is still taken."""
     (tmp_path / "t.csv").write_text("t,lat,lon,gravity,h\n0,30.2,130.4,5,0\n")
-    _refused(capsys, [a.format(d=tmp_path) for a in argv], message.format(d=tmp_path))
+    refused([a.format(d=tmp_path) for a in argv], message.format(d=tmp_path))
     assert [p.name for p in tmp_path.iterdir()] == ["t.csv"]
 
 
-def test_a_track_without_readings_names_its_columns_in_words(tmp_path, capsys):
+def test_a_track_without_readings_names_its_columns_in_words(tmp_path, refused):
     """"... column; it has ['lat', 'lon', 't']": a Python list, sorted, and no way out."""
     track = tmp_path / "t.csv"
     track.write_text("t,lat,lon,FAA\n" + "".join(
         f"{60 * i},{30.2 + 1e-3 * i:.4f},130.4,{i}\n" for i in range(6)))
     out = tmp_path / "m.json"
-    err = _refused(capsys, ["match", "--map", "ryukyu", "--track", track, "--out", out],
-                   f"track file {str(track)!r} needs a 'gravity' (mGal) or 'magnetic' (nT) "
-                   "column; it has t, lat, lon, FAA (name the readings' column with --columns "
-                   "gravity=COLUMN)")
+    err = refused(["match", "--map", "ryukyu", "--track", track, "--out", out],
+                  f"track file {str(track)!r} needs a 'gravity' (mGal) or 'magnetic' (nT) "
+                  "column; it has t, lat, lon, FAA (name the readings' column with --columns "
+                  "gravity=COLUMN)")
     assert "[" not in err and not out.exists()
 
 
@@ -129,17 +120,17 @@ def test_a_track_without_readings_names_its_columns_in_words(tmp_path, capsys):
     ["sample", "--map", "ryukyu", "--track", "{d}/t.csv", "--out", "{d}/pipe", "--force"],
     ["simulate", "--out", "{d}/s.csv", "--truth", "{d}/pipe", "--force"],
 ])
-def test_an_output_that_is_a_pipe_or_device_is_never_replaced(tmp_path, capsys, argv):
+def test_an_output_that_is_a_pipe_or_device_is_never_replaced(tmp_path, refused, argv):
     """``--out /dev/stdout --force`` (or a named pipe) was replaced by a regular file, the
     output written whole and moved into place: as root, /dev/stdout and /dev/null
     themselves. Tried on a named pipe here, never on /dev."""
     (tmp_path / "t.csv").write_text("lat,lon\n30.2,130.4\n")
     os.mkfifo(tmp_path / "pipe")
     option = "--out" if argv[0] == "sample" else "--truth"
-    _refused(capsys, [a.format(d=tmp_path) for a in argv],
-             f"{option} '{tmp_path}/pipe' is a device, pipe or socket, not a regular file: "
-             "jaxgrav writes each output whole and then moves it into place, which would "
-             "replace it; give another path")
+    refused([a.format(d=tmp_path) for a in argv],
+            f"{option} '{tmp_path}/pipe' is a device, pipe or socket, not a regular file: "
+            "jaxgrav writes each output whole and then moves it into place, which would "
+            "replace it; give another path")
     assert stat.S_ISFIFO((tmp_path / "pipe").lstat().st_mode)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe", "t.csv"]
 
@@ -164,18 +155,17 @@ def _velocity_log(path, ve, vn, scale=1.0, swap=False, t_unit=1.0):
     (1.0, True, 1.0, "but along the other axis: are v_east and v_north swapped?"),
     (1.0, False, 1000.0, "is column t in milliseconds, not seconds?"),
 ])
-def test_velocity_columns_in_other_units_are_named(tmp_path, capsys, scale, swap, t_unit,
-                                                   hint):
+def test_velocity_columns_in_other_units_are_named(tmp_path, refused, scale, swap, t_unit, hint):
     """A log whose v_east/v_north were in knots: "the position jumps by 48.48 m between
     lines 2 and 3 ... (72 such jump(s)); a reset or glitch of the INS position: split the
     log there or remove the row" - every row blamed on a glitch of the positions."""
     log = _velocity_log(tmp_path / "v.csv", 8.0, 1.0, scale, swap, t_unit)
     out = tmp_path / "o.csv"
-    err = _refused(capsys, ["filter", "--point-masses", "paper-d", "--track", log, "--out",
-                            out],
-                   f"--track {str(log)!r}: v_east/v_north disagree with the positions on 9 of "
-                   "9 steps (first between lines 2 and 3): the positions move at a median "
-                   f"{8.07 / t_unit:.3g} m/s, the velocity columns say ")
+    err = refused(["filter", "--point-masses", "paper-d", "--track", log, "--out",
+                   out],
+                  f"--track {str(log)!r}: v_east/v_north disagree with the positions on 9 of "
+                  "9 steps (first between lines 2 and 3): the positions move at a median "
+                  f"{8.07 / t_unit:.3g} m/s, the velocity columns say ")
     assert hint in err and "glitch" not in err, err
     assert not out.exists()
 
@@ -215,25 +205,25 @@ def test_a_time_gap_in_a_match_track_is_named(tmp_path, capsys):
     assert said in json.loads(out.read_text())["status_messages"]
 
 
-def test_simulate_filter_refuses_a_geometry_it_would_not_use(tmp_path, capsys):
+def test_simulate_filter_refuses_a_geometry_it_would_not_use(tmp_path, refused):
     """``simulate-filter --map ryukyu --geometry north-east`` wrote a random straight track
     (exit 0): the geometry is paper D's, dropped over a map without a word."""
     out = tmp_path / "s.csv"
-    _refused(capsys, ["simulate-filter", "--map", "ryukyu", "--geometry", "north-east",
-                      "--out", out],
-             "--geometry north-east shapes the track over paper D's point masses; with --map "
-             "the track is a straight line of random heading: leave --geometry out")
+    refused(["simulate-filter", "--map", "ryukyu", "--geometry", "north-east",
+             "--out", out],
+            "--geometry north-east shapes the track over paper D's point masses; with --map "
+            "the track is a straight line of random heading: leave --geometry out")
     assert not out.exists()
 
 
-def test_simulate_refuses_a_probability_it_would_not_use(tmp_path, capsys):
+def test_simulate_refuses_a_probability_it_would_not_use(tmp_path, refused):
     """``simulate --probability 0.5`` (the default --drift-law fixed) wrote the same track as
     without it (exit 0): the quantile only sets the radius of --drift-law rayleigh."""
     out = tmp_path / "s.csv"
-    _refused(capsys, ["simulate", "--probability", "0.5", "--out", out],
-             "--probability 0.5 is the Rayleigh quantile of --drift-law rayleigh; with "
-             "--drift-law fixed the search radius is 1.2 x --drift: give --drift-law rayleigh "
-             "or leave it out")
+    refused(["simulate", "--probability", "0.5", "--out", out],
+            "--probability 0.5 is the Rayleigh quantile of --drift-law rayleigh; with "
+            "--drift-law fixed the search radius is 1.2 x --drift: give --drift-law rayleigh "
+            "or leave it out")
     assert not out.exists()
     assert main(["simulate", "--probability", "0.5", "--drift-law", "rayleigh", "--n", "5",
                  "--out", str(out)]) == 0
@@ -243,14 +233,14 @@ def test_simulate_refuses_a_probability_it_would_not_use(tmp_path, capsys):
     ("filter", "--seed is for --method pf or rbpf (their particles' draws); got --method ukf"),
     ("navigate", "--seed is for --method rbpf; got --method ukf"),
 ])
-def test_a_seed_the_method_does_not_draw_with_is_refused(tmp_path, capsys, filter_log,
-                                                         command, message):
+def test_a_seed_the_method_does_not_draw_with_is_refused(tmp_path, refused, filter_log, command,
+                                                         message):
     """``filter --seed 5`` (ukf) gave the very run of seed 0, exit 0: a user trying seeds
     saw identical results and no word; --particles was already refused so."""
     out = tmp_path / "o.csv"
     source = ["--point-masses", "paper-d"] if command == "filter" else []
-    _refused(capsys, [command, *source, "--track", filter_log, "--out", out, "--method", "ukf",
-                      "--seed", "5"], message)
+    refused([command, *source, "--track", filter_log, "--out", out, "--method", "ukf",
+             "--seed", "5"], message)
     assert not out.exists()
 
 
@@ -264,7 +254,7 @@ def test_a_seed_the_method_does_not_draw_with_is_refused(tmp_path, capsys, filte
     (["simulate-voyage", "--out", "{d}/o.csv", "--hours", "0.1"], True),
     (["montecarlo", "--method", "ukf", "--runs", "5", "--out", "{d}/m.nc"], True),
 ])
-def test_a_map_error_length_without_a_map_error_is_refused(tmp_path, capsys, argv, drawn):
+def test_a_map_error_length_without_a_map_error_is_refused(tmp_path, refused, argv, drawn):
     """``--map-error-length 5000`` alone ran on a perfect map (match, filter, suitability,
     the simulators; exit 0): the user believed the map's error modelled. montecarlo keeps
     it alone only beside --told-map-error SIGMA, as its length."""
@@ -275,30 +265,30 @@ def test_a_map_error_length_without_a_map_error_is_refused(tmp_path, capsys, arg
                "--map-error-length 5000 is the correlation length of the map's error, and no "
                "map error is given: add --map-error SIGMA (or --map-error-var NAME where the "
                "command takes it), or leave it out")
-    _refused(capsys, [a.format(d=tmp_path) for a in argv] + ["--map-error-length", "5000"],
-             message)
+    refused([a.format(d=tmp_path) for a in argv] + ["--map-error-length", "5000"],
+            message)
     assert [p.name for p in tmp_path.iterdir()] == ["t.csv"]
 
 
-def test_a_map_error_order_without_a_map_error_is_refused(tmp_path, capsys, filter_log):
+def test_a_map_error_order_without_a_map_error_is_refused(tmp_path, refused, filter_log):
     """``filter --map-error-order 2`` alone ran with no map-error state at all (exit 0)."""
     out = tmp_path / "o.csv"
-    _refused(capsys, ["filter", "--point-masses", "paper-d", "--track", filter_log, "--out", out,
-                      "--map-error-order", "2"],
-             "--map-error-order 2 is the order of the map-error state, and no map error is "
-             "given (the filter carries none): add --map-error SIGMA or --map-error-var NAME, "
-             "or leave it out")
+    refused(["filter", "--point-masses", "paper-d", "--track", filter_log, "--out", out,
+             "--map-error-order", "2"],
+            "--map-error-order 2 is the order of the map-error state, and no map error is "
+            "given (the filter carries none): add --map-error SIGMA or --map-error-var NAME, "
+            "or leave it out")
     assert not out.exists()
 
 
-def test_montecarlo_refuses_a_map_error_order_with_no_map_error(tmp_path, capsys):
+def test_montecarlo_refuses_a_map_error_order_with_no_map_error(tmp_path, refused):
     """``montecarlo --method ukf --map-error-order 2`` on paper D's masses (no map error
     drawn) ran, the order unused (exit 0)."""
-    _refused(capsys, ["montecarlo", "--method", "ukf", "--runs", "5", "--out",
-                      tmp_path / "m.nc", "--map-error-order", "2"],
-             "--map-error-order 2 is the order of the map-error state the filters are told, and "
-             "the runs draw no map error: add --map-error SIGMA or --truth-map MAP, or leave it "
-             "out")
+    refused(["montecarlo", "--method", "ukf", "--runs", "5", "--out",
+             tmp_path / "m.nc", "--map-error-order", "2"],
+            "--map-error-order 2 is the order of the map-error state the filters are told, and "
+            "the runs draw no map error: add --map-error SIGMA or --truth-map MAP, or leave it "
+            "out")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -317,35 +307,35 @@ def test_montecarlo_refuses_a_map_error_order_with_no_map_error(tmp_path, capsys
     (["filter", "--point-masses=", "--track", "t.csv", "--out", "s.csv"],
      "--point-masses is empty; expected paper-d or a MODEL.json file"),
 ])
-def test_an_empty_path_is_named(tmp_path, capsys, monkeypatch, argv, message):
+def test_an_empty_path_is_named(tmp_path, refused, monkeypatch, argv, message):
     monkeypatch.chdir(tmp_path)
-    _refused(capsys, argv, message)
+    refused(argv, message)
     assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize(("columns", "name"), [("foo=gravity", "foo"), ("LAT=lat", "LAT")])
-def test_a_columns_name_the_commands_do_not_read_is_refused(tmp_path, capsys, columns, name):
+def test_a_columns_name_the_commands_do_not_read_is_refused(tmp_path, refused, columns, name):
     """``sample --columns foo=gravity`` renamed the gravity column foo in the output (exit
     0); ``--columns LAT=lat`` (upper case) ended in "column 'lat' would be read as 'lat', but
     --columns LAT=lat reads it as 'LAT'"."""
     track = tmp_path / "t.csv"
     track.write_text("t,lat,lon,gravity\n0,30.2,130.4,5\n")
     out = tmp_path / "s.csv"
-    _refused(capsys, ["sample", "--map", "ryukyu", "--track", track, "--out", out, "--columns",
-                      columns],
-             f"--columns {columns}: {name!r} is not a name the commands read; the names are t, "
-             "lat, lon, h, gravity, magnetic, v_east, v_north, drift_radius (lower case); "
-             "COLUMN is the file's header or 1-based column number")
+    refused(["sample", "--map", "ryukyu", "--track", track, "--out", out, "--columns",
+             columns],
+            f"--columns {columns}: {name!r} is not a name the commands read; the names are t, "
+            "lat, lon, h, gravity, magnetic, v_east, v_north, drift_radius (lower case); "
+            "COLUMN is the file's header or 1-based column number")
     assert not out.exists()
 
 
-def test_suitability_refuses_two_readings_a_segment(tmp_path, capsys):
+def test_suitability_refuses_two_readings_a_segment(tmp_path, refused):
     """``suitability --fixes 2`` wrote "0 of 83521 nodes have a bound" (every node
     no_information, exit 0): two readings cannot fix two coordinates and a bias."""
     out = tmp_path / "s.nc"
-    _refused(capsys, ["suitability", "--map", "ryukyu", "--out", out, "--fixes", "2"],
-             "--fixes 2 places no segment: two readings cannot give the position (north, east) "
-             "and the free gravimeter bias; give at least 3")
+    refused(["suitability", "--map", "ryukyu", "--out", out, "--fixes", "2"],
+            "--fixes 2 places no segment: two readings cannot give the position (north, east) "
+            "and the free gravimeter bias; give at least 3")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -356,10 +346,10 @@ def test_suitability_refuses_two_readings_a_segment(tmp_path, capsys):
     (["montecarlo", "--method", "dense", "--runs", "5", "--out", "{d}/new/"],
      "e.g. '{d}/new/NAME.nc'"),
 ])
-def test_an_output_ending_in_a_slash_is_not_written_as_a_file(tmp_path, capsys, argv, message):
+def test_an_output_ending_in_a_slash_is_not_written_as_a_file(tmp_path, refused, argv, message):
     """``simulate --out new/`` wrote a file named 'new' (montecarlo: 'new' and 'new.png'),
     exit 0, where the user meant a folder."""
-    _refused(capsys, [a.format(d=tmp_path) for a in argv], message.format(d=tmp_path))
+    refused([a.format(d=tmp_path) for a in argv], message.format(d=tmp_path))
     assert list(tmp_path.iterdir()) == []
 
 
@@ -382,20 +372,20 @@ def test_a_track_on_standard_input_is_read_with_a_dash(tmp_path, capsys):
     assert len(out.read_text().splitlines()) == 3
 
 
-def test_filter_refuses_a_map_variable_with_point_masses(tmp_path, capsys, filter_log):
+def test_filter_refuses_a_map_variable_with_point_masses(tmp_path, refused, filter_log):
     """``filter --point-masses paper-d --var z`` ran on the masses, --var unused (exit 0)."""
     out = tmp_path / "o.csv"
-    _refused(capsys, ["filter", "--point-masses", "paper-d", "--var", "z", "--track", filter_log,
-                      "--out", out],
-             "--var z names a variable of a --map file; --point-masses paper-d has none: leave "
-             "--var out")
+    refused(["filter", "--point-masses", "paper-d", "--var", "z", "--track", filter_log,
+             "--out", out],
+            "--var z names a variable of a --map file; --point-masses paper-d has none: leave "
+            "--var out")
     assert not out.exists()
 
 
-def test_simulate_filter_refuses_a_map_variable_without_a_map(tmp_path, capsys):
+def test_simulate_filter_refuses_a_map_variable_without_a_map(tmp_path, refused):
     """``simulate-filter --var z`` (no --map) simulated paper D's masses, --var unused."""
     out = tmp_path / "s.csv"
-    _refused(capsys, ["simulate-filter", "--var", "z", "--out", out],
-             "--var z names a variable of --map; without --map the readings come from paper "
-             "D's point masses: give --map or leave --var out")
+    refused(["simulate-filter", "--var", "z", "--out", out],
+            "--var z names a variable of --map; without --map the readings come from paper "
+            "D's point masses: give --map or leave --var out")
     assert not out.exists()
