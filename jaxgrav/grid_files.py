@@ -17,6 +17,7 @@ atomically. Both are package-internal: use the :class:`~jaxgrav.grid.Grid` metho
 ``load_map``.
 """
 
+import re
 import warnings
 from pathlib import Path
 from typing import NamedTuple
@@ -37,15 +38,17 @@ _CF = {
     "longitude": ("longitude", {"degrees_east", "degree_east", "degrees_e", "degree_e"}),
 }
 _UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (factor, units)
-    **dict.fromkeys(("mgal", "milligal", "milligals"), (1.0, "mGal")),
+    **dict.fromkeys(("mgal", "mgals", "milligal", "milligals"), (1.0, "mGal")),
     **dict.fromkeys(("gal", "gals"), (1e3, "mGal")),
     **dict.fromkeys(("ugal", "microgal", "microgals"), (1e-3, "mGal")),
     **dict.fromkeys(("ms-2", "m/s2", "m/s/s", "ms-1s-1"), (1e5, "mGal")),
     **dict.fromkeys(("gu", "um/s2", "ums-2"), (0.1, "mGal")),  # gravity units, µm/s²
-    **dict.fromkeys(("nt", "nanotesla", "gamma"), (1.0, "nT")),
+    **dict.fromkeys(("nt", "nanotesla", "gamma", "gammas"), (1.0, "nT")),
     **dict.fromkeys(("ut", "microtesla"), (1e3, "nT")),
     **dict.fromkeys(("t", "tesla"), (1e9, "nT")),
 }
+_SCALED_UNIT = re.compile(r"(?:1e|10(?=[-+]))([-+]?\d+)(.+)")
+"""A normalised unit with a power of ten in front (``10^-5 m/s^2``, ``1e-6 m s-2``)."""
 FILL_VALUES = (-9999.0, 9999.0, -99999.0, 99999.0, -999999.0, 999999.0, -32767.0, 32767.0,
                -32768.0, 65535.0)
 """Fill values a grid may hold without declaring them (no ``_FillValue`` or
@@ -130,17 +133,30 @@ def _listed(names, last=","):
     return f"{', '.join(names[:-1])} {last} {names[-1]}"
 
 
+def _is_cf_by_name(v, kind):
+    """Whether variable ``v`` declares CF ``standard_name`` ``kind`` (latitude, longitude)."""
+    return v.attrs.get("standard_name") == _CF[kind][0]
+
+
+def _is_cf_by_units(v, kind):
+    """Whether variable ``v``'s ``units`` are CF degrees north (latitude) or east."""
+    return str(v.attrs.get("units", "")).strip().lower() in _CF[kind][1]
+
+
 def _find_axis(ds, names, kind, label):
     """Name of the latitude or longitude coordinate: by name (any case), then CF attributes."""
     found = {str(n).lower(): n for n in [*ds.coords, *ds.dims, *ds.data_vars]}
     for n in names:
         if n in found:
             return found[n]
-    standard, units = _CF[kind]
-    for n, v in ds.variables.items():
-        if (v.attrs.get("standard_name") == standard
-                or str(v.attrs.get("units", "")).lower() in units):
-            return n
+    # a 1-D dimension coordinate first, standard_name before units: a 2-D node_lat(j, i)
+    # data variable listed first was taken for the axis of j (standard_name latitude)
+    ranked = sorted((v.dims != (n,), v.ndim != 1, not _is_cf_by_name(v, kind), i, n)
+                    for i, (n, v) in enumerate(ds.variables.items())
+                    if _is_cf_by_name(v, kind) or _is_cf_by_units(v, kind))
+    if ranked:
+        return ranked[0][-1]
+    standard = _CF[kind][0]
     raise ValueError(f"{label} has no {kind} coordinate: expected one named "
                      f"{_listed(names, 'or')} (any case) or with CF standard_name {standard}; "
                      f"it has {_listed(ds.variables)}")
@@ -175,7 +191,14 @@ def _grid_dims(ds, lat_name, lon_name, label):
 def _choose_var(ds, var, dims, label, exclude):
     gridded = [str(v) for v in ds.data_vars if set(dims) <= set(ds[v].dims)
                and str(v) not in exclude]
+    if var is None:  # node latitudes/longitudes (degrees_north, ...) are never the map
+        gridded = [v for v in gridded if not any(
+            test(ds[v], kind) for test in (_is_cf_by_name, _is_cf_by_units) for kind in _CF)]
     if var is None:
+        if not gridded:  # was "holds 0 gridded variables (none); choose one with --var"
+            raise ValueError(f"{label} holds no variable on its latitude/longitude grid (it "
+                             f"has {_listed(ds.variables)}); expected a map variable along "
+                             f"{_listed(dims, 'and')}, e.g. gravity({', '.join(dims)})")
         if len(gridded) != 1:
             raise ValueError(f"{label} holds {len(gridded)} gridded variables "
                              f"({_listed(gridded)}); choose one with --var NAME")
@@ -257,6 +280,11 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
                 raise ValueError(f"{label}: coordinate {name!r} is in {declared!r}; jaxgrav "
                                  "reads latitudes and longitudes in degrees: convert them "
                                  "(x 180/pi) and set units 'degrees_north'/'degrees_east'")
+    if values.dtype.kind not in "fciu":  # text was "could not convert string to float:
+        # np.str_('a')"; a true/false mask read as a field of 0 and 1
+        what = "true/false values (a mask?)" if values.dtype.kind == "b" else "text"
+        raise ValueError(f"variable {var!r} of {label} holds {what}, not numbers "
+                         f"(dtype {values.dtype}); expected the map's values (e.g. mGal)")
     if values.dtype.kind not in "fc":
         values = values.astype(float)
     values = _undeclared_fills(values, label, var)
@@ -267,9 +295,10 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
 
 def _undeclared_fills(values, label, var):
     """``values`` with undeclared fill values (:data:`FILL_VALUES` beyond the range of every
-    other node, ``|v| >= 1e20``) as NaN, and an :class:`UndeclaredFillWarning` naming them."""
+    other node, ``|v| >= 1e20`` or infinite) as NaN, and an :class:`UndeclaredFillWarning`
+    naming them."""
     finite = np.isfinite(values)
-    fill = finite & (np.abs(values) >= 1e20)
+    fill = np.isinf(values) | (finite & (np.abs(values) >= 1e20))  # inf: was silently missing
     candidates = finite & np.isin(values, FILL_VALUES) & ~fill
     if candidates.any():  # the range of every other node, without copying a large map
         others = finite & ~fill & ~candidates
@@ -286,7 +315,8 @@ def _undeclared_fills(values, label, var):
 
 
 def _unit_key(units):
-    key = units.strip().lower().replace("µ", "u").replace("μ", "u")
+    key = re.sub(r"\s*\([^()]*\)$", "", units.strip().lower())  # "mGal (free-air)"
+    key = key.replace("µ", "u").replace("μ", "u")
     key = key.replace("²", "2").replace("⁻", "-")
     for c in " *^.·":
         key = key.replace(c, "")
@@ -313,7 +343,11 @@ def map_units(values, units):
         ``"mGal"`` or ``"nT"`` for a recognised gravity or magnetic unit, else ``units``
         unchanged (geoid heights in ``m``, DOV in ``arcsec`` …).
     """
-    factor, canonical = _UNIT_SCALES.get(_unit_key(units), (None, units))
+    scaled = _SCALED_UNIT.fullmatch(_unit_key(units))  # "10^-5 m/s^2": mGal
+    factor, canonical = (
+        (_UNIT_SCALES[scaled.group(2)][0] * 10.0 ** int(scaled.group(1)),
+         _UNIT_SCALES[scaled.group(2)][1]) if scaled and scaled.group(2) in _UNIT_SCALES
+        else _UNIT_SCALES.get(_unit_key(units), (None, units)))
     if factor is None:
         return values, units
     return (values if factor == 1.0 else values * factor), canonical

@@ -121,3 +121,44 @@ def test_a_point_mass_model_message_says_what_the_file_must_hold(tmp_path, clear
         '"depth", "mass" and an "offset"',
         "jaxgrav.fields.pointmass_fit.save_point_masses in Python"])
     assert "None" not in msg and "written by save_point_masses" not in msg
+
+
+def _one_var_map(path, values):
+    """A 3 x 3 map on lat 24..25, lon 122..123 holding ``values`` as variable ``g``."""
+    xr.Dataset({"g": (("lat", "lon"), values)},
+               coords={"lat": np.linspace(24, 25, 3), "lon": np.linspace(122, 123, 3)}
+               ).to_netcdf(path)
+    return path
+
+
+@pytest.mark.parametrize(("values", "what"), [
+    (np.full((3, 3), "a"), r"text, not numbers \(dtype <U1\)"),
+    (np.eye(3, dtype=bool), r"true/false values \(a mask\?\), not numbers \(dtype bool\)"),
+])
+def test_a_map_of_text_or_a_mask_is_named(tmp_path, values, what):
+    """Text was "could not convert string to float: np.str_('a')"; a true/false land mask
+    was read as a field of 0 and 1."""
+    path = _one_var_map(tmp_path / "m.nc", values)
+    with pytest.raises(ValueError, match=rf"^variable 'g' of map '.*m.nc' holds {what}; "
+                       r"expected the map's values \(e.g. mGal\)$"):
+        read_netcdf(path)
+
+
+def test_a_map_with_no_gridded_variable_says_so(tmp_path):
+    """Was "holds 0 gridded variables (none); choose one with --var NAME": nothing to choose."""
+    path = tmp_path / "m.nc"
+    xr.Dataset(coords={"lat": np.linspace(24, 25, 3), "lon": np.linspace(122, 123, 3)}
+               ).to_netcdf(path)
+    with pytest.raises(ValueError, match=r"^map '.*m.nc' holds no variable on its latitude/"
+                       r"longitude grid \(it has lat, lon\); expected a map variable along lat "
+                       r"and lon, e.g. gravity\(lat, lon\)$"):
+        read_netcdf(path)
+
+
+def test_an_infinite_map_node_is_announced_as_missing(tmp_path):
+    """An inf node became a missing node with no word (a -9999 one was announced)."""
+    values = np.arange(9.0).reshape(3, 3)
+    values[1, 1] = np.inf
+    with pytest.warns(UserWarning, match=r"1 node\(s\) of variable 'g' hold inf"):
+        got = read_netcdf(_one_var_map(tmp_path / "m.nc", values))
+    assert np.isnan(got.values[1, 1]) and np.isfinite(np.delete(got.values, 4)).all()
