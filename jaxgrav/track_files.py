@@ -13,6 +13,8 @@ their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
   ``lon``, ``lat``, ``z`` for ``.xyz``/``.xy`` files (GMT's order) and ``1``, ``2``, ...
   otherwise.
 
+:func:`header_scale` reads a unit in a header (``t (min)``, ``gravity [m/s^2]``, ``lat
+(rad)``, ``v_east (kn)``) as the factor to the library's units.
 :func:`parse_numbers` reads one column of cells as float64 (empty, ``nan``, ``NA``,
 ``N/A``, ``null`` as NaN; a decimal comma accepted when the delimiter is not a comma).
 """
@@ -26,7 +28,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["NA_TOKENS", "Table", "column_key", "parse_numbers", "read_table"]
+from jaxgrav.grid_files import map_units
+
+__all__ = ["NA_TOKENS", "Table", "column_key", "header_scale", "parse_numbers", "read_table"]
 
 NA_TOKENS = frozenset({"", "nan", "na", "n/a", "null", "none"})
 """Cells (lower case) read as a missing value (NaN)."""
@@ -72,6 +76,65 @@ def column_key(name):
     """How a header matches a column name: trimmed, lower case, a ``(unit)``/``[unit]``
     suffix dropped (``"Gravity [mGal]"`` → ``"gravity"``)."""
     return _UNITS.sub("", str(name).strip()).strip().lower()
+
+
+_DEG = dict.fromkeys(("deg", "degs", "degree", "degrees", "°", "decimal degrees", "dd"), 1.0)
+_HEADER_UNITS = {  # column -> unit (lower case, spaces kept) -> factor to the library's
+    "t": {**dict.fromkeys(("s", "sec", "secs", "second", "seconds"), 1.0),
+          **dict.fromkeys(("ms", "millisecond", "milliseconds"), 1e-3),
+          **dict.fromkeys(("min", "mins", "minute", "minutes"), 60.0),
+          **dict.fromkeys(("h", "hr", "hrs", "hour", "hours"), 3600.0),
+          **dict.fromkeys(("d", "day", "days"), 86400.0)},
+    "lat": {**_DEG, **dict.fromkeys(("rad", "radian", "radians"), 180.0 / np.pi)},
+    "h": {**dict.fromkeys(("m", "metre", "metres", "meter", "meters"), 1.0),
+          "km": 1e3, **dict.fromkeys(("ft", "feet"), 0.3048)},
+    "v_east": {**dict.fromkeys(("m/s", "m s-1", "ms-1", "m/sec"), 1.0),
+               **dict.fromkeys(("kn", "kt", "kts", "knot", "knots"), 1852.0 / 3600.0),
+               **dict.fromkeys(("km/h", "kmh", "kph"), 1.0 / 3.6)},
+}
+_HEADER_UNITS.update(lon=_HEADER_UNITS["lat"], drift_radius=_HEADER_UNITS["lat"],
+                     v_north=_HEADER_UNITS["v_east"])
+_FIELD_UNITS = {"gravity": "mGal", "magnetic": "nT"}
+
+
+def header_scale(name, header, label):
+    """Factor from the unit a header declares to the library's unit of column ``name``.
+
+    Parameters
+    ----------
+    name : str
+        The canonical column (``t``, ``lat``, ``gravity``, ...).
+    header : str
+        The header as written, e.g. ``"t (min)"``, ``"gravity [m/s^2]"``.
+    label : str
+        The file, for messages.
+
+    Returns
+    -------
+    float
+        1 when the header declares no unit, or one this function does not know (a note
+        such as ``lat (WGS84)`` or ``time (UTC)``); else the factor (``t (min)``: 60,
+        ``gravity [m/s^2]``: 1e5, ``lat (rad)``: 180/π, ``v_east (kn)``: 0.5144).
+
+    Raises
+    ------
+    ValueError
+        A gravity column declared in a magnetic unit, or a magnetic column in a gravity
+        unit (the file and the header named).
+    """
+    found = _UNITS.search(str(header))
+    if not found:
+        return 1.0
+    unit = found.group(0).strip()[1:-1].strip()
+    if name in _FIELD_UNITS:
+        factor_units = map_units(np.ones(1), unit)
+        if factor_units[1] in _FIELD_UNITS.values() and factor_units[1] != _FIELD_UNITS[name]:
+            raise ValueError(f"{label}: column {header!r} declares {unit!r}, a unit of "
+                             f"{'gravity' if factor_units[1] == 'mGal' else 'magnetic'} "
+                             f"fields; column {name!r} holds {_FIELD_UNITS[name]}: rename it "
+                             "or name the right column with --columns")
+        return float(factor_units[0][0]) if factor_units[1] == _FIELD_UNITS[name] else 1.0
+    return _HEADER_UNITS.get(name, {}).get(unit.lower(), 1.0)
 
 
 def _decode(data, label):
@@ -186,7 +249,8 @@ def read_table(path, label=None):
     if has_header:
         rows = rows[1:]
     elif path.suffix.lower() in (".xyz", ".xy"):
-        header = ["lon", "lat", "z", *(str(j + 1) for j in range(3, len(header)))]
+        # a two-column .xy(z) file gained an empty "z" column in the outputs
+        header = ["lon", "lat", "z", *(str(j + 1) for j in range(3, len(header)))][:len(header)]
     else:
         header = [str(j + 1) for j in range(len(header))]
     while len(header) > 1 and not header[-1] and all(len(r) < len(header) or not r[-1]

@@ -11,7 +11,8 @@ What the reader accepts (parsing of the text: :mod:`jaxgrav.track_files`):
 - comma, semicolon, tab or whitespace (``.xyz``) separated files, quoted fields, a
   UTF-8 byte-order mark, CRLF line ends, ``#`` comment lines, a decimal comma in
   semicolon/tab files;
-- column names in any case, trimmed, with a ``(unit)`` suffix ignored, and the aliases
+- column names in any case, trimmed, with a ``(unit)`` suffix (read as a conversion
+  when known: :func:`~jaxgrav.track_files.header_scale`), and the aliases
   of :data:`ALIASES` (``time`` for ``t``, ``latitude`` for ``lat``, ``longitude``,
   ``long``, ``lng`` for ``lon``, ``height`` for ``h``); an exact name wins over an alias;
   ``columns={"lat": "LAT", ...}`` (``--columns lat=LAT,...``, :func:`parse_columns`)
@@ -32,7 +33,7 @@ import numpy as np
 
 from jaxgrav._io import atomic_output
 from jaxgrav.grid_axes import contiguous_longitudes
-from jaxgrav.track_files import column_key, parse_numbers, read_table
+from jaxgrav.track_files import column_key, header_scale, parse_numbers, read_table
 
 __all__ = ["ALIASES", "KNOWN_COLUMNS", "TrackTable", "csv_line", "parse_columns",
            "read_track_csv", "write_track_csv"]
@@ -287,6 +288,8 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
         name = canonical.get(j, header)
         cells = [r[j] for r in table.rows]
         values, bad = parse_numbers(cells, decimal_comma=table.delimiter != ",")
+        if j in canonical and bad is None:  # "t (min)", "gravity [m/s^2]", "lat (rad)"
+            values = values * header_scale(name, header, label)
         if bad is not None and name == "t":
             values, track.time_origin = _iso_seconds(cells, lines, label, header)
             text_name = header if header != "t" else "time"

@@ -1,5 +1,5 @@
 """Track files of other tools: an Excel "sep=" first line, a JSON file given as a track,
-a one-column header (issue 19)."""
+a one-column header, a unit in a header (issue 19)."""
 
 import pytest
 
@@ -31,3 +31,34 @@ def test_one_column_header_in_the_singular(tmp_path):
     path.write_text("a\n1 2\n")
     with pytest.raises(ValueError, match=r"the header has 1 column \(whitespace-separated\)"):
         read_track_csv(path)
+
+
+@pytest.mark.parametrize(("header", "cell", "name", "value"), [
+    ("t (min)", "2", "t", 120.0), ("t [ms]", "1500", "t", 1.5), ("time (h)", "1", "t", 3600.0),
+    ("lat (rad)", "0.5", "lat", 28.64788975654116), ("Latitude [deg]", "30", "lat", 30.0),
+    ("gravity [m/s^2]", "2e-4", "gravity", 20.0), ("gravity (uGal)", "3000", "gravity", 3.0),
+    ("gravity (10^-5 m/s^2)", "7", "gravity", 7.0), ("magnetic (uT)", "0.5", "magnetic", 500.0),
+    ("v_east (kn)", "10", "v_east", 5.144444444444445), ("h (ft)", "100", "h", 30.48),
+    ("time (UTC)", "60", "t", 60.0), ("gravity (free-air)", "7", "gravity", 7.0),
+])
+def test_a_unit_in_a_header_converts_the_column(tmp_path, header, cell, name, value):
+    """``gravity [m/s^2]`` was refused for its spread ("are the readings in other units?")
+    though the header said so; ``t (min)`` was read as seconds and ``lat (rad)`` as
+    degrees ("the track leaves the map"): a known unit is now converted, a note such as
+    ``(UTC)`` or ``(free-air)`` left alone."""
+    path = tmp_path / "u.csv"
+    cols = {"t": "0", "lat": "0.1", "lon": "130", name: cell}
+    heads = {k: k for k in cols} | {name: header}
+    path.write_text(",".join(heads.values()) + "\n" + ",".join(cols.values()) + "\n")
+    track = read_track_csv(path, required=("t", "lat", "lon", name))
+    assert track[name][0] == pytest.approx(value)
+
+
+def test_a_field_column_in_the_other_field_s_unit_is_refused(tmp_path):
+    """``gravity (nT)``: the header says a magnetic field; not read as mGal."""
+    path = tmp_path / "u.csv"
+    path.write_text("t,lat,lon,gravity (nT)\n0,30,130,5\n")
+    with pytest.raises(ValueError, match=r"^track file '.*u.csv': column 'gravity \(nT\)' "
+                       r"declares 'nT', a unit of magnetic fields; column 'gravity' holds mGal: "
+                       r"rename it or name the right column with --columns$"):
+        read_track_csv(path, required=("t", "lat", "lon", "gravity"))
