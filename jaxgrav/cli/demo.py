@@ -20,6 +20,7 @@ import numpy as np
 
 from jaxgrav import datasets
 from jaxgrav._io import atomic_output, check_outputs
+from jaxgrav.cli.montecarlo_options import run_count
 from jaxgrav.cli.simulate import check_seed
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match.api import config_for
@@ -28,7 +29,7 @@ from jaxgrav.plot import plot_map, save_figure
 from jaxgrav.scenarios import MatchingScenario
 from jaxgrav.sim import DEG_ARC_M
 
-__all__ = ["run_demo"]
+__all__ = ["MAX_DEMO_RUNS", "run_demo"]
 
 OUTPUTS = ("table1.md", "summary.json", "tracks.png")
 
@@ -152,11 +153,16 @@ def run_demo(out_dir, *, force=False, runs=200, seed=0, smoke=False):
           f"{out_dir / 'tracks.png'} ({time.perf_counter() - t0:.0f} s)")
 
 
+MAX_DEMO_RUNS = 100_000
+"""Most Monte Carlo runs ``jaxgrav demo --runs`` takes (500 x the default's)."""
+
+
 def add_parser(subparsers):
     """Add the ``demo`` sub-command to an ``argparse`` sub-parser set."""
     d = subparsers.add_parser("demo", help="run the main job on the shipped data")
     d.add_argument("--out", default="demo_output", help="output folder (default demo_output)")
-    d.add_argument("--runs", type=int, default=200, help="Monte Carlo runs (default 200)")
+    d.add_argument("--runs", type=run_count, default=200,
+                   help=f"Monte Carlo runs (default 200, from 5 to {MAX_DEMO_RUNS}, e.g. 1e4)")
     d.add_argument("--seed", type=int, default=0, help="PRNG seed")
     d.add_argument("--force", action="store_true", help="overwrite existing outputs")
     d.add_argument("--smoke", action="store_true",
@@ -170,6 +176,11 @@ def _cmd_demo(args):
     least 5``, a negative seed run, an --out file ended in "[Errno 17] File exists")."""
     if args.runs < 5:
         raise ValueError(f"--runs must be at least 5 Monte Carlo runs; got {args.runs}")
+    if args.runs > MAX_DEMO_RUNS:  # --runs 1000000000 started, silently, for years
+        raise ValueError(f"--runs must be at most {MAX_DEMO_RUNS} for the demo (its realistic "
+                         f"table runs them three times; the default 200 take about a minute); "
+                         f"got {args.runs:.3g}; for larger studies use jaxgrav montecarlo, which "
+                         "checks their memory and disk space first")
     check_seed(args.seed)
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise ValueError(f"--out {args.out!r} is a file; expected a folder (the demo writes "

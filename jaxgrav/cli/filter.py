@@ -269,6 +269,10 @@ def cmd_filter(args):
     if args.point_masses is not None and args.var is not None:  # was ignored, silently
         raise ValueError(f"--var {args.var} names a variable of a --map file; --point-masses "
                          f"{args.point_masses} has none: leave --var out")
+    if args.point_masses is not None and args.missing is not None and args.method == "pmf":
+        raise ValueError(f"--missing {args.missing} says how pmf reads a --map's missing (NaN) "
+                         f"nodes; --point-masses {args.point_masses} is a field with no "
+                         "nodes: leave --missing out")
     check_outputs([args.out], force=args.force, names=["--out"],
                   inputs={"--track": args.track, "--map": args.map,
                           "--point-masses": args.point_masses})

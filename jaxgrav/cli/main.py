@@ -105,10 +105,15 @@ def build_parser():
     montecarlo.add_parser(sub)
     bench.add_parser(sub)
 
+    for parser in sub.choices.values():  # main() reads "--track -" from standard input
+        for action in parser._actions:
+            if "--track" in action.option_strings and "standard input" not in action.help:
+                action.help += "; '-' reads it from standard input (e.g. a pipe)"
     data = sub.add_parser("data", help="build shipped data sets")
     dsub = data.add_subparsers(dest="source", required=True)
     e = dsub.add_parser("egm2008", help="EGM2008 regional grids (needs jaxgrav[egm2008])")
-    e.add_argument("--region", default="all", help="ryukyu, qinling or all")
+    e.add_argument("--region", default="all", choices=[*egm2008.REGIONS, "all"],
+                   help="ryukyu, qinling or all (default)")
     e.add_argument("--out", required=True, help="output folder")
     e.add_argument("--force", action="store_true", help="overwrite existing files")
     e.set_defaults(func=_cmd_data_egm2008)

@@ -16,7 +16,13 @@ import numpy as np
 from jaxgrav import __version__, montecarlo
 from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import check_out_format
-from jaxgrav.cli.montecarlo_options import check_drift, check_options, told_from_args
+from jaxgrav.cli.montecarlo_options import (
+    check_drift,
+    check_options,
+    check_results_size,
+    run_count,
+    told_from_args,
+)
 from jaxgrav.cli.montecarlo_summary import (
     fix_lines,
     format_summary,
@@ -80,8 +86,11 @@ def add_parser(subparsers):
                         "fixes of that matcher), voyage-ukf, voyage-ekf, voyage-gsf, voyage-rbpf, "
                         "voyage-pmf (tightly coupled; voyage-rbpf: 500 particles): 12 h patrols "
                         "(--hours) navigated with a navigation-grade INS (--ins)")
-    m.add_argument("--runs", type=int, required=True, help="number of simulated runs")
-    m.add_argument("--chunk", type=int, default=None,
+    m.add_argument("--runs", type=run_count, required=True,
+                   help="number of simulated runs (e.g. 1000 or 1e6); from 10000 runs their "
+                        "memory and file size are estimated first, and refused beyond 80 %% "
+                        "of the machine's memory or the disk's free space")
+    m.add_argument("--chunk", type=run_count, default=None,
                    help="runs per compiled call (bounds memory; default 256)")
     m.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
     m.add_argument("--devices", type=int, default=None,
@@ -238,6 +247,7 @@ def cmd_montecarlo(args):
             extra["map_error_told"] = told_from_args(args)
     spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes,
                  map_error=model, **extra)
+    check_results_size(args, spec, out)
     n_dev = args.devices or len(jax.devices())
     setting = describe_map_error(args)
     print(f"jaxgrav montecarlo: {args.method} ({spec.settings['description']}), {args.runs} "

@@ -5,11 +5,18 @@ out of range, more ``--devices`` than ``--runs``, and a ``--fixes`` x ``--chunk`
 runs would not fit in memory, with one line naming the option (``--noise``, not the
 library's ``noise``), before any map is read or anything compiled; :func:`check_drift`
 refuses a ``--drift`` whose search or initial error does not fit on the map, once the
-map is known; :func:`told_from_args` parses ``--told-map-error SIGMA[,L]``.
+map is known; :func:`told_from_args` parses ``--told-map-error SIGMA[,L]``; :func:`run_count` reads
+``--runs`` and ``--chunk`` (``1e6`` too); :func:`check_results_size` refuses a run count
+whose results do not fit in memory or on the disk, and announces a large one.
 """
 
+import argparse
 import math
+import shutil
 import sys
+from pathlib import Path
+
+import jax
 
 from jaxgrav.cli.filter_checks import memory_budget
 from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M, MAX_BIAS_MGAL, check_seed
@@ -19,8 +26,8 @@ from jaxgrav.montecarlo import DEFAULT_CHUNK
 from jaxgrav.montecarlo.filter_runs import FILTER_METHODS
 from jaxgrav.sim import DEG_ARC_M
 
-__all__ = ["BYTES_PER_FIX", "PAPER_D_AREA_DEG", "check_drift", "check_options",
-           "told_from_args"]
+__all__ = ["BYTES_PER_FIX", "LARGE_RUNS", "PAPER_D_AREA_DEG", "check_drift", "check_options",
+           "check_results_size", "run_count", "told_from_args"]
 
 BYTES_PER_FIX = {"dense": 20e3, "chains": 20e3, "entropy+iccp": 40e3, "entropy": 15e3,
                  "iccp": 5e3, **dict.fromkeys(FILTER_METHODS, 2e3)}
@@ -44,6 +51,66 @@ _DEFAULT_FIXES = {"dense": 30, "chains": 30, "entropy": 60, "iccp": 60, "entropy
 PAPER_D_AREA_DEG = 0.7
 """Side of paper D's match area (23.9-24.6 N, 122.6-123.3 E; degrees): the "map" of the
 filter methods over its three point masses, for :func:`check_drift`."""
+
+
+LARGE_RUNS = 10_000
+"""From this many runs :func:`check_results_size` measures a run's results (tracing the
+method once, about 1 s) and checks and announces their size."""
+
+_KEY_BYTES = 16  # a run's PRNG key, split on the device and copied to the host
+
+
+def run_count(text):
+    """``--runs`` or ``--chunk`` as an int: digits, or a whole number in exponent form
+    (``1e6``); argparse.ArgumentTypeError for anything else (``2.5``, ``nan``, ``ten``)."""
+    try:
+        value = int(text)
+    except ValueError:
+        try:
+            number = float(text)
+        except ValueError:
+            number = math.nan
+        if not (math.isfinite(number) and number == int(number)):
+            raise argparse.ArgumentTypeError(
+                f"expected a whole number of runs (e.g. 1000 or 1e6); got {text!r}") from None
+        value = int(number)
+    return value
+
+
+def check_results_size(args, spec, out):
+    """Refuse ``--runs`` whose results exceed the memory or the disk; announce a large one.
+
+    From :data:`LARGE_RUNS` runs, one run's results are measured (``jax.eval_shape`` of
+    the method, no run computed): the runner keeps every run's results and key in memory
+    until the NetCDF is written (counted twice: the file is written from a copy), and the
+    NetCDF holds them uncompressed. ValueError naming ``--runs`` when that needs more than
+    80 % of the machine's memory or more than the free space of ``out``'s folder;
+    otherwise one line on stdout with the sizes (``--runs 1e9`` started splitting 16 GB
+    of keys, silently).
+    """
+    if args.runs < LARGE_RUNS:
+        return
+    shapes = jax.eval_shape(spec.fn, jax.random.key(0), *spec.args)
+    per_run = sum(leaf.size * leaf.dtype.itemsize for leaf in jax.tree.leaves(shapes))
+    need = _BASELINE_BYTES + args.runs * (_KEY_BYTES + 2 * per_run)
+    size = args.runs * per_run
+    (budget, total), runs = memory_budget(), f"{args.runs:.3g}" if args.runs >= 1e7 else args.runs
+    if budget and need > budget:
+        fit = int((budget - _BASELINE_BYTES) // (_KEY_BYTES + 2 * per_run))
+        raise ValueError(f"--runs {runs} needs about {need / 1e9:.3g} GB of memory "
+                         f"({per_run} bytes of results and {_KEY_BYTES} of key a run, kept "
+                         f"until the file is written), more than 80 % of this machine's "
+                         f"{total / 1e9:.3g} GB; expected at most {fit} runs (run more batches "
+                         "with other --seed values)")
+    free = shutil.disk_usage(Path(out).resolve().parent).free
+    if size > free:
+        raise ValueError(f"--runs {runs} writes about {size / 1e9:.3g} GB to --out {out} "
+                         f"({per_run} bytes a run), more than the {free / 1e9:.3g} GB free in "
+                         "its folder; expected fewer --runs or another folder")
+    when = ("no time estimate with --no-progress" if args.no_progress else
+            "the progress bar estimates the time after the first compiled call")
+    print(f"jaxgrav montecarlo: {runs} runs hold about {need / 1e9:.3g} GB in memory and "
+          f"write about {size / 1e6:.3g} MB to {out} ({per_run} bytes a run); {when}")
 
 
 def check_options(args):

@@ -1,0 +1,159 @@
+"""Inputs found by the fifth issue-19 hunt (2026-12-07, helper-60): a Monte Carlo run
+count that cannot be a whole number, or whose results would not fit in memory or on the
+disk (and the size of a large one announced first); ``--track -`` in the commands'
+help; ``filter --missing`` over point masses; a map whose latitude/longitude axes are
+known only by CF attributes while a 2-D node-latitude variable is listed first."""
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from jaxgrav import montecarlo as mc_package
+from jaxgrav.cli import main, montecarlo_options
+from jaxgrav.grid_files import map_units, read_netcdf
+from jaxgrav.track_files import read_table
+
+
+@pytest.mark.parametrize("runs", ["2.5", "nan", "1e400", "ten"])
+def test_a_run_count_that_is_no_whole_number_is_refused(tmp_path, capsys, runs):
+    """``--runs 2.5`` was argparse's "invalid int value" and ``--runs 1e6`` refused alike."""
+    with pytest.raises(SystemExit) as exit_:
+        main(["montecarlo", "--method", "ukf", "--runs", runs, "--out", f"{tmp_path}/m.nc"])
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and "\n" not in err, err
+    assert (f"argument --runs: expected a whole number of runs (e.g. 1000 or 1e6); got "
+            f"{runs!r}") in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_run_count_reads_exponent_forms():
+    """``1e6`` is a million runs; digits stay exact."""
+    assert montecarlo_options.run_count("1e6") == 1_000_000
+    assert montecarlo_options.run_count("12345678901234567890") == 12345678901234567890
+
+
+@pytest.fixture
+def machine_25gb(monkeypatch):
+    """A machine of 25 GB (20 GB usable), whatever the test machine has."""
+    monkeypatch.setattr(montecarlo_options, "memory_budget", lambda: (20e9, 25e9))
+
+
+def test_a_run_count_beyond_the_memory_is_refused(tmp_path, refused, machine_25gb):
+    """``--runs 1e9`` started splitting 16 GB of keys with no estimate (then out of memory
+    or hours later a 69 GB file)."""
+    refused(["montecarlo", "--method", "ukf", "--runs", "1e9", "--out", tmp_path / "m.nc"],
+            "--runs 1e+09 needs about 155 GB of memory (69 bytes of results and 16 of key a "
+            "run, kept until the file is written), more than 80 % of this machine's 25 GB; "
+            "expected at most 123376623 runs (run more batches with other --seed values)")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_run_count_beyond_the_disk_is_refused(tmp_path, refused, machine_25gb,
+                                                monkeypatch):
+    """Results that fit in memory but not in --out's folder are refused before the runs."""
+    monkeypatch.setattr(montecarlo_options.shutil, "disk_usage",
+                        lambda path: type("Usage", (), {"free": 1e6})())
+    refused(["montecarlo", "--method", "ukf", "--runs", "1e5", "--out", tmp_path / "m.nc"],
+            f"--runs 100000 writes about 0.0069 GB to --out {tmp_path / 'm.nc'} (69 bytes a "
+            "run), more than the 0.001 GB free in its folder")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_large_run_count_is_announced_with_its_sizes(tmp_path, capsys, machine_25gb,
+                                                      monkeypatch):
+    """From 10000 runs the memory and file size are printed before the runs start."""
+    def stop(*args, **kwargs):
+        raise ValueError("stopped before the runs")
+
+    monkeypatch.setattr(mc_package, "run", stop)
+    out = tmp_path / "m.nc"
+    assert main(["montecarlo", "--method", "ukf", "--runs", "2e4", "--out", str(out),
+                 "--no-progress"]) == 2
+    printed = capsys.readouterr().out
+    assert (f"jaxgrav montecarlo: 20000 runs hold about 1 GB in memory and write about 1.38 MB "
+            f"to {out} (69 bytes a run); no time estimate with --no-progress") in printed
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["match", "sample", "filter", "navigate", "dov"])
+def test_help_says_track_reads_standard_input(capsys, command):
+    """``--track -`` read the standard input, and no help said so."""
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "'-' reads it from standard input (e.g. a pipe)" in text
+
+
+@pytest.mark.parametrize("missing", ["gaps", "land"])
+def test_filter_missing_over_point_masses_is_refused(tmp_path, refused, missing):
+    """``filter --point-masses paper-d --method pmf --missing land`` ran and the option did
+    nothing: point masses have no map nodes."""
+    track = tmp_path / "f.csv"
+    track.write_text("t,lat,lon,gravity\n0,24.3,122.74,-30\n2,24.30002,122.74002,-29.8\n")
+    refused(["filter", "--point-masses", "paper-d", "--method", "pmf", "--missing", missing,
+             "--track", track, "--out", tmp_path / "o.csv"],
+            f"--missing {missing} says how pmf reads a --map's missing (NaN) nodes; "
+            "--point-masses paper-d is a field with no nodes: leave --missing out")
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_cf_axes_beat_a_node_latitude_variable_listed_first(tmp_path):
+    """Axes ``j``, ``i`` known by CF standard_name, and a 2-D ``node_lat`` (degrees_north)
+    listed first: was "coordinate 'node_lat' is 2-D ... not curvilinear or projected
+    ones"; now the axes are j, i and the map is the one variable that is not a latitude."""
+    lat, lon = np.linspace(24, 25, 11), np.linspace(122, 123, 11)
+    nodes, _ = np.meshgrid(lat, lon, indexing="ij")
+    xr.Dataset({"node_lat": (("j", "i"), nodes, {"units": "degrees_north"}),
+                "gravity": (("j", "i"), np.full((11, 11), 5.0), {"units": "mGal"})},
+               coords={"j": ("j", lat, {"standard_name": "latitude"}),
+                       "i": ("i", lon, {"standard_name": "longitude"})}
+               ).to_netcdf(tmp_path / "m.nc")
+    got = read_netcdf(tmp_path / "m.nc")
+    assert (got.name, got.values.shape, float(got.values[5, 5])) == ("gravity", (11, 11), 5.0)
+    assert got.lat == pytest.approx(lat) and got.lon == pytest.approx(lon)
+
+
+@pytest.mark.parametrize("runs, message", [
+    ("1e9", "--runs must be at most 100000 for the demo (its realistic table runs them three "
+            "times; the default 200 take about a minute); got 1e+09; for larger studies use "
+            "jaxgrav montecarlo, which checks their memory and disk space first"),
+    ("4", "--runs must be at least 5 Monte Carlo runs; got 4"),
+])
+def test_demo_run_counts_out_of_range_are_refused(tmp_path, refused, runs, message):
+    """``demo --runs 1000000000`` started, silently, for years (and ``--runs 1e4`` was "invalid
+    int value")."""
+    refused(["demo", "--out", tmp_path / "d", "--runs", runs], message)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_data_region_is_named_with_its_choices(tmp_path, capsys):
+    """``data egm2008 --region mars`` said "region must be one of ['ryukyu', 'qinling',
+    'all']" (a Python list, no option name)."""
+    with pytest.raises(SystemExit) as exit_:
+        main(["data", "egm2008", "--region", "mars", "--out", str(tmp_path / "e")])
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and "\n" not in err
+    assert ("argument --region: invalid choice: 'mars' (choose from 'ryukyu', 'qinling', "
+            "'all')") in err
+
+
+def test_a_two_column_xyz_file_gains_no_empty_column(tmp_path):
+    """A headerless ``lon lat`` ``.xyz`` file was read with an empty third column ``z``,
+    written into ``sample``'s output (``lon,lat,z,map``)."""
+    track = tmp_path / "t.xyz"
+    track.write_text("125.5 24.5\n125.51 24.51\n")
+    table = read_table(track)
+    assert table.header == ["lon", "lat"]
+    assert table.rows == [["125.5", "24.5"], ["125.51", "24.51"]]
+
+
+@pytest.mark.parametrize("units, factor", [
+    ("10^-5 m/s^2", 1.0), ("1e-6 m s-2", 0.1), ("mGals", 1.0), ("mGal (free-air)", 1.0),
+    ("gammas", 1.0), ("1E-9 T", 1.0),
+])
+def test_map_units_with_a_power_of_ten_or_a_note_are_read(units, factor):
+    """``10^-5 m/s^2`` (mGal, common in gravity surveys), ``1e-6 m s-2`` (0.1 mGal), a
+    plural or a parenthesised note were not recognised, and the values read as they are
+    (1e-6 m s-2 taken for mGal: 10 x too large)."""
+    values, canonical = map_units(np.array([2.0]), units)
+    assert canonical in ("mGal", "nT") and values[0] == pytest.approx(2.0 * factor)
