@@ -20,6 +20,7 @@ their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
 """
 
 import csv
+import datetime as dt
 import io
 import re
 import shlex
@@ -30,7 +31,8 @@ import numpy as np
 
 from jaxgrav.grid_files import map_units
 
-__all__ = ["NA_TOKENS", "Table", "column_key", "header_scale", "parse_numbers", "read_table"]
+__all__ = ["NA_TOKENS", "Table", "column_key", "header_scale", "parse_datetime", "parse_numbers",
+           "read_table"]
 
 NA_TOKENS = frozenset({"", "nan", "na", "n/a", "null", "none"})
 """Cells (lower case) read as a missing value (NaN)."""
@@ -135,6 +137,23 @@ def header_scale(name, header, label):
                              "or name the right column with --columns")
         return float(factor_units[0][0]) if factor_units[1] == _FIELD_UNITS[name] else 1.0
     return _HEADER_UNITS.get(name, {}).get(unit.lower(), 1.0)
+
+
+_SLASH_DATE = re.compile(r"(\d{4})/(\d{1,2})/(\d{1,2})(?=$|[ T])")
+_CLOCK = re.compile(r"\d{1,2}:\d{2}(:\d{2}(\.\d*)?)?")
+
+
+def parse_datetime(cell):
+    """An ISO-8601 date-time cell as a :class:`datetime.datetime`.
+
+    Also ``2024/05/01 12:00:00`` (year first, slashes) and a lower-case ``z``.
+    ValueError for anything else; its text says so for a time of day without a date
+    (``12:00:00``, a log that keeps the date in another column).
+    """
+    text = _SLASH_DATE.sub(lambda m: f"{m[1]}-{int(m[2]):02d}-{int(m[3]):02d}", cell.strip())
+    if _CLOCK.fullmatch(text):
+        raise ValueError("a time of day without a date")
+    return dt.datetime.fromisoformat(text.replace("z", "Z"))
 
 
 def _decode(data, label):

@@ -27,13 +27,12 @@ What the reader accepts (parsing of the text: :mod:`jaxgrav.track_files`):
 """
 
 import csv
-import datetime as dt
 
 import numpy as np
 
 from jaxgrav._io import atomic_output
 from jaxgrav.grid_axes import contiguous_longitudes
-from jaxgrav.track_files import column_key, header_scale, parse_numbers, read_table
+from jaxgrav.track_files import column_key, header_scale, parse_datetime, parse_numbers, read_table
 
 __all__ = ["ALIASES", "KNOWN_COLUMNS", "TrackTable", "csv_line", "parse_columns",
            "read_track_csv", "write_track_csv"]
@@ -201,12 +200,13 @@ def _iso_seconds(cells, lines, label, header):
     stamps = []
     for cell, line in zip(cells, lines, strict=True):
         try:
-            stamps.append(dt.datetime.fromisoformat(cell.replace("z", "Z")))
-        except ValueError:
+            stamps.append(parse_datetime(cell))
+        except ValueError as err:  # a clock time: "12:00:00 ... a time of day without a date"
+            clock = f" ({err}: join the date to it)" if "time of day" in str(err) else ""
             raise ValueError(
                 f"{label}, line {line}, column {header!r}: {cell!r} is neither a number "
-                "(seconds) nor an ISO-8601 date-time (e.g. 2024-05-01T12:00:00Z); times must "
-                "be complete") from None
+                f"(seconds) nor an ISO-8601 date-time (e.g. 2024-05-01T12:00:00Z){clock}; "
+                "times must be complete") from None
     aware = [s.tzinfo is not None for s in stamps]
     if any(aware) and not all(aware):
         i = aware.index(not aware[0])

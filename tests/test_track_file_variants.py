@@ -62,3 +62,24 @@ def test_a_field_column_in_the_other_field_s_unit_is_refused(tmp_path):
                        r"declares 'nT', a unit of magnetic fields; column 'gravity' holds mGal: "
                        r"rename it or name the right column with --columns$"):
         read_track_csv(path, required=("t", "lat", "lon", "gravity"))
+
+
+def test_a_year_first_date_with_slashes_is_a_date_time(tmp_path):
+    """``2024/05/01 12:00:00`` (a spreadsheet's export) was "neither a number nor an
+    ISO-8601 date-time"; the text is kept as written."""
+    path = tmp_path / "s.csv"
+    path.write_text("time,lat,lon\n2024/05/01 12:00:00,30,130\n2024/05/01 12:01:30,30,130\n")
+    track = read_track_csv(path, required=("t", "lat", "lon"))
+    assert list(track["t"]) == [0.0, 90.0] and track.time_origin == "2024-05-01T12:00:00"
+    assert list(track.text["time"]) == ["2024/05/01 12:00:00", "2024/05/01 12:01:30"]
+
+
+def test_a_time_of_day_without_a_date_says_so(tmp_path):
+    """``12:00:00`` (the date in another column) is refused with the reason."""
+    path = tmp_path / "c.csv"
+    path.write_text("date,time,lat,lon\n2024-05-01,12:00:00,30,130\n")
+    with pytest.raises(ValueError, match=r"line 2, column 'time': '12:00:00' is neither a "
+                       r"number \(seconds\) nor an ISO-8601 date-time \(e.g. "
+                       r"2024-05-01T12:00:00Z\) \(a time of day without a date: join the date "
+                       r"to it\); times must be complete$"):
+        read_track_csv(path, required=("t", "lat", "lon"))
