@@ -20,7 +20,7 @@ import numpy as np
 
 from jaxgrav import datasets
 from jaxgrav._io import atomic_output, check_outputs
-from jaxgrav.cli.montecarlo_options import run_count
+from jaxgrav.cli.inputs import whole_number
 from jaxgrav.cli.simulate import check_seed
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match.api import config_for
@@ -161,7 +161,7 @@ def add_parser(subparsers):
     """Add the ``demo`` sub-command to an ``argparse`` sub-parser set."""
     d = subparsers.add_parser("demo", help="run the main job on the shipped data")
     d.add_argument("--out", default="demo_output", help="output folder (default demo_output)")
-    d.add_argument("--runs", type=run_count, default=200,
+    d.add_argument("--runs", type=whole_number, default=200,
                    help=f"Monte Carlo runs (default 200, from 5 to {MAX_DEMO_RUNS}, e.g. 1e4)")
     d.add_argument("--seed", type=int, default=0, help="PRNG seed")
     d.add_argument("--force", action="store_true", help="overwrite existing outputs")

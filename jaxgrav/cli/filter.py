@@ -79,6 +79,7 @@ from jaxgrav.cli.inputs import (
     map_error_args,
     read_track,
     track_map,
+    whole_number,
 )
 from jaxgrav.cli.sanity import (
     check_positions,
@@ -144,7 +145,7 @@ def add_parser(subparsers):
                         "UKFs, for multi-modal priors), pmf (grid point-mass filter), pf (SIR "
                         "particle filter), rbpf (Rao-Blackwellised particle filter: particles "
                         "in position, a Kalman filter for the rest)")
-    f.add_argument("--particles", type=int, default=None, metavar="N",
+    f.add_argument("--particles", type=whole_number, default=None, metavar="N",
                    help=f"pf, rbpf: number of particles, at least {MIN_PARTICLES} (default "
                         "2000 for pf, 1000 for rbpf; pf's 1-sigma is over-confident below "
                         "about 1000)")

@@ -13,6 +13,8 @@ refused only when the track's own region is unusable: more than :data:`MAX_MISSI
 its nodes missing.
 """
 
+import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -36,6 +38,7 @@ __all__ = [
     "map_error_args",
     "read_track",
     "track_map",
+    "whole_number",
 ]
 
 OUT_FORMATS = {".json": "JSON", ".csv": "CSV", ".nc": "NetCDF", ".nc4": "NetCDF",
@@ -270,3 +273,20 @@ def check_missing_option(args):
         raise ValueError(f"--missing {args.missing} is for --method pmf; got --method "
                          f"{args.method}")
     return args.missing or "gaps"
+
+
+def whole_number(text):
+    """A count option (``--runs``, ``--fixes``, ``--particles`` ...) as an int: digits, or a
+    whole number in exponent form (``1e6``; was argparse's "invalid int value: '1e6'");
+    argparse.ArgumentTypeError for anything else (``2.5``, ``nan``, ``ten``)."""
+    try:
+        return int(text)
+    except ValueError:
+        try:
+            number = float(text)
+        except ValueError:
+            number = math.nan
+        if not (math.isfinite(number) and number == int(number)):
+            raise argparse.ArgumentTypeError(
+                f"expected a whole number (e.g. 1000 or 1e6); got {text!r}") from None
+        return int(number)

@@ -15,12 +15,11 @@ import numpy as np
 
 from jaxgrav import __version__, montecarlo
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import check_out_format
+from jaxgrav.cli.inputs import check_out_format, whole_number
 from jaxgrav.cli.montecarlo_options import (
     check_drift,
     check_options,
     check_results_size,
-    run_count,
     told_from_args,
 )
 from jaxgrav.cli.montecarlo_summary import (
@@ -86,11 +85,11 @@ def add_parser(subparsers):
                         "fixes of that matcher), voyage-ukf, voyage-ekf, voyage-gsf, voyage-rbpf, "
                         "voyage-pmf (tightly coupled; voyage-rbpf: 500 particles): 12 h patrols "
                         "(--hours) navigated with a navigation-grade INS (--ins)")
-    m.add_argument("--runs", type=run_count, required=True,
+    m.add_argument("--runs", type=whole_number, required=True,
                    help="number of simulated runs (e.g. 1000 or 1e6); from 10000 runs their "
                         "memory and file size are estimated first, and refused beyond 80 %% "
                         "of the machine's memory or the disk's free space")
-    m.add_argument("--chunk", type=run_count, default=None,
+    m.add_argument("--chunk", type=whole_number, default=None,
                    help="runs per compiled call (bounds memory; default 256)")
     m.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
     m.add_argument("--devices", type=int, default=None,
@@ -110,7 +109,7 @@ def add_parser(subparsers):
                         "shorter side (paper D's point masses: 0.35)")
     m.add_argument("--noise", type=float, default=None,
                    help="reading noise sigma (mGal, > 0, default 1)")
-    m.add_argument("--fixes", type=int, default=None,
+    m.add_argument("--fixes", type=whole_number, default=None,
                    help="fixes per track (default 30 dense and chains, 60 entropy, "
                         "iccp and entropy+iccp); "
                         "filters: readings 10 s apart, start included (default 721 = 2 h); "

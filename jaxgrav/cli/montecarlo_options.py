@@ -5,12 +5,11 @@ out of range, more ``--devices`` than ``--runs``, and a ``--fixes`` x ``--chunk`
 runs would not fit in memory, with one line naming the option (``--noise``, not the
 library's ``noise``), before any map is read or anything compiled; :func:`check_drift`
 refuses a ``--drift`` whose search or initial error does not fit on the map, once the
-map is known; :func:`told_from_args` parses ``--told-map-error SIGMA[,L]``; :func:`run_count` reads
-``--runs`` and ``--chunk`` (``1e6`` too); :func:`check_results_size` refuses a run count
-whose results do not fit in memory or on the disk, and announces a large one.
+map is known; :func:`told_from_args` parses ``--told-map-error SIGMA[,L]``;
+:func:`check_results_size` refuses a run count whose results do not fit in memory or on
+the disk, and announces a large one.
 """
 
-import argparse
 import math
 import shutil
 import sys
@@ -27,7 +26,7 @@ from jaxgrav.montecarlo.filter_runs import FILTER_METHODS
 from jaxgrav.sim import DEG_ARC_M
 
 __all__ = ["BYTES_PER_FIX", "LARGE_RUNS", "PAPER_D_AREA_DEG", "check_drift", "check_options",
-           "check_results_size", "run_count", "told_from_args"]
+           "check_results_size", "told_from_args"]
 
 BYTES_PER_FIX = {"dense": 20e3, "chains": 20e3, "entropy+iccp": 40e3, "entropy": 15e3,
                  "iccp": 5e3, **dict.fromkeys(FILTER_METHODS, 2e3)}
@@ -58,23 +57,6 @@ LARGE_RUNS = 10_000
 method once, about 1 s) and checks and announces their size."""
 
 _KEY_BYTES = 16  # a run's PRNG key, split on the device and copied to the host
-
-
-def run_count(text):
-    """``--runs`` or ``--chunk`` as an int: digits, or a whole number in exponent form
-    (``1e6``); argparse.ArgumentTypeError for anything else (``2.5``, ``nan``, ``ten``)."""
-    try:
-        value = int(text)
-    except ValueError:
-        try:
-            number = float(text)
-        except ValueError:
-            number = math.nan
-        if not (math.isfinite(number) and number == int(number)):
-            raise argparse.ArgumentTypeError(
-                f"expected a whole number of runs (e.g. 1000 or 1e6); got {text!r}") from None
-        value = int(number)
-    return value
 
 
 def check_results_size(args, spec, out):

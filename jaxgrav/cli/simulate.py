@@ -13,7 +13,7 @@ import numpy as np
 
 from jaxgrav import executables
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import check_out_format
+from jaxgrav.cli.inputs import check_out_format, whole_number
 from jaxgrav.constants import KNOT
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import TruthGrid, map_error, truth_grid
@@ -147,7 +147,7 @@ def add_parser(sub):
     sim_p.add_argument("--var", default=None)
     sim_p.add_argument("--out", required=True, help="track CSV (INS fixes and readings)")
     sim_p.add_argument("--truth", default=None, help="also write the true track here")
-    sim_p.add_argument("--n", type=int, default=30,
+    sim_p.add_argument("--n", type=whole_number, default=30,
                        help=f"fixes (default 30, at least {MIN_FIXES}: the fewest match takes)")
     sim_p.add_argument("--dt", type=float, default=120.0, help="interval (s, default 120)")
     sim_p.add_argument("--v-east", type=float, default=10.0, help="knots (default 10)")

@@ -34,7 +34,7 @@ import xarray as xr
 from matplotlib.colors import LogNorm
 
 from jaxgrav._io import atomic_output, check_outputs
-from jaxgrav.cli.inputs import check_out_format, fill_map_error_length
+from jaxgrav.cli.inputs import check_out_format, fill_map_error_length, whole_number
 from jaxgrav.constants import DEG
 from jaxgrav.datasets import load_map
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
@@ -68,7 +68,7 @@ def add_parser(subparsers):
     s.add_argument("--heading", type=float, default=45.0,
                    help="segment heading, degrees clockwise from north, -360 to 360 "
                         "(default 45; -90 is 270)")
-    s.add_argument("--fixes", type=int, default=30,
+    s.add_argument("--fixes", type=whole_number, default=30,
                    help="readings per segment (at least 3; default 30)")
     s.add_argument("--spacing", type=float, default=1200.0,
                    help="distance between readings (m, default 1200)")

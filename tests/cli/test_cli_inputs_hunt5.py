@@ -10,6 +10,7 @@ import xarray as xr
 
 from jaxgrav import montecarlo as mc_package
 from jaxgrav.cli import main, montecarlo_options
+from jaxgrav.cli.inputs import whole_number
 from jaxgrav.grid_files import map_units, read_netcdf
 from jaxgrav.track_files import read_table
 
@@ -21,15 +22,31 @@ def test_a_run_count_that_is_no_whole_number_is_refused(tmp_path, capsys, runs):
         main(["montecarlo", "--method", "ukf", "--runs", runs, "--out", f"{tmp_path}/m.nc"])
     err = capsys.readouterr().err.strip()
     assert exit_.value.code == 2 and "\n" not in err, err
-    assert (f"argument --runs: expected a whole number of runs (e.g. 1000 or 1e6); got "
-            f"{runs!r}") in err
+    assert f"argument --runs: expected a whole number (e.g. 1000 or 1e6); got {runs!r}" in err
     assert list(tmp_path.iterdir()) == []
 
 
-def test_run_count_reads_exponent_forms():
-    """``1e6`` is a million runs; digits stay exact."""
-    assert montecarlo_options.run_count("1e6") == 1_000_000
-    assert montecarlo_options.run_count("12345678901234567890") == 12345678901234567890
+def test_count_options_read_exponent_forms():
+    """``1e6`` is a million; digits stay exact (count options: montecarlo --runs, --chunk,
+    --fixes, demo --runs, filter --particles, simulate --n, suitability --fixes)."""
+    assert whole_number("1e6") == 1_000_000
+    assert whole_number("12345678901234567890") == 12345678901234567890
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", "--out", "{d}/s.csv", "--n", "2.5"],
+    ["suitability", "--map", "ryukyu", "--out", "{d}/s.nc", "--fixes", "2.5"],
+    ["filter", "--point-masses", "paper-d", "--method", "pf", "--track", "{d}/t.csv", "--out",
+     "{d}/f.csv", "--particles", "2.5"],
+    ["montecarlo", "--method", "dense", "--runs", "5", "--out", "{d}/m.nc", "--fixes", "2.5"],
+])
+def test_count_options_name_a_count_that_is_no_whole_number(tmp_path, capsys, argv):
+    """The other count options read ``1e4`` too and refuse ``2.5`` in the same words."""
+    with pytest.raises(SystemExit) as exit_:
+        main([a.format(d=tmp_path) for a in argv])
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and "\n" not in err, err
+    assert f"argument {argv[-2]}: expected a whole number (e.g. 1000 or 1e6); got '2.5'" in err
 
 
 @pytest.fixture
