@@ -116,6 +116,8 @@ def check_netcdf_file(path, what="map"):
         return
     if not head:
         looks = "it is empty"
+    elif head.startswith((b"\x1f\x8b", b"BZh", b"\xfd7zXZ", b"PK\x03\x04")):
+        looks = "it is compressed (gzip, bzip2, xz or zip): decompress it first"
     elif b"\0" not in head:
         first = head.decode("utf-8", "replace").lstrip("\ufeff").splitlines()[0][:40]
         looks = f"it is a text file starting {first!r}, a CSV track or table?"

@@ -4,7 +4,8 @@
 their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
 
 - encodings: UTF-8 with or without a byte-order mark, UTF-16 with a BOM (spreadsheet
-  "Unicode text"), else Latin-1; a binary file (NetCDF, HDF5, ...) is refused;
+  "Unicode text"), else Latin-1; gzip-compressed (``.csv.gz``); a binary file (NetCDF,
+  HDF5, ...) is refused;
 - line ends: LF, CRLF or CR; blank lines and ``#`` comment lines (GMT headers) skipped;
 - the delimiter is sniffed from the header line: a tab, else ``;`` when it has at least
   as many as ``,``, else ``,``, else runs of whitespace (``.xyz``, ``.txt``; GMT ``>``
@@ -21,9 +22,11 @@ their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
 
 import csv
 import datetime as dt
+import gzip
 import io
 import re
 import shlex
+import zlib
 from pathlib import Path
 from typing import NamedTuple
 
@@ -157,6 +160,12 @@ def parse_datetime(cell):
 
 
 def _decode(data, label):
+    if data[:2] == b"\x1f\x8b":  # a gzip-compressed log (track.csv.gz): was "a binary file"
+        try:
+            data = gzip.decompress(data)
+        except (OSError, EOFError, zlib.error) as err:
+            raise ValueError(f"{label} is a gzip file that cannot be decompressed ({err}); "
+                             "expected a whole .gz of a CSV text file") from None
     head = data[:4096]
     for magic, what in _BINARY.items():
         if head.startswith(magic):

@@ -194,11 +194,19 @@ def check_map_field(grid, field, map_name):
               file=sys.stderr)
 
 
+_COMPRESSED = (".gz", ".bz2", ".xz", ".zst", ".zip", ".7z")
+
+
 def check_out_format(path, writes, option="--out"):
     """ValueError naming ``option`` when ``path``'s suffix promises another format than the
     ``writes`` one (``"JSON"``, ``"CSV"``, ``"NetCDF"`` or ``"Markdown"``): ``match --out
     result.csv`` wrote JSON into it, exit 0. Suffixes of no known format pass."""
     path = Path(path)
+    if path.suffix.lower() in _COMPRESSED:  # s.csv.gz held plain text (gunzip: not gzip)
+        raise ValueError(f"{option} {str(path)!r} names a compressed file, but this command "
+                         f"writes plain {writes} there; give a name ending "
+                         f"{_SUFFIX[writes]} (e.g. {str(path.with_suffix(''))!r}) and compress "
+                         "it afterwards")
     fmt = OUT_FORMATS.get(path.suffix.lower())
     if fmt is not None and fmt != writes:
         raise ValueError(f"{option} {str(path)!r} names a{'n' if fmt[0] in 'AEIOU' else ''} "

@@ -4,6 +4,8 @@ disk (and the size of a large one announced first); ``--track -`` in the command
 help; ``filter --missing`` over point masses; a map whose latitude/longitude axes are
 known only by CF attributes while a 2-D node-latitude variable is listed first."""
 
+import gzip
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -174,3 +176,39 @@ def test_map_units_with_a_power_of_ten_or_a_note_are_read(units, factor):
     (1e-6 m s-2 taken for mGal: 10 x too large)."""
     values, canonical = map_units(np.array([2.0]), units)
     assert canonical in ("mGal", "nT") and values[0] == pytest.approx(2.0 * factor)
+
+
+def test_a_gzip_compressed_track_is_read(tmp_path):
+    """``track.csv.gz`` was "a binary file, not a text table"; a cut one is named."""
+    path = tmp_path / "t.csv.gz"
+    path.write_bytes(gzip.compress(b"lat,lon\n24.5,125.5\n24.6,125.6\n"))
+    assert read_table(path).rows == [["24.5", "125.5"], ["24.6", "125.6"]]
+    path.write_bytes(path.read_bytes()[:20])
+    with pytest.raises(ValueError, match=r"^track file '.*t.csv.gz' is a gzip file that cannot "
+                       r"be decompressed \(.*\); expected a whole .gz of a CSV text file$"):
+        read_table(path)
+
+
+@pytest.mark.parametrize(("command", "out", "writes"), [
+    (["sample", "--map", "ryukyu", "--track", "{d}/t.csv"], "s.csv.gz", "CSV"),
+    (["match", "--map", "ryukyu", "--track", "{d}/t.csv"], "m.json.bz2", "JSON"),
+    (["montecarlo", "--method", "dense", "--runs", "5"], "m.nc.zip", "NetCDF"),
+])
+def test_a_compressed_output_name_is_refused(tmp_path, refused, command, out, writes):
+    """``--out s.csv.gz`` wrote plain text under a gzip name (gunzip: "not in gzip format")."""
+    (tmp_path / "t.csv").write_text("t,lat,lon,gravity\n0,24.5,125.5,1\n")
+    stem = out.rsplit(".", 1)[0]
+    refused([a.format(d=tmp_path) for a in command] + ["--out", tmp_path / out],
+            f"--out '{tmp_path / out}' names a compressed file, but this command writes plain "
+            f"{writes} there; give a name ending .{stem.rsplit('.', 1)[1]} (e.g. "
+            f"'{tmp_path / stem}') and compress it afterwards")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv"]
+
+
+def test_a_compressed_map_says_decompress_it(tmp_path):
+    """A gzipped NetCDF map was "its format is not NetCDF-3 or NetCDF-4"."""
+    path = tmp_path / "m.nc.gz"
+    path.write_bytes(gzip.compress(b"CDF\x01" + bytes(64)))
+    with pytest.raises(ValueError, match=r"is not a NetCDF file \(it is compressed \(gzip, "
+                       r"bzip2, xz or zip\): decompress it first\)"):
+        read_netcdf(path)
