@@ -194,6 +194,17 @@ def check_special_outputs(args):
                              f"e.g. '{str(value).rstrip('/' + os.sep)}/NAME{suffix}'")
 
 
+def _stdin_track(args):
+    """``--track -``: the standard input (``/dev/stdin``); ValueError when it is a terminal
+    (the command waited, silently, for a track typed in)."""
+    if sys.stdin is not None and sys.stdin.isatty():
+        raise ValueError("--track - reads the track from standard input, which is a terminal "
+                         "here; pipe or redirect a file into it (e.g. jaxgrav "
+                         f"{args.command} --track - ... < track.csv), or give its path")
+    if Path("/dev/stdin").exists():
+        args.track = "/dev/stdin"  # the usual "-": was "track file '-' does not exist"
+
+
 def main(argv=None):
     """Entry point of the ``jaxgrav`` command; returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -202,9 +213,9 @@ def main(argv=None):
     enable_cache(off=args.no_cache)
     default = warnings.formatwarning
     warnings.formatwarning = functools.partial(_one_line, default=default)
-    if getattr(args, "track", None) == "-" and Path("/dev/stdin").exists():
-        args.track = "/dev/stdin"  # the usual "-": was "track file '-' does not exist"
     try:
+        if getattr(args, "track", None) == "-":
+            _stdin_track(args)
         check_special_outputs(args)
         args.func(args)
     except (ValueError, FileExistsError, FileNotFoundError, ImportError) as err:

@@ -5,6 +5,7 @@ help; ``filter --missing`` over point masses; a map whose latitude/longitude axe
 known only by CF attributes while a 2-D node-latitude variable is listed first."""
 
 import gzip
+import sys
 
 import numpy as np
 import pytest
@@ -212,3 +213,13 @@ def test_a_compressed_map_says_decompress_it(tmp_path):
     with pytest.raises(ValueError, match=r"is not a NetCDF file \(it is compressed \(gzip, "
                        r"bzip2, xz or zip\): decompress it first\)"):
         read_netcdf(path)
+
+
+def test_a_dash_track_on_a_terminal_is_refused(tmp_path, refused, monkeypatch):
+    """``jaxgrav sample --track -`` typed at a terminal waited, silently, for a track."""
+    monkeypatch.setattr(sys, "stdin", type("Tty", (), {"isatty": lambda self: True})())
+    refused(["sample", "--map", "ryukyu", "--track", "-", "--out", tmp_path / "s.csv"],
+            "--track - reads the track from standard input, which is a terminal here; pipe or "
+            "redirect a file into it (e.g. jaxgrav sample --track - ... < track.csv), or give "
+            "its path")
+    assert list(tmp_path.iterdir()) == []
