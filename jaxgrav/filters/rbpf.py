@@ -221,7 +221,8 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
         state = _move(state, dynamics)
         c, c_pos = _linear_row(step, state.mean)
         g = jax.vmap(lambda d: measurement.map_part(field, d, step.lat, step.lon))(state.position)
-        zs = g + state.position @ c_pos + state.mean @ c
+        rows = jnp.concatenate([g[:, None], state.position, state.mean], axis=1)
+        zs = rows @ jnp.concatenate([jnp.ones(1, c.dtype), c_pos, c])
         pc = state.p @ c
         s_lin = c @ pc + step.r  # each particle's innovation variance
         wr = weigh_reading(state.log_w, zs, s_lin, step.z)
@@ -230,11 +231,13 @@ def rbpf(n_particles=500, measurement=gravity_measurement, *, resample="systemat
         gain = pc / s_safe
         # a particle without a map value learns nothing from the reading: its mean stays;
         # the shared covariance shrinks by the posterior share of those that learn (the
-        # mixture's mean conditional covariance)
-        mean = state.mean + jnp.where(wr.known, wr.z - wr.zs, 0.0)[:, None] * gain
+        # mixture's mean conditional covariance). A skipped reading moves no mean: zero
+        # innovations and gain (one select per particle and per state, not per element)
+        innovation = jnp.where(wr.known & ~skip, wr.z - wr.zs, 0.0)
+        mean = state.mean + innovation[:, None] * jnp.where(skip, 0.0, gain)
         share = jnp.where(jnp.all(wr.known), 1.0, jnp.exp(wr.log_w) @ wr.known)
         p = state.p - share * s_safe * jnp.outer(gain, gain)
-        new = RBPFState(state.position, jnp.where(skip, state.mean, mean),
+        new = RBPFState(state.position, mean,
                         jnp.where(skip, state.p, 0.5 * (p + p.T)),
                         jnp.where(skip, state.log_w, wr.log_w), state.key)
         nu_out = jnp.where(jnp.isfinite(step.z) & ~wr.none_known, wr.nu, jnp.nan)
