@@ -10,6 +10,8 @@ their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
 - the delimiter is sniffed from the header line: a tab, else ``;`` when it has at least
   as many as ``,``, else ``,``, else runs of whitespace (``.xyz``, ``.txt``; GMT ``>``
   segment lines skipped); quoted fields may hold the delimiter;
+- a units row under the header (``s,deg,deg,mGal``) is joined to it (``t (s)``, ...);
+  a repeated header line (two files joined) is skipped;
 - a first line that is all numbers is data, not a header: the columns are then named
   ``lon``, ``lat``, ``z`` for ``.xyz``/``.xy`` files (GMT's order) and ``1``, ``2``, ...
   otherwise.
@@ -227,6 +229,11 @@ def _is_number(cell):
     return True
 
 
+def _numberish(cell):
+    """A number, with a decimal point or a decimal comma."""
+    return _is_number(cell) or bool(_DECIMAL_COMMA.fullmatch(cell))
+
+
 def read_table(path, label=None):
     """Read a track or log file as a header and rows of text cells (see the module notes).
 
@@ -275,7 +282,9 @@ def read_table(path, label=None):
     n_head, header = rows[0]
     has_header = not all(_is_number(c) for c in header if c)
     if has_header:
-        rows = rows[1:]
+        # "cat a.csv b.csv": b's header repeated mid-file ("'lat' is not a number")
+        rows = [(n, cells) for n, cells in rows[1:] if cells != header]
+        header, rows = _units_row(header, rows)
     elif path.suffix.lower() in (".xyz", ".xy"):
         # a two-column .xy(z) file gained an empty "z" column in the outputs
         header = ["lon", "lat", "z", *(str(j + 1) for j in range(3, len(header)))][:len(header)]
@@ -302,6 +311,22 @@ def read_table(path, label=None):
         out.append(cells[:len(header)] + [""] * (len(header) - len(cells)))
         lines.append(n)
     return Table(header, out, lines, delimiter, has_header)
+
+
+def _units_row(header, rows):
+    """``header`` with a units row below it (``s,deg,deg,mGal``, as survey exports write)
+    joined as ``t (s)``, ... and the rows without it; unchanged when the first row holds a
+    number, or no column has a number in the next row below a text cell (was refused:
+    "line 2, column 'lat': 'deg' is not a number")."""
+    if len(rows) < 2 or any(_numberish(c) or c.lower() in NA_TOKENS - {""}
+                            for c in rows[0][1]):
+        return header, rows
+    units = [u.strip("()[] ") for u in rows[0][1]] + [""] * len(header)
+    below = rows[1][1]
+    if not any(u and j < len(below) and _numberish(below[j]) for j, u in enumerate(units)):
+        return header, rows
+    return ([f"{h} ({u})" if u else h for h, u in zip(header, units[:len(header)], strict=True)],
+            rows[1:])
 
 
 def parse_numbers(cells, decimal_comma=False):

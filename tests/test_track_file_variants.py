@@ -83,3 +83,23 @@ def test_a_time_of_day_without_a_date_says_so(tmp_path):
                        r"2024-05-01T12:00:00Z\) \(a time of day without a date: join the date "
                        r"to it\); times must be complete$"):
         read_track_csv(path, required=("t", "lat", "lon"))
+
+
+def test_a_units_row_under_the_header_is_read_as_the_units(tmp_path):
+    """``t,lat,lon,gravity`` then ``s,deg,deg,m/s^2`` (a survey export): was "line 2, column
+    'lat': 'deg' is not a number"; now the units convert the columns, and the data keep
+    their line numbers."""
+    path = tmp_path / "u.csv"
+    path.write_text("t,lat,lon,gravity,ship\nmin,deg,deg,m/s^2,\n1,30,130,2e-4,A\n2,30,130,,A\n")
+    track = read_track_csv(path, required=("t", "lat", "lon", "gravity"),
+                           allow_nan=("gravity",))
+    assert list(track["t"]) == [60.0, 120.0] and track["gravity"][0] == pytest.approx(20.0)
+    assert list(track.lines) == [3, 4] and list(track.text["ship"]) == ["A", "A"]
+
+
+def test_a_repeated_header_of_joined_files_is_skipped(tmp_path):
+    """``cat a.csv b.csv``: b's header mid-file was "'t' is not a number"."""
+    path = tmp_path / "j.csv"
+    path.write_text("t,lat,lon\n0,30,130\nt,lat,lon\n60,30.1,130\n")
+    track = read_track_csv(path, required=("t", "lat", "lon"))
+    assert list(track["t"]) == [0.0, 60.0] and list(track.lines) == [2, 4]
