@@ -53,17 +53,19 @@ def cpu_options_for(kind):
     """XLA options on CPU of a method's runs (:attr:`MethodSpec.cpu_options`).
 
     :data:`~jaxgrav.xla_options.CPU_OPTIONS` (LLVM ``-O2``, XLA's elemental kernel
-    emitters), except the point-mass filter's (``pmf``, ``voyage-pmf``) and the
-    Rao–Blackwellised particle filter's (``rbpf``, ``voyage-rbpf``):
+    emitters), except the point-mass filter's (``pmf``, ``voyage-pmf``) and the voyages'
+    Rao–Blackwellised particle filter's (``voyage-rbpf``):
     :data:`~jaxgrav.xla_options.FUSION_EMITTER_OPTIONS` (``-O2``, XLA's fusion emitters),
     since their runs were 28 % (``pmf``) and 65 % (``voyage-rbpf``) slower with the
     elemental emitters (16 runs in one chunk, twice; ``python
     benchmarks/montecarlo_scaling.py --compile-only --against emitters`` measures it).
-    The RBPF kept XLA's defaults (``-O3``) until 2026-12-06, when its runs were as fast
-    at ``-O2`` (2.82 / 2.70 s against 2.76 / 2.84 s for 16 of paper D's runs, 6.67
-    against 6.90 s for 16 patrols) and compiled 1.5 s faster.
+    ``voyage-rbpf`` is still 4–9 % slower with them (CPU time of 16 patrols, 2026-12-07).
+    The paper-D ``rbpf`` took the fusion emitters until 2026-12-07, when its predicted
+    readings became one dot (:func:`~jaxgrav.filters.rbpf`): with the elemental emitters
+    its 16 runs then took 3.2 s CPU against 4.2 s before with the fusion emitters, and
+    XLA compiled them in half the CPU time (5.2 against 10 s).
     """
-    if kind.removeprefix("voyage-") in ("pmf", "rbpf"):
+    if kind == "voyage-rbpf" or kind.removeprefix("voyage-") == "pmf":
         return FUSION_EMITTER_OPTIONS
     return CPU_OPTIONS
 
