@@ -18,12 +18,14 @@ method (each method's 16-run chunk function in a fresh process, compile without
 tracing, 2026-12-06: dense 4.4 → 2.6 s, entropy+iccp 6.6 → 4.2 s, ukf 2.7 → 1.6 s,
 voyage-dense 7.1 → 4.3 s), runs as fast (±5 %) and results equal to rounding — except
 the point-mass filter's runs, 28 % slower (1.70 → 2.19 s for 16 of paper D's runs,
-twice) and the Rao–Blackwellised particle filter's, 65 % slower (16 patrols).
+twice) and the Rao–Blackwellised particle filter's, 65 % slower (16 patrols; since its
+predicted readings are one product, 2026-12-07, paper D's RBPF runs faster with the
+elemental emitters and only the voyages' RBPF is still 4–9 % slower with them).
 
 So :data:`CPU_OPTIONS` (``-O2``, elemental emitters) is what jaxgrav compiles with on
 CPU where it compiles a program itself: the Monte Carlo runner
-(:func:`jaxgrav.montecarlo.run`; the point-mass and Rao–Blackwellised particle filters'
-methods ask for :data:`FUSION_EMITTER_OPTIONS`,
+(:func:`jaxgrav.montecarlo.run`; the point-mass filter's methods and ``voyage-rbpf``
+ask for :data:`FUSION_EMITTER_OPTIONS`,
 :func:`jaxgrav.montecarlo.spec.cpu_options_for`) and the command line's programs
 (:mod:`jaxgrav.executables`; one command's run is short next to its compile, so
 :data:`CPU_OPTIONS` is used there for every method). Other platforms keep XLA's
