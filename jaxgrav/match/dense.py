@@ -165,7 +165,8 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
             k = min(config.k_best, scores.shape[0])
             top = k_smallest(scores, k)
             topk_lat, topk_lon = shifted_tracks(lat, lon, d_n[top], d_e[top], rr[top])
-            (distance,) = sums([jnp.hypot(*local_offsets_m(topk_lat, topk_lon, lat, lon))], -1)
+            distance = (sums([jnp.hypot(*local_offsets_m(topk_lat, topk_lon, lat, lon))], -1)[0]
+                        if config.selection == "nearest" else None)  # "best" needs none
             chosen = nearest_to_ins(scores[top], distance, config.selection)
             i = top[chosen]
             found = jnp.isfinite(scores[i])
@@ -195,11 +196,12 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
             # one by one, not in total: on a coarse map it walked far outside)
             p = p.at[:2].set(_clamp_offset(p[:2], reach, config.region))
             p = jnp.where(found, p, jnp.zeros_like(p))
-            v = _track_values(table, frame, p, config.method)
+            # the map along the refined track and the best candidate's, in one evaluation
+            v, v0 = jax.vmap(lambda q: _track_values(table, frame, q, config.method))(
+                jnp.stack([p, p0]))
             # clipped into a cell with a missing (NaN) corner: back to the best candidate
-            ok = jnp.isfinite(v) if present is None else jnp.isfinite(v) | ~present
-            p, v = jax.lax.cond(jnp.all(ok), lambda: (p, v), lambda: (
-                p0, _track_values(table, frame, p0, config.method)))
+            ok = jnp.all(jnp.isfinite(v) if present is None else jnp.isfinite(v) | ~present)
+            p, v = jnp.where(ok, p, p0), jnp.where(ok, v, v0)
             if use_gls:
                 final_score, final_bias = (
                     gls_score(wh, readings - v, gls[1]) if present is None

@@ -61,6 +61,13 @@ class DenseConfig:
         to 2 cells); otherwise a block of ``2·half_size + 2`` nodes, which fits
         whenever ``spacing_m`` is at most the node spacing; otherwise, or with 0,
         every shifted fix is sampled on its own (same values, slowest).
+    spacing_bound_m : float or None
+        The largest ``spacing_m`` the config will be run with, known when compiling
+        (static; None, the default: any). With it the block sizes are chosen for it:
+        a larger block or the point-by-point path that no spacing up to it can need is
+        not compiled (the same values; a smaller program and, under ``vmap`` with a
+        spacing per track, less work). ``spacing_m`` must not exceed it (checked when
+        concrete), as :class:`~jaxgrav.navigate.LooseConfig`'s loop guarantees.
     map_error_mgal : float
         σ of the map's error (mGal). 0 (default): the white-noise score, exactly as
         without this field; > 0: candidates are scored by the GLS likelihood with
@@ -139,6 +146,7 @@ class DenseConfig:
     max_second_mode: float = float("inf")
     max_chi2_per_dof: float = float("inf")
     max_edge_mass: float = float("inf")
+    spacing_bound_m: float | None = static_field(None)
 
     def __post_init__(self):
         if self.region not in ("square", "disc"):
@@ -171,3 +179,12 @@ class DenseConfig:
             raise ValueError(f"lattice_block must be >= 0; got {self.lattice_block!r}")
         if isinstance(self.gap_fixes, int) and self.gap_fixes < 0:
             raise ValueError(f"gap_fixes must be >= 0; got {self.gap_fixes!r}")
+        bound = self.spacing_bound_m
+        if bound is not None:
+            if not (isinstance(bound, int | float) and bound > 0):
+                raise ValueError(f"spacing_bound_m must be None or a number > 0 (static); got "
+                                 f"{bound!r}")
+            spacing = concrete(self.spacing_m)
+            if spacing is not None and spacing.dtype != object and np.any(spacing > bound):
+                raise ValueError(f"spacing_m must not exceed spacing_bound_m = {bound}; got "
+                                 f"{spacing}")

@@ -79,7 +79,8 @@ class LooseConfig:
     window_p : float
         Rayleigh quantile the search reaches.
     min_spacing_m, max_spacing_m : float
-        Bounds of the offset grid's spacing (m).
+        Bounds of the offset grid's spacing (m); ``max_spacing_m`` is static (the dense
+        matcher compiles only the map reads that spacings up to it need).
     gate : float
         Innovation gate on ``νᵀ S⁻¹ ν`` (2 degrees of freedom; 13.8 is the 99.9 % point).
     fix_sigma_floor_m : float
@@ -107,7 +108,7 @@ class LooseConfig:
     sigma_vel: float = 0.035
     window_p: float = 0.999
     min_spacing_m: float = 100.0
-    max_spacing_m: float = 1500.0
+    max_spacing_m: float = static_field(1500.0)
     gate: float = 13.8
     fix_sigma_floor_m: float = 50.0
     fix_cov_scale: float = 3.0
@@ -130,6 +131,9 @@ class LooseConfig:
                 and isinstance(m[1], IccpConfig))):
             raise TypeError("matcher must be a DenseConfig or a tuple (EntropyConfig, "
                             f"IccpConfig); got {type(m).__name__}")
+        if not (isinstance(self.max_spacing_m, int | float) and self.max_spacing_m > 0):
+            raise ValueError(f"max_spacing_m must be a number > 0 (static); got "
+                             f"{self.max_spacing_m!r}")
         if self.stride > self.n_fixes:
             raise ValueError(f"stride must be at most n_fixes = {self.n_fixes} (segments may "
                              f"overlap, not leave gaps); got {self.stride}")
@@ -276,7 +280,8 @@ def _match(cfg, grid, lat, lon, g, reach, sigma_eotvos):
     told = jnp.sqrt(told_to.map_error_mgal**2 + sigma_eotvos**2)
     if dense:
         return match_dense(grid, lat, lon, g, dataclasses.replace(
-            cfg.matcher, spacing_m=spacing, map_error_mgal=told))
+            cfg.matcher, spacing_m=spacing, map_error_mgal=told,
+            spacing_bound_m=float(cfg.max_spacing_m)))
     entropy, iccp = cfg.matcher
     window = jnp.maximum(iccp.window_m, 1.2 * spacing * entropy.half_size)
     # a fix beyond 1.5 searched reaches is rejected (the config's own bound is for a
@@ -319,7 +324,9 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     lat, lon, g, complete = _segment(cfg, tables, ins, gravity, x, end)
     sigma = largest_sigma(h_mean @ p @ h_mean.T)  # closed form: no LAPACK call
     reach = rayleigh_quantile(sigma, cfg.window_p)
-    usable = complete & jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(grid.sample(lat, lon)))
+    # bilinear: NaN exactly where bicubic is (off the map, a cell with a missing corner)
+    on_map = jnp.all(jnp.isfinite(grid.sample(lat, lon, method="bilinear")))
+    usable = complete & jnp.all(jnp.isfinite(g)) & on_map
     sig_e = eotvos_sigma(jnp.mean(lat), ins.v_east[end], ins.v_north[end], p[2:4, 2:4])
     res = _match(cfg, grid, lat, lon, jnp.where(jnp.isfinite(g), g, 0.0), reach, sig_e)
     return res, reach, usable
