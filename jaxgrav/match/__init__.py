@@ -38,11 +38,12 @@ from jaxgrav.match.result import (
     status_messages,
 )
 from jaxgrav.match.scoring import SCORES, bias_precision, decreasing_weights, score_track
-from jaxgrav.match.sizing import config_for, iccp_config_for
+from jaxgrav.match.sizing import CHAIN_NODE_DEG, chain_grid, config_for, iccp_config_for
 from jaxgrav.match.suitability import DESCRIPTORS, Suitability, suitability
 from jaxgrav.prepared import PreparedMap, prepare_map
 
 __all__ = [
+    "CHAIN_NODE_DEG",
     "DESCRIPTORS",
     "ENTROPY_HALF_SIZE",
     "IMPLAUSIBLE_FIT",
@@ -59,6 +60,7 @@ __all__ = [
     "PreparedMap",
     "Suitability",
     "bias_precision",
+    "chain_grid",
     "config_for",
     "decreasing_weights",
     "difference_entropy",

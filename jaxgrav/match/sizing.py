@@ -16,10 +16,12 @@ from jaxgrav.prepared import as_grid
 
 __all__ = [
     "CHAIN_MAP_ERROR_INTEGRITY",
+    "CHAIN_NODE_DEG",
     "FAR_FIX_RADII",
     "ICCP_MAP_ERROR_INTEGRITY",
     "MAP_ERROR_INTEGRITY",
     "WHITE_INTEGRITY",
+    "chain_grid",
     "config_for",
     "iccp_config_for",
 ]
@@ -40,6 +42,10 @@ CHAIN_MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
 """ChainConfig fields :func:`config_for` sets with a map error (σ > 0), measured with
 ``examples/map_error_matchers.py`` (see the README)."""
 
+CHAIN_NODE_DEG = 0.005
+"""Node spacing the chain matcher's map is refined to (degrees): paper A's 0.005°
+(its 0.5° map refined ×100; the 2.5′ map refined ×8, as ``examples/paper_a_table1.py``)."""
+
 FAR_FIX_RADII = 1.5
 """:func:`iccp_config_for` (``stage="fine"``) sets ``max_offset_m`` to this many drift
 radii: the entropy stage searches 1.2 radii; a fix beyond 1.5 the INS cannot have
@@ -48,6 +54,28 @@ drifted to is rejected."""
 ICCP_MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
 """IccpConfig fields :func:`iccp_config_for` sets with a map error (σ > 0), measured
 with ``examples/map_error_matchers.py`` (see the README)."""
+
+
+def chain_grid(grid, node_deg=CHAIN_NODE_DEG):
+    """``grid`` refined (bilinear, :meth:`~jaxgrav.grid.Grid.refine`) to nodes about
+    ``node_deg`` apart, the chain matcher's candidates: factor ``round(min(dlat, dlon) /
+    node_deg)``, at least 1 (a map as fine already is returned as it is).
+
+    Parameters
+    ----------
+    grid : Grid or PreparedMap
+    node_deg : float
+        Wanted node spacing (degrees).
+
+    Returns
+    -------
+    Grid
+    """
+    if not node_deg > 0:
+        raise ValueError(f"node_deg must be a positive spacing (degrees); got {node_deg!r}")
+    grid = as_grid(grid)
+    factor = max(1, round(min(grid.dlat, grid.dlon) / node_deg))
+    return grid.refine(factor) if factor > 1 else grid
 
 
 def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=math.inf,

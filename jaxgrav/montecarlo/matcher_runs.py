@@ -20,7 +20,7 @@ from jaxgrav.match.entropy import entropy_config_for, match_entropy
 from jaxgrav.match.iccp import match_iccp
 from jaxgrav.match.result import CORRELATION_STATUS
 from jaxgrav.match.result import STATUS as ALL_STATUS
-from jaxgrav.match.sizing import config_for, iccp_config_for
+from jaxgrav.match.sizing import chain_grid, config_for, iccp_config_for
 from jaxgrav.montecarlo.draws import scenario_draws
 from jaxgrav.montecarlo.fix_metrics import fix_metrics
 from jaxgrav.montecarlo.spec import (
@@ -38,7 +38,6 @@ from jaxgrav.scenarios.paper_b import PaperBScenario, paper_b_scenario
 from jaxgrav.sim import DEG_ARC_M, track_error_m
 
 __all__ = [
-    "CHAIN_NODE_DEG",
     "DEPRECATED_NAMES",
     "MISSING_MAP_START_TRIES",
     "chains_builder",
@@ -228,11 +227,6 @@ def dense_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=N
 
 
 # ------------------------------------------------------------------------ chains (A)
-CHAIN_NODE_DEG = 0.005
-"""Node spacing the chain matcher's map is refined to (degrees): paper A's 0.005°
-(its 0.5° map refined ×100; the 2.5′ map refined ×8, as ``examples/paper_a_table1.py``)."""
-
-
 def chains_run(key, grid, refined, scenario, config, map_error=None):
     """One paper-A run: simulate on ``grid``, match by iso-point chains on ``refined``.
 
@@ -254,16 +248,17 @@ def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=
     """Paper A's pipeline: iso-point chains with constraint elimination.
 
     The readings come from ``grid``; the matcher searches ``grid`` refined (bilinear)
-    to :data:`CHAIN_NODE_DEG` nodes (factor ``round(dlat / 0.005°)``, at least 1:
-    ×8 for the 2.5′ map). Scenario as :func:`dense_builder` (drift 0.035°,
-    1 mGal, 30 fixes 2 min apart); search window and tolerances from
-    :func:`~jaxgrav.match.api.config_for` ``("chains", ...)`` for 1.2 × the drift.
+    to :data:`~jaxgrav.match.sizing.CHAIN_NODE_DEG` nodes
+    (:func:`~jaxgrav.match.sizing.chain_grid`: ×8 for the 2.5′ map). Scenario as
+    :func:`dense_builder` (drift 0.035°, 1 mGal, 30 fixes 2 min apart); search window
+    and tolerances from :func:`~jaxgrav.match.api.config_for` ``("chains", ...)`` for
+    1.2 × the drift.
     ``map_error`` as :func:`dense_builder` (drawn on ``grid``, not the refined map).
     """
     grid, map_error, drift, noise, n, scen = _paper_a_settings(grid, drift_deg, noise, n_fixes,
                                                              map_error)
-    factor = max(1, round(min(grid.dlat, grid.dlon) / CHAIN_NODE_DEG))
-    refined = grid.refine(factor) if factor > 1 else grid
+    refined = chain_grid(grid)
+    factor = round(grid.dlat / refined.dlat)
     cfg = config_for("chains", refined, 1.2 * drift * DEG_ARC_M, noise_mgal=max(noise, 0.1),
                      step_m=scen.step_m)
     settings = dict(description=f"paper A: iso-point chains on the map refined x{factor}, "
