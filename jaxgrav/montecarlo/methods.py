@@ -25,7 +25,7 @@ The paper-D filters (``ukf``, ``ekf``, ``gsf``, ``pmf`` and the guarded ``ukf-gu
 run (expected value 2); they run over paper D's point masses, or over a map (straight
 tracks in random directions).
 
-Voyages (:mod:`~jaxgrav.montecarlo.voyage_runs`): ``voyage-dense``,
+Voyages (:mod:`~jaxgrav.montecarlo.voyage_runs`): ``voyage-dense``, ``voyage-chains``,
 ``voyage-entropy+iccp`` (loosely coupled, hourly fixes of that matcher) and
 ``voyage-ukf``, ``voyage-ekf``, ``voyage-gsf``, ``voyage-rbpf``, ``voyage-pmf`` (tightly
 coupled) navigate 12 h patrols; ``ins_err_m`` and ``err_m`` are the last hour's RMS, and

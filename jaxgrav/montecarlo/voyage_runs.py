@@ -1,8 +1,9 @@
 """Monte Carlo methods over voyages: simulate a patrol, navigate it, measure against the truth.
 
-``voyage-dense`` and ``voyage-entropy+iccp`` are the loosely coupled loop
-(:func:`~jaxgrav.navigate.navigate_loose`, hourly fixes of the dense or the entropy+ICCP
-matcher, :func:`~jaxgrav.navigate.loose_config`); ``voyage-ukf``,
+``voyage-dense``, ``voyage-chains`` and ``voyage-entropy+iccp`` are the loosely coupled
+loop (:func:`~jaxgrav.navigate.navigate_loose`, hourly fixes of the dense matcher, of
+paper A's chains on the map refined to 0.005° nodes, or of the entropy+ICCP matcher,
+:func:`~jaxgrav.navigate.loose_config`); ``voyage-ukf``,
 ``voyage-ekf``, ``voyage-gsf``, ``voyage-rbpf`` and ``voyage-pmf`` the tightly coupled filters
 (:func:`~jaxgrav.navigate.navigate_tight`; the particle filter's key is
 ``fold_in(run key, 1)``, apart from the simulation's, as for the filter methods). Each
@@ -34,6 +35,7 @@ import jax.numpy as jnp
 
 from jaxgrav.fields.map_error import CorrelatedMapError
 from jaxgrav.filters import STATUS_FILTER, matched_state
+from jaxgrav.match.sizing import chain_grid
 from jaxgrav.montecarlo.draws import scenario_draws
 from jaxgrav.montecarlo.matcher_runs import MISSING_MAP_START_TRIES
 from jaxgrav.montecarlo.spec import (
@@ -48,6 +50,7 @@ from jaxgrav.navigate import (
     FIX_EVENTS,
     LOOSE_MATCHERS,
     TIGHT_METHODS,
+    LooseConfig,
     TightConfig,
     hourly_rms,
     loose_config,
@@ -154,8 +157,8 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
     grid : Grid, optional
         The map (default the shipped 2.5′ ``ryukyu``). The preset's region (25–35° N,
         125–135° E) is used if the map covers it, else the map's own extent.
-    kind : {"voyage-dense", "voyage-entropy+iccp", "voyage-ukf", "voyage-ekf", "voyage-gsf",
-            "voyage-rbpf", "voyage-pmf"}
+    kind : {"voyage-dense", "voyage-chains", "voyage-entropy+iccp", "voyage-ukf",
+            "voyage-ekf", "voyage-gsf", "voyage-rbpf", "voyage-pmf"}
     drift_deg : float, optional
         Initial INS position error (degrees of arc; default 500 m).
     noise : float, optional
@@ -220,12 +223,14 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
     sigma_pos = scenario.pos_error_m / 2**0.5
     name = kind.removeprefix("voyage-")
     loose = name in LOOSE_MATCHERS
+    # the map the navigator reads: chains search the nodes of the map refined
+    pm = chain_grid(grid) if name == "chains" else prepare_map(grid)
     if loose:
         sigma = 0.0 if told is None else float(told.sigma)
         length = 10000.0 if told is None else float(told.length_m)
+        step = scenario.speed * LooseConfig.fix_every * scenario.dt  # between fixes (m)
         config = loose_config(scenario.ins, sigma, length, scenario.noise_mgal,
-                              matcher=name, grid=grid,
-                              sigma_pos_m=sigma_pos)
+                              matcher=name, grid=pm, step_m=step, sigma_pos_m=sigma_pos)
         fn, bits = voyage_dense_run, {1 << k: v for k, v in FIX_EVENTS.items()}
     else:
         default = 1 if name == "pmf" else told.order if told is not None else None
@@ -240,7 +245,7 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
                     hours=scenario.hours, dt=scenario.dt, noise_mgal=scenario.noise_mgal,
                     pos_error_m=scenario.pos_error_m, map_error_told=map_error_told,
                     series_every_s=SERIES_EVERY_S, **map_error_settings(model))
-    return MethodSpec(fn, (prepare_map(grid), grid, scenario, model, config), settings, bits,
+    return MethodSpec(fn, (pm, grid, scenario, model, config), settings, bits,
                       cpu_options_for(kind))
 
 

@@ -14,6 +14,7 @@ from jaxgrav.navigate.error_kf import (
     spread,
 )
 from jaxgrav.navigate.loose import (
+    CHAIN_REACH_M,
     FIX_EVENTS,
     LOOSE_MATCHERS,
     LooseConfig,
@@ -32,6 +33,7 @@ from jaxgrav.navigate.tight import (
 )
 
 __all__ = [
+    "CHAIN_REACH_M",
     "FIX_EVENTS",
     "LOOSE_MATCHERS",
     "TIGHT_METHODS",

@@ -22,7 +22,6 @@ covariance is inflated by ``n_fixes / stride`` so the filter does not count them
 The whole voyage is one ``lax.scan`` over segment ends; ``vmap`` it over voyages.
 """
 
-import dataclasses
 import math
 from typing import NamedTuple
 
@@ -30,25 +29,25 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._pytree import pytree_dataclass, static_field
-from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import eotvos, eotvos_jacobian
-from jaxgrav.match.combined import match_entropy_iccp
-from jaxgrav.match.dense import DenseConfig, match_dense
+from jaxgrav.match.correlation import ChainConfig
+from jaxgrav.match.dense import DenseConfig
 from jaxgrav.match.entropy import EntropyConfig
 from jaxgrav.match.iccp_config import IccpConfig
 from jaxgrav.match.integrity import largest_sigma
-from jaxgrav.match.sizing import FAR_FIX_RADII, iccp_config_for
 from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, innovation_nis, spread
+from jaxgrav.navigate.loose_match import (
+    CHAIN_REACH_M,
+    LOOSE_MATCHERS,
+    match_segment,
+    matcher_config,
+)
 from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance
 from jaxgrav.sim.trajectory import Track
 
-__all__ = ["FIX_EVENTS", "LOOSE_MATCHERS", "LooseConfig", "LooseResult", "eotvos_sigma",
-           "fix_segment", "loose_config", "navigate_loose"]
-
-LOOSE_MATCHERS = ("dense", "entropy+iccp")
-"""Matchers of the loop: the dense offset grid (GLS score, Gauss–Newton), or paper B's
-entropy coarse search and ICCP fine match (the reading bias marginalised)."""
+__all__ = ["CHAIN_REACH_M", "FIX_EVENTS", "LOOSE_MATCHERS", "LooseConfig", "LooseResult",
+           "eotvos_sigma", "fix_segment", "loose_config", "navigate_loose"]
 
 FIX_EVENTS = {
     0: "accepted",
@@ -66,9 +65,11 @@ class LooseConfig:
 
     Attributes
     ----------
-    matcher : DenseConfig or tuple of (EntropyConfig, IccpConfig)
+    matcher : DenseConfig or ChainConfig or tuple of (EntropyConfig, IccpConfig)
         The matcher's settings: the dense matcher (``spacing_m`` is set per segment from
-        the window), or the entropy+ICCP matcher (the entropy grid's ``spacing_m`` set
+        the window), the chain matcher (its window of ``half_size`` map nodes is fixed:
+        pass the map refined to the nodes wanted, see :func:`loose_config`), or the
+        entropy+ICCP matcher (the entropy grid's ``spacing_m`` set
         the same way, ICCP's ``window_m`` raised to 1.2 × the reach; set
         ``IccpConfig.bias_sigma`` for the gravimeter bias and the Eötvös error, as
         :func:`loose_config` does).
@@ -126,11 +127,11 @@ class LooseConfig:
             if not (isinstance(v, int) and v >= 1):
                 raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
         m = self.matcher
-        if not (isinstance(m, DenseConfig) or (
+        if not (isinstance(m, (DenseConfig, ChainConfig)) or (
                 isinstance(m, tuple) and len(m) == 2 and isinstance(m[0], EntropyConfig)
                 and isinstance(m[1], IccpConfig))):
-            raise TypeError("matcher must be a DenseConfig or a tuple (EntropyConfig, "
-                            f"IccpConfig); got {type(m).__name__}")
+            raise TypeError("matcher must be a DenseConfig, a ChainConfig or a tuple "
+                            f"(EntropyConfig, IccpConfig); got {type(m).__name__}")
         if not (isinstance(self.max_spacing_m, int | float) and self.max_spacing_m > 0):
             raise ValueError(f"max_spacing_m must be a number > 0 (static); got "
                              f"{self.max_spacing_m!r}")
@@ -140,7 +141,8 @@ class LooseConfig:
 
 
 def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=10000.0,  # noqa: B008
-                 noise_mgal=1.0, matcher="dense", grid=None, **changes):
+                 noise_mgal=1.0, matcher="dense", grid=None, step_m=None,
+                 chain_reach_m=CHAIN_REACH_M, **changes):
     """The loop's settings used by the examples, ``navigate`` and ``montecarlo``.
 
     The matcher told the map error (GLS score), a posterior-mean fix, fixes with a 1-σ
@@ -151,7 +153,13 @@ def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=100
     as the fine stage of
     :func:`~jaxgrav.match.sizing.iccp_config_for` on ``grid`` (window at least a map
     cell's diagonal, ten least-squares steps), the reading bias (gravimeter offset,
-    Eötvös error) marginalised with a flat prior.
+    Eötvös error) marginalised with a flat prior. ``chains``: paper A's search
+    (:func:`~jaxgrav.match.sizing.config_for`) on the nodes of ``grid`` (pass the map
+    refined to the nodes wanted, :func:`~jaxgrav.match.sizing.chain_grid`), its window fixed at
+    ``chain_reach_m`` about each fix (the loop cannot widen it per segment as it does the
+    other matchers' grids: a segment whose Rayleigh reach is larger is still matched in
+    that window, and the fix's edge test and the innovation gate are what guard it),
+    the difference score (the reading bias drops out), the GLS posterior fix.
 
     Parameters
     ----------
@@ -161,9 +169,16 @@ def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=100
         The map error told to the matcher (mGal, m); 0: the white-noise matcher.
     noise_mgal : float
         1-σ of one reading (mGal).
-    matcher : {"dense", "entropy+iccp"}
+    matcher : {"dense", "chains", "entropy+iccp"}
     grid : Grid or PreparedMap, optional
-        The map (``entropy+iccp`` only: its cell sizes ICCP's window).
+        The map (``entropy+iccp``: its cell sizes ICCP's window; ``chains``: the map the
+        loop will be given, whose nodes are the chains' candidates).
+    step_m : float, optional
+        ``chains``: the largest distance between consecutive fixes (m; the platform's
+        top speed × ``fix_every`` × the log's step), which sizes the chain search's
+        displacement stencil; None: the pairwise search over candidate slots.
+    chain_reach_m : float
+        ``chains``: the window's reach about each fix (m).
     **changes
         Other :class:`LooseConfig` fields (``fix_every``, ``n_fixes``, ``stride``,
         ``sigma_pos_m`` …).
@@ -172,25 +187,9 @@ def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=100
     -------
     LooseConfig
     """
-    if matcher not in LOOSE_MATCHERS:
-        raise ValueError(f"matcher must be one of {LOOSE_MATCHERS}; got {matcher!r}")
     fix_every = changes.get("fix_every", LooseConfig.fix_every)
-    noise = noise_mgal / math.sqrt(fix_every)
-    if matcher == "dense":
-        config = DenseConfig(noise_mgal=noise, map_error_mgal=map_error_mgal,
-                             map_error_length_m=map_error_length_m, fix="posterior",
-                             max_sigma_m=3000.0, max_edge_mass=0.2, n_rotations=5,
-                             max_rotation_deg=3.0, score_model="gls")
-    else:
-        if grid is None:
-            raise ValueError("loose_config(matcher='entropy+iccp') needs the grid (its cell "
-                             "sizes ICCP's window)")
-        # sized for a nominal 1 km reach; the loop sets the spacing and window per segment
-        iccp = iccp_config_for(grid, 1000.0, stage="fine", noise=noise, max_rotation_deg=3.0,
-                               map_error=map_error(map_error_mgal, map_error_length_m),
-                               bias_sigma=math.inf, fix="posterior", max_sigma_m=3000.0,
-                               max_edge_mass=0.2)
-        config = (EntropyConfig(half_size=20), iccp)
+    config = matcher_config(matcher, noise_mgal / math.sqrt(fix_every), map_error_mgal,
+                            map_error_length_m, grid, step_m, chain_reach_m)
     return LooseConfig(matcher=config, ins=ins, **changes)
 
 
@@ -270,28 +269,6 @@ def eotvos_sigma(lat, v_east, v_north, vel_cov):
     return jnp.sqrt(jac @ vel_cov @ jac)
 
 
-def _match(cfg, grid, lat, lon, g, reach, sigma_eotvos):
-    """The matcher, its offset grid spread over the reach and the Eötvös error of the
-    filter's velocity told as a correlated error beside the map's."""
-    dense = isinstance(cfg.matcher, DenseConfig)
-    # the offset grid's settings, and the settings that are told the map error
-    offsets, told_to = (cfg.matcher, cfg.matcher) if dense else cfg.matcher
-    spacing = jnp.clip(reach / offsets.half_size, cfg.min_spacing_m, cfg.max_spacing_m)
-    told = jnp.sqrt(told_to.map_error_mgal**2 + sigma_eotvos**2)
-    if dense:
-        return match_dense(grid, lat, lon, g, dataclasses.replace(
-            cfg.matcher, spacing_m=spacing, map_error_mgal=told,
-            spacing_bound_m=float(cfg.max_spacing_m)))
-    entropy, iccp = cfg.matcher
-    window = jnp.maximum(iccp.window_m, 1.2 * spacing * entropy.half_size)
-    # a fix beyond 1.5 searched reaches is rejected (the config's own bound is for a
-    # nominal 1 km reach)
-    far = FAR_FIX_RADII * spacing * entropy.half_size
-    return match_entropy_iccp(grid, lat, lon, g, dataclasses.replace(entropy, spacing_m=spacing),
-                              dataclasses.replace(iccp, window_m=window, map_error_mgal=told,
-                                                  max_offset_m=far))
-
-
 def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     """Match the segment that ends at INS step ``end``, as the loop does.
 
@@ -328,7 +305,8 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     on_map = jnp.all(jnp.isfinite(grid.sample(lat, lon, method="bilinear")))
     usable = complete & jnp.all(jnp.isfinite(g)) & on_map
     sig_e = eotvos_sigma(jnp.mean(lat), ins.v_east[end], ins.v_north[end], p[2:4, 2:4])
-    res = _match(cfg, grid, lat, lon, jnp.where(jnp.isfinite(g), g, 0.0), reach, sig_e)
+    res = match_segment(cfg.matcher, grid, lat, lon, jnp.where(jnp.isfinite(g), g, 0.0), reach,
+                        sig_e, (cfg.min_spacing_m, cfg.max_spacing_m))
     return res, reach, usable
 
 

@@ -4,6 +4,7 @@ differences, the loop on an information-rich map, jit without retrace, vmap agai
 loop, bad settings."""
 
 import dataclasses
+import re
 
 import jax
 import jax.numpy as jnp
@@ -11,9 +12,10 @@ import numpy as np
 import pytest
 
 from jaxgrav.geodesy import eotvos
+from jaxgrav.match.correlation import ChainConfig
 from jaxgrav.match.dense import DenseConfig
 from jaxgrav.match.entropy import EntropyConfig
-from jaxgrav.match.sizing import iccp_config_for
+from jaxgrav.match.sizing import chain_grid, iccp_config_for
 from jaxgrav.navigate import (
     FIX_EVENTS,
     LooseConfig,
@@ -128,6 +130,26 @@ def test_the_entropy_iccp_loop_corrects_the_ins_too(smooth_grid, short_voyages):
 
 
 @pytest.mark.long
+def test_the_chain_loop_corrects_the_ins_too(smooth_grid, short_voyages):
+    """Paper A's chains in the loop, on the map refined to 0.005° nodes (×2 here), their
+    window fixed; the reading bias drops out of the difference score."""
+    nodes = chain_grid(smooth_grid)
+    assert nodes.dlat == pytest.approx(0.005)
+    v = jax.tree.map(lambda a: a[0], short_voyages)
+    step = 10 * 0.514444 * 10.0 * CONFIG.fix_every  # 10 kn, a reading every 10 s
+    config = loose_config(INS, 0.0, 10000.0, 1.0, matcher="chains", grid=nodes, step_m=step,
+                          chain_reach_m=6000.0, sigma_pos_m=1100.0, fix_every=6, n_fixes=20,
+                          stride=10)
+    assert isinstance(config.matcher, ChainConfig) and config.matcher.stencil_size > 0
+    res = navigate_loose(nodes, v, config)
+    assert int(np.sum(np.asarray(res.fix_event) == 0)) >= 5
+    err = voyage_errors(v, res.nav, res.cov_north_east)
+    assert float(err.nav_m[-1]) < 0.3 * float(err.free_m[-1])
+    n = v.ins.t.shape[0]
+    assert 0.2 < float(jnp.mean(err.nees[n // 2:])) < 8.0
+
+
+@pytest.mark.long
 def test_jit_without_retrace_and_vmap_equals_loop(smooth_grid, short_voyages):
     pm = prepare_map(smooth_grid)
     batch = jax.vmap(navigate_loose, in_axes=(None, 0, None))(pm, short_voyages, CONFIG)
@@ -162,15 +184,21 @@ def test_bad_settings_get_clear_errors(change, message):
 
 
 def test_loose_config_names_its_matchers(smooth_grid):
-    with pytest.raises(ValueError, match=r"matcher must be one of .*; got 'chains'"):
-        loose_config(matcher="chains")
-    with pytest.raises(ValueError, match="needs the grid"):
-        loose_config(matcher="entropy+iccp")
-    with pytest.raises(TypeError, match="matcher must be a DenseConfig or a tuple"):
+    with pytest.raises(ValueError, match=r"matcher must be one of .*; got 'iccp'"):
+        loose_config(matcher="iccp")
+    for matcher in ("chains", "entropy+iccp"):
+        with pytest.raises(ValueError, match=re.escape(f"(matcher={matcher!r}) needs the grid")):
+            loose_config(matcher=matcher)
+    with pytest.raises(ValueError, match="chain_reach_m must be a positive distance"):
+        loose_config(matcher="chains", grid=smooth_grid, chain_reach_m=0.0)
+    with pytest.raises(TypeError, match="matcher must be a DenseConfig, a ChainConfig or a"):
         LooseConfig(matcher=(None, EntropyConfig()))
     entropy, iccp = loose_config(matcher="entropy+iccp", grid=smooth_grid).matcher
     assert iccp.bias_sigma == float("inf") and iccp.map_error_mgal == 3.0
     assert entropy.half_size == 20 and iccp.max_rotation_deg == 3.0
+    chains = loose_config(matcher="chains", grid=smooth_grid, chain_reach_m=6000.0).matcher
+    assert chains.map_error_mgal == 3.0 and chains.fix == "posterior"
+    assert chains.half_size * 0.01 * 111e3 * np.cos(np.deg2rad(30.0)) >= 6000.0
 
 
 @pytest.mark.long  # cheap, but short_voyages costs ~30 s to build: with its other users

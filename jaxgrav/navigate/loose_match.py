@@ -1,0 +1,131 @@
+"""The matchers of the loosely coupled loop: their settings and one segment's match.
+
+:func:`matcher_config` builds a matcher's settings as :func:`~jaxgrav.navigate.loose.loose_config`
+uses them; :func:`match_segment` matches one corrected segment with the search spread
+over the segment's reach and the Eötvös error of the filter's velocity told beside the
+map's error.
+"""
+
+import dataclasses
+import math
+
+import jax.numpy as jnp
+
+from jaxgrav.fields.map_error import map_error
+from jaxgrav.match.combined import match_entropy_iccp
+from jaxgrav.match.correlation import ChainConfig, match_chains
+from jaxgrav.match.dense import DenseConfig, match_dense
+from jaxgrav.match.entropy import EntropyConfig
+from jaxgrav.match.sizing import FAR_FIX_RADII, config_for, iccp_config_for
+
+__all__ = ["CHAIN_REACH_M", "LOOSE_MATCHERS", "match_segment", "matcher_config"]
+
+LOOSE_MATCHERS = ("dense", "chains", "entropy+iccp")
+"""Matchers of the loop: the dense offset grid (GLS score, Gauss–Newton), paper A's
+iso-point chains on a refined map (a fixed window of nodes), or paper B's entropy coarse
+search and ICCP fine match (the reading bias marginalised)."""
+
+CHAIN_REACH_M = 8000.0
+"""Reach (m) of the chain matcher's fixed window about each fix (:func:`matcher_config`):
+the Rayleigh 99.9 % reach of a 2.1 km position 1-σ."""
+
+
+def matcher_config(matcher, noise_mgal, map_error_mgal, map_error_length_m, grid=None,
+                   step_m=None, chain_reach_m=CHAIN_REACH_M):
+    """A loop matcher's settings (see :func:`~jaxgrav.navigate.loose.loose_config`).
+
+    Parameters
+    ----------
+    matcher : {"dense", "chains", "entropy+iccp"}
+    noise_mgal : float
+        1-σ of one fix's reading (mGal; the mean of the readings it averages).
+    map_error_mgal, map_error_length_m : float
+        The map error told to the matcher (mGal, m); 0: the white-noise score.
+    grid : Grid or PreparedMap, optional
+        ``entropy+iccp``: the map (its cell sizes ICCP's window); ``chains``: the map the
+        loop will be given (its nodes are the candidates: pass it refined,
+        :func:`~jaxgrav.match.sizing.chain_grid`).
+    step_m : float, optional
+        ``chains``: the largest distance between consecutive fixes (m), which sizes the
+        chain search's displacement stencil; None: the pairwise search.
+    chain_reach_m : float
+        ``chains``: the window's reach about each fix (m).
+
+    Returns
+    -------
+    DenseConfig or ChainConfig or tuple of (EntropyConfig, IccpConfig)
+    """
+    if matcher not in LOOSE_MATCHERS:
+        raise ValueError(f"matcher must be one of {LOOSE_MATCHERS}; got {matcher!r}")
+    if matcher == "dense":
+        return DenseConfig(noise_mgal=noise_mgal, map_error_mgal=map_error_mgal,
+                           map_error_length_m=map_error_length_m, fix="posterior",
+                           max_sigma_m=3000.0, max_edge_mass=0.2, n_rotations=5,
+                           max_rotation_deg=3.0, score_model="gls")
+    if grid is None:
+        raise ValueError(f"loose_config(matcher={matcher!r}) needs the grid (entropy+iccp: "
+                         "its cell sizes ICCP's window; chains: its nodes are the candidates)")
+    if matcher == "chains":
+        if not chain_reach_m > 0:
+            raise ValueError(f"chain_reach_m must be a positive distance (m); got "
+                             f"{chain_reach_m!r}")
+        told = map_error(map_error_mgal, map_error_length_m) if map_error_mgal > 0 else None
+        config = config_for("chains", grid, chain_reach_m / 1.2, noise_mgal=noise_mgal,
+                            step_m=step_m, map_error=told)
+        return dataclasses.replace(config, map_error_length_m=map_error_length_m,
+                                   fix="posterior", max_sigma_m=3000.0)
+    # sized for a nominal 1 km reach; the loop sets the spacing and window per segment
+    iccp = iccp_config_for(grid, 1000.0, stage="fine", noise=noise_mgal, max_rotation_deg=3.0,
+                           map_error=map_error(map_error_mgal, map_error_length_m),
+                           bias_sigma=math.inf, fix="posterior", max_sigma_m=3000.0,
+                           max_edge_mass=0.2)
+    return (EntropyConfig(half_size=20), iccp)
+
+
+def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bounds):
+    """Match one corrected segment as the loop does.
+
+    Parameters
+    ----------
+    matcher : DenseConfig or ChainConfig or tuple of (EntropyConfig, IccpConfig)
+    grid : Grid or PreparedMap
+    lat, lon, g : Array, shape ``(n_fixes,)``
+        The corrected segment's fixes (degrees) and Eötvös-corrected readings (mGal).
+    reach : Array
+        The search's reach (m): the dense and entropy offset grids are spread over it
+        (spacing ``reach / half_size`` within ``spacing_bounds``); the chain window is
+        fixed.
+    sigma_eotvos : Array
+        1-σ (mGal) of the Eötvös error of the filter's velocity, told as a correlated
+        error beside the map's (and, for chains, in the iso-value tolerance).
+    spacing_bounds : tuple of float
+        ``(min_spacing_m, max_spacing_m)``; the second static (the dense matcher compiles
+        only the map reads that spacings up to it need,
+        :attr:`~jaxgrav.match.dense.DenseConfig.spacing_bound_m`).
+
+    Returns
+    -------
+    MatchResult
+    """
+    if isinstance(matcher, ChainConfig):  # a fixed window of map nodes
+        told = jnp.sqrt(matcher.map_error_mgal**2 + sigma_eotvos**2)
+        delta = 2.0 * jnp.sqrt(matcher.noise_mgal**2 + told**2)  # as config_for's
+        return match_chains(grid, lat, lon, g, dataclasses.replace(
+            matcher, map_error_mgal=told, delta=delta))
+    dense = isinstance(matcher, DenseConfig)
+    # the offset grid's settings, and the settings that are told the map error
+    offsets, told_to = (matcher, matcher) if dense else matcher
+    spacing = jnp.clip(reach / offsets.half_size, *spacing_bounds)
+    told = jnp.sqrt(told_to.map_error_mgal**2 + sigma_eotvos**2)
+    if dense:
+        return match_dense(grid, lat, lon, g, dataclasses.replace(
+            matcher, spacing_m=spacing, map_error_mgal=told,
+            spacing_bound_m=float(spacing_bounds[1])))
+    entropy, iccp = matcher
+    window = jnp.maximum(iccp.window_m, 1.2 * spacing * entropy.half_size)
+    # a fix beyond 1.5 searched reaches is rejected (the config's own bound is for a
+    # nominal 1 km reach)
+    far = FAR_FIX_RADII * spacing * entropy.half_size
+    return match_entropy_iccp(grid, lat, lon, g, dataclasses.replace(entropy, spacing_m=spacing),
+                              dataclasses.replace(iccp, window_m=window, map_error_mgal=told,
+                                                  max_offset_m=far))
