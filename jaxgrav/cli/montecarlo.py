@@ -81,10 +81,11 @@ def add_parser(subparsers):
                         "filter), pf (SIR particle filter, 2000 particles), rbpf "
                         "(Rao-Blackwellised particle filter, 1000 particles) and the guarded "
                         "ukf-guard, gsf-guard: paper D's filters (over its three point masses, or "
-                        "over --map); voyage-dense, voyage-entropy+iccp (loosely coupled, hourly "
-                        "fixes of that matcher), voyage-ukf, voyage-ekf, voyage-gsf, voyage-rbpf, "
-                        "voyage-pmf (tightly coupled; voyage-rbpf: 500 particles): 12 h patrols "
-                        "(--hours) navigated with a navigation-grade INS (--ins)")
+                        "over --map); voyage-dense, voyage-chains, voyage-entropy+iccp (loosely "
+                        "coupled, hourly fixes of that matcher), voyage-ukf, voyage-ekf, "
+                        "voyage-gsf, voyage-rbpf, voyage-pmf (tightly coupled; voyage-rbpf: 500 "
+                        "particles): 12 h patrols (--hours) navigated with a navigation-grade "
+                        "INS (--ins)")
     m.add_argument("--runs", type=whole_number, required=True,
                    help="number of simulated runs (e.g. 1000 or 1e6); from 10000 runs their "
                         "memory and file size are estimated first, and refused beyond 80 %% "

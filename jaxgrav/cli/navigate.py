@@ -21,11 +21,12 @@ Wire into :mod:`jaxgrav.cli` with ``add_parser(sub)``.
               innovation and innovation_sigma (mGal), gravimeter_bias and
               sigma_gravimeter_bias (mGal)
 
-``--method dense|entropy+iccp`` (loosely coupled): every ``--stride`` fixes the last
-``--n-fixes`` fixes (each the mean of ``--fix-every`` rows) are matched with the dense
-matcher (or paper B's entropy coarse search and ICCP fine match, the reading bias
-marginalised) on the filter-corrected track; accepted fixes update the 13-state INS
-error Kalman filter (:func:`jaxgrav.navigate.navigate_loose`).
+``--method dense|chains|entropy+iccp`` (loosely coupled): every ``--stride`` fixes the
+last ``--n-fixes`` fixes (each the mean of ``--fix-every`` rows) are matched with the
+dense matcher (or paper A's iso-point chains on the map refined to 0.005° nodes, or
+paper B's entropy coarse search and ICCP fine match, the reading bias marginalised) on
+the filter-corrected track (:mod:`jaxgrav.cli.navigate_loose`); accepted fixes update
+the 13-state INS error Kalman filter (:func:`jaxgrav.navigate.navigate_loose`).
 The readings are Eötvös-corrected with the filter's velocity, the one rule of the
 navigation loop. Where the log leaves the map, the fixes stop (event 2) and the
 solution continues on the INS with a growing σ.
@@ -77,6 +78,7 @@ from jaxgrav.cli.inputs import (
     read_track,
     track_map,
 )
+from jaxgrav.cli.navigate_loose import check_fix_blocks, run_loose
 from jaxgrav.cli.sanity import (
     check_positions,
     check_readings,
@@ -87,12 +89,9 @@ from jaxgrav.cli.simulate import check_seed
 from jaxgrav.filters import STATUS_FILTER, map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
-    FIX_EVENTS,
     LOOSE_MATCHERS,
     TIGHT_METHODS,
     TightConfig,
-    loose_config,
-    navigate_loose,
     navigate_tight,
 )
 from jaxgrav.prepared import prepare_map
@@ -134,7 +133,8 @@ def add_parser(sub):
     p.add_argument("--method", choices=METHODS, default="ukf",
                    help="ukf (default), ekf, gsf, rbpf, pmf: every reading into the INS error "
                         "filter (tightly coupled; pmf's 1-sigma is over-confident with the "
-                        "navigation INS); dense, entropy+iccp: hourly fixes of that "
+                        "navigation INS); dense, chains, entropy+iccp: hourly fixes of "
+                        "that "
                         "matcher into the filter (loosely coupled; --fix-every, --n-fixes, "
                         "--stride)")
     p.add_argument("--particles", type=int, default=None,
@@ -159,13 +159,13 @@ def add_parser(sub):
                    help="its correlation length (m, default 10000)")
     add_map_error_var_option(p)
     p.add_argument("--fix-every", type=int, default=None,
-                   help=f"dense, entropy+iccp: rows per fix (default "
+                   help=f"loosely coupled methods: rows per fix (default "
                         f"{LOOSE_DEFAULTS['fix_every']})")
     p.add_argument("--n-fixes", type=int, default=None,
-                   help=f"dense, entropy+iccp: fixes per segment (>= 5, default "
+                   help=f"loosely coupled methods: fixes per segment (>= 5, default "
                         f"{LOOSE_DEFAULTS['n_fixes']})")
     p.add_argument("--stride", type=int, default=None,
-                   help="dense, entropy+iccp: fixes between segment ends (default = "
+                   help="loosely coupled methods: fixes between segment ends (default = "
                         "--n-fixes: consecutive)")
     add_missing_option(p)
     p.add_argument("--max-gap", type=float, default=60.0,
@@ -277,7 +277,7 @@ def cmd_navigate(args):
     log = Track(*(np.asarray(track[k]) for k in ("t", "lat", "lon", "v_east", "v_north")))
     gravity = np.asarray(track["gravity"])
     if args.method in LOOSE_MATCHERS:
-        _check_fix_blocks(gravity, args.fix_every, track.path)
+        check_fix_blocks(gravity, args.fix_every, track.path)
     e_ins = np.asarray(eotvos_jit(log.lat, log.v_east, log.v_north))
     expected = np.asarray(grid.sample(log.lat, log.lon, "bicubic"))
     check_readings(gravity, expected, args.noise, column="gravity", line=track.line,
@@ -297,27 +297,8 @@ def cmd_navigate(args):
     voyage = Voyage(ins, on_steps(steps, gravity, fill=np.nan))
     if args.method in TIGHT_METHODS:
         _tight(args, voyage, grid, n_missing, n_off, track, steps)
-        return
-    cfg = loose_config(INS_GRADES[args.ins], args.map_error, args.map_error_length, args.noise,
-                       matcher=args.method, grid=grid, sigma_pos_m=args.sigma_pos,
-                       sigma_vel=args.sigma_vel, fix_every=args.fix_every,
-                       n_fixes=args.n_fixes, stride=args.stride)
-    # not through executables: the loop's kept program crashes XLA:CPU when loaded
-    # (jaxlib 0.10.2; its trial never passes), so keeping it would only cost a compile
-    res = _loose(grid, voyage, cfg)
-    _write(args, log, res, cfg, track)
-    events = np.asarray(res.fix_event)
-    counts = ", ".join(f"{int(np.sum(events == k))} {FIX_EVENTS[k].split(':')[0]}"
-                       for k in FIX_EVENTS if np.any(events == k))
-    print(f"wrote {args.out}: {len(ins.t)} rows, {events.size} segment ends ({counts}); "
-          f"{n_missing} missing reading(s) skipped, {n_off} row(s) off the map (not aided)"
-          f"; {steps.describe()}")
-
-
-@jax.jit
-def _loose(grid, voyage, cfg):
-    """The loosely coupled loop as one program, the map's spline prepared inside it."""
-    return navigate_loose(prepare_map(grid), voyage, cfg)
+    else:
+        run_loose(args, log, voyage, grid, track, steps, n_missing, n_off)
 
 
 @jax.jit
@@ -381,40 +362,7 @@ PMF_WARNING = ("pmf's 1-sigma is over-confident with a navigation-grade INS (pos
                "grid); use --method ukf or rbpf for a 1-sigma to trust")  # README's table
 
 
-def _check_fix_blocks(gravity, fix_every, path):
-    """The loose loop averages ``--fix-every`` rows into a fix and does not match a
-    segment with a missing one: refuse a log where most blocks miss a reading (a reading
-    every few rows: no segment was ever matched, exit 0), warn where some do."""
-    m = len(gravity) // fix_every * fix_every
-    holed = ~np.all(np.isfinite(gravity[:m].reshape(-1, fix_every)), axis=1)
-    if holed.mean() > 0.5:
-        raise ValueError(f"track file {path!r}: {100 * holed.mean():.0f} % of the blocks of "
-                         f"--fix-every {fix_every} rows miss a reading, and a segment with one "
-                         "is not matched by the loosely coupled methods; give a reading on "
-                         "every row, or use a tightly coupled --method (ukf, pmf ...)")
-    if holed.any():
-        print(f"warning: {int(holed.sum())} of {holed.size} blocks of --fix-every {fix_every} "
-              "rows miss a reading; the segments holding one are not matched", file=sys.stderr)
-
-
 def nis_warning(innovation, innovation_sigma):
     """The tight filter's innovation check (:func:`~jaxgrav.cli.sanity.innovation_check`)
     as navigate's warning, its advice naming ``--noise``; None when the fit is plausible."""
     return innovation_check(innovation, innovation_sigma, noise_option="--noise")[2]
-
-
-def _write(args, ins, res, cfg, track):
-    """The navigation CSV: every row, fix columns on the rows that end a segment."""
-    n = len(ins.t)
-    sd = np.sqrt(np.diagonal(np.asarray(res.cov_north_east), axis1=1, axis2=2))
-    rows = (np.arange(res.fix_event.shape[0]) + 1) * cfg.stride * cfg.fix_every
-    keep = rows < n
-    fix = {k: np.full(n, np.nan) for k in ("fix_event", "fix_status", "fix_north", "fix_east")}
-    fix["fix_event"][rows[keep]] = np.asarray(res.fix_event)[keep]
-    fix["fix_status"][rows[keep]] = np.asarray(res.fix_status)[keep]
-    fix["fix_north"][rows[keep]] = np.asarray(res.fix_offset_m)[keep, 0]
-    fix["fix_east"][rows[keep]] = np.asarray(res.fix_offset_m)[keep, 1]
-    write_track_csv(args.out, kept_columns(track, {
-        "t": ins.t, "lat": res.nav.lat, "lon": res.nav.lon, "sigma_north": sd[:, 0],
-        "sigma_east": sd[:, 1], "cov_north_east": np.asarray(res.cov_north_east)[:, 0, 1],
-        "v_east": res.nav.v_east, "v_north": res.nav.v_north, **fix}), force=args.force)

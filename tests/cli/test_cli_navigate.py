@@ -24,7 +24,7 @@ def voyage_log(tmp_path_factory):
 
 
 @pytest.mark.long
-@pytest.mark.parametrize("method", ["dense", "entropy+iccp"])
+@pytest.mark.parametrize("method", ["dense", "chains", "entropy+iccp"])
 def test_navigate_writes_every_row_with_sigma_and_fix_events(voyage_log, tmp_path, capsys,
                                                              method):
     log, _ = voyage_log

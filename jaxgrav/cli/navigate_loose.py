@@ -1,0 +1,91 @@
+"""``jaxgrav navigate``'s loosely coupled methods (``dense``, ``chains``, ``entropy+iccp``):
+the loop on the log, its CSV and its summary line (see :mod:`jaxgrav.cli.navigate`).
+
+``chains`` searches the nodes of the map refined to
+:data:`~jaxgrav.match.sizing.CHAIN_NODE_DEG` (:func:`~jaxgrav.match.sizing.chain_grid`),
+its displacement stencil sized for the log's fastest row between fixes and its window
+fixed at :data:`~jaxgrav.navigate.CHAIN_REACH_M` about each fix.
+"""
+
+import sys
+
+import jax
+import numpy as np
+
+from jaxgrav.cli.inputs import kept_columns
+from jaxgrav.match.sizing import chain_grid
+from jaxgrav.navigate import FIX_EVENTS, loose_config, navigate_loose
+from jaxgrav.prepared import prepare_map
+from jaxgrav.scenarios import INS_GRADES
+from jaxgrav.tracks import write_track_csv
+
+__all__ = ["check_fix_blocks", "run_loose"]
+
+
+def run_loose(args, log, voyage, grid, track, steps, n_missing, n_off):
+    """The loosely coupled loop over the log, its CSV (``args.out``) and summary line.
+
+    ``log`` is the log's Track (its own rows), ``voyage`` the log on its regular step
+    (raw readings), ``grid`` the map cropped to the log, ``steps`` the log's
+    :class:`~jaxgrav.time_steps.TimeSteps`; ``n_missing``, ``n_off`` are counted for the
+    summary.
+    """
+    chains = args.method == "chains"
+    nav_map = chain_grid(grid) if chains else grid
+    # chains: the largest distance between fixes sizes the search's displacement stencil
+    step = (float(np.max(np.hypot(log.v_east, log.v_north))) * args.fix_every * steps.dt
+            if chains else None)
+    cfg = loose_config(INS_GRADES[args.ins], args.map_error, args.map_error_length, args.noise,
+                       matcher=args.method, grid=nav_map, step_m=step,
+                       sigma_pos_m=args.sigma_pos, sigma_vel=args.sigma_vel,
+                       fix_every=args.fix_every, n_fixes=args.n_fixes, stride=args.stride)
+    # not through executables: the loop's kept program crashes XLA:CPU when loaded
+    # (jaxlib 0.10.2; its trial never passes), so keeping it would only cost a compile.
+    # chains read the refined map's nodes: no spline to prepare
+    res = navigate_loose(nav_map, voyage, cfg) if chains else _loose(grid, voyage, cfg)
+    _write(args, log, res, cfg, track)
+    events = np.asarray(res.fix_event)
+    counts = ", ".join(f"{int(np.sum(events == k))} {FIX_EVENTS[k].split(':')[0]}"
+                       for k in FIX_EVENTS if np.any(events == k))
+    print(f"wrote {args.out}: {len(voyage.ins.t)} rows, {events.size} segment ends ({counts}); "
+          f"{n_missing} missing reading(s) skipped, {n_off} row(s) off the map (not aided)"
+          f"; {steps.describe()}")
+
+
+@jax.jit
+def _loose(grid, voyage, cfg):
+    """The loosely coupled loop as one program, the map's spline prepared inside it."""
+    return navigate_loose(prepare_map(grid), voyage, cfg)
+
+
+def check_fix_blocks(gravity, fix_every, path):
+    """The loose loop averages ``--fix-every`` rows into a fix and does not match a
+    segment with a missing one: refuse a log where most blocks miss a reading (a reading
+    every few rows: no segment was ever matched, exit 0), warn where some do."""
+    m = len(gravity) // fix_every * fix_every
+    holed = ~np.all(np.isfinite(gravity[:m].reshape(-1, fix_every)), axis=1)
+    if holed.mean() > 0.5:
+        raise ValueError(f"track file {path!r}: {100 * holed.mean():.0f} % of the blocks of "
+                         f"--fix-every {fix_every} rows miss a reading, and a segment with one "
+                         "is not matched by the loosely coupled methods; give a reading on "
+                         "every row, or use a tightly coupled --method (ukf, pmf ...)")
+    if holed.any():
+        print(f"warning: {int(holed.sum())} of {holed.size} blocks of --fix-every {fix_every} "
+              "rows miss a reading; the segments holding one are not matched", file=sys.stderr)
+
+
+def _write(args, ins, res, cfg, track):
+    """The navigation CSV: every row, fix columns on the rows that end a segment."""
+    n = len(ins.t)
+    sd = np.sqrt(np.diagonal(np.asarray(res.cov_north_east), axis1=1, axis2=2))
+    rows = (np.arange(res.fix_event.shape[0]) + 1) * cfg.stride * cfg.fix_every
+    keep = rows < n
+    fix = {k: np.full(n, np.nan) for k in ("fix_event", "fix_status", "fix_north", "fix_east")}
+    fix["fix_event"][rows[keep]] = np.asarray(res.fix_event)[keep]
+    fix["fix_status"][rows[keep]] = np.asarray(res.fix_status)[keep]
+    fix["fix_north"][rows[keep]] = np.asarray(res.fix_offset_m)[keep, 0]
+    fix["fix_east"][rows[keep]] = np.asarray(res.fix_offset_m)[keep, 1]
+    write_track_csv(args.out, kept_columns(track, {
+        "t": ins.t, "lat": res.nav.lat, "lon": res.nav.lon, "sigma_north": sd[:, 0],
+        "sigma_east": sd[:, 1], "cov_north_east": np.asarray(res.cov_north_east)[:, 0, 1],
+        "v_east": res.nav.v_east, "v_north": res.nav.v_north, **fix}), force=args.force)
