@@ -35,17 +35,18 @@ from jaxgrav.fields.map_error import map_error
 from jaxgrav.navigate import (
     FIX_EVENTS,
     LOOSE_MATCHERS,
+    LooseConfig,
     error_kf_tables,
     fix_segment,
     fix_update,
     hourly_rms,
     loose_config,
+    loose_map,
     navigate_loose,
     voyage_errors,
     voyage_summary,
 )
 from jaxgrav.plot import plot_voyage_errors, save_figure
-from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import INS_GRADES, voyage_preset, voyage_scenario
 from jaxgrav.sim.ins import initial_covariance
 
@@ -63,11 +64,11 @@ def _one(pm, grid, key, scenario, model, config):
             err.nees.mean(), res.fix_event, series, res.fix_time)
 
 
-def run(grid, scenario, model, config, keys, batch=1):
-    """Simulate and navigate voyages, one after another inside one compiled call
-    (``vmap`` runs both sides of the matcher's branches: slower on a CPU, see
-    ``benchmarks/voyage_loose.py``); per-voyage hourly errors, NEES, fix events."""
-    pm = prepare_map(grid)
+def run(pm, grid, scenario, model, config, keys, batch=1):
+    """Simulate on ``grid`` and navigate on ``pm`` (:func:`~jaxgrav.navigate.loose_map`)
+    voyages, one after another inside one compiled call (``vmap`` runs both sides of the
+    matcher's branches: slower on a CPU, see ``benchmarks/voyage_loose.py``); per-voyage
+    hourly errors, NEES, fix events."""
     f = jax.jit(lambda pm, grid, ks: jax.lax.map(
         lambda k: _one(pm, grid, k, scenario, model, config), ks, batch_size=batch))
     return tuple(np.asarray(a) for a in f(pm, grid, keys))
@@ -88,9 +89,9 @@ def summarise(nav, free, nees, events, *_):
             "fix_events": {FIX_EVENTS[k]: int(np.sum(events == k)) for k in FIX_EVENTS}}
 
 
-def calibrate(grid, scenario, model, config, keys, fix_sigma=500.0):
-    """Fix errors and NEES against the truth along an ideal filter's states (see notes)."""
-    pm = prepare_map(grid)
+def calibrate(pm, grid, scenario, model, config, keys, fix_sigma=500.0):
+    """Fix errors and NEES against the truth along an ideal filter's states (see notes);
+    arguments as :func:`run`."""
     steps = config.stride * config.fix_every
     n_seg = (scenario.n_steps - 1) // steps
 
@@ -154,19 +155,21 @@ def main(argv=None):
     grid = datasets.load("ryukyu")["anomaly_2p5min"]
     scenario = voyage_preset("patrol-12h", ins=ins, hours=hours)
     keys = jax.random.split(jax.random.key(a.seed), runs)
+    nav_map = loose_map(grid, a.matcher)  # chains: the map refined to 0.005° nodes
+    step = scenario.speed * LooseConfig.fix_every * scenario.dt  # between fixes (m)
     rows = {}
     for name, sigma in (("perfect map", 0.0), ("map error, told", a.sigma)):
         model = map_error(a.sigma, a.length) if sigma > 0 else None
         # the matcher told the map error
-        cfg = loose_config(ins, sigma, a.length, matcher=a.matcher, grid=grid)
+        cfg = loose_config(ins, sigma, a.length, matcher=a.matcher, grid=nav_map, step_m=step)
         t0 = time.perf_counter()
         if a.calibrate:
             row = {"setting": name, "ins": a.ins, "runs": runs, "calibrate": True,
-                   **calibrate(grid, scenario, model, cfg, keys)}
+                   **calibrate(nav_map, grid, scenario, model, cfg, keys)}
             print(json.dumps(row))
             rows[name] = row
             continue
-        out = run(grid, scenario, model, cfg, keys)
+        out = run(nav_map, grid, scenario, model, cfg, keys)
         seconds = time.perf_counter() - t0
         row = {"setting": name, "ins": a.ins, "matcher": a.matcher, "runs": runs, "hours": hours,
                "map_error_mgal": sigma, **summarise(*out),

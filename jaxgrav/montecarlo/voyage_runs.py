@@ -35,7 +35,6 @@ import jax.numpy as jnp
 
 from jaxgrav.fields.map_error import CorrelatedMapError
 from jaxgrav.filters import STATUS_FILTER, matched_state
-from jaxgrav.match.sizing import chain_grid
 from jaxgrav.montecarlo.draws import scenario_draws
 from jaxgrav.montecarlo.matcher_runs import MISSING_MAP_START_TRIES
 from jaxgrav.montecarlo.spec import (
@@ -54,6 +53,7 @@ from jaxgrav.navigate import (
     TightConfig,
     hourly_rms,
     loose_config,
+    loose_map,
     navigate_loose,
     navigate_tight,
     voyage_errors,
@@ -223,8 +223,8 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
     sigma_pos = scenario.pos_error_m / 2**0.5
     name = kind.removeprefix("voyage-")
     loose = name in LOOSE_MATCHERS
-    # the map the navigator reads: chains search the nodes of the map refined
-    pm = chain_grid(grid) if name == "chains" else prepare_map(grid)
+    # the map the navigator reads (chains: the nodes of the map refined)
+    pm = loose_map(grid, name) if loose else prepare_map(grid)
     if loose:
         sigma = 0.0 if told is None else float(told.sigma)
         length = 10000.0 if told is None else float(told.length_m)

@@ -22,6 +22,7 @@ from jaxgrav.navigate.loose import (
     eotvos_sigma,
     fix_segment,
     loose_config,
+    loose_map,
     navigate_loose,
 )
 from jaxgrav.navigate.metrics import VoyageErrors, hourly_rms, voyage_errors, voyage_summary
@@ -50,6 +51,7 @@ __all__ = [
     "hourly_rms",
     "innovation_nis",
     "loose_config",
+    "loose_map",
     "navigate_loose",
     "navigate_tight",
     "spread",

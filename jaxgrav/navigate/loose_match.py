@@ -16,9 +16,10 @@ from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import ChainConfig, match_chains
 from jaxgrav.match.dense import DenseConfig, match_dense
 from jaxgrav.match.entropy import EntropyConfig
-from jaxgrav.match.sizing import FAR_FIX_RADII, config_for, iccp_config_for
+from jaxgrav.match.sizing import FAR_FIX_RADII, chain_grid, config_for, iccp_config_for
+from jaxgrav.prepared import prepare_map
 
-__all__ = ["CHAIN_REACH_M", "LOOSE_MATCHERS", "match_segment", "matcher_config"]
+__all__ = ["CHAIN_REACH_M", "LOOSE_MATCHERS", "loose_map", "match_segment", "matcher_config"]
 
 LOOSE_MATCHERS = ("dense", "chains", "entropy+iccp")
 """Matchers of the loop: the dense offset grid (GLS score, Gauss–Newton), paper A's
@@ -28,6 +29,27 @@ search and ICCP fine match (the reading bias marginalised)."""
 CHAIN_REACH_M = 8000.0
 """Reach (m) of the chain matcher's fixed window about each fix (:func:`matcher_config`):
 the Rayleigh 99.9 % reach of a 2.1 km position 1-σ."""
+
+
+def loose_map(grid, matcher):
+    """The map the loop reads for ``matcher``.
+
+    Parameters
+    ----------
+    grid : Grid or PreparedMap
+        The anomaly map.
+    matcher : {"dense", "chains", "entropy+iccp"}
+
+    Returns
+    -------
+    Grid or PreparedMap
+        ``chains``: the map refined to :data:`~jaxgrav.match.sizing.CHAIN_NODE_DEG` nodes
+        (:func:`~jaxgrav.match.sizing.chain_grid`; its nodes are the candidates, no spline
+        needed); the others: the map with its bicubic spline prepared once.
+    """
+    if matcher not in LOOSE_MATCHERS:
+        raise ValueError(f"matcher must be one of {LOOSE_MATCHERS}; got {matcher!r}")
+    return chain_grid(grid) if matcher == "chains" else prepare_map(grid)
 
 
 def matcher_config(matcher, noise_mgal, map_error_mgal, map_error_length_m, grid=None,
