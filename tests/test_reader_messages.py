@@ -4,13 +4,15 @@ function a command-line user cannot call)."""
 
 import json
 
+import jax
 import numpy as np
 import pytest
 import xarray as xr
 
 from jaxgrav.cli import main
 from jaxgrav.datasets import load_map
-from jaxgrav.fields.pointmass_fit import load_point_masses
+from jaxgrav.fields.pointmass import paper_d
+from jaxgrav.fields.pointmass_fit import load_point_masses, save_point_masses
 from jaxgrav.grid_files import read_netcdf
 from jaxgrav.tracks import read_track_csv
 
@@ -121,6 +123,19 @@ def test_a_point_mass_model_message_says_what_the_file_must_hold(tmp_path, clear
         '"depth", "mass" and an "offset"',
         "jaxgrav.fields.pointmass_fit.save_point_masses in Python"])
     assert "None" not in msg and "written by save_point_masses" not in msg
+
+
+def test_a_point_mass_model_with_a_byte_order_mark_is_read(tmp_path):
+    """A model saved by a Windows editor starts with a UTF-8 byte-order mark: it was refused
+    as "is not JSON (Unexpected UTF-8 BOM ...)"."""
+    path, bom = tmp_path / "model.json", tmp_path / "bom.json"
+    save_point_masses(path, paper_d(), offset=5.0)
+    bom.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    model, offset = load_point_masses(path)
+    again, offset_again = load_point_masses(bom)
+    assert offset_again == offset == 5.0
+    for a, b in zip(jax.tree.leaves(model), jax.tree.leaves(again), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
 
 def _one_var_map(path, values):

@@ -377,7 +377,9 @@ def load_point_masses(path):
     if not path.is_file():
         raise ValueError(f"{where} is not a file")
     try:
-        doc = json.loads(path.read_text())
+        # utf-8-sig: a byte-order mark, as Windows editors write, is read too (it was
+        # refused as "Unexpected UTF-8 BOM")
+        doc = json.loads(path.read_text(encoding="utf-8-sig"))
     except (UnicodeDecodeError, json.JSONDecodeError) as err:
         raise ValueError(f"{where} is not JSON ({err}); {expected}") from None
     if not isinstance(doc, dict) or doc.get("format") != MODEL_FORMAT:
