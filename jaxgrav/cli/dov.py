@@ -12,7 +12,7 @@ import numpy as np
 
 from jaxgrav import dov
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import add_columns_option, check_out_format, read_track
+from jaxgrav.cli.inputs import add_track_option, check_out_format, read_track
 from jaxgrav.dov import DEFAULT_METHOD, HARMONIC_GAP_LIMIT, METHODS
 from jaxgrav.grid_files import check_netcdf_file
 from jaxgrav.tracks import write_track_csv
@@ -23,8 +23,7 @@ __all__ = ["add_parser", "cmd_dov"]
 def add_parser(subparsers):
     """Add the ``dov`` sub-command to an ``argparse`` sub-parser set."""
     d = subparsers.add_parser("dov", help="interpolate layered DOV along a track (paper C)")
-    d.add_argument("--track", required=True, help="CSV with lat, lon (degrees) and h (m)")
-    add_columns_option(d)
+    add_track_option(d, "CSV with lat, lon (degrees) and h (m)")
     d.add_argument("--out", required=True, help="output CSV: the track columns + xi, eta (arcsec)")
     d.add_argument("--layers", default=None,
                    help="comma-separated layer heights in m, e.g. -50,0,10000,20000 for a track "

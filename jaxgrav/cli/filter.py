@@ -70,9 +70,9 @@ from jaxgrav.cli.filter_checks import (
     offset_warning,
 )
 from jaxgrav.cli.inputs import (
-    add_columns_option,
     add_map_error_var_option,
     add_missing_option,
+    add_track_option,
     check_missing_option,
     check_out_format,
     kept_columns,
@@ -134,12 +134,10 @@ def add_parser(subparsers):
                         "jaxgrav.fields.pointmass_fit.save_point_masses (e.g. by "
                         "examples/paper_d_pointmass_fit.py --out-model)")
     f.add_argument("--var", default=None, help="variable to read when the file has several")
-    f.add_argument("--track", required=True,
-                   help="CSV: t (s, a regular step; jitter up to 10 %% of it absorbed, gaps "
+    add_track_option(f, "CSV: t (s, a regular step; jitter up to 10 %% of it absorbed, gaps "
                         "up to --max-gap predicted through), lat, lon (INS, degrees), gravity "
                         "(mGal; empty where no reading; raw when v_east, v_north are given, "
                         "else Eötvös-corrected); optional v_east, v_north (INS, m/s)")
-    add_columns_option(f)
     f.add_argument("--method", choices=FILTER_METHODS, default="ukf",
                    help="ukf (default), ekf (jacfwd Jacobian), gsf (Gaussian sum of 3 x 3 "
                         "UKFs, for multi-modal priors), pmf (grid point-mass filter), pf (SIR "

@@ -27,9 +27,11 @@ from jaxgrav.tracks import KNOWN_COLUMNS, parse_columns, read_track_csv
 __all__ = [
     "FIELD_UNITS",
     "MAX_MISSING",
+    "STDIN_HELP",
     "add_columns_option",
     "add_map_error_var_option",
     "add_missing_option",
+    "add_track_option",
     "check_map_field",
     "check_missing_option",
     "check_out_format",
@@ -49,6 +51,17 @@ _SUFFIX = {"JSON": ".json", "CSV": ".csv", "NetCDF": ".nc", "Markdown": ".md"}
 
 MAX_MISSING = 0.9
 """Largest fraction of missing (NaN) nodes accepted in the map region a track needs."""
+
+
+STDIN_HELP = "; '-' reads it from standard input (e.g. a pipe)"
+"""The end of every ``--track`` help (:func:`add_track_option`): ``main`` reads ``-`` so."""
+
+
+def add_track_option(parser, help):
+    """Add ``--track`` (its ``help`` plus :data:`STDIN_HELP`) and ``--columns`` to a
+    command's parser."""
+    parser.add_argument("--track", required=True, help=help + STDIN_HELP)
+    add_columns_option(parser)
 
 
 def add_columns_option(parser):

@@ -105,10 +105,6 @@ def build_parser():
     montecarlo.add_parser(sub)
     bench.add_parser(sub)
 
-    for parser in sub.choices.values():  # main() reads "--track -" from standard input
-        for action in parser._actions:
-            if "--track" in action.option_strings and "standard input" not in action.help:
-                action.help += "; '-' reads it from standard input (e.g. a pipe)"
     data = sub.add_parser("data", help="build shipped data sets")
     dsub = data.add_subparsers(dest="source", required=True)
     e = dsub.add_parser("egm2008", help="EGM2008 regional grids (needs jaxgrav[egm2008])")

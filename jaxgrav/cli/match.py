@@ -13,8 +13,8 @@ from jaxgrav._io import atomic_output, check_outputs
 from jaxgrav.cli.filter_checks import check_on_map
 from jaxgrav.cli.inputs import (
     FIELD_UNITS,
-    add_columns_option,
     add_map_error_var_option,
+    add_track_option,
     check_map_field,
     check_out_format,
     fill_map_error_length,
@@ -52,10 +52,8 @@ def add_parsers(sub):
                    help="NetCDF grid with lat/lon coordinates, or a shipped map (ryukyu, "
                         "ryukyu:anomaly_0p5deg)")
     m.add_argument("--var", default=None, help="variable to read when the file has several")
-    m.add_argument("--track", required=True,
-                   help="CSV: t (s), lat, lon (INS, degrees), gravity (mGal) or magnetic "
+    add_track_option(m, "CSV: t (s), lat, lon (INS, degrees), gravity (mGal) or magnetic "
                         "(nT); optional v_east, v_north (m/s), drift_radius (degrees)")
-    add_columns_option(m)
     m.add_argument("--out", required=True, help="result JSON")
     m.add_argument("--method", choices=METHODS, default="dense",
                    help="dense (default, most accurate), chains (paper A's constrained "
@@ -103,8 +101,7 @@ def add_parsers(sub):
     s = sub.add_parser("sample", help="sample a map along a track CSV")
     s.add_argument("--map", required=True, help="NetCDF grid with lat/lon coordinates")
     s.add_argument("--var", default=None, help="variable to read when the file has several")
-    s.add_argument("--track", required=True, help="CSV with lat, lon columns (degrees)")
-    add_columns_option(s)
+    add_track_option(s, "CSV with lat, lon columns (degrees)")
     s.add_argument("--out", required=True, help="output CSV (track columns + sampled column)")
     s.add_argument("--method", choices=("bilinear", "bicubic"), default="bicubic")
     s.add_argument("--column", default="map",

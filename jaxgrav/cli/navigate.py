@@ -69,9 +69,9 @@ from jaxgrav.cli.filter_checks import (
     offset_warning,
 )
 from jaxgrav.cli.inputs import (
-    add_columns_option,
     add_map_error_var_option,
     add_missing_option,
+    add_track_option,
     check_missing_option,
     check_out_format,
     kept_columns,
@@ -127,9 +127,7 @@ def add_parser(sub):
                        help="map-aided navigation of an INS log (loosely or tightly coupled)")
     p.add_argument("--map", default="ryukyu", help="anomaly map: NetCDF grid or shipped map")
     p.add_argument("--var", default=None)
-    p.add_argument("--track", required=True,
-                   help="INS log CSV: t, lat, lon, v_east, v_north, gravity (raw, mGal)")
-    add_columns_option(p)
+    add_track_option(p, "INS log CSV: t, lat, lon, v_east, v_north, gravity (raw, mGal)")
     p.add_argument("--method", choices=METHODS, default="ukf",
                    help="ukf (default), ekf, gsf, rbpf, pmf: every reading into the INS error "
                         "filter (tightly coupled; pmf's 1-sigma is over-confident with the "
