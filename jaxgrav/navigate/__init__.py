@@ -22,9 +22,9 @@ from jaxgrav.navigate.loose import (
     eotvos_sigma,
     fix_segment,
     loose_config,
-    loose_map,
     navigate_loose,
 )
+from jaxgrav.navigate.loose_match import loose_map
 from jaxgrav.navigate.metrics import VoyageErrors, hourly_rms, voyage_errors, voyage_summary
 from jaxgrav.navigate.tight import (
     TIGHT_METHODS,

@@ -39,7 +39,6 @@ from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, innovation_ni
 from jaxgrav.navigate.loose_match import (
     CHAIN_REACH_M,
     LOOSE_MATCHERS,
-    loose_map,
     match_segment,
     matcher_config,
 )
@@ -48,7 +47,7 @@ from jaxgrav.sim.ins import INSErrorModel, initial_covariance
 from jaxgrav.sim.trajectory import Track
 
 __all__ = ["CHAIN_REACH_M", "FIX_EVENTS", "LOOSE_MATCHERS", "LooseConfig", "LooseResult",
-           "eotvos_sigma", "fix_segment", "loose_config", "loose_map", "navigate_loose"]
+           "eotvos_sigma", "fix_segment", "loose_config", "navigate_loose"]
 
 FIX_EVENTS = {
     0: "accepted",
@@ -156,11 +155,11 @@ def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=100
     cell's diagonal, ten least-squares steps), the reading bias (gravimeter offset,
     Eötvös error) marginalised with a flat prior. ``chains``: paper A's search
     (:func:`~jaxgrav.match.sizing.config_for`) on the nodes of ``grid`` (pass the map
-    refined to the nodes wanted, :func:`loose_map`), its window fixed at
-    ``chain_reach_m`` about each fix (the loop cannot widen it per segment as it does the
-    other matchers' grids: a segment whose Rayleigh reach is larger is still matched in
-    that window, and the fix's edge test and the innovation gate are what guard it),
-    the difference score (the reading bias drops out), the GLS posterior fix.
+    refined to the nodes wanted, :func:`~jaxgrav.navigate.loose_match.loose_map`), its
+    window fixed at ``chain_reach_m`` about each fix (the loop cannot widen it per segment
+    as it does the other matchers' grids: a segment whose Rayleigh reach is larger is still
+    matched in that window, and the fix's edge test and the innovation gate are what guard
+    it), the difference score (the reading bias drops out), the GLS posterior fix.
 
     Parameters
     ----------
