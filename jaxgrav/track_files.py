@@ -16,14 +16,13 @@ their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
   ``lon``, ``lat``, ``z`` for ``.xyz``/``.xy`` files (GMT's order) and ``1``, ``2``, ...
   otherwise.
 
-:func:`header_scale` reads a unit in a header (``t (min)``, ``gravity [m/s^2]``, ``lat
-(rad)``, ``v_east (kn)``) as the factor to the library's units.
+:func:`jaxgrav.track_units.header_scale` reads a unit in a header (``t (min)``,
+``gravity [m/s^2]``, ``lat (rad)``, ``v_east (kn)``) as the factor to the library's units.
 :func:`parse_numbers` reads one column of cells as float64 (empty, ``nan``, ``NA``,
 ``N/A``, ``null`` as NaN; a decimal comma accepted when the delimiter is not a comma).
 """
 
 import csv
-import datetime as dt
 import gzip
 import io
 import re
@@ -34,17 +33,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from jaxgrav.grid_files import map_units
+from jaxgrav.track_units import UNIT_SUFFIX
 
-__all__ = ["NA_TOKENS", "Table", "column_key", "header_scale", "parse_datetime", "parse_numbers",
-           "read_table"]
+__all__ = ["NA_TOKENS", "Table", "column_key", "parse_numbers", "read_table"]
 
 NA_TOKENS = frozenset({"", "nan", "na", "n/a", "null", "none"})
 """Cells (lower case) read as a missing value (NaN)."""
 
 _BINARY = {b"CDF": "a NetCDF-3 file", b"\x89HDF": "a NetCDF-4/HDF5 file",
            b"PK": "a zip/xlsx archive", b"\xd0\xcf\x11\xe0": "an old Excel/Office file"}
-_UNITS = re.compile(r"\s*[(\[][^()\[\]]*[)\]]\s*$")
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
 _DELIMITER_NAMES = {",": "comma", ";": "semicolon", "\t": "tab", " ": "whitespace"}
 _SEP_LINE = re.compile(r'\s*"?sep=([,;\t])"?[,;\t]*\s*', re.IGNORECASE)  # Excel's first line
@@ -82,83 +79,7 @@ class Table(NamedTuple):
 def column_key(name):
     """How a header matches a column name: trimmed, lower case, a ``(unit)``/``[unit]``
     suffix dropped (``"Gravity [mGal]"`` → ``"gravity"``)."""
-    return _UNITS.sub("", str(name).strip()).strip().lower()
-
-
-_DEG = dict.fromkeys(("deg", "degs", "degree", "degrees", "°", "decimal degrees", "dd"), 1.0)
-_HEADER_UNITS = {  # column -> unit (lower case, spaces kept) -> factor to the library's
-    "t": {**dict.fromkeys(("s", "sec", "secs", "second", "seconds"), 1.0),
-          **dict.fromkeys(("ms", "millisecond", "milliseconds"), 1e-3),
-          **dict.fromkeys(("min", "mins", "minute", "minutes"), 60.0),
-          **dict.fromkeys(("h", "hr", "hrs", "hour", "hours"), 3600.0),
-          **dict.fromkeys(("d", "day", "days"), 86400.0)},
-    "lat": {**_DEG, **dict.fromkeys(("rad", "radian", "radians"), 180.0 / np.pi)},
-    "h": {**dict.fromkeys(("m", "metre", "metres", "meter", "meters"), 1.0),
-          "km": 1e3, **dict.fromkeys(("ft", "feet"), 0.3048)},
-    "v_east": {**dict.fromkeys(("m/s", "m s-1", "ms-1", "m/sec"), 1.0),
-               **dict.fromkeys(("kn", "kt", "kts", "knot", "knots"), 1852.0 / 3600.0),
-               **dict.fromkeys(("km/h", "kmh", "kph"), 1.0 / 3.6)},
-}
-_HEADER_UNITS.update(lon=_HEADER_UNITS["lat"], drift_radius=_HEADER_UNITS["lat"],
-                     v_north=_HEADER_UNITS["v_east"])
-_FIELD_UNITS = {"gravity": "mGal", "magnetic": "nT"}
-
-
-def header_scale(name, header, label):
-    """Factor from the unit a header declares to the library's unit of column ``name``.
-
-    Parameters
-    ----------
-    name : str
-        The canonical column (``t``, ``lat``, ``gravity``, ...).
-    header : str
-        The header as written, e.g. ``"t (min)"``, ``"gravity [m/s^2]"``.
-    label : str
-        The file, for messages.
-
-    Returns
-    -------
-    float
-        1 when the header declares no unit, or one this function does not know (a note
-        such as ``lat (WGS84)`` or ``time (UTC)``); else the factor (``t (min)``: 60,
-        ``gravity [m/s^2]``: 1e5, ``lat (rad)``: 180/π, ``v_east (kn)``: 0.5144).
-
-    Raises
-    ------
-    ValueError
-        A gravity column declared in a magnetic unit, or a magnetic column in a gravity
-        unit (the file and the header named).
-    """
-    found = _UNITS.search(str(header))
-    if not found:
-        return 1.0
-    unit = found.group(0).strip()[1:-1].strip()
-    if name in _FIELD_UNITS:
-        factor_units = map_units(np.ones(1), unit)
-        if factor_units[1] in _FIELD_UNITS.values() and factor_units[1] != _FIELD_UNITS[name]:
-            raise ValueError(f"{label}: column {header!r} declares {unit!r}, a unit of "
-                             f"{'gravity' if factor_units[1] == 'mGal' else 'magnetic'} "
-                             f"fields; column {name!r} holds {_FIELD_UNITS[name]}: rename it "
-                             "or name the right column with --columns")
-        return float(factor_units[0][0]) if factor_units[1] == _FIELD_UNITS[name] else 1.0
-    return _HEADER_UNITS.get(name, {}).get(unit.lower(), 1.0)
-
-
-_SLASH_DATE = re.compile(r"(\d{4})/(\d{1,2})/(\d{1,2})(?=$|[ T])")
-_CLOCK = re.compile(r"\d{1,2}:\d{2}(:\d{2}(\.\d*)?)?")
-
-
-def parse_datetime(cell):
-    """An ISO-8601 date-time cell as a :class:`datetime.datetime`.
-
-    Also ``2024/05/01 12:00:00`` (year first, slashes) and a lower-case ``z``.
-    ValueError for anything else; its text says so for a time of day without a date
-    (``12:00:00``, a log that keeps the date in another column).
-    """
-    text = _SLASH_DATE.sub(lambda m: f"{m[1]}-{int(m[2]):02d}-{int(m[3]):02d}", cell.strip())
-    if _CLOCK.fullmatch(text):
-        raise ValueError("a time of day without a date")
-    return dt.datetime.fromisoformat(text.replace("z", "Z"))
+    return UNIT_SUFFIX.sub("", str(name).strip()).strip().lower()
 
 
 def _decode(data, label):

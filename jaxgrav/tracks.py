@@ -12,14 +12,15 @@ What the reader accepts (parsing of the text: :mod:`jaxgrav.track_files`):
   UTF-8 byte-order mark, CRLF line ends, ``#`` comment lines, a decimal comma in
   semicolon/tab files;
 - column names in any case, trimmed, with a ``(unit)`` suffix (read as a conversion
-  when known: :func:`~jaxgrav.track_files.header_scale`), and the aliases
+  when known: :func:`~jaxgrav.track_units.header_scale`), and the aliases
   of :data:`ALIASES` (``time`` for ``t``, ``latitude`` for ``lat``, ``longitude``,
   ``long``, ``lng`` for ``lon``, ``height`` for ``h``); an exact name wins over an alias;
   ``columns={"lat": "LAT", ...}`` (``--columns lat=LAT,...``, :func:`parse_columns`)
   names any other column, by name or by 1-based number;
-- times in seconds or as ISO-8601 date-times (``2024-05-01T12:00:00Z``), which become
-  seconds since the first row (the text is kept in the column ``time``); times must
-  increase: a repeated or earlier time is refused with its line;
+- times in seconds or as ISO-8601 date-times (``2024-05-01T12:00:00Z``,
+  :func:`~jaxgrav.track_times.parse_datetime`), which become seconds since the first row
+  (the text is kept in the column ``time``); times of day are joined to a ``date``
+  column; times must increase: a repeated or earlier time is refused with its line;
 - longitudes in the 0–360 or the ±180 convention; a track crossing 0° or 180° is made
   contiguous (359.5, 0.5 → −0.5, 0.5), as maps are (:func:`~jaxgrav.grid_axes.
   contiguous_longitudes`); latitudes must lie within ±90°;
@@ -32,7 +33,9 @@ import numpy as np
 
 from jaxgrav._io import atomic_output
 from jaxgrav.grid_axes import contiguous_longitudes
-from jaxgrav.track_files import column_key, header_scale, parse_datetime, parse_numbers, read_table
+from jaxgrav.track_files import column_key, parse_numbers, read_table
+from jaxgrav.track_times import DATE_COLUMN, check_time_steps, iso_seconds
+from jaxgrav.track_units import header_scale
 
 __all__ = ["ALIASES", "KNOWN_COLUMNS", "TrackTable", "csv_line", "parse_columns",
            "read_track_csv", "write_track_csv"]
@@ -195,41 +198,6 @@ def _match_columns(header, wanted, columns, label, required=()):
     return found
 
 
-def _iso_seconds(cells, lines, label, header):
-    """Seconds since the first row of ISO-8601 cells (aware times in UTC, naive as given)."""
-    stamps = []
-    for cell, line in zip(cells, lines, strict=True):
-        try:
-            stamps.append(parse_datetime(cell))
-        except ValueError as err:  # a clock time: "12:00:00 ... a time of day without a date"
-            clock = f" ({err}: join the date to it)" if "time of day" in str(err) else ""
-            raise ValueError(
-                f"{label}, line {line}, column {header!r}: {cell!r} is neither a number "
-                f"(seconds) nor an ISO-8601 date-time (e.g. 2024-05-01T12:00:00Z){clock}; "
-                "times must be complete") from None
-    aware = [s.tzinfo is not None for s in stamps]
-    if any(aware) and not all(aware):
-        i = aware.index(not aware[0])
-        raise ValueError(f"{label}, line {lines[i]}, column {header!r}: {cells[i]!r} "
-                         f"{'has' if aware[i] else 'lacks'} a time zone, unlike line "
-                         f"{lines[0]}; give every time with or every time without one")
-    seconds = np.array([(s - stamps[0]).total_seconds() for s in stamps])
-    return seconds, stamps[0].isoformat()
-
-
-def _time_steps(t, shown, lines, label, header):
-    """Refuse a time that repeats or goes back, naming both lines."""
-    step = np.diff(t)
-    bad = np.flatnonzero(~(step > 0))
-    if bad.size:
-        i = int(bad[0])
-        what = "repeats" if step[i] == 0 else "is earlier than"
-        raise ValueError(
-            f"{label}, line {lines[i + 1]}, column {header!r}: time {shown[i + 1]} {what} "
-            f"{shown[i]} on line {lines[i]}; times must increase ({int((step == 0).sum())} "
-            f"repeated, {int((step < 0).sum())} backward step(s))")
-
-
 def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None):
     """Read a track or log file (see the module notes for what it accepts).
 
@@ -291,7 +259,9 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
         if j in canonical and bad is None:  # "t (min)", "gravity [m/s^2]", "lat (rad)"
             values = values * header_scale(name, header, label)
         if bad is not None and name == "t":
-            values, track.time_origin = _iso_seconds(cells, lines, label, header)
+            day = [k for k, h in enumerate(table.header) if column_key(h) == DATE_COLUMN]
+            dates = [r[day[0]] for r in table.rows] if day and day[0] != j else None
+            values, track.time_origin = iso_seconds(cells, lines, label, header, dates)
             text_name = header if header != "t" else "time"
             if text_name in table.header[:j] + table.header[j + 1:]:
                 text_name += "_iso"
@@ -345,7 +315,7 @@ def _check_columns(track, required, allow_nan, label):
         if np.isfinite(t).all():
             shown = (track.text[track.time_text] if track.time_text
                      else [f"{v:g}" for v in t])
-            _time_steps(t, shown, lines, label, track.renamed.get("t", "t"))
+            check_time_steps(t, shown, lines, label, track.renamed.get("t", "t"))
         elif "t" in required:
             i = int(np.flatnonzero(~np.isfinite(t))[0])
             raise ValueError(f"{label}, line {lines[i]}: the time is missing; times must be "

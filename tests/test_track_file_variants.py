@@ -75,13 +75,14 @@ def test_a_year_first_date_with_slashes_is_a_date_time(tmp_path):
 
 
 def test_a_time_of_day_without_a_date_says_so(tmp_path):
-    """``12:00:00`` (the date in another column) is refused with the reason."""
+    """``12:00:00`` with no date anywhere is refused with the reason (a ``date`` column
+    is joined to it: ``tests/cli/test_cli_inputs_hunt6.py``)."""
     path = tmp_path / "c.csv"
-    path.write_text("date,time,lat,lon\n2024-05-01,12:00:00,30,130\n")
+    path.write_text("day,time,lat,lon\n2024-05-01,12:00:00,30,130\n")
     with pytest.raises(ValueError, match=r"line 2, column 'time': '12:00:00' is neither a "
                        r"number \(seconds\) nor an ISO-8601 date-time \(e.g. "
                        r"2024-05-01T12:00:00Z\) \(a time of day without a date: join the date "
-                       r"to it\); times must be complete$"):
+                       r"to it, or give it a column named 'date'\); times must be complete$"):
         read_track_csv(path, required=("t", "lat", "lon"))
 
 

@@ -1,0 +1,103 @@
+"""Times in track and log files: date-time cells, seconds since the first row, their order.
+
+:func:`parse_datetime` reads one ISO-8601 cell (also ``2024/05/01 12:00:00``, a ``UTC``
+or ``GMT`` suffix and ordinal dates ``2024-122T12:00:00``); :func:`iso_seconds` turns a
+column of them into seconds since the first row, joining a separate date column to
+times of day (``date,time,lat,...`` logs); :func:`check_time_steps` refuses times that
+repeat or go back, naming both lines.
+"""
+
+import datetime as dt
+import re
+
+import numpy as np
+
+__all__ = ["DATE_COLUMN", "check_time_steps", "iso_seconds", "parse_datetime"]
+
+DATE_COLUMN = "date"
+"""A column (any case) whose dates are joined to a time column holding times of day."""
+
+_SLASH_DATE = re.compile(r"(\d{4})/(\d{1,2})/(\d{1,2})(?=$|[ T])")
+_ORDINAL = re.compile(r"(\d{4})-?(\d{3})(?=$|[ T])")  # ISO 8601 ordinal date: year-day
+_CLOCK = re.compile(r"\d{1,2}:\d{2}(:\d{2}(\.\d*)?)?")
+_UTC = re.compile(r"\s*(UTC|GMT|Z)$", re.IGNORECASE)
+
+
+def _ordinal(m):
+    day = int(m[2])
+    if not 1 <= day <= 366:
+        return m[0]
+    date = dt.date(int(m[1]), 1, 1) + dt.timedelta(days=day - 1)
+    return date.isoformat() if date.year == int(m[1]) else m[0]
+
+
+def parse_datetime(cell):
+    """An ISO-8601 date-time cell as a :class:`datetime.datetime`.
+
+    Also ``2024/05/01 12:00:00`` (year first, slashes), a lower-case ``z``, a ``UTC`` or
+    ``GMT`` suffix (``2024-05-01 12:00:00 UTC``, as databases write) and ISO ordinal dates
+    (``2024-122T12:00:00``, the day of the year of survey logs). ValueError for anything
+    else; its text says so for a time of day without a date (``12:00:00``, a log that
+    keeps the date in another column).
+    """
+    text = _SLASH_DATE.sub(lambda m: f"{m[1]}-{int(m[2]):02d}-{int(m[3]):02d}", cell.strip())
+    text = _ORDINAL.sub(_ordinal, text, count=1) if _ORDINAL.match(text) else text
+    bare = _UTC.sub("", text)
+    if _CLOCK.fullmatch(bare):
+        raise ValueError("a time of day without a date")
+    return dt.datetime.fromisoformat(text if bare == text else bare + "+00:00")
+
+
+def iso_seconds(cells, lines, label, header, dates=None):
+    """Seconds since the first row of ISO-8601 cells (aware times in UTC, naive as given).
+
+    Parameters
+    ----------
+    cells : sequence of str
+        The time column.
+    lines : sequence of int
+        The file line of each cell, for messages.
+    label, header : str
+        The file and the column, for messages.
+    dates : sequence of str, optional
+        A date column joined in front of each time of day (``2024-05-01`` + ``12:00:00``).
+
+    Returns
+    -------
+    seconds : numpy.ndarray
+    origin : str
+        The first time, ISO-8601.
+    """
+    stamps = []
+    for k, (cell, line) in enumerate(zip(cells, lines, strict=True)):
+        try:
+            stamps.append(parse_datetime(cell if dates is None else f"{dates[k]} {cell}"))
+        except ValueError as err:  # a clock time: "12:00:00 ... a time of day without a date"
+            clock = (f" ({err}: join the date to it, or give it a column named "
+                     f"{DATE_COLUMN!r})") if "time of day" in str(err) else ""
+            shown = cell if dates is None else f"{dates[k]} {cell}"
+            raise ValueError(
+                f"{label}, line {line}, column {header!r}: {shown!r} is neither a number "
+                f"(seconds) nor an ISO-8601 date-time (e.g. 2024-05-01T12:00:00Z){clock}; "
+                "times must be complete") from None
+    aware = [s.tzinfo is not None for s in stamps]
+    if any(aware) and not all(aware):
+        i = aware.index(not aware[0])
+        raise ValueError(f"{label}, line {lines[i]}, column {header!r}: {cells[i]!r} "
+                         f"{'has' if aware[i] else 'lacks'} a time zone, unlike line "
+                         f"{lines[0]}; give every time with or every time without one")
+    seconds = np.array([(s - stamps[0]).total_seconds() for s in stamps])
+    return seconds, stamps[0].isoformat()
+
+
+def check_time_steps(t, shown, lines, label, header):
+    """Refuse a time that repeats or goes back, naming both lines (ValueError)."""
+    step = np.diff(t)
+    bad = np.flatnonzero(~(step > 0))
+    if bad.size:
+        i = int(bad[0])
+        what = "repeats" if step[i] == 0 else "is earlier than"
+        raise ValueError(
+            f"{label}, line {lines[i + 1]}, column {header!r}: time {shown[i + 1]} {what} "
+            f"{shown[i]} on line {lines[i]}; times must increase ({int((step == 0).sum())} "
+            f"repeated, {int((step < 0).sum())} backward step(s))")

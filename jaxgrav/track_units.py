@@ -1,0 +1,94 @@
+"""Units declared in the headers of track and log files (``t (min)``, ``gravity [m/s^2]``).
+
+:func:`header_scale` reads the unit a header declares, ``name (unit)`` or ``name
+[unit]``, as the factor to the library's unit of that column: seconds, degrees, metres,
+m/s, degrees of arc for ``drift_radius``, mGal and nT (the map units of
+:func:`jaxgrav.grid_files.map_units`). CF-style ``UNIT since DATE`` reads as ``UNIT``
+(``t (hours since 2024-05-01)``: 3600). A unit it does not know is read as a note (``lat
+(WGS84)``, ``time (UTC)``): factor 1.
+"""
+
+import math
+import re
+
+import numpy as np
+
+from jaxgrav.constants import WGS84_MEAN_RADIUS
+from jaxgrav.grid_files import map_units
+
+__all__ = ["UNIT_SUFFIX", "header_scale"]
+
+UNIT_SUFFIX = re.compile(r"\s*[(\[][^()\[\]]*[)\]]\s*$")
+"""A ``(unit)`` or ``[unit]`` at the end of a header."""
+
+_SINCE = re.compile(r"(.+?)\s+since\s+.*", re.IGNORECASE)  # CF "hours since 2024-05-01"
+_DEG = dict.fromkeys(("deg", "degs", "degree", "degrees", "°", "decimal degrees", "dd"), 1.0)
+_ARC_M = 180.0 / (math.pi * WGS84_MEAN_RADIUS)  # degrees of arc per metre
+_HEADER_UNITS = {  # column -> unit (lower case, spaces kept) -> factor to the library's
+    "t": {**dict.fromkeys(("s", "sec", "secs", "second", "seconds"), 1.0),
+          **dict.fromkeys(("ms", "millisecond", "milliseconds"), 1e-3),
+          **dict.fromkeys(("us", "µs", "μs", "microsecond", "microseconds"), 1e-6),
+          **dict.fromkeys(("min", "mins", "minute", "minutes"), 60.0),
+          **dict.fromkeys(("h", "hr", "hrs", "hour", "hours"), 3600.0),
+          **dict.fromkeys(("d", "day", "days"), 86400.0)},
+    "lat": {**_DEG, **dict.fromkeys(("rad", "radian", "radians"), 180.0 / np.pi)},
+    "h": {**dict.fromkeys(("m", "metre", "metres", "meter", "meters"), 1.0),
+          "km": 1e3, "cm": 1e-2, "mm": 1e-3, **dict.fromkeys(("ft", "feet"), 0.3048)},
+    "v_east": {**dict.fromkeys(("m/s", "m s-1", "ms-1", "m/sec", "m s^-1"), 1.0),
+               **dict.fromkeys(("kn", "kt", "kts", "knot", "knots"), 1852.0 / 3600.0),
+               **dict.fromkeys(("km/h", "kmh", "kph", "km h-1"), 1.0 / 3.6),
+               **dict.fromkeys(("ft/s", "fps", "ft s-1", "ft/sec"), 0.3048),
+               **dict.fromkeys(("cm/s", "cm s-1"), 1e-2),
+               **dict.fromkeys(("mm/s", "mm s-1"), 1e-3),
+               **dict.fromkeys(("mph", "mi/h"), 0.44704)},
+    "drift_radius": {**_DEG, **dict.fromkeys(("rad", "radian", "radians"), 180.0 / np.pi),
+                     **dict.fromkeys(("m", "metre", "metres", "meter", "meters"), _ARC_M),
+                     "km": 1e3 * _ARC_M, **dict.fromkeys(("nmi", "nm", "nautical miles"),
+                                                         1852.0 * _ARC_M),
+                     **dict.fromkeys(("arcmin", "'"), 1.0 / 60.0)},
+}
+_HEADER_UNITS.update(lon=_HEADER_UNITS["lat"], v_north=_HEADER_UNITS["v_east"])
+_FIELD_UNITS = {"gravity": "mGal", "magnetic": "nT"}
+
+
+def header_scale(name, header, label):
+    """Factor from the unit a header declares to the library's unit of column ``name``.
+
+    Parameters
+    ----------
+    name : str
+        The canonical column (``t``, ``lat``, ``gravity``, ...).
+    header : str
+        The header as written, e.g. ``"t (min)"``, ``"gravity [m/s^2]"``.
+    label : str
+        The file, for messages.
+
+    Returns
+    -------
+    float
+        1 when the header declares no unit, or one this function does not know (a note
+        such as ``lat (WGS84)`` or ``time (UTC)``); else the factor (``t (min)``: 60,
+        ``gravity [m/s^2]``: 1e5, ``lat (rad)``: 180/π, ``v_east (kn)``: 0.5144,
+        ``v_east (ft/s)``: 0.3048, ``drift_radius (km)``: 1/111.2).
+
+    Raises
+    ------
+    ValueError
+        A gravity column declared in a magnetic unit, or a magnetic column in a gravity
+        unit (the file and the header named).
+    """
+    found = UNIT_SUFFIX.search(str(header))
+    if not found:
+        return 1.0
+    unit = found.group(0).strip()[1:-1].strip()
+    since = _SINCE.fullmatch(unit)  # "t (hours since 2024-05-01)" was read as seconds
+    unit = since.group(1).strip() if since else unit
+    if name in _FIELD_UNITS:
+        factor_units = map_units(np.ones(1), unit)
+        if factor_units[1] in _FIELD_UNITS.values() and factor_units[1] != _FIELD_UNITS[name]:
+            raise ValueError(f"{label}: column {header!r} declares {unit!r}, a unit of "
+                             f"{'gravity' if factor_units[1] == 'mGal' else 'magnetic'} "
+                             f"fields; column {name!r} holds {_FIELD_UNITS[name]}: rename it "
+                             "or name the right column with --columns")
+        return float(factor_units[0][0]) if factor_units[1] == _FIELD_UNITS[name] else 1.0
+    return _HEADER_UNITS.get(name, {}).get(unit.lower(), 1.0)

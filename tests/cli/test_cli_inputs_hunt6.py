@@ -1,0 +1,113 @@
+"""Inputs found by the sixth issue-19 hunt (2026-12-07, helper-62): units a header
+declares that were read as the library's own (``drift_radius (km)``, ``v_east (ft/s)``,
+``t (hours since ...)``), a log that keeps the date and the time of day in two columns,
+date-times with a ``UTC`` suffix or an ordinal day of the year."""
+
+import numpy as np
+import pytest
+
+from jaxgrav.cli import main
+from jaxgrav.track_times import parse_datetime
+from jaxgrav.track_units import header_scale
+from jaxgrav.tracks import read_track_csv
+
+ROWS = [(0, 29.5, 126.5, 1.0), (60, 29.51, 126.51, 2.0), (120, 29.52, 126.52, 3.0)]
+
+
+def _csv(path, header, rows=ROWS, fmt=None):
+    lines = [header] + [",".join(fmt(r) if fmt else map(str, r)) for r in rows]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("header, factor", [
+    ("drift_radius (km)", 1 / 111.19508), ("drift_radius [nmi]", 1 / 60.04),
+    ("drift_radius (m)", 1 / 111195.08), ("drift_radius (deg)", 1.0)])
+def test_a_drift_radius_in_km_or_nautical_miles_is_converted_to_degrees(header, factor):
+    """``drift_radius (km)`` 4.67 was read as 4.67 degrees (the match JSON recorded
+    ``drift_radius_deg: 4.67``, exit 0)."""
+    assert header_scale("drift_radius", header, "f") == pytest.approx(factor, rel=1e-4)
+
+
+@pytest.mark.parametrize("header, factor", [
+    ("v_east (ft/s)", 0.3048), ("v_north [cm/s]", 0.01), ("v_east (mph)", 0.44704),
+    ("v_east (mm/s)", 1e-3), ("v_east (kn)", 1852 / 3600)])
+def test_a_velocity_in_feet_or_centimetres_per_second_is_converted(header, factor):
+    """``v_east (ft/s)`` was read as m/s: ``match`` corrected the readings for Eötvös with
+    a velocity 3.3 times too large and fitted a 127 mGal "bias", exit 0."""
+    assert header_scale(header.split()[0], header, "f") == pytest.approx(factor)
+
+
+def test_velocities_in_ft_per_s_read_as_the_same_m_per_s(tmp_path):
+    """A log with velocities in ft/s reads as the same log in m/s."""
+    rows = [(120 * i, 29.5 + 0.0056 * i, 126.5 + 0.0068 * i, 0.0, 5.144, 5.144)
+            for i in range(8)]
+    base = _csv(tmp_path / "m.csv", "t,lat,lon,gravity,v_east,v_north", rows)
+    feet = _csv(tmp_path / "f.csv", "t,lat,lon,gravity,v_east (ft/s),v_north (ft/s)", rows,
+                fmt=lambda r: [str(r[0]), str(r[1]), str(r[2]), str(r[3]),
+                               repr(r[4] / 0.3048), repr(r[5] / 0.3048)])
+    a = read_track_csv(base, required=("t", "lat", "lon", "gravity"))
+    b = read_track_csv(feet, required=("t", "lat", "lon", "gravity"))
+    np.testing.assert_allclose(b["v_east"], a["v_east"], rtol=1e-12)
+    np.testing.assert_allclose(b["v_north"], a["v_north"], rtol=1e-12)
+
+
+@pytest.mark.parametrize("header, factor", [
+    ("t (hours since 2024-05-01)", 3600.0), ("time (seconds since 1970-01-01T00:00:00Z)", 1.0),
+    ("t [minutes since start]", 60.0), ("t (us)", 1e-6), ("h (cm)", 0.01), ("h (mm)", 1e-3)])
+def test_a_cf_since_unit_and_small_units_are_read(header, factor):
+    """``t (hours since 2024-05-01)`` was read as seconds (an unknown unit is a note)."""
+    name = "h" if header.startswith("h") else "t"
+    assert header_scale(name, header, "f") == factor
+
+
+def test_a_date_column_is_joined_to_times_of_day(tmp_path, capsys):
+    """``date,time,lat,lon`` (a logger's two columns) was refused: "'00:00:00' is neither
+    a number (seconds) nor an ISO-8601 date-time (a time of day without a date)"."""
+    path = tmp_path / "d.csv"
+    path.write_text("Date,Time,lat,lon\n2024-05-01,23:59:00,30,130\n2024-05-02,00:01:00,30,130"
+                    "\n2024/05/02,00:02:30,30,130\n")
+    track = read_track_csv(path, required=("t", "lat", "lon"))
+    assert list(track["t"]) == [0.0, 120.0, 210.0]
+    assert track.time_origin == "2024-05-01T23:59:00"
+    assert list(track.text["Date"]) == ["2024-05-01", "2024-05-02", "2024/05/02"]
+    assert main(["sample", "--map", "ryukyu", "--track", str(path), "--out",
+                 str(tmp_path / "s.csv")]) == 0
+    head = (tmp_path / "s.csv").read_text().splitlines()[:2]
+    assert head[0] == "Date,t,Time,lat,lon,map" and head[1].startswith("2024-05-01,0,23:59:00,")
+
+
+def test_a_date_column_with_a_missing_date_names_the_line(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_text("date,time,lat,lon\n2024-05-01,12:00:00,30,130\n,12:01:00,30,130\n")
+    with pytest.raises(ValueError, match=r"line 3, column 'time': ' 12:01:00' is neither"):
+        read_track_csv(path, required=("t", "lat", "lon"))
+
+
+@pytest.mark.parametrize("cell, iso", [
+    ("2024-05-01 12:00:00 UTC", "2024-05-01T12:00:00+00:00"),
+    ("2024-05-01T12:00:00GMT", "2024-05-01T12:00:00+00:00"),
+    ("2024-05-01T12:00:00z", "2024-05-01T12:00:00+00:00"),
+    ("2024-122T12:00:00", "2024-05-01T12:00:00"),
+    ("2024-366 00:00", "2024-12-31T00:00:00"),
+    ("2024-05-01T12:00:00+09:00", "2024-05-01T12:00:00+09:00")])
+def test_a_utc_suffix_and_an_ordinal_date_are_date_times(cell, iso):
+    """``2024-05-01 12:00:00 UTC`` (databases) and ``2024-122T12:00:00`` (the day of the
+    year of survey logs, ISO 8601's ordinal date) were "neither a number nor an ISO-8601
+    date-time"."""
+    assert parse_datetime(cell).isoformat() == iso
+
+
+@pytest.mark.parametrize("cell", ["2023-366T00:00", "2024-400T00:00", "12:00:00 UTC"])
+def test_an_impossible_ordinal_date_or_a_bare_clock_is_still_refused(cell):
+    with pytest.raises(ValueError):
+        parse_datetime(cell)
+
+
+def test_a_time_column_with_a_utc_suffix_is_read(tmp_path):
+    """A track with ``... UTC`` times is read as seconds from its first, an aware time."""
+    rows = [(f"2024-05-01 00:{2 * i:02d}:00 UTC", 29.5 + 0.0056 * i, 126.5 + 0.0068 * i, 0.0)
+            for i in range(30)]
+    path = _csv(tmp_path / "u.csv", "time,lat,lon,gravity", rows)
+    track = read_track_csv(path, required=("t", "lat", "lon", "gravity"))
+    assert track["t"][-1] == 58 * 60 and track.time_origin == "2024-05-01T00:00:00+00:00"
