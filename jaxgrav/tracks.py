@@ -33,7 +33,7 @@ import numpy as np
 
 from jaxgrav._io import atomic_output
 from jaxgrav.grid_axes import contiguous_longitudes
-from jaxgrav.track_files import column_key, parse_numbers, read_table
+from jaxgrav.track_files import column_key, parse_degrees, parse_numbers, read_table
 from jaxgrav.track_times import DATE_COLUMN, check_time_steps, iso_seconds
 from jaxgrav.track_units import header_scale
 
@@ -52,7 +52,8 @@ KNOWN_COLUMNS = ("t", "lat", "lon", "h", "gravity", "magnetic", "v_east", "v_nor
                  "drift_radius")
 """Columns the commands look for; found in any case and always numeric."""
 
-_EXPECTED = {"t": "seconds or an ISO-8601 date-time", "lat": "degrees", "lon": "degrees",
+_EXPECTED = {"t": "seconds or an ISO-8601 date-time", "lat": "degrees (35.5, -35.5, 35.5 S or "
+             "35°30'S)", "lon": "degrees (127.5, -127.5, 127.5 W or 127°30'W)",
              "h": "metres", "gravity": "mGal", "magnetic": "nT", "v_east": "m/s",
              "v_north": "m/s", "drift_radius": "degrees"}
 
@@ -270,10 +271,15 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
             track.order += ["t", text_name]
             track[name] = values
             continue
+        why = "not a number"
+        if bad is not None and name in ("lat", "lon") and j in canonical:  # "35.5 N", 35°30'
+            values, bad, why = parse_degrees(cells, name, table.delimiter != ",")
+            values = values * header_scale(name, header, label)
         if bad is not None and j in canonical:
             raise ValueError(
-                f"{label}, line {lines[bad]}, column {header!r}: {cells[bad]!r} is not a "
-                f"number (expected {_EXPECTED.get(name, 'a number')})")
+                f"{label}, line {lines[bad]}, column {header!r}: {cells[bad]!r} " + (
+                    f"is not a number (expected {_EXPECTED.get(name, 'a number')})"
+                    if why == "not a number" else f"cannot be read as degrees: {why}"))
         if j not in canonical and name in found:
             name = f"{header}_col{j + 1}"  # "lat" beside --columns lat=LAT2
         if bad is not None:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from jaxgrav.cli import main
+from jaxgrav.track_files import parse_degrees
 from jaxgrav.track_times import parse_datetime
 from jaxgrav.track_units import header_scale
 from jaxgrav.tracks import read_track_csv
@@ -111,3 +112,52 @@ def test_a_time_column_with_a_utc_suffix_is_read(tmp_path):
     path = _csv(tmp_path / "u.csv", "time,lat,lon,gravity", rows)
     track = read_track_csv(path, required=("t", "lat", "lon", "gravity"))
     assert track["t"][-1] == 58 * 60 and track.time_origin == "2024-05-01T00:00:00+00:00"
+
+
+@pytest.mark.parametrize("name, cell, value", [
+    ("lat", "35.5 N", 35.5), ("lat", "S35.5", -35.5), ("lat", "35.5s", -35.5),
+    ("lat", "35°27.72'N", 35.462), ("lat", "35 27 43.2 S", -35.462),
+    ("lon", "127°30′36″W", -127.51), ("lon", "127:30:36E", 127.51), ("lon", "-127.5", -127.5),
+    ("lon", "172.5°", 172.5), ("lat", "-35°27.72'", -35.462)])
+def test_hemisphere_letters_and_degrees_minutes_are_read(name, cell, value):
+    """``35.4619 N`` and ``35°27.7164'N`` (ship logs, GPS exports) were "not a number
+    (expected degrees)"."""
+    values, bad, why = parse_degrees([cell, ""], name)
+    assert bad is None and why == ""
+    assert values[0] == pytest.approx(value) and np.isnan(values[1])
+
+
+@pytest.mark.parametrize("name, cell, why", [
+    ("lat", "35.5 E", "hemisphere E in a latitude column (expected N or S)"),
+    ("lon", "N127", "hemisphere N in a longitude column (expected E or W)"),
+    ("lat", "-35.5 S", "both a sign and hemisphere S"),
+    ("lat", "35 75.0 N", "not degrees, minutes and seconds"),
+    ("lat", "35.5 27 N", "not degrees, minutes and seconds"),
+    ("lat", "N35.5S", "not a number"), ("lat", "thirty", "not a number")])
+def test_a_wrong_hemisphere_or_angle_is_named(name, cell, why):
+    _, bad, reason = parse_degrees(["10", cell], name)
+    assert bad == 1 and reason.startswith(why)
+
+
+def test_a_log_in_degrees_and_minutes_is_sampled_at_its_positions(tmp_path, refused):
+    """``sample`` on a log written ``29°30.0'N,126°30.0'E`` gives the values of the same
+    log in decimal degrees; a latitude with an E names the line, the cell and the reason."""
+    rows = [(f"29°{30 + i}.0'N", f"126°{30 + i}.0'E") for i in range(3)]
+    _csv(tmp_path / "dm.csv", "lat,lon", rows)
+    _csv(tmp_path / "dd.csv", "lat,lon", [(29.5 + i / 60, 126.5 + i / 60) for i in range(3)])
+    for name in ("dm", "dd"):
+        assert main(["sample", "--map", "ryukyu", "--track", str(tmp_path / f"{name}.csv"),
+                     "--out", str(tmp_path / f"s_{name}.csv")]) == 0
+    got = [ln.split(",")[-1] for ln in (tmp_path / "s_dm.csv").read_text().splitlines()]
+    want = [ln.split(",")[-1] for ln in (tmp_path / "s_dd.csv").read_text().splitlines()]
+    assert got == want
+    _csv(tmp_path / "bad.csv", "lat,lon", [("29.5 N", "126.5 E"), ("29.6 E", "126.6 E")])
+    refused(["sample", "--map", "ryukyu", "--track", tmp_path / "bad.csv", "--out",
+             tmp_path / "s.csv"],
+            "bad.csv', line 3, column 'lat': '29.6 E' cannot be read as degrees: hemisphere "
+            "E in a latitude column (expected N or S)")
+    _csv(tmp_path / "bad.csv", "lat,lon", [("29.5 N", "126.5 E"), ("29.6 N", "east")])
+    refused(["sample", "--map", "ryukyu", "--track", tmp_path / "bad.csv", "--out",
+             tmp_path / "s.csv"],
+            "bad.csv', line 3, column 'lon': 'east' is not a number (expected degrees (127.5, "
+            "-127.5, 127.5 W or 127°30'W))")
