@@ -7,18 +7,18 @@ given as a map) in one line, finds the 1-D latitude and longitude coordinates (`
 dimensions (``time`` of length 1) and refuses other ones by name, makes the longitudes
 contiguous (a regional 0–360 map across 0°, 350 … 10, becomes −10 … 10) and checks both
 axes (a repeated, unsorted or irregular node is named with the file and its value).
+GMT 4's native grids (``x_range``, ``y_range``, ``dimension``, ``z``) are read too.
 Nodes holding a fill value the file does not declare (−9999, 99999, … beyond the range
 of every other node, or ``|v| >= 1e20``) are read as missing, with an
-:class:`UndeclaredFillWarning`. A gravity or magnetic map declared in other units (CF
-``units`` ``m s-2``, ``uGal``, ``uT`` …) is converted to mGal or nT (:func:`map_units`).
+:class:`UndeclaredFillWarning`, and so are nodes outside a declared CF valid range. A
+gravity or magnetic map declared in other units (CF ``units`` ``m s-2``, ``uGal``,
+``uT`` …) is converted to mGal or nT (:func:`map_units`); see :mod:`jaxgrav.grid_values`.
 It returns plain arrays; :meth:`Grid.from_netcdf` and :func:`jaxgrav.datasets.load_map`
 build the grid. :func:`write_netcdf` writes a grid with CF ``lat``/``lon`` coordinates,
 atomically. Both are package-internal: use the :class:`~jaxgrav.grid.Grid` methods or
 ``load_map``.
 """
 
-import re
-import warnings
 from pathlib import Path
 from typing import NamedTuple
 
@@ -27,6 +27,16 @@ import xarray as xr
 
 from jaxgrav._io import atomic_output
 from jaxgrav.grid_axes import contiguous_longitudes, regular_axis
+from jaxgrav.grid_values import (
+    FILL_VALUES,
+    UndeclaredFillWarning,
+    map_units,
+    outside_valid_range,
+    undeclared_fills,
+)
+
+__all__ = ["FILL_VALUES", "LAT_NAMES", "LON_NAMES", "GridArrays", "UndeclaredFillWarning",
+           "check_netcdf_file", "map_units", "read_netcdf", "write_netcdf"]
 
 LAT_NAMES = ("lat", "latitude", "y")
 """Accepted names of the latitude coordinate (any case), in order of preference."""
@@ -37,29 +47,6 @@ _CF = {
     "latitude": ("latitude", {"degrees_north", "degree_north", "degrees_n", "degree_n"}),
     "longitude": ("longitude", {"degrees_east", "degree_east", "degrees_e", "degree_e"}),
 }
-_UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (factor, units)
-    **dict.fromkeys(("mgal", "mgals", "milligal", "milligals"), (1.0, "mGal")),
-    **dict.fromkeys(("gal", "gals"), (1e3, "mGal")),
-    **dict.fromkeys(("ugal", "microgal", "microgals"), (1e-3, "mGal")),
-    **dict.fromkeys(("ms-2", "m/s2", "m/s/s", "ms-1s-1"), (1e5, "mGal")),
-    **dict.fromkeys(("gu", "um/s2", "ums-2"), (0.1, "mGal")),  # gravity units, µm/s²
-    **dict.fromkeys(("nt", "nanotesla", "gamma", "gammas"), (1.0, "nT")),
-    **dict.fromkeys(("ut", "microtesla"), (1e3, "nT")),
-    **dict.fromkeys(("t", "tesla"), (1e9, "nT")),
-}
-_SCALED_UNIT = re.compile(r"(?:1e|10(?=[-+]))([-+]?\d+)(.+)")
-"""A normalised unit with a power of ten in front (``10^-5 m/s^2``, ``1e-6 m s-2``)."""
-FILL_VALUES = (-9999.0, 9999.0, -99999.0, 99999.0, -999999.0, 999999.0, -32767.0, 32767.0,
-               -32768.0, 65535.0)
-"""Fill values a grid may hold without declaring them (no ``_FillValue`` or
-``missing_value`` attribute, e.g. a grid converted from ASCII); with ``|v| >= 1e20``."""
-
-
-class UndeclaredFillWarning(UserWarning):
-    """A map's nodes hold a fill value its file does not declare; they were read as
-    missing (NaN) nodes (:func:`read_netcdf`)."""
-
-
 _MAGIC = (b"CDF\x01", b"CDF\x02", b"CDF\x05", b"\x89HDF\r\n\x1a\n")
 """First bytes of NetCDF-3 (classic, 64-bit offset, 64-bit data) and NetCDF-4 (HDF5)."""
 
@@ -258,30 +245,12 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
         msg = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise ValueError(f"{label} cannot be read as NetCDF: {msg}") from None
     with ds:
-        lat_name = _find_axis(ds, LAT_NAMES, "latitude", label)
-        lon_name = _find_axis(ds, LON_NAMES, "longitude", label)
-        lat_dim, lon_dim = _grid_dims(ds, lat_name, lon_name, label)
-        var = _choose_var(ds, var, (lat_dim, lon_dim), label, exclude)
-        da = ds[var]
-        extra = [d for d in da.dims if d not in (lat_dim, lon_dim)]
-        extra = [d for d in extra if da.sizes[d] > 1]
-        da = da.squeeze([d for d in da.dims if d not in (*extra, lat_dim, lon_dim)], drop=True)
-        if ndim is not None and len(extra) + 2 > ndim:
-            sizes = ", ".join(f"{d}: {da.sizes[d]}" for d in da.dims)
-            raise ValueError(
-                f"variable {var!r} of {label} has dimensions ({sizes}); a map must be 2-D "
-                f"(latitude, longitude): extract one level of {extra[0]!r} first (e.g. "
-                f"ncks -d {extra[0]},0 IN OUT)")
-        values = np.asarray(da.transpose(*extra, lat_dim, lon_dim).values)
-        lat = np.asarray(ds.variables[lat_name].values)
-        lon = np.asarray(ds.variables[lon_name].values)
-        units = str(da.attrs.get("units", ""))
-        for name in (lat_name, lon_name):  # were read as degrees: "off the map" at 0.5..2.3
-            declared = str(ds.variables[name].attrs.get("units", "")).strip()
-            if declared.lower() in ("rad", "radian", "radians"):
-                raise ValueError(f"{label}: coordinate {name!r} is in {declared!r}; jaxgrav "
-                                 "reads latitudes and longitudes in degrees: convert them "
-                                 "(x 180/pi) and set units 'degrees_north'/'degrees_east'")
+        if _GMT4 <= set(map(str, ds.variables)):  # GMT 4's native grid: "no latitude"
+            lat, lon, values, units, attrs, encoding = _gmt4_grid(ds, var, label)
+            var, lat_name, lon_name = "z", "y_range", "x_range"
+        else:
+            lat, lon, values, units, attrs, encoding, var, lat_name, lon_name = _cf_grid(
+                ds, var, ndim, exclude, label)
     if values.dtype.kind not in "fciu":  # text was "could not convert string to float:
         # np.str_('a')"; a true/false mask read as a field of 0 and 1
         what = "true/false values (a mask?)" if values.dtype.kind == "b" else "text"
@@ -289,70 +258,67 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
                          f"(dtype {values.dtype}); expected the map's values (e.g. mGal)")
     if values.dtype.kind not in "fc":
         values = values.astype(float)
-    values = _undeclared_fills(values, label, var)
+    values = undeclared_fills(outside_valid_range(values, attrs, encoding), label, var)
     values, units = map_units(values, units)
     return GridArrays(*_checked_axes(lat, lon, label, lat_name, lon_name), values, str(var),
                       units)
 
 
-def _undeclared_fills(values, label, var):
-    """``values`` with undeclared fill values (:data:`FILL_VALUES` beyond the range of every
-    other node, ``|v| >= 1e20`` or infinite) as NaN, and an :class:`UndeclaredFillWarning`
-    naming them."""
-    finite = np.isfinite(values)
-    fill = np.isinf(values) | (finite & (np.abs(values) >= 1e20))  # inf: was silently missing
-    candidates = finite & np.isin(values, FILL_VALUES) & ~fill
-    if candidates.any():  # the range of every other node, without copying a large map
-        others = finite & ~fill & ~candidates
-        low = values.min(where=others, initial=np.inf)
-        high = values.max(where=others, initial=-np.inf)
-        fill |= candidates & ((values < low) | (values > high)) & others.any()
-    if not fill.any():
-        return values
-    found = ", ".join(f"{v:g}" for v in np.unique(values[fill])[:3])
-    warnings.warn(f"{label}: {int(fill.sum())} node(s) of variable {var!r} hold {found}, a fill "
-                  "value the file does not declare (no _FillValue or missing_value attribute); "
-                  "read as missing nodes", UndeclaredFillWarning, stacklevel=3)
-    return np.where(fill, np.nan, values)
+def _cf_grid(ds, var, ndim, exclude, label):
+    """A CF or GMT 5+ grid's coordinates, values (``(..., ny, nx)``), units, the variable's
+    attributes and encoding, its name and those of its coordinates."""
+    lat_name = _find_axis(ds, LAT_NAMES, "latitude", label)
+    lon_name = _find_axis(ds, LON_NAMES, "longitude", label)
+    lat_dim, lon_dim = _grid_dims(ds, lat_name, lon_name, label)
+    var = _choose_var(ds, var, (lat_dim, lon_dim), label, exclude)
+    da = ds[var]
+    extra = [d for d in da.dims if d not in (lat_dim, lon_dim)]
+    extra = [d for d in extra if da.sizes[d] > 1]
+    da = da.squeeze([d for d in da.dims if d not in (*extra, lat_dim, lon_dim)], drop=True)
+    if ndim is not None and len(extra) + 2 > ndim:
+        sizes = ", ".join(f"{d}: {da.sizes[d]}" for d in da.dims)
+        raise ValueError(
+            f"variable {var!r} of {label} has dimensions ({sizes}); a map must be 2-D "
+            f"(latitude, longitude): extract one level of {extra[0]!r} first (e.g. "
+            f"ncks -d {extra[0]},0 IN OUT)")
+    values = np.asarray(da.transpose(*extra, lat_dim, lon_dim).values)
+    lat = np.asarray(ds.variables[lat_name].values)
+    lon = np.asarray(ds.variables[lon_name].values)
+    units = str(da.attrs.get("units", ""))
+    for name in (lat_name, lon_name):  # were read as degrees: "off the map" at 0.5..2.3
+        declared = str(ds.variables[name].attrs.get("units", "")).strip()
+        if declared.lower() in ("rad", "radian", "radians"):
+            raise ValueError(f"{label}: coordinate {name!r} is in {declared!r}; jaxgrav "
+                             "reads latitudes and longitudes in degrees: convert them "
+                             "(x 180/pi) and set units 'degrees_north'/'degrees_east'")
+    return (lat, lon, values, units, da.attrs, da.encoding, var, lat_name, lon_name)
 
 
-def _unit_key(units):
-    key = re.sub(r"\s*\([^()]*\)$", "", units.strip().lower())  # "mGal (free-air)"
-    key = key.replace("µ", "u").replace("μ", "u")
-    key = key.replace("²", "2").replace("⁻", "-")
-    for c in " *^.·":
-        key = key.replace(c, "")
-    return key
+_GMT4 = {"x_range", "y_range", "dimension", "z"}
+_GMT_PLACEHOLDERS = ("", "z", "user_z_unit")
 
 
-def map_units(values, units):
-    """A map's values in the library's units: gravity in mGal, magnetic fields in nT.
-
-    The file's CF ``units`` attribute says what the numbers are (``m s-2``, ``Gal``,
-    ``uGal``, ``gu``, ``T``, ``uT`` …); matching, filtering and the readings' checks
-    work in mGal and nT, so a map in other units is converted, not misread as mGal.
-
-    Parameters
-    ----------
-    values : ndarray
-    units : str
-        The ``units`` attribute (``""``: none, the values are taken as they are).
-
-    Returns
-    -------
-    values : ndarray
-    units : str
-        ``"mGal"`` or ``"nT"`` for a recognised gravity or magnetic unit, else ``units``
-        unchanged (geoid heights in ``m``, DOV in ``arcsec`` …).
-    """
-    scaled = _SCALED_UNIT.fullmatch(_unit_key(units))  # "10^-5 m/s^2": mGal
-    factor, canonical = (
-        (_UNIT_SCALES[scaled.group(2)][0] * 10.0 ** int(scaled.group(1)),
-         _UNIT_SCALES[scaled.group(2)][1]) if scaled and scaled.group(2) in _UNIT_SCALES
-        else _UNIT_SCALES.get(_unit_key(units), (None, units)))
-    if factor is None:
-        return values, units
-    return (values if factor == 1.0 else values * factor), canonical
+def _gmt4_grid(ds, var, label):
+    """Coordinates, values, units, attributes and encoding of a GMT 4 native netCDF grid
+    (``x_range``, ``y_range``, ``dimension``, ``z(xysize)`` stored row by row from the
+    north; ``node_offset`` 1 for pixel registration), which has no latitude coordinate."""
+    if var not in (None, "z"):
+        raise ValueError(f"{label} is a GMT 4 native grid, whose one variable is 'z'; got "
+                         f"--var {var!r}")
+    nx, ny = (int(v) for v in np.ravel(ds["dimension"].values)[:2])
+    z = ds["z"]
+    if nx < 2 or ny < 2 or z.size != nx * ny:
+        raise ValueError(f"{label}: GMT 4 grid variable 'z' holds {z.size} values; its "
+                         f"dimension says {nx} x {ny} (at least 2 x 2)")
+    pixel = int(np.ravel(z.attrs.get("node_offset", 0))[0]) == 1
+    (x0, x1), (y0, y1) = (np.ravel(ds[n].values).astype(float)[:2] for n in ("x_range",
+                                                                          "y_range"))
+    lon = x0 + (np.arange(nx) + 0.5 * pixel) * (x1 - x0) / (nx - 1 + pixel)
+    lat = y1 - (np.arange(ny) + 0.5 * pixel) * (y1 - y0) / (ny - 1 + pixel)
+    units = str(z.attrs.get("units", ds["z_range"].attrs.get("units", "") if "z_range" in ds
+                            else ""))
+    units = "" if units.strip().lower() in _GMT_PLACEHOLDERS else units
+    return lat, lon, np.asarray(z.values).reshape(ny, nx), units, z.attrs, z.encoding
 
 
 def _checked_axes(lat, lon, label, lat_name, lon_name):

@@ -1,12 +1,17 @@
 """Inputs found by the sixth issue-19 hunt (2026-12-07, helper-62): units a header
 declares that were read as the library's own (``drift_radius (km)``, ``v_east (ft/s)``,
 ``t (hours since ...)``), a log that keeps the date and the time of day in two columns,
-date-times with a ``UTC`` suffix or an ordinal day of the year."""
+date-times with a ``UTC`` suffix or an ordinal day of the year, latitudes with
+hemisphere letters or in degrees and minutes; maps: a CF valid range, GMT 4's native
+grid format."""
 
 import numpy as np
 import pytest
+import xarray as xr
 
 from jaxgrav.cli import main
+from jaxgrav.datasets import load_map
+from jaxgrav.grid_files import read_netcdf
 from jaxgrav.track_files import parse_degrees
 from jaxgrav.track_times import parse_datetime
 from jaxgrav.track_units import header_scale
@@ -161,3 +166,71 @@ def test_a_log_in_degrees_and_minutes_is_sampled_at_its_positions(tmp_path, refu
              tmp_path / "s.csv"],
             "bad.csv', line 3, column 'lon': 'east' is not a number (expected degrees (127.5, "
             "-127.5, 127.5 W or 127°30'W))")
+
+
+def _ryukyu_arrays():
+    grid = load_map("ryukyu")
+    return np.asarray(grid.lat), np.asarray(grid.lon), np.asarray(grid.values, float)
+
+
+def test_nodes_outside_a_declared_valid_range_are_missing(tmp_path):
+    """CF ``valid_range``/``valid_min``/``valid_max`` (in the stored, packed type) mark the
+    nodes beyond them missing; xarray does not apply them, so a -500 node in a map
+    declaring ``valid_range = -400, 400`` was read as -500 mGal (``sample`` wrote it)."""
+    lat, lon, v = _ryukyu_arrays()
+    v = v.copy()
+    v[100:103, 100:103] = -500.0
+    for i, attrs in enumerate([{"valid_range": np.array([-400.0, 400.0])},
+                               {"valid_min": -400.0}, {"valid_min": -400.0, "valid_max": 1e3}]):
+        ds = xr.Dataset({"g": (("lat", "lon"), v, {"units": "mGal", **attrs})},
+                        coords={"lat": lat, "lon": lon})
+        ds.to_netcdf(tmp_path / f"m{i}.nc")
+        got = read_netcdf(tmp_path / f"m{i}.nc").values
+        assert np.isnan(got).sum() == 9 and np.isnan(got[100:103, 100:103]).all()
+    packed = xr.Dataset({"g": (("lat", "lon"), v, {"units": "mGal", "valid_min": -40000})},
+                        coords={"lat": lat, "lon": lon})  # -400 mGal, packed in 0.01 mGal
+    packed["g"].encoding = {"dtype": "int32", "scale_factor": 0.01, "_FillValue": -2 ** 31}
+    packed.to_netcdf(tmp_path / "p.nc")
+    got = read_netcdf(tmp_path / "p.nc").values
+    assert np.isnan(got).sum() == 9 and np.nanmin(got) > -400
+
+
+def _gmt4(path, lat, lon, v, pixel):
+    """``v`` (south row first) written as GMT 4's native netCDF grid."""
+    d = (lon[1] - lon[0]) / 2 if pixel else 0.0
+    ny, nx = v.shape
+    xr.Dataset({"x_range": ("side", [lon[0] - d, lon[-1] + d], {"units": "degrees"}),
+                "y_range": ("side", [lat[0] - d, lat[-1] + d], {"units": "degrees"}),
+                "z_range": ("side", [np.nanmin(v), np.nanmax(v)], {"units": "mGal"}),
+                "spacing": ("side", [lon[1] - lon[0]] * 2),
+                "dimension": ("side", np.array([nx, ny], "int32")),
+                "z": ("xysize", v[::-1].ravel(), {"node_offset": int(pixel)})}).to_netcdf(path)
+
+
+@pytest.mark.parametrize("pixel", [False, True])
+def test_a_gmt4_native_grid_is_read(tmp_path, pixel):
+    """GMT 4's native netCDF grids (``x_range``, ``y_range``, ``dimension``, ``z`` from the
+    north row down; ``node_offset`` 1 for pixel registration), still what older survey
+    archives hold, were refused: "has no latitude coordinate"."""
+    lat, lon, v = _ryukyu_arrays()
+    _gmt4(tmp_path / "g.grd", lat, lon, v, pixel)
+    got = read_netcdf(tmp_path / "g.grd")
+    np.testing.assert_allclose(got.lat[::-1], lat, atol=1e-9)
+    np.testing.assert_allclose(got.lon, lon, atol=1e-9)
+    np.testing.assert_array_equal(got.values[::-1], v)
+    assert got.units == "mGal" and got.name == "z"
+
+
+def test_sample_reads_a_gmt4_grid_as_the_same_map(tmp_path, refused):
+    lat, lon, v = _ryukyu_arrays()
+    _gmt4(tmp_path / "g.grd", lat, lon, v, False)
+    _csv(tmp_path / "t.csv", "lat,lon", [(29.5, 126.5), (29.61, 126.73)])
+    out = []
+    for m in (str(tmp_path / "g.grd"), "ryukyu"):
+        assert main(["sample", "--map", m, "--track", str(tmp_path / "t.csv"), "--out",
+                     str(tmp_path / "s.csv"), "--force"]) == 0
+        out.append(np.loadtxt(tmp_path / "s.csv", delimiter=",", skiprows=1))
+    np.testing.assert_allclose(out[0], out[1], rtol=1e-7)  # nodes from x_range: 1e-14 deg
+    refused(["sample", "--map", tmp_path / "g.grd", "--var", "gravity", "--track",
+             tmp_path / "t.csv", "--out", tmp_path / "s2.csv"],
+            "g.grd' is a GMT 4 native grid, whose one variable is 'z'; got --var 'gravity'")

@@ -1,0 +1,133 @@
+"""What a map's numbers mean: fill values, the CF valid range and the units.
+
+:func:`undeclared_fills` reads nodes holding a fill value the file does not declare
+(:data:`FILL_VALUES` beyond every other node's value, ``|v| >= 1e20``, infinite) as
+missing, with an :class:`UndeclaredFillWarning`; :func:`outside_valid_range` reads nodes
+outside a declared CF ``valid_range`` / ``valid_min`` / ``valid_max`` as missing, as CF
+says they are; :func:`map_units` converts a gravity or magnetic map declared in other
+units (``m s-2``, ``uGal``, ``uT`` …) to mGal or nT. Used by
+:func:`jaxgrav.grid_files.read_netcdf`.
+"""
+
+import re
+import warnings
+
+import numpy as np
+
+__all__ = ["FILL_VALUES", "UndeclaredFillWarning", "map_units", "outside_valid_range",
+           "undeclared_fills"]
+
+_UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (factor, units)
+    **dict.fromkeys(("mgal", "mgals", "milligal", "milligals"), (1.0, "mGal")),
+    **dict.fromkeys(("gal", "gals"), (1e3, "mGal")),
+    **dict.fromkeys(("ugal", "microgal", "microgals"), (1e-3, "mGal")),
+    **dict.fromkeys(("ms-2", "m/s2", "m/s/s", "ms-1s-1"), (1e5, "mGal")),
+    **dict.fromkeys(("gu", "um/s2", "ums-2"), (0.1, "mGal")),  # gravity units, µm/s²
+    **dict.fromkeys(("nt", "nanotesla", "gamma", "gammas"), (1.0, "nT")),
+    **dict.fromkeys(("ut", "microtesla"), (1e3, "nT")),
+    **dict.fromkeys(("t", "tesla"), (1e9, "nT")),
+}
+_SCALED_UNIT = re.compile(r"(?:1e|10(?=[-+]))([-+]?\d+)(.+)")
+"""A normalised unit with a power of ten in front (``10^-5 m/s^2``, ``1e-6 m s-2``)."""
+FILL_VALUES = (-9999.0, 9999.0, -99999.0, 99999.0, -999999.0, 999999.0, -32767.0, 32767.0,
+               -32768.0, 65535.0)
+"""Fill values a grid may hold without declaring them (no ``_FillValue`` or
+``missing_value`` attribute, e.g. a grid converted from ASCII); with ``|v| >= 1e20``."""
+
+
+class UndeclaredFillWarning(UserWarning):
+    """A map's nodes hold a fill value its file does not declare; they were read as
+    missing (NaN) nodes (:func:`read_netcdf`)."""
+
+
+def undeclared_fills(values, label, var):
+    """``values`` with undeclared fill values (:data:`FILL_VALUES` beyond the range of every
+    other node, ``|v| >= 1e20`` or infinite) as NaN, and an :class:`UndeclaredFillWarning`
+    naming them."""
+    finite = np.isfinite(values)
+    fill = np.isinf(values) | (finite & (np.abs(values) >= 1e20))  # inf: was silently missing
+    candidates = finite & np.isin(values, FILL_VALUES) & ~fill
+    if candidates.any():  # the range of every other node, without copying a large map
+        others = finite & ~fill & ~candidates
+        low = values.min(where=others, initial=np.inf)
+        high = values.max(where=others, initial=-np.inf)
+        fill |= candidates & ((values < low) | (values > high)) & others.any()
+    if not fill.any():
+        return values
+    found = ", ".join(f"{v:g}" for v in np.unique(values[fill])[:3])
+    warnings.warn(f"{label}: {int(fill.sum())} node(s) of variable {var!r} hold {found}, a fill "
+                  "value the file does not declare (no _FillValue or missing_value attribute); "
+                  "read as missing nodes", UndeclaredFillWarning, stacklevel=3)
+    return np.where(fill, np.nan, values)
+
+
+def _unit_key(units):
+    key = re.sub(r"\s*\([^()]*\)$", "", units.strip().lower())  # "mGal (free-air)"
+    key = key.replace("µ", "u").replace("μ", "u")
+    key = key.replace("²", "2").replace("⁻", "-")
+    for c in " *^.·":
+        key = key.replace(c, "")
+    return key
+
+
+def map_units(values, units):
+    """A map's values in the library's units: gravity in mGal, magnetic fields in nT.
+
+    The file's CF ``units`` attribute says what the numbers are (``m s-2``, ``Gal``,
+    ``uGal``, ``gu``, ``T``, ``uT`` …); matching, filtering and the readings' checks
+    work in mGal and nT, so a map in other units is converted, not misread as mGal.
+
+    Parameters
+    ----------
+    values : ndarray
+    units : str
+        The ``units`` attribute (``""``: none, the values are taken as they are).
+
+    Returns
+    -------
+    values : ndarray
+    units : str
+        ``"mGal"`` or ``"nT"`` for a recognised gravity or magnetic unit, else ``units``
+        unchanged (geoid heights in ``m``, DOV in ``arcsec`` …).
+    """
+    scaled = _SCALED_UNIT.fullmatch(_unit_key(units))  # "10^-5 m/s^2": mGal
+    factor, canonical = (
+        (_UNIT_SCALES[scaled.group(2)][0] * 10.0 ** int(scaled.group(1)),
+         _UNIT_SCALES[scaled.group(2)][1]) if scaled and scaled.group(2) in _UNIT_SCALES
+        else _UNIT_SCALES.get(_unit_key(units), (None, units)))
+    if factor is None:
+        return values, units
+    return (values if factor == 1.0 else values * factor), canonical
+
+
+def outside_valid_range(values, attrs, encoding):
+    """``values`` with the nodes outside the variable's declared CF valid range as NaN.
+
+    Parameters
+    ----------
+    values : ndarray
+        The decoded values (scale and offset applied).
+    attrs, encoding : dict
+        The variable's attributes (``valid_range``, ``valid_min``, ``valid_max``, which CF
+        gives in the stored, packed type) and its encoding (``scale_factor``,
+        ``add_offset``).
+
+    Returns
+    -------
+    ndarray
+        ``values``, or a copy with the nodes beyond the range as NaN (xarray does not
+        apply the range: a node of -500 in a map declaring ``valid_range = -400, 400`` was
+        read as -500 mGal).
+    """
+    low, high = -np.inf, np.inf
+    if "valid_range" in attrs and np.size(attrs["valid_range"]) == 2:
+        low, high = (float(v) for v in np.ravel(attrs["valid_range"]))
+    low = float(np.ravel(attrs["valid_min"])[0]) if "valid_min" in attrs else low
+    high = float(np.ravel(attrs["valid_max"])[0]) if "valid_max" in attrs else high
+    if not (np.isfinite(low) or np.isfinite(high)):
+        return values
+    scale = float(encoding.get("scale_factor", 1.0))
+    offset = float(encoding.get("add_offset", 0.0))
+    low, high = sorted((low * scale + offset, high * scale + offset))
+    outside = (values < low) | (values > high)
+    return np.where(outside, np.nan, values) if outside.any() else values
