@@ -28,6 +28,7 @@ What the reader accepts (parsing of the text: :mod:`jaxgrav.track_files`):
 """
 
 import csv
+from pathlib import Path
 
 import numpy as np
 
@@ -37,7 +38,7 @@ from jaxgrav.track_files import column_key, parse_degrees, parse_numbers, read_t
 from jaxgrav.track_times import DATE_COLUMN, check_time_steps, iso_seconds
 from jaxgrav.track_units import header_scale
 
-__all__ = ["ALIASES", "KNOWN_COLUMNS", "TrackTable", "csv_line", "parse_columns",
+__all__ = ["ALIASES", "KNOWN_COLUMNS", "TAB_SUFFIXES", "TrackTable", "csv_line", "parse_columns",
            "read_track_csv", "write_track_csv"]
 
 ALIASES = {
@@ -47,6 +48,9 @@ ALIASES = {
     "h": ("h", "height"),
 }
 """Header names (any case) accepted for each column, in order of preference."""
+
+TAB_SUFFIXES = (".tsv", ".tab")
+"""Output suffixes :func:`write_track_csv` writes tab-separated."""
 
 KNOWN_COLUMNS = ("t", "lat", "lon", "h", "gravity", "magnetic", "v_east", "v_north",
                  "drift_radius")
@@ -353,7 +357,8 @@ def write_track_csv(path, columns, *, force=False, precision=12):
     Parameters
     ----------
     path : str or Path
-        Output file; an existing file is replaced only with ``force=True``.
+        Output file; an existing file is replaced only with ``force=True``. Comma-separated,
+        or tab-separated when its suffix is one of :data:`TAB_SUFFIXES` (``.tsv``).
     columns : dict of str to array_like
         Column name → 1-D values: numbers (NaN written as an empty cell) or text (str
         arrays, e.g. :attr:`TrackTable.text`, written as they are, quoted when needed).
@@ -376,8 +381,9 @@ def write_track_csv(path, columns, *, force=False, precision=12):
     lengths = {k: a.size for k, a in arrays.items()}
     if len(set(lengths.values())) > 1:
         raise ValueError(f"columns must have equal lengths; got {lengths}")
+    tab = Path(path).suffix.lower() in TAB_SUFFIXES  # --out s.tsv held commas
     with atomic_output(path, force=force) as tmp, open(tmp, "w", newline="") as fh:
-        w = csv.writer(fh, lineterminator="\n")  # csv defaults to CRLF line ends
+        w = csv.writer(fh, lineterminator="\n", delimiter="\t" if tab else ",")  # not CRLF
         w.writerow(list(arrays))
         for row in zip(*arrays.values(), strict=True):
             w.writerow([v if isinstance(v, str) else "" if not np.isfinite(v)

@@ -44,7 +44,9 @@ __all__ = [
 ]
 
 OUT_FORMATS = {".json": "JSON", ".csv": "CSV", ".nc": "NetCDF", ".nc4": "NetCDF",
-               ".grd": "NetCDF", ".png": "PNG", ".pdf": "PDF", ".xlsx": "Excel", ".md": "Markdown"}
+               ".grd": "NetCDF", ".png": "PNG", ".pdf": "PDF", ".xlsx": "Excel", ".md": "Markdown",
+               ".tsv": "TSV", ".tab": "TSV", ".xls": "Excel", ".h5": "HDF5", ".hdf5": "HDF5",
+               ".parquet": "Parquet", ".geojson": "GeoJSON", ".kml": "KML"}
 """What a user expects in a file by its suffix (:func:`check_out_format`)."""
 
 _SUFFIX = {"JSON": ".json", "CSV": ".csv", "NetCDF": ".nc", "Markdown": ".md"}
@@ -213,7 +215,8 @@ _COMPRESSED = (".gz", ".bz2", ".xz", ".zst", ".zip", ".7z")
 def check_out_format(path, writes, option="--out"):
     """ValueError naming ``option`` when ``path``'s suffix promises another format than the
     ``writes`` one (``"JSON"``, ``"CSV"``, ``"NetCDF"`` or ``"Markdown"``): ``match --out
-    result.csv`` wrote JSON into it, exit 0. Suffixes of no known format pass."""
+    result.csv`` wrote JSON into it, exit 0. Suffixes of no known format pass, and a CSV
+    named ``.tsv`` is written tab-separated."""
     path = Path(path)
     if path.suffix.lower() in _COMPRESSED:  # s.csv.gz held plain text (gunzip: not gzip)
         raise ValueError(f"{option} {str(path)!r} names a compressed file, but this command "
@@ -221,8 +224,10 @@ def check_out_format(path, writes, option="--out"):
                          f"{_SUFFIX[writes]} (e.g. {str(path.with_suffix(''))!r}) and compress "
                          "it afterwards")
     fmt = OUT_FORMATS.get(path.suffix.lower())
+    if fmt == "TSV" and writes == "CSV":  # written tab-separated (tracks.write_track_csv)
+        return
     if fmt is not None and fmt != writes:
-        raise ValueError(f"{option} {str(path)!r} names a{'n' if fmt[0] in 'AEIOU' else ''} "
+        raise ValueError(f"{option} {str(path)!r} names a{'n' if fmt[0] in 'AEIOUH' else ''} "
                          f"{fmt} file, but this command writes {writes} there; give a name "
                          f"ending {_SUFFIX[writes]}, e.g. "
                          f"{str(path.with_suffix(_SUFFIX[writes]))!r}")

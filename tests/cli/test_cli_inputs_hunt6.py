@@ -234,3 +234,32 @@ def test_sample_reads_a_gmt4_grid_as_the_same_map(tmp_path, refused):
     refused(["sample", "--map", tmp_path / "g.grd", "--var", "gravity", "--track",
              tmp_path / "t.csv", "--out", tmp_path / "s2.csv"],
             "g.grd' is a GMT 4 native grid, whose one variable is 'z'; got --var 'gravity'")
+
+
+def test_a_tsv_output_is_written_tab_separated(tmp_path):
+    """``sample --out s.tsv`` wrote commas into a file named tab-separated (exit 0); it is
+    now tab-separated and reads back as the same track."""
+    _csv(tmp_path / "t.csv", "t,lat,lon,ship", [(0, 29.5, 126.5, "Maru, No. 1"),
+                                                  (60, 29.51, 126.51, "Maru, No. 1")],
+         fmt=lambda r: [str(r[0]), str(r[1]), str(r[2]), f'"{r[3]}"'])
+    assert main(["sample", "--map", "ryukyu", "--track", str(tmp_path / "t.csv"), "--out",
+                 str(tmp_path / "s.tsv")]) == 0
+    lines = (tmp_path / "s.tsv").read_text().splitlines()
+    assert lines[0] == "t\tlat\tlon\tship\tmap" and lines[1].count("\t") == 4
+    assert "," not in lines[1].replace("Maru, No. 1", "")
+    back = read_track_csv(tmp_path / "s.tsv", required=("lat", "lon"))
+    assert list(back.text["ship"]) == ["Maru, No. 1"] * 2 and back["map"].shape == (2,)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["match", "--map", "ryukyu", "--track", "{d}/t.csv", "--out", "{d}/r.tsv"],
+     "--out '{d}/r.tsv' names a TSV file, but this command writes JSON there; give a name "
+     "ending .json, e.g. '{d}/r.json'"),
+    (["simulate", "--out", "{d}/r.h5", "--truth", "{d}/t.csv"],
+     "--out '{d}/r.h5' names an HDF5 file, but this command writes CSV there"),
+    (["suitability", "--map", "ryukyu", "--out", "{d}/r.parquet"],
+     "--out '{d}/r.parquet' names a Parquet file, but this command writes NetCDF there")])
+def test_an_output_named_for_another_table_format_is_refused(tmp_path, refused, argv, message):
+    """JSON into ``r.tsv``, CSV into ``r.h5`` were written, exit 0."""
+    refused([a.format(d=tmp_path) for a in argv], message.format(d=tmp_path))
+    assert list(tmp_path.iterdir()) == []
