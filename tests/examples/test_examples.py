@@ -73,6 +73,22 @@ def test_paper_c_dov_smoke(tmp_path):
     # compensation must beat the uncompensated INS by orders of magnitude
     assert errors["uncompensated"] > 100 * errors["bilinear-linear"]
     assert errors["bilinear-linear"] > errors["bicubic-harmonic"]
+    # both settings, labelled: the perfect model and the finer (degree-2159) truth
+    assert "setting 1 (perfect model, best case): truth = the degree-60 model" in out
+    assert "setting 2 (finer truth): truth = EGM2008 to degree 2159" in out
+    fine = {r["case"]: r for r in table["table_truth_n2159"]}
+    assert {"uncompensated", "layered bicubic-harmonic", "exact degree-60 model"} <= set(fine)
+    assert len(fine) == len(table["table"]) + 1  # every method, plus the omission alone
+    omission = fine["exact degree-60 model"]["rms_total"]
+    # against the finer truth no method beats the exact model by more than its own error
+    for case, r in fine.items():
+        assert r["rms_total"] > 0.5 * omission, case
+    assert table["settings"]["table_truth_n2159"].startswith("truth = EGM2008 to degree 2159")
+    ins_fine = {m: float(v) for m, v in re.findall(
+        r"INS max horizontal position error \(truth degree 2159\), ([\w-]+): ([\d.]+) m", out)}
+    assert set(ins_fine) == {"uncompensated", "bilinear-linear", "bicubic-harmonic",
+                             "exact-degree-60-model"}
+    assert ins_fine["uncompensated"] > ins_fine["exact-degree-60-model"] > 0
 
 
 def test_paper_d_gravimeter_smoke():
