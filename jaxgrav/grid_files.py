@@ -105,6 +105,13 @@ def check_netcdf_file(path, what="map"):
         looks = "it is empty"
     elif head.startswith((b"\x1f\x8b", b"BZh", b"\xfd7zXZ", b"PK\x03\x04")):
         looks = "it is compressed (gzip, bzip2, xz or zip): decompress it first"
+    elif head.startswith((b"II*\0", b"MM\0*", b"II+\0", b"MM\0+")):  # was "not NetCDF-3 or 4"
+        looks = ("it is a (Geo)TIFF raster: convert it, e.g. gdal_translate -of netCDF IN "
+                 "OUT.nc")
+    elif head.startswith((b"DSAA", b"DSRB", b"DSBB")):  # Surfer grids, often named .grd too
+        looks = "it is a Surfer grid: convert it, e.g. gdal_translate -of netCDF IN OUT.nc"
+    elif head.startswith((b"\x89PNG", b"\xff\xd8\xff", b"%PDF")):
+        looks = "it is an image or a PDF, not gridded values"
     elif b"\0" not in head:
         first = head.decode("utf-8", "replace").lstrip("\ufeff").splitlines()[0][:40]
         looks = f"it is a text file starting {first!r}, a CSV track or table?"

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import jax
 
+from jaxgrav import datasets
 from jaxgrav.cli import (
     bench,
     demo,
@@ -51,8 +52,8 @@ from jaxgrav.cli.cache import enable_cache
 from jaxgrav.fields import egm2008
 from jaxgrav.grid_files import UndeclaredFillWarning
 
-__all__ = ["NEGATIVE_LIST", "build_parser", "check_special_outputs", "joined_negative_lists",
-           "main"]
+__all__ = ["NEGATIVE_LIST", "build_parser", "check_map_names", "check_special_outputs",
+           "joined_negative_lists", "main"]
 
 
 def _enable_x64():
@@ -190,6 +191,30 @@ def check_special_outputs(args):
                              f"e.g. '{str(value).rstrip('/' + os.sep)}/NAME{suffix}'")
 
 
+def check_map_names(args):
+    """``--map`` / ``--truth-map`` that name no file: a shipped map's name in another case
+    (``Ryukyu``) is read as that map; anything else is refused naming the shipped maps
+    (was "map 'Ryukyu' does not exist", with no word of the names that work)."""
+    for name in ("map", "truth_map"):
+        value = getattr(args, name, None)
+        if not isinstance(value, str) or Path(value).exists():
+            continue
+        base, colon, key = value.partition(":")
+        shipped = datasets.available()
+        if base.lower() in shipped:
+            setattr(args, name, base.lower() + colon + key)
+            keys = sorted(datasets.path(base.lower())) if key else [key]
+            if key not in keys:  # was "it has ['anomaly_0p5deg', 'anomaly_2p5min']"
+                raise ValueError(f"--{name.replace('_', '-')} {value!r}: the shipped dataset "
+                                 f"{base.lower()!r} has no map {key!r}; expected "
+                                 f"{' or '.join(f'{base.lower()}:{k}' for k in keys)}")
+        else:
+            raise FileNotFoundError(
+                f"--{name.replace('_', '-')} {value!r} is neither a file nor a shipped map "
+                f"({', '.join(shipped)}); expected the path of a NetCDF grid or a shipped "
+                "map's name")
+
+
 def _stdin_track(args):
     """``--track -``: the standard input (``/dev/stdin``); ValueError when it is a terminal
     (the command waited, silently, for a track typed in)."""
@@ -213,6 +238,7 @@ def main(argv=None):
         if getattr(args, "track", None) == "-":
             _stdin_track(args)
         check_special_outputs(args)
+        check_map_names(args)
         args.func(args)
     except (ValueError, FileExistsError, FileNotFoundError, ImportError) as err:
         if args.debug:

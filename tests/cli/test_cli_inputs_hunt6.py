@@ -263,3 +263,50 @@ def test_an_output_named_for_another_table_format_is_refused(tmp_path, refused, 
     """JSON into ``r.tsv``, CSV into ``r.h5`` were written, exit 0."""
     refused([a.format(d=tmp_path) for a in argv], message.format(d=tmp_path))
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("head, looks", [
+    (b"II*\0\x08\0\0\0", "it is a (Geo)TIFF raster: convert it, e.g. gdal_translate -of netCDF "
+                         "IN OUT.nc"),
+    (b"MM\0*\0\0\0\x08", "it is a (Geo)TIFF raster"),
+    (b"DSAA\n3 3\n0 1\n0 1\n0 1\n1 2 3\n", "it is a Surfer grid: convert it, e.g. "
+                                          "gdal_translate -of netCDF IN OUT.nc"),
+    (b"DSRB\x04\0\0\0", "it is a Surfer grid"),
+    (b"\x89PNG\r\n\x1a\n", "it is an image or a PDF, not gridded values")])
+def test_a_raster_that_is_not_netcdf_says_what_it_is(tmp_path, refused, head, looks):
+    """A GeoTIFF was "its format is not NetCDF-3 or NetCDF-4", and a Surfer ASCII grid
+    (also named ``.grd``) "a text file starting 'DSAA', a CSV track or table?"."""
+    (tmp_path / "m.grd").write_bytes(head)
+    _csv(tmp_path / "t.csv", "lat,lon", [(29.5, 126.5)])
+    refused(["sample", "--map", tmp_path / "m.grd", "--track", tmp_path / "t.csv", "--out",
+             tmp_path / "s.csv"], f"m.grd' is not a NetCDF file ({looks}")
+    assert not (tmp_path / "s.csv").exists()
+
+
+@pytest.mark.parametrize("given", ["Ryukyu", "RYUKYU:anomaly_0p5deg"])
+def test_a_shipped_map_name_in_another_case_is_that_map(tmp_path, given):
+    """``--map Ryukyu`` was "map 'Ryukyu' does not exist"."""
+    _csv(tmp_path / "t.csv", "lat,lon", [(29.5, 126.5), (29.6, 126.6)])
+    out = []
+    for name in (given, given.lower()):
+        assert main(["sample", "--map", name, "--track", str(tmp_path / "t.csv"), "--out",
+                     str(tmp_path / "s.csv"), "--force"]) == 0
+        out.append((tmp_path / "s.csv").read_text())
+    assert out[0] == out[1]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["sample", "--map", "nosuch.nc"], "--map 'nosuch.nc' is neither a file nor a shipped map "
+     "(qinling, ryukyu); expected the path of a NetCDF grid or a shipped map's name"),
+    (["sample", "--map", "ryukyu:bogus"], "--map 'ryukyu:bogus': the shipped dataset 'ryukyu' "
+     "has no map 'bogus'; expected ryukyu:anomaly_0p5deg or ryukyu:anomaly_2p5min"),
+    (["simulate", "--truth-map", "Nope.nc"], "--truth-map 'Nope.nc' is neither a file nor a "
+     "shipped map")])
+def test_a_map_that_is_no_file_names_the_shipped_maps(tmp_path, refused, argv, message):
+    """Was "map 'nosuch.nc' does not exist" and "it has ['anomaly_0p5deg', ...]" (a Python
+    list); now the option and the names that work."""
+    _csv(tmp_path / "t.csv", "lat,lon", [(29.5, 126.5)])
+    extra = (["--track", tmp_path / "t.csv", "--out", tmp_path / "s.csv"] if argv[0] == "sample"
+             else ["--out", tmp_path / "s.csv"])
+    refused([*argv, *extra], message)
+    assert not (tmp_path / "s.csv").exists()
