@@ -19,7 +19,8 @@ their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
 :func:`jaxgrav.track_units.header_scale` reads a unit in a header (``t (min)``,
 ``gravity [m/s^2]``, ``lat (rad)``, ``v_east (kn)``) as the factor to the library's units.
 :func:`parse_numbers` reads one column of cells as float64 (empty, ``nan``, ``NA``,
-``N/A``, ``null`` as NaN; a decimal comma accepted when the delimiter is not a comma);
+``N/A``, ``#N/A``, ``null``, ``-`` as NaN; a decimal comma accepted when the delimiter
+is not a comma);
 :func:`parse_degrees` reads latitudes and longitudes with hemisphere letters or in
 degrees, minutes and seconds (``35°27.716'N``).
 """
@@ -39,8 +40,10 @@ from jaxgrav.track_units import UNIT_SUFFIX
 
 __all__ = ["NA_TOKENS", "Table", "column_key", "parse_degrees", "parse_numbers", "read_table"]
 
-NA_TOKENS = frozenset({"", "nan", "na", "n/a", "null", "none"})
-"""Cells (lower case) read as a missing value (NaN)."""
+NA_TOKENS = frozenset({"", "nan", "na", "n/a", "null", "none", "#n/a", "-", "--"})
+"""Cells (lower case) read as a missing value (NaN): also a spreadsheet's ``#N/A`` and a
+logger's ``-`` or ``--`` (were "not a number")."""
+_DASHES = frozenset({"-", "--"})  # also a units row's "no unit"
 
 _BINARY = {b"CDF": "a NetCDF-3 file", b"\x89HDF": "a NetCDF-4/HDF5 file",
            b"PK": "a zip/xlsx archive", b"\xd0\xcf\x11\xe0": "an old Excel/Office file"}
@@ -241,10 +244,10 @@ def _units_row(header, rows):
     joined as ``t (s)``, ... and the rows without it; unchanged when the first row holds a
     number, or no column has a number in the next row below a text cell (was refused:
     "line 2, column 'lat': 'deg' is not a number")."""
-    if len(rows) < 2 or any(_numberish(c) or c.lower() in NA_TOKENS - {""}
+    if len(rows) < 2 or any(_numberish(c) or c.lower() in NA_TOKENS - {""} - _DASHES
                             for c in rows[0][1]):
         return header, rows
-    units = [u.strip("()[] ") for u in rows[0][1]] + [""] * len(header)
+    units = ["" if u in _DASHES else u.strip("()[] ") for u in rows[0][1]] + [""] * len(header)
     below = rows[1][1]
     if not any(u and j < len(below) and _numberish(below[j]) for j, u in enumerate(units)):
         return header, rows
