@@ -247,6 +247,27 @@ def test_point_evaluation_reproduces_the_degree_360_model(qinling):
     assert np.max(np.abs(fine.xi[k] - got[0])) > 0.1
 
 
+def test_track_product_dataset(qinling):
+    """The builder's track product at small size: fixes, values, check and provenance."""
+    pytest.importorskip("pyshtools")
+    model = qinling["coefficients"]
+    cilm = np.stack([np.asarray(model.c, float), np.asarray(model.s, float)])
+    prod = egm2008.Product("t.nc", "track_dov", lmax=360, track="paper_c", points=4)
+    ds, enc = egm2008.track_dataset(cilm, model.gm, model.radius, prod, {"title": "t"},
+                                    paper_c_trajectory, check_lmax=60)
+    assert ds.attrs["trajectory"] == "jaxgrav.scenarios.paper_c.paper_c_trajectory(4)"
+    assert ds.attrs["check_n60_max_abs_diff_arcsec"] < 1e-9
+    tr = paper_c_trajectory(4)
+    np.testing.assert_array_equal(ds["h"].values, tr.h)
+    for got, want in zip((ds["xi"], ds["eta"]), deflection(model, tr.lat, tr.lon, tr.h),
+                         strict=True):
+        np.testing.assert_allclose(got.values, np.asarray(want, float), rtol=0, atol=1e-6)
+    assert all(enc[v]["dtype"] == "float64" for v in ("xi", "eta", "lat", "lon", "h"))
+    with pytest.raises(ValueError, match=r"track 'paper_c' gave \(5,\) fixes, expected 4"):
+        egm2008.track_dataset(cilm, model.gm, model.radius, prod, {},
+                              lambda n: paper_c_trajectory(n + 1), check_lmax=60)
+
+
 # ---------------------------------------------------------------------- provenance
 @pytest.mark.parametrize("name", ["ryukyu", "qinling"])
 def test_provenance(name):
@@ -271,6 +292,14 @@ def test_provenance(name):
 def test_builder_rejects_unknown_region(tmp_path):
     with pytest.raises(ValueError, match=r"region must be one of.*ryukyu.*qinling.*all"):
         egm2008.build("alps", tmp_path)
+
+
+def test_builder_needs_the_track_of_a_track_product(tmp_path):
+    """The fixes come from the caller (the scenarios sit above the builder's layer)."""
+    with pytest.raises(ValueError, match=r"qinling_paperc_truth_n2159.nc needs the fixes of "
+                                         r"track 'paper_c'.*jaxgrav data egm2008"):
+        egm2008.build("qinling", tmp_path)
+    assert not any(tmp_path.iterdir())
 
 
 def test_builder_refuses_to_overwrite(tmp_path):
@@ -310,7 +339,7 @@ def test_build_end_to_end(tmp_path):
     """Rebuild everything from the geoid grid; compare with the shipped files and
     with checks that do not share the builder's formulas."""
     pyshtools = pytest.importorskip("pyshtools")
-    paths = egm2008.build("all", tmp_path)
+    paths = egm2008.build("all", tmp_path, tracks={"paper_c": paper_c_trajectory})
     assert sorted(p.name for p in paths) == sorted(
         f for r in egm2008.REGIONS.values() for f in r.filenames
     )

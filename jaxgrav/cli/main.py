@@ -51,6 +51,7 @@ from jaxgrav.cli import filter as filtering
 from jaxgrav.cli.cache import enable_cache
 from jaxgrav.fields import egm2008
 from jaxgrav.grid_files import UndeclaredFillWarning
+from jaxgrav.scenarios.paper_c import paper_c_trajectory
 
 __all__ = ["NEGATIVE_LIST", "build_parser", "check_map_names", "check_special_outputs",
            "joined_negative_lists", "main"]
@@ -61,7 +62,8 @@ def _enable_x64():
 
 
 def _cmd_data_egm2008(args):
-    paths = egm2008.build(args.region, Path(args.out), force=args.force)
+    paths = egm2008.build(args.region, Path(args.out), force=args.force,
+                          tracks={"paper_c": paper_c_trajectory})
     for p in paths:
         print(f"wrote {p}")
 

@@ -57,13 +57,14 @@ Approximations (read before using the numbers as "EGM2008")
 
 Track product (paper C's finer truth)
 -------------------------------------
-``qinling_paperc_truth_n2159.nc`` holds ξ, η of the full degree-2159 model at the
-3333 fixes of paper C's climbing trajectory
-(:func:`jaxgrav.scenarios.paper_c.paper_c_trajectory`), each evaluated exactly at its
-own (φ, λ, h) by ``pyshtools.gravmag.MakeGravGridPoint`` (:func:`deflection_points`;
-no grid, no interpolation). The build evaluates the same points at degree 360 with
-the same code and checks them against jaxgrav's own synthesis of the degree-360
-coefficients (an error is raised above 1e-5″; the difference is stored).
+``qinling_paperc_truth_n2159.nc``: ξ, η of the full degree-2159 model at the 3333
+fixes of paper C's trajectory (:func:`jaxgrav.scenarios.paper_c.paper_c_trajectory`,
+passed by ``jaxgrav data egm2008`` as ``build(..., tracks={"paper_c": ...})``), each
+evaluated exactly at its own (φ, λ, h) by ``pyshtools.gravmag.MakeGravGridPoint``
+(:func:`deflection_points`; no grid, no interpolation). The build evaluates the same
+points at degree 360 with the same code and checks them against jaxgrav's own
+synthesis of the degree-360 coefficients (it fails above 1e-5″; the difference is
+stored).
 
 The pieces: :mod:`jaxgrav.fields.egm2008_geoid` (steps 1–3),
 :mod:`jaxgrav.fields.egm2008_synthesis` (step 4) and
@@ -106,7 +107,6 @@ from jaxgrav.fields.egm2008_geoid import (
 from jaxgrav.fields.egm2008_synthesis import anomaly_grid, deflection_grid
 from jaxgrav.fields.harmonic_model import SphericalHarmonics
 from jaxgrav.fields.harmonics import deflection
-from jaxgrav.scenarios.paper_c import paper_c_trajectory
 
 __all__ = [
     "GEOID_FILE",
@@ -144,8 +144,11 @@ class Product:
         Grid spacing (arcminutes); None for coefficients.
     heights : tuple of float
         Heights above the sphere of radius R (m) at which grids are synthesised.
+    track : str or None
+        Name of the track whose fixes a ``track_dov`` product holds (a key of
+        :func:`build`'s ``tracks``; ``"paper_c"``).
     points : int or None
-        Fixes of :func:`~jaxgrav.scenarios.paper_c.paper_c_trajectory` (``track_dov``).
+        Number of fixes of that track (``track_dov``).
     """
 
     filename: str
@@ -153,6 +156,7 @@ class Product:
     lmax: int
     spacing_arcmin: float | None = None
     heights: tuple[float, ...] = (0.0,)
+    track: str | None = None
     points: int | None = None
 
 
@@ -201,14 +205,15 @@ REGIONS = {
             Product("qinling_dov_3min.nc", "dov", lmax=360, spacing_arcmin=3.0,
                     heights=(0.0, 10000.0, 20000.0)),
             Product("qinling_egm2008_n360.nc", "coefficients", lmax=360),
-            Product("qinling_paperc_truth_n2159.nc", "track_dov", lmax=2159, points=3333),
+            Product("qinling_paperc_truth_n2159.nc", "track_dov", lmax=2159,
+                    track="paper_c", points=3333),
         ),
     ),
 }
 """Regions :func:`build` knows, by name."""
 
 
-def build(region, out_dir, *, force=False):
+def build(region, out_dir, *, force=False, tracks=None):
     """Build a region's EGM2008 products and write them to ``out_dir``.
 
     Parameters
@@ -219,6 +224,10 @@ def build(region, out_dir, *, force=False):
         Output directory (created if missing).
     force : bool
         Overwrite existing files. Without it nothing is computed if any output exists.
+    tracks : dict of str to callable, optional
+        For ``track_dov`` products: ``tracks[product.track](product.points)`` returns
+        the fixes (``lat``, ``lon`` in degrees, ``h`` in m). ``jaxgrav data egm2008``
+        passes ``{"paper_c": jaxgrav.scenarios.paper_c.paper_c_trajectory}``.
 
     Returns
     -------
@@ -228,7 +237,7 @@ def build(region, out_dir, *, force=False):
     Raises
     ------
     ValueError
-        Unknown region.
+        Unknown region; a track product whose track is not in ``tracks``.
     FileExistsError
         An output exists and ``force`` is False.
     ImportError
@@ -246,6 +255,11 @@ def build(region, out_dir, *, force=False):
     if existing and not force:
         raise FileExistsError(f"outputs exist: {existing}; pass --force (library: force=True) "
                               "to overwrite")
+    tracks = dict(tracks or {})
+    for p in (p for r in regions for p in r.products if p.track not in (None, *tracks)):
+        raise ValueError(f"{p.filename} needs the fixes of track {p.track!r}: pass tracks="
+                         "{'paper_c': jaxgrav.scenarios.paper_c.paper_c_trajectory} (the "
+                         "command line `jaxgrav data egm2008` does)")
     require_extras()
     out_dir.mkdir(parents=True, exist_ok=True)
     command = build_command(region, out_dir, force)
@@ -276,7 +290,7 @@ def build(region, out_dir, *, force=False):
             elif prod.kind == "coefficients":
                 ds, enc = coefficients_dataset(cilm, prod, attrs)
             elif prod.kind == "track_dov":
-                ds, enc = track_dataset(cilm, gm, radius, prod, attrs)
+                ds, enc = track_dataset(cilm, gm, radius, prod, attrs, tracks[prod.track])
             else:
                 raise ValueError(f"unknown product kind {prod.kind!r}")
             path = out_dir / prod.filename
@@ -331,10 +345,11 @@ def deflection_points(cilm, gm, radius, lat, lon, h, lmax):
     return g[:, 1] / gamma / ARCSEC, -g[:, 2] / gamma / ARCSEC
 
 
-def track_dataset(cilm, gm, radius, product, attrs, check_lmax=360, tol_arcsec=1e-5):
+def track_dataset(cilm, gm, radius, product, attrs, track, check_lmax=360, tol_arcsec=1e-5):
     """Dataset of a ``track_dov`` product: ξ, η at paper C's fixes (float64, arcsec).
 
-    Evaluates :func:`deflection_points` at ``product.lmax`` and, as a check, at
+    Evaluates :func:`deflection_points` at the fixes ``track(product.points)`` at
+    ``product.lmax`` and, as a check, at
     ``check_lmax`` against jaxgrav's own synthesis
     (:func:`jaxgrav.fields.harmonics.deflection`) of the same truncated coefficients.
 
@@ -346,6 +361,8 @@ def track_dataset(cilm, gm, radius, product, attrs, check_lmax=360, tol_arcsec=1
         ``kind == "track_dov"`` with ``points`` fixes.
     attrs : dict
         Provenance attributes (:func:`provenance_attrs`).
+    track : callable
+        ``track(points)`` returns the fixes (``lat``, ``lon`` in degrees, ``h`` in m).
     check_lmax : int
         Degree of the check.
     tol_arcsec : float
@@ -361,7 +378,10 @@ def track_dataset(cilm, gm, radius, product, attrs, check_lmax=360, tol_arcsec=1
     RuntimeError
         The check differs by more than ``tol_arcsec``.
     """
-    tr = paper_c_trajectory(product.points)
+    tr = track(product.points)
+    if np.shape(tr.lat) != (product.points,):
+        raise ValueError(f"track {product.track!r} gave {np.shape(tr.lat)} fixes, expected "
+                         f"{product.points}")
     xi, eta = deflection_points(cilm, gm, radius, tr.lat, tr.lon, tr.h, product.lmax)
     ref = deflection_points(cilm, gm, radius, tr.lat, tr.lon, tr.h, check_lmax)
     with jax.enable_x64(True):
@@ -389,7 +409,7 @@ def track_dataset(cilm, gm, radius, product, attrs, check_lmax=360, tol_arcsec=1
         coords={k: ("point", np.asarray(v, float), a) for k, v, a in
                 zip(("lat", "lon", "h"), (tr.lat, tr.lon, tr.h), point_attrs, strict=True)},
         attrs={**attrs,
-               "trajectory": f"jaxgrav.scenarios.paper_c.paper_c_trajectory({product.points})",
+               "trajectory": f"{track.__module__}.{track.__qualname__}({product.points})",
                "evaluation": "exact point evaluation (no grid, no interpolation)",
                f"check_n{check_lmax}_max_abs_diff_arcsec": diff,
                "check": f"the same code at degree {check_lmax} against "
