@@ -6,7 +6,8 @@ their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
 - encodings: UTF-8 with or without a byte-order mark, UTF-16 with a BOM (spreadsheet
   "Unicode text"), else Latin-1; gzip-compressed (``.csv.gz``); a binary file (NetCDF,
   HDF5, ...) is refused;
-- line ends: LF, CRLF or CR; blank lines and ``#`` comment lines (GMT headers) skipped;
+- line ends: LF, CRLF or CR; blank lines and ``#`` comment lines (GMT headers) skipped,
+  and title lines above the header (``Survey leg 3``: at most half its cells);
 - the delimiter is sniffed from the header line: a tab, else ``;`` when it has at least
   as many as ``,``, else ``,``, else runs of whitespace (``.xyz``, ``.txt``; GMT ``>``
   segment lines skipped); quoted fields may hold the delimiter;
@@ -28,6 +29,7 @@ degrees, minutes and seconds (``35°27.716'N``).
 import csv
 import gzip
 import io
+import itertools
 import re
 import shlex
 import zlib
@@ -147,6 +149,31 @@ def _delimited_rows(text, delimiter, label):
         yield reader.line_num, cells
 
 
+def _count(line, delimiter):
+    """Cells of one line with ``delimiter`` (``" "``: runs of whitespace)."""
+    try:
+        if delimiter == " ":  # as _whitespace_rows splits them
+            return len(shlex.split(line) if ('"' in line or "'" in line) else line.split())
+        return len(next(csv.reader([line], delimiter=delimiter)))
+    except (ValueError, csv.Error, StopIteration):
+        return 0
+
+
+def _preamble(raw, k):
+    """Indices of title lines above the header (``Survey leg 3``, ``Operator: X``), from
+    line ``k``: the lines before the first one that has as many cells (at least 2) as the
+    line after it, each with at most half its cells; none if there is no such line."""
+    lines = [j for j, ln in enumerate(raw[k:k + 40], k)
+             if ln.strip() and not ln.strip().startswith(("#", ">"))][:20]
+    for a, b in itertools.pairwise(lines):
+        delimiter = _sniff(raw[a].strip())
+        n = _count(raw[a], delimiter)
+        if n >= 2 and n == _count(raw[b], delimiter):
+            title = [j for j in lines if j < a]
+            return title if all(2 * _count(raw[j], delimiter) <= n for j in title) else []
+    return []
+
+
 def _is_number(cell):
     try:
         float(cell)
@@ -201,6 +228,12 @@ def read_table(path, label=None):
                          "header row, e.g. t,lat,lon,gravity")
     if declared:  # "sep=;": the delimiter, declared; blanked so line numbers stay the file's
         text = "\n".join([*raw[:k], "", *raw[k + 1:]])
+    title = [] if declared else _preamble(raw, k)
+    if title:  # "Survey leg 3" above the header was read as the header: blanked, as "sep="
+        raw = ["" if j in title else ln for j, ln in enumerate(raw)]
+        text, k = "\n".join(raw), next(j for j in range(title[-1] + 1, len(raw)) if raw[j].strip()
+                                       and not raw[j].strip().startswith(("#", ">")))
+        first = raw[k].strip()
     delimiter = declared.group(1) if declared else _sniff(first)
     rows = (_whitespace_rows(text, label) if delimiter == " "
             else _delimited_rows(text, delimiter, label))

@@ -310,3 +310,29 @@ def test_a_map_that_is_no_file_names_the_shipped_maps(tmp_path, refused, argv, m
              else ["--out", tmp_path / "s.csv"])
     refused([*argv, *extra], message)
     assert not (tmp_path / "s.csv").exists()
+
+
+@pytest.mark.parametrize("title", ["Ryukyu survey leg 3\n", '"Ryukyu survey"\n',
+                                   "Survey: Ryukyu leg 3, ship Maru\nOperator: X\n\n"])
+def test_title_lines_above_the_header_are_skipped(tmp_path, title):
+    """An instrument export's title lines above the header were read as the header:
+    "lacks columns lat and lon; it has Ryukyu, survey, leg, 3" or "line 3 has 7 cells
+    but the header has 2 columns"; the file's own line numbers stay in messages."""
+    body = "t,lat,lon,gravity\n0,29.5,126.5,1\n60,29.51,126.51,x\n"
+    (tmp_path / "t.csv").write_text(title + body)
+    n = title.count("\n")
+    with pytest.raises(ValueError, match=rf"line {n + 3}, column 'gravity': 'x' is not a number"):
+        read_track_csv(tmp_path / "t.csv", required=("t", "lat", "lon"))
+    (tmp_path / "t.csv").write_text(title + body.replace("x", "2"))
+    track = read_track_csv(tmp_path / "t.csv", required=("t", "lat", "lon", "gravity"))
+    assert list(track["gravity"]) == [1.0, 2.0] and list(track.lines) == [n + 2, n + 3]
+
+
+@pytest.mark.parametrize("text", [
+    "t,lat,lon,gravity\n0,29.5,126.5,1,\n60,29.51,126.51,2,\n",  # a trailing delimiter
+    "t,lat,lon,gravity\ns,deg,deg,mGal\n0,29.5,126.5,1\n60,29.51,126.51,2\n",  # units row
+    "lat lon\n29.5 126.5\n"])
+def test_a_header_with_fewer_cells_than_its_rows_is_not_a_title(tmp_path, text):
+    (tmp_path / "t.csv").write_text(text)
+    track = read_track_csv(tmp_path / "t.csv", required=("lat", "lon"))
+    assert track["lat"][0] == 29.5 and track.lines[0] == text.count("\n") - len(track["lat"]) + 1
