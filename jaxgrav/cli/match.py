@@ -20,6 +20,7 @@ from jaxgrav.cli.inputs import (
     fill_map_error_length,
     read_track,
     track_map,
+    whole_number,
 )
 from jaxgrav.cli.match_missing import missing_counts, missing_message
 from jaxgrav.cli.match_size import check_fixes_memory
@@ -71,11 +72,11 @@ def add_parsers(sub):
                         "bound on ICCP's rotation (library max_rotation_deg); default 90, "
                         "i.e. no bound that matters. The README's paper B numbers use 2 with "
                         "--drift-radius 0.035")
-    m.add_argument("--entropy-half-size", type=int, default=ENTROPY_HALF_SIZE, metavar="N",
+    m.add_argument("--entropy-half-size", type=whole_number, default=ENTROPY_HALF_SIZE, metavar="N",
                    help="entropy, entropy+iccp: at most N offsets per side, (2N+1)^2 in all "
                         f"(default {ENTROPY_HALF_SIZE}, as the README's numbers); on fine maps "
                         "the offset spacing grows instead")
-    m.add_argument("--refine", type=int, default=1,
+    m.add_argument("--refine", type=whole_number, default=1,
                    help="refine the map by this factor first (chains: paper A used 100)")
     m.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
                    help="dense, chains, entropy+iccp: σ of the map's error (map units, default "

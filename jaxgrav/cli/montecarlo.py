@@ -93,7 +93,7 @@ def add_parser(subparsers):
     m.add_argument("--chunk", type=whole_number, default=None,
                    help="runs per compiled call (bounds memory; default 256)")
     m.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
-    m.add_argument("--devices", type=int, default=None,
+    m.add_argument("--devices", type=whole_number, default=None,
                    help="use this many devices, at most --runs (default all; on a CPU the "
                         "host is split into this many when JAX has not started yet)")
     m.add_argument("--map", default=None,

@@ -77,6 +77,7 @@ from jaxgrav.cli.inputs import (
     kept_columns,
     read_track,
     track_map,
+    whole_number,
 )
 from jaxgrav.cli.navigate_loose import check_fix_blocks, run_loose
 from jaxgrav.cli.sanity import (
@@ -135,7 +136,7 @@ def add_parser(sub):
                         "that "
                         "matcher into the filter (loosely coupled; --fix-every, --n-fixes, "
                         "--stride)")
-    p.add_argument("--particles", type=int, default=None,
+    p.add_argument("--particles", type=whole_number, default=None,
                    help=f"particles of --method rbpf, at least {MIN_PARTICLES} (default "
                         f"{DEFAULT_PARTICLES})")
     p.add_argument("--seed", type=int, default=None, help="seed of --method rbpf's draws")
@@ -156,13 +157,13 @@ def add_parser(sub):
     p.add_argument("--map-error-length", type=float, default=10000.0, metavar="L",
                    help="its correlation length (m, default 10000)")
     add_map_error_var_option(p)
-    p.add_argument("--fix-every", type=int, default=None,
+    p.add_argument("--fix-every", type=whole_number, default=None,
                    help=f"loosely coupled methods: rows per fix (default "
                         f"{LOOSE_DEFAULTS['fix_every']})")
-    p.add_argument("--n-fixes", type=int, default=None,
+    p.add_argument("--n-fixes", type=whole_number, default=None,
                    help=f"loosely coupled methods: fixes per segment (>= 5, default "
                         f"{LOOSE_DEFAULTS['n_fixes']})")
-    p.add_argument("--stride", type=int, default=None,
+    p.add_argument("--stride", type=whole_number, default=None,
                    help="loosely coupled methods: fixes between segment ends (default = "
                         "--n-fixes: consecutive)")
     add_missing_option(p)

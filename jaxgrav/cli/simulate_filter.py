@@ -13,7 +13,7 @@ import jax
 import numpy as np
 
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import check_out_format, map_error_args
+from jaxgrav.cli.inputs import check_out_format, map_error_args, whole_number
 from jaxgrav.cli.simulate import check_seed, check_simulated_map_error
 from jaxgrav.cli.voyage import MAX_HOURS
 from jaxgrav.datasets import load_map
@@ -39,7 +39,7 @@ def add_parser(subparsers):
                         "line for half the run, then east")
     s.add_argument("--minutes", type=float, default=120.0, help="duration (default 120)")
     s.add_argument("--dt", type=float, default=2.0, help="row interval (s, default 2)")
-    s.add_argument("--reading-every", type=int, default=5,
+    s.add_argument("--reading-every", type=whole_number, default=5,
                    help="a gravity reading every this many rows (default 5: every 10 s)")
     s.add_argument("--map", default=None,
                    help="simulate over this anomaly map (NetCDF or a shipped map, e.g. "

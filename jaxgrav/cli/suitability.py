@@ -77,7 +77,7 @@ def add_parser(subparsers):
                    help="the map's error 1-sigma (mGal, default 0: the map is the truth)")
     s.add_argument("--map-error-length", type=float, default=None, metavar="L",
                    help="its correlation length along the track (m, default 10000)")
-    s.add_argument("--window", type=int, default=None, metavar="NODES",
+    s.add_argument("--window", type=whole_number, default=None, metavar="NODES",
                    help="side of the descriptors' window (odd; default the segment length)")
     s.add_argument("--force", action="store_true", help="overwrite existing outputs")
     s.set_defaults(func=cmd_suitability)

@@ -10,6 +10,7 @@ import pytest
 import xarray as xr
 
 from jaxgrav.cli import main
+from jaxgrav.cli.main import build_parser
 from jaxgrav.datasets import load_map
 from jaxgrav.grid_files import read_netcdf
 from jaxgrav.track_files import parse_degrees
@@ -336,3 +337,30 @@ def test_a_header_with_fewer_cells_than_its_rows_is_not_a_title(tmp_path, text):
     (tmp_path / "t.csv").write_text(text)
     track = read_track_csv(tmp_path / "t.csv", required=("lat", "lon"))
     assert track["lat"][0] == 29.5 and track.lines[0] == text.count("\n") - len(track["lat"]) + 1
+
+
+@pytest.mark.parametrize("argv", [
+    ["navigate", "--track", "{d}/t.csv", "--out", "{d}/n.csv", "--method", "rbpf",
+     "--particles"],
+    ["navigate", "--track", "{d}/t.csv", "--out", "{d}/n.csv", "--method", "dense",
+     "--fix-every"],
+    ["navigate", "--track", "{d}/t.csv", "--out", "{d}/n.csv", "--method", "dense", "--n-fixes"],
+    ["navigate", "--track", "{d}/t.csv", "--out", "{d}/n.csv", "--method", "dense", "--stride"],
+    ["simulate-filter", "--out", "{d}/s.csv", "--reading-every"],
+    ["suitability", "--map", "ryukyu", "--out", "{d}/s.nc", "--window"],
+    ["match", "--map", "ryukyu", "--track", "{d}/t.csv", "--out", "{d}/m.json", "--refine"],
+    ["match", "--map", "ryukyu", "--track", "{d}/t.csv", "--out", "{d}/m.json",
+     "--entropy-half-size"],
+    ["montecarlo", "--method", "dense", "--runs", "8", "--out", "{d}/m.nc", "--devices"]])
+def test_every_count_option_reads_counts_alike(tmp_path, capsys, argv):
+    """``navigate --particles 1e3`` was "invalid int value: '1e3'" where ``filter
+    --particles 1e3`` ran: the count options left on argparse's int now read ``1e3`` and
+    name ``2.5`` as hunt 5's did."""
+    with pytest.raises(SystemExit) as exit_:
+        main([a.format(d=tmp_path) for a in argv] + ["2.5"])
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and "\n" not in err, err
+    assert f"argument {argv[-1]}: expected a whole number (e.g. 1000 or 1e6); got '2.5'" in err
+    parser_args = build_parser().parse_args(
+        [a.format(d=tmp_path) for a in argv] + ["1e1"])
+    assert getattr(parser_args, argv[-1][2:].replace("-", "_")) == 10
