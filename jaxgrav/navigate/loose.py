@@ -41,6 +41,7 @@ from jaxgrav.navigate.loose_match import (
     LOOSE_MATCHERS,
     match_segment,
     matcher_config,
+    schuler_length_m,
 )
 from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance
@@ -159,7 +160,11 @@ def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=100
     window fixed at ``chain_reach_m`` about each fix (the loop cannot widen it per segment
     as it does the other matchers' grids: a segment whose Rayleigh reach is larger is still
     matched in that window, and the fix's edge test and the innovation gate are what guard
-    it), the difference score (the reading bias drops out), the GLS posterior fix.
+    it), the difference score (the reading bias drops out), the GLS posterior fix, the
+    Eötvös error of the filter's velocity told at its along-track Schuler length with the
+    map error (:func:`~jaxgrav.navigate.loose_match.told_error`), a fix with more than
+    :data:`~jaxgrav.navigate.loose_match.LOOSE_MAX_EDGE_MASS` of its posterior on the
+    window's edge rejected.
 
     Parameters
     ----------
@@ -305,8 +310,9 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     on_map = jnp.all(jnp.isfinite(grid.sample(lat, lon, method="bilinear")))
     usable = complete & jnp.all(jnp.isfinite(g)) & on_map
     sig_e = eotvos_sigma(jnp.mean(lat), ins.v_east[end], ins.v_north[end], p[2:4, 2:4])
+    length_e = schuler_length_m(jnp.hypot(ins.v_east[end], ins.v_north[end]), jnp.mean(lat))
     res = match_segment(cfg.matcher, grid, lat, lon, jnp.where(jnp.isfinite(g), g, 0.0), reach,
-                        sig_e, (cfg.min_spacing_m, cfg.max_spacing_m))
+                        sig_e, (cfg.min_spacing_m, cfg.max_spacing_m), length_e)
     return res, reach, usable
 
 

@@ -4,6 +4,16 @@
 uses them; :func:`match_segment` matches one corrected segment with the search spread
 over the segment's reach and the Eötvös error of the filter's velocity told beside the
 map's error.
+
+The Eötvös error of the filter's velocity is not a map error: the navigation INS's
+velocity error oscillates at the Schuler rate ω_s = √(g/R) (84 min), so along a track
+sailed at speed v it varies over ``v/ω_s`` (4.1 km at 10 kn), not over the map error's
+L (10 km). The chain matcher, which reads one correlated error, is told the sum of the
+two as one Gauss–Markov process of the same variance and the same slope variance
+(:func:`told_error`): told with the map's L, the Eötvös error's faster wiggles were
+explained by shifting the track, and its fixes, 8 km of window about each fix, were
+centred off the truth with a covariance too small for it (``examples/voyage_loose.py
+--calibrate --matcher chains``).
 """
 
 import dataclasses
@@ -11,15 +21,18 @@ import math
 
 import jax.numpy as jnp
 
+from jaxgrav.constants import MGAL, WGS84_MEAN_RADIUS
 from jaxgrav.fields.map_error import map_error
+from jaxgrav.geodesy import normal_gravity
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import ChainConfig, match_chains
 from jaxgrav.match.dense import DenseConfig, match_dense
 from jaxgrav.match.entropy import EntropyConfig
-from jaxgrav.match.sizing import FAR_FIX_RADII, chain_grid, config_for, iccp_config_for
-from jaxgrav.prepared import prepare_map
+from jaxgrav.match.sizing import CHAIN_NODE_DEG, FAR_FIX_RADII, config_for, iccp_config_for
+from jaxgrav.prepared import as_grid, prepare_map
 
-__all__ = ["CHAIN_REACH_M", "LOOSE_MATCHERS", "loose_map", "match_segment", "matcher_config"]
+__all__ = ["CHAIN_REACH_M", "LOOSE_MATCHERS", "LOOSE_MAX_EDGE_MASS", "loose_map", "match_segment",
+           "matcher_config", "schuler_length_m", "told_error"]
 
 LOOSE_MATCHERS = ("dense", "chains", "entropy+iccp")
 """Matchers of the loop: the dense offset grid (GLS score, Gauss–Newton), paper A's
@@ -29,6 +42,14 @@ search and ICCP fine match (the reading bias marginalised)."""
 CHAIN_REACH_M = 8000.0
 """Reach (m) of the chain matcher's fixed window about each fix (:func:`matcher_config`):
 the Rayleigh 99.9 % reach of a 2.1 km position 1-σ."""
+
+
+LOOSE_MAX_EDGE_MASS = 0.2
+"""A loop fix with more than this share of its posterior on the search region's edge is
+rejected (status 4096): the likelihood goes on beyond the region, so the fix and its
+covariance, cut there, are not what the readings say. The dense and entropy+ICCP
+matchers are given it as ``max_edge_mass``; the chains' window is tested in
+:func:`match_segment`."""
 
 
 def loose_map(grid, matcher):
@@ -44,12 +65,75 @@ def loose_map(grid, matcher):
     -------
     Grid or PreparedMap
         ``chains``: the map refined to :data:`~jaxgrav.match.sizing.CHAIN_NODE_DEG` nodes
-        (:func:`~jaxgrav.match.sizing.chain_grid`; its nodes are the candidates, no spline
-        needed); the others: the map with its bicubic spline prepared once.
+        by its bicubic spline (its nodes are the candidates, no spline needed then); the
+        others: the map with its bicubic spline prepared once. The chains' nodes are the
+        values the other matchers read: paper A's bilinear refinement
+        (:func:`~jaxgrav.match.sizing.chain_grid`) differs from the spline by 0.6 mGal
+        RMS on the shipped 2.5′ map, an error the chains' covariance was not told.
     """
     if matcher not in LOOSE_MATCHERS:
         raise ValueError(f"matcher must be one of {LOOSE_MATCHERS}; got {matcher!r}")
-    return chain_grid(grid) if matcher == "chains" else prepare_map(grid)
+    if matcher != "chains":
+        return prepare_map(grid)
+    grid = as_grid(grid)
+    factor = max(1, round(min(grid.dlat, grid.dlon) / CHAIN_NODE_DEG))  # as chain_grid's
+    return grid.refine(factor, "bicubic") if factor > 1 else grid
+
+
+def schuler_length_m(speed, lat):
+    """Along-track correlation length (m) of an error oscillating at the Schuler rate.
+
+    A velocity error ``cos(ω_s t)`` read along a track sailed at ``speed`` and a second-order
+    Gauss–Markov covariance ``(1 + d/L) e^{−d/L}`` have the same curvature at zero lag
+    (the same slope variance) when ``L = speed / ω_s``, ``ω_s = √(g/R)``.
+
+    Parameters
+    ----------
+    speed : Array
+        Ground speed (m/s).
+    lat : Array
+        Latitude (degrees) of the normal gravity g.
+
+    Returns
+    -------
+    Array
+        ``L`` (m); 0 at rest (the error then varies in time only: white along the fixes).
+    """
+    rate = jnp.sqrt(normal_gravity(lat) * MGAL / WGS84_MEAN_RADIUS)  # rad/s
+    return jnp.abs(speed) / rate
+
+
+def told_error(map_sigma, map_length_m, eotvos_sigma, eotvos_length_m, order=2):
+    """One Gauss–Markov error standing for the map's and the Eötvös error together.
+
+    The variance is the sum; L gives the sum's slope variance: ``σ²/L² = Σ σ_k²/L_k²``
+    (order 2, the curvature at zero lag) or ``σ²/L = Σ σ_k²/L_k`` (order 1, the slope
+    at zero lag). An error of L = 0 (white) makes the sum white.
+
+    Parameters
+    ----------
+    map_sigma, map_length_m : Array
+        The map error told (mGal, m).
+    eotvos_sigma, eotvos_length_m : Array
+        The Eötvös error of the filter's velocity (mGal) and its length
+        (:func:`schuler_length_m`; m).
+    order : {1, 2}
+        Gauss–Markov order of the told covariance.
+
+    Returns
+    -------
+    sigma, length_m : Array
+        mGal, m (``map_length_m`` when both σ are 0).
+    """
+    sigmas = jnp.stack([jnp.asarray(map_sigma, float), jnp.asarray(eotvos_sigma, float)])
+    lengths = jnp.stack([jnp.asarray(map_length_m, float), jnp.asarray(eotvos_length_m, float)])
+    var = jnp.sum(sigmas**2)
+    p = 2 if order == 2 else 1
+    safe = jnp.where(lengths > 0, lengths, 1.0)
+    rough = jnp.sum(jnp.where(sigmas > 0, jnp.where(lengths > 0, sigmas**2 / safe**p, jnp.inf),
+                              0.0))
+    length = jnp.where(rough > 0, (var / jnp.where(rough > 0, rough, 1.0)) ** (1.0 / p), 0.0)
+    return jnp.sqrt(var), jnp.where(var > 0, length, map_length_m)
 
 
 def matcher_config(matcher, noise_mgal, map_error_mgal, map_error_length_m, grid=None,
@@ -82,7 +166,7 @@ def matcher_config(matcher, noise_mgal, map_error_mgal, map_error_length_m, grid
     if matcher == "dense":
         return DenseConfig(noise_mgal=noise_mgal, map_error_mgal=map_error_mgal,
                            map_error_length_m=map_error_length_m, fix="posterior",
-                           max_sigma_m=3000.0, max_edge_mass=0.2, n_rotations=5,
+                           max_sigma_m=3000.0, max_edge_mass=LOOSE_MAX_EDGE_MASS, n_rotations=5,
                            max_rotation_deg=3.0, score_model="gls")
     if grid is None:
         raise ValueError(f"loose_config(matcher={matcher!r}) needs the grid (entropy+iccp: "
@@ -100,11 +184,24 @@ def matcher_config(matcher, noise_mgal, map_error_mgal, map_error_length_m, grid
     iccp = iccp_config_for(grid, 1000.0, stage="fine", noise=noise_mgal, max_rotation_deg=3.0,
                            map_error=map_error(map_error_mgal, map_error_length_m),
                            bias_sigma=math.inf, fix="posterior", max_sigma_m=3000.0,
-                           max_edge_mass=0.2)
+                           max_edge_mass=LOOSE_MAX_EDGE_MASS)
     return (EntropyConfig(half_size=20), iccp)
 
 
-def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bounds):
+def _edge_tested(res, lat, lon):
+    """``res`` rejected (status 4096, the INS track kept) when its posterior's edge mass
+    exceeds :data:`LOOSE_MAX_EDGE_MASS` (a NaN edge mass never rejects)."""
+    edge = res.accepted & (res.edge_mass > LOOSE_MAX_EDGE_MASS)
+    keep = res.accepted & ~edge
+    return res._replace(
+        lat=jnp.where(keep, res.lat, lat), lon=jnp.where(keep, res.lon, lon),
+        offset_north_m=jnp.where(keep, res.offset_north_m, 0.0),
+        offset_east_m=jnp.where(keep, res.offset_east_m, 0.0),
+        accepted=keep, status=res.status | jnp.where(edge, 4096, 0).astype(res.status.dtype))
+
+
+def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bounds,
+                  eotvos_length_m=None):
     """Match one corrected segment as the loop does.
 
     Parameters
@@ -124,16 +221,23 @@ def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bound
         ``(min_spacing_m, max_spacing_m)``; the second static (the dense matcher compiles
         only the map reads that spacings up to it need,
         :attr:`~jaxgrav.match.dense.DenseConfig.spacing_bound_m`).
+    eotvos_length_m : Array, optional
+        ``chains``: the Eötvös error's along-track length (m, :func:`schuler_length_m`),
+        told with the map error as one error (:func:`told_error`); None: the map
+        error's L. The other matchers are told the Eötvös error with the map error's L.
 
     Returns
     -------
     MatchResult
     """
     if isinstance(matcher, ChainConfig):  # a fixed window of map nodes
-        told = jnp.sqrt(matcher.map_error_mgal**2 + sigma_eotvos**2)
+        length_e = matcher.map_error_length_m if eotvos_length_m is None else eotvos_length_m
+        told, length = told_error(matcher.map_error_mgal, matcher.map_error_length_m,
+                                  sigma_eotvos, length_e, matcher.map_error_order)
         delta = 2.0 * jnp.sqrt(matcher.noise_mgal**2 + told**2)  # as config_for's
-        return match_chains(grid, lat, lon, g, dataclasses.replace(
-            matcher, map_error_mgal=told, delta=delta))
+        res = match_chains(grid, lat, lon, g, dataclasses.replace(
+            matcher, map_error_mgal=told, map_error_length_m=length, delta=delta))
+        return _edge_tested(res, lat, lon)
     dense = isinstance(matcher, DenseConfig)
     # the offset grid's settings, and the settings that are told the map error
     offsets, told_to = (matcher, matcher) if dense else matcher

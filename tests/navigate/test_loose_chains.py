@@ -1,0 +1,124 @@
+"""The chain matcher in the loosely coupled loop (navigate.loose_match): the error it is
+told (the Eötvös error of the filter's velocity at its Schuler length, with the map's
+error as one Gauss–Markov error of the same variance and slope variance), the map it
+reads (the bicubic spline at 0.005° nodes) and the edge test of its fixes."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgrav.constants import KNOT, MGAL, WGS84_MEAN_RADIUS
+from jaxgrav.geodesy import normal_gravity
+from jaxgrav.match.correlation import ChainConfig
+from jaxgrav.match.gls import track_covariance
+from jaxgrav.match.result import MatchResult
+from jaxgrav.match.sizing import chain_grid
+from jaxgrav.navigate import loose_match
+from jaxgrav.navigate.loose_match import (
+    LOOSE_MAX_EDGE_MASS,
+    loose_map,
+    match_segment,
+    schuler_length_m,
+    told_error,
+)
+from jaxgrav.prepared import prepare_map
+
+
+def _one_minus_corr(sigma, length, h, order=2):
+    """``1 − C(h)/C(0)`` of the told Gauss–Markov error (track_covariance, no noise)."""
+    c = np.asarray(track_covariance(jnp.array([0.0, h]), jnp.zeros(2), 1e-9, sigma, length,
+                                    order))
+    return 1.0 - c[0, 1] / c[0, 0]
+
+
+def test_the_schuler_length_gives_a_markov_error_the_schuler_curvature():
+    """A velocity error cos(ω_s t) read at 10 kn and the Markov error of L = v/ω_s have the
+    same curvature at zero lag; at 10 kn L is about 4.1 km (not the map error's 10 km)."""
+    v, lat = 10 * KNOT, 26.0
+    length = float(schuler_length_m(v, lat))
+    rate = np.sqrt(float(normal_gravity(lat)) * MGAL / WGS84_MEAN_RADIUS)
+    assert 2 * np.pi / rate / 60 == pytest.approx(84.4, abs=0.3)  # the Schuler period, min
+    assert length == pytest.approx(4140.0, rel=0.01)
+    h = 20.0  # m, small against L
+    assert _one_minus_corr(1.0, length, h) == pytest.approx(1 - np.cos(rate * h / v), rel=0.02)
+    assert float(schuler_length_m(0.0, lat)) == 0.0
+
+
+def test_told_error_keeps_the_variance_and_the_slope_variance():
+    sigma, length = (float(a) for a in told_error(3.0, 10000.0, 2.0, 4000.0))
+    assert sigma**2 == pytest.approx(13.0)
+    assert sigma**2 / length**2 == pytest.approx(9.0 / 1e8 + 4.0 / 1.6e7)
+    # near zero lag the told error decorrelates as the sum of the two does
+    h = 20.0
+    both = (9 * _one_minus_corr(1, 1e4, h) + 4 * _one_minus_corr(1, 4e3, h)) / 13
+    assert _one_minus_corr(sigma, length, h) == pytest.approx(both, rel=0.02)
+    # order 1: the slope at zero lag, σ²/L = Σ σ_k²/L_k
+    s1, l1 = (float(a) for a in told_error(3.0, 10000.0, 2.0, 4000.0, order=1))
+    assert s1**2 / l1 == pytest.approx(9.0 / 1e4 + 4.0 / 4e3)
+    # one error alone is told as it is; none: the map's L; a white one makes the sum white
+    np.testing.assert_allclose(told_error(3.0, 10000.0, 0.0, 4000.0), (3.0, 10000.0))
+    np.testing.assert_allclose(told_error(0.0, 10000.0, 2.0, 4000.0), (2.0, 4000.0))
+    np.testing.assert_allclose(told_error(0.0, 10000.0, 0.0, 4000.0), (0.0, 10000.0))
+    np.testing.assert_allclose(told_error(3.0, 10000.0, 2.0, 0.0), (np.sqrt(13.0), 0.0))
+
+
+class _Told(Exception):
+    """Carries the settings match_segment gave the chain matcher."""
+
+
+def test_the_chains_are_told_the_eotvos_error_at_its_schuler_length(smooth_grid, monkeypatch):
+    def fake(grid, lat, lon, g, config):
+        raise _Told(config)
+
+    monkeypatch.setattr(loose_match, "match_chains", fake)
+    config = ChainConfig(noise_mgal=0.3, map_error_mgal=3.0, map_error_length_m=10000.0)
+    lat, lon = jnp.linspace(29.9, 30.1, 10), jnp.full(10, 130.0)
+    args = (config, smooth_grid, lat, lon, jnp.zeros(10), 1000.0, 2.0, (100.0, 1500.0))
+    with pytest.raises(_Told) as told:
+        match_segment(*args, eotvos_length_m=4000.0)
+    sent = told.value.args[0]
+    sigma, length = told_error(3.0, 10000.0, 2.0, 4000.0)
+    assert float(sent.map_error_mgal) == pytest.approx(float(sigma))
+    assert float(sent.map_error_length_m) == pytest.approx(float(length))
+    assert float(sent.delta) == pytest.approx(2 * np.sqrt(0.3**2 + 13.0))
+    with pytest.raises(_Told) as told:  # no length given: the map error's
+        match_segment(*args)
+    assert float(told.value.args[0].map_error_length_m) == pytest.approx(10000.0)
+
+
+def test_the_chains_in_the_loop_read_the_maps_spline_at_their_nodes(smooth_grid):
+    nodes = loose_map(smooth_grid, "chains")
+    assert nodes.dlat == pytest.approx(0.005) and nodes.dlon == pytest.approx(0.005)
+    lat, lon = np.meshgrid(np.asarray(nodes.lat)[::7], np.asarray(nodes.lon)[::7],
+                           indexing="ij")
+    spline = prepare_map(smooth_grid).sample(jnp.asarray(lat), jnp.asarray(lon), "bicubic")
+    np.testing.assert_allclose(np.asarray(nodes.values)[::7, ::7], spline, atol=1e-3)
+    # not paper A's bilinear refinement (chain_grid), which differs from the spline
+    assert np.max(np.abs(np.asarray(chain_grid(smooth_grid).values - nodes.values))) > 0.1
+
+
+def _result(edge_mass, n=4):
+    z = jnp.zeros(())
+    fields = {f: z for f in MatchResult._fields}
+    return MatchResult(**{**fields, "lat": jnp.full(n, 30.01), "lon": jnp.full(n, 130.01),
+                          "offset_north_m": jnp.asarray(900.0),
+                          "offset_east_m": jnp.asarray(-400.0), "status": jnp.asarray(0),
+                          "accepted": jnp.asarray(True), "edge_mass": jnp.asarray(edge_mass)})
+
+
+@pytest.mark.parametrize("edge_mass", [0.5, LOOSE_MAX_EDGE_MASS + 0.01])
+def test_a_chain_fix_with_its_posterior_on_the_window_edge_is_rejected(edge_mass):
+    lat, lon = jnp.full(4, 30.0), jnp.full(4, 130.0)
+    res = loose_match._edge_tested(_result(edge_mass), lat, lon)
+    assert not bool(res.accepted) and int(res.status) & 4096
+    assert float(res.offset_north_m) == 0.0 and float(res.offset_east_m) == 0.0
+    np.testing.assert_array_equal(res.lat, lat)
+    np.testing.assert_array_equal(res.lon, lon)
+
+
+@pytest.mark.parametrize("edge_mass", [0.0, LOOSE_MAX_EDGE_MASS - 0.01, np.nan])
+def test_a_chain_fix_inside_its_window_is_kept(edge_mass):
+    lat, lon = jnp.full(4, 30.0), jnp.full(4, 130.0)
+    res = loose_match._edge_tested(_result(edge_mass), lat, lon)
+    assert bool(res.accepted) and int(res.status) == 0
+    assert float(res.offset_north_m) == 900.0 and float(res.lat[0]) == pytest.approx(30.01)
