@@ -15,8 +15,11 @@ ratio, the position NEES (2 expected), the fix events and runs per second.
 ``--calibrate`` measures the fixes alone instead: on each voyage an ideal filter (fed
 honest 500 m fixes of the true segment-mean error every hour) gives the state a good
 loop would have; each hour's segment, corrected with it, is matched as the loop does
-and the fix compared with the true residual: error, fix NEES (2 expected), by quartile
-of the matcher's edge mass; and the ideal filter's own hourly RMS error and NEES.
+and the fix compared with the true residual: error, fix NEES (2 expected; median 1.39)
+and the share within the fix's 95 % ellipse (coverage, 0.95 expected), over every fix
+(a rejected one as no correction with the matcher's covariance) and over the accepted
+ones, by quartile of the matcher's edge mass; and the ideal filter's own hourly RMS
+error and NEES.
 
 Run: ``python examples/voyage_loose.py [--runs 100] [--sigma 3] [--length 10000]
 [--ins navigation|strategic] [--calibrate] [--smoke]``.
@@ -49,6 +52,9 @@ from jaxgrav.navigate import (
 from jaxgrav.plot import plot_voyage_errors, save_figure
 from jaxgrav.scenarios import INS_GRADES, voyage_preset, voyage_scenario
 from jaxgrav.sim.ins import initial_covariance
+
+CHI2_2_95 = 5.991
+"""95 % point of χ²(2): a fix whose NEES is below it is covered by its 95 % ellipse."""
 
 EVERY = 60
 """Steps between the samples of the error series kept for the figure (10 min)."""
@@ -129,8 +135,14 @@ def calibrate(pm, grid, scenario, model, config, keys, fix_sigma=500.0):
                 "fix_err_rms_m": float(np.sqrt(np.mean(err[bins == b] ** 2))),
                 "fix_nees_median": float(np.median(nees[bins == b]))}
                for b, q in enumerate([*quart, edge.max()])]
+    acc = accepted.astype(bool)
     return {"fix_err_median_m": float(np.median(err)), "fix_nees_median": float(np.median(nees)),
-            "accepted": float(np.mean(accepted)), "by_edge_mass": by_edge,
+            "fix_coverage_95": float(np.mean(nees <= CHI2_2_95)),
+            "accepted": float(np.mean(accepted)),
+            "accepted_fix_err_median_m": float(np.median(err[acc])),
+            "accepted_fix_nees_median": float(np.median(nees[acc])),
+            "accepted_fix_coverage_95": float(np.mean(nees[acc] <= CHI2_2_95)),
+            "by_edge_mass": by_edge,
             "ideal_filter_hourly_rms_m": np.sqrt(np.mean(kf_err**2, 0)).round(0).tolist(),
             "ideal_filter_nees": float(np.mean(kf_nees))}
 
