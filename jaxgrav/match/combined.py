@@ -30,7 +30,7 @@ import jax.numpy as jnp
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match.contour import value_grad
-from jaxgrav.match.entropy import EntropyConfig, coarse_offsets, offset_grid
+from jaxgrav.match.entropy import EntropyConfig, coarse_stage, offset_grid
 from jaxgrav.match.fix_covariance import (
     gauss_newton_information,
     integrity_status,
@@ -99,8 +99,8 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     lat, lon, readings = (jnp.asarray(x) for x in (lat, lon, readings))
     n = readings.shape[0]
     pm = prepare_map(grid)
-    coarse, d_n, d_e, top_n, top_e = coarse_offsets(pm.sampler(entropy.method), lat, lon,
-                                                    readings, entropy)
+    coarse, d_n, d_e, top_n, top_e, vals, index = coarse_stage(
+        pm.sampler(entropy.method), lat, lon, readings, entropy)
     p0, field = local_track_frame(pm.patches(), pm.grid, lat, lon)
     dtype = p0.dtype
     z = readings.astype(dtype)
@@ -113,38 +113,37 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     sb = jnp.asarray(iccp.bias_sigma, dtype)  # 0: bias-free readings (as ICCP assumes)
     gls_b = lambda f: gls_score(wh, z - f, sb)  # noqa: E731  (score, bias)
     g_n, g_e = offset_grid(entropy, dtype)
-    starts = _starts(top_n, top_e, d_n, d_e, dtype)
-    # the map and the GLS scores along the grid's offsets and the ICCP starts (the last
-    # start is the coarse fix) in one evaluation, unless the posterior moves the fix
-    grid_off = jnp.stack([g_n, g_e], -1)
-    posterior = iccp.fix == "posterior"
-    f_s, g_s = value_grad(field, p0 + (grid_off if posterior else jnp.concatenate(
-        [grid_off, starts]))[:, None, :])
-    j_s, b_s = gls_b(f_s)
-    j_grid = j_s[:g_n.shape[0]]
+    # the GLS scores along the grid's offsets from the map the coarse stage read there
+    # (bicubic; else the bicubic map is read along them)
+    if entropy.method != "bicubic":
+        vals, _ = value_grad(field, p0 + jnp.stack([g_n, g_e], -1)[:, None, :])
+    j_grid, b_grid = gls_b(vals.astype(dtype))
     dof = gls_dof(n, sb)  # n, or n − 1 when a free bias takes one
     post = offset_posterior(j_grid, g_n, g_e, entropy.spacing_m, dof=dof)
-    if posterior:
+    if iccp.fix == "posterior":
         d_n = jnp.where(post.valid, post.mean_north_m, d_n).astype(d_n.dtype)
         d_e = jnp.where(post.valid, post.mean_east_m, d_e).astype(d_e.dtype)
-        starts = _starts(top_n, top_e, d_n, d_e, dtype)
-        f_s, g_s = value_grad(field, p0 + starts[:, None, :])
-        j_s, b_s = gls_b(f_s)
-    f_s, g_s, j_s, b_s = (a[-starts.shape[0]:] for a in (f_s, g_s, j_s, b_s))
+    starts = _starts(top_n, top_e, d_n, d_e, dtype)  # the last start is the coarse fix
+    if iccp.fix == "posterior":  # the fix is off the grid: its GLS bias read there
+        b_s = gls_b(value_grad(field, p0 + starts[:, None, :])[0])[1]
+    else:  # every start is an offset of the grid
+        b_s = b_grid[index]
     # each start fits the readings less the GLS bias there (none when bias_sigma = 0)
     b_starts = jnp.where(jnp.isfinite(b_s), b_s, 0.0)
     fits = jax.vmap(lambda t0, b: iccp_fit(field, p0, z - b, iccp, t0=t0))(starts, b_starts)
-    f_fits, g_fits = value_grad(field, _moved(p0, fits.rotation, fits.translation))
-    j_fits, b_fits = gls_b(f_fits)
-    # with a bias: the misfit at each fit's own GLS bias, as the coarse one's below
-    fits = fits._replace(misfit=jnp.where(
-        sb > 0, jnp.mean((z - b_fits[:, None] - f_fits) ** 2, -1), fits.misfit))
+    # the map and the GLS scores along the fits and the coarse fix, in one evaluation
+    f_s, g_s = value_grad(field, jnp.concatenate(
+        [_moved(p0, fits.rotation, fits.translation), (p0 + starts[-1])[None]]))
+    j_s, b_s = gls_b(f_s)
+    g_fits, j_fits = g_s[:-1], j_s[:-1]
+    # the coarse fix's misfit and, with a bias, each fit's misfit at its own GLS bias
+    m_s = jnp.mean((z - b_s[:, None] - f_s) ** 2, -1)
+    fits = fits._replace(misfit=jnp.where(sb > 0, m_s[:-1], fits.misfit))
     misfits = jnp.where(jnp.isfinite(fits.misfit), fits.misfit, jnp.inf)
     best = jnp.argmin(jnp.where(told, jnp.where(jnp.isfinite(j_fits), j_fits, jnp.inf),
                                 misfits))
     st = jax.tree.map(lambda x: x[best], fits)
-    f_c, j_coarse, b_coarse = f_s[-1], j_s[-1], b_s[-1]
-    coarse_misfit = jnp.mean((z - b_coarse - f_c) ** 2)
+    j_coarse, b_coarse, coarse_misfit = j_s[-1], b_s[-1], m_s[-1]
     gain = n * (coarse_misfit - st.misfit)
     use_fine = jnp.isfinite(st.misfit) & jnp.where(
         told, ~(j_coarse - j_fits[best] < iccp.accept_chi2),
@@ -152,11 +151,12 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     rot = jnp.arctan2(st.rotation[1, 0], st.rotation[0, 0])
     if iccp.fix == "posterior":
         coarse_lat, coarse_lon = shifted_tracks(lat, lon, d_n, d_e, zero)
-        c_n, c_e = local_offsets_m(coarse_lat, coarse_lon, lat, lon)
-        coarse = coarse._replace(lat=coarse_lat, lon=coarse_lon, offset_north_m=jnp.mean(c_n),
-                                 offset_east_m=jnp.mean(c_e))
+        c_n, c_e = jnp.mean(jnp.stack(local_offsets_m(coarse_lat, coarse_lon, lat, lon)), -1)
+        coarse = coarse._replace(lat=coarse_lat, lon=coarse_lon, offset_north_m=c_n,
+                                 offset_east_m=c_e)
     f_lat, f_lon = shifted_tracks(lat, lon, st.translation[0], st.translation[1], rot)
-    f_n, f_e = local_offsets_m(f_lat, f_lon, lat, lon)
+    # the fine fix's mean offset (one sum of both: see rigid.kabsch_moments)
+    f_n, f_e = jnp.mean(jnp.stack(local_offsets_m(f_lat, f_lon, lat, lon)), -1)
     pick = lambda a, b: jnp.where(use_fine, a, b)  # noqa: E731
     found = jnp.isfinite(st.misfit) | jnp.isfinite(coarse_misfit)
     t_fix = pick(st.translation, jnp.stack([d_n, d_e]).astype(dtype))
@@ -167,8 +167,8 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     reject = integrity_status(cov, post.second_mode_ratio, chi2, post.edge_mass, iccp)
     # ICCP can walk a weak or biased fix far past the drift the search was sized for
     # (15 km at a 4.7 km drift radius, accepted): beyond max_offset_m it is rejected
-    off = jnp.hypot(pick(jnp.mean(f_n), coarse.offset_north_m),
-                    pick(jnp.mean(f_e), coarse.offset_east_m))
+    off = jnp.hypot(pick(f_n, coarse.offset_north_m),
+                    pick(f_e, coarse.offset_east_m))
     reject = reject | jnp.where(off > iccp.max_offset_m, FAR_FIX, 0).astype(reject.dtype)
     accepted = found & (reject == 0)
     keep = lambda a, b: jnp.where(accepted, pick(a, b), jnp.zeros_like(a))  # noqa: E731
@@ -184,11 +184,11 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
     return MatchResult(
         lat=jnp.where(accepted, pick(f_lat, coarse.lat), lat),
         lon=jnp.where(accepted, pick(f_lon, coarse.lon), lon),
-        offset_north_m=keep(jnp.mean(f_n), coarse.offset_north_m),
-        offset_east_m=keep(jnp.mean(f_e), coarse.offset_east_m),
+        offset_north_m=keep(f_n, coarse.offset_north_m),
+        offset_east_m=keep(f_e, coarse.offset_east_m),
         rotation_deg=keep(rot / DEG, coarse.rotation_deg),
         score=pick(st.misfit, coarse_misfit),
-        bias=jnp.where(sb > 0, pick(b_fits[best], b_coarse), coarse.bias),
+        bias=jnp.where(sb > 0, pick(b_s[best], b_coarse), coarse.bias),
         topk_lat=jnp.stack([coarse.lat, f_lat]),
         topk_lon=jnp.stack([coarse.lon, f_lon]),
         topk_score=jnp.stack([coarse_misfit, st.misfit]),
@@ -230,10 +230,14 @@ def _fix_covariance(g, p0, wh, rotation, translation, j_fix, fine, post, j_grid,
     d_theta = jnp.sum(g * jnp.stack([-turned[:, 1], turned[:, 0]], -1), axis=-1)
     info = gauss_newton_information(wh, jnp.concatenate([d_theta[:, None], g], -1),
                                     jnp.asarray(iccp.bias_sigma, g.dtype))
-    gn_fine, gn_coarse = offset_covariance(info), offset_covariance(info[1:, 1:])
+    # a fine fix marginalises the rotation; a coarse one (no rotation) is offset_covariance
+    # of info[1:, 1:], which is the Schur complement with the coupling info[0, 1:] zeroed
+    couple = jnp.arange(3) > 0
+    keep = fine | ~(couple[:, None] ^ couple[None, :])
+    gn = offset_covariance(jnp.where(keep, info, 0.0))
     chi2 = j_fix / n
     dof = jnp.where(fine, n - 3, n - 2) + bias_dof
-    gn = jnp.where(fine, gn_fine, gn_coarse) * jnp.maximum(1.0, j_fix / jnp.maximum(dof, 1))
+    gn = gn * jnp.maximum(1.0, j_fix / jnp.maximum(dof, 1))
     spread, _, _ = spread_about(j_grid, g_n, g_e, translation[0], translation[1])
     cell = jnp.asarray(entropy.spacing_m, spread.dtype) ** 2 / 12.0
     resolved = post.n_effective >= iccp.resolved_n_effective

@@ -49,6 +49,7 @@ __all__ = [
     "EntropyConfig",
     "coarse_offsets",
     "coarse_search",
+    "coarse_stage",
     "difference_entropy",
     "entropy_config_for",
     "information_entropy",
@@ -113,15 +114,30 @@ def difference_entropy(h, axis=-1):
         Entropy in nats, in ``[0, ln N]``; NaN for a constant sequence (all ``C_i = 0``,
         no distribution) or one with a non-finite value.
     """
-    h = jnp.moveaxis(jnp.asarray(h), axis, -1)
-    finite = jnp.all(jnp.isfinite(h), axis=-1, keepdims=True)
+    return _difference_entropy(jnp.moveaxis(jnp.asarray(h), axis, -1))[0]
+
+
+def _difference_entropy(h, *extra):
+    """:func:`difference_entropy` along the last axis, and the sums of ``extra``.
+
+    Two sums, each over stacked terms, not four sums: XLA's CPU backend compiles each
+    sum over more than 32 values as two kernels of its own. The first sums the finite
+    values, counts them and sums ``extra`` (arrays of ``h``'s shape); the second sums
+    ``C_i`` and ``C_i ln C_i``, and ``H = ln ΣC − Σ C ln C / ΣC`` (= ``−Σ q ln q``).
+    """
+    n = h.shape[-1]
+    is_finite = jnp.isfinite(h)
+    total_h, n_finite, *rest = jnp.sum(jnp.stack(
+        [jnp.where(is_finite, h, 0.0), is_finite.astype(h.dtype), *extra]), axis=-1)
+    finite = (n_finite == n)[..., None]
     h_f = jnp.where(finite, h, 0.0)
-    c = jnp.abs(h_f - jnp.mean(h_f, axis=-1, keepdims=True))
-    total = jnp.sum(c, axis=-1, keepdims=True)
-    ok = finite & (total > 0)
-    q = c / jnp.where(ok, total, 1.0)
-    out = jnp.sum(_neg_plogp(q, ok), axis=-1)
-    return jnp.where(ok[..., 0], out, jnp.nan)
+    c = jnp.abs(h_f - jnp.where(finite, total_h[..., None] / n, 0.0))
+    pos = c > 0
+    safe = jnp.where(pos, c, 1.0)  # 0 ln 0 = 0, NaN-free gradients (double where)
+    total, c_log_c = jnp.sum(jnp.stack([c, jnp.where(pos, safe * jnp.log(safe), 0.0)]), axis=-1)
+    ok = finite[..., 0] & (total > 0)
+    total = jnp.where(ok, total, 1.0)
+    return jnp.where(ok, jnp.log(total) - c_log_c / total, jnp.nan), rest
 
 
 def sequence_entropy(h, kind="difference", shift=0.0):
@@ -274,6 +290,25 @@ def coarse_offsets(sample, lat, lon, readings, config):
         ``bias`` is 0, ``topk_score`` the |ΔH| of the ``k_best`` best accepted
         candidates (``inf`` for missing ones).
     """
+    return coarse_stage(sample, lat, lon, readings, config)[:5]
+
+
+def coarse_stage(sample, lat, lon, readings, config):
+    """:func:`coarse_offsets` and what a later stage reads again (the jit-free core).
+
+    Parameters
+    ----------
+    sample, lat, lon, readings, config
+        As :func:`coarse_offsets`.
+
+    Returns
+    -------
+    tuple
+        :func:`coarse_offsets`' five values, then ``values`` ``(S, N)``: the map along
+        the offset grid's tracks (:func:`offset_grid`'s order), and ``index`` ``(k_best +
+        2,)``: the grid indices of the top-k offsets (as returned), of the zero offset
+        (the INS track) and of the chosen offset, in that order.
+    """
     lat, lon, readings = (jnp.asarray(a) for a in (lat, lon, readings))
     n = lat.shape[0]
     dtype = jnp.result_type(lat.dtype, float)
@@ -281,9 +316,13 @@ def coarse_offsets(sample, lat, lon, readings, config):
     la, lo = shifted_tracks(lat, lon, d_n, d_e, jnp.zeros_like(d_n))  # (S, N)
     vals = sample(la, lo)
     h_meas = sequence_entropy(readings, config.kind, config.shift)
-    h_cand = sequence_entropy(vals, config.kind, config.shift)
+    if config.kind == "difference":  # the misfit summed in the entropy's first pass
+        h_cand, (sq,) = _difference_entropy(vals, (readings - vals) ** 2)
+        rms = jnp.sqrt(sq / n)
+    else:
+        h_cand = sequence_entropy(vals, config.kind, config.shift)
+        rms = jnp.sqrt(jnp.mean((readings - vals) ** 2, axis=-1))
     d_h = jnp.abs(h_cand - h_meas)
-    rms = jnp.sqrt(jnp.mean((readings - vals) ** 2, axis=-1))
     # the INS track is the centre offset (exactly 0): the same arithmetic, so that the
     # zero offset is never "accepted" for beating itself by a rounding error
     rms_ins = rms[d_n.shape[0] // 2]
@@ -302,7 +341,7 @@ def coarse_offsets(sample, lat, lon, readings, config):
     p_n = jnp.where(any_ok, d_n[i], zero)
     p_e = jnp.where(any_ok, d_e[i], zero)
     m_lat, m_lon = shifted_tracks(lat, lon, p_n, p_e, zero)
-    off_n, off_e = local_offsets_m(m_lat, m_lon, lat, lon)
+    off_n, off_e = jnp.mean(jnp.stack(local_offsets_m(m_lat, m_lon, lat, lon)), -1)
     reach = config.half_size * config.spacing_m
     edge = any_ok & ((jnp.abs(p_n) >= reach) | (jnp.abs(p_e) >= reach)) & (config.half_size > 0)
     n_off = jnp.asarray(d_n.shape[0], dtype)
@@ -314,8 +353,8 @@ def coarse_offsets(sample, lat, lon, readings, config):
     result = MatchResult(
         lat=m_lat,
         lon=m_lon,
-        offset_north_m=jnp.mean(off_n),
-        offset_east_m=jnp.mean(off_e),
+        offset_north_m=off_n,
+        offset_east_m=off_e,
         rotation_deg=zero,
         score=jnp.where(any_ok, d_h[i], jnp.abs(sequence_entropy(sample(lat, lon), config.kind,
                                                                    config.shift) - h_meas)),
@@ -331,7 +370,11 @@ def coarse_offsets(sample, lat, lon, readings, config):
         status=status.astype(jnp.int32),
     )
     have = jnp.isfinite(key[top])
-    return result, p_n, p_e, jnp.where(have, d_n[top], p_n), jnp.where(have, d_e[top], p_e)
+    centre = d_n.shape[0] // 2  # the zero offset, exactly
+    chosen_i = jnp.where(any_ok, i, centre).astype(top.dtype)  # p_n = d_n[chosen_i]
+    index = jnp.concatenate([jnp.where(have, top, chosen_i), jnp.stack([centre, chosen_i])])
+    return (result, p_n, p_e, jnp.where(have, d_n[top], p_n), jnp.where(have, d_e[top], p_e),
+            vals, index)
 
 
 @jax.jit
