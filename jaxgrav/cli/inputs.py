@@ -108,11 +108,13 @@ _UNIT_NAMES = {"gravity": "a gravity unit (mGal, Gal, uGal, m s-2, gu)",
 
 
 def kept_columns(track, columns):
-    """``columns`` (an output's, ``t`` first) with the track's text columns after ``t``.
+    """``columns`` (an output's, ``t`` first) with the track's text columns after ``t``
+    and its other numeric columns last.
 
     The ISO-8601 times as given (``time``) and text columns such as a ship's name pass
-    through to a command's per-row output; one whose name the output uses already gets
-    ``_track`` appended.
+    through to a command's per-row output, and so do numeric columns no command reads (a
+    depth, a heading: dropped before), as the file wrote them; one whose name the output
+    uses already gets ``_track`` appended.
 
     Parameters
     ----------
@@ -126,8 +128,11 @@ def kept_columns(track, columns):
     dict of str to array_like
     """
     kept = {(k if k not in columns else f"{k}_track"): v for k, v in (track.text or {}).items()}
+    cells = track.cells or {}
+    extra = {(k if k not in columns else f"{k}_track"): cells[k]
+             for k in (track.order or ()) if k in cells and k not in KNOWN_COLUMNS}
     first, *rest = columns
-    return {first: columns[first], **kept, **{k: columns[k] for k in rest}}
+    return {first: columns[first], **kept, **{k: columns[k] for k in rest}, **extra}
 
 
 def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False,

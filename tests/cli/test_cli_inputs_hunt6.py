@@ -10,6 +10,7 @@ import pytest
 import xarray as xr
 
 from jaxgrav.cli import main
+from jaxgrav.cli.inputs import kept_columns
 from jaxgrav.cli.main import build_parser
 from jaxgrav.datasets import load_map
 from jaxgrav.grid_files import read_netcdf
@@ -364,3 +365,29 @@ def test_every_count_option_reads_counts_alike(tmp_path, capsys, argv):
     parser_args = build_parser().parse_args(
         [a.format(d=tmp_path) for a in argv] + ["1e1"])
     assert getattr(parser_args, argv[-1][2:].replace("-", "_")) == 10
+
+
+def test_numeric_columns_no_command_reads_pass_through_to_per_row_outputs(tmp_path):
+    """A log's ``depth`` or ``heading`` column was dropped from ``filter``'s and
+    ``navigate``'s CSVs (only text columns passed through); it now follows the output's
+    columns as the file wrote it, ``_track`` appended where the output has the name."""
+    path = _csv(tmp_path / "l.csv", "t,lat,lon,gravity,ship,depth,status",
+                [(0, 29.5, 126.5, 1.0, "Kaiyo", "0012.50", 3), (10, 29.5, 126.5, "", "Kaiyo",
+                                                                  "7", 4)])
+    track = read_track_csv(path, required=("t", "lat", "lon", "gravity"), allow_nan=("gravity",))
+    out = kept_columns(track, {"t": track["t"], "lat": track["lat"], "status": np.zeros(2)})
+    assert list(out) == ["t", "ship", "lat", "status", "depth", "status_track"]
+    assert list(out["depth"]) == ["0012.50", "7"] and list(out["status_track"]) == ["3", "4"]
+
+
+@pytest.mark.long
+def test_filter_keeps_a_depth_column(tmp_path):
+    log = tmp_path / "f.csv"
+    assert main(["simulate-filter", "--out", str(log), "--minutes", "4"]) == 0
+    lines = log.read_text().splitlines()
+    log.write_text("\n".join([lines[0] + ",depth"] + [ln + ",12.5" for ln in lines[1:]]) + "\n")
+    out = tmp_path / "o.csv"
+    assert main(["filter", "--point-masses", "paper-d", "--track", str(log), "--out",
+                 str(out)]) == 0
+    got = out.read_text().splitlines()
+    assert got[0].endswith(",status,depth") and all(ln.endswith(",12.5") for ln in got[1:])
