@@ -28,6 +28,7 @@ What the reader accepts (parsing of the text: :mod:`jaxgrav.track_files`):
 """
 
 import csv
+import re
 from pathlib import Path
 
 import numpy as np
@@ -120,8 +121,8 @@ def parse_columns(text):
     Parameters
     ----------
     text : str or None
-        ``NAME=COLUMN`` pairs separated by commas; COLUMN is a header (any case) or a
-        1-based column number.
+        ``NAME=COLUMN`` pairs separated by commas (or semicolons); COLUMN is a header (any
+        case) or a 1-based column number.
 
     Returns
     -------
@@ -136,7 +137,7 @@ def parse_columns(text):
     """
     out = {}
     example = "(e.g. --columns lat=LAT,lon=LON,gravity=FAA)"
-    for part in (text or "").split(","):
+    for part in re.split(r"[,;]", text or ""):  # "lat=LAT;lon=LON" was one column's name
         if not part.strip():
             continue
         name, eq, col = (s.strip() for s in part.partition("="))

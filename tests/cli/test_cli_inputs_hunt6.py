@@ -17,7 +17,7 @@ from jaxgrav.grid_files import read_netcdf
 from jaxgrav.track_files import parse_degrees
 from jaxgrav.track_times import parse_datetime
 from jaxgrav.track_units import header_scale
-from jaxgrav.tracks import read_track_csv
+from jaxgrav.tracks import parse_columns, read_track_csv
 
 ROWS = [(0, 29.5, 126.5, 1.0), (60, 29.51, 126.51, 2.0), (120, 29.52, 126.52, 3.0)]
 
@@ -391,3 +391,10 @@ def test_filter_keeps_a_depth_column(tmp_path):
                  str(out)]) == 0
     got = out.read_text().splitlines()
     assert got[0].endswith(",status,depth") and all(ln.endswith(",12.5") for ln in got[1:])
+
+
+def test_columns_pairs_may_be_separated_by_semicolons():
+    """``--columns "lat=LAT;lon=LON"`` (the file's own separator) was "no column
+    'LAT;lon=LON'"."""
+    assert parse_columns("lat=LAT;lon=LON; gravity=FAA (mGal)") == {
+        "lat": "LAT", "lon": "LON", "gravity": "FAA (mGal)"}
