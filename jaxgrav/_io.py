@@ -15,7 +15,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_output", "check_outputs"]
+__all__ = ["atomic_output", "check_name", "check_outputs"]
 
 
 def _umask():
@@ -59,6 +59,7 @@ def check_outputs(paths, *, force=False, names=None, inputs=None):
         if path is None:
             continue
         label = f"{name} {str(path)!r}" if name else repr(str(path))
+        check_name(Path(path), label)
         resolved = Path(path).resolve()
         if resolved in seen:
             raise ValueError(f"{label} and {seen[resolved]} are the same file; give each "
@@ -75,6 +76,28 @@ def check_outputs(paths, *, force=False, names=None, inputs=None):
         verb, them = ("exists", "it") if len(existing) == 1 else ("exist", "them")
         raise FileExistsError(f"{listed} {verb}; pass --force to overwrite {them} "
                               "(nothing was written)")
+
+
+def check_name(path, label):
+    """ValueError when a name on ``path`` is longer than its file system allows (the run
+    ended in "[Errno 36] File name too long", exit 1, its output not written)."""
+    folder = path.absolute().parent
+    while folder != folder.parent:
+        try:
+            if folder.exists():
+                break
+        except OSError:  # a name on the way is itself too long
+            pass
+        folder = folder.parent
+    try:
+        limit = os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        limit = 255
+    for part in path.parts:
+        size = len(os.fsencode(part))
+        if size > limit:
+            raise ValueError(f"{label}: the name {part[:24]!r}... is {size} bytes long, more "
+                             f"than the {limit} a name may have there; give a shorter name")
 
 
 def _check_folder(path, label):
@@ -121,7 +144,8 @@ def atomic_output(path, *, force=False):
     if path.exists() and not force:
         raise FileExistsError(f"{str(path)!r} exists; pass force=True (--force) to overwrite it")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    # the temporary name fits wherever the name does (a 250-byte name ended in exit 1)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:64]}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp)

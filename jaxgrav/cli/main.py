@@ -35,6 +35,7 @@ from pathlib import Path
 import jax
 
 from jaxgrav import datasets
+from jaxgrav._io import check_name
 from jaxgrav.cli import (
     bench,
     demo,
@@ -175,11 +176,15 @@ def check_special_outputs(args):
         if getattr(args, name, None) == "":
             raise ValueError(f"--{name.replace('_', '-')} is empty; expected "
                              f"{expected.get(name, 'a path')}")
+        if isinstance(getattr(args, name, None), str):  # an input's: no such file can exist
+            check_name(Path(getattr(args, name)),
+                       f"--{name.replace('_', '-')} {getattr(args, name)!r}")
     for name in ("out", "truth"):
         value = getattr(args, name, None)
         if value is None:
             continue
         path = Path(value)
+        check_name(path, f"--{name} {str(value)!r}")  # exists() raised "File name too long"
         if path.exists() and not (path.is_file() or path.is_dir()):
             raise ValueError(f"--{name} {str(value)!r} is a device, pipe or socket, not a "
                              "regular file: jaxgrav writes each output whole and then moves "

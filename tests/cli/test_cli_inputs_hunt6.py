@@ -398,3 +398,30 @@ def test_columns_pairs_may_be_separated_by_semicolons():
     'LAT;lon=LON'"."""
     assert parse_columns("lat=LAT;lon=LON; gravity=FAA (mGal)") == {
         "lat": "LAT", "lon": "LON", "gravity": "FAA (mGal)"}
+
+
+def test_an_output_name_that_fits_writes_though_its_temporary_name_would_not(tmp_path):
+    """A 250-byte ``--out`` name ran the command, then failed writing its temporary file
+    ``.NAME.XXXXXXXX.tmp`` (over 255 bytes): "failed: OSError: [Errno 36] File name too
+    long", exit 1, nothing written."""
+    _csv(tmp_path / "t.csv", "lat,lon", [(29.5, 126.5)])
+    out = tmp_path / ("a" * 246 + ".csv")
+    assert main(["sample", "--map", "ryukyu", "--track", str(tmp_path / "t.csv"), "--out",
+                 str(out)]) == 0
+    assert out.read_text().startswith("lat,lon,map\n")
+
+
+@pytest.mark.parametrize("option", ["--out", "--track", "--map", "--truth"])
+def test_a_name_too_long_for_the_file_system_is_refused_first(tmp_path, refused, option):
+    """A 300-byte name was exit 1 with Python's "[Errno 36] File name too long" (for
+    ``--truth``, after the track was simulated)."""
+    long = tmp_path / ("b" * 296 + ".csv")
+    _csv(tmp_path / "t.csv", "lat,lon", [(29.5, 126.5)])
+    argv = {"--truth": ["simulate", "--out", tmp_path / "s.csv", "--truth", long]}.get(
+        option, ["sample", "--map", "ryukyu", "--track", tmp_path / "t.csv", "--out",
+                 tmp_path / "s.csv"])
+    if option != "--truth":
+        argv[argv.index(option) + 1] = long
+    refused(argv, f"{option} '{long}': the name 'bbbbbbbbbbbbbbbbbbbbbbbb'... is 300 bytes "
+                  "long, more than the 255 a name may have there; give a shorter name")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv"]
