@@ -248,9 +248,19 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
     label = f"map {str(path)!r}"
     try:
         ds = xr.open_dataset(path, decode_times=False)
+        groups = [] if ds.variables else [  # NetCDF-4 with its grid in a group: "it has none"
+            name for name, node in xr.open_groups(path, decode_times=False).items()
+            if node.variables]
+        if len(groups) == 1:
+            ds.close()
+            ds = xr.open_dataset(path, decode_times=False, group=groups[0])
     except (OSError, ValueError, RuntimeError) as err:
         msg = str(err).splitlines()[0] if str(err) else type(err).__name__
         raise ValueError(f"{label} cannot be read as NetCDF: {msg}") from None
+    if len(groups) > 1:
+        raise ValueError(f"{label} holds no variables at its root and {len(groups)} groups "
+                         f"with variables ({_listed(groups)}); expected one grid: extract it "
+                         "first (e.g. ncks -G : -g GROUP IN OUT.nc)")
     with ds:
         if _GMT4 <= set(map(str, ds.variables)):  # GMT 4's native grid: "no latitude"
             lat, lon, values, units, attrs, encoding = _gmt4_grid(ds, var, label)

@@ -425,3 +425,22 @@ def test_a_name_too_long_for_the_file_system_is_refused_first(tmp_path, refused,
     refused(argv, f"{option} '{long}': the name 'bbbbbbbbbbbbbbbbbbbbbbbb'... is 300 bytes "
                   "long, more than the 255 a name may have there; give a shorter name")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv"]
+
+
+def test_a_grid_in_a_netcdf4_group_is_read(tmp_path, refused):
+    """A NetCDF-4 file with its grid in a group (``/data``) and nothing at its root was
+    "has no latitude coordinate ...; it has none"; one such group is read, two are named."""
+    lat, lon, v = _ryukyu_arrays()
+    ds = xr.Dataset({"g": (("lat", "lon"), v, {"units": "mGal"})},
+                    coords={"lat": lat, "lon": lon})
+    ds.to_netcdf(tmp_path / "one.nc", group="data")
+    got = read_netcdf(tmp_path / "one.nc")
+    np.testing.assert_array_equal(got.values, v)
+    assert got.name == "g" and got.units == "mGal"
+    ds.to_netcdf(tmp_path / "two.nc", group="a")
+    ds.to_netcdf(tmp_path / "two.nc", group="b", mode="a")
+    _csv(tmp_path / "t.csv", "lat,lon", [(29.5, 126.5)])
+    refused(["sample", "--map", tmp_path / "two.nc", "--track", tmp_path / "t.csv", "--out",
+             tmp_path / "s.csv"], "two.nc' holds no variables at its root and 2 groups with "
+            "variables (/a, /b); expected one grid: extract it first (e.g. ncks -G : -g GROUP "
+            "IN OUT.nc)")
