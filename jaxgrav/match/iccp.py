@@ -37,7 +37,7 @@ from jaxgrav.match.contour import local_field, project_to_contours, value_grad_n
 from jaxgrav.match.iccp_config import IccpConfig
 from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import STATUS, MatchResult
-from jaxgrav.match.rigid import kabsch_2d, kabsch_moments, kabsch_solve, refine_local
+from jaxgrav.match.rigid import kabsch_2d, kabsch_ne, refine_local
 from jaxgrav.prepared import prepare_map
 
 __all__ = [
@@ -137,11 +137,9 @@ def iccp_local(field, p0, z, config, r0=None, t0=None):
         if config.weights == "gradient":
             w = w * (g_n * g_n + g_e * g_e)
         # materialised once: otherwise each Kabsch sum's fusion recomputes the tests
-        w, used, x_n, x_e = jax.lax.optimization_barrier(
-            (w, ok.astype(dtype), jnp.where(ok, x_n, y_n), jnp.where(ok, x_e, y_e)))
-        moments = kabsch_moments(p_n, p_e, x_n, x_e, w, used)  # one sum, n_ok's too
-        c_new, s_new, tn_new, te_new = kabsch_solve(moments, bound)
-        n_ok = moments[8].astype(jnp.int32)
+        w, n_ok, x_n, x_e = jax.lax.optimization_barrier(
+            (w, jnp.sum(ok, dtype=jnp.int32), jnp.where(ok, x_n, y_n), jnp.where(ok, x_e, y_e)))
+        c_new, s_new, tn_new, te_new = kabsch_ne(p_n, p_e, x_n, x_e, w, bound)
         move2 = jnp.max((c_new * p_n - s_new * p_e + tn_new - y_n) ** 2
                         + (s_new * p_n + c_new * p_e + te_new - y_e) ** 2)
         enough = n_ok >= 3

@@ -15,8 +15,7 @@ import jax.numpy as jnp
 
 from jaxgrav.match.contour import value_grad_ne
 
-__all__ = ["kabsch_2d", "kabsch_moments", "kabsch_ne", "kabsch_solve", "refine_local",
-           "rotation_matrix", "solve3"]
+__all__ = ["kabsch_2d", "kabsch_ne", "refine_local", "rotation_matrix", "solve3"]
 
 
 def kabsch_2d(p, x, w=None, max_rotation_rad=None):
@@ -72,59 +71,14 @@ def kabsch_ne(p_n, p_e, x_n, x_e, w, bound=None):
         ``(cos θ, sin θ, t_north, t_east)``; the identity with fewer than two
         weighted points.
     """
-    return kabsch_solve(kabsch_moments(p_n, p_e, x_n, x_e, w), bound)
-
-
-def kabsch_moments(p_n, p_e, x_n, x_e, w, *extra):
-    """The weighted sums of :func:`kabsch_solve`, as one sum over a stacked array.
-
-    Parameters
-    ----------
-    p_n, p_e, x_n, x_e, w : Array, shape ``(N,)``
-        As :func:`kabsch_ne`.
-    *extra : Array, shape ``(N,)``
-        More arrays (of ``w``'s dtype) summed with them, their sums appended.
-
-    Returns
-    -------
-    Array, shape ``(8 + len(extra),)``
-        ``Σw``, the number of positive weights, ``Σw·p_n``, ``Σw·p_e``, ``Σw·x_n``,
-        ``Σw·x_e``, ``Σw·(p·x)``, ``Σw·(p×x)``, then the sums of ``extra``.
-
-    Notes
-    -----
-    One sum of the stacked terms, not eight sums: XLA's CPU backend compiles each sum
-    over more than 32 values as two kernels of its own (a windowed pre-sum, then the sum
-    of the windows), each a function for LLVM to compile. Stacked, the eight are one
-    pair of kernels, and each row is summed as before (the same numbers).
-    """
-    return jnp.sum(jnp.stack([w, jnp.where(w > 0, 1.0, 0.0).astype(w.dtype), w * p_n,
-                              w * p_e, w * x_n, w * x_e, w * (p_n * x_n + p_e * x_e),
-                              w * (p_n * x_e - p_e * x_n), *extra]), axis=-1)
-
-
-def kabsch_solve(moments, bound=None):
-    """:func:`kabsch_ne`'s transform from the first eight :func:`kabsch_moments`.
-
-    Parameters
-    ----------
-    moments : Array, shape ``(≥ 8,)``
-    bound : tuple of Array, optional
-        As :func:`kabsch_ne`.
-
-    Returns
-    -------
-    tuple of Array
-        ``(cos θ, sin θ, t_north, t_east)``.
-    """
-    total, count, s_pn, s_pe, s_xn, s_xe, s_dot, s_cross = (moments[i] for i in range(8))
-    enough = (total > 0) & (count >= 2)
+    total = jnp.sum(w)
+    enough = (total > 0) & (jnp.sum(jnp.where(w > 0, 1.0, 0.0)) >= 2)
     inv_w = 1.0 / jnp.where(total > 0, total, 1.0)
-    pc_n, pc_e = s_pn * inv_w, s_pe * inv_w
-    xc_n, xc_e = s_xn * inv_w, s_xe * inv_w
+    pc_n, pc_e = jnp.sum(w * p_n) * inv_w, jnp.sum(w * p_e) * inv_w
+    xc_n, xc_e = jnp.sum(w * x_n) * inv_w, jnp.sum(w * x_e) * inv_w
     # centred sums, without forming the centred arrays: Σw P·X = Σw p·x − W pc·xc, etc.
-    a = s_dot * inv_w - (pc_n * xc_n + pc_e * xc_e)
-    b = s_cross * inv_w - (pc_n * xc_e - pc_e * xc_n)
+    a = jnp.sum(w * (p_n * x_n + p_e * x_e)) * inv_w - (pc_n * xc_n + pc_e * xc_e)
+    b = jnp.sum(w * (p_n * x_e - p_e * x_n)) * inv_w - (pc_n * xc_e - pc_e * xc_n)
     rho2 = a * a + b * b
     good = enough & (rho2 > 0) & jnp.isfinite(rho2)
     inv = jax.lax.rsqrt(jnp.where(good, rho2, 1.0))
@@ -183,10 +137,9 @@ def refine_local(field, p0, z, r, t, max_rotation_rad, steps):
         res = jnp.where(jnp.isfinite(f), f - z, 0.0)
         j_th = g_e * rp_n - g_n * rp_e  # d f / d theta
         cols = (j_th, g_n, g_e)
-        # JᵀJ, Jᵀr and the misfit's sum as one sum over stacked terms (see kabsch_moments)
-        sums = jnp.sum(jnp.stack([u * v for u in cols for v in cols]
-                                 + [u * res for u in cols] + [(f - z) ** 2]), axis=-1)
-        return sums[12] / z.shape[-1], sums[:9].reshape(3, 3), sums[9:12]
+        jtj = jnp.stack([jnp.stack([jnp.sum(u * v) for v in cols]) for u in cols])
+        jtr = jnp.stack([jnp.sum(u * res) for u in cols])
+        return jnp.mean((f - z) ** 2), jtj, jtr
 
     def step(i, s):
         # evaluate the trial point, keep it if it lowers the misfit (the first one, the
