@@ -14,7 +14,8 @@ What the reader accepts (parsing of the text: :mod:`jaxgrav.track_files`):
 - column names in any case, trimmed, with a ``(unit)`` suffix (read as a conversion
   when known: :func:`~jaxgrav.track_units.header_scale`), and the aliases
   of :data:`ALIASES` (``time`` for ``t``, ``latitude`` for ``lat``, ``longitude``,
-  ``long``, ``lng`` for ``lon``, ``height`` for ``h``); an exact name wins over an alias;
+  ``long``, ``lng`` for ``lon``, ``height`` for ``h``, ``ve``/``vn`` for ``v_east``/
+  ``v_north``); an exact name wins over an alias;
   ``columns={"lat": "LAT", ...}`` (``--columns lat=LAT,...``, :func:`parse_columns`)
   names any other column, by name or by 1-based number;
 - times in seconds or as ISO-8601 date-times (``2024-05-01T12:00:00Z``,
@@ -47,6 +48,10 @@ ALIASES = {
     "lat": ("lat", "latitude"),
     "lon": ("lon", "longitude", "long", "lng"),
     "h": ("h", "height"),
+    # "ve, vn" logs ran as if without velocities: raw readings taken as Eötvös-corrected
+    "v_east": ("v_east", "ve", "v_e", "vel_east", "velocity_east", "east_velocity", "veast"),
+    "v_north": ("v_north", "vn", "v_n", "vel_north", "velocity_north", "north_velocity",
+                "vnorth"),
 }
 """Header names (any case) accepted for each column, in order of preference."""
 

@@ -72,7 +72,8 @@ def add_columns_option(parser):
         "--columns", default=None, metavar="NAME=COLUMN,...",
         help="which file columns hold the names the command reads, by header (any case) "
              "or 1-based number, e.g. --columns lat=LAT,lon=LON,gravity=FAA (headers t/time, "
-             "lat/latitude, lon/longitude, h/height are found without it)")
+             "lat/latitude, lon/longitude, h/height, v_east/ve, v_north/vn are found "
+             "without it)")
 
 
 def read_track(args, required, optional=(), allow_nan=()):

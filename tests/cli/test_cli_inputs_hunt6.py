@@ -444,3 +444,20 @@ def test_a_grid_in_a_netcdf4_group_is_read(tmp_path, refused):
              tmp_path / "s.csv"], "two.nc' holds no variables at its root and 2 groups with "
             "variables (/a, /b); expected one grid: extract it first (e.g. ncks -G : -g GROUP "
             "IN OUT.nc)")
+
+
+@pytest.mark.parametrize("east, north", [("ve", "vn"), ("VE (kn)", "VN (kn)"),
+                                         ("vel_east", "vel_north"), ("v_e", "v_n")])
+def test_velocity_columns_under_common_names_are_the_velocities(tmp_path, east, north):
+    """A log with ``ve, vn`` columns ran ``match`` as if it had no velocities: its raw
+    readings were taken as Eötvös-corrected and a -63.7 mGal "bias" fitted (against -1.5
+    with ``v_east, v_north``), exit 0 without a word."""
+    scale = 1852 / 3600 if "kn" in east else 1.0
+    path = _csv(tmp_path / "v.csv", f"t,lat,lon,gravity,{east},{north}",
+                [(0, 29.5, 126.5, 1.0, 5 / scale, 2 / scale), (60, 29.51, 126.51, 2.0, 5 / scale,
+                                                              2 / scale)])
+    track = read_track_csv(path, required=("t", "lat", "lon", "gravity"),
+                           optional=("v_east", "v_north"))
+    np.testing.assert_allclose(track["v_east"], [5.0, 5.0])
+    np.testing.assert_allclose(track["v_north"], [2.0, 2.0])
+    assert track.renamed["v_east"] == east
