@@ -70,12 +70,18 @@ def iso_seconds(cells, lines, label, header, dates=None):
     """
     stamps = []
     for k, (cell, line) in enumerate(zip(cells, lines, strict=True)):
+        shown = cell
         try:
-            stamps.append(parse_datetime(cell if dates is None else f"{dates[k]} {cell}"))
+            try:
+                stamps.append(parse_datetime(cell))
+            except ValueError as err:  # a time of day, and a date column: joined
+                if dates is None or "time of day" not in str(err):
+                    raise
+                shown = f"{dates[k]} {cell}"
+                stamps.append(parse_datetime(shown))
         except ValueError as err:  # a clock time: "12:00:00 ... a time of day without a date"
             clock = (f" ({err}: join the date to it, or give it a column named "
                      f"{DATE_COLUMN!r})") if "time of day" in str(err) else ""
-            shown = cell if dates is None else f"{dates[k]} {cell}"
             raise ValueError(
                 f"{label}, line {line}, column {header!r}: {shown!r} is neither a number "
                 f"(seconds) nor an ISO-8601 date-time (e.g. 2024-05-01T12:00:00Z){clock}; "

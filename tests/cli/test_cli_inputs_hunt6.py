@@ -461,3 +461,11 @@ def test_velocity_columns_under_common_names_are_the_velocities(tmp_path, east, 
     np.testing.assert_allclose(track["v_east"], [5.0, 5.0])
     np.testing.assert_allclose(track["v_north"], [2.0, 2.0])
     assert track.renamed["v_east"] == east
+
+
+def test_a_date_column_beside_complete_date_times_is_left_alone(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_text("date,time,lat,lon\n2024-05-01,2024-05-01T23:59:00Z,30,130\n"
+                    "2024-05-02,2024-05-02T00:01:00Z,30,130\n")
+    track = read_track_csv(path, required=("t", "lat", "lon"))
+    assert list(track["t"]) == [0.0, 120.0]
