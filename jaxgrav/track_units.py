@@ -47,7 +47,13 @@ _HEADER_UNITS = {  # column -> unit (lower case, spaces kept) -> factor to the l
                                                          1852.0 * _ARC_M),
                      **dict.fromkeys(("arcmin", "'"), 1.0 / 60.0)},
 }
-_HEADER_UNITS.update(lon=_HEADER_UNITS["lat"], v_north=_HEADER_UNITS["v_east"])
+_HEADER_UNITS.update(lon=dict(_HEADER_UNITS["lat"]), v_north=_HEADER_UNITS["v_east"])
+for _name, _sign, _words in (("lat", 1.0, ("n", "north")), ("lat", -1.0, ("s", "south")),
+                             ("lon", 1.0, ("e", "east")), ("lon", -1.0, ("w", "west"))):
+    # "lon (W)", "longitude (degrees_west)": positive west was read as east
+    _HEADER_UNITS[_name].update(dict.fromkeys(
+        [f"{p}{w}" for w in _words for p in ("", "°", "° ", "deg ", "deg", "degrees ",
+                                             "degrees_", "degree_")], _sign))
 _FIELD_UNITS = {"gravity": "mGal", "magnetic": "nT"}
 
 
@@ -69,7 +75,8 @@ def header_scale(name, header, label):
         1 when the header declares no unit, or one this function does not know (a note
         such as ``lat (WGS84)`` or ``time (UTC)``); else the factor (``t (min)``: 60,
         ``gravity [m/s^2]``: 1e5, ``lat (rad)``: 180/π, ``v_east (kn)``: 0.5144,
-        ``v_east (ft/s)``: 0.3048, ``drift_radius (km)``: 1/111.2).
+        ``v_east (ft/s)``: 0.3048, ``drift_radius (km)``: 1/111.2, ``lon (W)`` or ``lon
+        (degrees_west)``: -1, positive west).
 
     Raises
     ------
@@ -91,4 +98,11 @@ def header_scale(name, header, label):
                              f"fields; column {name!r} holds {_FIELD_UNITS[name]}: rename it "
                              "or name the right column with --columns")
         return float(factor_units[0][0]) if factor_units[1] == _FIELD_UNITS[name] else 1.0
+    other = {"lat": "lon", "lon": "lat"}.get(name)
+    if other and abs(_HEADER_UNITS[other].get(unit.lower(), 0.0)) == 1.0 and (
+            unit.lower() not in _HEADER_UNITS[name]):  # "lat (W)": the columns swapped?
+        raise ValueError(f"{label}: column {header!r} declares {unit!r}, a "
+                         f"{'longitude' if other == 'lon' else 'latitude'} hemisphere, for "
+                         f"{'latitudes' if name == 'lat' else 'longitudes'}: name the right "
+                         f"column with --columns {name}=COLUMN")
     return _HEADER_UNITS.get(name, {}).get(unit.lower(), 1.0)

@@ -469,3 +469,23 @@ def test_a_date_column_beside_complete_date_times_is_left_alone(tmp_path):
                     "2024-05-02,2024-05-02T00:01:00Z,30,130\n")
     track = read_track_csv(path, required=("t", "lat", "lon"))
     assert list(track["t"]) == [0.0, 120.0]
+
+
+@pytest.mark.parametrize("lat_h, lon_h, lat, lon", [
+    ("lat", "lon (W)", 29.5, -126.5), ("Latitude (deg S)", "Longitude (degrees_west)", -29.5,
+                                       -126.5),
+    ("lat (°N)", "lon (deg E)", 29.5, 126.5), ("lat (N)", "lon (west)", 29.5, -126.5)])
+def test_a_hemisphere_in_a_header_gives_the_sign(tmp_path, lat_h, lon_h, lat, lon):
+    """``lon (W)`` (positive west, as some survey archives write) was an unknown unit, a
+    note: the track was read 253 degrees of longitude away, in the east."""
+    path = _csv(tmp_path / "w.csv", f"{lat_h},{lon_h}", [(29.5, 126.5)])
+    track = read_track_csv(path, required=("lat", "lon"))
+    assert (track["lat"][0], track["lon"][0]) == (lat, lon)
+
+
+def test_a_header_hemisphere_of_the_other_axis_is_refused(tmp_path):
+    path = _csv(tmp_path / "w.csv", "lat (W),lon (N)", [(29.5, 126.5)])
+    with pytest.raises(ValueError, match=r"column 'lat \(W\)' declares 'W', a longitude "
+                       r"hemisphere, for latitudes: name the right column with --columns "
+                       r"lat=COLUMN$"):
+        read_track_csv(path, required=("lat", "lon"))
