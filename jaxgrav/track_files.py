@@ -4,8 +4,8 @@
 their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
 
 - encodings: UTF-8 with or without a byte-order mark, UTF-16 with a BOM (spreadsheet
-  "Unicode text"), else Latin-1; gzip-compressed (``.csv.gz``); a binary file (NetCDF,
-  HDF5, ...) is refused;
+  "Unicode text"), else Latin-1; gzip, bzip2 or xz-compressed (``.csv.gz``), or the one
+  file of a zip archive; a binary file (NetCDF, HDF5, a workbook ...) is refused;
 - line ends: LF, CRLF or CR; blank lines and ``#`` comment lines (GMT headers) skipped,
   and title lines above the header (``Survey leg 3``: at most half its cells);
 - the delimiter is sniffed from the header line: a tab, else ``;`` when it has at least
@@ -26,12 +26,15 @@ is not a comma);
 degrees, minutes and seconds (``35°27.716'N``).
 """
 
+import bz2
 import csv
 import gzip
 import io
 import itertools
+import lzma
 import re
 import shlex
+import zipfile
 import zlib
 from pathlib import Path
 from typing import NamedTuple
@@ -89,13 +92,39 @@ def column_key(name):
     return UNIT_SUFFIX.sub("", str(name).strip()).strip().lower()
 
 
+_COMPRESSED = {b"\x1f\x8b": ("gzip", ".gz", gzip.decompress),
+               b"BZh": ("bzip2", ".bz2", bz2.decompress),
+               b"\xfd7zXZ\0": ("xz", ".xz", lzma.decompress)}
+
+
+def _unzipped(data, label):
+    """The one text member of a zip archive (``log.zip`` holding ``log.csv``); ValueError
+    for a spreadsheet (``.xlsx``) or an archive of several files."""
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        names = [n for n in archive.namelist() if not n.endswith("/")]
+        if "[Content_Types].xml" in names:
+            raise ValueError(f"{label} is an Excel/OpenDocument workbook, not a text table; "
+                             "save the sheet as CSV")
+        if len(names) != 1:
+            raise ValueError(f"{label} is a zip archive of {len(names)} files "
+                             f"({', '.join(names[:4])}); expected one CSV file in it")
+        return archive.read(names[0])
+
+
 def _decode(data, label):
-    if data[:2] == b"\x1f\x8b":  # a gzip-compressed log (track.csv.gz): was "a binary file"
+    for magic, (kind, suffix, decompress) in _COMPRESSED.items():  # log.csv.gz, .bz2, .xz: were
+        if data.startswith(magic):  # "a binary file"
+            try:
+                data = decompress(data)
+            except (OSError, EOFError, ValueError, zlib.error, lzma.LZMAError) as err:
+                raise ValueError(f"{label} is a {kind} file that cannot be decompressed "
+                                 f"({err}); expected a whole {suffix} of a CSV text file"
+                                 ) from None
+    if data.startswith(b"PK\x03\x04"):
         try:
-            data = gzip.decompress(data)
-        except (OSError, EOFError, zlib.error) as err:
-            raise ValueError(f"{label} is a gzip file that cannot be decompressed ({err}); "
-                             "expected a whole .gz of a CSV text file") from None
+            data = _unzipped(data, label)
+        except zipfile.BadZipFile as err:
+            raise ValueError(f"{label} is a zip file that cannot be read ({err})") from None
     head = data[:4096]
     for magic, what in _BINARY.items():
         if head.startswith(magic):

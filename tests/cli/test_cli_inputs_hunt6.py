@@ -5,6 +5,11 @@ date-times with a ``UTC`` suffix or an ordinal day of the year, latitudes with
 hemisphere letters or in degrees and minutes; maps: a CF valid range, GMT 4's native
 grid format."""
 
+import bz2
+import lzma
+import re
+import zipfile
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -14,7 +19,7 @@ from jaxgrav.cli.inputs import kept_columns
 from jaxgrav.cli.main import build_parser
 from jaxgrav.datasets import load_map
 from jaxgrav.grid_files import read_netcdf
-from jaxgrav.track_files import parse_degrees
+from jaxgrav.track_files import parse_degrees, read_table
 from jaxgrav.track_times import parse_datetime
 from jaxgrav.track_units import header_scale
 from jaxgrav.tracks import parse_columns, read_track_csv
@@ -489,3 +494,35 @@ def test_a_header_hemisphere_of_the_other_axis_is_refused(tmp_path):
                        r"hemisphere, for latitudes: name the right column with --columns "
                        r"lat=COLUMN$"):
         read_track_csv(path, required=("lat", "lon"))
+
+
+@pytest.mark.parametrize("pack", ["bz2", "xz", "zip"])
+def test_a_bzip2_xz_or_zipped_track_is_read(tmp_path, pack):
+    """``log.csv.bz2``, ``log.csv.xz`` and ``log.zip`` (holding ``log.csv``) were "a
+    binary file, not a text table" or "a zip/xlsx archive", where ``.gz`` was read."""
+    text = b"lat,lon\n24.5,125.5\n24.6,125.6\n"
+    path = tmp_path / f"t.{pack}"
+    if pack == "zip":
+        with zipfile.ZipFile(path, "w") as archive:
+            archive.writestr("log/t.csv", text)
+    else:
+        path.write_bytes(bz2.compress(text) if pack == "bz2" else lzma.compress(text))
+    assert read_table(path).rows == [["24.5", "125.5"], ["24.6", "125.6"]]
+    if pack == "bz2":
+        path.write_bytes(path.read_bytes()[:20])
+        with pytest.raises(ValueError, match=r"is a bzip2 file that cannot be decompressed "
+                           r"\(.*\); expected a whole .bz2 of a CSV text file$"):
+            read_table(path)
+
+
+@pytest.mark.parametrize("members, message", [
+    (["a.csv", "b.csv"], "is a zip archive of 2 files (a.csv, b.csv); expected one CSV file in it"),
+    (["[Content_Types].xml", "xl/workbook.xml"], "is an Excel/OpenDocument workbook, not a text "
+                                                 "table; save the sheet as CSV")])
+def test_a_zip_of_several_files_or_a_workbook_is_named(tmp_path, members, message):
+    path = tmp_path / "t.zip"
+    with zipfile.ZipFile(path, "w") as archive:
+        for m in members:
+            archive.writestr(m, "lat,lon\n1,2\n")
+    with pytest.raises(ValueError, match=re.escape(message)):
+        read_table(path)
