@@ -1,9 +1,14 @@
-"""Inputs found by the sixth issue-19 hunt (2026-12-07, helper-62): units a header
-declares that were read as the library's own (``drift_radius (km)``, ``v_east (ft/s)``,
-``t (hours since ...)``), a log that keeps the date and the time of day in two columns,
-date-times with a ``UTC`` suffix or an ordinal day of the year, latitudes with
-hemisphere letters or in degrees and minutes; maps: a CF valid range, GMT 4's native
-grid format."""
+"""Inputs found by the sixth issue-19 hunt (2026-12-07, helper-62).
+
+Tracks: units a header declares that were read as the library's own (``drift_radius
+(km)``, ``v_east (ft/s)``, ``t (hours since ...)``, ``lon (W)``), a log keeping the date
+and the time of day in two columns, date-times with a ``UTC`` suffix or an ordinal day,
+positions with hemisphere letters or in degrees and minutes, ``#N/A`` and ``-`` cells,
+title lines above the header, ``ve``/``vn`` velocity columns, bzip2/xz/zip files,
+``--columns`` pairs split by semicolons. Maps: a CF valid range, GMT 4's native grid, a
+grid in a NetCDF-4 group, a shipped map's name in another case, a GeoTIFF or Surfer grid
+named. Outputs: ``.tsv`` written tab-separated, other table formats refused, names too
+long for the file system, numeric log columns passed through. Count options alike."""
 
 import bz2
 import lzma
@@ -230,10 +235,13 @@ def test_a_gmt4_native_grid_is_read(tmp_path, pixel):
 
 def test_sample_reads_a_gmt4_grid_as_the_same_map(tmp_path, refused):
     lat, lon, v = _ryukyu_arrays()
+    lat, lon, v = lat[100:140], lon[50:90], v[100:140, 50:90]  # 28.2-29.8 N, 126.1-127.7 E
     _gmt4(tmp_path / "g.grd", lat, lon, v, False)
-    _csv(tmp_path / "t.csv", "lat,lon", [(29.5, 126.5), (29.61, 126.73)])
+    xr.Dataset({"g": (("lat", "lon"), v, {"units": "mGal"})},
+               coords={"lat": lat, "lon": lon}).to_netcdf(tmp_path / "cf.nc")
+    _csv(tmp_path / "t.csv", "lat,lon", [(29.0, 126.5), (29.11, 126.73)])
     out = []
-    for m in (str(tmp_path / "g.grd"), "ryukyu"):
+    for m in (str(tmp_path / "g.grd"), str(tmp_path / "cf.nc")):
         assert main(["sample", "--map", m, "--track", str(tmp_path / "t.csv"), "--out",
                      str(tmp_path / "s.csv"), "--force"]) == 0
         out.append(np.loadtxt(tmp_path / "s.csv", delimiter=",", skiprows=1))
