@@ -108,9 +108,9 @@ def outside_valid_range(values, attrs, encoding):
     values : ndarray
         The decoded values (scale and offset applied).
     attrs, encoding : dict
-        The variable's attributes (``valid_range``, ``valid_min``, ``valid_max``, which CF
-        gives in the stored, packed type) and its encoding (``scale_factor``,
-        ``add_offset``).
+        The variable's attributes (``valid_range``, ``valid_min``, ``valid_max``: in packed
+        units when of the stored, packed type, else in the unpacked ones, as CF says) and
+        its encoding (``dtype``, ``scale_factor``, ``add_offset``).
 
     Returns
     -------
@@ -119,15 +119,22 @@ def outside_valid_range(values, attrs, encoding):
         apply the range: a node of -500 in a map declaring ``valid_range = -400, 400`` was
         read as -500 mGal).
     """
-    low, high = -np.inf, np.inf
+    low, high, declared = -np.inf, np.inf, []
     if "valid_range" in attrs and np.size(attrs["valid_range"]) == 2:
         low, high = (float(v) for v in np.ravel(attrs["valid_range"]))
+        declared.append(attrs["valid_range"])
+    for name in ("valid_min", "valid_max"):
+        if name in attrs:
+            declared.append(attrs[name])
     low = float(np.ravel(attrs["valid_min"])[0]) if "valid_min" in attrs else low
     high = float(np.ravel(attrs["valid_max"])[0]) if "valid_max" in attrs else high
     if not (np.isfinite(low) or np.isfinite(high)):
         return values
-    scale = float(encoding.get("scale_factor", 1.0))
-    offset = float(encoding.get("add_offset", 0.0))
-    low, high = sorted((low * scale + offset, high * scale + offset))
+    stored = np.dtype(encoding.get("dtype", values.dtype))
+    if ("scale_factor" in encoding or "add_offset" in encoding) and all(
+            np.asarray(v).dtype == stored for v in declared):  # else in unpacked units (CF)
+        scale = float(encoding.get("scale_factor", 1.0))
+        offset = float(encoding.get("add_offset", 0.0))
+        low, high = sorted((low * scale + offset, high * scale + offset))
     outside = (values < low) | (values > high)
     return np.where(outside, np.nan, values) if outside.any() else values

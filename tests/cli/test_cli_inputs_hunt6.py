@@ -199,12 +199,16 @@ def test_nodes_outside_a_declared_valid_range_are_missing(tmp_path):
         ds.to_netcdf(tmp_path / f"m{i}.nc")
         got = read_netcdf(tmp_path / f"m{i}.nc").values
         assert np.isnan(got).sum() == 9 and np.isnan(got[100:103, 100:103]).all()
-    packed = xr.Dataset({"g": (("lat", "lon"), v, {"units": "mGal", "valid_min": -40000})},
-                        coords={"lat": lat, "lon": lon})  # -400 mGal, packed in 0.01 mGal
-    packed["g"].encoding = {"dtype": "int32", "scale_factor": 0.01, "_FillValue": -2 ** 31}
-    packed.to_netcdf(tmp_path / "p.nc")
-    got = read_netcdf(tmp_path / "p.nc").values
-    assert np.isnan(got).sum() == 9 and np.nanmin(got) > -400
+    # packed in 0.01 mGal: a range of the stored type is in packed units (-40000: -400
+    # mGal), one of the unpacked (float) type in mGal, as CF says
+    for i, low in enumerate([np.int32(-40000), np.float32(-400.0)]):
+        packed = xr.Dataset({"g": (("lat", "lon"), v, {"units": "mGal", "valid_min": low})},
+                            coords={"lat": lat, "lon": lon})
+        packed["g"].encoding = {"dtype": "int32", "scale_factor": np.float32(0.01),
+                                "_FillValue": np.int32(-2 ** 31)}
+        packed.to_netcdf(tmp_path / f"p{i}.nc")
+        got = read_netcdf(tmp_path / f"p{i}.nc").values
+        assert np.isnan(got).sum() == 9 and np.nanmin(got) > -400
 
 
 def _gmt4(path, lat, lon, v, pixel):
