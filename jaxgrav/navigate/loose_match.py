@@ -28,8 +28,8 @@ from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import ChainConfig, match_chains
 from jaxgrav.match.dense import DenseConfig, match_dense
 from jaxgrav.match.entropy import EntropyConfig
-from jaxgrav.match.sizing import CHAIN_NODE_DEG, FAR_FIX_RADII, config_for, iccp_config_for
-from jaxgrav.prepared import as_grid, prepare_map
+from jaxgrav.match.sizing import FAR_FIX_RADII, chain_grid, config_for, iccp_config_for
+from jaxgrav.prepared import prepare_map
 
 __all__ = ["CHAIN_REACH_M", "LOOSE_MATCHERS", "LOOSE_MAX_EDGE_MASS", "loose_map", "match_segment",
            "matcher_config", "schuler_length_m", "told_error"]
@@ -65,19 +65,12 @@ def loose_map(grid, matcher):
     -------
     Grid or PreparedMap
         ``chains``: the map refined to :data:`~jaxgrav.match.sizing.CHAIN_NODE_DEG` nodes
-        by its bicubic spline (its nodes are the candidates, no spline needed then); the
-        others: the map with its bicubic spline prepared once. The chains' nodes are the
-        values the other matchers read: paper A's bilinear refinement
-        (:func:`~jaxgrav.match.sizing.chain_grid`) differs from the spline by 0.6 mGal
-        RMS on the shipped 2.5′ map, an error the chains' covariance was not told.
+        (:func:`~jaxgrav.match.sizing.chain_grid`; its nodes are the candidates, no spline
+        needed); the others: the map with its bicubic spline prepared once.
     """
     if matcher not in LOOSE_MATCHERS:
         raise ValueError(f"matcher must be one of {LOOSE_MATCHERS}; got {matcher!r}")
-    if matcher != "chains":
-        return prepare_map(grid)
-    grid = as_grid(grid)
-    factor = max(1, round(min(grid.dlat, grid.dlon) / CHAIN_NODE_DEG))  # as chain_grid's
-    return grid.refine(factor, "bicubic") if factor > 1 else grid
+    return chain_grid(grid) if matcher == "chains" else prepare_map(grid)
 
 
 def schuler_length_m(speed, lat):

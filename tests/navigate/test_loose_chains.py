@@ -1,7 +1,7 @@
 """The chain matcher in the loosely coupled loop (navigate.loose_match): the error it is
 told (the Eötvös error of the filter's velocity at its Schuler length, with the map's
-error as one Gauss–Markov error of the same variance and slope variance), the map it
-reads (the bicubic spline at 0.005° nodes) and the edge test of its fixes."""
+error as one Gauss–Markov error of the same variance and slope variance) and the edge
+test of its fixes."""
 
 import jax.numpy as jnp
 import numpy as np
@@ -12,16 +12,13 @@ from jaxgrav.geodesy import normal_gravity
 from jaxgrav.match.correlation import ChainConfig
 from jaxgrav.match.gls import track_covariance
 from jaxgrav.match.result import MatchResult
-from jaxgrav.match.sizing import chain_grid
 from jaxgrav.navigate import loose_match
 from jaxgrav.navigate.loose_match import (
     LOOSE_MAX_EDGE_MASS,
-    loose_map,
     match_segment,
     schuler_length_m,
     told_error,
 )
-from jaxgrav.prepared import prepare_map
 
 
 def _one_minus_corr(sigma, length, h, order=2):
@@ -84,17 +81,6 @@ def test_the_chains_are_told_the_eotvos_error_at_its_schuler_length(smooth_grid,
     with pytest.raises(_Told) as told:  # no length given: the map error's
         match_segment(*args)
     assert float(told.value.args[0].map_error_length_m) == pytest.approx(10000.0)
-
-
-def test_the_chains_in_the_loop_read_the_maps_spline_at_their_nodes(smooth_grid):
-    nodes = loose_map(smooth_grid, "chains")
-    assert nodes.dlat == pytest.approx(0.005) and nodes.dlon == pytest.approx(0.005)
-    lat, lon = np.meshgrid(np.asarray(nodes.lat)[::7], np.asarray(nodes.lon)[::7],
-                           indexing="ij")
-    spline = prepare_map(smooth_grid).sample(jnp.asarray(lat), jnp.asarray(lon), "bicubic")
-    np.testing.assert_allclose(np.asarray(nodes.values)[::7, ::7], spline, atol=1e-3)
-    # not paper A's bilinear refinement (chain_grid), which differs from the spline
-    assert np.max(np.abs(np.asarray(chain_grid(smooth_grid).values - nodes.values))) > 0.1
 
 
 def _result(edge_mass, n=4):
