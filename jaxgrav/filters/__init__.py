@@ -23,6 +23,7 @@ from jaxgrav.filters.api import (
     eotvos_part,
     filter_track,
     pad_to_stride,
+    run_pmf,
 )
 from jaxgrav.filters.gaussian_sum import GaussianSumState, gaussian_sum, split_prior
 from jaxgrav.filters.guard import GuardConfig, free_covariance, guard_infos, guard_run
@@ -61,7 +62,7 @@ from jaxgrav.filters.particles import (
 )
 from jaxgrav.filters.pcrlb import PCRLBResult, pcrlb
 from jaxgrav.filters.pf import ParticleState, pf
-from jaxgrav.filters.pmf import PMFFilter, PMFState, pmf, run_pmf
+from jaxgrav.filters.pmf import PMFFilter, PMFState, pmf
 from jaxgrav.filters.rbpf import RBPFState, rbpf
 
 __all__ = [

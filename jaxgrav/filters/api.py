@@ -5,8 +5,10 @@ degrees, builds the INS error model's prior and dynamics, runs a filter of this
 package (UKF, EKF, Gaussian sum, point-mass, SIR or Rao–Blackwellised particle filter)
 once jitted, and returns the corrected positions with their 1-σ and per-row status.
 The jitted runners are module functions: one compilation per process, filter and
-track shape.
+track shape. Also the deprecated :func:`run_pmf` (the point-mass filter's old runner).
 """
+
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -38,6 +40,7 @@ __all__ = [
     "filter_track",
     "pad_to_stride",
     "reading_stride",
+    "run_pmf",
 ]
 
 FILTER_METHODS = ("ukf", "ekf", "gsf", "pmf", "pf", "rbpf")
@@ -349,3 +352,25 @@ def filter_track(field, t, lat, lon, gravity, method="ukf", *, sigma_pos=1414.2,
     if x.shape[1] > N_STATES:  # the map-error state, appended last
         out.update(map_error=x[:, N_STATES], sigma_map_error=sigma[:, N_STATES])
     return out
+
+
+def run_pmf(filt, field, dt, x0, p0, steps, every=1):
+    """Deprecated: :func:`~jaxgrav.filters.model.run_filter` runs the point-mass filter.
+
+    ``run_pmf(filt, field, dt, x0, p0, steps, every)`` is
+    ``run_filter(filt, field, filt.dynamics(mean(steps.lat), dt), x0, p0, steps, every)``
+    (the error model at the mean INS latitude) for ``T`` a multiple of ``every``; pad
+    other runs with :func:`~jaxgrav.filters.api.pad_to_stride`. Kept for one release.
+
+    Raises
+    ------
+    ValueError
+        ``every`` not a positive int dividing the number of steps.
+    """
+    warnings.warn("run_pmf is deprecated: use run_filter(filt, field, filt.dynamics(lat, dt), "
+                  "x0, p0, steps, every=k) (and pad_to_stride for runs off the stride)",
+                  DeprecationWarning, stacklevel=2)
+    t = steps.z.shape[0]
+    if not isinstance(every, int) or every < 1 or t % every:
+        raise ValueError(f"every must be a positive int dividing the {t} steps; got {every!r}")
+    return run_filter(filt, field, filt.dynamics(jnp.mean(steps.lat), dt), x0, p0, steps, every)

@@ -70,7 +70,6 @@ takes each cell's ``ε ← Φ ε + w`` (from the dynamics' last row) and mixes t
 moments through the kernel. Order 2 is refused (ValueError); 13 states: as above.
 """
 
-import warnings
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -83,22 +82,20 @@ from jaxgrav.filters.model import (
     Dynamics,
     StepInfo,
     gravity_measurement,
-    run_filter,
 )
 from jaxgrav.filters.pmf_cells import (
     MISSING,
     PMFState,
     cell_fields,
     cell_values,
-    check_adaptive,
     global_moments,
     grid_moments,
     mix_cells,
-    resize_cells,
     sync_gaussian,
     weigh_cells,
     with_cells,
 )
+from jaxgrav.filters.pmf_grid import REGRID_RATIO, check_adaptive, resize_cells, resolving_cell
 from jaxgrav.filters.pmf_linear import conditional_reading, mixture_update
 from jaxgrav.filters.pmf_predict import (
     affine_cells,
@@ -110,14 +107,12 @@ from jaxgrav.filters.pmf_predict import (
 )
 from jaxgrav.sim.ins import GRAV, N_STATES, INSErrorModel, transition
 
-__all__ = ["PMFFilter", "PMFState", "diffusion_kernel", "pmf", "run_pmf"]
+__all__ = ["PMFFilter", "PMFState", "diffusion_kernel", "pmf"]
 
 EDGE_MASS = 1e-3
 """``grid_edge`` is flagged when the outermost cells hold more than this mass."""
-REGRID_RATIO = 1.4
-"""An adaptive grid is re-sized when its cell is off the wanted size by more than this;
-it always spans the cells weighing more than KEEP_WEIGHT (a distant mode stays)."""
 KEEP_WEIGHT = 1e-3
+"""An adaptive grid always spans the cells weighing more than this (a distant mode stays)."""
 RECENTRE_LOSS = 1e-5
 """Re-centring may push at most this mass off the grid."""
 _DEFAULT_INS = INSErrorModel()
@@ -149,7 +144,7 @@ class PMFFilter(NamedTuple):
 
 def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         measurement=gravity_measurement, adapt_span=None, min_cell_m=None, max_cell_m=None,
-        missing="gaps"):
+        resolve=None, missing="gaps"):
     """Grid point-mass filter with the INS error model's drift.
 
     Parameters
@@ -171,10 +166,18 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         zero bias.
     adapt_span : float, optional
         An adaptive grid, first cell ``cell_m``: whenever the prediction is settled (each
-        ``update`` or ``settle``) it is re-centred and re-sized to span ``±adapt_span`` σ
-        of the weights per axis (cells within ``[min_cell_m, max_cell_m]``, default
-        ``cell_m/4`` and ``8·cell_m``; see :data:`REGRID_RATIO`,
-        :func:`~jaxgrav.filters.pmf_cells.regrid_cells`). None (default): the fixed grid.
+        ``update`` or ``settle``) it is re-centred, and re-sized when it spans fewer than
+        ``±adapt_span`` σ of the weights on an axis or more than ``±REGRID_RATIO ·
+        adapt_span`` σ, to span the latter (cells within ``[min_cell_m, max_cell_m]``,
+        default ``cell_m/4`` and ``8·cell_m``; :mod:`~jaxgrav.filters.pmf_grid`). None
+        (default): the fixed grid.
+    resolve : float, optional
+        An adaptive grid's cells are also kept small enough that the map changes from one
+        cell to the next by at most ``resolve`` times the reading's predictive 1-σ where
+        the weights are (measured at each reading,
+        :func:`~jaxgrav.filters.pmf_grid.resolving_cell`), even if the grid then spans
+        less than ``±adapt_span`` σ (its ``grid_edge`` flag says so). None (default): no
+        such bound.
     missing : {"gaps", "land"}
         A cell on a missing (NaN) node of a Grid map: a survey gap (default) or land,
         where the vehicle cannot be (:data:`~jaxgrav.filters.pmf_cells.MISSING`).
@@ -195,7 +198,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
     if adapt_span is not None:
         min_cell_m = cell_m / 4 if min_cell_m is None else min_cell_m
         max_cell_m = cell_m * 8 if max_cell_m is None else max_cell_m
-        check_adaptive(adapt_span, min_cell_m, max_cell_m)
+        check_adaptive(adapt_span, min_cell_m, max_cell_m, resolve)
     # the cells' largest extent (an adaptive grid starts at cell_m, then stays in [min, max]);
     # None when a size is traced: the cells are then sampled one by one on a map
     sizes = [concrete(v) for v in ((cell_m,) if adapt_span is None else (cell_m, max_cell_m))]
@@ -224,9 +227,10 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         extra = () if not n else tuple(jnp.full(shape, v) for v in (
             x0[N_STATES], p0[N_STATES, N_STATES], p0[GRAV, N_STATES]))
         size = None if adapt_span is None else jnp.full(2, cell_m, x0.dtype)
+        cap = None if adapt_span is None or resolve is None else jnp.full(2, jnp.inf, x0.dtype)
         state = PMFState(w, jnp.full(shape, x0[GRAV]), jnp.full(shape, p0[GRAV, GRAV]), centre,
                          x0[:N_STATES], p0[:N_STATES, :N_STATES], *extra, cell=size,
-                         pending=no_pending(x0.dtype))
+                         pending=no_pending(x0.dtype), cell_cap=cap)
         return sync_gaussian(state, *grid_moments(w, dn, de, cell_m))
 
     def _n_map_states(n):
@@ -299,7 +303,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         state = state._replace(w=w, centre=state.centre + k * size,
                                pending=no_pending(pending.dtype))
         state = with_cells(state, cell)
-        if adapt_span is not None:  # cells to span ±adapt_span σ (see REGRID_RATIO)
+        if adapt_span is not None:  # cells to span ±adapt_span σ (see pmf_grid)
             state = resize_cells(state, cells(state.centre, state.cell), adapt_span,
                                  (min_cell_m, max_cell_m), KEEP_WEIGHT, REGRID_RATIO, _TINY)
         # the Gaussian part's position block := the spread grid's moments, as predicted
@@ -369,6 +373,9 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         m_new = jnp.where(took, m + gain * nu, m)
         s_new = jnp.where(took, s - gain * cross_b, s)
         state = state._replace(w=w_new, bias_mean=m_new, bias_var=s_new)
+        if state.cell_cap is not None:  # the map's resolution where the weights were
+            cap = resolving_cell(w, jnp.where(on_map, g, jnp.nan), var, state.cell, resolve)
+            state = state._replace(cell_cap=jnp.where(do, cap, state.cell_cap))
         if has_err:
             gain_e = cross_e / var
             state = state._replace(err_mean=jnp.where(took, em + gain_e * nu, em),
@@ -396,25 +403,3 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
                             jnp.where(used, z_var, jnp.nan), flags)
 
     return PMFFilter(init, update, predict, dynamics, settle)
-
-
-def run_pmf(filt, field, dt, x0, p0, steps, every=1):
-    """Deprecated: :func:`~jaxgrav.filters.model.run_filter` runs the point-mass filter.
-
-    ``run_pmf(filt, field, dt, x0, p0, steps, every)`` is
-    ``run_filter(filt, field, filt.dynamics(mean(steps.lat), dt), x0, p0, steps, every)``
-    (the error model at the mean INS latitude) for ``T`` a multiple of ``every``; pad
-    other runs with :func:`~jaxgrav.filters.api.pad_to_stride`. Kept for one release.
-
-    Raises
-    ------
-    ValueError
-        ``every`` not a positive int dividing the number of steps.
-    """
-    warnings.warn("run_pmf is deprecated: use run_filter(filt, field, filt.dynamics(lat, dt), "
-                  "x0, p0, steps, every=k) (and pad_to_stride for runs off the stride)",
-                  DeprecationWarning, stacklevel=2)
-    t = steps.z.shape[0]
-    if not isinstance(every, int) or every < 1 or t % every:
-        raise ValueError(f"every must be a positive int dividing the {t} steps; got {every!r}")
-    return run_filter(filt, field, filt.dynamics(jnp.mean(steps.lat), dt), x0, p0, steps, every)

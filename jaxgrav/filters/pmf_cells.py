@@ -35,8 +35,6 @@ __all__ = [
     "lattice_block",
     "mix_cells",
     "point_mass_cells",
-    "regrid_matrix",
-    "resize_cells",
     "sync_gaussian",
     "weigh_cells",
     "with_cells",
@@ -80,6 +78,10 @@ class PMFState(NamedTuple):
         the grid as it was when last settled; ``centre`` is current, and ``x``, ``p``
         hold the predicted moments (the settled grid's position moments plus the
         pending drift and spread, without the edges' reflection).
+    cell_cap : Array, shape ``(2,)``, or None
+        The largest cell (m, north and east) that resolves the map where the weights
+        are, from the last reading (:func:`resolving_cell`); an adaptive grid's cells
+        are kept below it. None: no bound (before the first reading, a fixed grid).
     """
 
     w: jax.Array
@@ -93,6 +95,7 @@ class PMFState(NamedTuple):
     err_cross: jax.Array | None = None
     cell: jax.Array | None = None
     pending: jax.Array | None = None
+    cell_cap: jax.Array | None = None
 
 
 def grid_moments(w, dn, de, cell_m):
@@ -319,87 +322,3 @@ def mix_cells(a_n, a_e, w0, cell0, tiny=1e-13):
         lim = jnp.sqrt(s * ev)
         cell += [em, ev, jnp.clip(ec, -lim, lim)]
     return w / total, cell
-
-
-def regrid_matrix(old_centre, old_cell, new_centre, new_cell, n):
-    """Weights of ``n`` new nodes from ``n`` old ones along one axis, ``(n, n)``.
-
-    A hat of half-width ``max(old_cell, new_cell)``: linear interpolation when the
-    grid is refined, each new cell gathering the mass about it when coarsened (rows
-    not normalised: the caller renormalises the weights).
-    """
-    i = jnp.arange(n) - (n - 1) / 2
-    old = old_centre + i * old_cell
-    new = new_centre + i * new_cell
-    h = jnp.maximum(old_cell, new_cell)
-    return jnp.maximum(0.0, 1.0 - jnp.abs(new[:, None] - old[None, :]) / h)
-
-
-def regrid_cells(state, mean, target, tiny=1e-13):
-    """``state`` on the grid of cell ``target`` centred at ``mean``.
-
-    Parameters
-    ----------
-    state : PMFState
-        With its ``cell`` (m, north and east) set.
-    mean, target : Array, shape ``(2,)``
-        The new grid's centre (m) and cell size (m), north and east.
-    tiny : float
-        As in :func:`mix_cells`.
-
-    Returns
-    -------
-    new : PMFState
-        Weights and per-cell Gaussians carried by :func:`regrid_matrix` (normalised),
-        the grid shifted so that the weights' mean stays ``mean``. Old cells outside
-        the new grid are dropped: size it with :func:`wanted_cell` to keep the mass.
-    """
-    n = state.w.shape[0]
-    i = jnp.arange(n) - (n - 1) / 2
-    r_n, r_e = (regrid_matrix(state.centre[k], state.cell[k], mean[k], target[k], n)
-                for k in (0, 1))
-    w, cell = mix_cells(r_n, r_e, state.w, cell_fields(state), tiny)
-    # the interpolated weights' mean, off by a fraction of a cell, put back where it was
-    moved = jnp.stack([jnp.sum(w.sum(1) * i), jnp.sum(w.sum(0) * i)]) * target
-    centre = mean - moved
-    return with_cells(state._replace(w=w, centre=centre, cell=target), cell)
-
-
-def resize_cells(state, where, span, bounds, keep, ratio, tiny=1e-13):
-    """An adaptive grid re-sized to span ``±span`` σ of its weights (and every cell
-    weighing more than ``keep``), cells clipped to ``bounds`` (m) — only when the wanted
-    cell is off the current one by more than the factor ``ratio`` on either axis.
-
-    ``where``: the cells' position errors ``(dn, de)`` (:func:`regrid_cells`,
-    :func:`wanted_cell`).
-    """
-    c = state.cell
-    mean, cov = grid_moments(state.w, *where, c)
-    target = jnp.clip(wanted_cell(state.w, where, mean, cov, span, keep), *bounds)
-    new = regrid_cells(state, mean, target, tiny)
-    go = jnp.any(jnp.abs(jnp.log(target / c)) > jnp.log(ratio))
-    return jax.tree.map(lambda a, b: jnp.where(go, a, b), new, state)
-
-
-def wanted_cell(w, where, mean, cov, span, keep):
-    """Cell size (m, north and east) for the grid to span ``±span`` σ of the weights and
-    every cell weighing more than ``keep`` (a distant mode stays on the grid).
-
-    ``where`` are the cells' position errors ``(dn, de)``, ``(G, G)`` each; ``mean``,
-    ``cov`` the weights' moments (:func:`grid_moments`).
-    """
-    reach = [jnp.max(jnp.where(w > keep, jnp.abs(a - mean[k]), 0.0))
-             for k, a in enumerate(where)]
-    return (jnp.maximum(2.0 * span * jnp.sqrt(jnp.diagonal(cov)), 2.0 * jnp.stack(reach))
-            / (w.shape[0] - 1))
-
-
-def check_adaptive(span, min_cell_m, max_cell_m):
-    """ValueError unless ``span > 0`` and ``0 < min_cell_m <= max_cell_m`` (where concrete)."""
-    vals = [concrete(v) for v in (span, min_cell_m, max_cell_m)]
-    if any(v is None or v.dtype == object for v in vals):
-        return  # traced: checked where the numbers are made
-    span, lo, hi = (float(v) for v in vals)
-    if not (span > 0 and 0 < lo <= hi):
-        raise ValueError("an adaptive grid needs adapt_span > 0 and 0 < min_cell_m <= "
-                         f"max_cell_m (m); got {span:g}, {lo:g}, {hi:g}")

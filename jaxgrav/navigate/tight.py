@@ -122,8 +122,13 @@ class TightConfig:
         is adaptive: it follows the estimate and re-sizes its cells to span
         ±``pmf_span`` σ of the weights (between a quarter and 8 × this size).
     pmf_span : float
-        σ the adaptive grid spans per side (static; default 4; 0: a fixed grid of
-        ``pmf_cell_m`` cells).
+        σ the adaptive grid spans at least per side (static; default 4; it is re-sized
+        to span 1.4 × this when it spans fewer or more than 1.4 × this,
+        :mod:`~jaxgrav.filters.pmf_grid`; 0: a fixed grid of ``pmf_cell_m`` cells).
+    pmf_resolve : float
+        The adaptive grid's cells are kept small enough that the map changes from one cell
+        to the next by at most this many of the reading's predictive 1-σ where the weights
+        are (static; default 0.5; 0: no bound; :func:`~jaxgrav.filters.pmf`'s ``resolve``).
     pmf_q_pos : float
         Its extra random-walk density of the position error (m²/s; default 0.25, the
         ``jaxgrav filter`` value at this ``sigma_vel``).
@@ -157,6 +162,7 @@ class TightConfig:
     n_particles: int = static_field(500)
     pmf_cells: int = static_field(61)
     pmf_span: float = static_field(4.0)
+    pmf_resolve: float = static_field(0.5)
     pmf_cell_m: float = static_field(100.0)
     pmf_missing: str = static_field("gaps")
     eotvos_velocity: bool = static_field(True)
@@ -173,6 +179,9 @@ class TightConfig:
                             f"or None; got {type(self.map_error).__name__}")
         if not (isinstance(self.pmf_span, int | float) and self.pmf_span >= 0):
             raise ValueError(f"pmf_span must be >= 0 (0: a fixed grid); got {self.pmf_span!r}")
+        if not (isinstance(self.pmf_resolve, int | float) and self.pmf_resolve >= 0):
+            raise ValueError(f"pmf_resolve must be a number >= 0 (reading 1-sigma per cell; "
+                             f"0: no bound); got {self.pmf_resolve!r}")
         cell = self.pmf_cell_m
         if isinstance(cell, bool) or not isinstance(cell, numbers.Real) or not cell > 0:
             raise ValueError(f"pmf_cell_m must be a number > 0 (m; static); got {cell!r}")
@@ -222,7 +231,8 @@ def _filter(cfg, measurement, count):
     method, gate = cfg.method, cfg.gate
     if method == "pmf":  # its map-error state is per cell: the map alone per cell
         return pmf(cfg.pmf_cells, cfg.pmf_cell_m, q_pos=cfg.pmf_q_pos, ins=cfg.ins,
-                   adapt_span=cfg.pmf_span or None, missing=cfg.pmf_missing)
+                   adapt_span=cfg.pmf_span or None, resolve=cfg.pmf_resolve or None,
+                   missing=cfg.pmf_missing)
     if method == "ukf":
         return ukf(measurement, gate=gate, curvature_count=count)
     if method == "ekf":
