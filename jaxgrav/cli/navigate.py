@@ -31,9 +31,9 @@ The readings are Eötvös-corrected with the filter's velocity, the one rule of 
 navigation loop. Where the log leaves the map, the fixes stop (event 2) and the
 solution continues on the INS with a growing σ.
 
-The default is ``--method ukf``: on the README's 12 h patrols the tightly coupled UKF
-ends the last hour at 0.06 × the free INS's error where the loosely coupled loop ends
-at 0.84 (3 mGal map error, the same 100 voyages).
+The default is ``--method ukf``: on the documented 12 h patrols (``docs/voyages.md``) the
+tightly coupled UKF ends the last hour at 0.06 × the free INS's error where the loosely
+coupled loop ends at 0.84 (3 mGal map error, the same 100 voyages).
 
 ``--method ukf|ekf|gsf|rbpf|pmf`` (tightly coupled, :func:`jaxgrav.navigate.navigate_tight`):
 every reading updates the INS error filter; the readings are Eötvös-corrected with the
@@ -43,7 +43,7 @@ INS velocity and the Eötvös effect of its velocity error is part of the measur
 ``rbpf`` is the Rao–Blackwellised particle filter (``--particles``, default 500;
 ``--seed`` for its draws); ``pmf`` the point-mass filter on an adaptive grid
 (over-confident with a navigation-grade INS: one Gaussian velocity for the whole grid
-cannot hold what each cell's Eötvös residual says; see the README).
+cannot hold what each cell's Eötvös residual says; see ``docs/voyages.md``).
 Readings that are missing or off the map are skipped and flagged row by row.
 
 Times (:mod:`jaxgrav.time_steps`): jitter up to 10 % of the step is absorbed; the tight
@@ -356,9 +356,9 @@ def _tight(args, voyage, grid, n_missing, n_off, track, steps):
             print(f"warning: {warning}", file=sys.stderr)
 
 
-PMF_WARNING = ("pmf's 1-sigma is over-confident with a navigation-grade INS (position NEES 86 "
-               "on the README's 100 patrols, 2 expected: one Gaussian velocity for the whole "
-               "grid); use --method ukf or rbpf for a 1-sigma to trust")  # README's table
+PMF_WARNING = ("pmf's 1-sigma is over-confident with a navigation-grade INS (position NEES 21 "
+               "on the documented 100 patrols, 2 expected: one Gaussian velocity for the "
+               "whole grid); use --method ukf or rbpf for a 1-sigma to trust")  # docs/voyages.md
 
 
 def nis_warning(innovation, innovation_sigma):
