@@ -374,7 +374,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         s_new = jnp.where(took, s - gain * cross_b, s)
         state = state._replace(w=w_new, bias_mean=m_new, bias_var=s_new)
         if state.cell_cap is not None:  # the map's resolution where the weights were
-            cap = resolving_cell(w, jnp.where(on_map, g, jnp.nan), var, state.cell, resolve)
+            cap = resolving_cell(w, g, var, state.cell, resolve)  # g: NaN off the map
             state = state._replace(cell_cap=jnp.where(do, cap, state.cell_cap))
         if has_err:
             gain_e = cross_e / var
