@@ -144,13 +144,16 @@ class ChainConfig:
     fix : {"chain", "posterior"}
         The returned track (static): the selected chain, or the INS track shifted to
         the posterior mean offset (module docstring).
-    max_sigma_m, max_second_mode, max_chi2_per_dof : float
+    max_sigma_m, max_second_mode, max_chi2_per_dof, max_edge_mass : float
         Integrity thresholds (traced): the fix is rejected (INS track returned, status
-        512, 1024, 2048) when the largest 1-σ of its covariance (m), the posterior's
-        second-mode likelihood ratio (:func:`~jaxgrav.match.gls.offset_posterior`; for
-        the pairwise search, of the best chain outside the 3-σ curvature ellipse of the
-        best), or the chosen chain's GLS χ² per degree of freedom exceeds it.
-        Defaults ``inf``: every found fix is accepted.
+        512, 1024, 2048, 4096) when the largest 1-σ of its covariance (m), the
+        posterior's second-mode likelihood ratio
+        (:func:`~jaxgrav.match.gls.offset_posterior`; for the pairwise search, of the
+        best chain outside the 3-σ curvature ellipse of the best), the chosen chain's
+        GLS χ² per degree of freedom, or the window posterior's mass on its outermost
+        ring of offsets (the stencil search only; the pairwise search has no window
+        posterior and never rejects on it) exceeds it. Defaults ``inf``: every found
+        fix is accepted.
     """
 
     delta: float = 1.0
@@ -175,6 +178,7 @@ class ChainConfig:
     max_sigma_m: float = float("inf")
     max_second_mode: float = float("inf")
     max_chi2_per_dof: float = float("inf")
+    max_edge_mass: float = float("inf")
 
     def __post_init__(self):
         if isinstance(self.fix, str) and self.fix not in ("chain", "posterior"):

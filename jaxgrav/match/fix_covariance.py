@@ -140,13 +140,12 @@ def integrity_status(cov, second_mode, chi2_per_dof, edge_mass, config):
     """Rejection bits of a fix (0: accepted), from the thresholds of ``config``.
 
     ``config.max_sigma_m`` (bit 512, on the largest 1-σ of ``cov``),
-    ``max_second_mode`` (1024), ``max_chi2_per_dof`` (2048), ``max_edge_mass`` (4096,
-    if the config has it);
+    ``max_second_mode`` (1024), ``max_chi2_per_dof`` (2048), ``max_edge_mass`` (4096);
     a NaN statistic never rejects.
     """
     sigma = largest_sigma(cov)
     return (jnp.where(sigma > config.max_sigma_m, 512, 0)
             | jnp.where(second_mode > config.max_second_mode, 1024, 0)
             | jnp.where(chi2_per_dof > config.max_chi2_per_dof, 2048, 0)
-            | jnp.where(edge_mass > getattr(config, "max_edge_mass", jnp.inf), 4096, 0)
+            | jnp.where(edge_mass > config.max_edge_mass, 4096, 0)
             ).astype(jnp.int32)

@@ -47,9 +47,8 @@ the Rayleigh 99.9 % reach of a 2.1 km position 1-σ."""
 LOOSE_MAX_EDGE_MASS = 0.2
 """A loop fix with more than this share of its posterior on the search region's edge is
 rejected (status 4096): the likelihood goes on beyond the region, so the fix and its
-covariance, cut there, are not what the readings say. The dense and entropy+ICCP
-matchers are given it as ``max_edge_mass``; the chains' window is tested in
-:func:`match_segment`."""
+covariance, cut there, are not what the readings say. Every matcher of the loop is
+given it as ``max_edge_mass`` (:func:`matcher_config`)."""
 
 
 def loose_map(grid, matcher):
@@ -172,25 +171,14 @@ def matcher_config(matcher, noise_mgal, map_error_mgal, map_error_length_m, grid
         config = config_for("chains", grid, chain_reach_m / 1.2, noise_mgal=noise_mgal,
                             step_m=step_m, map_error=told)
         return dataclasses.replace(config, map_error_length_m=map_error_length_m,
-                                   fix="posterior", max_sigma_m=3000.0)
+                                   fix="posterior", max_sigma_m=3000.0,
+                                   max_edge_mass=LOOSE_MAX_EDGE_MASS)
     # sized for a nominal 1 km reach; the loop sets the spacing and window per segment
     iccp = iccp_config_for(grid, 1000.0, stage="fine", noise=noise_mgal, max_rotation_deg=3.0,
                            map_error=map_error(map_error_mgal, map_error_length_m),
                            bias_sigma=math.inf, fix="posterior", max_sigma_m=3000.0,
                            max_edge_mass=LOOSE_MAX_EDGE_MASS)
     return (EntropyConfig(half_size=20), iccp)
-
-
-def _edge_tested(res, lat, lon):
-    """``res`` rejected (status 4096, the INS track kept) when its posterior's edge mass
-    exceeds :data:`LOOSE_MAX_EDGE_MASS` (a NaN edge mass never rejects)."""
-    edge = res.accepted & (res.edge_mass > LOOSE_MAX_EDGE_MASS)
-    keep = res.accepted & ~edge
-    return res._replace(
-        lat=jnp.where(keep, res.lat, lat), lon=jnp.where(keep, res.lon, lon),
-        offset_north_m=jnp.where(keep, res.offset_north_m, 0.0),
-        offset_east_m=jnp.where(keep, res.offset_east_m, 0.0),
-        accepted=keep, status=res.status | jnp.where(edge, 4096, 0).astype(res.status.dtype))
 
 
 def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bounds,
@@ -228,9 +216,8 @@ def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bound
         told, length = told_error(matcher.map_error_mgal, matcher.map_error_length_m,
                                   sigma_eotvos, length_e, matcher.map_error_order)
         delta = 2.0 * jnp.sqrt(matcher.noise_mgal**2 + told**2)  # as config_for's
-        res = match_chains(grid, lat, lon, g, dataclasses.replace(
+        return match_chains(grid, lat, lon, g, dataclasses.replace(
             matcher, map_error_mgal=told, map_error_length_m=length, delta=delta))
-        return _edge_tested(res, lat, lon)
     dense = isinstance(matcher, DenseConfig)
     # the offset grid's settings, and the settings that are told the map error
     offsets, told_to = (matcher, matcher) if dense else matcher

@@ -3,22 +3,29 @@ told (the Eötvös error of the filter's velocity at its Schuler length, with th
 error as one Gauss–Markov error of the same variance and slope variance) and the edge
 test of its fixes."""
 
+import dataclasses
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from jaxgrav.constants import KNOT, MGAL, WGS84_MEAN_RADIUS
+from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import normal_gravity
-from jaxgrav.match.correlation import ChainConfig
+from jaxgrav.match.correlation import ChainConfig, match_chains
 from jaxgrav.match.gls import track_covariance
-from jaxgrav.match.result import MatchResult
+from jaxgrav.match.sizing import config_for
 from jaxgrav.navigate import loose_match
 from jaxgrav.navigate.loose_match import (
+    LOOSE_MATCHERS,
     LOOSE_MAX_EDGE_MASS,
     match_segment,
+    matcher_config,
     schuler_length_m,
     told_error,
 )
+from jaxgrav.scenarios import MatchingScenario, matching_scenario
 
 
 def _one_minus_corr(sigma, length, h, order=2):
@@ -83,28 +90,41 @@ def test_the_chains_are_told_the_eotvos_error_at_its_schuler_length(smooth_grid,
     assert float(told.value.args[0].map_error_length_m) == pytest.approx(10000.0)
 
 
-def _result(edge_mass, n=4):
-    z = jnp.zeros(())
-    fields = {f: z for f in MatchResult._fields}
-    return MatchResult(**{**fields, "lat": jnp.full(n, 30.01), "lon": jnp.full(n, 130.01),
-                          "offset_north_m": jnp.asarray(900.0),
-                          "offset_east_m": jnp.asarray(-400.0), "status": jnp.asarray(0),
-                          "accepted": jnp.asarray(True), "edge_mass": jnp.asarray(edge_mass)})
+def test_every_loop_matcher_is_given_the_edge_limit(smooth_grid):
+    configs = {m: matcher_config(m, 0.3, 3.0, 10000.0, grid=smooth_grid, step_m=1000.0)
+               for m in LOOSE_MATCHERS}
+    assert configs["dense"].max_edge_mass == LOOSE_MAX_EDGE_MASS
+    assert configs["chains"].max_edge_mass == LOOSE_MAX_EDGE_MASS
+    assert configs["chains"].fix == "posterior" and configs["chains"].stencil_size > 0
+    assert configs["entropy+iccp"][1].max_edge_mass == LOOSE_MAX_EDGE_MASS
 
 
-@pytest.mark.parametrize("edge_mass", [0.5, LOOSE_MAX_EDGE_MASS + 0.01])
-def test_a_chain_fix_with_its_posterior_on_the_window_edge_is_rejected(edge_mass):
-    lat, lon = jnp.full(4, 30.0), jnp.full(4, 130.0)
-    res = loose_match._edge_tested(_result(edge_mass), lat, lon)
-    assert not bool(res.accepted) and int(res.status) & 4096
-    assert float(res.offset_north_m) == 0.0 and float(res.offset_east_m) == 0.0
-    np.testing.assert_array_equal(res.lat, lat)
-    np.testing.assert_array_equal(res.lon, lon)
-
-
-@pytest.mark.parametrize("edge_mass", [0.0, LOOSE_MAX_EDGE_MASS - 0.01, np.nan])
-def test_a_chain_fix_inside_its_window_is_kept(edge_mass):
-    lat, lon = jnp.full(4, 30.0), jnp.full(4, 130.0)
-    res = loose_match._edge_tested(_result(edge_mass), lat, lon)
-    assert bool(res.accepted) and int(res.status) == 0
-    assert float(res.offset_north_m) == 900.0 and float(res.lat[0]) == pytest.approx(30.01)
+def test_a_chain_fix_with_its_posterior_on_the_window_edge_is_rejected(smooth_grid):
+    """The chain matcher's own edge test (status 4096, the INS track kept), on the first
+    track whose window posterior has more than the loop's limit on the window's outer
+    ring (the fourth of the first five, with 0.997)."""
+    scen = MatchingScenario(region=(29.6, 30.4, 129.6, 130.4), drift_deg=0.01, n_fixes=12,
+                            dt=120.0, eotvos=None)
+    config = dataclasses.replace(
+        config_for("chains", smooth_grid, 1500.0, step_m=scen.step_m,
+                   map_error=map_error(3.0, 8000.0)), fix="posterior")
+    for key in range(5):
+        run = matching_scenario(jax.random.key(key), smooth_grid, scen)
+        args = (smooth_grid, run.ins_lat, run.ins_lon, run.readings)
+        free = match_chains(*args, config)
+        edge = float(free.edge_mass)
+        if edge > LOOSE_MAX_EDGE_MASS:
+            break
+    assert bool(free.accepted) and LOOSE_MAX_EDGE_MASS < edge <= 1.0
+    assert abs(float(free.offset_north_m)) > 100.0
+    kept = match_chains(*args, dataclasses.replace(config, max_edge_mass=edge + 0.01))
+    rejected = match_chains(*args, dataclasses.replace(config, max_edge_mass=edge - 0.01))
+    assert bool(kept.accepted) and not int(kept.status) & 4096
+    np.testing.assert_array_equal(np.asarray(kept.lat), np.asarray(free.lat))
+    assert not bool(rejected.accepted) and int(rejected.status) & 4096
+    assert float(rejected.offset_north_m) == 0.0 and float(rejected.offset_east_m) == 0.0
+    np.testing.assert_array_equal(np.asarray(rejected.lat), np.asarray(run.ins_lat))
+    np.testing.assert_array_equal(np.asarray(rejected.lon), np.asarray(run.ins_lon))
+    # the same fix and covariance either way: the test only decides acceptance
+    np.testing.assert_array_equal(np.asarray(rejected.covariance_m2),
+                                  np.asarray(free.covariance_m2))
