@@ -73,7 +73,7 @@ def _plot(grid, out, path, force, setting):
     save_figure(fig, path, force=force)
 
 
-def run_demo(out_dir, *, force=False, runs=200, seed=0, smoke=False):
+def run_demo(out_dir, *, force=False, runs=200, seed=0, smoke=False, option=None):
     """Run the demo and write ``table1.md``, ``summary.json`` and ``tracks.png`` to ``out_dir``.
 
     Parameters
@@ -91,11 +91,15 @@ def run_demo(out_dir, *, force=False, runs=200, seed=0, smoke=False):
         The same steps at toy sizes, for tests (numbers meaningless): the 0.5° map
         refined ×10 instead of ×100, 6 fixes per track in the table and 10 in the
         Monte Carlo, and at least 2 (not 8) tracks per group.
+    option : str, optional
+        The command-line option that named ``out_dir`` (``--out``), for messages.
     """
     out_dir = Path(out_dir)
     if runs < 5:
         raise ValueError(f"runs must be at least 5; got {runs}")
-    check_outputs([out_dir / f for f in OUTPUTS], force=force)  # every one that exists named
+    # every one that exists named; --out named too (was "'/proc/x/table1.md': a file cannot
+    # be created ...", no word of the option)
+    check_outputs([out_dir / f for f in OUTPUTS], force=force, names=[option] * len(OUTPUTS))
     t0 = time.perf_counter()
     key = jax.random.key(seed)
     maps = datasets.load("ryukyu")
@@ -185,4 +189,5 @@ def _cmd_demo(args):
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise ValueError(f"--out {args.out!r} is a file; expected a folder (the demo writes "
                          f"{', '.join(OUTPUTS)} into it)")
-    run_demo(Path(args.out), force=args.force, runs=args.runs, seed=args.seed, smoke=args.smoke)
+    run_demo(Path(args.out), force=args.force, runs=args.runs, seed=args.seed, smoke=args.smoke,
+             option="--out")

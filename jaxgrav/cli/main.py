@@ -54,8 +54,8 @@ from jaxgrav.fields import egm2008
 from jaxgrav.grid_files import UndeclaredFillWarning
 from jaxgrav.scenarios.paper_c import paper_c_trajectory
 
-__all__ = ["NEGATIVE_LIST", "build_parser", "check_map_names", "check_special_outputs",
-           "joined_negative_lists", "main"]
+__all__ = ["NEGATIVE_LIST", "STDIN_NAME", "build_parser", "check_map_names",
+           "check_special_outputs", "joined_negative_lists", "main", "stdin_named"]
 
 
 def _enable_x64():
@@ -222,6 +222,35 @@ def check_map_names(args):
                 "map's name")
 
 
+STDIN_NAME = "standard input (--track -)"
+"""What messages call ``--track -`` (was ``'/dev/stdin'``, a name the user never gave)."""
+
+_STDIN_LABELS = ("track file '/dev/stdin'", "--track '/dev/stdin'", "'/dev/stdin'")
+
+
+def stdin_named(text):
+    """``text`` with the standard input's file names (``track file '/dev/stdin'``,
+    ``--track '/dev/stdin'``) replaced by :data:`STDIN_NAME`."""
+    for label in _STDIN_LABELS:
+        text = text.replace(label, STDIN_NAME)
+    return text
+
+
+class _StdinNamed:
+    """A text stream writing to ``stream`` through :func:`stdin_named`: the command's
+    errors and warnings about ``--track -`` name the standard input."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text):
+        """Write ``text`` with the standard input named."""
+        return self._stream.write(stdin_named(text))
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def _stdin_track(args):
     """``--track -``: the standard input (``/dev/stdin``); ValueError when it is a terminal
     (the command waited, silently, for a track typed in)."""
@@ -239,11 +268,12 @@ def main(argv=None):
     args = build_parser().parse_args(joined_negative_lists(argv))
     _enable_x64()
     enable_cache(off=args.no_cache)
-    default = warnings.formatwarning
+    default, stderr = warnings.formatwarning, sys.stderr
     warnings.formatwarning = functools.partial(_one_line, default=default)
     try:
         if getattr(args, "track", None) == "-":
             _stdin_track(args)
+            sys.stderr = _StdinNamed(stderr)
         check_special_outputs(args)
         check_map_names(args)
         args.func(args)
@@ -262,6 +292,6 @@ def main(argv=None):
               "--debug for the traceback)", file=sys.stderr)
         return 1
     finally:
-        warnings.formatwarning = default
+        warnings.formatwarning, sys.stderr = default, stderr
     return 0
 

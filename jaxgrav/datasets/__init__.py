@@ -94,7 +94,8 @@ def available():
 
 def _check(name):
     if name not in _FILES:
-        raise ValueError(f"unknown dataset {name!r}; available: {available()}")
+        raise ValueError(f"unknown dataset {name!r}; expected one of "
+                         f"{', '.join(available())}")
 
 
 def path(name):
@@ -124,7 +125,7 @@ def path(name):
     missing = [str(p) for p in paths.values() if not p.is_file()]
     if missing:
         raise FileNotFoundError(
-            f"dataset {name!r} is incomplete, missing {missing}; rebuild it with "
+            f"dataset {name!r} is incomplete, missing {', '.join(missing)}; rebuild it with "
             f"`jaxgrav data egm2008 --region {name} --out {_HERE} --force` "
             "(needs pip install 'jaxgrav[egm2008]')"
         )
@@ -261,7 +262,8 @@ def load_map(path, var=None, dataset_default="anomaly_2p5min", *, error_var=None
         maps = {k: v for k, v in load(name).items() if isinstance(v, Grid)}
         key = key or dataset_default
         if key not in maps:
-            raise ValueError(f"dataset {name!r} has no map {key!r}; it has {sorted(maps)}")
+            raise ValueError(f"dataset {name!r} has no map {key!r}; expected one of "
+                             f"{', '.join(sorted(maps))}")
         if var is not None and var not in (maps[key].name, key):  # was ignored, exit 0
             raise ValueError(f"the shipped map {str(path)!r} has one variable, "
                              f"{maps[key].name!r}; got the variable {var!r} to read (leave it "
