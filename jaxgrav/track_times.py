@@ -4,7 +4,8 @@
 or ``GMT`` suffix and ordinal dates ``2024-122T12:00:00``); :func:`iso_seconds` turns a
 column of them into seconds since the first row, joining a separate date column to
 times of day (``date,time,lat,...`` logs); :func:`check_time_steps` refuses times that
-repeat or go back, naming both lines.
+repeat or go back, naming both lines; :func:`epoch_unit` recognises Unix times written
+in milliseconds, microseconds or nanoseconds.
 """
 
 import datetime as dt
@@ -12,15 +13,25 @@ import re
 
 import numpy as np
 
-__all__ = ["DATE_COLUMN", "check_time_steps", "iso_seconds", "parse_datetime"]
+__all__ = ["DATE_COLUMN", "MAX_EPOCH_SECONDS", "check_time_steps", "epoch_unit", "iso_seconds",
+           "parse_datetime"]
 
 DATE_COLUMN = "date"
 """A column (any case) whose dates are joined to a time column holding times of day."""
+
+MAX_EPOCH_SECONDS = 1e11
+"""Largest plausible time in seconds: 1e11 s after 1970-01-01 is the year 5138. Larger
+times are Unix times in a finer unit (:func:`epoch_unit`)."""
+
+_EPOCH_UNITS = ((1e17, 1e-9, "nanoseconds", "ns"), (1e14, 1e-6, "microseconds", "us"),
+                (MAX_EPOCH_SECONDS, 1e-3, "milliseconds", "ms"))
+_YEAR_S = 365.2425 * 86400.0
 
 _SLASH_DATE = re.compile(r"(\d{4})/(\d{1,2})/(\d{1,2})(?=$|[ T])")
 _ORDINAL = re.compile(r"(\d{4})-?(\d{3})(?=$|[ T])")  # ISO 8601 ordinal date: year-day
 _CLOCK = re.compile(r"\d{1,2}:\d{2}(:\d{2}(\.\d*)?)?")
 _UTC = re.compile(r"\s*(UTC|GMT|Z)$", re.IGNORECASE)
+_LEAP = re.compile(r"(?<=[T ]\d\d:\d\d:)60(?=$|[.,]\d|[^\d])")  # 23:59:60, a leap second
 
 
 def _ordinal(m):
@@ -39,13 +50,26 @@ def parse_datetime(cell):
     (``2024-122T12:00:00``, the day of the year of survey logs). ValueError for anything
     else; its text says so for a time of day without a date (``12:00:00``, a log that
     keeps the date in another column).
+
+    A leap second, ``2016-12-31T23:59:60Z`` (a UTC log across one, e.g. a GNSS receiver's),
+    is the instant a POSIX clock (and pandas, NumPy) calls the next ``00:00:00``, as
+    :class:`datetime.datetime` has no second 60; :func:`iso_seconds` then counts the
+    leap second itself, so the times around it stay one second apart. Second 60 at any
+    time other than 23:59 UTC (in the cell's own time zone) is refused.
     """
     text = _SLASH_DATE.sub(lambda m: f"{m[1]}-{int(m[2]):02d}-{int(m[3]):02d}", cell.strip())
     text = _ORDINAL.sub(_ordinal, text, count=1) if _ORDINAL.match(text) else text
     bare = _UTC.sub("", text)
     if _CLOCK.fullmatch(bare):
         raise ValueError("a time of day without a date")
-    return dt.datetime.fromisoformat(text if bare == text else bare + "+00:00")
+    text = text if bare == text else bare + "+00:00"
+    if not _LEAP.search(text):
+        return dt.datetime.fromisoformat(text)
+    before = dt.datetime.fromisoformat(_LEAP.sub("59", text, count=1))
+    utc = before.astimezone(dt.UTC) if before.tzinfo else before
+    if (utc.hour, utc.minute) != (23, 59):
+        raise ValueError("second 60 is a leap second, which only 23:59:60 UTC can be")
+    return before + dt.timedelta(seconds=1)
 
 
 def iso_seconds(cells, lines, label, header, dates=None):
@@ -65,6 +89,9 @@ def iso_seconds(cells, lines, label, header, dates=None):
     Returns
     -------
     seconds : numpy.ndarray
+        Since the first cell; a leap second in the column (``23:59:60``) counted, so
+        ``23:59:59``, ``23:59:60``, ``00:00:00`` are one second apart (a leap second that
+        falls between two cells is not: UTC as POSIX clocks count it).
     origin : str
         The first time, ISO-8601.
     """
@@ -81,7 +108,8 @@ def iso_seconds(cells, lines, label, header, dates=None):
                 stamps.append(parse_datetime(shown))
         except ValueError as err:  # a clock time: "12:00:00 ... a time of day without a date"
             clock = (f" ({err}: join the date to it, or give it a column named "
-                     f"{DATE_COLUMN!r})") if "time of day" in str(err) else ""
+                     f"{DATE_COLUMN!r})") if "time of day" in str(err) else (
+                f" ({err})" if "leap second" in str(err) else "")
             raise ValueError(
                 f"{label}, line {line}, column {header!r}: {shown!r} is neither a number "
                 f"(seconds) nor an ISO-8601 date-time (e.g. 2024-05-01T12:00:00Z){clock}; "
@@ -93,6 +121,14 @@ def iso_seconds(cells, lines, label, header, dates=None):
                          f"{'has' if aware[i] else 'lacks'} a time zone, unlike line "
                          f"{lines[0]}; give every time with or every time without one")
     seconds = np.array([(s - stamps[0]).total_seconds() for s in stamps])
+    leap = np.array([bool(_LEAP.search(cell)) for cell in cells])
+    posix = seconds.copy()
+    while leap.any():  # 23:59:60 read as the next 00:00:00: the times after it, and not
+        k = int(np.argmax(leap))  # in it, one second later
+        midnight = (stamps[k].replace(microsecond=0) - stamps[0]).total_seconds()
+        within = leap & (posix >= midnight) & (posix < midnight + 1)
+        seconds[(np.arange(len(seconds)) > k) & ~within & (posix >= midnight)] += 1.0
+        leap &= ~within  # each leap second counted once
     return seconds, stamps[0].isoformat()
 
 
@@ -107,3 +143,34 @@ def check_time_steps(t, shown, lines, label, header):
             f"{label}, line {lines[i + 1]}, column {header!r}: time {shown[i + 1]} {what} "
             f"{shown[i]} on line {lines[i]}; times must increase ({int((step == 0).sum())} "
             f"repeated, {int((step < 0).sum())} backward step(s))")
+
+
+def epoch_unit(t):
+    """The unit of Unix times too large to be seconds: ``(factor, name, symbol)``, or None.
+
+    A time column whose every value exceeds :data:`MAX_EPOCH_SECONDS` (the year 5138 in
+    seconds since 1970) holds Unix times in milliseconds (1e11 to 1e14: the years 1973
+    to 5138), microseconds (1e14 to 1e17) or nanoseconds (above), the units of GNSS
+    receivers, phones and data loggers; ``factor`` converts them to seconds.
+
+    Parameters
+    ----------
+    t : array_like
+        The times as read (finite).
+
+    Returns
+    -------
+    tuple of (float, str, str) or None
+        E.g. ``(1e-3, "milliseconds", "ms")``; None when the times may be seconds (any
+        time at most :data:`MAX_EPOCH_SECONDS`, or none given).
+    """
+    t = np.asarray(t, dtype=float)
+    if not t.size or not np.isfinite(t).all() or t.min() <= MAX_EPOCH_SECONDS:
+        return None
+    return next((factor, name, symbol) for low, factor, name, symbol in _EPOCH_UNITS
+                if t.min() > low or low == MAX_EPOCH_SECONDS)
+
+
+def epoch_year(seconds):
+    """The calendar year of ``seconds`` after 1970-01-01 (approximate, for messages)."""
+    return int(1970 + seconds // _YEAR_S)

@@ -16,7 +16,7 @@ import numpy as np
 from jaxgrav.constants import WGS84_MEAN_RADIUS
 from jaxgrav.grid_files import map_units
 
-__all__ = ["UNIT_SUFFIX", "header_scale"]
+__all__ = ["UNIT_SUFFIX", "declared_unit", "header_scale"]
 
 UNIT_SUFFIX = re.compile(r"\s*[(\[][^()\[\]]*[)\]]\s*$")
 """A ``(unit)`` or ``[unit]`` at the end of a header."""
@@ -28,6 +28,7 @@ _HEADER_UNITS = {  # column -> unit (lower case, spaces kept) -> factor to the l
     "t": {**dict.fromkeys(("s", "sec", "secs", "second", "seconds"), 1.0),
           **dict.fromkeys(("ms", "millisecond", "milliseconds"), 1e-3),
           **dict.fromkeys(("us", "µs", "μs", "microsecond", "microseconds"), 1e-6),
+          **dict.fromkeys(("ns", "nanosecond", "nanoseconds"), 1e-9),
           **dict.fromkeys(("min", "mins", "minute", "minutes"), 60.0),
           **dict.fromkeys(("h", "hr", "hrs", "hour", "hours"), 3600.0),
           **dict.fromkeys(("d", "day", "days"), 86400.0)},
@@ -106,3 +107,16 @@ def header_scale(name, header, label):
                          f"{'latitudes' if name == 'lat' else 'longitudes'}: name the right "
                          f"column with --columns {name}=COLUMN")
     return _HEADER_UNITS.get(name, {}).get(unit.lower(), 1.0)
+
+
+def declared_unit(name, header):
+    """The unit ``header`` declares for column ``name`` when :func:`header_scale` knows it
+    (``"ms"`` for ``t (ms)``, ``"hours"`` for ``t (hours since 2024-05-01)``), else None
+    (no unit, or a note such as ``time (UTC)``)."""
+    found = UNIT_SUFFIX.search(str(header))
+    if not found:
+        return None
+    unit = found.group(0).strip()[1:-1].strip()
+    since = _SINCE.fullmatch(unit)
+    unit = (since.group(1).strip() if since else unit).lower()
+    return unit if unit in _HEADER_UNITS.get(name, {}) else None

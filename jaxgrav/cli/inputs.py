@@ -22,6 +22,8 @@ import numpy as np
 
 from jaxgrav.datasets import map_for_track
 from jaxgrav.filters.pmf_cells import MISSING
+from jaxgrav.track_times import MAX_EPOCH_SECONDS, epoch_unit, epoch_year
+from jaxgrav.track_units import UNIT_SUFFIX, declared_unit
 from jaxgrav.tracks import KNOWN_COLUMNS, parse_columns, read_track_csv
 
 __all__ = [
@@ -97,8 +99,50 @@ def read_track(args, required, optional=(), allow_nan=()):
         raise ValueError(f"--columns {name}={columns[name]}: {name!r} is not a name the "
                          f"commands read; the names are {', '.join(KNOWN_COLUMNS)} (lower "
                          "case); COLUMN is the file's header or 1-based column number")
-    return read_track_csv(args.track, required, optional, allow_nan=allow_nan,
-                          columns=columns)
+    track = read_track_csv(args.track, required, optional, allow_nan=allow_nan,
+                           columns=columns)
+    _epoch_times(track)
+    return track
+
+
+def _epoch_times(track):
+    """Unix times in milliseconds, microseconds or nanoseconds (a phone's or a GNSS
+    logger's) read as seconds, with a warning naming the unit; ValueError for times that
+    are no plausible seconds in a unit the header declares, or that mix units.
+
+    Such times were read as seconds: ``1714564800000`` (2024 in ms) labelled the year
+    56 302, its steps 1000 times too long, exit 0. The magnitude tells the unit for every
+    date from 1973 to 5138, so they are converted as a header ``t (ms)`` converts them
+    (a log need not be edited); a declared unit is the user's word, and not overridden.
+    """
+    if "t" not in track or track.time_origin is not None:  # ISO times count from the first
+        return
+    t = track["t"]
+    unit = epoch_unit(t)
+    if unit is None:
+        return
+    header = track.renamed.get("t", "t")
+    label = f"track file {track.path!r}, column {header!r}"
+    first = np.format_float_positional(t[0], trim="-")
+    declared = declared_unit("t", header)
+    if declared is not None:
+        raise ValueError(f"{label}: the first time, read in the header's unit "
+                         f"({declared}), is {first} s, the year {epoch_year(t[0])} as a Unix "
+                         "time (today's is about 1.8e9 s); check the unit in the header (e.g. "
+                         f"'{UNIT_SUFFIX.sub('', header)} (ms)' for milliseconds)")
+    factor, name, symbol = unit
+    seconds = t * factor
+    if seconds.max() > MAX_EPOCH_SECONDS:
+        i = int(np.argmax(seconds > MAX_EPOCH_SECONDS))
+        raise ValueError(f"{label}: the times mix units: {first} on line {track.line(0)} is a "
+                         f"Unix time in {name}, "
+                         f"{np.format_float_positional(t[i], trim='-')} on line {track.line(i)} "
+                         "is not; expected one unit, seconds or one declared in the header")
+    print(f"warning: {label}: times such as {first} are Unix times in {name} (as seconds they "
+          f"would be in the year {epoch_year(t[0])}); read as {name} since 1970-01-01 "
+          f"(declare the unit in the header, e.g. '{header} ({symbol})', to silence this)",
+          file=sys.stderr)
+    track["t"] = seconds
 
 
 FIELD_UNITS = {"gravity": "mGal", "magnetic": "nT"}

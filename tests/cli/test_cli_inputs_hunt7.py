@@ -1,0 +1,172 @@
+"""Inputs found by the seventh issue-19 hunt (2026-12-07, helper-67).
+
+The last hunt's leftovers: the shipped datasets' messages printed Python lists, ``demo
+--out`` into an unwritable place did not name the option, Unix times in milliseconds
+were read as seconds, a leap second (``23:59:60``) was refused, and ``--track -`` was
+called ``'/dev/stdin'``. Then the hunt's own finds (below them)."""
+
+import os
+
+import numpy as np
+import pytest
+
+from jaxgrav import datasets
+from jaxgrav.cli import main
+from jaxgrav.cli.main import STDIN_NAME, stdin_named
+from jaxgrav.track_times import epoch_unit, iso_seconds, parse_datetime
+from jaxgrav.tracks import read_track_csv
+
+ROWS = [(29.5 + 0.0056 * i, 126.5 + 0.0068 * i) for i in range(5)]
+
+
+def _track(path, header, times):
+    path.write_text(header + "\n" + "".join(f"{t},{lat},{lon}\n"
+                                            for t, (lat, lon) in zip(times, ROWS, strict=True)))
+    return path
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: datasets.path("etopo"), "unknown dataset 'etopo'; expected one of qinling, ryukyu"),
+    (lambda: datasets.load_map("ryukyu:bogus"),
+     "dataset 'ryukyu' has no map 'bogus'; expected one of anomaly_0p5deg, anomaly_2p5min"),
+])
+def test_dataset_messages_list_names_as_text(call, message):
+    """Were "available: ['qinling', 'ryukyu']" and "it has ['anomaly_0p5deg', ...]"."""
+    with pytest.raises(ValueError) as err:
+        call()
+    assert str(err.value) == message
+
+
+def test_demo_into_an_unwritable_place_names_out(refused):
+    """``demo --out /proc/x`` named '/proc/x/table1.md' but not the option."""
+    if os.access("/proc", os.W_OK) and not os.path.isdir("/proc/self"):
+        pytest.skip("needs a /proc that refuses files")
+    refused(["demo", "--smoke", "--out", "/proc/x"],
+            "--out '/proc/x/table1.md': a file cannot be created in the folder '/proc'")
+
+
+def test_demo_existing_outputs_name_out(tmp_path, refused):
+    (tmp_path / "summary.json").write_text("keep\n")
+    refused(["demo", "--smoke", "--out", tmp_path],
+            f"--out '{tmp_path}/summary.json' exists; pass --force to overwrite it")
+    assert (tmp_path / "summary.json").read_text() == "keep\n"
+
+
+@pytest.mark.parametrize("t0, factor, name", [
+    (1714564800000, 1e-3, "milliseconds"), (1714564800000000, 1e-6, "microseconds"),
+    (1714564800000000000, 1e-9, "nanoseconds")])
+def test_unix_times_in_milliseconds_are_read_as_seconds_with_a_warning(
+        tmp_path, capsys, t0, factor, name):
+    """``t`` = 1714564800000 (2024 in ms, a phone's or GNSS logger's) was read as
+    seconds, the year 56302, its two-minute steps 33 hours long (exit 0)."""
+    step = int(120 / factor)
+    path = _track(tmp_path / "t.csv", "t,lat,lon", [t0 + step * i for i in range(5)])
+    out = tmp_path / "s.csv"
+    assert main(["sample", "--map", "ryukyu", "--track", str(path), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"are Unix times in {name} (as seconds they would be in the year" in err, err
+    assert "declare the unit in the header, e.g. 't (" in err and err.count("\n") == 1
+    t = [float(line.split(",")[0]) for line in out.read_text().splitlines()[1:]]
+    np.testing.assert_allclose(t, 1714564800 + 120 * np.arange(5))
+
+
+def test_unix_times_in_a_declared_unit_are_converted_without_a_word(tmp_path, capsys):
+    path = _track(tmp_path / "t.csv", "t (ms),lat,lon", [1714564800000 + 120000 * i
+                                                          for i in range(5)])
+    assert main(["sample", "--map", "ryukyu", "--track", str(path), "--out",
+                 str(tmp_path / "s.csv")]) == 0
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("header, times, message", [
+    ("t (s)", [1714564800000 + 120000 * i for i in range(5)],
+     "column 't (s)': the first time, read in the header's unit (s), is 1714564800000 s, the "
+     "year 56302 as a Unix time (today's is about 1.8e9 s); check the unit in the header "
+     "(e.g. 't (ms)' for milliseconds)"),
+    ("t", [1714564800000, 1714564920000, 1714565040000000, 1714565160000000, 1714565280000000],
+     "column 't': the times mix units: 1714564800000 on line 2 is a Unix time in "
+     "milliseconds, 1714565040000000 on line 4 is not"),
+])
+def test_implausible_seconds_are_refused(tmp_path, refused, header, times, message):
+    path = _track(tmp_path / "t.csv", header + ",lat,lon", times)
+    refused(["sample", "--map", "ryukyu", "--track", path, "--out", tmp_path / "s.csv"], message)
+    assert not (tmp_path / "s.csv").exists()
+
+
+@pytest.mark.parametrize("t, unit", [([0, 60, 1e11], None), ([1.7e9, 1.8e9], None), ([], None),
+                                     ([1.7e12, 1.8e12], "ms"), ([1.7e15], "us"),
+                                     ([1.7e18], "ns")])
+def test_epoch_unit_by_magnitude(t, unit):
+    found = epoch_unit(t)
+    assert (found and found[2]) == unit
+
+
+@pytest.mark.parametrize("cell, iso", [
+    ("2016-12-31T23:59:60Z", "2017-01-01T00:00:00+00:00"),
+    ("2016-12-31T23:59:60.5Z", "2017-01-01T00:00:00.500000+00:00"),
+    ("2016-12-31 23:59:60 UTC", "2017-01-01T00:00:00+00:00"),
+    ("2017-01-01T08:59:60+09:00", "2017-01-01T09:00:00+09:00"),
+    ("2016-12-31T23:59:60", "2017-01-01T00:00:00")])
+def test_a_leap_second_is_the_next_midnight(cell, iso):
+    """``2016-12-31T23:59:60Z`` was "neither a number nor an ISO-8601 date-time"."""
+    assert parse_datetime(cell).isoformat() == iso
+
+
+def test_times_around_a_leap_second_are_one_second_apart():
+    cells = ["2016-12-31T23:59:59.5Z", "2016-12-31T23:59:60Z", "2016-12-31T23:59:60.5Z",
+             "2017-01-01T00:00:00Z", "2017-01-01T00:00:00.5Z"]
+    seconds, origin = iso_seconds(cells, range(2, 7), "x", "time")
+    assert list(seconds) == [0, 0.5, 1, 1.5, 2] and origin == "2016-12-31T23:59:59.500000+00:00"
+    two = ["2016-06-30T23:59:59Z", "2016-06-30T23:59:60Z", "2016-07-01T00:00:00Z",
+           "2016-12-31T23:59:60Z", "2017-01-01T00:00:00Z"]
+    seconds, _ = iso_seconds(two, range(2, 7), "x", "time")
+    assert list(seconds - [0, 0, 0, 15897600, 15897600]) == [0, 1, 2, 2, 3]
+
+
+def test_a_log_across_a_leap_second_is_read(tmp_path):
+    path = tmp_path / "t.csv"
+    path.write_text("time,lat,lon\n" + "".join(
+        f"{c},{lat},{lon}\n" for c, (lat, lon) in zip(
+            ["2016-12-31T23:59:58Z", "2016-12-31T23:59:59Z", "2016-12-31T23:59:60Z",
+             "2017-01-01T00:00:00Z", "2017-01-01T00:00:01Z"], ROWS, strict=True)))
+    track = read_track_csv(path, required=("t", "lat", "lon"))
+    assert list(track["t"]) == [0, 1, 2, 3, 4]
+    assert track.text["time"][2] == "2016-12-31T23:59:60Z"
+
+
+def test_second_60_other_than_at_midnight_utc_is_refused(tmp_path):
+    path = tmp_path / "t.csv"
+    path.write_text("time,lat,lon\n2016-12-31T12:00:60Z,30,130\n")
+    with pytest.raises(ValueError, match=r"line 2, column 'time': '2016-12-31T12:00:60Z' is "
+                       r"neither .* \(second 60 is a leap second, which only 23:59:60 UTC "
+                       r"can be\)"):
+        read_track_csv(path, required=("t", "lat", "lon"))
+
+
+def test_standard_input_is_named_so():
+    """``--track -`` was named '/dev/stdin' in messages, a name the user never gave."""
+    assert stdin_named("track file '/dev/stdin', line 3, column 'lat': 'x'") == (
+        f"{STDIN_NAME}, line 3, column 'lat': 'x'")
+    assert stdin_named("--track '/dev/stdin' has 2 rows") == f"{STDIN_NAME} has 2 rows"
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/stdin"), reason="needs /dev/stdin")
+@pytest.mark.parametrize("argv, message", [
+    (["sample", "--map", "ryukyu", "--out", "o.csv"],
+     "standard input (--track -), line 3, column 'lat': 'x' is not a number"),
+    (["match", "--map", "ryukyu", "--out", "o.json"],
+     "standard input (--track -), line 3, column 'lat'")])
+def test_a_bad_track_on_standard_input_names_it(tmp_path, capsys, argv, message):
+    track = tmp_path / "t.csv"
+    track.write_text("t,lat,lon\n0,29.5,126.5\n60,x,126.6\n")
+    saved = os.dup(0)
+    with open(track, "rb") as f:
+        os.dup2(f.fileno(), 0)
+        try:
+            code = main([*argv[:-1], str(tmp_path / argv[-1]), "--track", "-"])
+        finally:
+            os.dup2(saved, 0)
+            os.close(saved)
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and "/dev/stdin" not in err, err
+    assert list(tmp_path.iterdir()) == [track]
