@@ -57,9 +57,11 @@ def regular_axis(coord, name, source=None):
     """
     raw = np.asarray(coord)
     where = f"{source}: " if source else ""
-    if raw.ndim != 1 or raw.size < 2:
-        raise ValueError(f"{where}{name} must be a 1-D array of at least 2 nodes; got shape "
-                         f"{raw.shape}")
+    if raw.ndim != 1 or raw.size < 2:  # a map of one row was "got shape (1,)", a tuple
+        at = f" (at {float(raw[0]):g})" if raw.shape == (1,) and np.isreal(raw[0]) else ""
+        raise ValueError(f"{where}{name} has {raw.size} node{'s' * (raw.size != 1)}{at}" + (
+            f" in {raw.ndim} dimensions" if raw.ndim != 1 else "") + "; a map needs at least 2 "
+            "along each axis, in one dimension (a grid, not a single row or column)")
     try:
         coord = raw.astype(float)
     except (TypeError, ValueError):

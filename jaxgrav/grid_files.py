@@ -19,6 +19,7 @@ atomically. Both are package-internal: use the :class:`~jaxgrav.grid.Grid` metho
 ``load_map``.
 """
 
+import re
 from pathlib import Path
 from typing import NamedTuple
 
@@ -256,7 +257,12 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
             ds = xr.open_dataset(path, decode_times=False, group=groups[0])
     except (OSError, ValueError, RuntimeError) as err:
         msg = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise ValueError(f"{label} cannot be read as NetCDF: {msg}") from None
+        # "[Errno -101] NetCDF: HDF error: '/path'": the errno and the path again dropped
+        msg = re.sub(r"^\[Errno -?\d+\]\s*", "", msg).replace(f": {str(path)!r}", "")
+        msg = msg.replace(f": {str(Path(path).absolute())!r}", "")
+        damaged = (" (the file may be truncated or damaged: copy it again)"
+                   if "HDF error" in msg or "NetCDF: " in msg else "")
+        raise ValueError(f"{label} cannot be read as NetCDF: {msg}{damaged}") from None
     if len(groups) > 1:
         raise ValueError(f"{label} holds no variables at its root and {len(groups)} groups "
                          f"with variables ({_listed(groups)}); expected one grid: extract it "

@@ -9,6 +9,7 @@ import os
 
 import numpy as np
 import pytest
+import xarray as xr
 
 from jaxgrav import datasets
 from jaxgrav.cli import main
@@ -170,3 +171,39 @@ def test_a_bad_track_on_standard_input_names_it(tmp_path, capsys, argv, message)
     err = capsys.readouterr().err
     assert code == 2 and message in err and "/dev/stdin" not in err, err
     assert list(tmp_path.iterdir()) == [track]
+
+
+def _map(path, lat, lon, **encoding):
+    """A small NetCDF map ``z`` (mGal) on ``lat`` x ``lon``."""
+    values = 10 * np.sin(np.add.outer(np.asarray(lat) * 3, np.asarray(lon) * 2))
+    ds = xr.Dataset({"z": (("lat", "lon"), values, {"units": "mGal"})},
+                    coords={"lat": lat, "lon": lon})
+    ds.to_netcdf(path, encoding={"z": encoding} if encoding else None)
+    return path
+
+
+@pytest.mark.parametrize("lat, lon, message", [
+    ([29.5], np.linspace(126, 127, 11),
+     "lat has 1 node (at 29.5); a map needs at least 2 along each axis, in one dimension (a "
+     "grid, not a single row or column)"),
+    (np.linspace(29, 30, 11), [126.5], "lon has 1 node (at 126.5); a map needs at least 2")])
+def test_a_map_of_one_row_or_column_is_refused_in_words(tmp_path, refused, lat, lon, message):
+    """Was "lat must be a 1-D array of at least 2 nodes; got shape (1,)" (a Python tuple)."""
+    path = _map(tmp_path / "m.nc", lat, lon)
+    (tmp_path / "t.csv").write_text("lat,lon\n29.5,126.5\n")
+    err = refused(["sample", "--map", path, "--track", tmp_path / "t.csv", "--out",
+                   tmp_path / "s.csv"], message)
+    assert "shape" not in err and "(1,)" not in err
+    assert not (tmp_path / "s.csv").exists()
+
+
+def test_a_truncated_netcdf_map_is_named_damaged(tmp_path, refused, clear_message):
+    """Was "cannot be read as NetCDF: [Errno -101] NetCDF: HDF error: '/full/path'"."""
+    whole = _map(tmp_path / "whole.nc", np.linspace(29, 30, 11), np.linspace(126, 127, 11))
+    path = tmp_path / "m.nc"
+    path.write_bytes(whole.read_bytes()[:300])
+    (tmp_path / "t.csv").write_text("lat,lon\n29.5,126.5\n")
+    err = refused(["sample", "--map", path, "--track", tmp_path / "t.csv", "--out",
+                   tmp_path / "s.csv"], f"map '{path}' cannot be read as NetCDF: ")
+    clear_message(err, path, ["(the file may be truncated or damaged: copy it again)"])
+    assert "Errno" not in err and err.count(str(path)) == 1
