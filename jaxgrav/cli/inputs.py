@@ -28,6 +28,7 @@ from jaxgrav.tracks import KNOWN_COLUMNS, parse_columns, read_track_csv
 
 __all__ = [
     "FIELD_UNITS",
+    "MAX_COUNT",
     "MAX_MISSING",
     "STDIN_HELP",
     "add_columns_option",
@@ -56,6 +57,9 @@ _SUFFIX = {"JSON": ".json", "CSV": ".csv", "NetCDF": ".nc", "Markdown": ".md"}
 MAX_MISSING = 0.9
 """Largest fraction of missing (NaN) nodes accepted in the map region a track needs."""
 
+
+MAX_COUNT = 10**15
+"""Largest count option :func:`whole_number` reads (more than any run could use)."""
 
 STDIN_HELP = "; '-' reads it from standard input (e.g. a pipe)"
 """The end of every ``--track`` help (:func:`add_track_option`): ``main`` reads ``-`` so."""
@@ -354,9 +358,10 @@ def check_missing_option(args):
 def whole_number(text):
     """A count option (``--runs``, ``--fixes``, ``--particles`` ...) as an int: digits, or a
     whole number in exponent form (``1e6``; was argparse's "invalid int value: '1e6'");
-    argparse.ArgumentTypeError for anything else (``2.5``, ``nan``, ``ten``)."""
+    argparse.ArgumentTypeError for anything else (``2.5``, ``nan``, ``ten``) and for counts
+    above :data:`MAX_COUNT` (``--n 1e300`` was refused by a message holding its 301 digits)."""
     try:
-        return int(text)
+        number = int(text)
     except ValueError:
         try:
             number = float(text)
@@ -365,4 +370,7 @@ def whole_number(text):
         if not (math.isfinite(number) and number == int(number)):
             raise argparse.ArgumentTypeError(
                 f"expected a whole number (e.g. 1000 or 1e6); got {text!r}") from None
-        return int(number)
+    if abs(number) > MAX_COUNT:
+        raise argparse.ArgumentTypeError(f"expected a whole number of at most {MAX_COUNT:.0e} "
+                                         f"(a count); got {text.strip()!r}")
+    return int(number)

@@ -35,6 +35,7 @@ from matplotlib.colors import LogNorm
 
 from jaxgrav._io import atomic_output, check_outputs
 from jaxgrav.cli.inputs import check_out_format, fill_map_error_length, whole_number
+from jaxgrav.cli.simulate import MAX_BIAS_MGAL
 from jaxgrav.constants import DEG
 from jaxgrav.datasets import load_map
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
@@ -107,9 +108,10 @@ def cmd_suitability(args):
     cell_m = grid.spacing_m()[0]  # north-south node spacing at the map's centre (m)
     nodes = (args.fixes - 1) * args.spacing / cell_m  # the segment, in the map's nodes
     if nodes >= side:  # every segment leaves the map (and the default window is too wide)
+        count = f"{nodes:.0f}" if nodes < 1e9 else f"{nodes:.3g}"  # 1e300: was 297 digits
         raise ValueError(f"--fixes {args.fixes} readings --spacing {args.spacing:g} m apart make "
                          f"a segment of {(args.fixes - 1) * args.spacing / 1e3:.4g} km, "
-                         f"{nodes:.0f} nodes of the map, longer than its shorter side ({side} "
+                         f"{count} nodes of the map, longer than its shorter side ({side} "
                          "nodes): every segment would leave the map; give fewer --fixes or a "
                          "shorter --spacing")
     with np.errstate(invalid="ignore"):  # NaN nodes: the descriptors' bins of missing values
@@ -209,6 +211,11 @@ def _check_args(args):
         if not (np.isfinite(value) and (value >= 0 if zero_ok else value > 0)):
             bound = ">= 0" if zero_ok else "> 0"
             raise ValueError(f"{name} must be a finite number {bound} ({unit}); got {value!r}")
+        if unit == "mGal" and value > MAX_BIAS_MGAL:  # 1e300: squared to inf, ran (exit 0)
+            typical = ("a marine gravimeter's noise is about 1" if name == "--noise"
+                       else "a marine map's error is a few mGal")
+            raise ValueError(f"{name} must be at most {MAX_BIAS_MGAL:g} mGal ({typical}); got "
+                             f"{value:g}")
     if not (np.isfinite(args.heading) and abs(args.heading) <= 360.0):
         raise ValueError(f"--heading must be an angle from -360 to 360 (degrees clockwise from "
                          f"north); got {args.heading!r}")

@@ -207,3 +207,38 @@ def test_a_truncated_netcdf_map_is_named_damaged(tmp_path, refused, clear_messag
                    tmp_path / "s.csv"], f"map '{path}' cannot be read as NetCDF: ")
     clear_message(err, path, ["(the file may be truncated or damaged: copy it again)"])
     assert "Errno" not in err and err.count(str(path)) == 1
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["simulate", "--out", "{d}/s.csv", "--n", "1e300"],
+     "argument --n: expected a whole number of at most 1e+15 (a count); got '1e300'"),
+    (["simulate", "--out", "{d}/s.csv", "--n", "99999999999999999999999"],
+     "got '99999999999999999999999'"),
+    (["montecarlo", "--method", "dense", "--out", "{d}/m.nc", "--runs", "5", "--fixes", "1e300"],
+     "argument --fixes: expected a whole number of at most 1e+15"),
+    (["suitability", "--map", "ryukyu:anomaly_0p5deg", "--out", "{d}/s.nc", "--fixes", "1e300"],
+     "argument --fixes: expected a whole number of at most 1e+15"),
+])
+def test_a_huge_count_is_refused_without_its_digits(tmp_path, capsys, argv, message):
+    """``--n 1e300`` was refused by a message holding the count's 301 digits."""
+    with pytest.raises(SystemExit) as exit_:
+        main([a.format(d=tmp_path) for a in argv])
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and "\n" not in err and message in err, err
+    assert "0000000000000000" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--noise", "1e300"], "--noise must be at most 1000 mGal (a marine gravimeter's noise is "
+                           "about 1); got 1e+300"),
+    (["--map-error", "2000"], "--map-error must be at most 1000 mGal (a marine map's error is a "
+                              "few mGal); got 2000"),
+    (["--spacing", "1e300"], "make a segment of 2.9e+298 km, 5.23e+296 nodes of the map"),
+])
+def test_suitability_refuses_a_noise_that_overflows(tmp_path, refused, argv, message):
+    """``suitability --noise 1e300`` (squared: inf) ran; ``--spacing 1e300`` was refused
+    naming a segment of 297 digits of nodes."""
+    refused(["suitability", "--map", "ryukyu:anomaly_0p5deg", "--out", tmp_path / "s.nc",
+             *argv], message)
+    assert list(tmp_path.iterdir()) == []
