@@ -4,6 +4,7 @@ disk (and the size of a large one announced first); ``--track -`` in the command
 help; ``filter --missing`` over point masses; a map whose latitude/longitude axes are
 known only by CF attributes while a 2-D node-latitude variable is listed first."""
 
+import argparse
 import gzip
 import sys
 
@@ -33,7 +34,9 @@ def test_count_options_read_exponent_forms():
     """``1e6`` is a million; digits stay exact (count options: montecarlo --runs, --chunk,
     --fixes, demo --runs, filter --particles, simulate --n, suitability --fixes)."""
     assert whole_number("1e6") == 1_000_000
-    assert whole_number("12345678901234567890") == 12345678901234567890
+    assert whole_number("123456789012345") == 123456789012345
+    with pytest.raises(argparse.ArgumentTypeError, match="at most 1e"):  # hunt 7: no count
+        whole_number("12345678901234567890")  # that large; its digits filled messages
 
 
 @pytest.mark.parametrize("argv", [
