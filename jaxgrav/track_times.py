@@ -27,7 +27,10 @@ _EPOCH_UNITS = ((1e17, 1e-9, "nanoseconds", "ns"), (1e14, 1e-6, "microseconds", 
                 (MAX_EPOCH_SECONDS, 1e-3, "milliseconds", "ms"))
 _YEAR_S = 365.2425 * 86400.0
 
-_SLASH_DATE = re.compile(r"(\d{4})/(\d{1,2})/(\d{1,2})(?=$|[ T])")
+_SLASH_DATE = re.compile(r"^(\d{4})([/-])(\d{1,2})\2(\d{1,2})(?=$|[ T])")  # 2024/5/1, 2024-5-1
+_YEAR_LAST = re.compile(r"^\d{1,2}([/.-])\d{1,2}\1\d{2,4}(?=$|[ T])")  # 05/01/2024: ambiguous
+_MIDNIGHT = re.compile(r"(?<=[T ])24:00(:00([.,]0*)?)?(?=$|[^\d:.,])")  # ISO's end of a day
+_SPACED_OFFSET = re.compile(r"(?<=\d)\s+([+-]\d{2}(:?\d{2})?)$")  # "12:00:00.000 +0000"
 _ORDINAL = re.compile(r"(\d{4})-?(\d{3})(?=$|[ T])")  # ISO 8601 ordinal date: year-day
 _CLOCK = re.compile(r"\d{1,2}:\d{2}(:\d{2}(\.\d*)?)?")
 _UTC = re.compile(r"\s*(UTC|GMT|Z)$", re.IGNORECASE)
@@ -45,11 +48,14 @@ def _ordinal(m):
 def parse_datetime(cell):
     """An ISO-8601 date-time cell as a :class:`datetime.datetime`.
 
-    Also ``2024/05/01 12:00:00`` (year first, slashes), a lower-case ``z``, a ``UTC`` or
-    ``GMT`` suffix (``2024-05-01 12:00:00 UTC``, as databases write) and ISO ordinal dates
-    (``2024-122T12:00:00``, the day of the year of survey logs). ValueError for anything
-    else; its text says so for a time of day without a date (``12:00:00``, a log that
-    keeps the date in another column).
+    Also ``2024/05/01 12:00:00`` (year first, slashes) and ``2024-5-1``, a lower-case ``z``,
+    a ``UTC`` or ``GMT`` suffix (``2024-05-01 12:00:00 UTC``, as databases write), an offset
+    after a space (``12:00:00.000 +0000``), ISO ordinal dates (``2024-122T12:00:00``, the
+    day of the year of survey logs) and ISO's ``24:00:00``, the end of a day (the next
+    day's ``00:00:00``). ValueError for anything else; its text says so for a time of day
+    without a date (``12:00:00``, a log that keeps the date in another column) and for a
+    date with the year last (``05/01/2024``: day/month or month/day, not guessed).
+    Fractions of a second finer than a microsecond are cut to microseconds.
 
     A leap second, ``2016-12-31T23:59:60Z`` (a UTC log across one, e.g. a GNSS receiver's),
     is the instant a POSIX clock (and pandas, NumPy) calls the next ``00:00:00``, as
@@ -57,12 +63,17 @@ def parse_datetime(cell):
     leap second itself, so the times around it stay one second apart. Second 60 at any
     time other than 23:59 UTC (in the cell's own time zone) is refused.
     """
-    text = _SLASH_DATE.sub(lambda m: f"{m[1]}-{int(m[2]):02d}-{int(m[3]):02d}", cell.strip())
+    text = _SLASH_DATE.sub(lambda m: f"{m[1]}-{int(m[3]):02d}-{int(m[4]):02d}", cell.strip())
     text = _ORDINAL.sub(_ordinal, text, count=1) if _ORDINAL.match(text) else text
-    bare = _UTC.sub("", text)
+    if _YEAR_LAST.match(text):
+        raise ValueError("a date with the year last, day/month or month/day: ambiguous; "
+                         "write it year first, e.g. 2024-05-01")
+    bare = _UTC.sub("", _SPACED_OFFSET.sub(r"\1", text))
     if _CLOCK.fullmatch(bare):
         raise ValueError("a time of day without a date")
-    text = text if bare == text else bare + "+00:00"
+    text = bare if bare == text or not _UTC.search(text) else bare + "+00:00"
+    if _MIDNIGHT.search(text):  # 2024-05-01T24:00:00: the next day's 00:00:00
+        return parse_datetime(_MIDNIGHT.sub("00:00:00", text, count=1)) + dt.timedelta(days=1)
     if not _LEAP.search(text):
         return dt.datetime.fromisoformat(text)
     before = dt.datetime.fromisoformat(_LEAP.sub("59", text, count=1))
@@ -109,7 +120,7 @@ def iso_seconds(cells, lines, label, header, dates=None):
         except ValueError as err:  # a clock time: "12:00:00 ... a time of day without a date"
             clock = (f" ({err}: join the date to it, or give it a column named "
                      f"{DATE_COLUMN!r})") if "time of day" in str(err) else (
-                f" ({err})" if "leap second" in str(err) else "")
+                f" ({err})" if "leap second" in str(err) or "year last" in str(err) else "")
             raise ValueError(
                 f"{label}, line {line}, column {header!r}: {shown!r} is neither a number "
                 f"(seconds) nor an ISO-8601 date-time (e.g. 2024-05-01T12:00:00Z){clock}; "

@@ -242,3 +242,27 @@ def test_suitability_refuses_a_noise_that_overflows(tmp_path, refused, argv, mes
     refused(["suitability", "--map", "ryukyu:anomaly_0p5deg", "--out", tmp_path / "s.nc",
              *argv], message)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("cell, iso", [
+    ("2024-05-01T24:00:00Z", "2024-05-02T00:00:00+00:00"),
+    ("2024-12-31 24:00", "2025-01-01T00:00:00"),
+    ("2024-5-1 12:00:00", "2024-05-01T12:00:00"),
+    ("2024-05-01 12:00:00.000 +0000", "2024-05-01T12:00:00+00:00"),
+    ("2024-05-01 12:00:00 -05:00", "2024-05-01T12:00:00-05:00")])
+def test_end_of_day_unpadded_dates_and_spaced_offsets_are_read(cell, iso):
+    """ISO's ``24:00:00`` ("hour must be in 0..23"), ``2024-5-1`` (read with slashes
+    only) and an offset after a space behind a fraction were refused."""
+    assert parse_datetime(cell).isoformat() == iso
+
+
+@pytest.mark.parametrize("cell", ["05/01/2024 12:00:00", "01.05.2024 12:00", "1-5-24"])
+def test_a_date_with_the_year_last_is_refused_as_ambiguous(tmp_path, cell):
+    """``05/01/2024`` (May 1st or January 5th) was "neither a number nor an ISO-8601
+    date-time" with no word of why; it is not guessed."""
+    path = tmp_path / "t.csv"
+    path.write_text(f"time,lat,lon\n{cell},30,130\n")
+    with pytest.raises(ValueError, match=r"line 2, column 'time': .* \(a date with the year "
+                       r"last, day/month or month/day: ambiguous; write it year first, e\.g\. "
+                       r"2024-05-01\); times must be complete"):
+        read_track_csv(path, required=("t", "lat", "lon"))
