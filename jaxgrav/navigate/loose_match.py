@@ -8,12 +8,11 @@ map's error.
 The Eötvös error of the filter's velocity is not a map error: the navigation INS's
 velocity error oscillates at the Schuler rate ω_s = √(g/R) (84 min), so along a track
 sailed at speed v it varies over ``v/ω_s`` (4.1 km at 10 kn), not over the map error's
-L (10 km). The chain matcher, which reads one correlated error, is told the sum of the
-two as one Gauss–Markov process of the same variance and the same slope variance
+L (10 km). Every matcher, each of which reads one correlated error, is told the sum of
+the two as one Gauss–Markov process of the same variance and the same slope variance
 (:func:`told_error`): told with the map's L, the Eötvös error's faster wiggles were
-explained by shifting the track, and its fixes, 8 km of window about each fix, were
-centred off the truth with a covariance too small for it (``examples/voyage_loose.py
---calibrate --matcher chains``).
+explained by shifting the track, and the fixes were centred off the truth with a
+covariance too small for it (``examples/voyage_loose.py --calibrate``).
 """
 
 import dataclasses
@@ -203,29 +202,28 @@ def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bound
         only the map reads that spacings up to it need,
         :attr:`~jaxgrav.match.dense.DenseConfig.spacing_bound_m`).
     eotvos_length_m : Array, optional
-        ``chains``: the Eötvös error's along-track length (m, :func:`schuler_length_m`),
-        told with the map error as one error (:func:`told_error`); None: the map
-        error's L. The other matchers are told the Eötvös error with the map error's L.
+        The Eötvös error's along-track length (m, :func:`schuler_length_m`), told with
+        the map error as one error (:func:`told_error`) to every matcher; None: the map
+        error's L.
 
     Returns
     -------
     MatchResult
     """
-    if isinstance(matcher, ChainConfig):  # a fixed window of map nodes
-        length_e = matcher.map_error_length_m if eotvos_length_m is None else eotvos_length_m
-        told, length = told_error(matcher.map_error_mgal, matcher.map_error_length_m,
-                                  sigma_eotvos, length_e, matcher.map_error_order)
+    chains, dense = isinstance(matcher, ChainConfig), isinstance(matcher, DenseConfig)
+    # the offset grid's settings, and the settings that are told the map error
+    offsets, told_to = (matcher, matcher) if chains or dense else matcher
+    length_e = told_to.map_error_length_m if eotvos_length_m is None else eotvos_length_m
+    told, length = told_error(told_to.map_error_mgal, told_to.map_error_length_m,
+                              sigma_eotvos, length_e, told_to.map_error_order)
+    if chains:  # a fixed window of map nodes
         delta = 2.0 * jnp.sqrt(matcher.noise_mgal**2 + told**2)  # as config_for's
         return match_chains(grid, lat, lon, g, dataclasses.replace(
             matcher, map_error_mgal=told, map_error_length_m=length, delta=delta))
-    dense = isinstance(matcher, DenseConfig)
-    # the offset grid's settings, and the settings that are told the map error
-    offsets, told_to = (matcher, matcher) if dense else matcher
     spacing = jnp.clip(reach / offsets.half_size, *spacing_bounds)
-    told = jnp.sqrt(told_to.map_error_mgal**2 + sigma_eotvos**2)
     if dense:
         return match_dense(grid, lat, lon, g, dataclasses.replace(
-            matcher, spacing_m=spacing, map_error_mgal=told,
+            matcher, spacing_m=spacing, map_error_mgal=told, map_error_length_m=length,
             spacing_bound_m=float(spacing_bounds[1])))
     entropy, iccp = matcher
     window = jnp.maximum(iccp.window_m, 1.2 * spacing * entropy.half_size)
@@ -234,4 +232,4 @@ def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bound
     far = FAR_FIX_RADII * spacing * entropy.half_size
     return match_entropy_iccp(grid, lat, lon, g, dataclasses.replace(entropy, spacing_m=spacing),
                               dataclasses.replace(iccp, window_m=window, map_error_mgal=told,
-                                                  max_offset_m=far))
+                                                  map_error_length_m=length, max_offset_m=far))

@@ -1,7 +1,7 @@
-"""The chain matcher in the loosely coupled loop (navigate.loose_match): the error it is
+"""The matchers of the loosely coupled loop (navigate.loose_match): the error they are
 told (the Eötvös error of the filter's velocity at its Schuler length, with the map's
 error as one Gauss–Markov error of the same variance and slope variance) and the edge
-test of its fixes."""
+test of the chains' fixes."""
 
 import dataclasses
 
@@ -88,6 +88,33 @@ def test_the_chains_are_told_the_eotvos_error_at_its_schuler_length(smooth_grid,
     with pytest.raises(_Told) as told:  # no length given: the map error's
         match_segment(*args)
     assert float(told.value.args[0].map_error_length_m) == pytest.approx(10000.0)
+
+
+@pytest.mark.parametrize("matcher", ["dense", "entropy+iccp"])
+def test_the_offset_grid_matchers_are_told_the_eotvos_error_at_its_schuler_length(
+        matcher, smooth_grid, monkeypatch):
+    """As the chains: the dense GLS score and ICCP's are told one Markov error standing for
+    the map's (3 mGal, 10 km) and the Eötvös error (2 mGal, at 4 km), not the Eötvös error
+    at the map's L; the perfect map is told the Eötvös error alone at its length."""
+    def fake(grid, lat, lon, g, *configs):
+        raise _Told(configs[-1])  # the dense config, or ICCP's
+
+    monkeypatch.setattr(loose_match, "match_dense", fake)
+    monkeypatch.setattr(loose_match, "match_entropy_iccp", fake)
+    lat, lon = jnp.linspace(29.9, 30.1, 10), jnp.full(10, 130.0)
+    for map_sigma in (3.0, 0.0):
+        config = matcher_config(matcher, 0.3, map_sigma, 10000.0, grid=smooth_grid)
+        args = (config, smooth_grid, lat, lon, jnp.zeros(10), 1000.0, 2.0, (100.0, 1500.0))
+        with pytest.raises(_Told) as told:
+            match_segment(*args, eotvos_length_m=4000.0)
+        sent = told.value.args[0]
+        sigma, length = told_error(map_sigma, 10000.0, 2.0, 4000.0)
+        assert float(sent.map_error_mgal) == pytest.approx(float(sigma))
+        assert float(sent.map_error_length_m) == pytest.approx(float(length))
+        assert float(length) == pytest.approx(4000.0 if map_sigma == 0 else 6183.5, rel=1e-3)
+        with pytest.raises(_Told) as told:  # no length given: the map error's
+            match_segment(*args)
+        assert float(told.value.args[0].map_error_length_m) == pytest.approx(10000.0)
 
 
 def test_every_loop_matcher_is_given_the_edge_limit(smooth_grid):
