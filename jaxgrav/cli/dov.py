@@ -9,6 +9,7 @@ import math
 import sys
 
 import numpy as np
+import xarray as xr
 
 from jaxgrav import dov
 from jaxgrav._io import check_outputs
@@ -51,7 +52,10 @@ def _parse_heights(text):
     none below :data:`LOWEST_LAYER_M`; an empty item (``0,,20000``: a height lost in
     typing, which was dropped) is refused."""
     items = [v.strip() for v in text.split(",")]
-    if "" in items and any(items):
+    if not any(items):  # --layers '' ran on the default heights, silently
+        raise ValueError(f"--layers {text!r} is empty; expected comma-separated heights in m, "
+                         "e.g. 0,10000,20000 (or leave it out for the default)")
+    if "" in items:
         raise ValueError(f"--layers {text!r}: item {items.index('') + 1} is empty; expected "
                          "comma-separated heights in m, e.g. 0,10000,20000")
     try:
@@ -70,6 +74,18 @@ def _parse_heights(text):
                          f"deepest ocean floor; heights are in m above the ellipsoid); got "
                          f"{vals[0]:g}")
     return vals
+
+
+def _check_layer_dims(path):
+    """ValueError naming ``--grid`` when the file lacks a height, lat or lon dimension (was
+    "needs dimensions ('height', 'lat', 'lon'); it has ('lat', 'lon')", Python tuples)."""
+    with xr.open_dataset(path, decode_times=False) as ds:
+        dims = list(ds.dims)
+    missing = [d for d in ("height", "lat", "lon") if d not in dims]
+    if missing:
+        raise ValueError(f"--grid {str(path)!r} has dimensions {', '.join(dims) or 'none'}; "
+                         f"expected height, lat, lon (xi and eta in arcsec on layers at heights "
+                         f"in m, as the shipped qinling file), missing {', '.join(missing)}")
 
 
 def _check_points(args, track, layers):
@@ -142,11 +158,12 @@ def cmd_dov(args):
                   inputs={"--track": args.track, "--grid": args.grid})
     check_out_format(args.out, "CSV")
     track = read_track(args, required=("lat", "lon", "h"))
-    heights = _parse_heights(args.layers) if args.layers else None
+    heights = _parse_heights(args.layers) if args.layers is not None else None
     if args.grid:
         # a CSV or an empty file ended in xarray's three-line "did not find a match in any
         # of xarray's currently installed IO backends"; the layers' own errors named no option
         check_netcdf_file(args.grid, what="--grid")
+        _check_layer_dims(args.grid)
         try:
             layers = dov.LayeredGrid.from_netcdf(args.grid)
         except ValueError as err:

@@ -204,7 +204,9 @@ def test_an_infinite_position_is_called_so(tmp_path, capsys, refused):
                                 "starting 'lat,lon,xi', a CSV track or table?)"),
     ("", "--grid '{p}' is not a NetCDF file (it is empty)"),
     # "'{p}' needs dimensions ...": the option unnamed
-    (None, "--grid '{p}' needs dimensions ('height', 'lat', 'lon'); it has ('lat', 'lon')"),
+    # (hunt 7: and in Python tuples, "needs dimensions ('height', 'lat', 'lon')")
+    (None, "--grid '{p}' has dimensions lat, lon; expected height, lat, lon (xi and eta in "
+           "arcsec on layers at heights in m, as the shipped qinling file), missing height"),
 ])
 def test_dov_names_a_grid_that_is_not_layers(tmp_path, refused, content, message):
     grid = tmp_path / "g.nc"

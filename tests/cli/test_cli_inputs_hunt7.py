@@ -266,3 +266,14 @@ def test_a_date_with_the_year_last_is_refused_as_ambiguous(tmp_path, cell):
                        r"last, day/month or month/day: ambiguous; write it year first, e\.g\. "
                        r"2024-05-01\); times must be complete"):
         read_track_csv(path, required=("t", "lat", "lon"))
+
+
+@pytest.mark.parametrize("layers", ["", " , "])
+def test_dov_refuses_empty_layers(tmp_path, refused, layers):
+    """``dov --layers ''`` ran on the default heights (0, 10000, 20000 m), exit 0."""
+    track = tmp_path / "t.csv"
+    track.write_text("lat,lon,h\n35.1,110.1,100\n35.2,110.2,200\n")
+    refused(["dov", "--track", track, "--out", tmp_path / "o.csv", f"--layers={layers}"],
+            f"--layers {layers!r} is empty; expected comma-separated heights in m, e.g. "
+            "0,10000,20000 (or leave it out for the default)")
+    assert not (tmp_path / "o.csv").exists()
