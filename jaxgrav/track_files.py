@@ -8,20 +8,22 @@ their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
   file of a zip archive; a binary file (NetCDF, HDF5, a workbook ...) is refused;
 - line ends: LF, CRLF or CR; blank lines and ``#`` comment lines (GMT headers) skipped,
   and title lines above the header (``Survey leg 3``: at most half its cells);
-- the delimiter is sniffed from the header line: a tab, else ``;`` when it has at least
-  as many as ``,``, else ``,``, else runs of whitespace (``.xyz``, ``.txt``; GMT ``>``
+- the delimiter is sniffed from the header line: a tab, else ``|`` when it has more of
+  them than of ``,`` and ``;``, else ``;`` when it has at least as many as ``,``, else
+  ``,``, else runs of whitespace (``.xyz``, ``.txt``; GMT ``>``
   segment lines skipped); quoted fields may hold the delimiter;
 - a units row under the header (``s,deg,deg,mGal``) is joined to it (``t (s)``, ...);
   a repeated header line (two files joined) is skipped;
-- a first line that is all numbers is data, not a header: the columns are then named
-  ``lon``, ``lat``, ``z`` for ``.xyz``/``.xy`` files (GMT's order) and ``1``, ``2``, ...
-  otherwise.
+- a first line that is all numbers is data, not a header: the header is then the comment
+  line right above it when that has as many cells (``# t,lat,lon``, as ``numpy.savetxt``
+  and GMT write), else the columns are named ``lon``, ``lat``, ``z`` for ``.xyz``/``.xy``
+  files (GMT's order) and ``1``, ``2``, ... otherwise.
 
 :func:`jaxgrav.track_units.header_scale` reads a unit in a header (``t (min)``,
 ``gravity [m/s^2]``, ``lat (rad)``, ``v_east (kn)``) as the factor to the library's units.
 :func:`parse_numbers` reads one column of cells as float64 (empty, ``nan``, ``NA``,
 ``N/A``, ``#N/A``, ``null``, ``-`` as NaN; a decimal comma accepted when the delimiter
-is not a comma);
+is not a comma; Fortran's ``1.5D+01``);
 :func:`parse_degrees` reads latitudes and longitudes with hemisphere letters or in
 degrees, minutes and seconds (``35°27.716'N``).
 """
@@ -41,19 +43,18 @@ from typing import NamedTuple
 
 import numpy as np
 
+from jaxgrav.track_degrees import NA_TOKENS, parse_degrees
 from jaxgrav.track_units import UNIT_SUFFIX
 
 __all__ = ["NA_TOKENS", "Table", "column_key", "parse_degrees", "parse_numbers", "read_table"]
 
-NA_TOKENS = frozenset({"", "nan", "na", "n/a", "null", "none", "#n/a", "-", "--"})
-"""Cells (lower case) read as a missing value (NaN): also a spreadsheet's ``#N/A`` and a
-logger's ``-`` or ``--`` (were "not a number")."""
 _DASHES = frozenset({"-", "--"})  # also a units row's "no unit"
 
 _BINARY = {b"CDF": "a NetCDF-3 file", b"\x89HDF": "a NetCDF-4/HDF5 file",
            b"PK": "a zip/xlsx archive", b"\xd0\xcf\x11\xe0": "an old Excel/Office file"}
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
-_DELIMITER_NAMES = {",": "comma", ";": "semicolon", "\t": "tab", " ": "whitespace"}
+_FORTRAN = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)[dD][+-]?\d+")  # 1.5D+01: Fortran's exponent
+_DELIMITER_NAMES = {",": "comma", ";": "semicolon", "\t": "tab", " ": "whitespace", "|": "pipe"}
 _SEP_LINE = re.compile(r'\s*"?sep=([,;\t])"?[,;\t]*\s*', re.IGNORECASE)  # Excel's first line
 
 
@@ -69,7 +70,7 @@ class Table(NamedTuple):
     lines : list of int
         The file line number (1-based) of each row.
     delimiter : str
-        ``","``, ``";"``, ``"\\t"`` or ``" "`` (runs of whitespace).
+        ``","``, ``";"``, ``"\\t"``, ``"|"`` or ``" "`` (runs of whitespace).
     has_header : bool
         False when the first line was data.
     """
@@ -82,7 +83,7 @@ class Table(NamedTuple):
 
     @property
     def delimiter_name(self):
-        """``"comma"``, ``"semicolon"``, ``"tab"`` or ``"whitespace"``."""
+        """``"comma"``, ``"semicolon"``, ``"tab"``, ``"pipe"`` or ``"whitespace"``."""
         return _DELIMITER_NAMES[self.delimiter]
 
 
@@ -144,6 +145,8 @@ def _decode(data, label):
 def _sniff(line):
     if "\t" in line:
         return "\t"
+    if line.count("|") > max(line.count(","), line.count(";")):  # t|lat|lon (psql, exports)
+        return "|"
     if ";" in line and line.count(";") >= line.count(","):
         return ";"
     return "," if "," in line else " "
@@ -207,7 +210,7 @@ def _is_number(cell):
     try:
         float(cell)
     except ValueError:
-        return False
+        return bool(_FORTRAN.fullmatch(cell))
     return True
 
 
@@ -269,10 +272,13 @@ def read_table(path, label=None):
     rows = [(n, [c.strip() for c in cells]) for n, cells in rows if not _skip(cells)]
     n_head, header = rows[0]
     has_header = not all(_is_number(c) for c in header if c)
+    commented = None if has_header else _commented_header(raw[:n_head - 1], delimiter, header)
     if has_header:
         # "cat a.csv b.csv": b's header repeated mid-file ("'lat' is not a number")
         rows = [(n, cells) for n, cells in rows[1:] if cells != header]
         header, rows = _units_row(header, rows)
+    elif commented:  # "# t,lat,lon" (numpy.savetxt, GMT): was "it has 1, 2, 3"
+        header, has_header = commented, True
     elif path.suffix.lower() in (".xyz", ".xy"):
         # a two-column .xy(z) file gained an empty "z" column in the outputs
         header = ["lon", "lat", "z", *(str(j + 1) for j in range(3, len(header)))][:len(header)]
@@ -299,6 +305,19 @@ def read_table(path, label=None):
         out.append(cells[:len(header)] + [""] * (len(header) - len(cells)))
         lines.append(n)
     return Table(header, out, lines, delimiter, has_header)
+
+
+def _commented_header(above, delimiter, first):
+    """The header of a file whose header line is a comment (``# t,lat,lon``, as
+    ``numpy.savetxt`` and GMT write it): the last non-blank line ``above`` the first data
+    row ``first``, when it is a comment with as many cells, not all numbers; else None."""
+    above = [ln.strip() for ln in above if ln.strip()]
+    line = above[-1].lstrip("#").strip() if above and above[-1].startswith("#") else ""
+    if not line:
+        return None
+    cells = [c.strip() for c in (line.split() if delimiter == " " else
+                                 next(csv.reader([line], delimiter=delimiter)))]
+    return cells if len(cells) == len(first) and not all(map(_is_number, cells)) else None
 
 
 def _units_row(header, rows):
@@ -344,67 +363,8 @@ def parse_numbers(cells, decimal_comma=False):
         except ValueError:
             if decimal_comma and _DECIMAL_COMMA.fullmatch(cell):
                 values[i] = float(cell.replace(",", "."))
+            elif _FORTRAN.fullmatch(cell):  # was "not a number"
+                values[i] = float(cell.replace("D", "e").replace("d", "e"))
             else:
                 return values, i
     return values, None
-
-
-_HEMISPHERE = re.compile(r"([NSEW])?\s*([^NSEW]*?)\s*([NSEW])?", re.IGNORECASE)
-_ANGLE_PARTS = re.compile(r"[°º:'′\"″\s]+")
-_SIGNS = {"lat": {"N": 1.0, "S": -1.0}, "lon": {"E": 1.0, "W": -1.0}}
-
-
-def _degrees(cell, name):
-    """One angle cell (``35.5 N``, ``S35.5``, ``35°27.7'N``, ``35 27 43.2 S``) in signed
-    degrees; ValueError with the reason for anything else."""
-    m = _HEMISPHERE.fullmatch(cell.strip())
-    if not m or (m[1] and m[3]):
-        raise ValueError("not a number")
-    letter = (m[1] or m[3] or "").upper()
-    if letter and letter not in _SIGNS[name]:
-        raise ValueError(f"hemisphere {letter} in a {'latitude' if name == 'lat' else 'longitude'}"
-                         f" column (expected {' or '.join(_SIGNS[name])})")
-    parts = [p for p in _ANGLE_PARTS.split(m[2]) if p]
-    if not 1 <= len(parts) <= 3 or not all(_is_number(p) for p in parts):
-        raise ValueError("not a number")
-    numbers = [float(p) for p in parts]
-    if any(p[0] in "+-" for p in parts[1:]) or any(not 0 <= v < 60 for v in numbers[1:]) or any(
-            not v.is_integer() for v in numbers[:-1]):
-        raise ValueError("not degrees, minutes and seconds (whole degrees and minutes, "
-                         "minutes and seconds below 60)")
-    if letter and parts[0].startswith("-"):
-        raise ValueError(f"both a sign and hemisphere {letter}")
-    magnitude = abs(numbers[0]) + sum(v / 60.0 ** k for k, v in enumerate(numbers[1:], 1))
-    sign = _SIGNS[name].get(letter, -1.0 if parts[0].startswith("-") else 1.0)
-    return sign * magnitude
-
-
-def parse_degrees(cells, name, decimal_comma=False):
-    """A latitude (``name="lat"``) or longitude column written with hemisphere letters or
-    in degrees, minutes and seconds, as ship logs and GPS exports do: ``35.4619 N``,
-    ``N35.4619``, ``127.71W``, ``35°27.716'N``, ``35 27 43.2 S``; plain numbers as well.
-
-    Returns
-    -------
-    values : numpy.ndarray
-        Signed decimal degrees (S and W negative; NaN for missing cells).
-    bad : int or None
-        Index of the first cell that cannot be read.
-    why : str
-        Why that cell cannot be read (``""`` when ``bad`` is None).
-    """
-    values = np.empty(len(cells))
-    for i, cell in enumerate(cells):
-        if cell.lower() in NA_TOKENS:
-            values[i] = np.nan
-            continue
-        if decimal_comma:  # "35,5 N", "35°27,7'N" in a semicolon file
-            cell = cell.replace(",", ".")
-        try:
-            values[i] = float(cell)
-        except ValueError:
-            try:
-                values[i] = _degrees(cell, name)
-            except ValueError as err:
-                return values, i, str(err)
-    return values, None, ""

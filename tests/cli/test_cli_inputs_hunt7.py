@@ -277,3 +277,27 @@ def test_dov_refuses_empty_layers(tmp_path, refused, layers):
             f"--layers {layers!r} is empty; expected comma-separated heights in m, e.g. "
             "0,10000,20000 (or leave it out for the default)")
     assert not (tmp_path / "o.csv").exists()
+
+
+@pytest.mark.parametrize("name, text", [
+    # "'0.0D+00' is neither a number (seconds) nor an ISO-8601 date-time"
+    ("f.csv", "t,lat,lon\n0.0D+00,2.95D+01,1.265d2\n6.0D+01,29.51D0,126.51D+00\n"),
+    # "lacks columns lat and lon; it has t|lat|lon"
+    ("p.csv", "t|lat|lon\n0|29.5|126.5\n60|29.51|126.51\n"),
+    # numpy.savetxt(header="t,lat,lon"): "lacks columns lat and lon; it has 1, 2, 3"
+    ("h.csv", "# t,lat,lon\n0,29.5,126.5\n60,29.51,126.51\n"),
+    ("h.xyz", "# GMT output\n# t lat lon\n0 29.5 126.5\n60 29.51 126.51\n"),
+])
+def test_fortran_exponents_pipes_and_a_commented_header_are_read(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    track = read_track_csv(path, required=("t", "lat", "lon"))
+    assert list(track["t"]) == [0, 60] and list(track["lat"]) == [29.5, 29.51]
+    assert list(track["lon"]) == [126.5, 126.51]
+
+
+def test_a_comment_that_is_no_header_leaves_the_columns_numbered(tmp_path):
+    path = tmp_path / "n.csv"
+    path.write_text("# written by logger v2\n29.5,126.5\n29.51,126.51\n")
+    track = read_track_csv(path, required=("lat", "lon"), columns={"lat": "1", "lon": "2"})
+    assert list(track["lat"]) == [29.5, 29.51]

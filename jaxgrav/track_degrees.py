@@ -1,0 +1,86 @@
+"""Latitudes and longitudes as ship logs and GPS exports write them.
+
+:func:`parse_degrees` reads a column of angle cells with hemisphere letters (``35.4619
+N``, ``N35.4619``, ``127.71W``) or in degrees, minutes and seconds (``35°27.716'N``,
+``35 27 43.2 S``) as signed decimal degrees, for :func:`jaxgrav.tracks.read_track_csv`
+(through :mod:`jaxgrav.track_files`, which exports it).
+"""
+
+import re
+
+import numpy as np
+
+__all__ = ["NA_TOKENS", "parse_degrees"]
+
+NA_TOKENS = frozenset({"", "nan", "na", "n/a", "null", "none", "#n/a", "-", "--"})
+"""Cells (lower case) read as a missing value (NaN): also a spreadsheet's ``#N/A`` and a
+logger's ``-`` or ``--`` (were "not a number"). Exported by :mod:`jaxgrav.track_files`."""
+
+
+def _is_number(cell):
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+_HEMISPHERE = re.compile(r"([NSEW])?\s*([^NSEW]*?)\s*([NSEW])?", re.IGNORECASE)
+_ANGLE_PARTS = re.compile(r"[°º:'′\"″\s]+")
+_SIGNS = {"lat": {"N": 1.0, "S": -1.0}, "lon": {"E": 1.0, "W": -1.0}}
+
+
+def _degrees(cell, name):
+    """One angle cell (``35.5 N``, ``S35.5``, ``35°27.7'N``, ``35 27 43.2 S``) in signed
+    degrees; ValueError with the reason for anything else."""
+    m = _HEMISPHERE.fullmatch(cell.strip())
+    if not m or (m[1] and m[3]):
+        raise ValueError("not a number")
+    letter = (m[1] or m[3] or "").upper()
+    if letter and letter not in _SIGNS[name]:
+        raise ValueError(f"hemisphere {letter} in a {'latitude' if name == 'lat' else 'longitude'}"
+                         f" column (expected {' or '.join(_SIGNS[name])})")
+    parts = [p for p in _ANGLE_PARTS.split(m[2]) if p]
+    if not 1 <= len(parts) <= 3 or not all(_is_number(p) for p in parts):
+        raise ValueError("not a number")
+    numbers = [float(p) for p in parts]
+    if any(p[0] in "+-" for p in parts[1:]) or any(not 0 <= v < 60 for v in numbers[1:]) or any(
+            not v.is_integer() for v in numbers[:-1]):
+        raise ValueError("not degrees, minutes and seconds (whole degrees and minutes, "
+                         "minutes and seconds below 60)")
+    if letter and parts[0].startswith("-"):
+        raise ValueError(f"both a sign and hemisphere {letter}")
+    magnitude = abs(numbers[0]) + sum(v / 60.0 ** k for k, v in enumerate(numbers[1:], 1))
+    sign = _SIGNS[name].get(letter, -1.0 if parts[0].startswith("-") else 1.0)
+    return sign * magnitude
+
+
+def parse_degrees(cells, name, decimal_comma=False):
+    """A latitude (``name="lat"``) or longitude column written with hemisphere letters or
+    in degrees, minutes and seconds, as ship logs and GPS exports do: ``35.4619 N``,
+    ``N35.4619``, ``127.71W``, ``35°27.716'N``, ``35 27 43.2 S``; plain numbers as well.
+
+    Returns
+    -------
+    values : numpy.ndarray
+        Signed decimal degrees (S and W negative; NaN for missing cells).
+    bad : int or None
+        Index of the first cell that cannot be read.
+    why : str
+        Why that cell cannot be read (``""`` when ``bad`` is None).
+    """
+    values = np.empty(len(cells))
+    for i, cell in enumerate(cells):
+        if cell.lower() in NA_TOKENS:
+            values[i] = np.nan
+            continue
+        if decimal_comma:  # "35,5 N", "35°27,7'N" in a semicolon file
+            cell = cell.replace(",", ".")
+        try:
+            values[i] = float(cell)
+        except ValueError:
+            try:
+                values[i] = _degrees(cell, name)
+            except ValueError as err:
+                return values, i, str(err)
+    return values, None, ""
