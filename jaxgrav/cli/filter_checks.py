@@ -256,7 +256,21 @@ def check_on_map(grid, lat, lon, where, name, line=csv_line):
         raise ValueError(
             f"{where}: {int((~inside).sum())} of {lat.size} positions are off the map --map "
             f"{name} ({extent_text(grid)}), first on line {line(i)} "
-            f"(lat {lat[i]:g}, lon {lon[i]:g})")
+            f"(lat {lat[i]:g}, lon {lon[i]:g}){_off_map_hint(grid, lat, lon, inside)}")
+
+
+def _off_map_hint(grid, lat, lon, inside):
+    """Why a whole track is off the map when it is plain: in radians (``lat (rad)`` not
+    declared), or its latitudes and longitudes swapped; else ``""``."""
+    if inside.any():
+        return ""
+    if np.asarray(grid.contains(np.degrees(lat), np.degrees(lon))).all():
+        return ("; in degrees these numbers would lie on the map: are they radians? declare "
+                "the unit in the header, e.g. 'lat (rad)' and 'lon (rad)'")
+    if np.asarray(grid.contains(lon, lat)).all():
+        return ("; with latitude and longitude swapped they would lie on the map: are the "
+                "columns swapped? name them with --columns lat=COLUMN,lon=COLUMN")
+    return ""
 
 
 def extent_text(grid):

@@ -301,3 +301,25 @@ def test_a_comment_that_is_no_header_leaves_the_columns_numbered(tmp_path):
     path.write_text("# written by logger v2\n29.5,126.5\n29.51,126.51\n")
     track = read_track_csv(path, required=("lat", "lon"), columns={"lat": "1", "lon": "2"})
     assert list(track["lat"]) == [29.5, 29.51]
+
+
+@pytest.mark.parametrize("own, rows, hint", [
+    (False, [(0.5149, 2.2078), (0.5151, 2.2080)],
+     "; in degrees these numbers would lie on the map: are they radians? declare the unit in "
+     "the header, e.g. 'lat (rad)' and 'lon (rad)'"),
+    (True, [(45.5, 15.5), (45.6, 15.6)],
+     "; with latitude and longitude swapped they would lie on the map: are the columns "
+     "swapped? name them with --columns lat=COLUMN,lon=COLUMN"),
+    (True, [(0.0, 0.0), (15.5, 45.5)], "(lat 0, lon 0)"),  # not all off: no hint
+])
+def test_a_track_wholly_off_the_map_says_why_when_it_is_plain(tmp_path, refused, own, rows,
+                                                               hint):
+    """A track in radians, or with its columns swapped, was only "off the map"."""
+    map_ = _map(tmp_path / "m.nc", np.linspace(10, 20, 11), np.linspace(40, 50, 11)) if own \
+        else "ryukyu"
+    track = tmp_path / "t.csv"
+    track.write_text("lat,lon\n" + "".join(f"{a},{b}\n" for a, b in rows))
+    err = refused(["sample", "--map", map_, "--track", track, "--out", tmp_path / "s.csv"],
+                  "positions are off the map")
+    assert err.endswith(hint), err
+    assert not (tmp_path / "s.csv").exists()
