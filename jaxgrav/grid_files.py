@@ -20,6 +20,7 @@ atomically. Both are package-internal: use the :class:`~jaxgrav.grid.Grid` metho
 """
 
 import re
+import warnings
 from pathlib import Path
 from typing import NamedTuple
 
@@ -210,6 +211,16 @@ def _choose_var(ds, var, dims, label, exclude):
     return var
 
 
+def _open(path, group=None):
+    """``xr.open_dataset`` with times left as numbers, quiet about a variable that declares
+    both ``_FillValue`` and ``missing_value`` (both are missing, as CF says and xarray reads
+    them; it said so in two lines of ``{np.float64(-8888.0), ...}`` on stderr)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "variable .* has multiple fill values",
+                                xr.SerializationWarning)
+        return xr.open_dataset(path, decode_times=False, group=group)
+
+
 def read_netcdf(path, var=None, *, ndim=None, exclude=()):
     """Read one gridded variable and its coordinates from a NetCDF file.
 
@@ -248,13 +259,13 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
     check_netcdf_file(path)
     label = f"map {str(path)!r}"
     try:
-        ds = xr.open_dataset(path, decode_times=False)
+        ds = _open(path)
         groups = [] if ds.variables else [  # NetCDF-4 with its grid in a group: "it has none"
             name for name, node in xr.open_groups(path, decode_times=False).items()
             if node.variables]
         if len(groups) == 1:
             ds.close()
-            ds = xr.open_dataset(path, decode_times=False, group=groups[0])
+            ds = _open(path, group=groups[0])
     except (OSError, ValueError, RuntimeError) as err:
         msg = str(err).splitlines()[0] if str(err) else type(err).__name__
         # "[Errno -101] NetCDF: HDF error: '/path'": the errno and the path again dropped

@@ -6,6 +6,7 @@ were read as seconds, a leap second (``23:59:60``) was refused, and ``--track -`
 called ``'/dev/stdin'``. Then the hunt's own finds (below them)."""
 
 import os
+import warnings
 
 import numpy as np
 import pytest
@@ -323,3 +324,23 @@ def test_a_track_wholly_off_the_map_says_why_when_it_is_plain(tmp_path, refused,
                   "positions are off the map")
     assert err.endswith(hint), err
     assert not (tmp_path / "s.csv").exists()
+
+
+def test_a_map_declaring_fillvalue_and_missing_value_is_read_quietly(tmp_path, capsys):
+    """Both declared (CF: both missing) printed xarray's two-line SerializationWarning with
+    "{np.float64(-8888.0), np.float64(-9999.0)}" on stderr."""
+    lat, lon = np.linspace(29, 31, 21), np.linspace(126, 128, 21)
+    values = 10 * np.sin(np.add.outer(lat * 3, lon * 2))
+    values[0, 0] = -8888.0
+    xr.Dataset({"z": (("lat", "lon"), values, {"units": "mGal", "missing_value": -8888.0})},
+               coords={"lat": lat, "lon": lon}).to_netcdf(
+        tmp_path / "m.nc", encoding={"z": {"_FillValue": -9999.0}})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        grid = datasets.load_map(tmp_path / "m.nc", allow_nan=True)
+    assert grid.n_missing == 1 and [str(w.message) for w in caught] == []
+    track = tmp_path / "t.csv"
+    track.write_text("lat,lon\n30,127\n30.1,127.1\n")
+    assert main(["sample", "--map", str(tmp_path / "m.nc"), "--track", str(track), "--out",
+                 str(tmp_path / "s.csv")]) == 0
+    assert capsys.readouterr().err == ""
