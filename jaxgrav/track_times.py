@@ -144,16 +144,22 @@ def iso_seconds(cells, lines, label, header, dates=None):
 
 
 def check_time_steps(t, shown, lines, label, header):
-    """Refuse a time that repeats or goes back, naming both lines (ValueError)."""
+    """Refuse a time that repeats or goes back, naming both lines (ValueError); a step back
+    from the end of a day (or a GPS week) to its start is named as seconds of the day (of
+    the week) restarting."""
     step = np.diff(t)
     bad = np.flatnonzero(~(step > 0))
     if bad.size:
         i = int(bad[0])
         what = "repeats" if step[i] == 0 else "is earlier than"
+        wrap = next((f"; seconds of the {name}, starting again at 0 after {period}? give "
+                     "times that keep counting (add the date, e.g. ISO-8601 date-times)"
+                     for period, name in ((86400, "day"), (604800, "GPS week"))
+                     if 0 <= t[i + 1] < period / 2 < t[i] <= period), "")
         raise ValueError(
             f"{label}, line {lines[i + 1]}, column {header!r}: time {shown[i + 1]} {what} "
             f"{shown[i]} on line {lines[i]}; times must increase ({int((step == 0).sum())} "
-            f"repeated, {int((step < 0).sum())} backward step(s))")
+            f"repeated, {int((step < 0).sum())} backward step(s)){wrap}")
 
 
 def epoch_unit(t):

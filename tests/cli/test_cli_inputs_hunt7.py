@@ -344,3 +344,21 @@ def test_a_map_declaring_fillvalue_and_missing_value_is_read_quietly(tmp_path, c
     assert main(["sample", "--map", str(tmp_path / "m.nc"), "--track", str(track), "--out",
                  str(tmp_path / "s.csv")]) == 0
     assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("times, hint", [
+    ((86340, 86399, 59), "; seconds of the day, starting again at 0 after 86400? give times "
+                         "that keep counting (add the date, e.g. ISO-8601 date-times)"),
+    ((604700, 604790, 80), "; seconds of the GPS week, starting again at 0 after 604800? "
+                           "give times that keep counting (add the date, e.g. ISO-8601 "
+                           "date-times)"),
+    ((100, 200, 90), "backward step(s))"),
+])
+def test_times_of_day_that_restart_at_midnight_are_named(tmp_path, times, hint):
+    """A log in seconds of the day across midnight was only "time 59 is earlier than
+    86399; times must increase"."""
+    path = tmp_path / "t.csv"
+    path.write_text("t,lat,lon\n" + "".join(f"{t},30,130\n" for t in times))
+    with pytest.raises(ValueError) as err:
+        read_track_csv(path, required=("t", "lat", "lon"))
+    assert str(err.value).endswith(hint) and "line 4" in str(err.value), str(err.value)
