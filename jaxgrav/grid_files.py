@@ -114,9 +114,13 @@ def check_netcdf_file(path, what="map"):
         looks = "it is a Surfer grid: convert it, e.g. gdal_translate -of netCDF IN OUT.nc"
     elif head.startswith((b"\x89PNG", b"\xff\xd8\xff", b"%PDF")):
         looks = "it is an image or a PDF, not gridded values"
+    elif head.lstrip().lower().startswith((b"ncols", b"nrows")):  # was "a CSV track?"
+        looks = ("it is an ESRI ASCII grid: convert it, e.g. gdal_translate -of netCDF IN "
+                 "OUT.nc")
     elif b"\0" not in head:
         first = head.decode("utf-8", "replace").lstrip("\ufeff").splitlines()[0][:40]
-        looks = f"it is a text file starting {first!r}, a CSV track or table?"
+        looks = (f"it is a text file starting {first!r}, a CSV track or table? a table of "
+                 "lon, lat, value converts with GMT's xyz2grd")
     else:
         looks = "its format is not NetCDF-3 or NetCDF-4"
     raise ValueError(f"{what} {str(path)!r} is not a NetCDF file ({looks}); expected a "

@@ -201,7 +201,8 @@ def test_an_infinite_position_is_called_so(tmp_path, capsys, refused):
     # xarray's three lines: "did not find a match in any of xarray's currently installed IO
     # backends ['netcdf4', 'scipy']. Consider explicitly selecting one ..."
     ("lat,lon,xi\n35,110,1\n", "--grid '{p}' is not a NetCDF file (it is a text file "
-                                "starting 'lat,lon,xi', a CSV track or table?)"),
+                                "starting 'lat,lon,xi', a CSV track or table? a table of lon, "
+                                "lat, value converts with GMT's xyz2grd)"),
     ("", "--grid '{p}' is not a NetCDF file (it is empty)"),
     # "'{p}' needs dimensions ...": the option unnamed
     # (hunt 7: and in Python tuples, "needs dimensions ('height', 'lat', 'lon')")

@@ -362,3 +362,17 @@ def test_times_of_day_that_restart_at_midnight_are_named(tmp_path, times, hint):
     with pytest.raises(ValueError) as err:
         read_track_csv(path, required=("t", "lat", "lon"))
     assert str(err.value).endswith(hint) and "line 4" in str(err.value), str(err.value)
+
+
+@pytest.mark.parametrize("text, looks", [
+    ("ncols 3\nnrows 3\nxllcorner 126\nyllcorner 29\ncellsize 0.5\n1 2 3\n4 5 6\n7 8 9\n",
+     "(it is an ESRI ASCII grid: convert it, e.g. gdal_translate -of netCDF IN OUT.nc)"),
+    ("126.5 29.5 1.0\n127 29.5 2.0\n", "(it is a text file starting '126.5 29.5 1.0', a CSV "
+                                      "track or table? a table of lon, lat, value converts "
+                                      "with GMT's xyz2grd)")])
+def test_a_text_grid_given_as_map_says_how_to_convert_it(tmp_path, refused, text, looks):
+    """An ESRI ASCII grid was "a text file starting 'ncols 3', a CSV track or table?"."""
+    (tmp_path / "m.asc").write_text(text)
+    (tmp_path / "t.csv").write_text("lat,lon\n29.5,126.5\n")
+    refused(["sample", "--map", tmp_path / "m.asc", "--track", tmp_path / "t.csv", "--out",
+             tmp_path / "s.csv"], f"map '{tmp_path / 'm.asc'}' is not a NetCDF file {looks}")
