@@ -16,7 +16,7 @@ Carlo runs).
 import jax
 import jax.numpy as jnp
 
-__all__ = ["cholesky", "expm", "inv_2x2", "modified_cholesky", "psd_sqrt"]
+__all__ = ["cholesky", "expm", "inv_2x2", "modified_cholesky", "psd_sqrt", "solve_spd"]
 
 
 def _column(a, low, j):
@@ -125,6 +125,37 @@ def psd_sqrt(a, rtol=1e-12):
     Array, shape ``(n, n)``
     """
     return _cholesky(a, rtol)
+
+
+def solve_spd(a, b):
+    """Solve ``a x = b`` for a small symmetric positive definite ``a`` in one ``fori_loop``.
+
+    ``a`` is equilibrated by its diagonal, then Gauss–Jordan elimination without pivoting
+    runs on ``[a | b]``, one column per step (one compiled step: under ``vmap`` a few
+    XLA kernels, where an unrolled scalar Cholesky solve is dozens). Step k's pivot is
+    the Cholesky pivot ``L_kk²``; a negative one gives NaN, as the Cholesky square root
+    would, so an ``a`` that is not positive definite gives a non-finite ``x``.
+
+    Parameters
+    ----------
+    a : Array, shape ``(n, n)``
+    b : Array, shape ``(n,)``
+
+    Returns
+    -------
+    Array, shape ``(n,)``
+    """
+    n = b.shape[-1]
+    d = 1.0 / jnp.sqrt(jnp.diagonal(a))
+    m = jnp.concatenate([a * d[:, None] * d[None, :], (b * d)[:, None]], axis=1)
+    idx = jnp.arange(n)
+
+    def step(k, m):
+        pivot = m[k, k]
+        row = m[k] / jnp.where(pivot >= 0, pivot, jnp.nan)
+        return jnp.where((idx == k)[:, None], row, m - m[:, k, None] * row)
+
+    return jax.lax.fori_loop(0, n, step, m)[:, n] * d
 
 
 def expm(m, squarings=16, order=10):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from jaxgrav._linalg import cholesky, expm, modified_cholesky, psd_sqrt
+from jaxgrav._linalg import cholesky, expm, modified_cholesky, psd_sqrt, solve_spd
 
 
 def _spd(n, seed):
@@ -80,3 +80,12 @@ def test_psd_sqrt_tolerance_is_relative_to_each_state():
     dependent = np.array([[1.0, 1.0], [1.0, 1.0 + 1e-15]])
     low = np.asarray(psd_sqrt(dependent))
     assert low[1, 1] == 0.0 and low[1, 0] == 1.0
+
+
+def test_solve_spd_equals_numpy_and_is_not_finite_where_indefinite():
+    a, b = _spd(6, 4), np.arange(6.0) - 2.5
+    np.testing.assert_allclose(jax.jit(solve_spd)(a, b), np.linalg.solve(a, b), rtol=1e-12)
+    batch = jax.jit(jax.vmap(solve_spd))(np.stack([a, 2 * a]), np.stack([b, b]))
+    np.testing.assert_allclose(batch[1], np.linalg.solve(2 * a, b), rtol=1e-12)
+    indefinite = np.diag([1.0, 2.0, -1.0, 3.0, 1.0, 1.0]) + 0.1
+    assert not np.all(np.isfinite(solve_spd(jnp.asarray(indefinite), jnp.ones(6))))

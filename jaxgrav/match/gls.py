@@ -16,9 +16,9 @@ With no map error and the fixes' noise variances ``σ_n² Σμ²/μ_i`` (normali
 :func:`~jaxgrav.match.scoring.score_track` with the prior
 :func:`~jaxgrav.match.scoring.bias_precision`, and the bias estimates are equal.
 
-:func:`offset_posterior` turns the scores over a lattice of offsets into the
-likelihood-weighted posterior of the offset: its mean and 2 × 2 covariance, and the
-diagnostics an integrity decision needs.
+:func:`offset_posterior` (of :mod:`~jaxgrav.match.posterior`, importable from here)
+turns the scores over a lattice of offsets into the likelihood-weighted posterior of the
+offset: its mean and 2 × 2 covariance, and the diagnostics an integrity decision needs.
 """
 
 from typing import NamedTuple
@@ -29,8 +29,7 @@ import numpy as np
 
 from jaxgrav._validate import concrete
 from jaxgrav.fields.random import MarkovSpectrum
-from jaxgrav.match.refine import solve_spd
-from jaxgrav.match.scoring import k_smallest
+from jaxgrav.match.posterior import OffsetPosterior, offset_posterior
 
 __all__ = [
     "GlsWhitener",
@@ -260,161 +259,3 @@ def gls_log_normaliser(whitener, bias_prior_sigma=float("inf")):
 def gls_dof(n, bias_prior_sigma=float("inf")):
     """Expected score of the truth: ``N − 1`` with a flat bias prior, ``N`` otherwise."""
     return jnp.where(jnp.isinf(jnp.asarray(bias_prior_sigma)), n - 1, n)
-
-
-class OffsetPosterior(NamedTuple):
-    """Likelihood-weighted posterior of a track's offset over a set of offsets.
-
-    Attributes
-    ----------
-    mean_north_m, mean_east_m : Array
-        Posterior mean offset (m); 0 when ``valid`` is false.
-    covariance_m2 : Array, shape ``(2, 2)``
-        Posterior covariance (m², north/east) plus ``cell²/12`` per axis; ``inf`` on
-        the diagonal when ``valid`` is false.
-    best_index, best_score : Array
-        Index (into the flattened scores) and value of the least score (``inf`` if none).
-    chi2_per_dof : Array
-        ``best_score / dof``: about 1 when the error model is right.
-    n_effective : Array
-        ``1 / Σ p²`` of the normalised weights p: offsets sharing the posterior mass.
-    second_mode_ratio : Array
-        ``exp(−(J₂ − J_best)/2)``, J₂ the least score outside the mode's
-        neighbourhood: near 1 for a second mode nearly as likely, at most
-        ``exp(−exclusion_chi2/2)`` for a quadratic score, 0 when nothing is outside;
-        1 when ``valid`` is false.
-    curvature_covariance_m2 : Array, shape ``(2, 2)``
-        ``2 H⁻¹`` from a quadratic fit of the score at the 9 valid offsets nearest the
-        best (H its Hessian, 1/m²): the Laplace covariance of the mode (no
-        quantisation term); ``inf`` diagonal when ``curvature_ok`` is false.
-    curvature_ok : Array of bool
-        The fit was determined and its Hessian positive definite.
-    log_evidence : Array
-        ``log Σ exp(−J/2)`` over the valid offsets.
-    edge_mass : Array
-        Posterior mass on the outermost offsets (least or greatest north or east):
-        more than a little means the truth may lie beyond the searched region.
-    n_valid, n_invalid, valid : Array
-        Offsets with a finite score, with ``inf`` or NaN (zero weight); any valid.
-    """
-
-    mean_north_m: jax.Array
-    mean_east_m: jax.Array
-    covariance_m2: jax.Array
-    best_index: jax.Array
-    best_score: jax.Array
-    chi2_per_dof: jax.Array
-    n_effective: jax.Array
-    second_mode_ratio: jax.Array
-    curvature_covariance_m2: jax.Array
-    curvature_ok: jax.Array
-    log_evidence: jax.Array
-    edge_mass: jax.Array
-    n_valid: jax.Array
-    n_invalid: jax.Array
-    valid: jax.Array
-
-
-def _curvature(j, d, ok, best):
-    """Laplace covariance ``2 H⁻¹`` (m²) from a quadratic fit near the best offset."""
-    k = min(9, j.shape[0])
-    dist2 = jnp.where(ok, jnp.sum(d * d, axis=-1), jnp.inf)
-    near = k_smallest(dist2, k)
-    used = ok[near]
-    dn, de = d[near, 0], d[near, 1]
-    s = jnp.sqrt(jnp.max(jnp.where(used, dist2[near], 0.0))) + 1e-30
-    x, y = dn / s, de / s
-    design = jnp.stack([jnp.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)
-    design = jnp.where(used[:, None], design, 0.0)
-    rhs = jnp.where(used, j[near] - j[best], 0.0)
-    q = solve_spd(design.T @ design, design.T @ rhs)
-    h = jnp.stack([jnp.stack([2 * q[3], q[4]]), jnp.stack([q[4], 2 * q[5]])]) / s**2
-    det = h[0, 0] * h[1, 1] - h[0, 1] ** 2
-    fine = (jnp.sum(used) >= 6) & jnp.all(jnp.isfinite(q)) & (h[0, 0] > 0) & (det > 0)
-    inv = jnp.stack([jnp.stack([h[1, 1], -h[0, 1]]), jnp.stack([-h[0, 1], h[0, 0]])])
-    cov = 2.0 * inv / jnp.where(fine, det, 1.0)
-    return jnp.where(fine, cov, jnp.diag(jnp.array([jnp.inf, jnp.inf], cov.dtype))), fine
-
-
-def offset_posterior(scores, offsets_north_m, offsets_east_m, cell_m=0.0, *, dof=1,
-                     exclusion_m=0.0, exclusion_chi2=9.0, edge=None):
-    """Posterior of the offset over a lattice, weights ``∝ exp(−score/2)``.
-
-    Parameters
-    ----------
-    scores : Array, shape ``(C,)`` (or any shape, flattened)
-        χ² scores of the offsets (:func:`gls_score`; a white-noise
-        :func:`~jaxgrav.match.scoring.score_track` divided by ``σ_n² Σμ²``). ``inf``
-        or NaN marks an invalid offset (zero weight, counted).
-    offsets_north_m, offsets_east_m : Array, shape of ``scores``
-        The offsets (m).
-    cell_m : float or Array, scalar or ``(2,)``
-        Lattice spacing (m; north, east): adds ``cell²/12`` per axis (0: none).
-    dof : int or Array
-        Degrees of freedom of a score (:func:`gls_dof`), for ``chi2_per_dof``.
-    exclusion_m : float or Array
-        Radius (m) of the mode's neighbourhood for ``second_mode_ratio``; 0 (default):
-        the neighbourhood is ``dᵀ K⁻¹ d ≤ exclusion_chi2`` about the best offset, K the
-        curvature covariance (or, when its fit fails, the posterior covariance).
-    exclusion_chi2 : float or Array
-        Squared Mahalanobis radius of the default neighbourhood (9: 3 σ).
-    edge : Array of bool, shape of ``scores``, optional
-        The offsets whose mass is ``edge_mass`` (e.g. a disc's outer ring); None
-        (default): the lattice's outermost rows and columns.
-
-    Returns
-    -------
-    OffsetPosterior
-        Of one track; ``jax.vmap`` it over tracks.
-    """
-    j = jnp.asarray(scores).reshape(-1)
-    dtype = jnp.result_type(j.dtype, float)
-    j = j.astype(dtype)
-    d0 = jnp.stack([jnp.asarray(offsets_north_m, dtype).reshape(-1),
-                    jnp.asarray(offsets_east_m, dtype).reshape(-1)], axis=-1)
-    ok = jnp.isfinite(j)
-    n_valid = jnp.sum(ok)
-    valid = n_valid > 0
-    j = jnp.where(ok, j, jnp.inf)
-    best = jnp.argmin(j)
-    j_best = jnp.where(valid, j[best], 0.0)
-    d = d0 - d0[best]  # about the best offset: accurate in float32
-    p = jnp.where(ok, jnp.exp(-0.5 * (jnp.where(ok, j, j_best) - j_best)), 0.0)
-    z = jnp.sum(p)
-    p = p / jnp.where(valid, z, 1.0)
-    mean = p @ d
-    e = d - mean
-    cov = (p[:, None] * e).T @ e
-    cov = cov + jnp.diag(jnp.broadcast_to(jnp.asarray(cell_m, dtype) ** 2 / 12.0, (2,)))
-    curv, curv_ok = _curvature(j, d, ok, best)
-    metric = jnp.where(curv_ok, curv, cov)
-    det = metric[0, 0] * metric[1, 1] - metric[0, 1] ** 2
-    maha = (metric[1, 1] * d[:, 0] ** 2 - 2 * metric[0, 1] * d[:, 0] * d[:, 1]
-            + metric[0, 0] * d[:, 1] ** 2) / jnp.where(det > 0, det, 1.0)
-    radius = jnp.asarray(exclusion_m, dtype)
-    dist2 = jnp.sum(d * d, axis=-1)
-    outside = jnp.where(radius > 0, dist2 > radius**2,
-                        jnp.where(det > 0, maha > exclusion_chi2, dist2 > 0))
-    j2 = jnp.min(jnp.where(ok & outside, j, jnp.inf))
-    ratio = jnp.exp(-0.5 * (j2 - j_best))
-    mean = mean + d0[best]
-    edge = (jnp.asarray(edge, bool).reshape(-1) if edge is not None
-            else jnp.any((d0 == jnp.min(d0, axis=0)) | (d0 == jnp.max(d0, axis=0)), axis=-1))
-    return OffsetPosterior(
-        mean_north_m=jnp.where(valid, mean[0], 0.0),
-        mean_east_m=jnp.where(valid, mean[1], 0.0),
-        covariance_m2=jnp.where(valid, cov, curv),  # curv has an inf diagonal then
-        best_index=best,
-        best_score=jnp.where(valid, j_best, jnp.inf),
-        chi2_per_dof=jnp.where(valid, j_best, jnp.inf) / jnp.asarray(dof, dtype),
-        n_effective=jnp.where(valid, 1.0 / jnp.sum(p * p), 0.0),
-        second_mode_ratio=jnp.where(valid, ratio, 1.0),
-        curvature_covariance_m2=curv,
-        curvature_ok=curv_ok & valid,
-        log_evidence=jnp.where(valid, jnp.log(jnp.where(valid, z, 1.0)) - 0.5 * j_best,
-                               -jnp.inf),
-        edge_mass=jnp.sum(jnp.where(edge, p, 0.0)),
-        n_valid=n_valid,
-        n_invalid=j.shape[0] - n_valid,
-        valid=valid,
-    )
