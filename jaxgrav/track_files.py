@@ -44,7 +44,7 @@ from typing import NamedTuple
 import numpy as np
 
 from jaxgrav.track_degrees import NA_TOKENS, parse_degrees
-from jaxgrav.track_units import UNIT_SUFFIX
+from jaxgrav.track_units import unit_of
 
 __all__ = ["NA_TOKENS", "Table", "column_key", "parse_degrees", "parse_numbers", "read_table"]
 
@@ -89,8 +89,9 @@ class Table(NamedTuple):
 
 def column_key(name):
     """How a header matches a column name: trimmed, lower case, a ``(unit)``/``[unit]``
-    suffix dropped (``"Gravity [mGal]"`` → ``"gravity"``)."""
-    return UNIT_SUFFIX.sub("", str(name).strip()).strip().lower()
+    suffix or a unit ending (``lat_deg``) dropped (``"Gravity [mGal]"`` → ``"gravity"``;
+    :func:`~jaxgrav.track_units.unit_of`)."""
+    return unit_of(name)[0].lower()
 
 
 _COMPRESSED = {b"\x1f\x8b": ("gzip", ".gz", gzip.decompress),

@@ -1,11 +1,11 @@
 """Units declared in the headers of track and log files (``t (min)``, ``gravity [m/s^2]``).
 
-:func:`header_scale` reads the unit a header declares, ``name (unit)`` or ``name
-[unit]``, as the factor to the library's unit of that column: seconds, degrees, metres,
-m/s, degrees of arc for ``drift_radius``, mGal and nT (the map units of
-:func:`jaxgrav.grid_files.map_units`). CF-style ``UNIT since DATE`` reads as ``UNIT``
-(``t (hours since 2024-05-01)``: 3600). A unit it does not know is read as a note (``lat
-(WGS84)``, ``time (UTC)``): factor 1.
+:func:`header_scale` reads the unit a header declares, ``name (unit)``, ``name [unit]``
+or ``name_unit`` (``lat_deg``, ``time_s``: :func:`unit_of`), as the factor to the
+library's unit of that column: seconds, degrees, metres, m/s, degrees of arc for
+``drift_radius``, mGal and nT (the map units of :func:`jaxgrav.grid_files.map_units`).
+CF-style ``UNIT since DATE`` reads as ``UNIT`` (``t (hours since 2024-05-01)``: 3600). A
+unit it does not know is read as a note (``lat (WGS84)``, ``time (UTC)``): factor 1.
 """
 
 import math
@@ -16,11 +16,20 @@ import numpy as np
 from jaxgrav.constants import WGS84_MEAN_RADIUS
 from jaxgrav.grid_files import map_units
 
-__all__ = ["UNIT_SUFFIX", "declared_unit", "header_scale"]
+__all__ = ["UNIT_SUFFIX", "declared_unit", "header_scale", "unit_of"]
 
 UNIT_SUFFIX = re.compile(r"\s*[(\[][^()\[\]]*[)\]]\s*$")
 """A ``(unit)`` or ``[unit]`` at the end of a header."""
 
+_SNAKE_UNITS = {  # a header (lower case) -> the units an "_unit" ending may give it
+    **dict.fromkeys(("lat", "latitude", "lon", "longitude", "long", "lng"),
+                    ("deg", "degs", "degrees", "rad")),
+    **dict.fromkeys(("t", "time", "timestamp"),
+                    ("s", "sec", "secs", "ms", "us", "ns", "min", "h", "hr", "hrs")),
+    **dict.fromkeys(("h", "height"), ("m", "km", "ft", "cm", "mm")),
+    "gravity": ("mgal", "ugal", "µgal", "gal", "gu"), "magnetic": ("nt", "ut", "µt"),
+    "drift_radius": ("deg", "m", "km", "nmi"),
+}
 _SINCE = re.compile(r"(.+?)\s+since\s+.*", re.IGNORECASE)  # CF "hours since 2024-05-01"
 _DEG = dict.fromkeys(("deg", "degs", "degree", "degrees", "°", "decimal degrees", "dd"), 1.0)
 _ARC_M = 180.0 / (math.pi * WGS84_MEAN_RADIUS)  # degrees of arc per metre
@@ -58,6 +67,22 @@ for _name, _sign, _words in (("lat", 1.0, ("n", "north")), ("lat", -1.0, ("s", "
 _FIELD_UNITS = {"gravity": "mGal", "magnetic": "nT"}
 
 
+def unit_of(header):
+    """A header's name and the unit it declares: ``lat (deg)`` or ``lat [deg]`` → ``("lat",
+    "deg")``; ``lat_deg``, ``time_s``, ``height_m``, ``gravity_mgal`` → the same, for the
+    names and units of :data:`_SNAKE_UNITS` (``lat_s`` stays a name: ``s`` is no unit of
+    latitudes); ``(header, None)`` when it declares none.
+    """
+    text = str(header).strip()
+    found = UNIT_SUFFIX.search(text)
+    if found:
+        return text[:found.start()].strip(), found.group(0).strip()[1:-1].strip()
+    base, sep, unit = text.rpartition("_")
+    if sep and unit.lower() in _SNAKE_UNITS.get(base.strip().lower(), ()):
+        return base.strip(), unit  # "lat_deg" was no latitude: "lacks columns lat and lon"
+    return text, None
+
+
 def header_scale(name, header, label):
     """Factor from the unit a header declares to the library's unit of column ``name``.
 
@@ -85,10 +110,9 @@ def header_scale(name, header, label):
         A gravity column declared in a magnetic unit, or a magnetic column in a gravity
         unit (the file and the header named).
     """
-    found = UNIT_SUFFIX.search(str(header))
-    if not found:
+    unit = unit_of(header)[1]
+    if unit is None:
         return 1.0
-    unit = found.group(0).strip()[1:-1].strip()
     since = _SINCE.fullmatch(unit)  # "t (hours since 2024-05-01)" was read as seconds
     unit = since.group(1).strip() if since else unit
     if name in _FIELD_UNITS:
@@ -113,10 +137,9 @@ def declared_unit(name, header):
     """The unit ``header`` declares for column ``name`` when :func:`header_scale` knows it
     (``"ms"`` for ``t (ms)``, ``"hours"`` for ``t (hours since 2024-05-01)``), else None
     (no unit, or a note such as ``time (UTC)``)."""
-    found = UNIT_SUFFIX.search(str(header))
-    if not found:
+    unit = unit_of(header)[1]
+    if unit is None:
         return None
-    unit = found.group(0).strip()[1:-1].strip()
     since = _SINCE.fullmatch(unit)
     unit = (since.group(1).strip() if since else unit).lower()
     return unit if unit in _HEADER_UNITS.get(name, {}) else None

@@ -23,7 +23,7 @@ import numpy as np
 from jaxgrav.datasets import map_for_track
 from jaxgrav.filters.pmf_cells import MISSING
 from jaxgrav.track_times import MAX_EPOCH_SECONDS, epoch_unit, epoch_year
-from jaxgrav.track_units import UNIT_SUFFIX, declared_unit
+from jaxgrav.track_units import declared_unit, unit_of
 from jaxgrav.tracks import KNOWN_COLUMNS, parse_columns, read_track_csv
 
 __all__ = [
@@ -133,7 +133,7 @@ def _epoch_times(track):
         raise ValueError(f"{label}: the first time, read in the header's unit "
                          f"({declared}), is {first} s, the year {epoch_year(t[0])} as a Unix "
                          "time (today's is about 1.8e9 s); check the unit in the header (e.g. "
-                         f"'{UNIT_SUFFIX.sub('', header)} (ms)' for milliseconds)")
+                         f"'{unit_of(header)[0]} (ms)' for milliseconds)")
     factor, name, symbol = unit
     seconds = t * factor
     if seconds.max() > MAX_EPOCH_SECONDS:

@@ -376,3 +376,26 @@ def test_a_text_grid_given_as_map_says_how_to_convert_it(tmp_path, refused, text
     (tmp_path / "t.csv").write_text("lat,lon\n29.5,126.5\n")
     refused(["sample", "--map", tmp_path / "m.asc", "--track", tmp_path / "t.csv", "--out",
              tmp_path / "s.csv"], f"map '{tmp_path / 'm.asc'}' is not a NetCDF file {looks}")
+
+
+@pytest.mark.parametrize("header, scale", [
+    ("time_s,lat_deg,lon_deg,gravity_mgal", (1, 1, 1)),
+    ("t_ms,Latitude_deg,Longitude_DEG,gravity_ugal", (1e-3, 1, 1e-3)),
+    ("time_min,lat_rad,lon_rad,gravity", (60, 180 / np.pi, 1))])
+def test_a_unit_after_an_underscore_is_read(tmp_path, header, scale):
+    """``time_s,lat_deg,lon_deg`` (a logger's snake-case headers) was "lacks columns lat and
+    lon; it has time_s, lat_deg, lon_deg, ..."."""
+    path = tmp_path / "t.csv"
+    path.write_text(header + "\n0,0.5,2.2,10\n1,0.51,2.21,20\n")
+    track = read_track_csv(path, required=("t", "lat", "lon", "gravity"))
+    assert track["t"][1] == pytest.approx(scale[0])
+    assert track["lat"][0] == pytest.approx(0.5 * scale[1])
+    assert track["gravity"][1] == pytest.approx(20 * scale[2])
+
+
+@pytest.mark.parametrize("header", ["t,lat_s,lon,x", "t,lat,lon_e,x", "t,lat,lon,v_east"])
+def test_an_underscore_that_is_no_unit_stays_in_the_name(tmp_path, header):
+    """``lat_s`` is not latitudes in seconds (nor south): it stays a column of its own."""
+    path = tmp_path / "t.csv"
+    path.write_text(header + "\n0,30,130,1\n")
+    assert set(header.split(",")) <= set(read_track_csv(path, required=("t",)).order)
