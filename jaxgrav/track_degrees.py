@@ -26,7 +26,7 @@ def _is_number(cell):
 
 
 _HEMISPHERE = re.compile(r"([NSEW])?\s*([^NSEW]*?)\s*([NSEW])?", re.IGNORECASE)
-_ANGLE_PARTS = re.compile(r"[°º:'′\"″\s]+")
+_ANGLE_PARTS = re.compile(r"[°º˚:'′’\"″”\s]+")  # ’ ”: a word processor's quotes as marks
 _SIGNS = {"lat": {"N": 1.0, "S": -1.0}, "lon": {"E": 1.0, "W": -1.0}}
 
 

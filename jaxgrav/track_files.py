@@ -4,8 +4,9 @@
 their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
 
 - encodings: UTF-8 with or without a byte-order mark, UTF-16 with a BOM (spreadsheet
-  "Unicode text"), else Latin-1; gzip, bzip2 or xz-compressed (``.csv.gz``), or the one
-  file of a zip archive; a binary file (NetCDF, HDF5, a workbook ...) is refused;
+  "Unicode text"), else Windows-1252, else Latin-1; gzip, bzip2 or xz-compressed
+  (``.csv.gz``), or the one file of a zip archive; a binary file (NetCDF, HDF5, a
+  workbook ...) is refused;
 - line ends: LF, CRLF or CR; blank lines and ``#`` comment lines (GMT headers) skipped,
   and title lines above the header (``Survey leg 3``: at most half its cells);
 - the delimiter is sniffed from the header line: a tab, else ``|`` when it has more of
@@ -137,10 +138,12 @@ def _decode(data, label):
     if b"\0" in head:
         raise ValueError(f"{label} is a binary file, not a text table; a track is a CSV "
                          "(or whitespace-separated) text file with a header row")
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        return data.decode("latin-1")
+    for encoding in ("utf-8-sig", "cp1252"):  # Windows' ’ (0x92) was read as a control
+        try:  # character by Latin-1, which still reads what cp1252 leaves undefined
+            return data.decode(encoding)
+        except UnicodeDecodeError:
+            pass
+    return data.decode("latin-1")
 
 
 def _sniff(line):

@@ -399,3 +399,20 @@ def test_an_underscore_that_is_no_unit_stays_in_the_name(tmp_path, header):
     path = tmp_path / "t.csv"
     path.write_text(header + "\n0,30,130,1\n")
     assert set(header.split(",")) <= set(read_track_csv(path, required=("t",)).order)
+
+
+@pytest.mark.parametrize("encoding", ["cp1252", "utf-8"])
+def test_typographic_quotes_as_minute_and_second_marks_are_read(tmp_path, encoding):
+    """``35°27’42”N`` (a word processor's quotes) was "not a number"; in a Windows-1252
+    file the ’ read as the control character '\\x92' (Latin-1)."""
+    path = tmp_path / "t.csv"
+    path.write_bytes("lat,lon\n35°27’42”N,127°30’E\n35°27.8’N,127°31’E\n".encode(encoding))
+    track = read_track_csv(path, required=("lat", "lon"))
+    np.testing.assert_allclose(track["lat"], [35.461667, 35.463333], atol=1e-6)
+    np.testing.assert_allclose(track["lon"], [127.5, 127.516667], atol=1e-6)
+
+
+def test_a_windows_1252_header_keeps_its_symbols(tmp_path):
+    path = tmp_path / "t.csv"
+    path.write_bytes("lat,lon,depth (m) – “raw”\n30,130,5\n".encode("cp1252"))
+    assert read_track_csv(path, required=("lat", "lon")).order[-1] == "depth (m) – “raw”"
