@@ -173,7 +173,7 @@ def epoch_unit(t):
     Parameters
     ----------
     t : array_like
-        The times as read (finite).
+        The times as read (missing ones NaN, left aside).
 
     Returns
     -------
@@ -182,7 +182,8 @@ def epoch_unit(t):
         time at most :data:`MAX_EPOCH_SECONDS`, or none given).
     """
     t = np.asarray(t, dtype=float)
-    if not t.size or not np.isfinite(t).all() or t.min() <= MAX_EPOCH_SECONDS:
+    t = t[np.isfinite(t)]  # missing times (NaN) aside
+    if not t.size or t.min() <= MAX_EPOCH_SECONDS:
         return None
     return next((factor, name, symbol) for low, factor, name, symbol in _EPOCH_UNITS
                 if t.min() > low or low == MAX_EPOCH_SECONDS)

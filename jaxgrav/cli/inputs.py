@@ -127,23 +127,24 @@ def _epoch_times(track):
         return
     header = track.renamed.get("t", "t")
     label = f"track file {track.path!r}, column {header!r}"
-    first = np.format_float_positional(t[0], trim="-")
+    k = int(np.flatnonzero(np.isfinite(t))[0])  # the first time given
+    first = np.format_float_positional(t[k], trim="-")
     declared = declared_unit("t", header)
     if declared is not None:
         raise ValueError(f"{label}: the first time, read in the header's unit "
-                         f"({declared}), is {first} s, the year {epoch_year(t[0])} as a Unix "
+                         f"({declared}), is {first} s, the year {epoch_year(t[k])} as a Unix "
                          "time (today's is about 1.8e9 s); check the unit in the header (e.g. "
                          f"'{unit_of(header)[0]} (ms)' for milliseconds)")
     factor, name, symbol = unit
     seconds = t * factor
-    if seconds.max() > MAX_EPOCH_SECONDS:
+    if np.nanmax(seconds) > MAX_EPOCH_SECONDS:
         i = int(np.argmax(seconds > MAX_EPOCH_SECONDS))
-        raise ValueError(f"{label}: the times mix units: {first} on line {track.line(0)} is a "
+        raise ValueError(f"{label}: the times mix units: {first} on line {track.line(k)} is a "
                          f"Unix time in {name}, "
                          f"{np.format_float_positional(t[i], trim='-')} on line {track.line(i)} "
                          "is not; expected one unit, seconds or one declared in the header")
     print(f"warning: {label}: times such as {first} are Unix times in {name} (as seconds they "
-          f"would be in the year {epoch_year(t[0])}); read as {name} since 1970-01-01 "
+          f"would be in the year {epoch_year(t[k])}); read as {name} since 1970-01-01 "
           f"(declare the unit in the header, e.g. '{header} ({symbol})', to silence this)",
           file=sys.stderr)
     track["t"] = seconds

@@ -416,3 +416,15 @@ def test_a_windows_1252_header_keeps_its_symbols(tmp_path):
     path = tmp_path / "t.csv"
     path.write_bytes("lat,lon,depth (m) – “raw”\n30,130,5\n".encode("cp1252"))
     assert read_track_csv(path, required=("lat", "lon")).order[-1] == "depth (m) – “raw”"
+
+
+def test_unix_milliseconds_with_a_missing_time_are_still_converted(tmp_path, capsys):
+    """``sample`` (times optional) kept a column of ms with one empty cell as seconds."""
+    path = tmp_path / "t.csv"
+    path.write_text("t,lat,lon\n,29.5,126.5\n1714564800000,29.51,126.51\n"
+                    "1714564920000,29.52,126.52\n")
+    out = tmp_path / "s.csv"
+    assert main(["sample", "--map", "ryukyu", "--track", str(path), "--out", str(out)]) == 0
+    assert "times such as 1714564800000 are Unix times in milliseconds" in capsys.readouterr().err
+    assert [line.split(",")[0] for line in out.read_text().splitlines()] == [
+        "t", "", "1714564800", "1714564920"]
