@@ -175,8 +175,10 @@ def _match_columns(header, wanted, columns, label, required=()):
         if not hits and col.isdigit() and 1 <= int(col) <= len(header):
             hits = [int(col) - 1]
         if not hits:
+            counted = (f"; columns are counted from 1 to {len(header)}" if col.isdigit()
+                       else "")
             raise ValueError(f"{label} has no column {col!r} (asked for by --columns "
-                             f"{name}={col}); it has {_listed(header)}")
+                             f"{name}={col}); it has {_listed(header)}{counted}")
         found[name] = hits[0]
     for name in wanted:
         if name in found:
@@ -340,9 +342,13 @@ def _check_columns(track, required, allow_nan, label):
         bad = np.flatnonzero(np.abs(track["lat"]) > 90.0)
         if bad.size:
             i = int(bad[0])
+            swapped = ("; latitude and longitude look swapped (give --columns lat=NAME "
+                       "lon=NAME)" if "lon" in track
+                       and np.all(np.abs(track["lon"][np.isfinite(track["lon"])]) <= 90.0)
+                       else "")
             raise ValueError(f"{label}, line {lines[i]}, column "
                              f"{track.renamed.get('lat', 'lat')!r}: latitude "
-                             f"{track['lat'][i]:g} is outside [-90, 90] degrees")
+                             f"{track['lat'][i]:g} is outside [-90, 90] degrees{swapped}")
     if "lon" in track:
         lon = track["lon"]
         bad = np.flatnonzero(np.isinf(lon) | (lon < -180.0) | (lon > 360.0))

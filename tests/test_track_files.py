@@ -121,6 +121,12 @@ INVALID = [
      ["column 't' has 1 missing or NaN value(s), first on line 3"]),
     ("latitude-range", "a.csv", b"t,lat,lon\n0,30,130\n10,95,130\n", {}, ValueError,
      ["line 3", "latitude 95 is outside [-90, 90]"]),
+    # issue 19 (hunt 7): the likely cause named
+    ("latitude-and-longitude-swapped", "a.csv", b"t,lat,lon\n0,130,30\n10,130.1,30.1\n", {},
+     ValueError, ["line 2", "latitude 130 is outside [-90, 90]", "look swapped",
+                  "--columns lat=NAME lon=NAME"]),
+    ("column-number-zero", "a.csv", b"t,lat,lon\n0,30,130\n", {"columns": {"lat": "0"}},
+     ValueError, ["has no column '0'", "columns are counted from 1 to 3"]),
     ("longitude-range", "a.csv", b"t,lat,lon\n0,30,130\n10,30,400\n", {}, ValueError,
      ["line 3", "longitude 400 is outside [-180, 360]"]),
     ("nan-in-required", "a.csv", b"t,lat,gravity\n0,30,1\n10,30,\n", {"required": ("gravity",)},
