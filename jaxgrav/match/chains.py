@@ -30,6 +30,7 @@ __all__ = [
     "compatibility",
     "count_chains",
     "eliminate",
+    "kbest_backtrack",
     "kbest_chains",
     "kbest_run",
     "kbest_step",
@@ -349,6 +350,25 @@ def kbest_run(step_fn, xs, alive0, unary0, k):
     inf = jnp.asarray(jnp.inf, dtype=unary0.dtype)
     d0 = jnp.full((alive0.shape[0], k), inf).at[:, 0].set(jnp.where(alive0, unary0, inf))
     d_last, ptrs = jax.lax.scan(step_fn, d0, xs)  # ptrs: (N-1, C, K)
+    return kbest_backtrack(d_last, ptrs, k)
+
+
+def kbest_backtrack(d_last, ptrs, k):
+    """The K cheapest chains from the programme's last partial chains and pointers.
+
+    Parameters
+    ----------
+    d_last : Array, shape ``(C, K)``
+        The K cheapest partial chains ending at each candidate of the last fix.
+    ptrs : Array of int, shape ``(N−1, C, K)``
+        Pointers of every step (:func:`kbest_step`: ``slot·K + rank``).
+    k : int
+        Number of chains (static).
+
+    Returns
+    -------
+    ChainSearch
+    """
     total, best = kmin(d_last.reshape(-1), k)
     last_c, last_r = best // k, best % k
 

@@ -52,12 +52,7 @@ from jaxgrav.match.chains import (
     kbest_chains,
     step_compatibility,
 )
-from jaxgrav.match.lattice_chains import (
-    count_chains_lattice,
-    eliminate_lattice,
-    kbest_chains_lattice,
-    lattice_steps,
-)
+from jaxgrav.match.lattice_chains import lattice_steps, search_lattice
 from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import MatchResult, nearest_to_ins
 from jaxgrav.match.scoring import SCORES, decreasing_weights, score_track
@@ -139,8 +134,17 @@ class ChainConfig:
     map_error_order : {1, 2}
         Gauss–Markov order of the map-error covariance (static).
     k_posterior : int
-        Chains of the dynamic programme scored for the posterior of the fix (static;
-        the programme keeps at least this many).
+        Chains of the dynamic programme scored for the posterior of the fix (pairwise
+        search) and ranked by the GLS score (static; the programme then keeps at least
+        this many).
+    score_model : {"auto", "white", "gls"}
+        How the chains are ranked (static). ``"auto"`` (default): by the white score,
+        or by the GLS score of the programme's ``k_posterior`` best when
+        ``map_error_mgal > 0`` at run time. ``"white"``: by the white score only
+        (paper A; ``map_error_mgal`` must be 0), so the stencil search's programme keeps
+        only the ``k_best`` chains it returns (``k_dp`` for the bias form) instead of
+        ``k_posterior``: at N = 16 on 21 × 21 windows the matcher takes ~0.6 × the time.
+        ``"gls"``: by the GLS score always (σ = 0 gives the white-noise likelihood).
     fix : {"chain", "posterior"}
         The returned track (static): the selected chain, or the INS track shifted to
         the posterior mean offset (module docstring).
@@ -174,6 +178,7 @@ class ChainConfig:
     map_error_length_m: float = 10000.0
     map_error_order: int = static_field(2)
     k_posterior: int = static_field(16)
+    score_model: str = static_field("auto")
     fix: str = static_field("chain")
     max_sigma_m: float = float("inf")
     max_second_mode: float = float("inf")
@@ -194,6 +199,14 @@ class ChainConfig:
                 raise ValueError(f"{name} must be finite and >= 0; got {arr}")
         if isinstance(self.score, str) and self.score not in SCORES:
             raise ValueError(f"score must be one of {SCORES}; got {self.score!r}")
+        if self.score_model not in ("auto", "white", "gls"):
+            raise ValueError(f"score_model must be 'auto', 'white' or 'gls'; got "
+                             f"{self.score_model!r}")
+        sigma = concrete(self.map_error_mgal)
+        if (self.score_model == "white" and sigma is not None and sigma.dtype != object
+                and np.any(sigma > 0)):
+            raise ValueError(f"score_model='white' ignores the map error; got map_error_mgal="
+                             f"{sigma} (use 'gls' or 'auto')")
         if isinstance(self.selection, str) and self.selection not in ("nearest", "best"):
             raise ValueError(f"selection must be 'nearest' or 'best'; got {self.selection!r}")
         if isinstance(self.stencil_size, int) and self.stencil_size < 0:
@@ -265,7 +278,8 @@ def match_chains(grid, lat, lon, readings, config=ChainConfig()):  # noqa: B008
     wh, j_gls, b_gls, sigma_b, scale = chain_gls_scores(grid, lat, lon, readings, values, w,
                                                     config, dtype)
     j_gls = jnp.where(alive_chain, j_gls, jnp.inf)
-    told = jnp.asarray(config.map_error_mgal) > 0
+    told = {"auto": jnp.asarray(config.map_error_mgal) > 0, "white": False,
+            "gls": True}[config.score_model]
     rank = jnp.where(told, j_gls * scale, rescored)
     bias = jnp.where(told, b_gls, bias)
     order = jnp.argsort(rank)[: config.k_best]
@@ -330,8 +344,12 @@ def chain_tolerances(grid, lat, config):
 
 
 def _k_dp(config):
-    """Chains the programme keeps: re-scoring (bias form) needs more than it returns."""
-    return max(config.k_dp if config.score == "bias" else config.k_best, config.k_posterior)
+    """Chains the programme keeps: re-scoring (bias form) needs more than it returns, the
+    GLS ranking and the pairwise search's posterior ``k_posterior``."""
+    k = config.k_dp if config.score == "bias" else config.k_best
+    if config.score_model == "white" and config.stencil_size > 0:
+        return k  # the stencil search's posterior is over the window's rigid chains
+    return max(k, config.k_posterior)
 
 
 def _candidates_args(config):
@@ -360,10 +378,8 @@ def _lattice_search(grid, lat, lon, readings, steps, tol, unary_fn, pair, config
     """Steps 2–5 on the window lattices with the displacement stencil."""
     cands, origin = lattice_candidates(grid, lat, lon, readings, **_candidates_args(config))
     geo = lattice_steps(grid, cands, origin, lat, steps, *tol, config.stencil_size)
-    alive = eliminate_lattice(cands, geo, *tol)
-    work = count_chains_lattice(cands, alive, geo, *tol)
-    search = kbest_chains_lattice(cands, alive, geo, *tol, unary_fn(cands.value), pair,
-                                  _k_dp(config))
+    alive, work, search = search_lattice(cands, geo, *tol, unary_fn(cands.value), pair,
+                                         _k_dp(config))
     return cands, alive, work, search, jnp.any(geo.overflow)
 
 

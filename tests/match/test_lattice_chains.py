@@ -111,6 +111,40 @@ def test_kbest_equal_the_pairwise_programme(case):
     np.testing.assert_allclose(again, got.score, rtol=1e-10)
 
 
+@pytest.mark.long
+def test_search_lattice_equals_its_three_steps(case):
+    """One scan for the count and the programme: the same survivors, count and chains
+    as eliminate_lattice, count_chains_lattice and kbest_chains_lattice."""
+    cands, tol, geo, g = case["cands"], case["tol"], case["geo"], case["g"]
+    n = cands.mask.shape[0]
+    pair = pair_cost(jnp.asarray(g), jnp.ones(n - 1) / (n - 1))
+    unary = jnp.zeros(cands.value.shape)
+    alive, count, got = lc.search_lattice(cands, geo, *tol, unary, pair, 5)
+    ref_alive = lc.eliminate_lattice(cands, geo, *tol)
+    np.testing.assert_array_equal(alive, ref_alive)
+    assert float(count) == float(lc.count_chains_lattice(cands, ref_alive, geo, *tol))
+    ref = lc.kbest_chains_lattice(cands, ref_alive, geo, *tol, unary, pair, 5)
+    np.testing.assert_array_equal(got.score, ref.score)
+    np.testing.assert_array_equal(got.index, ref.index)
+
+
+@pytest.mark.long
+def test_white_score_model_keeps_the_same_chains(case, smooth_grid):
+    """score_model="white" (the programme keeps k_best chains, not k_posterior) gives the
+    same match as the default without a map error, and refuses a map error."""
+    cfg, ilat, ilon, g = case["cfg"], case["ilat"], case["ilon"], case["g"]
+    cfg = dataclasses.replace(cfg, stencil_size=case["size"])
+    ref = match_chains(smooth_grid, ilat, ilon, g, cfg)
+    got = match_chains(smooth_grid, ilat, ilon, g, dataclasses.replace(cfg, score_model="white"))
+    for name in ("lat", "lon", "topk_lat", "topk_lon", "topk_score", "chosen", "status",
+                 "covariance_m2", "work_constrained", "work_pairs"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
+    with pytest.raises(ValueError, match="ignores the map error"):
+        dataclasses.replace(cfg, score_model="white", map_error_mgal=1.0)
+    with pytest.raises(ValueError, match="score_model"):
+        dataclasses.replace(cfg, score_model="white-ish")
+
+
 ISOLATED = "JAXGRAV_ISOLATED_TEST"
 
 
