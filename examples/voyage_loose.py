@@ -5,7 +5,8 @@ reading every 10 s with 1 mGal noise, navigation-grade INS started 500 m off), e
 voyage's truth the map plus a correlated map error (σ, L below) drawn from its key, and
 the same voyages on a perfect map (best case). The loop (:func:`jaxgrav.navigate.
 navigate_loose`) matches a 1 h segment (30 fixes, each the mean of 12 readings) every
-hour; the matcher is told the map error and the Eötvös error of the filter's velocity.
+hour; the matcher is told the map error and the Eötvös error of the filter's velocity
+(at its along-track Schuler length, :func:`jaxgrav.navigate.loose_match.told_error`).
 
 Printed, one JSON line per setting: hourly RMS radial error of the navigation solution
 and of the free INS (m), the last-hour ratio nav/free and last/second hour, the share
