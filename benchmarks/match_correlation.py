@@ -19,10 +19,11 @@ difference score forms cancel any constant residual anyway). Batches of 1, 100 a
   (bilinear, ≈ 578 m × 500 m nodes), half_size covering 1.2 × the drift, with the
   displacement stencil (every window node a slot, ``stencil_size`` from
   :func:`~jaxgrav.match.lattice_chains.stencil_size_for` on the batch), ranking by
-  paper A's white score as the baseline does (``score_model="white"``; ``auto_*``
-  fields: the default ``"auto"``, whose programme keeps 16 chains for a GLS ranking
-  instead of the 5 the baseline keeps); the baseline runs on all valid candidates
-  (capacity = window). At batch 100 the pairwise search
+  paper A's white score as the baseline does (``score_model="white"``, what
+  :func:`~jaxgrav.match.sizing.config_for` chooses without a map error; ``auto_*``
+  fields: ``ChainConfig``'s own default ``"auto"``, whose programme keeps 16 chains for
+  a GLS ranking told at run time instead of the 5 the baseline keeps); the baseline
+  runs on all valid candidates (capacity = window). At batch 100 the pairwise search
   on padded candidate sets (capacity and survivor capacity from the 99th percentiles
   of the batch's iso-point and survivor counts) is timed too (``pairwise_*``).
 
@@ -395,7 +396,7 @@ def stencil_config(pairwise, stats):
     """The stencil search on the same windows (every window node a slot), ranking chains
     by paper A's white score as the baseline does (``score_model="white"``: the
     programme keeps the ``k_best`` chains the baseline keeps, not the ``k_posterior``
-    of the default ``"auto"``, which the ``auto_*`` fields time)."""
+    of ``ChainConfig``'s default ``"auto"``, which the ``auto_*`` fields time)."""
     return dataclasses.replace(pairwise, stencil_size=stats["stencil_size"],
                                capacity=(2 * pairwise.half_size + 1) ** 2, survivor_capacity=0,
                                score_model="white")

@@ -112,7 +112,10 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
         then grows to ``2·√(noise² + σ²)``). None: the white-noise score, with the
         informativeness test of :data:`WHITE_INTEGRITY` (``dense``). ``dense``
         compiles only the score it uses (``DenseConfig.score_model`` ``"gls"`` when
-        σ > 0, else ``"white"``).
+        σ > 0, else ``"white"``); ``chains`` ranks by the white score only when σ = 0
+        (``ChainConfig.score_model`` ``"white"``: its programme keeps the 5 chains it
+        returns, not 16, about half the time; ``"auto"`` when σ > 0). A caller that
+        tells a map error later, as a traced ``map_error_mgal``, sets ``"auto"``.
     region : {"disc", "square"}
         ``dense``: the offsets searched (:attr:`~jaxgrav.match.dense.DenseConfig.region`),
         by default the disc of the search's reach about the INS track (the drift is a
@@ -159,7 +162,8 @@ def config_for(method, grid, drift_radius_m, *, noise_mgal=1.0, bias_sigma_mgal=
     sigma_m = 0.0 if map_error is None else float(map_error.sigma)
     config = ChainConfig(half_size=half, capacity=min((2 * half + 1) ** 2, 384),
                          delta=2.0 * math.hypot(noise_mgal, sigma_m),
-                         score=score or "difference", noise_mgal=noise_mgal)
+                         score=score or "difference", noise_mgal=noise_mgal,
+                         score_model="auto" if sigma_m > 0 else "white")
     config = _with_map_error(config, map_error, CHAIN_MAP_ERROR_INTEGRITY)
     if step_m is None:
         return config

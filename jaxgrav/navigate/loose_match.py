@@ -171,7 +171,8 @@ def matcher_config(matcher, noise_mgal, map_error_mgal, map_error_length_m, grid
                             step_m=step_m, map_error=told)
         return dataclasses.replace(config, map_error_length_m=map_error_length_m,
                                    fix="posterior", max_sigma_m=3000.0,
-                                   max_edge_mass=LOOSE_MAX_EDGE_MASS)
+                                   max_edge_mass=LOOSE_MAX_EDGE_MASS,
+                                   score_model="auto")  # the loop tells errors traced
     # sized for a nominal 1 km reach; the loop sets the spacing and window per segment
     iccp = iccp_config_for(grid, 1000.0, stage="fine", noise=noise_mgal, max_rotation_deg=3.0,
                            map_error=map_error(map_error_mgal, map_error_length_m),

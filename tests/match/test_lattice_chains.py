@@ -13,11 +13,13 @@ import pytest
 
 from jaxgrav import sim
 from jaxgrav.constants import KNOT
+from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import local_offsets_m
 from jaxgrav.match import chains
 from jaxgrav.match import lattice_chains as lc
 from jaxgrav.match.candidates import lattice_candidates
 from jaxgrav.match.correlation import ChainConfig, match_chains, pair_cost
+from jaxgrav.match.sizing import config_for
 
 # the search steps jitted: one program each instead of hundreds of eagerly dispatched ones
 lattice_candidates = jax.jit(lattice_candidates, static_argnames="half_size")
@@ -144,6 +146,18 @@ def test_white_score_model_keeps_the_same_chains(case, smooth_grid):
     with pytest.raises(ValueError, match="score_model"):
         dataclasses.replace(cfg, score_model="white-ish")
 
+
+
+def test_config_for_ranks_chains_by_the_white_score_unless_told_a_map_error(smooth_grid):
+    """config_for("chains") without a map error: score_model "white" (the programme keeps
+    the 5 chains it returns); told one: "auto", the GLS ranking of the 16 best."""
+    white = config_for("chains", smooth_grid, 1500.0, step_m=1000.0)
+    told = config_for("chains", smooth_grid, 1500.0, step_m=1000.0,
+                      map_error=map_error(3.0, 8000.0))
+    zero = config_for("chains", smooth_grid, 1500.0, step_m=1000.0,
+                      map_error=map_error(0.0, 8000.0))
+    assert white.score_model == "white" and zero.score_model == "white"
+    assert told.score_model == "auto" and told.map_error_mgal == 3.0
 
 ISOLATED = "JAXGRAV_ISOLATED_TEST"
 

@@ -123,6 +123,9 @@ def test_every_loop_matcher_is_given_the_edge_limit(smooth_grid):
     assert configs["dense"].max_edge_mass == LOOSE_MAX_EDGE_MASS
     assert configs["chains"].max_edge_mass == LOOSE_MAX_EDGE_MASS
     assert configs["chains"].fix == "posterior" and configs["chains"].stencil_size > 0
+    # the loop tells the chains a traced error (the Eötvös one even on a perfect map)
+    assert matcher_config("chains", 0.3, 0.0, 10000.0, grid=smooth_grid,
+                          step_m=1000.0).score_model == "auto"
     assert configs["entropy+iccp"][1].max_edge_mass == LOOSE_MAX_EDGE_MASS
 
 
