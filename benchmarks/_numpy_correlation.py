@@ -36,7 +36,8 @@ Chain path (:func:`match_chains_np`)
     would, elimination works on the valid candidates only and counting and the
     programme on the surviving ones (variable-size index sets; compatibility
     computed once per step and reused), where jaxgrav's fixed shapes make it work on
-    all ``capacity`` slots and recompute compatibility in each of its four scans.
+    all ``capacity`` slots and recompute compatibility in each of its three scans
+    (the count shares the programme's since 2026-12-07).
     Padded and eliminated slots carry only infinite costs in jaxgrav, so the results
     are the same (chains with infinite cost aside). The map values are taken as
     given (the refined grid is map preparation, not matching).
