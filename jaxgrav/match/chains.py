@@ -33,6 +33,7 @@ __all__ = [
     "kbest_backtrack",
     "kbest_chains",
     "kbest_run",
+    "kbest_start",
     "kbest_step",
     "kmin",
     "step_compatibility",
@@ -341,15 +342,20 @@ def kbest_step(d, cost, index, k):
     return vals, (prev * k + flat % k).astype(jnp.int32)
 
 
+def kbest_start(alive0, unary0, k):
+    """The programme's first partial chains ``(C, K)``: each alive candidate of the first
+    fix at its unary cost (rank 0), ``inf`` elsewhere."""
+    inf = jnp.asarray(jnp.inf, dtype=unary0.dtype)
+    return jnp.full((alive0.shape[0], k), inf).at[:, 0].set(jnp.where(alive0, unary0, inf))
+
+
 def kbest_run(step_fn, xs, alive0, unary0, k):
     """Run the k-best programme (``lax.scan`` of ``step_fn`` over ``xs``) and backtrack.
 
     ``step_fn(d, x) -> (d_next, pointer)`` is one step (usually :func:`kbest_step`);
-    the first fix's partial chains are its alive candidates at their unary cost.
+    the first fix's partial chains are :func:`kbest_start`.
     """
-    inf = jnp.asarray(jnp.inf, dtype=unary0.dtype)
-    d0 = jnp.full((alive0.shape[0], k), inf).at[:, 0].set(jnp.where(alive0, unary0, inf))
-    d_last, ptrs = jax.lax.scan(step_fn, d0, xs)  # ptrs: (N-1, C, K)
+    d_last, ptrs = jax.lax.scan(step_fn, kbest_start(alive0, unary0, k), xs)  # (N-1, C, K)
     return kbest_backtrack(d_last, ptrs, k)
 
 

@@ -25,7 +25,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrav.geodesy import local_offsets_m
-from jaxgrav.match.chains import kbest_backtrack, kbest_run, kbest_step, step_ok, step_region
+from jaxgrav.match.chains import (
+    kbest_backtrack,
+    kbest_run,
+    kbest_start,
+    kbest_step,
+    step_ok,
+    step_region,
+)
 
 __all__ = [
     "LatticeSteps",
@@ -381,7 +388,6 @@ def search_lattice(cands, geo, step_tol_m, angle_tol_deg, unary, pair_fn, k):
         d_next, ptr = kbest_step(d, cost + unary_next[:, None], index, k)
         return (d_next, n_next), ptr
 
-    d0 = jnp.full((alive.shape[1], k), inf).at[:, 0].set(jnp.where(alive[0], unary[0], inf))
     n0 = alive[0].astype(jnp.result_type(float))
-    (d_last, n_last), ptrs = jax.lax.scan(fwd, (d0, n0), xs)
+    (d_last, n_last), ptrs = jax.lax.scan(fwd, (kbest_start(alive[0], unary[0], k), n0), xs)
     return alive, jnp.sum(n_last), kbest_backtrack(d_last, ptrs, k)
