@@ -5,7 +5,8 @@ or ``GMT`` suffix and ordinal dates ``2024-122T12:00:00``); :func:`iso_seconds` 
 column of them into seconds since the first row, joining a separate date column to
 times of day (``date,time,lat,...`` logs); :func:`check_time_steps` refuses times that
 repeat or go back, naming both lines; :func:`epoch_unit` recognises Unix times written
-in milliseconds, microseconds or nanoseconds.
+in milliseconds, microseconds or nanoseconds; :func:`time_units` labels the times an
+output writes with their unit and reference.
 """
 
 import datetime as dt
@@ -13,8 +14,8 @@ import re
 
 import numpy as np
 
-__all__ = ["DATE_COLUMN", "MAX_EPOCH_SECONDS", "check_time_steps", "epoch_unit", "iso_seconds",
-           "parse_datetime"]
+__all__ = ["DATE_COLUMN", "MAX_EPOCH_SECONDS", "UNIX_SECONDS_FROM", "check_time_steps",
+           "epoch_unit", "iso_seconds", "parse_datetime", "time_units"]
 
 DATE_COLUMN = "date"
 """A column (any case) whose dates are joined to a time column holding times of day."""
@@ -22,6 +23,14 @@ DATE_COLUMN = "date"
 MAX_EPOCH_SECONDS = 1e11
 """Largest plausible time in seconds: 1e11 s after 1970-01-01 is the year 5138. Larger
 times are Unix times in a finer unit (:func:`epoch_unit`)."""
+
+UNIX_SECONDS_FROM = 1e8
+"""Smallest time in seconds read as a Unix time when nothing declares a reference: 1e8 s
+is 3.2 years (1973-03-03 as a Unix time), longer than any survey counted from its start;
+seconds of the day or of a GPS week stay far below it."""
+
+UNIX_EPOCH = "1970-01-01T00:00:00Z"
+_SINCE = re.compile(r"^.+?\s+since\s+(.+?)\s*$", re.IGNORECASE)  # CF "s since 2024-05-01"
 
 _EPOCH_UNITS = ((1e17, 1e-9, "nanoseconds", "ns"), (1e14, 1e-6, "microseconds", "us"),
                 (MAX_EPOCH_SECONDS, 1e-3, "milliseconds", "ms"))
@@ -192,3 +201,40 @@ def epoch_unit(t):
 def epoch_year(seconds):
     """The calendar year of ``seconds`` after 1970-01-01 (approximate, for messages)."""
     return int(1970 + seconds // _YEAR_S)
+
+
+def time_units(t, *, origin=None, unit=None, unix=False):
+    """The unit and reference of a track's times in seconds, as an output labels them.
+
+    Parameters
+    ----------
+    t : array_like
+        The times (s) as the output writes them.
+    origin : str, optional
+        The first ISO-8601 time when the file gave ISO times (``t`` counts from it).
+    unit : str, optional
+        The unit the ``t`` header declares (``"hours since 2024-05-01"``), if any.
+    unix : bool
+        The times were recognised as Unix times (in ms, us or ns: :func:`epoch_unit`).
+
+    Returns
+    -------
+    units : str
+        CF style: ``"s since 2024-05-01T12:00:00+00:00"``, ``"s since 2024-05-01"`` (a
+        CF header's reference), ``"s since 1970-01-01T00:00:00Z"`` for Unix times
+        (recognised, or read so because every time is at least :data:`UNIX_SECONDS_FROM`),
+        else ``"s"`` (the track's own clock, no reference given).
+    first : str or None
+        The first time as an ISO-8601 UTC date-time for Unix times (None otherwise).
+    """
+    if origin is not None:
+        return f"s since {origin}", None
+    since = _SINCE.match(unit or "")
+    if since:
+        return f"s since {since.group(1)}", None
+    t = np.asarray(t, dtype=float)
+    t = t[np.isfinite(t)]
+    if not t.size or not (unix or UNIX_SECONDS_FROM <= t.min() <= MAX_EPOCH_SECONDS):
+        return "s", None
+    first = dt.datetime.fromtimestamp(float(t.min()), dt.UTC).isoformat().replace("+00:00", "Z")
+    return f"s since {UNIX_EPOCH}", first

@@ -22,7 +22,7 @@ import numpy as np
 
 from jaxgrav.datasets import map_for_track
 from jaxgrav.filters.pmf_cells import MISSING
-from jaxgrav.track_times import MAX_EPOCH_SECONDS, epoch_unit, epoch_year
+from jaxgrav.track_times import MAX_EPOCH_SECONDS, epoch_unit, epoch_year, time_units
 from jaxgrav.track_units import declared_unit, unit_of
 from jaxgrav.tracks import KNOWN_COLUMNS, parse_columns, read_track_csv
 
@@ -43,6 +43,7 @@ __all__ = [
     "map_error_args",
     "read_track",
     "track_map",
+    "track_time_units",
     "whole_number",
 ]
 
@@ -148,6 +149,16 @@ def _epoch_times(track):
           f"(declare the unit in the header, e.g. '{header} ({symbol})', to silence this)",
           file=sys.stderr)
     track["t"] = seconds
+    track.unix_times = True
+
+
+def track_time_units(track):
+    """The unit and reference of ``track["t"]`` (s) for an output's units block, and the
+    first time in ISO-8601 UTC when they are Unix times (else None):
+    :func:`jaxgrav.track_times.time_units`. A ``t`` of Unix seconds was labelled ``"s"``."""
+    header = (track.renamed or {}).get("t", "t")
+    return time_units(track["t"], origin=track.time_origin, unit=unit_of(header)[1],
+                      unix=getattr(track, "unix_times", False))
 
 
 FIELD_UNITS = {"gravity": "mGal", "magnetic": "nT"}

@@ -20,6 +20,7 @@ from jaxgrav.cli.inputs import (
     fill_map_error_length,
     read_track,
     track_map,
+    track_time_units,
     whole_number,
 )
 from jaxgrav.cli.match_missing import missing_counts, missing_message
@@ -255,15 +256,17 @@ def _cmd_match(args):
                                 line=track.line)
     messages = messages if time_gap is None else [*messages, time_gap]
     r = {"t": np.asarray(track["t"], float).tolist()}
+    t_units, t_first = track_time_units(track)  # Unix times were labelled "s"
     if track.time_origin is not None:  # ISO times: t counts from the first; both kept
         r.update(time=[str(c) for c in track.text[track.time_text]],
                  time_origin=track.time_origin)
+    elif t_first is not None:  # Unix times kept as given; the first one as a date
+        r.update(time_start=t_first)
     r.update({k: np.asarray(v).tolist() for k, v in result._asdict().items()})
     r.update(status_messages=messages, fit_p_value=p_fit,
              fit_plausible=None if math.isnan(p_fit) else fit_warning is None,
              units=_units(args.method, unit))
-    if track.time_origin is not None:
-        r["units"]["t"] = f"s since {track.time_origin}"
+    r["units"]["t"] = t_units
     cov = np.asarray(result.covariance_m2, float)
     r.update(accepted=bool(result.accepted), covariance_m2=cov.tolist(),
              sigma_north_m=float(np.sqrt(cov[0, 0])), sigma_east_m=float(np.sqrt(cov[1, 1])),

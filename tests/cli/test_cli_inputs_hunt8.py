@@ -1,0 +1,83 @@
+"""Inputs found by the eighth issue-19 hunt (2026-12-07, helper-70).
+
+The last hunt's leftovers first: ``match`` labelled a track's Unix times ``"s"`` in its
+JSON (as if counted from the track's start), and ``dov --layers 0,1e12`` ran with a
+warning. Then the hunt's own finds (below them)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from jaxgrav.cli import main
+from jaxgrav.cli.inputs import read_track, track_time_units
+from jaxgrav.cli.main import build_parser
+
+ROWS = [(29.5 + 0.0056 * i, 126.5 + 0.0068 * i) for i in range(5)]
+
+
+def _track(path, header, times):
+    path.write_text(header + "\n" + "".join(f"{t},{lat},{lon}\n"
+                                            for t, (lat, lon) in zip(times, ROWS, strict=True)))
+    return path
+
+
+def _units(path):
+    args = build_parser().parse_args(["sample", "--map", "ryukyu", "--track", str(path),
+                                      "--out", "x.csv"])
+    return track_time_units(read_track(args, required=("t", "lat", "lon")))
+
+
+@pytest.mark.parametrize("header, times, units, first", [
+    ("t", [0, 120, 240, 360, 480], "s", None),  # the track's own clock
+    ("t", [1714564800 + 120 * i for i in range(5)], "s since 1970-01-01T00:00:00Z",
+     "2024-05-01T12:00:00Z"),  # Unix seconds: were labelled "s"
+    ("t", [1714564800000 + 120000 * i for i in range(5)], "s since 1970-01-01T00:00:00Z",
+     "2024-05-01T12:00:00Z"),  # Unix milliseconds, read as seconds since 1970
+    ("t (hours since 2024-05-01)", [0, 0.5, 1, 1.5, 2], "s since 2024-05-01", None),
+    ("time", ["2024-05-01T12:00:00Z", "2024-05-01T12:02:00Z", "2024-05-01T12:04:00Z",
+              "2024-05-01T12:06:00Z", "2024-05-01T12:08:00Z"],
+     "s since 2024-05-01T12:00:00+00:00", None),
+    ("t", [86000 + 60 * i for i in range(5)], "s", None),  # seconds of the day: no epoch
+])
+def test_track_times_are_labelled_with_their_reference(tmp_path, capsys, header, times,
+                                                        units, first):
+    """``match``'s JSON said ``"t": "s"`` for Unix times and for a CF header's
+    ``hours since DATE`` (converted to seconds, the reference dropped)."""
+    assert _units(_track(tmp_path / "t.csv", header + ",lat,lon", times)) == (units, first)
+
+
+@pytest.mark.long
+def test_match_json_labels_unix_times(tmp_path):
+    """The match JSON keeps the track's Unix times and says so (compiles the matcher)."""
+    track, truth = tmp_path / "t.csv", tmp_path / "truth.csv"
+    assert main(["simulate", "--out", str(track), "--truth", str(truth)]) == 0
+    lines = track.read_text().splitlines()
+    rows = [line.split(",", 1) for line in lines[1:]]
+    track.write_text("\n".join([lines[0], *(f"{float(t) + 1714564800:.0f},{rest}"
+                                            for t, rest in rows)]) + "\n")
+    out = tmp_path / "r.json"
+    assert main(["match", "--map", "ryukyu", "--track", str(track), "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["units"]["t"] == "s since 1970-01-01T00:00:00Z"
+    assert r["time_start"] == "2024-05-01T12:00:00Z"
+    np.testing.assert_allclose(r["t"][:2], [1714564800, 1714564920])
+
+
+@pytest.fixture
+def dov_track(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_text("lat,lon,h\n34.0,108.5,0\n34.01,108.51,100\n")
+    return path
+
+
+@pytest.mark.parametrize("layers, got", [("0,1e12", "1e+12"), ("0,10000,100001", "100001")])
+def test_dov_layers_above_the_edge_of_space_are_refused(dov_track, tmp_path, refused, layers,
+                                                         got):
+    """``--layers 0,1e12`` synthesised a layer a million km up and wrote xi = -736964
+    arcsec with a gap warning, exit 0."""
+    out = tmp_path / "o.csv"
+    refused(["dov", "--track", dov_track, "--out", out, "--layers", layers],
+            f"--layers {layers}: heights must be between -11000 m (the deepest ocean floor) "
+            f"and 100000 m (the edge of space), in m above the ellipsoid; got {got}")
+    assert not out.exists()
