@@ -46,11 +46,16 @@ LOWEST_LAYER_M = -11000.0
 """Lowest ``--layers`` height (m): the deepest ocean floor; -1e9 ended in the harmonic
 synthesis's "h must be > -radius = -6378136.3 m", naming no option."""
 
+HIGHEST_LAYER_M = 100_000.0
+"""Highest ``--layers`` height (m): the edge of space (the Kármán line), above every
+aircraft and balloon the layers serve; ``--layers 0,1e12`` synthesised a layer a million
+km up, warned of the gap and wrote deflections of -736964 arcsec, exit 0."""
+
 
 def _parse_heights(text):
     """The heights (m) of ``--layers TEXT``: comma-separated, finite, strictly ascending,
-    none below :data:`LOWEST_LAYER_M`; an empty item (``0,,20000``: a height lost in
-    typing, which was dropped) is refused."""
+    none below :data:`LOWEST_LAYER_M` or above :data:`HIGHEST_LAYER_M`; an empty item
+    (``0,,20000``: a height lost in typing, which was dropped) is refused."""
     items = [v.strip() for v in text.split(",")]
     if not any(items):  # --layers '' ran on the default heights, silently
         raise ValueError(f"--layers {text!r} is empty; expected comma-separated heights in m, "
@@ -69,10 +74,11 @@ def _parse_heights(text):
         raise ValueError(f"--layers {text}: heights must be finite numbers (m); got {got}")
     if any(b <= a for a, b in itertools.pairwise(vals)):
         raise ValueError(f"--layers {text}: heights must be strictly ascending (m); got {got}")
-    if vals[0] < LOWEST_LAYER_M:
-        raise ValueError(f"--layers {text}: heights must be at least {LOWEST_LAYER_M:g} m (the "
-                         f"deepest ocean floor; heights are in m above the ellipsoid); got "
-                         f"{vals[0]:g}")
+    if vals[0] < LOWEST_LAYER_M or vals[-1] > HIGHEST_LAYER_M:
+        raise ValueError(f"--layers {text}: heights must be between {LOWEST_LAYER_M:g} m (the "
+                         f"deepest ocean floor) and {HIGHEST_LAYER_M:g} m (the edge of space), "
+                         f"in m above the ellipsoid; got "
+                         f"{vals[0] if vals[0] < LOWEST_LAYER_M else vals[-1]:g}")
     return vals
 
 

@@ -297,8 +297,9 @@ def dov_track(tmp_path_factory):
     ("0,,20000", "--layers '0,,20000': item 2 is empty; expected comma-separated heights in "
                  "m, e.g. 0,10000,20000"),
     # the synthesis's "h must be > -radius = -6378136.3 m; got -1000000000.0": no option
-    ("-1e9,0,20000", "--layers -1e9,0,20000: heights must be at least -11000 m (the deepest "
-                     "ocean floor; heights are in m above the ellipsoid); got -1e+09"),
+    ("-1e9,0,20000", "--layers -1e9,0,20000: heights must be between -11000 m (the deepest "
+                     "ocean floor) and 100000 m (the edge of space), in m above the "
+                     "ellipsoid; got -1e+09"),
 ])
 def test_dov_layers_values(dov_track, tmp_path, capsys, layers, message):
     out = tmp_path / "d.csv"
