@@ -117,10 +117,17 @@ def _height_fix(args, h, hs):
     """What takes the heights ``h`` (m) of the on-map points into layers at ``hs`` (m): for
     the shipped set, ``--layers`` with a layer at the lowest (highest) height rounded down
     (up) to 10 m, synthesised from the degree-360 model (no extrapolation); for a --grid, a
-    layer added to the file. Empty when every height is inside."""
+    layer added to the file. Empty when every height is inside; a height beyond the
+    layers' range (:data:`LOWEST_LAYER_M`, :data:`HIGHEST_LAYER_M`) asks for its unit."""
     lo, hi = (float(np.min(h)), float(np.max(h))) if h.size else (hs[0], hs[-1])
     if hs[0] <= lo and hi <= hs[-1]:
         return ""
+    if lo < LOWEST_LAYER_M or hi > HIGHEST_LAYER_M:  # advised --layers that were refused
+        far = lo if lo < LOWEST_LAYER_M else hi
+        return (f"; a height of {far:g} m is beyond any layer ({LOWEST_LAYER_M:g} to "
+                f"{HIGHEST_LAYER_M:g} m above the ellipsoid, the deepest ocean floor to the "
+                "edge of space): check the h column's unit (declare it in the header, e.g. "
+                "'h (ft)')")
     below = math.floor(min(lo, hs[0]) / 10.0) * 10.0
     above = math.ceil(max(hi, hs[-1]) / 10.0) * 10.0
     need = " and ".join(([f"at or below {below:g} m"] if lo < hs[0] else [])

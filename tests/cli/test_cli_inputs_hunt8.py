@@ -81,3 +81,16 @@ def test_dov_layers_above_the_edge_of_space_are_refused(dov_track, tmp_path, ref
             f"--layers {layers}: heights must be between -11000 m (the deepest ocean floor) "
             f"and 100000 m (the edge of space), in m above the ellipsoid; got {got}")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("h, far", [(200000.0, "200000"), (-20000.0, "-20000")])
+def test_dov_heights_beyond_any_layer_ask_for_their_unit(tmp_path, refused, h, far):
+    """A point 200 km up (a height in feet or cm?) was told to give
+    ``--layers=0,10000,20000,200000``, and -20 km ``--layers=-20000,...``: both refused."""
+    track = tmp_path / "d.csv"
+    track.write_text(f"lat,lon,h\n34.0,108.5,0\n34.01,108.51,{h}\n")
+    err = refused(["dov", "--track", track, "--out", tmp_path / "o.csv"],
+                  f"; a height of {far} m is beyond any layer (-11000 to 100000 m above the "
+                  "ellipsoid, the deepest ocean floor to the edge of space): check the h "
+                  "column's unit (declare it in the header, e.g. 'h (ft)')")
+    assert "--layers=" not in err
