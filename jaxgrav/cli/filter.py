@@ -63,6 +63,7 @@ from jaxgrav.cli.filter_checks import (
     check_particles,
     check_sigma,
     check_sigma_pos,
+    check_sigma_vel,
     gradient_at_ins,
     information_warning,
     ins_label,
@@ -280,6 +281,7 @@ def cmd_filter(args):
                         ("--sigma-gravity", args.sigma_gravity)):
         check_sigma(name, value)
     check_sigma_pos(args.sigma_pos)
+    check_sigma_vel(args.sigma_vel)
     if args.seed is not None and args.method not in PARTICLES:  # was not used, no word
         raise ValueError(f"--seed is for --method pf or rbpf (their particles' draws); got "
                          f"--method {args.method}")

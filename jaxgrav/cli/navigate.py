@@ -63,6 +63,7 @@ from jaxgrav.cli.filter_checks import (
     check_particles,
     check_positive,
     check_sigma_pos,
+    check_sigma_vel,
     extent_text,
     gradient_at_ins,
     information_warning,
@@ -236,6 +237,7 @@ def cmd_navigate(args):
     check_positive("--sigma-pos", args.sigma_pos, "m")
     check_sigma_pos(args.sigma_pos)
     check_positive("--sigma-vel", args.sigma_vel, "m/s")
+    check_sigma_vel(args.sigma_vel)
     check_positive("--noise", args.noise, "mGal")
     if args.map_error is not None:
         check_positive("--map-error", args.map_error, "mGal", allow_zero=True)

@@ -94,3 +94,17 @@ def test_dov_heights_beyond_any_layer_ask_for_their_unit(tmp_path, refused, h, f
                   "ellipsoid, the deepest ocean floor to the edge of space): check the h "
                   "column's unit (declare it in the header, e.g. 'h (ft)')")
     assert "--layers=" not in err
+
+
+@pytest.mark.parametrize("command", ["filter", "navigate"])
+def test_an_initial_velocity_error_above_any_vessel_s_speed_is_refused(tmp_path, refused,
+                                                                       command):
+    """``filter --sigma-vel 1e9`` ran, exit 0: the covariance failed on 596 of 601 rows
+    and the 1-sigma was 17 600 km."""
+    track = _track(tmp_path / "t.csv", "t,lat,lon", [0, 10, 20, 30, 40])
+    out = tmp_path / "o.csv"
+    source = ["--point-masses", "paper-d"] if command == "filter" else ["--map", "ryukyu"]
+    refused([command, *source, "--track", track, "--out", out, "--sigma-vel", "1e9"],
+            "--sigma-vel must be at most 50 m/s (97 knots, above the speed of the vessels the "
+            "filters follow; an INS starts within about 0.01-1 m/s); got 1e+09")
+    assert not out.exists()
