@@ -262,6 +262,11 @@ def cmd_navigate(args):
         print(unused, file=sys.stderr)
     track = read_track(args, ("t", "lat", "lon", "v_east", "v_north", "gravity"),
                        allow_nan=("gravity",))
+    if not np.isfinite(track["gravity"]).any():  # ran, exit 0: the INS written back, no aid
+        raise ValueError(f"--track {track.path!r}: column "
+                         f"{track.renamed.get('gravity', 'gravity')!r} has no readings (all "
+                         f"{track['gravity'].size} cells empty or NaN); navigate needs at "
+                         "least one (mGal)")
     grid, sigma_var = track_map(args, track, _MAP_MARGIN_M,  # missing nodes kept as a mask
                                 sigma_given=args.map_error is not None)
     args.map_error = (sigma_var if sigma_var is not None

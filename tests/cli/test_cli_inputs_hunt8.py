@@ -108,3 +108,16 @@ def test_an_initial_velocity_error_above_any_vessel_s_speed_is_refused(tmp_path,
             "--sigma-vel must be at most 50 m/s (97 knots, above the speed of the vessels the "
             "filters follow; an INS starts within about 0.01-1 m/s); got 1e+09")
     assert not out.exists()
+
+
+def test_navigate_without_a_single_reading_is_refused(tmp_path, refused):
+    """A log whose gravity column is empty throughout ran ``navigate`` for 19 s and wrote
+    the INS back, "0 reading(s) used", exit 0 (``filter`` refused it)."""
+    track = tmp_path / "v.csv"
+    track.write_text("t,lat,lon,v_east,v_north,gravity\n" + "".join(
+        f"{10 * i},{29.3 + 2.5e-5 * i},{126.05 + 4.5e-5 * i},4.34,2.74,\n" for i in range(20)))
+    out = tmp_path / "o.csv"
+    refused(["navigate", "--map", "ryukyu", "--track", track, "--out", out],
+            f"--track '{track}': column 'gravity' has no readings (all 20 cells empty or NaN); "
+            "navigate needs at least one (mGal)")
+    assert not out.exists()
