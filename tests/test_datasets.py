@@ -228,6 +228,7 @@ def test_paper_c_truth_is_the_trajectory_and_adds_the_omission(qinling):
     assert np.corrcoef(fine.xi, model[0])[0, 1] > 0.8  # the long wavelengths: the model
 
 
+@pytest.mark.long  # 4-8 s: the fast tier is at its 5-minute budget
 def test_point_evaluation_reproduces_the_degree_360_model(qinling):
     """The builder's point evaluation (pyshtools, one point at a time) at degree 360
     equals jaxgrav's synthesis of the shipped coefficients: the path that made the
@@ -247,6 +248,7 @@ def test_point_evaluation_reproduces_the_degree_360_model(qinling):
     assert np.max(np.abs(fine.xi[k] - got[0])) > 0.1
 
 
+@pytest.mark.long  # 4-8 s: the fast tier is at its 5-minute budget
 def test_track_product_dataset(qinling):
     """The builder's track product at small size: fixes, values, check and provenance."""
     pytest.importorskip("pyshtools")

@@ -153,6 +153,7 @@ def _map_with_uncertainty(path, sigma):
                coords={"lat": np.asarray(grid.lat), "lon": np.asarray(grid.lon)}).to_netcdf(path)
 
 
+@pytest.mark.long  # 4-8 s: the fast tier is at its 5-minute budget
 def test_map_error_var_tells_the_method_the_maps_own_uncertainty(sim, tmp_path, capsys):
     d, _ = sim
     _map_with_uncertainty(tmp_path / "u.nc", 2.5)

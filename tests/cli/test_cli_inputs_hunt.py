@@ -64,6 +64,7 @@ def test_an_output_in_a_new_folder_is_written(tmp_path):
     assert out.read_text().startswith("t,")
 
 
+@pytest.mark.long  # 4-8 s: the fast tier is at its 5-minute budget
 def test_undeclared_fill_values_in_a_map_are_not_sampled_or_matched(tmp_path, capsys):
     """A 3 x 3 block of -9999 (no _FillValue attribute) on the track: sample wrote values
     down to -5194 mGal beside it (exit 0, no warning) and match refused the readings as
@@ -173,6 +174,7 @@ def _write(path, data, t=None):
     return path
 
 
+@pytest.mark.long  # 4-8 s: the fast tier is at its 5-minute budget
 def test_readings_corrected_twice_for_eotvos_are_named(tmp_path, capsys, simulated):
     """Readings already Eötvös-corrected, with velocity columns and no --eotvos-corrected:
     match blamed the noise or a gravimeter offset ('give --bias-sigma inf', after which it

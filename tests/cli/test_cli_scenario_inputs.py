@@ -153,7 +153,9 @@ ACCEPTED = [  # defect 4: missing nodes away from the track are no reason to ref
 ]
 
 
-@pytest.mark.parametrize("argv", [c[1] for c in ACCEPTED], ids=[c[0] for c in ACCEPTED])
+@pytest.mark.parametrize("argv", [  # a voyage simulation takes 5-7 s: long tier
+    pytest.param(c[1], marks=[pytest.mark.long] if c[0] == "simulate-voyage" else [])
+    for c in ACCEPTED], ids=[c[0] for c in ACCEPTED])
 def test_missing_nodes_away_from_the_track_are_used(maps, tmp_path, argv):
     out = tmp_path / "t.csv"
     assert main(_args(argv, maps, out)) == 0

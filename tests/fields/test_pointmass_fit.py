@@ -253,6 +253,7 @@ def test_jit_no_retrace_on_new_data_and_sweep():
     assert sweep.k.tolist() == [1] and sweep.rms[0] == sweep.fits[0].rms
 
 
+@pytest.mark.long  # 4-8 s: the fast tier is at its 5-minute budget
 def test_vmap_over_restarts_equals_loop():
     # Restart i alone (replicated into every slot, so the compiled program of the
     # other tests is reused) gives what restart i gives inside the batch.

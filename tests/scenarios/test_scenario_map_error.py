@@ -65,6 +65,7 @@ def test_readings_minus_map_have_the_model_std_and_correlation(grid):
         assert rho == pytest.approx(expected, abs=0.12), k
 
 
+@pytest.mark.long  # 4-8 s: the fast tier is at its 5-minute budget
 def test_other_draws_unchanged_by_the_map_error(grid):
     key = jax.random.key(3)
     s = scen(grid, noise_mgal=1.0)

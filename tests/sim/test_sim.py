@@ -141,6 +141,7 @@ def test_track_csv_roundtrip_and_errors(tmp_path):
         read_track_csv(tmp_path / "bad.csv", required=("t",))
 
 
+@pytest.mark.long  # 4-8 s: the fast tier is at its 5-minute budget
 def test_scenario_with_a_fixed_start_draws_the_rest_as_without():
     """``start_lat, start_lon`` fix the start (traced: one per run in a vmap); the key
     still draws the same drift and noise as the run of that key without them."""

@@ -26,6 +26,7 @@ def test_great_circle_against_the_haversine_in_numpy():
     assert float(b) == pytest.approx(np.degrees(np.arctan2(y, x)), abs=1e-10)
 
 
+@pytest.mark.long  # 4-8 s: the fast tier is at its 5-minute budget
 def test_sail_goes_round_the_box_at_its_speed_and_turn_radius():
     track, leg = sail(BOX, 4001, 10.0)
     step, _ = great_circle(track.lat[:-1], track.lon[:-1], track.lat[1:], track.lon[1:])
