@@ -97,8 +97,8 @@ def map_error_from_args(args, grid, *, allow_nan=False, length_alone=False):
         None for a perfect map (``--map-error`` absent or 0 and no ``--truth-map``).
 
     Raises ValueError naming the option and the value for a negative, NaN or infinite
-    σ or L, a σ above :data:`MAX_MAP_ERROR`, both ``--map-error`` and ``--truth-map``, or
-    a truth map that does not cover the map.
+    σ or L, a σ above :data:`MAX_MAP_ERROR`, both ``--map-error`` and ``--truth-map``, a
+    truth map that does not cover the map or that holds the map's own values.
     """
     sigma, length = args.map_error, args.map_error_length
     if sigma is not None and not (math.isfinite(sigma) and sigma >= 0):
@@ -120,10 +120,21 @@ def map_error_from_args(args, grid, *, allow_nan=False, length_alone=False):
             raise ValueError(f"--truth-map {args.truth_map} needs a --map to compare with")
         truth = load_map(args.truth_map, None, allow_nan=allow_nan)
         check_region_covered(truth, region_of(grid), f"--truth-map {args.truth_map}")
+        if _same_grid(truth, grid):  # ran as a map error ("truth map ryukyu"), with none
+            raise ValueError(f"--truth-map {args.truth_map} holds the --map's own values: "
+                             "the readings would see no map error; give another map (e.g. a "
+                             "newer survey), or leave --truth-map out for a perfect map")
         return truth_grid(truth)
     if not sigma:
         return None
     return map_error(sigma, DEFAULT_MAP_ERROR_LENGTH_M if length is None else length)
+
+
+def _same_grid(a, b):
+    """Whether grids ``a`` and ``b`` have the same nodes and values (NaN equal to NaN)."""
+    return all(np.shape(x) == np.shape(y) and np.array_equal(np.asarray(x), np.asarray(y),
+                                                              equal_nan=True)
+               for x, y in ((a.lat, b.lat), (a.lon, b.lon), (a.values, b.values)))
 
 
 def describe_map_error(args):

@@ -121,3 +121,19 @@ def test_navigate_without_a_single_reading_is_refused(tmp_path, refused):
             f"--track '{track}': column 'gravity' has no readings (all 20 cells empty or NaN); "
             "navigate needs at least one (mGal)")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", "--out", "t.csv", "--truth", "truth.csv"],
+    ["simulate-voyage", "--hours", "1", "--out", "t.csv", "--truth", "truth.csv"],
+    ["montecarlo", "--method", "dense", "--runs", "10", "--out", "m.nc"],
+])
+def test_a_truth_map_that_is_the_map_is_refused(tmp_path, monkeypatch, refused, argv):
+    """``--truth-map ryukyu`` on the default ``--map ryukyu`` ran as "truth map ryukyu"
+    (montecarlo: "told the map error (GLS)") while the readings saw no map error."""
+    monkeypatch.chdir(tmp_path)
+    refused([*argv, "--truth-map", "ryukyu"],
+            "--truth-map ryukyu holds the --map's own values: the readings would see no map "
+            "error; give another map (e.g. a newer survey), or leave --truth-map out for a "
+            "perfect map")
+    assert list(tmp_path.iterdir()) == []
