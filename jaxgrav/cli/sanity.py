@@ -28,6 +28,7 @@ import math
 import numpy as np
 from scipy.special import chdtrc
 
+from jaxgrav.cli.log_clock import check_time_unit
 from jaxgrav.geodesy import local_offsets_m_jit
 from jaxgrav.match.result import P_IMPLAUSIBLE, fit_p_value
 from jaxgrav.tracks import csv_line
@@ -203,6 +204,7 @@ def check_positions(track, *, where):
     ve, vn = np.asarray(track["v_east"], float), np.asarray(track["v_north"], float)
     if t.size < 2:
         return
+    check_time_unit(track, where=where)  # days, hours: moves too short to be called jumps
     line = getattr(track, "line", csv_line)  # the file's own lines (comments skipped)
     dt = np.diff(t)
     north, east = (np.asarray(a) for a in local_offsets_m_jit(lat[1:], lon[1:], lat[:-1], lon[:-1]))

@@ -137,3 +137,36 @@ def test_a_truth_map_that_is_the_map_is_refused(tmp_path, monkeypatch, refused, 
             "error; give another map (e.g. a newer survey), or leave --truth-map out for a "
             "perfect map")
     assert list(tmp_path.iterdir()) == []
+
+
+def _log(path, t_unit, lat0, lon0):
+    """A 20-row INS log 10 s apart at 8 m/s east, 1 m/s north from ``lat0``, ``lon0``, its
+    times divided by ``t_unit`` (s), from 45413.5 days (an Excel serial date)."""
+    rows = []
+    for i in range(20):
+        lat = lat0 + 1.0 * 10 * i / 110_700.0
+        lon = lon0 + 8.0 * 10 * i / (111_320.0 * np.cos(np.radians(lat0)))
+        rows.append(f"{45413.5 * 86400 / t_unit + 10 * i / t_unit:.9f},{lat:.8f},{lon:.8f},8.0,"
+                    f"1.0,{-30 + 0.3 * i:.2f}\n")
+    path.write_text("t,lat,lon,v_east,v_north,gravity\n" + "".join(rows))
+    return path
+
+
+@pytest.mark.parametrize("command, source, lat0, lon0", [
+    ("filter", ["--point-masses", "paper-d"], 24.3, 122.74),
+    ("navigate", ["--map", "ryukyu"], 29.3, 126.05)])
+@pytest.mark.parametrize("t_unit, name, symbol", [(86400.0, "days", "d"), (3600.0, "hours", "h"),
+                                                  (60.0, "minutes", "min")])
+def test_log_times_in_days_or_hours_are_named(tmp_path, refused, command, source, lat0, lon0,
+                                              t_unit, name, symbol):
+    """Excel serial days (45413.5...), MATLAB datenums or Julian days in ``t`` ran
+    ``filter`` on a 2.3e-5 s step, exit 0 (moves of 10 m a row stayed below the 25 m
+    least jump): the distance the velocities explain is 86 400 times too short."""
+    log = _log(tmp_path / "v.csv", t_unit, lat0, lon0)
+    out = tmp_path / "o.csv"
+    err = refused([command, *source, "--track", log, "--out", out],
+                  f"column 't' looks like {name}, not seconds: the positions move 153")
+    ratio = float(err.split(" m over the log, ")[1].split(" times what")[0])
+    assert abs(ratio / t_unit - 1) < 0.01, err
+    assert err.endswith(f"declare the unit in the header, e.g. 't ({symbol})'"), err
+    assert not out.exists()
