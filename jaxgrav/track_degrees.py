@@ -3,14 +3,15 @@
 :func:`parse_degrees` reads a column of angle cells with hemisphere letters (``35.4619
 N``, ``N35.4619``, ``127.71W``) or in degrees, minutes and seconds (``35°27.716'N``,
 ``35 27 43.2 S``) as signed decimal degrees, for :func:`jaxgrav.tracks.read_track_csv`
-(through :mod:`jaxgrav.track_files`, which exports it).
+(through :mod:`jaxgrav.track_files`, which exports it); :func:`nmea_hint` names a
+column written as NMEA's ``ddmm.mmmm`` (degrees × 100 + minutes).
 """
 
 import re
 
 import numpy as np
 
-__all__ = ["NA_TOKENS", "parse_degrees"]
+__all__ = ["NA_TOKENS", "nmea_hint", "parse_degrees"]
 
 NA_TOKENS = frozenset({"", "nan", "na", "n/a", "null", "none", "#n/a", "-", "--"})
 """Cells (lower case) read as a missing value (NaN): also a spreadsheet's ``#N/A`` and a
@@ -84,3 +85,22 @@ def parse_degrees(cells, name, decimal_comma=False):
             except ValueError as err:
                 return values, i, str(err)
     return values, None, ""
+
+
+def nmea_hint(values, i):
+    """A message tail when the angles ``values`` (a lat or lon column read as degrees, its
+    value ``i`` out of range) look like NMEA ``ddmm.mmmm``, degrees × 100 plus minutes
+    (GPS receivers' GGA/RMC sentences, exported as numbers), else ``""``.
+
+    Such a column has every value's last two whole digits below 60 (the minutes).
+    """
+    v = np.abs(np.asarray(values, dtype=float))
+    v = v[np.isfinite(v)]
+    if not v.size or v.max() >= 18000.0 or np.any(v % 100.0 >= 60.0):
+        return ""
+    x = abs(float(values[i]))
+    deg, minutes = divmod(x, 100.0)
+    shown = (np.format_float_positional(a, trim="-") for a in (x, round(minutes, 6)))
+    return (f"; it looks like NMEA ddmm.mmmm (degrees x 100 + minutes): {next(shown)} is "
+            f"{deg:.0f} deg {next(shown)}' = {deg + minutes / 60.0:.6g} degrees; convert the "
+            "column to decimal degrees")

@@ -36,6 +36,7 @@ import numpy as np
 
 from jaxgrav._io import atomic_output
 from jaxgrav.grid_axes import contiguous_longitudes
+from jaxgrav.track_degrees import nmea_hint
 from jaxgrav.track_files import column_key, parse_degrees, parse_numbers, read_table
 from jaxgrav.track_times import DATE_COLUMN, check_time_steps, iso_seconds
 from jaxgrav.track_units import header_scale
@@ -348,7 +349,8 @@ def _check_columns(track, required, allow_nan, label):
                        else "")
             raise ValueError(f"{label}, line {lines[i]}, column "
                              f"{track.renamed.get('lat', 'lat')!r}: latitude "
-                             f"{track['lat'][i]:g} is outside [-90, 90] degrees{swapped}")
+                             f"{track['lat'][i]:g} is outside [-90, 90] degrees"
+                             f"{swapped or nmea_hint(track['lat'], i)}")
     if "lon" in track:
         lon = track["lon"]
         bad = np.flatnonzero(np.isinf(lon) | (lon < -180.0) | (lon > 360.0))
@@ -356,7 +358,7 @@ def _check_columns(track, required, allow_nan, label):
             i = int(bad[0])
             raise ValueError(f"{label}, line {lines[i]}, column "
                              f"{track.renamed.get('lon', 'lon')!r}: longitude {lon[i]:g} is "
-                             "outside [-180, 360] degrees")
+                             f"outside [-180, 360] degrees{nmea_hint(lon, i)}")
         ok = np.isfinite(lon)
         lon = lon.copy()
         lon[ok] = contiguous_longitudes(lon[ok])

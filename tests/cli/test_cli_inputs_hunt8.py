@@ -170,3 +170,22 @@ def test_log_times_in_days_or_hours_are_named(tmp_path, refused, command, source
     assert abs(ratio / t_unit - 1) < 0.01, err
     assert err.endswith(f"declare the unit in the header, e.g. 't ({symbol})'"), err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("rows, message", [
+    ("3527.71642,12742.78991", "column 'lat': latitude 3527.72 is outside [-90, 90] degrees; "
+     "it looks like NMEA ddmm.mmmm (degrees x 100 + minutes): 3527.71642 is 35 deg 27.71642' "
+     "= 35.4619 degrees; convert the column to decimal degrees"),
+    ("35.4619,12742.78991", "column 'lon': longitude 12742.8 is outside [-180, 360] degrees; it "
+     "looks like NMEA ddmm.mmmm (degrees x 100 + minutes): 12742.78991 is 127 deg 42.78991' = "
+     "127.713 degrees"),
+    ("3575.5,127.7", "latitude 3575.5 is outside [-90, 90] degrees"),  # 75 minutes: no hint
+])
+def test_nmea_positions_are_named(tmp_path, refused, rows, message):
+    """A GPS receiver's ddmm.mmmm latitudes (GGA sentences exported as numbers) were refused
+    as "latitude 3527.72 is outside [-90, 90] degrees", with no word of what they are."""
+    track = tmp_path / "t.csv"
+    track.write_text(f"lat,lon\n{rows}\n")
+    err = refused(["sample", "--map", "ryukyu", "--track", track, "--out", tmp_path / "o.csv"],
+                  message)
+    assert ("NMEA" in err) == ("NMEA" in message)
