@@ -265,6 +265,7 @@ def read_table(path, label=None):
     if declared:  # "sep=;": the delimiter, declared; blanked so line numbers stay the file's
         text = "\n".join([*raw[:k], "", *raw[k + 1:]])
     title = [] if declared else _preamble(raw, k)
+    above = raw[title[-1]] if title else ""  # the header, if its delimiter is not the rows'
     if title:  # "Survey leg 3" above the header was read as the header: blanked, as "sep="
         raw = ["" if j in title else ln for j, ln in enumerate(raw)]
         text, k = "\n".join(raw), next(j for j in range(title[-1] + 1, len(raw)) if raw[j].strip()
@@ -283,6 +284,8 @@ def read_table(path, label=None):
         header, rows = _units_row(header, rows)
     elif commented:  # "# t,lat,lon" (numpy.savetxt, GMT): was "it has 1, 2, 3"
         header, has_header = commented, True
+    elif _other_header(above, header):  # "t lat lon" over "0,29.5,126.5": "it has 1, 2, 3"
+        header, has_header = _other_header(above, header), True
     elif path.suffix.lower() in (".xyz", ".xy"):
         # a two-column .xy(z) file gained an empty "z" column in the outputs
         header = ["lon", "lat", "z", *(str(j + 1) for j in range(3, len(header)))][:len(header)]
@@ -319,6 +322,19 @@ def _commented_header(above, delimiter, first):
     line = above[-1].lstrip("#").strip() if above and above[-1].startswith("#") else ""
     if not line:
         return None
+    cells = [c.strip() for c in (line.split() if delimiter == " " else
+                                 next(csv.reader([line], delimiter=delimiter)))]
+    return cells if len(cells) == len(first) and not all(map(_is_number, cells)) else None
+
+
+def _other_header(line, first):
+    """The header of a file whose header line has another delimiter than its rows (``t lat
+    lon`` or ``t;lat;lon`` over ``0,29.5,126.5``, typed by hand): ``line``, the last line
+    above the first data row ``first`` (taken for a title), split on its own delimiter,
+    when that gives as many cells, not all numbers; else None."""
+    if not line.strip():
+        return None
+    delimiter = _sniff(line.strip())
     cells = [c.strip() for c in (line.split() if delimiter == " " else
                                  next(csv.reader([line], delimiter=delimiter)))]
     return cells if len(cells) == len(first) and not all(map(_is_number, cells)) else None

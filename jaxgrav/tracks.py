@@ -253,6 +253,10 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
     wanted = [*required, *optional, *(c for c in KNOWN_COLUMNS if c not in required)]
     found = _match_columns(table.header, wanted, columns, label, required)
     missing = [c for c in required if c not in found]
+    if missing and not table.has_header:  # was "lacks columns lat and lon; it has 1, 2, 3"
+        raise ValueError(f"{label} has no header row (line {table.lines[0]} holds only numbers); "
+                         f"add one naming its {len(table.header)} columns (e.g. t,lat,lon,"
+                         "gravity) or name them by number (e.g. --columns lat=2,lon=3)")
     if missing:
         raise ValueError(
             f"{label} lacks column{'s' * (len(missing) > 1)} {_listed(missing, 'and')}; it "

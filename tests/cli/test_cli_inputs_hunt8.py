@@ -189,3 +189,25 @@ def test_nmea_positions_are_named(tmp_path, refused, rows, message):
     err = refused(["sample", "--map", "ryukyu", "--track", track, "--out", tmp_path / "o.csv"],
                   message)
     assert ("NMEA" in err) == ("NMEA" in message)
+
+
+@pytest.mark.parametrize("header", ["t lat lon", "t\tlat\tlon", "t;lat;lon", "t  lat  lon  "])
+def test_a_header_typed_with_another_delimiter_is_read(tmp_path, capsys, header):
+    """``t lat lon`` over comma-separated rows was taken for a title line, and the file
+    refused as "lacks columns lat and lon; it has 1, 2, 3"."""
+    track = tmp_path / "t.csv"
+    track.write_text(f"{header}\n0,29.5,126.5\n120,29.5056,126.5068\n")
+    out = tmp_path / "o.csv"
+    assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out", str(out)]) == 0
+    assert out.read_text().splitlines()[:2] == ["t,lat,lon,map", "0,29.5,126.5,24.8326377869"]
+
+
+def test_a_file_without_a_header_says_so(tmp_path, refused):
+    track = tmp_path / "t.csv"
+    track.write_text("0,29.5,126.5\n120,29.5056,126.5068\n")
+    refused(["sample", "--map", "ryukyu", "--track", track, "--out", tmp_path / "o.csv"],
+            f"track file '{track}' has no header row (line 1 holds only numbers); add one "
+            "naming its 3 columns (e.g. t,lat,lon,gravity) or name them by number (e.g. "
+            "--columns lat=2,lon=3)")
+    assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out",
+                 str(tmp_path / "o.csv"), "--columns", "lat=2,lon=3"]) == 0
