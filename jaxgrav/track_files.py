@@ -251,7 +251,7 @@ def read_table(path, label=None):
         raise FileNotFoundError(f"{label} does not exist")
     if path.is_dir():
         raise ValueError(f"{label} is a folder; expected a CSV file")
-    text = _decode(path.read_bytes(), label)
+    text = _decode(path.read_bytes(), label).rstrip("\x1a")  # a DOS end-of-file mark (^Z)
     raw = text.splitlines()
     k = next((k for k, ln in enumerate(raw) if ln.strip() and not ln.strip().startswith(
         ("#", ">"))), None)

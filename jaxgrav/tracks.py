@@ -276,6 +276,10 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
         values, bad = parse_numbers(cells, decimal_comma=table.delimiter != ",")
         if j in canonical and bad is None:  # "t (min)", "gravity [m/s^2]", "lat (rad)"
             values = values * header_scale(name, header, label)
+        if bad is not None and name == "t" and np.isfinite(values[:bad]).any():  # named line 2
+            raise ValueError(f"{label}, line {lines[bad]}, column {header!r}: {cells[bad]!r} "
+                             "is not a number, as the column's other times are (seconds); "
+                             "give every time as a number, or every one as a date-time")
         if bad is not None and name == "t":
             day = [k for k, h in enumerate(table.header) if column_key(h) == DATE_COLUMN]
             dates = [r[day[0]] for r in table.rows] if day and day[0] != j else None

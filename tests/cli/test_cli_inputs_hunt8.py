@@ -211,3 +211,24 @@ def test_a_file_without_a_header_says_so(tmp_path, refused):
             "--columns lat=2,lon=3)")
     assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out",
                  str(tmp_path / "o.csv"), "--columns", "lat=2,lon=3"]) == 0
+
+
+@pytest.mark.parametrize("cell", ["120x", "2024-05-01T12:02:00"])
+def test_one_bad_time_among_numbers_is_named_on_its_own_line(tmp_path, refused, cell):
+    """A typo in line 3's time was reported as "line 2, column 't': '0' is neither a
+    number (seconds) nor an ISO-8601 date-time": the first cell, which is fine."""
+    track = tmp_path / "t.csv"
+    track.write_text(f"t,lat,lon\n0,29.5,126.5\n{cell},29.5056,126.5068\n")
+    refused(["sample", "--map", "ryukyu", "--track", track, "--out", tmp_path / "o.csv"],
+            f"line 3, column 't': {cell!r} is not a number, as the column's other times are "
+            "(seconds); give every time as a number, or every one as a date-time")
+
+
+def test_a_dos_end_of_file_mark_is_ignored(tmp_path):
+    """A ^Z (0x1a) after the last line, as old DOS programs end files, was a row whose time
+    was not a number (and the message named line 2's '0')."""
+    track = tmp_path / "t.csv"
+    track.write_bytes(b"t,lat,lon\r\n0,29.5,126.5\r\n120,29.5056,126.5068\r\n\x1a")
+    out = tmp_path / "o.csv"
+    assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out", str(out)]) == 0
+    assert len(out.read_text().splitlines()) == 3
