@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+import xarray as xr
 
 from jaxgrav.cli import main
 from jaxgrav.cli.inputs import read_track, track_time_units
@@ -232,3 +233,49 @@ def test_a_dos_end_of_file_mark_is_ignored(tmp_path):
     out = tmp_path / "o.csv"
     assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out", str(out)]) == 0
     assert len(out.read_text().splitlines()) == 3
+
+
+def _layers_file(path, xi_units, factor, h_units, h_factor):
+    """A 2-layer DOV file on 0-1 N, 10-11 E, heights 0 and 1000 m, written in other units."""
+    lat, lon = np.linspace(0.0, 1.0, 11), np.linspace(10.0, 11.0, 11)
+    values = np.stack([np.stack([np.add.outer(lat, lon) * (k + 1) * (c + 1) for c in range(2)])
+                       for k in range(2)])
+    xr.Dataset({name: (("height", "lat", "lon"), values[:, c] / factor, {"units": xi_units})
+                for c, name in enumerate(("xi", "eta"))},
+               coords={"height": ("height", np.array([0.0, 1000.0]) / h_factor,
+                                  {"units": h_units}),
+                       "lat": lat, "lon": lon}).to_netcdf(path)
+    return path
+
+
+@pytest.mark.parametrize("xi_units, factor, h_units, h_factor", [
+    ("radians", 206264.80624709636, "km", 1000.0), ("urad", 0.20626480624709636, "m", 1.0),
+    ("degrees", 3600.0, "ft", 0.3048)])
+def test_dov_grid_units_are_converted(tmp_path, xi_units, factor, h_units, h_factor):
+    """A --grid in radians (or µrad, degrees) was written under xi/eta as if in arcsec,
+    and heights in km were read as metres."""
+    track = tmp_path / "t.csv"
+    track.write_text("lat,lon,h\n0.5,10.5,500\n0.52,10.55,250\n")
+    outs = []
+    for name, args in (("a", ("arcsec", 1.0, "m", 1.0)),
+                       ("b", (xi_units, factor, h_units, h_factor))):
+        grid = _layers_file(tmp_path / f"{name}.nc", *args)
+        outs.append(tmp_path / f"{name}.csv")
+        assert main(["dov", "--track", str(track), "--out", str(outs[-1]), "--grid", str(grid),
+                     "--method", "bilinear-linear"]) == 0
+    a, b = (np.loadtxt(p, delimiter=",", skiprows=1) for p in outs)
+    np.testing.assert_allclose(b, a, rtol=1e-9)
+
+
+@pytest.mark.parametrize("attr, units, message", [
+    ("xi", "mGal", "xi declares units 'mGal', not an angle; expected deflections of the "
+                   "vertical in arcsec (or rad, urad, mrad, deg, mas)"),
+    ("height", "s", "height declares units 's'; expected layer heights in m (or km, ft) above "
+                    "the ellipsoid")])
+def test_dov_grid_units_of_no_kind_are_refused(tmp_path, refused, attr, units, message):
+    grid = _layers_file(tmp_path / "g.nc", units if attr == "xi" else "arcsec", 1.0,
+                        units if attr == "height" else "m", 1.0)
+    track = tmp_path / "t.csv"
+    track.write_text("lat,lon,h\n0.5,10.5,500\n")
+    refused(["dov", "--track", track, "--out", tmp_path / "o.csv", "--grid", grid],
+            f"--grid '{grid}': {message}")
