@@ -17,6 +17,7 @@ import jax.numpy as jnp
 
 import jaxgrav
 from jaxgrav._io import atomic_output, check_outputs
+from jaxgrav.cli.inputs import check_out_format
 
 __all__ = ["add_parser", "cmd_bench", "default_bench_dir", "is_result", "machine_info",
            "matmul_roofline"]
@@ -229,6 +230,7 @@ def cmd_bench(args):
     # the report never replaces a script or a helper module (_*.py) the scripts import
     check_outputs([out], force=args.force, names=["--out"],
                   inputs={f"script {p.name} of --dir": p for p in sorted(bdir.glob("*.py"))})
+    check_out_format(out, "Markdown")  # --out b.csv ran every script, then wrote Markdown
     before = machine_info()
     print(f"machine: {before['cpu']}, {before['cores']} cores, load {before['load_average']}, "
           f"roofline float64 {before['roofline']['float64_gflops']:.1f} GFLOP/s", flush=True)

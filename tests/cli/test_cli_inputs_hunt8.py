@@ -279,3 +279,15 @@ def test_dov_grid_units_of_no_kind_are_refused(tmp_path, refused, attr, units, m
     track.write_text("lat,lon,h\n0.5,10.5,500\n")
     refused(["dov", "--track", track, "--out", tmp_path / "o.csv", "--grid", grid],
             f"--grid '{grid}': {message}")
+
+
+@pytest.mark.parametrize("name, fmt", [("b.csv", "a CSV"), ("b.json", "a JSON"),
+                                       ("b.md.gz", "a compressed")])
+def test_bench_out_of_another_format_is_refused_before_running(tmp_path, refused, name, fmt):
+    """``bench --out b.csv`` ran every benchmark script (minutes), then wrote its Markdown
+    table into b.csv."""
+    bdir = tmp_path / "bench"
+    bdir.mkdir()
+    (bdir / "x.py").write_text("raise SystemExit('must not run')\n")
+    refused(["bench", "--dir", bdir, "--out", tmp_path / name], f"names {fmt} file")
+    assert not (tmp_path / name).exists()
