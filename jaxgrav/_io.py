@@ -68,7 +68,7 @@ def check_outputs(paths, *, force=False, names=None, inputs=None):
         if Path(path).is_dir():
             raise ValueError(f"{label} is a folder; expected a file path")
         _check_folder(Path(path), label)
-        if Path(path).exists() and not force:
+        if os.path.lexists(path) and not force:  # a broken link too: it was replaced
             existing.append(label)
     if existing:  # every one named, in one sentence ("a, b exist(s)" was the old wording)
         listed = (existing[0] if len(existing) == 1
@@ -141,7 +141,7 @@ def atomic_output(path, *, force=False):
     path = Path(path)
     if path.is_dir():
         raise ValueError(f"{str(path)!r} is a folder; expected a file path")
-    if path.exists() and not force:
+    if os.path.lexists(path) and not force:
         raise FileExistsError(f"{str(path)!r} exists; pass force=True (--force) to overwrite it")
     path.parent.mkdir(parents=True, exist_ok=True)
     # the temporary name fits wherever the name does (a 250-byte name ended in exit 1)

@@ -291,3 +291,16 @@ def test_bench_out_of_another_format_is_refused_before_running(tmp_path, refused
     (bdir / "x.py").write_text("raise SystemExit('must not run')\n")
     refused(["bench", "--dir", bdir, "--out", tmp_path / name], f"names {fmt} file")
     assert not (tmp_path / name).exists()
+
+
+def test_an_output_that_is_a_broken_link_needs_force(tmp_path, refused):
+    """``--out LINK`` whose target is gone (a link to last run's file on an unmounted disk)
+    was replaced by a file without ``--force``: ``exists()`` follows the link."""
+    track = _track(tmp_path / "t.csv", "t,lat,lon", [0, 120, 240, 360, 480])
+    link = tmp_path / "latest.csv"
+    link.symlink_to(tmp_path / "gone" / "run.csv")
+    argv = ["sample", "--map", "ryukyu", "--track", track, "--out", link]
+    refused(argv, f"--out '{link}' exists; pass --force to overwrite it (nothing was written)")
+    assert link.is_symlink()
+    assert main([str(a) for a in argv] + ["--force"]) == 0
+    assert not link.is_symlink() and link.read_text().startswith("t,lat,lon,map")
