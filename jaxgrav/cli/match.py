@@ -1,6 +1,7 @@
-"""``jaxgrav match`` and ``jaxgrav sample``: one track against a map.
+"""``jaxgrav match``: one track against a map.
 
-Wire into :mod:`jaxgrav.cli` with ``add_parsers(sub)``.
+Wire into :mod:`jaxgrav.cli` with ``add_parsers(sub)`` (which adds ``jaxgrav sample``,
+:mod:`jaxgrav.cli.sample`, too).
 """
 
 import json
@@ -10,7 +11,7 @@ import sys
 import numpy as np
 
 from jaxgrav._io import atomic_output, check_outputs
-from jaxgrav.cli.filter_checks import check_on_map
+from jaxgrav.cli import sample
 from jaxgrav.cli.inputs import (
     FIELD_UNITS,
     add_map_error_var_option,
@@ -39,7 +40,6 @@ from jaxgrav.match import (
 )
 from jaxgrav.match.api import MAP_ERROR_METHODS, MASKED, missing_reading
 from jaxgrav.sim import DEG_ARC_M
-from jaxgrav.tracks import write_track_csv
 
 __all__ = ["CONTOUR_METHODS", "ENTROPY_HALF_SIZE", "add_parsers", "check_search"]
 
@@ -100,44 +100,7 @@ def add_parsers(sub):
     m.add_argument("--force", action="store_true", help="overwrite an existing output")
     m.set_defaults(func=_cmd_match)
 
-    s = sub.add_parser("sample", help="sample a map along a track CSV")
-    s.add_argument("--map", required=True, help="NetCDF grid with lat/lon coordinates")
-    s.add_argument("--var", default=None, help="variable to read when the file has several")
-    add_track_option(s, "CSV with lat, lon columns (degrees)")
-    s.add_argument("--out", required=True, help="output CSV (track columns + sampled column)")
-    s.add_argument("--method", choices=("bilinear", "bicubic"), default="bicubic")
-    s.add_argument("--column", default="map",
-                   help="name of the added column, not one the track already has (default map)")
-    s.add_argument("--force", action="store_true", help="overwrite an existing output")
-    s.set_defaults(func=_cmd_sample)
-
-
-def _cmd_sample(args):
-    if not args.column.strip():
-        raise ValueError(f"--column must be a non-empty column name; got {args.column!r}")
-    _check_out(args, "CSV")
-    track = read_track(args, required=("lat", "lon"))
-    cols = track.columns()
-    taken = {c.lower(): c for c in (*cols, *track.renamed.values())}
-    if args.column.strip().lower() in taken:
-        raise ValueError(f"--column {args.column!r} is the name of a column of --track "
-                         f"{str(args.track)!r} ({taken[args.column.strip().lower()]!r}); "
-                         "expected a new name (the track's columns are kept)")
-    grid, _ = track_map(args, track, 0.0, field=None,  # any map: nT was refused as not mGal
-                        bicubic=args.method == "bicubic")
-    # off the map: was "point (lat=…) is outside the grid", naming neither file nor line
-    check_on_map(grid, track["lat"], track["lon"], f"--track {str(args.track)!r}", args.map,
-                 line=track.line)
-    values = np.asarray(grid.sample(track["lat"], track["lon"], args.method, strict=True))
-    cols[args.column] = values
-    write_track_csv(args.out, cols, force=args.force)
-    print(f"wrote {args.out}: {values.size} sample{'s' * (values.size != 1)} of "
-          f"{grid.name or 'map'} ({args.method})")
-    masked = ~np.isfinite(values)
-    if masked.any():
-        print(f"warning: {int(masked.sum())} of {values.size} points lie in map cells with a "
-              f"missing (NaN) node (first on line {track.line(int(np.flatnonzero(masked)[0]))}); "
-              f"their {args.column!r} cells are left empty", file=sys.stderr)
+    sample.add_parser(sub)
 
 
 def _check_out(args, writes):

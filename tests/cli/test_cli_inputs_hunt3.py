@@ -188,9 +188,10 @@ def test_an_infinite_position_is_called_so(tmp_path, capsys, refused):
     summary of one point said "1 samples"."""
     track = tmp_path / "t.csv"
     track.write_text("lat,lon\n1e400,130.1\n30.2,130.2\n")
+    # sample keeps a row without a position (empty cells) since hunt 8: inf is no position
     refused(["sample", "--map", "ryukyu", "--track", track, "--out", tmp_path / "o.csv"],
-            f"track file {str(track)!r}, column 'lat' has 1 missing, NaN or infinite value(s), "
-            "first on line 2; this column must be complete")
+            f"track file {str(track)!r}, line 2, column 'lat': inf is not a value; leave the "
+            "cell empty where there is none")
     track.write_text("lat,lon\n30.2,130.2\n")
     assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out",
                  str(tmp_path / "o.csv"), "--method", "bilinear"]) == 0

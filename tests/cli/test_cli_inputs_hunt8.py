@@ -304,3 +304,17 @@ def test_an_output_that_is_a_broken_link_needs_force(tmp_path, refused):
     assert link.is_symlink()
     assert main([str(a) for a in argv] + ["--force"]) == 0
     assert not link.is_symlink() and link.read_text().startswith("t,lat,lon,map")
+
+
+def test_sample_keeps_rows_without_a_position(tmp_path, capsys):
+    """A GPS dropout (empty lat/lon cells on one row) refused the whole file in ``sample``
+    ("column 'lat' has 1 missing or NaN value(s) ... must be complete")."""
+    track = tmp_path / "t.csv"
+    track.write_text("t,lat,lon,depth\n0,29.5,126.5,10\n120,,,11\n240,29.5112,126.5136,12\n")
+    out = tmp_path / "o.csv"
+    assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out", str(out)]) == 0
+    assert out.read_text().splitlines()[1:] == ["0,29.5,126.5,10,24.8326377869", "120,,,11,",
+                                                "240,29.5112,126.5136,12,26.0607606636"]
+    err = capsys.readouterr().err
+    assert err == ("warning: 1 of 3 rows have no position (first on line 3); their 'map' cells "
+                   "are left empty\n")
