@@ -22,10 +22,18 @@ resolves the posterior, else that spread plus the Gauss–Newton covariance. Wit
 error (``iccp.map_error_mgal`` > 0) the same GLS score also picks the best ICCP start
 and makes the fine-vs-coarse test; ``iccp.fix="posterior"`` takes the posterior mean
 over the offsets as the coarse fix (and as one more ICCP start).
+
+Integrity (a rejected fix keeps the INS track): the thresholds of
+:func:`~jaxgrav.match.fix_covariance.integrity_status` (512–4096), the dense matcher's
+informativeness test (``iccp.max_sigma_ratio`` × the 1-σ of a uniform prior over the
+searched offsets, :func:`~jaxgrav.match.integrity.region_sigma`, over the square grid or
+``iccp.region="disc"``; 512), the distance from the INS track (``max_offset_m``, 65536)
+and the no-harm test (``iccp.max_p_worse``, :func:`p_worse_than_ins`, 131072).
 """
 
 import jax
 import jax.numpy as jnp
+from jax.scipy.special import ndtr
 
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m
@@ -45,16 +53,20 @@ from jaxgrav.match.gls import (
     track_covariance,
 )
 from jaxgrav.match.iccp import IccpConfig, iccp_fit, local_track_frame
+from jaxgrav.match.integrity import largest_sigma, region_mask, region_sigma
 from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import STATUS, MatchResult
 from jaxgrav.prepared import prepare_map
 
-__all__ = ["COMBINED_STATUS", "FAR_FIX", "match_entropy_iccp"]
+__all__ = ["COMBINED_STATUS", "FAR_FIX", "NOT_BETTER", "match_entropy_iccp", "p_worse_than_ins"]
 
 FAR_FIX = 65536
 """Status bit: the fix lies beyond ``IccpConfig.max_offset_m`` from the INS track."""
 
-COMBINED_STATUS = {bit: STATUS[bit] for bit in (128, FAR_FIX)}
+NOT_BETTER = 131072
+"""Status bit: the fix is not shown better than the INS track (``IccpConfig.max_p_worse``)."""
+
+COMBINED_STATUS = {bit: STATUS[bit] for bit in (128, FAR_FIX, NOT_BETTER)}
 """The status bits raised by the combined matcher only (an excerpt of
 :data:`~jaxgrav.match.result.STATUS`); it also raises the entropy and ICCP bits."""
 
@@ -119,7 +131,10 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
         vals, _ = value_grad(field, p0 + jnp.stack([g_n, g_e], -1)[:, None, :])
     j_grid, b_grid = gls_b(vals.astype(dtype))
     dof = gls_dof(n, sb)  # n, or n − 1 when a free bias takes one
-    post = offset_posterior(j_grid, g_n, g_e, entropy.spacing_m, dof=dof)
+    # the posterior's support: the square grid, or its disc (static); outside: no weight
+    inside, ring = region_mask(entropy.half_size, iccp.region)
+    j_grid = jnp.where(inside, j_grid, jnp.inf)
+    post = offset_posterior(j_grid, g_n, g_e, entropy.spacing_m, dof=dof, edge=ring)
     if iccp.fix == "posterior":
         d_n = jnp.where(post.valid, post.mean_north_m, d_n).astype(d_n.dtype)
         d_e = jnp.where(post.valid, post.mean_east_m, d_e).astype(d_e.dtype)
@@ -165,11 +180,18 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
                                 pick(st.rotation, jnp.eye(2, dtype=dtype)), t_fix, j_fix,
                                 use_fine, post, j_grid, g_n, g_e, entropy, iccp, dof - n)
     reject = integrity_status(cov, post.second_mode_ratio, chi2, post.edge_mass, iccp)
+    # the informativeness test (the dense matcher's): the readings must narrow the search
+    prior_sigma = region_sigma(g_n, g_e, entropy.spacing_m, jnp.isfinite(j_grid))
+    reject = reject | jnp.where(largest_sigma(cov) > iccp.max_sigma_ratio * prior_sigma,
+                                512, 0).astype(reject.dtype)
     # ICCP can walk a weak or biased fix far past the drift the search was sized for
     # (15 km at a 4.7 km drift radius, accepted): beyond max_offset_m it is rejected
-    off = jnp.hypot(pick(f_n, coarse.offset_north_m),
-                    pick(f_e, coarse.offset_east_m))
+    off_ne = jnp.stack([pick(f_n, coarse.offset_north_m), pick(f_e, coarse.offset_east_m)])
+    off = jnp.hypot(off_ne[0], off_ne[1])
     reject = reject | jnp.where(off > iccp.max_offset_m, FAR_FIX, 0).astype(reject.dtype)
+    # no harm: a fix the truth may well lie nearer the INS track than is not taken
+    reject = reject | jnp.where(p_worse_than_ins(off_ne, cov) > iccp.max_p_worse,
+                                NOT_BETTER, 0).astype(reject.dtype)
     accepted = found & (reject == 0)
     keep = lambda a, b: jnp.where(accepted, pick(a, b), jnp.zeros_like(a))  # noqa: E731
     status = (
@@ -205,6 +227,35 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
         edge_mass=post.edge_mass.astype(dtype),
         chi2_per_dof=chi2,
     )
+
+
+def p_worse_than_ins(offset_m, covariance_m2):
+    """Probability that the truth lies nearer the INS track than the fix does.
+
+    The truth ``x`` (the offset from the INS track, m) distributed ``N(m, C)`` about
+    the fix ``m``: the fix is worse than the INS track where ``|x − m| > |x|``, the
+    half-plane ``x·m < |m|²/2`` on the INS side of the bisector, whose probability is
+    ``Φ(−|m|² / (2 √(mᵀ C m)))``: 0.5 for a fix on the INS track, small for a fix
+    many of its σ away from it (along the line joining them).
+
+    Parameters
+    ----------
+    offset_m : Array, shape ``(..., 2)``
+        The fix's mean offset from the INS track (m; north, east).
+    covariance_m2 : Array, shape ``(..., 2, 2)``
+        Its covariance (m²).
+
+    Returns
+    -------
+    Array, shape ``(...)``
+        In ``[0, 0.5]``; 0.5 for a zero offset, NaN for a non-finite covariance.
+    """
+    m = jnp.asarray(offset_m)
+    c = jnp.asarray(covariance_m2)
+    mm = jnp.sum(m * m, axis=-1)
+    mcm = jnp.einsum("...i,...ij,...j->...", m, c, m)
+    z = jnp.where(mm > 0, 0.5 * mm / jnp.sqrt(jnp.where(mm > 0, mcm, 1.0)), 0.0)
+    return ndtr(-z)
 
 
 def _moved(p0, rotation, translation):

@@ -54,6 +54,23 @@ class IccpConfig:
         :func:`~jaxgrav.match.combined.match_entropy_iccp` only (its docstring): map error
         σ (map units), L (m) of its GLS score (σ = 0: white ``noise``), the coarse fix
         (entropy's, or the GLS posterior mean), integrity thresholds (status 512–4096).
+    region : {"square", "disc"}
+        :func:`~jaxgrav.match.combined.match_entropy_iccp` only (static): the support of
+        the GLS posterior over the entropy stage's offsets, every offset of the square
+        grid (default) or those within the disc of its half-side
+        (:func:`~jaxgrav.match.integrity.region_mask`: the INS error is bounded by a
+        radius, the square's corners lie beyond it).
+    max_sigma_ratio : float
+        :func:`~jaxgrav.match.combined.match_entropy_iccp` only: a fix whose largest 1-σ
+        exceeds this times the 1-σ of a uniform prior over the searched region
+        (:func:`~jaxgrav.match.integrity.region_sigma`) is rejected (status 512): the
+        readings must narrow the search (default ``inf``: no test).
+    max_p_worse : float
+        :func:`~jaxgrav.match.combined.match_entropy_iccp` only: a fix is rejected (status
+        131072) when the probability, under its Gaussian ``N(fix, covariance_m2)``, that
+        the truth lies nearer the INS track than the fix exceeds this
+        (:func:`~jaxgrav.match.combined.p_worse_than_ins`; at most 0.5; default ``inf``:
+        no test).
     max_offset_m : float
         :func:`~jaxgrav.match.combined.match_entropy_iccp` only: a fix farther than
         this from the INS track (m, the mean offset) is rejected (status 65536);
@@ -90,10 +107,20 @@ class IccpConfig:
     max_chi2_per_dof: float = float("inf")
     max_edge_mass: float = float("inf")
     max_offset_m: float = float("inf")
+    region: str = static_field("square")
+    max_sigma_ratio: float = float("inf")
+    max_p_worse: float = float("inf")
 
     def __post_init__(self):
         if isinstance(self.fix, str) and self.fix not in ("coarse", "posterior"):
             raise ValueError(f"fix must be 'coarse' or 'posterior'; got {self.fix!r}")
+        if isinstance(self.region, str) and self.region not in ("square", "disc"):
+            raise ValueError(f"region must be 'square' or 'disc'; got {self.region!r}")
+        for name in ("max_sigma_ratio", "max_p_worse"):
+            arr = concrete(getattr(self, name))
+            if arr is not None and arr.dtype != object and not (
+                    np.all(~np.isnan(arr)) and np.all(arr >= 0)):
+                raise ValueError(f"{name} must be >= 0 (inf: no test); got {arr}")
         arr = concrete(self.bias_sigma)
         if arr is not None and arr.dtype != object and not (
                 np.all(~np.isnan(arr)) and np.all(arr >= 0)):

@@ -45,6 +45,8 @@ STATUS = {
            "map (missing='gaps'); INS track kept",
     65536: "fix rejected: the fix lies farther from the INS track than the drift allows "
            "(max_offset_m, 1.5 x the drift radius); INS track kept",
+    131072: "fix rejected: not shown better than the INS track (under the fix's covariance "
+            "the truth may well lie nearer the INS track than the fix); INS track kept",
 }
 """Bit flags of :attr:`MatchResult.status`, for every method (one table).
 
@@ -53,7 +55,8 @@ rejected fix: :attr:`MatchResult.accepted` false), and with survey gaps 32768
 (rejected too); ``chains`` 1, 2, 4, 8, 256 and the
 integrity bits 512, 1024, 2048; ``entropy`` 1, 8 and 32;
 ``iccp`` 1, 16 and 64; ``entropy+iccp`` those of entropy and ICCP, 128, the
-integrity bits 512–4096 and 65536 (a fix beyond ``max_offset_m``, rejected). Every
+integrity bits 512–4096, 65536 (a fix beyond ``max_offset_m``, rejected) and
+131072 (a fix not shown better than the INS track, rejected). Every
 method, through :func:`~jaxgrav.match.match_track`:
 8192 when the map has missing nodes within the drift radius of the track, and 16384
 when the fix's χ² is implausible for the stated error model (:func:`fit_p_value`

@@ -51,9 +51,13 @@ FAR_FIX_RADII = 1.5
 radii: the entropy stage searches 1.2 radii; a fix beyond 1.5 the INS cannot have
 drifted to is rejected."""
 
-ICCP_MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0}
-"""IccpConfig fields :func:`iccp_config_for` sets with a map error (σ > 0), measured
-with ``examples/map_error_matchers.py`` (see the README)."""
+ICCP_MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0, "region": "disc",
+                            "max_sigma_ratio": 0.9, "max_p_worse": 0.3}
+"""IccpConfig fields :func:`iccp_config_for` sets with a map error (σ > 0): the posterior
+coarse fix over the searched disc, the 3 km and informativeness tests (as the dense
+matcher's) and the no-harm test (a fix with more than a 30 % chance of being worse than
+the INS track is rejected); the ratio and the chance chosen with
+``examples/map_error_matchers.py --seed 1`` (see the README)."""
 
 
 def chain_grid(grid, node_deg=CHAIN_NODE_DEG):

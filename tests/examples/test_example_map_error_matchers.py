@@ -17,7 +17,7 @@ def test_map_error_matchers_smoke(capsys):
     spec.loader.exec_module(mod)
     rows = mod.main(["--smoke"])
     assert set(rows) == {"chains, white", "chains, told", "entropy+iccp, white",
-                         "entropy+iccp, told"}
+                         "entropy+iccp, told", "entropy+iccp, told, 3 km only"}
     for r in rows.values():
         assert 0.0 <= r["accepted"] <= 1.0 and np.isfinite(r["median"]) and r["symmetric_pd"]
     assert "median err/INS" in capsys.readouterr().out

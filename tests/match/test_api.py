@@ -30,7 +30,7 @@ def track(smooth_grid):
 def test_one_method_list_and_one_status_table():
     assert jm.METHODS == ("dense", "chains", "entropy", "iccp", "entropy+iccp")
     assert sorted(jm.STATUS) == [1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192,
-                               16384, 32768, 65536]
+                               16384, 32768, 65536, 131072]
     assert jm.status_messages(0) == []
     assert jm.status_messages(1 | 128) == [jm.STATUS[1], jm.STATUS[128]]
     # the per-matcher excerpts are views of the one table
