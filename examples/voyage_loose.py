@@ -22,8 +22,15 @@ and the share within the fix's 95 % ellipse (coverage, 0.95 expected), over ever
 ones, by quartile of the matcher's edge mass; and the ideal filter's own hourly RMS
 error and NEES.
 
+``--segment-error linear`` tells the dense matcher the segment's Eötvös and stretch
+errors as what they are, linear in the filter's error state (``LooseConfig.segment_error``);
+``--fix-prior`` weighs its offsets by the filter's prior and gives the posterior back by
+conditioning (``LooseConfig.fix_prior``); ``--n-fixes``, ``--stride`` and
+``--fix-cov-scale`` set the segment and the covariance inflation.
+
 Run: ``python examples/voyage_loose.py [--runs 100] [--sigma 3] [--length 10000]
-[--ins navigation|strategic] [--calibrate] [--smoke]``.
+[--ins navigation|strategic] [--calibrate] [--smoke] [--segment-error linear] [--fix-prior]
+[--n-fixes 60 --stride 30] [--fix-cov-scale 1]``.
 """
 
 import argparse
@@ -161,7 +168,19 @@ def main(argv=None):
     p.add_argument("--smoke", action="store_true", help="2 voyages of 2 h")
     p.add_argument("--matcher", choices=LOOSE_MATCHERS, default="dense",
                    help="the loop's matcher (default dense)")
+    p.add_argument("--segment-error", choices=("markov", "linear"), default="markov",
+                   help="dense: how the filter's own error is told (default markov)")
+    p.add_argument("--fix-prior", action="store_true",
+                   help="dense: weigh the offsets by the filter's prior")
+    p.add_argument("--n-fixes", type=int, default=LooseConfig.n_fixes, help="fixes per segment")
+    p.add_argument("--stride", type=int, default=None, help="fixes between segment ends "
+                   "(default --n-fixes)")
+    p.add_argument("--fix-cov-scale", type=float, default=LooseConfig.fix_cov_scale)
     a = p.parse_args(argv)
+    loop = {"n_fixes": a.n_fixes, "stride": a.stride or a.n_fixes,
+            "fix_cov_scale": a.fix_cov_scale}
+    if a.matcher == "dense":
+        loop.update(segment_error=a.segment_error, fix_prior=a.fix_prior)
     jax.config.update("jax_enable_x64", True)  # geodesy and 12 h of INS error in float64
     runs, hours = (2, 2.0) if a.smoke else (a.runs, 12.0)
     ins = INS_GRADES[a.ins]
@@ -174,7 +193,8 @@ def main(argv=None):
     for name, sigma in (("perfect map", 0.0), ("map error, told", a.sigma)):
         model = map_error(a.sigma, a.length) if sigma > 0 else None
         # the matcher told the map error
-        cfg = loose_config(ins, sigma, a.length, matcher=a.matcher, grid=nav_map, step_m=step)
+        cfg = loose_config(ins, sigma, a.length, matcher=a.matcher, grid=nav_map, step_m=step,
+                           **loop)
         t0 = time.perf_counter()
         if a.calibrate:
             row = {"setting": name, "ins": a.ins, "runs": runs, "calibrate": True,
@@ -185,7 +205,7 @@ def main(argv=None):
         out = run(nav_map, grid, scenario, model, cfg, keys)
         seconds = time.perf_counter() - t0
         row = {"setting": name, "ins": a.ins, "matcher": a.matcher, "runs": runs, "hours": hours,
-               "map_error_mgal": sigma, **summarise(*out),
+               "map_error_mgal": sigma, **loop, **summarise(*out),
                "seconds": round(seconds, 1), "runs_per_s": round(runs / seconds, 2)}
         print(json.dumps(row))
         rows[name] = row

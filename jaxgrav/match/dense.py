@@ -156,6 +156,8 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
                 cov = track_covariance(frame[4], frame[5], config.noise_mgal,
                                        config.map_error_mgal, config.map_error_length_m,
                                        config.map_error_order, weights=w)
+                if config.reading_covariance is not None:
+                    cov = cov + jnp.asarray(config.reading_covariance, cov.dtype)
                 wh = gls_whitener(cov)
                 gls = (wh, _gls_bias_sigma(config, dtype), scale)
             scores, biases = offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n,

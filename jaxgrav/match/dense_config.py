@@ -105,6 +105,19 @@ class DenseConfig:
     resolved_n_effective : float
         The posterior is resolved by the offset grid when ``n_effective`` reaches this;
         otherwise the covariance is the Gauss–Newton (Laplace) one.
+    reading_covariance : Array or None
+        Added to the GLS covariance of readings minus map, shape ``(N, N)`` (mGal²;
+        traced): a reading error known only in distribution, e.g. the loosely coupled
+        loop's Eötvös and segment-stretch error, linear in the INS error state
+        (:func:`~jaxgrav.navigate.loose_match.segment_error_covariance`). Used by the
+        GLS score only (``map_error_mgal`` > 0 or ``score_model="gls"``); None (default):
+        nothing added.
+    offset_prior_m2 : Array or None
+        A Gaussian prior on the offset, its 2 × 2 covariance (m², north/east; traced)
+        about the searched track: the fix is then the posterior of the likelihood times
+        this prior (:func:`~jaxgrav.match.integrity.fix_quality`), as the loosely coupled
+        loop uses it with its filter's covariance. None (default): a flat prior over
+        the searched offsets.
     max_sigma_m, max_second_mode, max_chi2_per_dof, max_edge_mass : float
         Integrity thresholds (traced): the fix is rejected (INS track returned,
         status 512, 1024, 2048, 4096) when the largest σ of its covariance (m), the
@@ -146,6 +159,8 @@ class DenseConfig:
     max_second_mode: float = float("inf")
     max_chi2_per_dof: float = float("inf")
     max_edge_mass: float = float("inf")
+    reading_covariance: object = None
+    offset_prior_m2: object = None
     spacing_bound_m: float | None = static_field(None)
 
     def __post_init__(self):

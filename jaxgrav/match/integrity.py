@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav._linalg import inv_2x2
 from jaxgrav.match.gls import offset_posterior
 
 __all__ = ["FixQuality", "fix_quality", "largest_sigma", "region_mask", "region_sigma",
@@ -160,9 +161,11 @@ def fix_quality(chi2, n_rot, d_n, d_e, best_ne, laplace_m2, final_chi2, dof, fou
     found : Array of bool
         Whether any candidate was valid.
     config : DenseConfig
-        ``spacing_m``, ``half_size``, ``region``, ``resolved_n_effective`` and the thresholds
+        ``spacing_m``, ``half_size``, ``region``, ``resolved_n_effective``, the thresholds
         ``max_sigma_m``, ``max_sigma_ratio``, ``max_second_mode``, ``max_chi2_per_dof``,
-        ``max_edge_mass``.
+        ``max_edge_mass``, and ``offset_prior_m2``: with it (a 2 × 2 covariance) the
+        posterior is the likelihood times a Gaussian prior of that covariance about the
+        searched track (an unresolved one: the Laplace Gaussian times the prior).
 
     Returns
     -------
@@ -171,10 +174,18 @@ def fix_quality(chi2, n_rot, d_n, d_e, best_ne, laplace_m2, final_chi2, dof, fou
     j = chi2.reshape(n_rot, -1)
     j = j[0] if n_rot == 1 else -2.0 * jax.nn.logsumexp(-0.5 * j, axis=0)
     inside, ring = region_mask(config.half_size, config.region)
+    prior = getattr(config, "offset_prior_m2", None)
+    if prior is not None:
+        s_inv = inv_2x2(jnp.asarray(prior, j.dtype))
+        j = j + s_inv[0, 0] * d_n**2 + 2.0 * s_inv[0, 1] * d_n * d_e + s_inv[1, 1] * d_e**2
     post = offset_posterior(j, d_n, d_e, config.spacing_m, dof=dof, edge=ring)
     prior_sigma = region_sigma(d_n, d_e, config.spacing_m, inside & jnp.isfinite(j))
     resolved = post.n_effective >= config.resolved_n_effective
     lap_ok = jnp.all(jnp.isfinite(laplace_m2)) & (laplace_m2[0, 0] > 0) & (laplace_m2[1, 1] > 0)
+    if prior is not None:  # the Laplace Gaussian times the prior
+        lap_info = inv_2x2(laplace_m2)
+        laplace_m2 = inv_2x2(lap_info + s_inv)
+        best_ne = jnp.where(lap_ok, laplace_m2 @ (lap_info @ best_ne), best_ne)
     cov = jnp.where(resolved | ~lap_ok, post.covariance_m2, laplace_m2)
     chi2_dof = final_chi2 / dof
     sigma = largest_sigma(cov)

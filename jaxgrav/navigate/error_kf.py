@@ -20,7 +20,8 @@ import jax.numpy as jnp
 from jaxgrav._linalg import inv_2x2
 from jaxgrav.sim.ins import transition
 
-__all__ = ["ErrorKFTables", "error_kf_tables", "fix_update", "innovation_nis", "spread"]
+__all__ = ["ErrorKFTables", "error_kf_tables", "fix_update", "innovation_nis", "posterior_update",
+           "spread"]
 
 
 class ErrorKFTables(NamedTuple):
@@ -153,4 +154,39 @@ def fix_update(x, p, innovation, r, h, accept):
     a = jnp.eye(x.shape[0], dtype=p.dtype) - k @ h
     p_new = a @ p @ a.T + k @ r @ k.T
     x_new = x + k @ innovation
+    return (jnp.where(accept, x_new, x), jnp.where(accept, 0.5 * (p_new + p_new.T), p), nis)
+
+
+def posterior_update(x, p, h, shift, cov, accept):
+    """Set the filter's ``H x`` to a posterior found with its own prior (Gaussian conditioning).
+
+    A matcher that weighed its offsets by the filter's prior ``N(H x, S = H P Hᵀ)`` returns
+    the posterior of ``H x``: moved by ``shift`` with covariance ``cov``. The other states
+    follow by their regression on ``H x``: ``x + P Hᵀ S⁻¹ shift``,
+    ``P − P Hᵀ S⁻¹ (S − cov) S⁻¹ H P`` (the Kalman update when the posterior is that of
+    a linear Gaussian measurement; a posterior wider than the prior widens ``P``).
+
+    Parameters
+    ----------
+    x, p : Array, shapes ``(13,)``, ``(13, 13)``
+    h : Array, shape ``(2, 13)``
+    shift : Array, shape ``(2,)``
+        Posterior mean of ``H x`` minus the prior's (m).
+    cov : Array, shape ``(2, 2)``
+        Posterior covariance of ``H x`` (m²).
+    accept : Array of bool
+
+    Returns
+    -------
+    x, p : the updated state and covariance (unchanged where not ``accept``)
+    nis : Array
+        ``shiftᵀ S⁻¹ shift``: how far the posterior moved, in the prior's σ (the
+        innovation gate's statistic; at most the equivalent measurement's NIS).
+    """
+    s = h @ p @ h.T
+    s_inv = inv_2x2(0.5 * (s + s.T))
+    gain = p @ h.T @ s_inv  # (13, 2)
+    x_new = x + gain @ shift
+    p_new = p - gain @ (s - cov) @ gain.T
+    nis = shift @ s_inv @ shift
     return (jnp.where(accept, x_new, x), jnp.where(accept, 0.5 * (p_new + p_new.T), p), nis)

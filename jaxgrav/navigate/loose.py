@@ -22,6 +22,7 @@ covariance is inflated by ``n_fixes / stride`` so the filter does not count them
 The whole voyage is one ``lax.scan`` over segment ends; ``vmap`` it over voyages.
 """
 
+import dataclasses
 import math
 from typing import NamedTuple
 
@@ -29,20 +30,29 @@ import jax
 import jax.numpy as jnp
 
 from jaxgrav._pytree import pytree_dataclass, static_field
-from jaxgrav.geodesy import eotvos, eotvos_jacobian
+from jaxgrav.geodesy import eotvos
 from jaxgrav.match.correlation import ChainConfig
 from jaxgrav.match.dense import DenseConfig
 from jaxgrav.match.entropy import EntropyConfig
 from jaxgrav.match.iccp_config import IccpConfig
 from jaxgrav.match.integrity import largest_sigma
-from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, innovation_nis, spread
+from jaxgrav.navigate.error_kf import (
+    error_kf_tables,
+    fix_update,
+    innovation_nis,
+    posterior_update,
+    spread,
+)
 from jaxgrav.navigate.loose_match import (
     CHAIN_REACH_M,
     LOOSE_MATCHERS,
+    eotvos_sigma,
     match_segment,
     matcher_config,
     schuler_length_m,
+    segment_error_covariance,
 )
+from jaxgrav.prepared import prepare_map
 from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
 from jaxgrav.sim.ins import INSErrorModel, initial_covariance
 from jaxgrav.sim.trajectory import Track
@@ -106,6 +116,17 @@ class LooseConfig:
         Fixes per segment (static, >= 5).
     stride : int
         Fixes between segment ends (static; ``n_fixes`` = consecutive segments).
+    segment_error : {"markov", "linear"}
+        How the reading error of the filter's own error is told (static): as a Markov
+        error at the Schuler length (:func:`~jaxgrav.navigate.loose_match.told_error`),
+        or (dense only) exactly, the Eötvös and stretch errors linear in the error state
+        (:func:`~jaxgrav.navigate.loose_match.segment_error_covariance`).
+    fix_prior : bool
+        Dense only (static): the offsets weighed by the filter's prior ``H̄ P H̄ᵀ / s``
+        (``s`` the inflation above), the posterior (covariance × ``s``) given to the
+        filter by Gaussian conditioning (:func:`~jaxgrav.navigate.error_kf.
+        posterior_update`; no 1-σ limit, no down-weighting, no floor; gated on the
+        move in prior σ). False: the fix is a measurement of its own.
     """
 
     matcher: DenseConfig = DenseConfig()
@@ -122,6 +143,8 @@ class LooseConfig:
     fix_every: int = static_field(12)
     n_fixes: int = static_field(30)
     stride: int = static_field(30)
+    segment_error: str = static_field("markov")
+    fix_prior: bool = static_field(False)
 
     def __post_init__(self):
         if not (isinstance(self.n_fixes, int) and self.n_fixes >= 5):
@@ -140,6 +163,11 @@ class LooseConfig:
         if not (isinstance(self.max_spacing_m, int | float) and self.max_spacing_m > 0):
             raise ValueError(f"max_spacing_m must be a number > 0 (static); got "
                              f"{self.max_spacing_m!r}")
+        dense_only = self.segment_error == "linear" or self.fix_prior
+        if self.segment_error not in ("markov", "linear") or (
+                dense_only and not isinstance(m, DenseConfig)):
+            raise ValueError("segment_error must be 'markov' or, with the dense matcher, 'linear'"
+                             f" (fix_prior: dense only); got {self.segment_error!r}")
         if self.stride > self.n_fixes:
             raise ValueError(f"stride must be at most n_fixes = {self.n_fixes} (segments may "
                              f"overlap, not leave gaps); got {self.stride}")
@@ -263,22 +291,7 @@ def _segment(cfg, tables, ins, gravity, x, end):
     lat, lon = _shift(take(ins.lat), take(ins.lon), err[:, 0], err[:, 1])
     v_e, v_n = take(ins.v_east) - err[:, 3], take(ins.v_north) - err[:, 2]
     g = take(gravity) + eotvos(lat, v_e, v_n)
-    return (_blocks(lat, cfg.fix_every), _blocks(lon, cfg.fix_every),
-            _blocks(g, cfg.fix_every), end - w >= 0)
-
-
-def eotvos_sigma(lat, v_east, v_north, vel_cov):
-    """σ (mGal) of the Eötvös correction from a velocity of covariance ``vel_cov``.
-
-    Parameters
-    ----------
-    lat, v_east, v_north : Array
-        Position (degrees) and velocity (m/s).
-    vel_cov : Array, shape ``(2, 2)``
-        Covariance of the velocity error, north then east (m²/s²).
-    """
-    jac = eotvos_jacobian(lat, v_east, v_north)
-    return jnp.sqrt(jac @ vel_cov @ jac)
+    return (*(_blocks(a, cfg.fix_every) for a in (lat, lon, g, v_e, v_n)), end - w >= 0)
 
 
 def fix_segment(config, tables, grid, ins, gravity, x, p, end):
@@ -310,7 +323,7 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     """
     cfg = config
     h_mean = tables.h_mean
-    lat, lon, g, complete = _segment(cfg, tables, ins, gravity, x, end)
+    lat, lon, g, v_e, v_n, complete = _segment(cfg, tables, ins, gravity, x, end)
     sigma = largest_sigma(h_mean @ p @ h_mean.T)  # closed form: no LAPACK call
     reach = rayleigh_quantile(sigma, cfg.window_p)
     # bilinear: NaN exactly where bicubic is (off the map, a cell with a missing corner)
@@ -318,8 +331,18 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     usable = complete & jnp.all(jnp.isfinite(g)) & on_map
     sig_e = eotvos_sigma(jnp.mean(lat), ins.v_east[end], ins.v_north[end], p[2:4, 2:4])
     length_e = schuler_length_m(jnp.hypot(ins.v_east[end], ins.v_north[end]), jnp.mean(lat))
-    res = match_segment(cfg.matcher, grid, lat, lon, jnp.where(jnp.isfinite(g), g, 0.0), reach,
-                        sig_e, (cfg.min_spacing_m, cfg.max_spacing_m), length_e)
+    extra = None
+    if cfg.segment_error == "linear":  # told exactly instead of as a Markov error
+        b = tables.backward[:, :4].reshape(cfg.n_fixes, cfg.fix_every, 4, -1).mean(1)
+        extra = segment_error_covariance(prepare_map(grid), lat, lon, v_e, v_n, b, h_mean, p)
+        extra, sig_e = jnp.where(jnp.isfinite(extra), extra, 0.0), jnp.zeros_like(sig_e)
+    matcher = cfg.matcher
+    if cfg.fix_prior:  # the filter's prior on the offsets, tempered by the inflation
+        prior = h_mean @ p @ h_mean.T / (cfg.fix_cov_scale * cfg.n_fixes / cfg.stride)
+        matcher = dataclasses.replace(matcher, offset_prior_m2=0.5 * (prior + prior.T),
+                                      max_sigma_m=jnp.inf)
+    res = match_segment(matcher, grid, lat, lon, jnp.where(jnp.isfinite(g), g, 0.0), reach,
+                        sig_e, (cfg.min_spacing_m, cfg.max_spacing_m), length_e, extra)
     return res, reach, usable
 
 
@@ -330,12 +353,16 @@ def _fix(cfg, tables, grid, ins, gravity, x, p, end):
     complete = end - cfg.n_fixes * cfg.fix_every >= 0
     offset = jnp.stack([res.offset_north_m, res.offset_east_m])
     inflate = cfg.fix_cov_scale * cfg.n_fixes / cfg.stride
-    r = (res.covariance_m2 * inflate + cfg.fix_sigma_floor_m**2 * jnp.eye(2)).astype(p.dtype)
+    floor = 0.0 if cfg.fix_prior else cfg.fix_sigma_floor_m**2
+    r = (res.covariance_m2 * inflate + floor * jnp.eye(2)).astype(p.dtype)
     good = usable & res.accepted & jnp.all(jnp.isfinite(r))
     r = jnp.where(jnp.isfinite(r), r, jnp.eye(2))
-    nis = innovation_nis(p, -offset, r, h_mean)
-    r = r * jnp.maximum(1.0, nis / cfg.robust_nis)
-    x_new, p_new, _ = fix_update(x, p, -offset, r, h_mean, good)
+    if cfg.fix_prior:
+        x_new, p_new, nis = posterior_update(x, p, h_mean, -offset, r, good)
+    else:
+        nis = innovation_nis(p, -offset, r, h_mean)
+        r = r * jnp.maximum(1.0, nis / cfg.robust_nis)
+        x_new, p_new, _ = fix_update(x, p, -offset, r, h_mean, good)
     gated = good & (nis <= cfg.gate)
     x_new, p_new = jnp.where(gated, x_new, x), jnp.where(gated, p_new, p)
     event = jnp.select([~complete, ~usable, ~res.accepted, ~gated], [1, 2, 3, 4], 0)

@@ -20,9 +20,14 @@ import math
 
 import jax.numpy as jnp
 
-from jaxgrav.constants import MGAL, WGS84_MEAN_RADIUS
+from jaxgrav.constants import DEG, MGAL, WGS84_MEAN_RADIUS
 from jaxgrav.fields.map_error import map_error
-from jaxgrav.geodesy import normal_gravity
+from jaxgrav.geodesy import (
+    eotvos_jacobian,
+    meridian_radius,
+    normal_gravity,
+    prime_vertical_radius,
+)
 from jaxgrav.match.combined import match_entropy_iccp
 from jaxgrav.match.correlation import ChainConfig, match_chains
 from jaxgrav.match.dense import DenseConfig, match_dense
@@ -30,8 +35,9 @@ from jaxgrav.match.entropy import EntropyConfig
 from jaxgrav.match.sizing import FAR_FIX_RADII, chain_grid, config_for, iccp_config_for
 from jaxgrav.prepared import prepare_map
 
-__all__ = ["CHAIN_REACH_M", "LOOSE_MATCHERS", "LOOSE_MAX_EDGE_MASS", "loose_map", "match_segment",
-           "matcher_config", "schuler_length_m", "told_error"]
+__all__ = ["CHAIN_REACH_M", "LOOSE_MATCHERS", "LOOSE_MAX_EDGE_MASS", "eotvos_sigma", "loose_map",
+           "match_segment", "matcher_config", "schuler_length_m", "segment_error_covariance",
+           "told_error"]
 
 LOOSE_MATCHERS = ("dense", "chains", "entropy+iccp")
 """Matchers of the loop: the dense offset grid (GLS score, Gauss–Newton), paper A's
@@ -69,6 +75,20 @@ def loose_map(grid, matcher):
     if matcher not in LOOSE_MATCHERS:
         raise ValueError(f"matcher must be one of {LOOSE_MATCHERS}; got {matcher!r}")
     return chain_grid(grid) if matcher == "chains" else prepare_map(grid)
+
+
+def eotvos_sigma(lat, v_east, v_north, vel_cov):
+    """σ (mGal) of the Eötvös correction from a velocity of covariance ``vel_cov``.
+
+    Parameters
+    ----------
+    lat, v_east, v_north : Array
+        Position (degrees) and velocity (m/s).
+    vel_cov : Array, shape ``(2, 2)``
+        Covariance of the velocity error, north then east (m²/s²).
+    """
+    jac = eotvos_jacobian(lat, v_east, v_north)
+    return jnp.sqrt(jac @ vel_cov @ jac)
 
 
 def schuler_length_m(speed, lat):
@@ -127,6 +147,47 @@ def told_error(map_sigma, map_length_m, eotvos_sigma, eotvos_length_m, order=2):
     return jnp.sqrt(var), jnp.where(var > 0, length, map_length_m)
 
 
+def segment_error_covariance(grid, lat, lon, v_east, v_north, backward, h_mean, p):
+    """Covariance (mGal²) of a corrected segment's reading error that the filter's error explains.
+
+    Along a segment corrected with the filter's estimate, the residual INS error at fix k
+    is ``e_k = B_k e`` (``B_k`` the block mean of ``F^{−j}`` over the fix's steps, ``e`` the
+    residual now, of covariance ``p``). It leaves two reading errors, both linear in
+    ``e``: the Eötvös error of the residual velocity, ``∂E/∂v · e_v,k``, and, once the
+    matcher has taken out the segment's mean position error (the rigid offset it fits),
+    the map misread by the position error's change along the segment (the stretch and
+    bend of the segment), ``−∇m_k · (e_p,k − H̄ e)``. With ``G`` their rows the
+    covariance is ``G p Gᵀ``, of rank at most 13: a few smooth trends along the segment,
+    not a stationary error (which :func:`told_error` would tell).
+
+    Parameters
+    ----------
+    grid : PreparedMap
+        The map (its bicubic gradient, read at the corrected fixes).
+    lat, lon, v_east, v_north : Array, shape ``(n,)``
+        The corrected fixes (degrees) and their velocity (m/s).
+    backward : Array, shape ``(n, 4, 13)``
+        Rows north, east position and north, east velocity of ``B_k`` per fix.
+    h_mean : Array, shape ``(2, 13)``
+        ``H̄``, the segment's mean position error.
+    p : Array, shape ``(13, 13)``
+        The filter's covariance now.
+
+    Returns
+    -------
+    Array, shape ``(n, n)``
+    """
+    jac = eotvos_jacobian(lat, v_east, v_north)  # (n, 2): mGal per m/s, north then east
+    _, d_lat, d_lon = grid.value_and_gradient(lat, lon)
+    grad = jnp.stack([d_lat / (meridian_radius(lat) * DEG), d_lon / (
+        prime_vertical_radius(lat) * jnp.cos(lat * DEG) * DEG)], -1)  # mGal per m
+    grad = jnp.where(jnp.isfinite(grad), grad, 0.0)
+    g = (jnp.einsum("ki,kij->kj", jac, backward[:, 2:4])
+         - jnp.einsum("ki,kij->kj", grad, backward[:, :2] - h_mean[None]))
+    c = g @ p @ g.T
+    return 0.5 * (c + c.T)
+
+
 def matcher_config(matcher, noise_mgal, map_error_mgal, map_error_length_m, grid=None,
                    step_m=None, chain_reach_m=CHAIN_REACH_M):
     """A loop matcher's settings (see :func:`~jaxgrav.navigate.loose.loose_config`).
@@ -182,7 +243,7 @@ def matcher_config(matcher, noise_mgal, map_error_mgal, map_error_length_m, grid
 
 
 def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bounds,
-                  eotvos_length_m=None):
+                  eotvos_length_m=None, reading_covariance=None):
     """Match one corrected segment as the loop does.
 
     Parameters
@@ -206,6 +267,10 @@ def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bound
         The Eötvös error's along-track length (m, :func:`schuler_length_m`), told with
         the map error as one error (:func:`told_error`) to every matcher; None: the map
         error's L.
+    reading_covariance : Array, shape ``(n_fixes, n_fixes)``, optional
+        The dense matcher only: a further covariance of the readings' error
+        (:func:`segment_error_covariance`), added to the GLS covariance
+        (:attr:`~jaxgrav.match.dense.DenseConfig.reading_covariance`).
 
     Returns
     -------
@@ -225,7 +290,7 @@ def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bound
     if dense:
         return match_dense(grid, lat, lon, g, dataclasses.replace(
             matcher, spacing_m=spacing, map_error_mgal=told, map_error_length_m=length,
-            spacing_bound_m=float(spacing_bounds[1])))
+            spacing_bound_m=float(spacing_bounds[1]), reading_covariance=reading_covariance))
     entropy, iccp = matcher
     window = jnp.maximum(iccp.window_m, 1.2 * spacing * entropy.half_size)
     # a fix beyond 1.5 searched reaches is rejected (the config's own bound is for a
