@@ -15,7 +15,7 @@ import numpy as np
 
 from jaxgrav import __version__, montecarlo
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import check_out_format, whole_number
+from jaxgrav.cli.inputs import check_map_field, check_out_format, whole_number
 from jaxgrav.cli.montecarlo_options import (
     check_drift,
     check_options,
@@ -208,6 +208,8 @@ def cmd_montecarlo(args):
             else load_map(args.map, None, allow_nan=masked_ok))
     if grid is None and (kind == "voyage" or (kind == "matcher" and args.truth_map)):
         grid = default_grid()
+    if grid is not None and kind != "matcher":  # a gravimeter's bias and Eötvös, over nT
+        check_map_field(grid, "gravity", args.map)
     check_drift(args, default_grid() if grid is None and kind == "matcher" else grid, kind)
     # alone, --map-error-length is the length of --told-map-error SIGMA (dense)
     model = map_error_from_args(args, grid, allow_nan=masked_ok,

@@ -13,7 +13,7 @@ import numpy as np
 
 from jaxgrav import executables
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import check_out_format, whole_number
+from jaxgrav.cli.inputs import check_map_field, check_out_format, whole_number
 from jaxgrav.constants import KNOT
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import TruthGrid, map_error, truth_grid
@@ -274,6 +274,7 @@ def _cmd_simulate(args):
     if args.truth is not None:
         check_out_format(args.truth, "CSV", "--truth")
     grid = load_map(args.map, args.var, allow_nan=True)
+    check_map_field(grid, "gravity", args.map)  # nT were written as gravity
     w, e, s, n = grid.extent
     scen = MatchingScenario(
         region=(s, n, w, e), v_east=args.v_east * KNOT, v_north=args.v_north * KNOT,

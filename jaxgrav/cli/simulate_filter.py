@@ -13,7 +13,7 @@ import jax
 import numpy as np
 
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import check_out_format, map_error_args, whole_number
+from jaxgrav.cli.inputs import check_map_field, check_out_format, map_error_args, whole_number
 from jaxgrav.cli.simulate import check_seed, check_simulated_map_error
 from jaxgrav.cli.voyage import MAX_HOURS
 from jaxgrav.datasets import load_map
@@ -177,6 +177,7 @@ def cmd_simulate_filter(args):
         over = f"{args.geometry} over paper D's point masses"
     else:
         grid = load_map(args.map, args.var, allow_nan=True)
+        check_map_field(grid, "gravity", args.map)  # nT were written as gravity
         scen = FilterScenario(dt=args.dt, reading_every=args.reading_every, n_steps=n)
         scen = dataclasses.replace(scen, geometry="random", region=_inner_region(
             grid, scen.speed * args.dt * (n - 1), args.map, args.dt))

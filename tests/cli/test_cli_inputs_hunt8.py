@@ -318,3 +318,22 @@ def test_sample_keeps_rows_without_a_position(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err == ("warning: 1 of 3 rows have no position (first on line 3); their 'map' cells "
                    "are left empty\n")
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", "--out", "t.csv", "--truth", "truth.csv"],
+    ["simulate-filter", "--out", "t.csv", "--truth", "truth.csv"],
+    ["simulate-voyage", "--hours", "1", "--out", "t.csv", "--truth", "truth.csv"],
+    ["montecarlo", "--method", "ukf", "--runs", "5", "--out", "m.nc"],
+    ["montecarlo", "--method", "voyage-ukf", "--runs", "5", "--out", "m.nc"]])
+def test_simulators_refuse_a_magnetic_map(tmp_path, monkeypatch, refused, argv):
+    """A map in nT gave ``simulate`` a 'gravity' column of nT values, exit 0, and
+    ``montecarlo``'s filters a gravimeter and Eötvös model over it (``match`` and the
+    filters refuse a magnetic map for gravity readings)."""
+    monkeypatch.chdir(tmp_path)
+    lat, lon = np.linspace(28.0, 31.0, 73), np.linspace(125.0, 128.0, 73)
+    xr.Dataset({"z": (("lat", "lon"), 100 * np.sin(lat[:, None] * 5) * np.cos(lon * 4),
+                      {"units": "nT"})}, coords={"lat": lat, "lon": lon}).to_netcdf("mag.nc")
+    refused([*argv, "--map", "mag.nc"], "--map 'mag.nc' is a magnetic map (units 'nT') and the "
+            "readings are gravity (mGal); give a gravity map")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mag.nc"]
