@@ -64,6 +64,7 @@ from jaxgrav.cli.filter_checks import (
     check_sigma,
     check_sigma_pos,
     check_sigma_vel,
+    check_velocity_columns,
     gradient_at_ins,
     information_warning,
     ins_label,
@@ -290,6 +291,7 @@ def cmd_filter(args):
     where = f"--track {str(args.track)!r}"
     track = read_track(args, required=("t", "lat", "lon", "gravity"), allow_nan=("gravity",))
     t, lat, lon, g = (track[k] for k in ("t", "lat", "lon", "gravity"))
+    check_velocity_columns(track, where)
     if not (np.isfinite(args.max_gap) and args.max_gap > 0):
         raise ValueError(f"--max-gap must be a finite time > 0 (s); got {args.max_gap!r}")
     steps = time_steps(t, where, max_gap=args.max_gap, line=track.line)

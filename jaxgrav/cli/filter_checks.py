@@ -34,6 +34,7 @@ __all__ = [
     "check_sigma",
     "check_sigma_pos",
     "check_sigma_vel",
+    "check_velocity_columns",
     "extent_text",
     "gradient_at_ins",
     "information_warning",
@@ -162,6 +163,25 @@ def check_sigma_vel(value):
         raise ValueError(f"--sigma-vel must be at most {MAX_SIGMA_VEL:g} m/s (97 knots, "
                          "above the speed of the vessels the filters follow; an INS starts "
                          f"within about 0.01-1 m/s); got {value:g}")
+
+
+def check_velocity_columns(track, where):
+    """ValueError when a track holds one INS velocity column without the other (it was
+    taken as having none: raw readings matched or filtered as Eötvös-corrected, the
+    column dropped) or a velocity column with empty cells (``filter`` skipped the
+    readings there, without a word)."""
+    given = [k for k in ("v_east", "v_north") if k in track]
+    if len(given) == 1:
+        other = "v_north" if given == ["v_east"] else "v_east"
+        raise ValueError(f"{where} has a {given[0]} column but no {other}; give both INS "
+                         f"velocity columns (m/s; name them with --columns {other}=COLUMN) or "
+                         "neither (readings then taken as Eötvös-corrected)")
+    for k in given:
+        bad = np.flatnonzero(~np.isfinite(np.asarray(track[k], float)))
+        if bad.size:
+            raise ValueError(f"{where}, line {track.line(int(bad[0]))}, column "
+                             f"{(track.renamed or {}).get(k, k)!r}: no velocity ({bad.size} "
+                             "such row(s)); the INS velocity columns must be complete")
 
 
 def check_sigma(name, value):

@@ -12,6 +12,7 @@ import numpy as np
 
 from jaxgrav._io import atomic_output, check_outputs
 from jaxgrav.cli import sample
+from jaxgrav.cli.filter_checks import check_velocity_columns
 from jaxgrav.cli.inputs import (
     FIELD_UNITS,
     add_map_error_var_option,
@@ -152,6 +153,8 @@ def _cmd_match(args):
     field = (fields[0] if len(fields) == 1
              else "magnetic" if grid.units == FIELD_UNITS["magnetic"] else "gravity")
     check_map_field(grid, field, args.map)
+    if field == "gravity" and not args.no_eotvos:  # a lone v_east: raw taken as corrected
+        check_velocity_columns(track, f"--track {str(args.track)!r}")
     if sigma_var is not None:
         if args.method not in MAP_ERROR_METHODS:
             raise ValueError(f"--map-error-var is used by --method {', '.join(MAP_ERROR_METHODS)}"

@@ -337,3 +337,34 @@ def test_simulators_refuse_a_magnetic_map(tmp_path, monkeypatch, refused, argv):
     refused([*argv, "--map", "mag.nc"], "--map 'mag.nc' is a magnetic map (units 'nT') and the "
             "readings are gravity (mGal); give a gravity map")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mag.nc"]
+
+
+def _gravity_log(path, header, rows):
+    path.write_text(header + "\n" + "".join(
+        f"{10 * i},{24.3 + 1e-4 * i},{122.74 + 8e-4 * i},{row}\n" for i, row in enumerate(rows)))
+    return path
+
+
+@pytest.mark.parametrize("command, source", [
+    ("filter", ["--point-masses", "paper-d"]), ("match", ["--map", "ryukyu"])])
+def test_a_lone_velocity_column_is_refused(tmp_path, refused, command, source):
+    """A log with v_east but no v_north ran as if without velocities: raw readings taken
+    as Eötvös-corrected (a 62 mGal first innovation), the v_east column dropped, exit 0."""
+    log = _gravity_log(tmp_path / "v.csv", "t,lat,lon,v_east,gravity",
+                       [f"8.0,{-30 + 0.3 * i:.1f}" for i in range(6)])
+    out = tmp_path / ("o.json" if command == "match" else "o.csv")
+    refused([command, *source, "--track", log, "--out", out],
+            f"--track '{log}' has a v_east column but no v_north; give both INS velocity "
+            "columns (m/s; name them with --columns v_north=COLUMN) or neither (readings then "
+            "taken as Eötvös-corrected)")
+    assert not out.exists()
+
+
+def test_filter_refuses_an_empty_velocity_cell(tmp_path, refused):
+    """``filter`` skipped the reading of a row whose v_east was empty, without a word (its
+    output row had an empty v_east and status 'no reading')."""
+    log = _gravity_log(tmp_path / "v.csv", "t,lat,lon,v_east,v_north,gravity",
+                       ["8.0,1.0,-30", "8.0,1.0,-29", ",1.0,-28", "8.0,1.0,-27"])
+    refused(["filter", "--point-masses", "paper-d", "--track", log, "--out", tmp_path / "o.csv"],
+            f"--track '{log}', line 4, column 'v_east': no velocity (1 such row(s)); the INS "
+            "velocity columns must be complete")
