@@ -70,6 +70,7 @@ from jaxgrav.cli.filter_checks import (
     ins_label,
     map_at_ins,
     offset_warning,
+    speed_course_warning,
 )
 from jaxgrav.cli.inputs import (
     add_map_error_var_option,
@@ -292,6 +293,9 @@ def cmd_filter(args):
     track = read_track(args, required=("t", "lat", "lon", "gravity"), allow_nan=("gravity",))
     t, lat, lon, g = (track[k] for k in ("t", "lat", "lon", "gravity"))
     check_velocity_columns(track, where)
+    speed_course = speed_course_warning(track, where)  # raw readings read as corrected
+    if speed_course is not None and not args.eotvos_corrected:
+        print(f"warning: {speed_course}", file=sys.stderr)
     if not (np.isfinite(args.max_gap) and args.max_gap > 0):
         raise ValueError(f"--max-gap must be a finite time > 0 (s); got {args.max_gap!r}")
     steps = time_steps(t, where, max_gap=args.max_gap, line=track.line)

@@ -12,7 +12,7 @@ import numpy as np
 
 from jaxgrav._io import atomic_output, check_outputs
 from jaxgrav.cli import sample
-from jaxgrav.cli.filter_checks import check_velocity_columns
+from jaxgrav.cli.filter_checks import check_velocity_columns, speed_course_warning
 from jaxgrav.cli.inputs import (
     FIELD_UNITS,
     add_map_error_var_option,
@@ -155,6 +155,9 @@ def _cmd_match(args):
     check_map_field(grid, field, args.map)
     if field == "gravity" and not args.no_eotvos:  # a lone v_east: raw taken as corrected
         check_velocity_columns(track, f"--track {str(args.track)!r}")
+        speed_course = speed_course_warning(track, f"--track {str(args.track)!r}")
+        if speed_course is not None:
+            print(f"warning: {speed_course}", file=sys.stderr)
     if sigma_var is not None:
         if args.method not in MAP_ERROR_METHODS:
             raise ValueError(f"--map-error-var is used by --method {', '.join(MAP_ERROR_METHODS)}"

@@ -368,3 +368,19 @@ def test_filter_refuses_an_empty_velocity_cell(tmp_path, refused):
     refused(["filter", "--point-masses", "paper-d", "--track", log, "--out", tmp_path / "o.csv"],
             f"--track '{log}', line 4, column 'v_east': no velocity (1 such row(s)); the INS "
             "velocity columns must be complete")
+
+
+@pytest.mark.parametrize("header", ["sog,cog", "speed (kn),course (deg)", "Speed,Heading"])
+def test_speed_and_course_without_velocities_are_warned_of(tmp_path, capsys, header):
+    """A ship's log with speed over ground and course but no v_east/v_north was filtered
+    with its readings taken as Eötvös-corrected, without a word (raw readings 75 mGal off at
+    10 kn east on the equator)."""
+    log = _gravity_log(tmp_path / "v.csv", f"t,lat,lon,{header},gravity",
+                       [f"10,90,{-30 + 0.3 * i:.1f}" for i in range(4)])
+    speed, course = (h.strip() for h in header.split(","))
+    assert main(["filter", "--point-masses", "paper-d", "--track", str(log), "--out",
+                 str(tmp_path / "o.csv")]) == 0
+    assert (f"warning: --track '{log}' has speed ({speed!r}) and course ({course!r}) columns but "
+            "no v_east, v_north: its readings are taken as Eötvös-corrected; if they are raw, add "
+            "v_east = speed x sin(course) and v_north = speed x cos(course) in m/s"
+            in capsys.readouterr().err)
