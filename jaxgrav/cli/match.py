@@ -173,7 +173,11 @@ def _cmd_match(args):
     check_readings(track[field], np.asarray(grid.sample(track["lat"], track["lon"], "bilinear")),
                    args.noise, column=field, where=f"--track {str(args.track)!r}", unit=unit,
                    correction=correction, missing_skipped=False, line=track.line)
-    check_search(args, grid, radius_deg, track["lat"])
+    check_search(args, grid, radius_deg, track["lat"], source=(
+        "--drift-radius" if args.drift_radius is not None else
+        f"column 'drift_radius' of --track {str(args.track)!r}" if
+        "drift_radius" in track and np.isfinite(track["drift_radius"]).any() else
+        "the default drift radius"))
     if args.refine > 1:
         grid = grid.refine(args.refine)
     if field != "gravity" and args.method not in CONTOUR_METHODS:
@@ -285,18 +289,23 @@ _MAX_REFINED_NODES = 2e7
 """Nodes of a refined map above which ``--refine`` is refused (160 MB in float64)."""
 
 
-def check_search(args, grid, radius_deg, lat):
+def check_search(args, grid, radius_deg, lat, source="--drift-radius"):
     """The search region and ``--refine``: a region larger than the map, a refinement that
-    makes the result worse or cannot fit in memory are refused; chains on coarse cells
-    without ``--refine`` are warned."""
+    makes the result worse or cannot fit in memory are refused (``source``: where the
+    radius came from, for the message); chains on coarse cells without ``--refine`` are
+    warned."""
     ny, nx = np.asarray(grid.values).shape[-2:]
     height = (ny - 1) * grid.dlat
     width = (nx - 1) * grid.dlon * math.cos(math.radians(float(np.mean(lat))))
     if 2 * radius_deg > min(height, width):
-        raise ValueError(f"--drift-radius {radius_deg:g} degrees searches a region "
-                         f"{2 * radius_deg:g} degrees across, larger than the map around the "
-                         f"track ({height:.3g} x {width:.3g} degrees of arc); expected a drift "
-                         "radius well inside the map")
+        column = source != "--drift-radius"  # the column's 4000 (m) was blamed on the option
+        said = (f"{source} holds up to {radius_deg:g} degrees, searching" if column
+                else f"{source} {radius_deg:g} degrees searches")
+        raise ValueError(f"{said} a region {2 * radius_deg:g} degrees across, larger than the "
+                         f"map around the track ({height:.3g} x {width:.3g} degrees of arc); "
+                         "expected a drift radius well inside the map" + (
+                             "; in other units? declare them in the header, e.g. "
+                             "'drift_radius (m)'" if column else ""))
     if args.refine <= 1:
         if args.method == "chains" and min(grid.spacing_m()) > 1000.0:
             print(f"warning: --method chains on a map of {min(grid.spacing_m()) / 1e3:.1f} km "

@@ -384,3 +384,14 @@ def test_speed_and_course_without_velocities_are_warned_of(tmp_path, capsys, hea
             "no v_east, v_north: its readings are taken as Eötvös-corrected; if they are raw, add "
             "v_east = speed x sin(course) and v_north = speed x cos(course) in m/s"
             in capsys.readouterr().err)
+
+
+def test_a_drift_radius_column_too_wide_is_named_not_the_option(tmp_path, refused):
+    """A ``drift_radius`` column in metres (4000) was refused as "--drift-radius 4000
+    degrees searches a region 8000 degrees across", an option the user never gave."""
+    track = tmp_path / "t.csv"
+    track.write_text("t,lat,lon,gravity,drift_radius\n" + "".join(
+        f"{120 * i},{30.2 + 0.005 * i},{130.4 + 0.005 * i},{i % 3},4000\n" for i in range(6)))
+    refused(["match", "--map", "ryukyu", "--track", track, "--out", tmp_path / "m.json"],
+            f"column 'drift_radius' of --track '{track}' holds up to 4000 degrees, searching a "
+            "region 8000 degrees across, larger than the map around the track (")
