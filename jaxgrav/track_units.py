@@ -26,7 +26,8 @@ _SNAKE_UNITS = {  # a header (lower case) -> the units an "_unit" ending may giv
                     ("deg", "degs", "degrees", "rad")),
     **dict.fromkeys(("t", "time", "timestamp"),
                     ("s", "sec", "secs", "ms", "us", "ns", "min", "h", "hr", "hrs")),
-    **dict.fromkeys(("h", "height"), ("m", "km", "ft", "cm", "mm")),
+    **dict.fromkeys(("h", "height", "alt", "altitude", "elev", "elevation"),  # alt_ft was m
+                    ("m", "km", "ft", "cm", "mm")),
     "gravity": ("mgal", "ugal", "µgal", "gal", "gu"), "magnetic": ("nt", "ut", "µt"),
     "drift_radius": ("deg", "m", "km", "nmi"),
 }

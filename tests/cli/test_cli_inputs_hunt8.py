@@ -395,3 +395,16 @@ def test_a_drift_radius_column_too_wide_is_named_not_the_option(tmp_path, refuse
     refused(["match", "--map", "ryukyu", "--track", track, "--out", tmp_path / "m.json"],
             f"column 'drift_radius' of --track '{track}' holds up to 4000 degrees, searching a "
             "region 8000 degrees across, larger than the map around the track (")
+
+
+@pytest.mark.parametrize("header", ["alt_ft", "altitude_ft", "ELEV_FT", "elevation_km"])
+def test_an_altitude_in_feet_named_with_columns_is_converted(tmp_path, header):
+    """``dov --columns h=alt_ft``: the aircraft's altitude in feet was read as metres
+    (``height_ft`` and ``h (ft)`` were converted, ``alt_ft`` not)."""
+    track = tmp_path / "ft.csv"
+    track.write_text(f"lat,lon,{header}\n34.0,108.5,10000\n34.01,108.51,20000\n")
+    args = build_parser().parse_args(["dov", "--track", str(track), "--out", "o.csv",
+                                      "--columns", f"h={header}"])
+    factor = 1000.0 if header.endswith("km") else 0.3048
+    np.testing.assert_allclose(read_track(args, required=("lat", "lon", "h"))["h"],
+                               [10000 * factor, 20000 * factor])
