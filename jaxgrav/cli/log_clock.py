@@ -13,7 +13,7 @@ import numpy as np
 
 from jaxgrav.geodesy import local_offsets_m_jit
 
-__all__ = ["MIN_TRAVEL_M", "TIME_UNITS", "check_time_unit"]
+__all__ = ["MIN_SPEED", "MIN_TRAVEL_M", "TIME_UNITS", "check_time_unit"]
 
 TIME_UNITS = {"days": 86400.0, "hours": 3600.0, "minutes": 60.0}
 """Units a log's ``t`` may hold instead of seconds, by their length in seconds, with the
@@ -28,6 +28,10 @@ _TOLERANCE = 0.2  # the units are a factor 16 or more apart
 MIN_TRAVEL_M = 100.0
 """Least distance (m) the positions must move over the log to compare it with the
 velocities (a log at rest tells no time unit)."""
+
+MIN_SPEED = 0.5
+"""Least median speed (m/s) of the velocity columns for the comparison: at rest, an INS
+position drifting over an hour could make any ratio."""
 
 
 def check_time_unit(track, *, where):
@@ -45,9 +49,11 @@ def check_time_unit(track, *, where):
     Raises
     ------
     ValueError
-        When ``Σ |Δp| / Σ |v| Δt`` is within 20 % of the length in seconds of one of
-        :data:`TIME_UNITS` (the positions move 86 400 times farther than the velocities
-        allow in "seconds" that are days), naming the unit and the header declaring it.
+        When ``Σ |Δp| / Σ |v| Δt``, and the median of the steps' own ratios, are within
+        20 % of the length in seconds of one of :data:`TIME_UNITS` (the positions move
+        86 400 times farther than the velocities allow in "seconds" that are days), for a
+        log moving at a median :data:`MIN_SPEED` or more; names the unit and the header
+        declaring it.
     """
     t, lat, lon = (np.asarray(track[k], float) for k in ("t", "lat", "lon"))
     ve, vn = np.asarray(track["v_east"], float), np.asarray(track["v_north"], float)
@@ -55,14 +61,18 @@ def check_time_unit(track, *, where):
         return
     north, east = (np.asarray(a) for a in local_offsets_m_jit(lat[1:], lon[1:], lat[:-1],
                                                               lon[:-1]))
-    moved = float(np.nansum(np.hypot(north, east)))
+    steps = np.hypot(north, east)
+    moved = float(np.nansum(steps))
     speed = 0.5 * (np.hypot(ve[1:], vn[1:]) + np.hypot(ve[:-1], vn[:-1]))
     said = float(np.nansum(speed * np.diff(t)))
-    if moved < MIN_TRAVEL_M or not said > 0:
+    # at rest (a moored ship's INS drifting) the ratio means nothing: the log must move
+    if moved < MIN_TRAVEL_M or not said > 0 or not np.nanmedian(speed) >= MIN_SPEED:
         return
     ratio = moved / said
+    each = steps / (speed * np.diff(t))  # and the steps themselves must agree
+    each = float(np.nanmedian(each[np.isfinite(each) & (speed >= MIN_SPEED)]))
     for unit, seconds in TIME_UNITS.items():
-        if abs(ratio / seconds - 1.0) < _TOLERANCE:
+        if abs(ratio / seconds - 1.0) < _TOLERANCE and abs(each / seconds - 1.0) < _TOLERANCE:
             header = (getattr(track, "renamed", None) or {}).get("t", "t")
             raise ValueError(
                 f"{where}: column {header!r} looks like {unit}, not seconds: the positions move "

@@ -12,6 +12,7 @@ import xarray as xr
 
 from jaxgrav.cli import main
 from jaxgrav.cli.inputs import read_track, track_time_units
+from jaxgrav.cli.log_clock import check_time_unit
 from jaxgrav.cli.main import build_parser
 
 ROWS = [(29.5 + 0.0056 * i, 126.5 + 0.0068 * i) for i in range(5)]
@@ -408,3 +409,12 @@ def test_an_altitude_in_feet_named_with_columns_is_converted(tmp_path, header):
     factor = 1000.0 if header.endswith("km") else 0.3048
     np.testing.assert_allclose(read_track(args, required=("lat", "lon", "h"))["h"],
                                [10000 * factor, 20000 * factor])
+
+
+def test_a_log_at_rest_is_not_taken_for_minutes():
+    """A moored ship's INS drifting 3 m a minute at a logged 1 mm/s: the ratio (50) is near
+    a minute's 60, but a log at rest tells no time unit."""
+    n = 61
+    track = {"t": 60.0 * np.arange(n), "lat": 24.3 + 3.0 * np.arange(n) / 110_700.0,
+             "lon": np.full(n, 122.74), "v_east": np.zeros(n), "v_north": np.full(n, 1e-3)}
+    assert check_time_unit(track, where="T") is None
