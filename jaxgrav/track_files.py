@@ -54,6 +54,7 @@ _DASHES = frozenset({"-", "--"})  # also a units row's "no unit"
 _BINARY = {b"CDF": "a NetCDF-3 file", b"\x89HDF": "a NetCDF-4/HDF5 file",
            b"PK": "a zip/xlsx archive", b"\xd0\xcf\x11\xe0": "an old Excel/Office file"}
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
+_THOUSANDS = re.compile(r"[+-]?\d{1,3},\d{3}")  # 1,234: a thousands separator, or 1.234?
 _FORTRAN = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)[dD][+-]?\d+")  # 1.5D+01: Fortran's exponent
 _DELIMITER_NAMES = {",": "comma", ";": "semicolon", "\t": "tab", " ": "whitespace", "|": "pipe"}
 _SEP_LINE = re.compile(r'\s*"?sep=([,;\t])"?[,;\t]*\s*', re.IGNORECASE)  # Excel's first line
@@ -364,7 +365,9 @@ def parse_numbers(cells, decimal_comma=False):
     cells : sequence of str
         Trimmed cells.
     decimal_comma : bool
-        Also accept ``1,5`` for 1.5 (files whose delimiter is not a comma).
+        Also accept ``1,5`` for 1.5 (files whose delimiter is not a comma); without it a
+        decimal comma is read only when it cannot be a thousands separator (``"29,5"``
+        quoted in a comma-separated file, not ``"1,234"``).
 
     Returns
     -------
@@ -381,7 +384,9 @@ def parse_numbers(cells, decimal_comma=False):
         try:
             values[i] = float(cell)
         except ValueError:
-            if decimal_comma and _DECIMAL_COMMA.fullmatch(cell):
+            # a comma-separated file's "29,5" was quoted: a decimal comma unless 1,234
+            if _DECIMAL_COMMA.fullmatch(cell) and (decimal_comma
+                                                    or not _THOUSANDS.fullmatch(cell)):
                 values[i] = float(cell.replace(",", "."))
             elif _FORTRAN.fullmatch(cell):  # was "not a number"
                 values[i] = float(cell.replace("D", "e").replace("d", "e"))

@@ -418,3 +418,17 @@ def test_a_log_at_rest_is_not_taken_for_minutes():
     track = {"t": 60.0 * np.arange(n), "lat": 24.3 + 3.0 * np.arange(n) / 110_700.0,
              "lon": np.full(n, 122.74), "v_east": np.zeros(n), "v_north": np.full(n, 1e-3)}
     assert check_time_unit(track, where="T") is None
+
+
+def test_quoted_decimal_commas_in_a_comma_separated_file_are_read(tmp_path, refused):
+    """``"29,5"`` quoted in a comma-separated file (a spreadsheet in a decimal-comma locale
+    saving CSV) was "not a number"; ``"1,234"`` stays refused (1234 or 1.234?)."""
+    track = tmp_path / "t.csv"
+    track.write_text('t,lat,lon\n"0","29,5","126,5"\n"120","29,5056","126,5068"\n')
+    out = tmp_path / "o.csv"
+    assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out", str(out)]) == 0
+    assert out.read_text().splitlines()[1:] == ["0,29.5,126.5,24.8326377869",
+                                                "120,29.5056,126.5068,25.4254756736"]
+    track.write_text('t,lat,lon,gravity\n0,29.5,126.5,"1,234"\n')
+    refused(["sample", "--map", "ryukyu", "--track", track, "--out", tmp_path / "p.csv"],
+            "line 2, column 'gravity': '1,234' is not a number")
