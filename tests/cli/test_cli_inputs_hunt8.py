@@ -11,6 +11,7 @@ import pytest
 import xarray as xr
 
 from jaxgrav.cli import main
+from jaxgrav.cli.filter_checks import speed_course_warning
 from jaxgrav.cli.inputs import read_track, track_time_units
 from jaxgrav.cli.log_clock import check_time_unit
 from jaxgrav.cli.main import build_parser
@@ -371,20 +372,35 @@ def test_filter_refuses_an_empty_velocity_cell(tmp_path, refused):
             "velocity columns must be complete")
 
 
-@pytest.mark.parametrize("header", ["sog,cog", "speed (kn),course (deg)", "Speed,Heading"])
-def test_speed_and_course_without_velocities_are_warned_of(tmp_path, capsys, header):
+@pytest.mark.parametrize("header", ["sog,cog", "speed (kn),course (deg)", "Speed,Heading",
+                                    "sog,cog,v_east,v_north", "speed,depth"])
+def test_speed_and_course_without_velocities_are_warned_of(tmp_path, header):
     """A ship's log with speed over ground and course but no v_east/v_north was filtered
     with its readings taken as Eötvös-corrected, without a word (raw readings 75 mGal off at
     10 kn east on the equator)."""
+    names = header.split(",")
     log = _gravity_log(tmp_path / "v.csv", f"t,lat,lon,{header},gravity",
+                       [",".join(["1"] * len(names) + [f"{-30 + 0.3 * i:.1f}"]) for i in range(4)])
+    args = build_parser().parse_args(["filter", "--point-masses", "paper-d", "--track", str(log),
+                                      "--out", "o.csv"])
+    warning = speed_course_warning(read_track(args, required=("t", "lat", "lon", "gravity")), "T")
+    if len(names) != 2 or names[1] == "depth":  # velocities given, or no course
+        assert warning is None
+    else:
+        assert warning == (f"T has speed ({names[0]!r}) and course ({names[1]!r}) columns but no "
+                           "v_east, v_north: its readings are taken as Eötvös-corrected; if they "
+                           "are raw, add v_east = speed x sin(course) and v_north = speed x "
+                           "cos(course) in m/s")
+
+
+@pytest.mark.long  # compiles the filter
+def test_filter_warns_of_speed_and_course(tmp_path, capsys):
+    log = _gravity_log(tmp_path / "v.csv", "t,lat,lon,sog,cog,gravity",
                        [f"10,90,{-30 + 0.3 * i:.1f}" for i in range(4)])
-    speed, course = (h.strip() for h in header.split(","))
     assert main(["filter", "--point-masses", "paper-d", "--track", str(log), "--out",
                  str(tmp_path / "o.csv")]) == 0
-    assert (f"warning: --track '{log}' has speed ({speed!r}) and course ({course!r}) columns but "
-            "no v_east, v_north: its readings are taken as Eötvös-corrected; if they are raw, add "
-            "v_east = speed x sin(course) and v_north = speed x cos(course) in m/s"
-            in capsys.readouterr().err)
+    assert f"warning: --track '{log}' has speed ('sog') and course ('cog')" in \
+        capsys.readouterr().err
 
 
 def test_a_drift_radius_column_too_wide_is_named_not_the_option(tmp_path, refused):
