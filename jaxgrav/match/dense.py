@@ -159,7 +159,7 @@ def match_dense(grid, lat, lon, readings, config=DenseConfig(), prepared=None): 
                 if config.reading_covariance is not None:
                     cov = cov + jnp.asarray(config.reading_covariance, cov.dtype)
                 wh = gls_whitener(cov)
-                gls = (wh, _gls_bias_sigma(config, dtype), scale)
+                gls = (wh, _gls_bias_sigma(config, dtype), scale, config.reading_coupling)
             scores, biases = offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n,
                                            d_e, rot, config, gls)
             if config.region == "disc":

@@ -112,6 +112,11 @@ class DenseConfig:
         (:func:`~jaxgrav.navigate.loose_match.segment_error_covariance`). Used by the
         GLS score only (``map_error_mgal`` > 0 or ``score_model="gls"``); None (default):
         nothing added.
+    reading_coupling : Array or None
+        Shape ``(N, 2)`` (mGal per m; traced): the readings' error expected for an offset
+        (north, east), subtracted from each candidate's residuals in the grid search's
+        GLS score (a nuisance correlated with the offset, as the loop's Eötvös error is
+        with its position error; not in the refinement). None (default): nothing.
     offset_prior_m2 : Array or None
         A Gaussian prior on the offset, its 2 × 2 covariance (m², north/east; traced)
         about the searched track: the fix is then the posterior of the likelihood times
@@ -161,6 +166,7 @@ class DenseConfig:
     max_edge_mass: float = float("inf")
     reading_covariance: object = None
     offset_prior_m2: object = None
+    reading_coupling: object = None
     spacing_bound_m: float | None = static_field(None)
 
     def __post_init__(self):

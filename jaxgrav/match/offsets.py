@@ -117,13 +117,14 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
         Heading errors (rad).
     config : DenseConfig
     gls : tuple, optional
-        ``(whitener, bias_sigma, scale)``: score by the GLS likelihood instead
+        ``(whitener, bias_sigma, scale, coupling)``: score by the GLS likelihood instead
         (:func:`~jaxgrav.match.gls.gls_score` of the track's
         :class:`~jaxgrav.match.gls.GlsWhitener`, bias prior σ_b in mGal), times
         ``scale`` (mGal²) to keep the white score's mGal² scale. The lattice values
         are whitened after the lattice evaluation, one product per candidate.
         With ``config.gap_fixes`` > 0 (survey gaps) every shifted fix is sampled on its
-        own and scored by :mod:`~jaxgrav.match.gaps`.
+        own and scored by :mod:`~jaxgrav.match.gaps`. ``coupling`` ``(N, 2)`` or None:
+        the residuals' expected value per metre of offset (north, east), taken off.
 
     Returns
     -------
@@ -147,6 +148,9 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
                 sc, b = lattice_scores(readings, v, w, config.score, prior, config.half_size)
             else:
                 r = jnp.moveaxis(readings[None, :, None, None] - v, 1, -1)  # (R, A, A, N)
+                if gls[3] is not None:
+                    k = jnp.asarray(gls[3], r.dtype)
+                    r = r - (d_1d[:, None, None] * k[:, 0] + d_1d[None, :, None] * k[:, 1])
                 sc, b = gls_score(gls[0], r, gls[1])
                 sc = sc * gls[2]
             return jnp.where(bad, jnp.inf, sc).reshape(-1), b.reshape(-1)
@@ -160,8 +164,12 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
         v = patch_values(table, iy, ix, config.method)
         gaps = config.gap_fixes
         if gls is not None:
-            sc, b = (gls_gap_score(gls[0], readings - v, gls[1], gaps) if gaps
-                     else gls_score(gls[0], readings - v, gls[1]))
+            r = readings - v
+            if gls[3] is not None:
+                k = jnp.asarray(gls[3], r.dtype)
+                r = r - (d_n[:, None] * k[:, 0] + d_e[:, None] * k[:, 1])
+            sc, b = (gls_gap_score(gls[0], r, gls[1], gaps) if gaps
+                     else gls_score(gls[0], r, gls[1]))
             return sc * gls[2], b
         if gaps:
             unit = jnp.asarray(config.noise_mgal, v.dtype) ** 2 * jnp.sum((w / jnp.sum(w)) ** 2)

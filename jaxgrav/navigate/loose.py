@@ -116,11 +116,10 @@ class LooseConfig:
         Fixes per segment (static, >= 5).
     stride : int
         Fixes between segment ends (static; ``n_fixes`` = consecutive segments).
-    segment_error : {"markov", "linear"}
-        How the reading error of the filter's own error is told (static): as a Markov
-        error at the Schuler length (:func:`~jaxgrav.navigate.loose_match.told_error`),
-        or (dense only) exactly, the Eötvös and stretch errors linear in the error state
-        (:func:`~jaxgrav.navigate.loose_match.segment_error_covariance`).
+    segment_error : {"markov", "linear", "conditional"}
+        How the filter's own error is told (static): a Markov error at the Schuler length
+        (:func:`~jaxgrav.navigate.loose_match.told_error`), or (dense only) linear in the
+        state, marginal or given the offset (:func:`~.loose_match.segment_error_covariance`).
     fix_prior : bool
         Dense only (static): the offsets weighed by the filter's prior ``H̄ P H̄ᵀ / s``
         (``s`` the inflation above), the posterior (covariance × ``s``) given to the
@@ -163,11 +162,11 @@ class LooseConfig:
         if not (isinstance(self.max_spacing_m, int | float) and self.max_spacing_m > 0):
             raise ValueError(f"max_spacing_m must be a number > 0 (static); got "
                              f"{self.max_spacing_m!r}")
-        dense_only = self.segment_error == "linear" or self.fix_prior
-        if self.segment_error not in ("markov", "linear") or (
+        dense_only = self.segment_error != "markov" or self.fix_prior
+        if self.segment_error not in ("markov", "linear", "conditional") or (
                 dense_only and not isinstance(m, DenseConfig)):
-            raise ValueError("segment_error must be 'markov' or, with the dense matcher, 'linear'"
-                             f" (fix_prior: dense only); got {self.segment_error!r}")
+            raise ValueError("segment_error must be 'markov' or, dense only, 'linear' or "
+                             f"'conditional' (fix_prior: dense only); got {self.segment_error!r}")
         if self.stride > self.n_fixes:
             raise ValueError(f"stride must be at most n_fixes = {self.n_fixes} (segments may "
                              f"overlap, not leave gaps); got {self.stride}")
@@ -331,10 +330,11 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     usable = complete & jnp.all(jnp.isfinite(g)) & on_map
     sig_e = eotvos_sigma(jnp.mean(lat), ins.v_east[end], ins.v_north[end], p[2:4, 2:4])
     length_e = schuler_length_m(jnp.hypot(ins.v_east[end], ins.v_north[end]), jnp.mean(lat))
-    extra = None
-    if cfg.segment_error == "linear":  # told exactly instead of as a Markov error
+    extra = coupling = None  # "markov": the Eötvös error told at its Schuler length
+    if cfg.segment_error != "markov":
         b = tables.backward[:, :4].reshape(cfg.n_fixes, cfg.fix_every, 4, -1).mean(1)
-        extra = segment_error_covariance(prepare_map(grid), lat, lon, v_e, v_n, b, h_mean, p)
+        extra, coupling = segment_error_covariance(prepare_map(grid), lat, lon, v_e, v_n, b,
+                                                   h_mean, p, cfg.segment_error == "conditional")
         extra, sig_e = jnp.where(jnp.isfinite(extra), extra, 0.0), jnp.zeros_like(sig_e)
     matcher = cfg.matcher
     if cfg.fix_prior:  # the filter's prior on the offsets, tempered by the inflation
@@ -342,7 +342,7 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
         matcher = dataclasses.replace(matcher, offset_prior_m2=0.5 * (prior + prior.T),
                                       max_sigma_m=jnp.inf)
     res = match_segment(matcher, grid, lat, lon, jnp.where(jnp.isfinite(g), g, 0.0), reach,
-                        sig_e, (cfg.min_spacing_m, cfg.max_spacing_m), length_e, extra)
+                        sig_e, (cfg.min_spacing_m, cfg.max_spacing_m), length_e, extra, coupling)
     return res, reach, usable
 
 

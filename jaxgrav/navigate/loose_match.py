@@ -20,6 +20,7 @@ import math
 
 import jax.numpy as jnp
 
+from jaxgrav._linalg import inv_2x2
 from jaxgrav.constants import DEG, MGAL, WGS84_MEAN_RADIUS
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import (
@@ -147,7 +148,8 @@ def told_error(map_sigma, map_length_m, eotvos_sigma, eotvos_length_m, order=2):
     return jnp.sqrt(var), jnp.where(var > 0, length, map_length_m)
 
 
-def segment_error_covariance(grid, lat, lon, v_east, v_north, backward, h_mean, p):
+def segment_error_covariance(grid, lat, lon, v_east, v_north, backward, h_mean, p,
+                             conditional=False):
     """Covariance (mGal²) of a corrected segment's reading error that the filter's error explains.
 
     Along a segment corrected with the filter's estimate, the residual INS error at fix k
@@ -172,10 +174,17 @@ def segment_error_covariance(grid, lat, lon, v_east, v_north, backward, h_mean, 
         ``H̄``, the segment's mean position error.
     p : Array, shape ``(13, 13)``
         The filter's covariance now.
+    conditional : bool
+        Static. True: the error given the segment's mean position error, which the
+        matcher's offset ``o`` is (``H̄ e = −o``): covariance ``G P_c Gᵀ`` with
+        ``P_c = P − P H̄ᵀ S⁻¹ H̄ P`` and mean ``K o``, ``K = −G P H̄ᵀ S⁻¹``
+        (``S = H̄ P H̄ᵀ``).
 
     Returns
     -------
-    Array, shape ``(n, n)``
+    cov : Array, shape ``(n, n)``
+    coupling : Array, shape ``(n, 2)`` or None
+        ``K`` (mGal per m) when ``conditional``.
     """
     jac = eotvos_jacobian(lat, v_east, v_north)  # (n, 2): mGal per m/s, north then east
     _, d_lat, d_lon = grid.value_and_gradient(lat, lon)
@@ -184,8 +193,14 @@ def segment_error_covariance(grid, lat, lon, v_east, v_north, backward, h_mean, 
     grad = jnp.where(jnp.isfinite(grad), grad, 0.0)
     g = (jnp.einsum("ki,kij->kj", jac, backward[:, 2:4])
          - jnp.einsum("ki,kij->kj", grad, backward[:, :2] - h_mean[None]))
+    coupling = None
+    if conditional:
+        ph = p @ h_mean.T
+        s_inv = inv_2x2(h_mean @ ph)
+        coupling = -(g @ ph) @ s_inv
+        p = p - ph @ s_inv @ ph.T
     c = g @ p @ g.T
-    return 0.5 * (c + c.T)
+    return 0.5 * (c + c.T), coupling
 
 
 def matcher_config(matcher, noise_mgal, map_error_mgal, map_error_length_m, grid=None,
@@ -243,7 +258,7 @@ def matcher_config(matcher, noise_mgal, map_error_mgal, map_error_length_m, grid
 
 
 def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bounds,
-                  eotvos_length_m=None, reading_covariance=None):
+                  eotvos_length_m=None, reading_covariance=None, reading_coupling=None):
     """Match one corrected segment as the loop does.
 
     Parameters
@@ -271,6 +286,9 @@ def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bound
         The dense matcher only: a further covariance of the readings' error
         (:func:`segment_error_covariance`), added to the GLS covariance
         (:attr:`~jaxgrav.match.dense.DenseConfig.reading_covariance`).
+    reading_coupling : Array, shape ``(n_fixes, 2)``, optional
+        The dense matcher only: the readings' error expected per metre of offset
+        (:attr:`~jaxgrav.match.dense.DenseConfig.reading_coupling`).
 
     Returns
     -------
@@ -290,7 +308,8 @@ def match_segment(matcher, grid, lat, lon, g, reach, sigma_eotvos, spacing_bound
     if dense:
         return match_dense(grid, lat, lon, g, dataclasses.replace(
             matcher, spacing_m=spacing, map_error_mgal=told, map_error_length_m=length,
-            spacing_bound_m=float(spacing_bounds[1]), reading_covariance=reading_covariance))
+            spacing_bound_m=float(spacing_bounds[1]), reading_covariance=reading_covariance,
+            reading_coupling=reading_coupling))
     entropy, iccp = matcher
     window = jnp.maximum(iccp.window_m, 1.2 * spacing * entropy.half_size)
     # a fix beyond 1.5 searched reaches is rejected (the config's own bound is for a

@@ -13,6 +13,7 @@ import pytest
 import jaxgrav as jg
 from jaxgrav.match.dense import DenseConfig, match_dense
 from jaxgrav.match.integrity import fix_quality
+from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.navigate import (
     LooseConfig,
     error_kf_tables,
@@ -108,6 +109,18 @@ def test_the_extra_reading_covariance_is_added_to_the_gls_one(smooth_grid):
         cfg, reading_covariance=jnp.eye(20), offset_prior_m2=jnp.eye(2) * 4e6))
     assert match_dense._cache_size() == before + 1
     assert np.all(np.isfinite(np.asarray(wide.covariance_m2)))
+    # a coupling: the candidate offset's expected residual is taken off its residuals
+    zero_k = match_dense(smooth_grid, lat, lon, g, dataclasses.replace(
+        cfg, reading_coupling=jnp.zeros((20, 2))))
+    np.testing.assert_allclose(zero_k.covariance_m2, base.covariance_m2, rtol=1e-12)
+    # readings of the track 500 m north, with the trend the coupling says that offset brings
+    k = np.stack([np.linspace(-1.0, 1.0, 20), np.zeros(20)], -1) * 4e-3  # mGal per m
+    t_lat, t_lon = shifted_tracks(jnp.asarray(lat), jnp.asarray(lon), 500.0, 0.0, 0.0)
+    g_k = prepare_map(smooth_grid).sample(t_lat, t_lon) + k[:, 0] * 500.0
+    told = match_dense(smooth_grid, lat, lon, g_k, dataclasses.replace(
+        cfg, reading_coupling=jnp.asarray(k)))
+    assert abs(float(told.offset_north_m) - 500.0) < 50.0
+    assert abs(float(told.offset_east_m)) < 50.0
 
 
 @pytest.mark.long  # the tables and the autodiff compile for ~10 s
@@ -132,15 +145,27 @@ def test_the_segment_error_covariance_is_the_eotvos_error_of_the_state_on_a_flat
     jac = jax.jacfwd(readings)(x0)
     lat_f, lon_f, _, v_e, v_n, _ = _segment(cfg, tables, ins, jnp.zeros(w + 1), x0, w)
     b = tables.backward[:, :4].reshape(n_fix, every, 4, -1).mean(1)
-    c = segment_error_covariance(prepare_map(flat), lat_f, lon_f, v_e, v_n, b, tables.h_mean, p)
+    c, none = segment_error_covariance(prepare_map(flat), lat_f, lon_f, v_e, v_n, b,
+                                       tables.h_mean, p)
     want = jac @ p @ jac.T
     np.testing.assert_allclose(c, want, rtol=1e-3, atol=1e-6 * float(jnp.max(want)))
-    assert float(jnp.max(want)) > 1.0  # mGal²: a 0.3 m/s velocity error is visible
+    assert none is None and float(jnp.max(want)) > 1.0  # mGal²: 0.3 m/s is visible
+    # given the mean position error H̄ e = −o: the Gaussian conditional of G e
+    c_o, k = segment_error_covariance(prepare_map(flat), lat_f, lon_f, v_e, v_n, b,
+                                      tables.h_mean, p, conditional=True)
+    h = np.asarray(tables.h_mean)
+    j, pp = np.asarray(jac), np.asarray(p)
+    s = h @ pp @ h.T
+    want_k = j @ pp @ h.T @ np.linalg.inv(s)  # jac is −G: the readings move with the estimate
+    np.testing.assert_allclose(k, want_k, rtol=1e-3, atol=2e-2 * np.max(np.abs(want_k)))
+    np.testing.assert_allclose(c_o, j @ (pp - pp @ h.T @ np.linalg.solve(s, h @ pp)) @ j.T,
+                               rtol=1e-3, atol=1e-6 * float(jnp.max(want)))
 
 
 @pytest.mark.long
-@pytest.mark.parametrize("prior", [False, True])
-def test_the_loop_told_its_error_exactly_corrects_the_ins(smooth_grid, prior):
+@pytest.mark.parametrize(("error", "prior"), [("linear", False), ("linear", True),
+                                              ("conditional", True)])
+def test_the_loop_told_its_error_exactly_corrects_the_ins(smooth_grid, error, prior):
     """The first voyage of test_loose's short_voyages, the dense matcher's GLS score told
     1 mGal, the segment's error told exactly, with or without the filter's prior."""
     from tests.navigate.test_loose import CONFIG, voyage_preset, voyage_scenario
@@ -149,7 +174,7 @@ def test_the_loop_told_its_error_exactly_corrects_the_ins(smooth_grid, prior):
                        leg_m=20000.0, margin_deg=0.1, pos_error_m=1500.0)
     v = voyage_scenario(jax.random.split(jax.random.key(4), 2)[0], smooth_grid, sc)
     cfg = dataclasses.replace(CONFIG, matcher=dataclasses.replace(
-        CONFIG.matcher, score_model="gls", map_error_mgal=1.0), segment_error="linear",
+        CONFIG.matcher, score_model="gls", map_error_mgal=1.0), segment_error=error,
         fix_prior=prior, fix_cov_scale=1.0 if prior else 3.0)
     pm = prepare_map(smooth_grid)
     res = navigate_loose(pm, v, cfg)
