@@ -68,6 +68,9 @@ MASKED_MAP_METHODS = ("dense", "chains", "entropy", "iccp", "entropy+iccp", *FIL
 route) is drawn again until its true track reads none (:data:`MISSING_MAP_START_TRIES`
 tries)."""
 
+TOLD_MATCHERS = ("dense", "chains", "entropy+iccp")
+"""Matchers that take ``--told-map-error`` (and are told ``--map-error`` by default)."""
+
 
 def add_parser(subparsers):
     """Add the ``montecarlo`` sub-command to an ``argparse`` sub-parser set."""
@@ -123,9 +126,10 @@ def add_parser(subparsers):
                    help="what the method is told about --map-error / --truth-map. Filters: "
                         "state (default: a Gauss-Markov map-error state; the point-mass "
                         "filter's is per cell), white (white noise of the same sigma) or none. "
-                        "dense: SIGMA[,L] (GLS score over the searched disc, posterior-mean "
-                        "fix, fixes with a 1-sigma above 3 km or above 0.9 x the disc's own "
-                        "rejected; SIGMA in map units, L in m, default "
+                        "dense, chains, entropy+iccp: SIGMA[,L] (GLS score, posterior-mean "
+                        "fix, fixes with a 1-sigma above 3 km rejected; dense and "
+                        "entropy+iccp: over the searched disc, also above 0.9 x the disc's "
+                        "own; SIGMA in map units, L in m, default "
                         "--map-error-length or 10000) or 0 / none (the white-noise matcher); "
                         "default the --map-error model itself, or for --truth-map an estimate "
                         "from --map alone (fields.map_error_estimate)")
@@ -243,9 +247,9 @@ def cmd_montecarlo(args):
         if args.map_error_order is not None:
             raise ValueError(f"--map-error-order is a filter option; got --method {args.method}")
         if args.told_map_error is not None:
-            if args.method != "dense":
-                raise ValueError(f"--told-map-error is used by the filters and --method dense "
-                                 f"only; got --method {args.method}")
+            if args.method not in TOLD_MATCHERS:
+                raise ValueError(f"--told-map-error is used by the filters and --method "
+                                 f"{', '.join(TOLD_MATCHERS)} only; got --method {args.method}")
             extra["map_error_told"] = told_from_args(args)
     spec = build(args.method, grid, drift_deg=args.drift, noise=args.noise, n_fixes=args.fixes,
                  map_error=model, **extra)

@@ -244,7 +244,8 @@ def chains_run(key, grid, refined, scenario, config, map_error=None):
     return matcher_record(run, r, **_offset(r), work_constrained=r.work_constrained)
 
 
-def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=None):
+def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=None,
+                   map_error_told="auto"):
     """Paper A's pipeline: iso-point chains with constraint elimination.
 
     The readings come from ``grid``; the matcher searches ``grid`` refined (bilinear)
@@ -253,19 +254,25 @@ def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=
     :func:`dense_builder` (drift 0.035°, 1 mGal, 30 fixes 2 min apart); search window
     and tolerances from :func:`~jaxgrav.match.api.config_for` ``("chains", ...)`` for
     1.2 × the drift.
-    ``map_error`` as :func:`dense_builder` (drawn on ``grid``, not the refined map).
+    ``map_error`` as :func:`dense_builder` (drawn on ``grid``, not the refined map);
+    ``map_error_told`` as :func:`dense_builder` (told: the GLS posterior over the
+    chains' nodes, fixes with a 1-σ above 3 km rejected,
+    :data:`~jaxgrav.match.sizing.CHAIN_MAP_ERROR_INTEGRITY`).
     """
     grid, map_error, drift, noise, n, scen = _paper_a_settings(grid, drift_deg, noise, n_fixes,
                                                              map_error)
+    told, source = told_map_error(map_error_told, map_error, grid)
     refined = chain_grid(grid)
     factor = round(grid.dlat / refined.dlat)
     cfg = config_for("chains", refined, 1.2 * drift * DEG_ARC_M, noise_mgal=max(noise, 0.1),
-                     step_m=scen.step_m)
+                     step_m=scen.step_m, map_error=told)
     settings = dict(description=f"paper A: iso-point chains on the map refined x{factor}, "
-                                "fixed INS drift",
+                                "fixed INS drift"
+                                + ("" if told is None else ", told the map error (GLS)"),
                     drift_deg=drift, noise_mgal=noise, n_fixes=n, dt_s=scen.dt,
                     refine_factor=factor, search_half_size=cfg.half_size,
-                    stencil_size=cfg.stencil_size, **map_error_settings(map_error))
+                    stencil_size=cfg.stencil_size, **map_error_settings(map_error),
+                    **told_settings(told, source))
     return MethodSpec(chains_run, (grid, refined, scen, cfg, map_error), settings,
                       dict(CORRELATION_STATUS))
 
@@ -313,7 +320,7 @@ _B_RUNS = {
 
 
 def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n_fixes=None,
-                    map_error=None):
+                    map_error=None, map_error_told="auto"):
     """Paper B: entropy coarse matching, ICCP, or both (``stage``).
 
     Defaults (paper B's gravity case, as ``examples/paper_b_entropy_iccp.py``): INS
@@ -333,6 +340,13 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
         Offset bound (degrees of arc), reading noise σ (map units), fixes per track.
     map_error : CorrelatedMapError, TruthGrid or None, optional
         The readings' map error, as :func:`dense_builder`.
+    map_error_told : "auto", CorrelatedMapError or None, optional
+        The map error ``entropy+iccp`` is told, as :func:`dense_builder`'s (told: the
+        GLS posterior over the entropy stage's offsets in the searched disc, its
+        informativeness and no-harm tests,
+        :data:`~jaxgrav.match.sizing.ICCP_MAP_ERROR_INTEGRITY`). The stages alone
+        (``entropy``, ``iccp``) have no told form: anything but "auto" or None is an
+        error for them, and they run the white-noise matcher.
 
     Returns
     -------
@@ -344,6 +358,12 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
     fn, label = _B_RUNS[stage]
     grid = default_grid() if grid is None else grid
     map_error = check_map_error(map_error, grid)
+    if stage != "entropy+iccp" and not (map_error_told is None
+                                        or isinstance(map_error_told, str)):
+        raise ValueError(f"map_error_told: the {stage} stage alone has no told form (its "
+                         f"fixes carry no covariance); got {map_error_told!r}")
+    told, source = (told_map_error(map_error_told, map_error, grid)
+                    if stage == "entropy+iccp" else told_map_error(None, None, grid))
     drift = 0.03 if drift_deg is None else float(drift_deg)
     noise = 1.0 if noise is None else float(noise)
     n = 60 if n_fixes is None else int(n_fixes)
@@ -353,10 +373,11 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
                           offset_max_deg=drift, noise=noise, n_fixes=n,
                           start_tries=MISSING_MAP_START_TRIES if grid.n_missing else 1)
     reach_m = (drift + 0.005) * DEG_ARC_M
-    settings = dict(description=f"paper B: {label}; offset and rotated INS track",
+    settings = dict(description=f"paper B: {label}; offset and rotated INS track"
+                                + ("" if told is None else ", told the map error (GLS)"),
                     drift_deg=drift, offset_min_deg=scen.offset_min_deg, noise_mgal=noise,
                     n_fixes=n, dt_s=scen.dt, rotation_deg=scen.rotation_deg,
-                    **map_error_settings(map_error))
+                    **map_error_settings(map_error), **told_settings(told, source))
     args = (grid, scen)
     if stage != "iccp":
         ent = entropy_config_for(grid, reach_m, max_half_size=20)
@@ -364,7 +385,7 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
         args += (ent,)
     if stage != "entropy":
         icp = iccp_config_for(grid, reach_m, stage="alone" if stage == "iccp" else "fine",
-                              noise=max(noise, 0.1))
+                              noise=max(noise, 0.1), map_error=told)
         settings["iccp_window_m"] = float(icp.window_m)
         args += (icp,)
     return MethodSpec(fn, (*args, map_error), settings, dict(ALL_STATUS))

@@ -464,11 +464,11 @@ def test_montecarlo_told_map_error_parsing(tmp_path, capsys):
     assert float(m.length_m) == 7000.0
     m = told("4,3000")
     assert (float(m.sigma), float(m.length_m)) == (4.0, 3000.0)
-    code = main(["montecarlo", "--method", "chains", "--runs", "2", "--told-map-error", "3",
+    code = main(["montecarlo", "--method", "entropy", "--runs", "2", "--told-map-error", "3",
                  "--out", str(tmp_path / "c.nc")])
     assert code == 2
-    assert "--told-map-error is used by the filters and --method dense only" in (
-        capsys.readouterr().err)
+    assert ("--told-map-error is used by the filters and --method dense, chains, "
+            "entropy+iccp only; got --method entropy") in capsys.readouterr().err
     code = main(["montecarlo", "--method", "ukf", "--map", "ryukyu", "--runs", "2",
                  "--map-error", "3", "--told-map-error", "3", "--out", str(tmp_path / "u.nc")])
     assert code == 2
