@@ -22,15 +22,16 @@ and the share within the fix's 95 % ellipse (coverage, 0.95 expected), over ever
 ones, by quartile of the matcher's edge mass; and the ideal filter's own hourly RMS
 error and NEES.
 
-``--segment-error linear`` tells the dense matcher the segment's Eötvös and stretch
-errors as what they are, linear in the filter's error state (``LooseConfig.segment_error``);
+``--segment-error linear|conditional`` tells the dense matcher the segment's Eötvös and
+stretch errors as what they are, linear in the filter's error state, marginal or given the
+offset (``LooseConfig.segment_error``);
 ``--fix-prior`` weighs its offsets by the filter's prior and gives the posterior back by
 conditioning (``LooseConfig.fix_prior``); ``--n-fixes``, ``--stride`` and
 ``--fix-cov-scale`` set the segment and the covariance inflation.
 
 Run: ``python examples/voyage_loose.py [--runs 100] [--sigma 3] [--length 10000]
-[--ins navigation|strategic] [--calibrate] [--smoke] [--segment-error linear] [--fix-prior]
-[--n-fixes 60 --stride 30] [--fix-cov-scale 1]``.
+[--ins navigation|strategic] [--calibrate] [--smoke] [--segment-error conditional]
+[--fix-prior] [--n-fixes 60 --stride 30] [--fix-cov-scale 1]``.
 """
 
 import argparse
@@ -168,7 +169,8 @@ def main(argv=None):
     p.add_argument("--smoke", action="store_true", help="2 voyages of 2 h")
     p.add_argument("--matcher", choices=LOOSE_MATCHERS, default="dense",
                    help="the loop's matcher (default dense)")
-    p.add_argument("--segment-error", choices=("markov", "linear"), default="markov",
+    p.add_argument("--segment-error", choices=("markov", "linear", "conditional"),
+                   default="markov",
                    help="dense: how the filter's own error is told (default markov)")
     p.add_argument("--fix-prior", action="store_true",
                    help="dense: weigh the offsets by the filter's prior")
