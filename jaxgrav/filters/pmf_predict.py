@@ -6,23 +6,67 @@ between readings (:attr:`~jaxgrav.filters.pmf_cells.PMFState.pending`): spreads 
 add, per-cell scalar models that compose.
 """
 
+import functools
+
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 __all__ = ["affine_cells", "compose_pending", "diffusion_kernel", "no_pending", "shifted_kernel",
            "staying_cells"]
 
 
-def _neumann_basis(n):
-    """Orthonormal cosine basis and eigenvalues of the zero-flux second difference on n cells."""
-    i = jnp.arange(n)[:, None] + 0.5
-    k = jnp.arange(n)[None, :]
-    v = jnp.cos(jnp.pi * k * i / n) * jnp.where(k == 0, jnp.sqrt(1.0 / n), jnp.sqrt(2.0 / n))
-    lam = -4.0 * jnp.sin(jnp.pi * jnp.arange(n) / (2 * n)) ** 2
-    return v, lam
+@functools.cache
+def _profile_table(n):
+    """``(C, lam)``, NumPy constants: ``T = C @ exp(v/2 · lam)`` is the kernel's profile
+    ``T(m)``, ``m = 0 … n`` (:func:`_kernel_profile`)."""
+    k = np.arange(n)
+    weight = np.where(k == 0, 1.0 / n, 2.0 / n)  # the squared norms of the cosine basis
+    c = 0.5 * weight[None, :] * np.cos(np.pi * np.arange(n + 1)[:, None] * k[None, :] / n)
+    lam = -4.0 * np.sin(np.pi * k / (2 * n)) ** 2
+    return c, lam
+
+
+def _kernel_profile(n, v):
+    """``T(m) = ½ Σ_k w_k e^{v λ_k / 2} cos(π k m / n)`` for ``m = 0 … n``: the kernel is
+    ``A[i, j] = T(|i − j|) + T(fold(i + j + 1))`` (Toeplitz plus Hankel, the Hankel part
+    the reflection at the edges; ``T`` is even and of period ``2n``: ``fold(m) =
+    min(m mod 2n, 2n − m mod 2n)``), from the cosine basis's product formula."""
+    c, lam = _profile_table(n)
+    dtype = jnp.result_type(v, float)
+    e = jnp.exp(0.5 * jnp.maximum(v, 0.0) * jnp.asarray(lam, dtype))
+    return jnp.asarray(c, dtype) @ e
+
+
+def _toeplitz(x, n):
+    """``M[i, j] = x[i − j + n − 1]``, ``(n, n)``, from ``x`` of length ``2n − 1``, by
+    slicing and reshaping a tiled copy (no gather: XLA's CPU gathers are slow)."""
+    y = jnp.roll(x[::-1], -(n - 1))  # y[(j − i) mod L] = x[i − j + n − 1]
+    flat = jnp.tile(y, n)[: n * (2 * n - 2)]
+    return flat.reshape(n, 2 * n - 2)[:, :n]  # row i starts at i (L − 1) ≡ −i (mod L)
+
+
+def _kernel_columns(n, v, k):
+    """``A S`` before normalisation: ``A[i, j − k]`` from the profile, zero in the columns
+    of the cells pushed off (``k = 0``: the kernel itself)."""
+    t = _kernel_profile(n, v)
+    m = np.arange(-3 * n, 3 * n + 1) % (2 * n)  # the profile over m = -3n … 3n
+    u = t[np.minimum(m, 2 * n - m)]  # constant indices
+    # A[i, j - k] = T(i - j + k) + T(i + j - k + 1), the second Toeplitz in (i, n - 1 - j)
+    start = 3 * n - (n - 1)
+    toe = jax.lax.dynamic_slice_in_dim(u, start + k, 2 * n - 1)
+    han = jax.lax.dynamic_slice_in_dim(u, start + n - k, 2 * n - 1)
+    a = jnp.maximum(_toeplitz(toe, n) + _toeplitz(han, n)[:, ::-1], 0.0)
+    j = jnp.arange(n) - k  # the old cell that column j takes
+    return jnp.where(((j >= 0) & (j < n))[None, :], a, 0.0)
 
 
 def diffusion_kernel(n, v):
     """Diffusion kernel ``exp(v/2 · L)`` on ``n`` cells with zero-flux edges.
+
+    Built from its profile (:func:`_kernel_profile`: ``n + 1`` values, one ``(n + 1) × n``
+    product, no ``n³`` one): the cosine basis diagonalises ``L``, and the product of two
+    of its cosines is a sum of cosines of the difference and the sum of the indices.
 
     Parameters
     ----------
@@ -35,12 +79,10 @@ def diffusion_kernel(n, v):
     -------
     Array, shape ``(n, n)``
         ``A[i, j]``: share of cell ``j``'s mass that moves to cell ``i``. Entries
-        are ``≥ 0`` (round-off negatives clipped) and each column sums to 1.
+        are ``≥ 0`` (round-off negatives clipped) and each column sums to 1 (to
+        rounding: the cosine basis's columns do; they are not renormalised).
     """
-    basis, lam = _neumann_basis(n)
-    a = (basis * jnp.exp(0.5 * jnp.maximum(v, 0.0) * lam)) @ basis.T
-    a = jnp.maximum(a, 0.0)
-    return a / a.sum(0, keepdims=True)
+    return shifted_kernel(n, v, 0)
 
 
 def shifted_kernel(n, v, k):
@@ -64,9 +106,7 @@ def shifted_kernel(n, v, k):
         Columns of :func:`diffusion_kernel` moved by ``k``; the columns of the cells
         pushed off the grid are zero.
     """
-    j = jnp.arange(n) - k
-    a = jnp.take(diffusion_kernel(n, v), jnp.clip(j, 0, n - 1), axis=1)
-    return jnp.where(staying_cells(n, k)[None, :], a, 0.0)
+    return _kernel_columns(n, v, k)
 
 
 def staying_cells(n, k):
