@@ -144,7 +144,7 @@ class PMFFilter(NamedTuple):
 
 def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         measurement=gravity_measurement, adapt_span=None, min_cell_m=None, max_cell_m=None,
-        resolve=None, missing="gaps"):
+        resolve=None, missing="gaps", spread_dtype=None):
     """Grid point-mass filter with the INS error model's drift.
 
     Parameters
@@ -181,6 +181,10 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
     missing : {"gaps", "land"}
         A cell on a missing (NaN) node of a Grid map: a survey gap (default) or land,
         where the vehicle cannot be (:data:`~jaxgrav.filters.pmf_cells.MISSING`).
+    spread_dtype : dtype, optional
+        Of the spread's two matrix products (:func:`~jaxgrav.filters.pmf_cells.mix_cells`),
+        e.g. ``jnp.float32``: ~2 × faster on a CPU, weights and moments still in the
+        state's dtype. None (default): the state's dtype.
 
     Returns
     -------
@@ -299,7 +303,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         k = jnp.where(ok, k, 0)
         a_n, a_e = (shifted_kernel(n_cells, pending[a] / size[a] ** 2, k[a]) for a in (0, 1))
         w, cell = mix_cells(a_n, a_e, state.w, affine_cells(cell_fields(state), pending),
-                            _TINY)
+                            _TINY, spread_dtype)
         state = state._replace(w=w, centre=state.centre + k * size,
                                pending=no_pending(pending.dtype))
         state = with_cells(state, cell)

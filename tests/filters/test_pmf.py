@@ -699,3 +699,20 @@ def test_cells_of_unknown_map_value_neither_gain_nor_lose_mass(prior):
     z_hat = np.sum(wk * np.where(known, g + m, 0.0))
     np.testing.assert_allclose(float(info.innovation), z - z_hat, rtol=1e-9)
     assert int(info.status) & FLAGS["off_map"]
+
+
+def test_spread_in_float32_follows_float64(prior):
+    """``spread_dtype=float32`` (the spread's two products in float32, the rest in float64)
+    gives the float64 filter's estimates to a small fraction of their σ, one compile."""
+    x0, p0 = prior
+    steps = _steps(16, 4, seed=5)
+    f32 = fl.pmf(n_cells=G, cell_m=CELL, q_pos=Q_POS, spread_dtype=jnp.float32)
+    _, ref = run(PMF, FIELD, DT, x0, p0, steps, 4)
+    _, got = run(f32, FIELD, DT, x0, p0, steps, 4)
+    assert got.x.dtype == jnp.float64
+    np.testing.assert_allclose(np.asarray(got.x), np.asarray(ref.x), rtol=1e-5,
+                               atol=1e-4 * float(np.max(ref.sigma)))
+    np.testing.assert_allclose(np.asarray(got.sigma), np.asarray(ref.sigma), rtol=1e-4)
+    before = run._cache_size()
+    run(f32, FIELD, DT, x0, p0, _steps(16, 4, seed=6), 4)  # new readings: no retrace
+    assert run._cache_size() == before
