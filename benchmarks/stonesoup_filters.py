@@ -41,6 +41,8 @@ noise. ``n`` runs (default 100, ``--quick`` 10). Reference: Stone Soup (PyPI
   here (the random walk stands in for it), so these errors are not the library's
   drift-aware ``pmf``'s. The point-mass filters are deterministic: on the same run
   their errors differ by the grids only.
+  A second line, ``pmf-61-spread32``, times the same filter with its spread's two matrix
+  products in float32 (``pmf(spread_dtype=float32)``; the rest in float64).
 
 Stone Soup is timed on a few runs and scaled per run (field ``note``); both are scored
 on those runs: RMS position error over the second hour (``err_m``; different random
@@ -48,7 +50,7 @@ numbers, so equal within Monte Carlo noise, not to the digit). jaxgrav's compile
 separate (``compile_s``); each filter is compiled with the XLA options the Monte Carlo
 runner gives its method (:func:`jaxgrav.montecarlo.spec.cpu_options_for`).
 
-Run ``python benchmarks/stonesoup_filters.py [--quick]``; JSON lines on stdout,
+Run ``python benchmarks/stonesoup_filters.py [--quick] [--filters pf pmf]``; JSON lines on stdout,
 progress on stderr. Compare ratios within one run (shared machine).
 """
 
@@ -60,6 +62,7 @@ import time
 import warnings
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from _common import best_time, emit
 
@@ -242,6 +245,9 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="10 runs, 1 Stone Soup run per case")
     p.add_argument("--runs", type=int, default=None, help="runs for jaxgrav (default 100)")
+    p.add_argument("--filters", nargs="+", choices=("pf", "pmf"), default=("pf", "pmf"),
+                   help="which comparisons (pf: the particle filters, both against Stone "
+                        "Soup's; pmf: the point-mass filter); default both")
     a = p.parse_args()
     n_runs = a.runs or (10 if a.quick else 100)
     n_ss = 1 if a.quick else 3
@@ -251,20 +257,23 @@ def main():
     ctx = (field, dyn, steps, truth, x0, p0, n_ss, repeats)
 
     # the Stone Soup particle filter is timed once and compared with both jaxgrav filters
-    def ss_pf(i, seed):
-        return stonesoup_pf(anomaly, np.asarray(dyn.f[i]), np.asarray(dyn.q[i]),
-                            np.asarray(x0), np.asarray(p0), np.asarray(steps.lat[i]),
-                            np.asarray(steps.lon[i]), np.asarray(steps.z[i]),
-                            float(steps.r[i, 0]), N_PARTICLES, float(dyn.dt[i]), seed)
+    if "pf" in a.filters:
+        def ss_pf(i, seed):
+            return stonesoup_pf(anomaly, np.asarray(dyn.f[i]), np.asarray(dyn.q[i]),
+                                np.asarray(x0), np.asarray(p0), np.asarray(steps.lat[i]),
+                                np.asarray(steps.lon[i]), np.asarray(steps.z[i]),
+                                float(steps.r[i, 0]), N_PARTICLES, float(dyn.dt[i]), seed)
 
-    ss = stonesoup_time(ss_pf, truth, n_ss, "pf")
-    bench_one("pf", fl.pf(N_PARTICLES, roughening=0.0), ctx, ss, "stonesoup-pf",
-              "same algorithm and model: SIR, systematic resampling at ESS < N/2, no "
-              "roughening in either")
-    bench_one("rbpf", fl.rbpf(N_PARTICLES), ctx, ss, "stonesoup-pf",
-              "Stone Soup has no Rao-Blackwellised filter for this model: compared with "
-              "its SIR filter (same model, 1000 particles over all 13 states)")
+        ss = stonesoup_time(ss_pf, truth, n_ss, "pf")
+        bench_one("pf", fl.pf(N_PARTICLES, roughening=0.0), ctx, ss, "stonesoup-pf",
+                  "same algorithm and model: SIR, systematic resampling at ESS < N/2, no "
+                  "roughening in either")
+        bench_one("rbpf", fl.rbpf(N_PARTICLES), ctx, ss, "stonesoup-pf",
+                  "Stone Soup has no Rao-Blackwellised filter for this model: compared with "
+                  "its SIR filter (same model, 1000 particles over all 13 states)")
 
+    if "pmf" not in a.filters:
+        return
     # point-mass: the classic 2-state random-walk model in both (see the docstring)
     bias = float(scen.bias_mgal)
     x0_pm = np.asarray(x0).copy()
@@ -291,6 +300,11 @@ def main():
               "diffusion; Stone Soup: grid rebuilt each step along the covariance "
               "eigenvectors at +-4 sigma, linear interpolation, FFT convolution with the "
               "Gaussian transition density", keyed=False)
+    filt32 = fl.pmf(N_CELLS, CELL_M, q_pos=Q_POS, ins=None, spread_dtype=jnp.float32)
+    bench_one("pmf", filt32, ctx_pm, ss, "stonesoup-pmf",
+              "as pmf-61, the spread's two matrix products in float32 (pmf(spread_dtype="
+              "float32); weights, likelihood and moments in float64)", keyed=False,
+              case="pmf-61-spread32")
 
 
 def stonesoup_time(run_one, truth, n_ss, kind):
@@ -318,7 +332,7 @@ def stonesoup_time(run_one, truth, n_ss, kind):
     return per_run, errs, done, failed
 
 
-def bench_one(kind, filt, ctx, ss, baseline, note, keyed=True):
+def bench_one(kind, filt, ctx, ss, baseline, note, keyed=True, case=None):
     """Time one jaxgrav filter over all runs against Stone Soup's per-run time."""
     field, dyn, steps, truth, x0, p0, n_ss, repeats = ctx
     ss_per_run, ss_err, ss_done, ss_failed = ss
@@ -342,7 +356,7 @@ def bench_one(kind, filt, ctx, ss, baseline, note, keyed=True):
     jax_s = best_time(lambda: jax.block_until_ready(compiled(*args)), repeats)
     progress(f"{kind}: jaxgrav {jax_s:.2f} s for {n_runs} runs")
     err = [second_half_rms(est[i], np.asarray(truth[i])) for i in range(n_runs)]
-    case = f"{kind}-{N_PARTICLES if kind != 'pmf' else N_CELLS}"
+    case = case or f"{kind}-{N_PARTICLES if kind != 'pmf' else N_CELLS}"
     if ss_per_run is None:  # no Stone Soup run finished: no ratio
         emit(BENCH, case, n_runs, jax_s, baseline, None, compile_s=round(compile_s, 2),
              baseline_failed=ss_failed, err_m_jaxgrav_all=round(float(np.mean(err)), 1))
