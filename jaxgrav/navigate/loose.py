@@ -377,18 +377,18 @@ def navigate_loose(grid, voyage, config):
     Parameters
     ----------
     grid : Grid or PreparedMap
-        The anomaly map (mGal); a PreparedMap computes the spline once.
+        The anomaly map (mGal); dense and entropy+ICCP prepare it once (a PreparedMap).
     voyage : Voyage
         The INS log and the raw readings (Eötvös not corrected); ``truth`` is not used.
-        ``N − 1`` need not be a multiple of the fix interval: the last fix interval is
-        cut short.
+        ``N − 1`` need not be a multiple of the fix interval (the last one is cut short).
     config : LooseConfig
 
     Returns
     -------
     LooseResult
     """
-    cfg = config
+    cfg = config  # dense, entropy+ICCP: the spline prepared once, not in every segment
+    grid = grid if isinstance(cfg.matcher, ChainConfig) else prepare_map(grid)
     ins, n = voyage.ins, voyage.ins.t.shape[0]
     m = cfg.fix_every
     steps_between = cfg.stride * m
