@@ -47,7 +47,8 @@ import numpy as np
 from jaxgrav.track_degrees import NA_TOKENS, parse_degrees
 from jaxgrav.track_units import unit_of
 
-__all__ = ["NA_TOKENS", "Table", "column_key", "parse_degrees", "parse_numbers", "read_table"]
+__all__ = ["NA_TOKENS", "Table", "column_key", "comma_hint", "parse_degrees", "parse_numbers",
+           "read_table"]
 
 _DASHES = frozenset({"-", "--"})  # also a units row's "no unit"
 
@@ -355,6 +356,15 @@ def _units_row(header, rows):
         return header, rows
     return ([f"{h} ({u})" if u else h for h, u in zip(header, units[:len(header)], strict=True)],
             rows[1:])
+
+
+def comma_hint(cell):
+    """A message tail for a cell such as ``1,234`` (1234 or 1.234?), else ``""``."""
+    if not _THOUSANDS.fullmatch(cell.strip()):
+        return ""
+    cell = cell.strip()
+    return (f"; it could be {cell.replace(',', '')} or {cell.replace(',', '.')} (a thousands "
+            "separator or a decimal comma): write the number meant, with a decimal point")
 
 
 def parse_numbers(cells, decimal_comma=False):

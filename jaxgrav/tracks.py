@@ -29,32 +29,20 @@ What the reader accepts (parsing of the text: :mod:`jaxgrav.track_files`):
 """
 
 import csv
-import re
 from pathlib import Path
 
 import numpy as np
 
 from jaxgrav._io import atomic_output
 from jaxgrav.grid_axes import contiguous_longitudes
+from jaxgrav.track_columns import ALIASES, listed, match_columns, parse_columns
 from jaxgrav.track_degrees import nmea_hint
-from jaxgrav.track_files import column_key, parse_degrees, parse_numbers, read_table
+from jaxgrav.track_files import column_key, comma_hint, parse_degrees, parse_numbers, read_table
 from jaxgrav.track_times import DATE_COLUMN, check_time_steps, iso_seconds
 from jaxgrav.track_units import header_scale
 
 __all__ = ["ALIASES", "KNOWN_COLUMNS", "TAB_SUFFIXES", "TrackTable", "csv_line", "parse_columns",
            "read_track_csv", "write_track_csv"]
-
-ALIASES = {
-    "t": ("t", "time", "timestamp", "datetime"),
-    "lat": ("lat", "latitude"),
-    "lon": ("lon", "longitude", "long", "lng"),
-    "h": ("h", "height"),
-    # "ve, vn" logs ran as if without velocities: raw readings taken as Eötvös-corrected
-    "v_east": ("v_east", "ve", "v_e", "vel_east", "velocity_east", "east_velocity", "veast"),
-    "v_north": ("v_north", "vn", "v_n", "vel_north", "velocity_north", "north_velocity",
-                "vnorth"),
-}
-"""Header names (any case) accepted for each column, in order of preference."""
 
 TAB_SUFFIXES = (".tsv", ".tab")
 """Output suffixes :func:`write_track_csv` writes tab-separated."""
@@ -121,97 +109,6 @@ class TrackTable(dict):
                 for k in self.order}
 
 
-def parse_columns(text):
-    """Parse ``--columns lat=LAT,lon=LON`` into ``{"lat": "LAT", "lon": "LON"}``.
-
-    Parameters
-    ----------
-    text : str or None
-        ``NAME=COLUMN`` pairs separated by commas (or semicolons); COLUMN is a header (any
-        case) or a 1-based column number.
-
-    Returns
-    -------
-    dict of str to str
-        Empty for None or ``""``.
-
-    Raises
-    ------
-    ValueError
-        A pair without ``=``, an empty side, a name given twice or two names for one
-        column.
-    """
-    out = {}
-    example = "(e.g. --columns lat=LAT,lon=LON,gravity=FAA)"
-    for part in re.split(r"[,;]", text or ""):  # "lat=LAT;lon=LON" was one column's name
-        if not part.strip():
-            continue
-        name, eq, col = (s.strip() for s in part.partition("="))
-        if not eq or not name or not col:
-            raise ValueError(f"--columns must be NAME=COLUMN pairs separated by commas "
-                             f"{example}; got {part.strip()!r} in {text!r}")
-        if name in out:
-            raise ValueError(f"--columns names {name!r} twice in {text!r}")
-        if col.lower() in (c.lower() for c in out.values()):
-            raise ValueError(f"--columns gives column {col!r} two names in {text!r}")
-        out[name] = col
-    return out
-
-
-def _listed(names, last=","):
-    """Names in plain words: ``a, b, c`` (``last="and"``: ``a, b and c``)."""
-    names = [str(n) for n in names]
-    if len(names) < 2 or last == ",":
-        return ", ".join(names)
-    return f"{', '.join(names[:-1])} {last} {names[-1]}"
-
-
-def _match_columns(header, wanted, columns, label, required=()):
-    """Header index of each canonical name found: ``--columns``, exact name, aliases."""
-    keys = [column_key(h) for h in header]
-    found = {}
-    for name, col in columns.items():
-        hits = [j for j, h in enumerate(header) if h == col] or [
-            j for j, k in enumerate(keys) if k == column_key(col)]
-        if not hits and col.isdigit() and 1 <= int(col) <= len(header):
-            hits = [int(col) - 1]
-        if not hits:
-            counted = (f"; columns are counted from 1 to {len(header)}" if col.isdigit()
-                       else "")
-            raise ValueError(f"{label} has no column {col!r} (asked for by --columns "
-                             f"{name}={col}); it has {_listed(header)}{counted}")
-        found[name] = hits[0]
-    for name in wanted:
-        if name in found:
-            continue
-        for alias in ALIASES.get(name, (name,)):
-            hits = [j for j, k in enumerate(keys) if k == alias and j not in found.values()]
-            exact = [j for j in hits if header[j] == alias]
-            hits = exact if len(exact) == 1 else hits
-            if len(hits) > 1:
-                both = _listed([header[j] for j in hits], "and")
-                raise ValueError(f"{label}: columns {both} could all be {name!r}; choose one "
-                                 f"with --columns {name}=COLUMN")
-            if hits:
-                found[name] = hits[0]
-                break
-        # was "lacks column(s) ['lat']; it has ['lat', ...]"
-        taken = [] if name in found or name not in required else [
-            n for n, j in found.items() if n in columns and keys[j] in ALIASES.get(name, (name,))]
-        if taken:
-            raise ValueError(f"{label}: column {header[found[taken[0]]]!r} would be read as "
-                             f"{name!r}, but --columns {taken[0]}={columns[taken[0]]} reads "
-                             f"it as {taken[0]!r}; give {name!r} its own column with "
-                             f"--columns {name}=COLUMN")
-    used = {}
-    for name, j in found.items():
-        if j in used:
-            raise ValueError(f"{label}: column {header[j]!r} cannot be both {used[j]!r} and "
-                             f"{name!r}")
-        used[j] = name
-    return found
-
-
 def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None):
     """Read a track or log file (see the module notes for what it accepts).
 
@@ -251,7 +148,7 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
     table = read_table(path, label)
     columns = dict(columns or {})
     wanted = [*required, *optional, *(c for c in KNOWN_COLUMNS if c not in required)]
-    found = _match_columns(table.header, wanted, columns, label, required)
+    found = match_columns(table.header, wanted, columns, label, required)
     missing = [c for c in required if c not in found]
     if missing and not table.has_header:  # was "lacks columns lat and lon; it has 1, 2, 3"
         raise ValueError(f"{label} has no header row (line {table.lines[0]} holds only numbers); "
@@ -259,8 +156,8 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
                          "gravity) or name them by number (e.g. --columns lat=2,lon=3)")
     if missing:
         raise ValueError(
-            f"{label} lacks column{'s' * (len(missing) > 1)} {_listed(missing, 'and')}; it "
-            f"has {_listed(table.header)}; required: {_listed(required)} (names in any case; "
+            f"{label} lacks column{'s' * (len(missing) > 1)} {listed(missing, 'and')}; it "
+            f"has {listed(table.header)}; required: {listed(required)} (names in any case; "
             f"aliases: time, latitude, longitude; others with --columns {missing[0]}=COLUMN)")
     if not table.rows:
         raise ValueError(f"{label} has a header but no rows")
@@ -294,13 +191,15 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
             continue
         why = "not a number"
         if bad is not None and name in ("lat", "lon") and j in canonical:  # "35.5 N", 35°30'
-            values, bad, why = parse_degrees(cells, name, table.delimiter != ",")
+            values, bad, why = parse_degrees(_numbers_as_read(cells, table.delimiter),
+                                             name, table.delimiter != ",")
             values = values * header_scale(name, header, label)
         if bad is not None and j in canonical:
             raise ValueError(
                 f"{label}, line {lines[bad]}, column {header!r}: {cells[bad]!r} " + (
                     f"is not a number (expected {_EXPECTED.get(name, 'a number')})"
-                    if why == "not a number" else f"cannot be read as degrees: {why}"))
+                    if why == "not a number" else f"cannot be read as degrees: {why}")
+                + comma_hint(cells[bad]))
         if j not in canonical and name in found:
             name = f"{header}_col{j + 1}"  # "lat" beside --columns lat=LAT2
         if bad is not None:
@@ -316,6 +215,17 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
         track.order.append(name)
     _check_columns(track, required, allow_nan, label)
     return track
+
+
+def _numbers_as_read(cells, delimiter):
+    """Angle cells with those :func:`parse_numbers` reads (a quoted ``"29,5"``) written
+    as plain numbers, so that the degrees reader names the cell that is bad, not them."""
+    out = list(cells)
+    for i, cell in enumerate(cells):
+        value, bad = parse_numbers([cell], decimal_comma=delimiter != ",")
+        if bad is None and np.isfinite(value[0]):
+            out[i] = repr(float(value[0]))
+    return out
 
 
 def _check_columns(track, required, allow_nan, label):

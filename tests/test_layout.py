@@ -20,6 +20,7 @@ LAYERS = {
     "grid": 1, "grid_axes": 1, "grid_files": 1, "grid_values": 1, "grid_windows": 1,
     "prepared": 1, "tracks": 1,
     "track_files": 1, "track_units": 1, "track_times": 1, "time_steps": 1, "track_degrees": 1,
+    "track_columns": 1,
     "plot": 1,
     "fields": 2, "sim": 2,
     "datasets": 3,

@@ -26,6 +26,7 @@ from jaxgrav.cli.inputs import (
     whole_number,
 )
 from jaxgrav.cli.match_missing import missing_counts, missing_message
+from jaxgrav.cli.match_search import check_radius_resolved, check_search
 from jaxgrav.cli.match_size import check_fixes_memory
 from jaxgrav.cli.match_status import status_text
 from jaxgrav.cli.sanity import check_readings, fit_check, time_gap_warning
@@ -173,11 +174,12 @@ def _cmd_match(args):
     check_readings(track[field], np.asarray(grid.sample(track["lat"], track["lon"], "bilinear")),
                    args.noise, column=field, where=f"--track {str(args.track)!r}", unit=unit,
                    correction=correction, missing_skipped=False, line=track.line)
-    check_search(args, grid, radius_deg, track["lat"], source=(
-        "--drift-radius" if args.drift_radius is not None else
-        f"column 'drift_radius' of --track {str(args.track)!r}" if
-        "drift_radius" in track and np.isfinite(track["drift_radius"]).any() else
-        "the default drift radius"))
+    source = ("--drift-radius" if args.drift_radius is not None else
+              f"column 'drift_radius' of --track {str(args.track)!r}" if
+              "drift_radius" in track and np.isfinite(track["drift_radius"]).any() else
+              "the default drift radius")
+    check_search(args, grid, radius_deg, track["lat"], source=source)
+    check_radius_resolved(grid, radius_deg, n_rows, args.noise, source)
     if args.refine > 1:
         grid = grid.refine(args.refine)
     if field != "gravity" and args.method not in CONTOUR_METHODS:
@@ -283,46 +285,6 @@ def _eotvos_note(args, field, track, has_v):
     if "v_east" in track and "v_north" in track:
         return "given corrected (--eotvos-corrected): readings used as they are"
     return "no velocity columns: readings taken as Eötvös-corrected"
-
-
-_MAX_REFINED_NODES = 2e7
-"""Nodes of a refined map above which ``--refine`` is refused (160 MB in float64)."""
-
-
-def check_search(args, grid, radius_deg, lat, source="--drift-radius"):
-    """The search region and ``--refine``: a region larger than the map, a refinement that
-    makes the result worse or cannot fit in memory are refused (``source``: where the
-    radius came from, for the message); chains on coarse cells without ``--refine`` are
-    warned."""
-    ny, nx = np.asarray(grid.values).shape[-2:]
-    height = (ny - 1) * grid.dlat
-    width = (nx - 1) * grid.dlon * math.cos(math.radians(float(np.mean(lat))))
-    if 2 * radius_deg > min(height, width):
-        column = source != "--drift-radius"  # the column's 4000 (m) was blamed on the option
-        said = (f"{source} holds up to {radius_deg:g} degrees, searching" if column
-                else f"{source} {radius_deg:g} degrees searches")
-        raise ValueError(f"{said} a region {2 * radius_deg:g} degrees across, larger than the "
-                         f"map around the track ({height:.3g} x {width:.3g} degrees of arc); "
-                         "expected a drift radius well inside the map" + (
-                             "; in other units? declare them in the header, e.g. "
-                             "'drift_radius (m)'" if column else ""))
-    if args.refine <= 1:
-        if args.method == "chains" and min(grid.spacing_m()) > 1000.0:
-            print(f"warning: --method chains on a map of {min(grid.spacing_m()) / 1e3:.1f} km "
-                  "cells without --refine: the chains move from node to node, so the fix is "
-                  "no finer than a cell (paper A refines x8 to x100; try --refine 8)",
-                  file=sys.stderr)
-        return
-    if args.method != "chains":
-        raise ValueError(f"--refine {args.refine} is for --method chains (paper A's node "
-                         f"lattice); --method {args.method} samples the map continuously, and "
-                         "a refined (bilinear) map only smooths away its curvature and makes "
-                         "the fix worse")
-    nodes = ((ny - 1) * args.refine + 1) * ((nx - 1) * args.refine + 1)
-    if nodes > _MAX_REFINED_NODES:
-        raise ValueError(f"--refine {args.refine} would make a {ny} x {nx} map region "
-                         f"{nodes:.3g} nodes ({nodes * 8 / 1e9:.2g} GB), more than the "
-                         f"{_MAX_REFINED_NODES:.0e} allowed; use a smaller factor")
 
 
 def _strict_json(value):

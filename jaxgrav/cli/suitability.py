@@ -25,6 +25,7 @@ bound says "anywhere on the map" (``precision_m``, ``corr`` and the axis whose 1
 exceeds that size are blanked; the summary says how many).
 """
 
+import math
 import sys
 from pathlib import Path
 
@@ -35,6 +36,7 @@ from matplotlib.colors import LogNorm
 
 from jaxgrav._io import atomic_output, check_outputs
 from jaxgrav.cli.inputs import check_out_format, fill_map_error_length, whole_number
+from jaxgrav.cli.match_search import steepest_slope
 from jaxgrav.cli.simulate import MAX_BIAS_MGAL
 from jaxgrav.constants import DEG
 from jaxgrav.datasets import load_map
@@ -114,6 +116,7 @@ def cmd_suitability(args):
                          f"{count} nodes of the map, longer than its shorter side ({side} "
                          "nodes): every segment would leave the map; give fewer --fixes or a "
                          "shorter --spacing")
+    _check_segment_resolved(grid, args)
     with np.errstate(invalid="ignore"):  # NaN nodes: the descriptors' bins of missing values
         suit = suitability(grid, heading_deg=args.heading, n_fixes=args.fixes,
                            spacing_m=args.spacing, noise_mgal=args.noise,
@@ -193,6 +196,25 @@ def _summary(args, png, suit, status, size_m):
                  f"(its bound exceeds the map's own {size_m / 1e3:.0f} km: infinite where the "
                  "map is flat); they are missing values with status 3 (no_information)")
     return head
+
+
+def _check_segment_resolved(grid, args):
+    """ValueError for a segment along which the map, at its steepest, changes by less than
+    ``--fixes`` readings of ``--noise`` can tell: "no information" at every node
+    (``--spacing 1e-6`` ran and wrote such a map, exit 0)."""
+    slope = steepest_slope(grid)
+    tell = args.noise / math.sqrt(args.fixes)
+    least_m = tell / slope / (args.fixes - 1) if slope > 0 else 0.0
+    if args.spacing >= least_m:
+        return
+    unit = grid.units or "map units"
+    length = (args.fixes - 1) * args.spacing
+    raise ValueError(f"--spacing {args.spacing:g} m makes a segment of {length:.3g} m, along "
+                     f"which the map changes by at most {length * slope:.3g} {unit} (its "
+                     f"steepest slope is {slope:.3g} {unit}/m), below what {args.fixes} "
+                     f"readings of --noise {args.noise:g} {unit} can tell ({tell:.3g} {unit}): "
+                     "no node could be told from its neighbours; expected a --spacing of at "
+                     f"least {least_m:.2g} m")
 
 
 def _check_args(args):

@@ -1,0 +1,88 @@
+"""The search region of ``jaxgrav match``: the drift radius and ``--refine``.
+
+:func:`check_search` refuses a search region wider than the map and a ``--refine`` that
+makes the fix worse or cannot fit in memory; :func:`check_radius_resolved` one too small
+for the readings to tell any position in it from the INS's (``--drift-radius 1e-9`` ran
+and reported "INS kept").
+"""
+
+import math
+import sys
+
+import numpy as np
+
+from jaxgrav.sim import DEG_ARC_M
+
+__all__ = ["check_radius_resolved", "check_search", "steepest_slope"]
+
+_MAX_REFINED_NODES = 2e7
+"""Nodes of a refined map above which ``--refine`` is refused (160 MB in float64)."""
+
+
+def steepest_slope(grid):
+    """The largest change of a map between neighbouring nodes per metre (map units per
+    m; 0 for a map without two neighbouring values)."""
+    values = np.asarray(grid.values, dtype=float)
+    dy, dx = (float(s) for s in grid.spacing_m())
+    with np.errstate(invalid="ignore"):
+        steps = [np.abs(np.diff(values, axis=-2)) / dy, np.abs(np.diff(values, axis=-1)) / dx]
+    finite = [s[np.isfinite(s)] for s in steps]
+    return max((float(s.max()) for s in finite if s.size), default=0.0)
+
+
+def check_radius_resolved(grid, radius_deg, n_fixes, noise, source):
+    """ValueError for a search disc across which the map, at its steepest, changes by
+    less than ``n_fixes`` readings of ``noise`` can tell (``noise / sqrt(n_fixes)``):
+    every candidate in it fits as the INS track does."""
+    slope = steepest_slope(grid)
+    tell = noise / math.sqrt(n_fixes)
+    least_m = tell / (2.0 * slope) if slope > 0 else 0.0
+    if 2.0 * radius_deg * DEG_ARC_M >= least_m:
+        return
+    said = (f"{source} {radius_deg:g} degrees of arc" if source == "--drift-radius"
+            else f"{source} ({radius_deg:g} degrees of arc at most)")
+    unit = grid.units or "map units"
+    raise ValueError(f"{said} ({radius_deg * DEG_ARC_M:.3g} m) searches a region across which "
+                     f"the map changes by at most {2 * radius_deg * DEG_ARC_M * slope:.3g} "
+                     f"{unit} (its steepest slope is {slope:.3g} {unit}/m), below what "
+                     f"{n_fixes} readings of --noise {noise:g} {unit} can tell ({tell:.3g} "
+                     f"{unit}): every position in it would fit as the INS track does; "
+                     "expected a drift radius of at least "
+                     f"{least_m / DEG_ARC_M:.2g} degrees of arc "
+                     f"({least_m:.2g} m)")
+
+
+def check_search(args, grid, radius_deg, lat, source="--drift-radius"):
+    """The search region and ``--refine``: a region larger than the map, a refinement that
+    makes the result worse or cannot fit in memory are refused (``source``: where the
+    radius came from, for the message); chains on coarse cells without ``--refine`` are
+    warned."""
+    ny, nx = np.asarray(grid.values).shape[-2:]
+    height = (ny - 1) * grid.dlat
+    width = (nx - 1) * grid.dlon * math.cos(math.radians(float(np.mean(lat))))
+    if 2 * radius_deg > min(height, width):
+        column = source != "--drift-radius"  # the column's 4000 (m) was blamed on the option
+        said = (f"{source} holds up to {radius_deg:g} degrees, searching" if column
+                else f"{source} {radius_deg:g} degrees searches")
+        raise ValueError(f"{said} a region {2 * radius_deg:g} degrees across, larger than the "
+                         f"map around the track ({height:.3g} x {width:.3g} degrees of arc); "
+                         "expected a drift radius well inside the map" + (
+                             "; in other units? declare them in the header, e.g. "
+                             "'drift_radius (m)'" if column else ""))
+    if args.refine <= 1:
+        if args.method == "chains" and min(grid.spacing_m()) > 1000.0:
+            print(f"warning: --method chains on a map of {min(grid.spacing_m()) / 1e3:.1f} km "
+                  "cells without --refine: the chains move from node to node, so the fix is "
+                  "no finer than a cell (paper A refines x8 to x100; try --refine 8)",
+                  file=sys.stderr)
+        return
+    if args.method != "chains":
+        raise ValueError(f"--refine {args.refine} is for --method chains (paper A's node "
+                         f"lattice); --method {args.method} samples the map continuously, and "
+                         "a refined (bilinear) map only smooths away its curvature and makes "
+                         "the fix worse")
+    nodes = ((ny - 1) * args.refine + 1) * ((nx - 1) * args.refine + 1)
+    if nodes > _MAX_REFINED_NODES:
+        raise ValueError(f"--refine {args.refine} would make a {ny} x {nx} map region "
+                         f"{nodes:.3g} nodes ({nodes * 8 / 1e9:.2g} GB), more than the "
+                         f"{_MAX_REFINED_NODES:.0e} allowed; use a smaller factor")

@@ -1,0 +1,103 @@
+"""Inputs found by the ninth issue-19 hunt (2026-12-07, helper-77).
+
+The last hunt's leftovers first: a track with both ``latitude`` and ``lat`` read ``lat``
+in silence, an ambiguous ``"29,512"`` was refused naming the row's first cell, and
+``match --drift-radius 1e-9`` / ``suitability --spacing 1e-6`` ran. Then the hunt's own
+finds (below them)."""
+
+import re
+
+import pytest
+
+from jaxgrav.cli import main
+from jaxgrav.tracks import read_track_csv
+
+ROWS = [(29.5 + 0.0056 * i, 126.5 + 0.0068 * i) for i in range(5)]
+
+
+def _track(path, header="t,lat,lon,gravity", rows=None):
+    rows = rows if rows is not None else [f"{120 * i},{lat},{lon},{-10 + i}"
+                                          for i, (lat, lon) in enumerate(ROWS)]
+    path.write_text(header + "\n" + "\n".join(rows) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("header, names", [
+    ("t,latitude,lat,lon", ("latitude", "lat")),
+    ("t,lat,lon,long", ("lon", "long")),
+    ("t,LAT,lon,Latitude [deg]", ("LAT", "Latitude [deg]")),
+])
+def test_two_names_for_one_position_column_are_refused(tmp_path, header, names):
+    """``t,latitude,lat,lon`` read ``lat`` and passed ``latitude`` through, in silence."""
+    track = _track(tmp_path / "t.csv", header, [f"{10 * i},29.5,29.6,126.5" for i in range(3)])
+    name = "lat" if "lat" in names[0].lower() else "lon"
+    with pytest.raises(ValueError, match=re.escape(
+            f"columns '{names[0]}' and '{names[1]}' could both be '{name}'; choose one with "
+            f"--columns {name}=COLUMN")):
+        read_track_csv(track, required=("t", "lat", "lon"))
+
+
+def test_one_of_two_position_columns_is_chosen_with_columns(tmp_path):
+    track = _track(tmp_path / "t.csv", "t,latitude,lat,lon",
+                   [f"{10 * i},29.5,29.6,126.5" for i in range(3)])
+    got = read_track_csv(track, required=("t", "lat", "lon"), columns={"lat": "latitude"})
+    assert got["lat"].tolist() == [29.5] * 3
+    assert got["lat_col3"].tolist() == [29.6] * 3
+
+
+def test_a_seconds_column_beside_iso_times_is_still_read(tmp_path):
+    """The commands' own outputs write ``t`` (s from the first row) beside the log's
+    ``time``: read back, ``t`` is the time (not refused as two time columns)."""
+    track = _track(tmp_path / "t.csv", "t,time,lat,lon",
+                   [f"{60 * i},2024-05-01T12:0{i}:00Z,29.5,126.5" for i in range(3)])
+    assert read_track_csv(track, required=("t", "lat", "lon"))["t"].tolist() == [0, 60, 120]
+
+
+@pytest.mark.parametrize("rows, line, cell", [
+    (['"0","29,5","126,5"', '"120","29,512","126,5068"'], 3, "29,512"),
+    (['0,29.5,126.5', '120,"29,512",126.5068'], 3, "29,512"),
+])
+def test_an_ambiguous_comma_number_is_named_where_it_is(tmp_path, rows, line, cell):
+    """``"29,512"`` on line 3 was refused as line 2's ``'29,5'`` (the degrees reader
+    did not take the quoted decimal comma the number reader had read)."""
+    track = _track(tmp_path / "t.csv", "t,lat,lon", rows)
+    with pytest.raises(ValueError) as err:
+        read_track_csv(track, required=("t", "lat", "lon"))
+    assert (f"line {line}, column 'lat': '{cell}' is not a number (expected degrees"
+            in str(err.value))
+    assert str(err.value).endswith("it could be 29512 or 29.512 (a thousands separator or a "
+                                   "decimal comma): write the number meant, with a decimal "
+                                   "point")
+
+
+def test_a_drift_radius_the_readings_cannot_resolve_is_refused(tmp_path, refused):
+    """``match --drift-radius 1e-9`` (0.1 mm) ran and reported "INS kept", exit 0."""
+    track = _track(tmp_path / "t.csv")
+    out = tmp_path / "r.json"
+    refused(["match", "--map", "ryukyu", "--track", track, "--out", out,
+             "--drift-radius", "1e-9"],
+            "--drift-radius 1e-09 degrees of arc (0.000111 m) searches a region across which "
+            "the map changes by at most 3.19e-06 mGal (its steepest slope is 0.0144 mGal/m), "
+            "below what 5 readings of --noise 1 mGal can tell (0.447 mGal): every position "
+            "in it would fit as the INS track does; expected a drift radius of at least "
+            "0.00014 degrees of arc (16 m)")
+    assert not out.exists()
+
+
+def test_a_drift_radius_column_the_readings_cannot_resolve_is_named(tmp_path, refused):
+    track = _track(tmp_path / "t.csv", "t,lat,lon,gravity,drift_radius",
+                   [f"{120 * i},{lat},{lon},{-10 + i},1e-8" for i, (lat, lon) in enumerate(ROWS)])
+    refused(["match", "--map", "ryukyu", "--track", track, "--out", tmp_path / "r.json"],
+            f"column 'drift_radius' of --track '{track}' (1e-08 degrees of arc at most) "
+            "(0.00111 m) searches a region")
+
+
+def test_a_spacing_the_readings_cannot_resolve_is_refused(tmp_path, refused):
+    """``suitability --spacing 1e-6`` wrote "no information" at every node, exit 0."""
+    out = tmp_path / "s.nc"
+    refused(["suitability", "--map", "ryukyu", "--out", out, "--spacing", "1e-6"],
+            "--spacing 1e-06 m makes a segment of 2.9e-05 m, along which the map changes by "
+            "at most 4.16e-07 mGal (its steepest slope is 0.0144 mGal/m), below what 30 "
+            "readings of --noise 1 mGal can tell (0.183 mGal): no node could be told from its "
+            "neighbours; expected a --spacing of at least 0.44 m")
+    assert list(tmp_path.iterdir()) == []
