@@ -32,6 +32,7 @@ from jaxgrav.grid_axes import contiguous_longitudes, regular_axis
 from jaxgrav.grid_values import (
     FILL_VALUES,
     UndeclaredFillWarning,
+    axis_degrees,
     map_units,
     outside_valid_range,
     undeclared_fills,
@@ -323,12 +324,8 @@ def _cf_grid(ds, var, ndim, exclude, label):
     lat = np.asarray(ds.variables[lat_name].values)
     lon = np.asarray(ds.variables[lon_name].values)
     units = str(da.attrs.get("units", ""))
-    for name in (lat_name, lon_name):  # were read as degrees: "off the map" at 0.5..2.3
-        declared = str(ds.variables[name].attrs.get("units", "")).strip()
-        if declared.lower() in ("rad", "radian", "radians"):
-            raise ValueError(f"{label}: coordinate {name!r} is in {declared!r}; jaxgrav "
-                             "reads latitudes and longitudes in degrees: convert them "
-                             "(x 180/pi) and set units 'degrees_north'/'degrees_east'")
+    lat, lon = (axis_degrees(c, ds.variables[n].attrs.get("units", ""), n, label)
+                for n, c in ((lat_name, lat), (lon_name, lon)))
     return (lat, lon, values, units, da.attrs, da.encoding, var, lat_name, lon_name)
 
 
@@ -372,6 +369,8 @@ def _checked_axes(lat, lon, label, lat_name, lon_name):
         raise ValueError(f"{label}: coordinate value {float(value):g} is not a latitude/"
                          "longitude in degrees (projected coordinates in metres?); jaxgrav "
                          "reads geographic grids: reproject it first (e.g. gmt grdproject -I)")
+    if lon.min() < -180.0 and lon.max() <= 0.0:  # -236..-224: the -360..0 convention
+        lon = lon + 360.0
     joined = contiguous_longitudes(lon)
     if joined is not lon:
         try:  # a 360° jump only: use the joined axis; otherwise name the file's own values

@@ -5,7 +5,8 @@
 missing, with an :class:`UndeclaredFillWarning`; :func:`outside_valid_range` reads nodes
 outside a declared CF ``valid_range`` / ``valid_min`` / ``valid_max`` as missing, as CF
 says they are; :func:`map_units` converts a gravity or magnetic map declared in other
-units (``m s-2``, ``uGal``, ``uT`` …) to mGal or nT. Used by
+units (``m s-2``, ``uGal``, ``uT`` …) to mGal or nT; :func:`axis_degrees` reads a
+coordinate's units (CF ``degrees_west``/``degrees_south`` count the other way). Used by
 :func:`jaxgrav.grid_files.read_netcdf`.
 """
 
@@ -14,8 +15,8 @@ import warnings
 
 import numpy as np
 
-__all__ = ["FILL_VALUES", "UndeclaredFillWarning", "map_units", "outside_valid_range",
-           "undeclared_fills"]
+__all__ = ["FILL_VALUES", "UndeclaredFillWarning", "axis_degrees", "map_units",
+           "outside_valid_range", "undeclared_fills"]
 
 _UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (factor, units)
     **dict.fromkeys(("mgal", "mgals", "milligal", "milligals"), (1.0, "mGal")),
@@ -33,6 +34,38 @@ FILL_VALUES = (-9999.0, 9999.0, -99999.0, 99999.0, -999999.0, 999999.0, -32767.0
                -32768.0, 65535.0)
 """Fill values a grid may hold without declaring them (no ``_FillValue`` or
 ``missing_value`` attribute, e.g. a grid converted from ASCII); with ``|v| >= 1e20``."""
+
+
+_COUNTED_BACK = ("degreew", "degrees", "degreewest", "degreesouth")
+"""CF's west and south units, lower case, ``degrees`` → ``degree``, ``_`` dropped."""
+
+
+def axis_degrees(coord, units, name, label):
+    """A latitude or longitude coordinate in degrees north or east.
+
+    Parameters
+    ----------
+    coord : numpy.ndarray
+        The coordinate's values as stored.
+    units : str
+        Its ``units`` attribute: CF's ``degrees_west`` or ``degrees_south`` (also
+        ``degree_W``, ``degreesS`` …) are negated (they were read as east and north: a
+        map of the Americas in degrees west was "off the map" of every track).
+    name, label : str
+        The coordinate and the file, for the message.
+
+    Raises
+    ------
+    ValueError
+        Units of radians (they were read as degrees: "off the map" at 0.5..2.3).
+    """
+    declared = str(units).strip()
+    if declared.lower() in ("rad", "radian", "radians"):
+        raise ValueError(f"{label}: coordinate {name!r} is in {declared!r}; jaxgrav "
+                         "reads latitudes and longitudes in degrees: convert them "
+                         "(x 180/pi) and set units 'degrees_north'/'degrees_east'")
+    key = declared.lower().replace("degrees", "degree").replace("_", "")
+    return -coord if key in _COUNTED_BACK else coord
 
 
 class UndeclaredFillWarning(UserWarning):

@@ -18,6 +18,9 @@ ALIASES = {
     "lat": ("lat", "latitude"),
     "lon": ("lon", "longitude", "long", "lng"),
     "h": ("h", "height"),
+    # a survey's anomaly column under its own name was "needs a 'gravity' column"
+    "gravity": ("gravity", "gravity_anomaly", "free_air_anomaly", "free_air", "faa", "grav"),
+    "magnetic": ("magnetic", "magnetic_anomaly", "mag_anomaly", "total_field_anomaly"),
     # "ve, vn" logs ran as if without velocities: raw readings taken as Eötvös-corrected
     "v_east": ("v_east", "ve", "v_e", "vel_east", "velocity_east", "east_velocity", "veast"),
     "v_north": ("v_north", "vn", "v_n", "vel_north", "velocity_north", "north_velocity",

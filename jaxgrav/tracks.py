@@ -14,8 +14,9 @@ What the reader accepts (parsing of the text: :mod:`jaxgrav.track_files`):
 - column names in any case, trimmed, with a ``(unit)`` suffix (read as a conversion
   when known: :func:`~jaxgrav.track_units.header_scale`), and the aliases
   of :data:`ALIASES` (``time`` for ``t``, ``latitude`` for ``lat``, ``longitude``,
-  ``long``, ``lng`` for ``lon``, ``height`` for ``h``, ``ve``/``vn`` for ``v_east``/
-  ``v_north``); an exact name wins over an alias;
+  ``long``, ``lng`` for ``lon``, ``height`` for ``h``, ``faa`` for ``gravity``,
+  ``ve``/``vn`` for ``v_east``/``v_north``); an exact name wins over an alias, and two
+  names of one column (``lat`` beside ``latitude``) are refused;
   ``columns={"lat": "LAT", ...}`` (``--columns lat=LAT,...``, :func:`parse_columns`)
   names any other column, by name or by 1-based number;
 - times in seconds or as ISO-8601 date-times (``2024-05-01T12:00:00Z``,

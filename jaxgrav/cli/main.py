@@ -183,6 +183,9 @@ def check_special_outputs(args):
         value = getattr(args, name, None)
         if value is None:
             continue
+        if value == "-":  # wrote a file named '-' (--track - reads standard input)
+            raise ValueError(f"--{name} - : jaxgrav writes its outputs to files, not to "
+                             "standard output; give a file name (./- for a file named '-')")
         path = Path(value)
         check_name(path, f"--{name} {str(value)!r}")  # exists() raised "File name too long"
         if path.exists() and not (path.is_file() or path.is_dir()):

@@ -105,12 +105,12 @@ def test_an_output_named_for_another_format_is_refused(tmp_path, refused, argv, 
 def test_a_track_without_readings_names_its_columns_in_words(tmp_path, refused):
     """"... column; it has ['lat', 'lon', 't']": a Python list, sorted, and no way out."""
     track = tmp_path / "t.csv"
-    track.write_text("t,lat,lon,FAA\n" + "".join(
+    track.write_text("t,lat,lon,reading\n" + "".join(
         f"{60 * i},{30.2 + 1e-3 * i:.4f},130.4,{i}\n" for i in range(6)))
     out = tmp_path / "m.json"
     err = refused(["match", "--map", "ryukyu", "--track", track, "--out", out],
                   f"track file {str(track)!r} needs a 'gravity' (mGal) or 'magnetic' (nT) "
-                  "column; it has t, lat, lon, FAA (name the readings' column with --columns "
+                  "column; it has t, lat, lon, reading (name the readings' column with --columns "
                   "gravity=COLUMN)")
     assert "[" not in err and not out.exists()
 

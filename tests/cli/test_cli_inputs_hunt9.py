@@ -7,9 +7,12 @@ finds (below them)."""
 
 import re
 
+import numpy as np
 import pytest
+import xarray as xr
 
 from jaxgrav.cli import main
+from jaxgrav.datasets import load_map
 from jaxgrav.tracks import read_track_csv
 
 ROWS = [(29.5 + 0.0056 * i, 126.5 + 0.0068 * i) for i in range(5)]
@@ -101,3 +104,66 @@ def test_a_spacing_the_readings_cannot_resolve_is_refused(tmp_path, refused):
             "readings of --noise 1 mGal can tell (0.183 mGal): no node could be told from its "
             "neighbours; expected a --spacing of at least 0.44 m")
     assert list(tmp_path.iterdir()) == []
+
+
+# --- the hunt's own finds ---------------------------------------------------------------
+
+@pytest.mark.parametrize("argv", [
+    ["sample", "--map", "ryukyu", "--track", "t.csv", "--out", "-"],
+    ["simulate", "--out", "t2.csv", "--truth", "-"],
+])
+def test_a_dash_output_is_refused(tmp_path, monkeypatch, refused, argv):
+    """``--out -`` wrote a file named ``-`` (``--track -`` reads standard input)."""
+    monkeypatch.chdir(tmp_path)
+    _track(tmp_path / "t.csv")
+    refused(argv, "- : jaxgrav writes its outputs to files, not to standard output; give a "
+                  "file name (./- for a file named '-')")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv"]
+
+
+def _ryukyu_nc(path, lat_units="degrees_north", lon_units="degrees_east", sign=(1, 1),
+               shift=0.0):
+    grid = load_map("ryukyu")
+    lat, lon = np.asarray(grid.lat), np.asarray(grid.lon)
+    xr.Dataset({"gravity": (("lat", "lon"), np.asarray(grid.values, float), {"units": "mGal"})},
+               coords={"lat": ("lat", sign[0] * lat, {"units": lat_units}),
+                       "lon": ("lon", sign[1] * lon + shift, {"units": lon_units})}
+               ).to_netcdf(path)
+    return path
+
+
+@pytest.mark.parametrize("kw", [
+    {"lon_units": "degrees_west", "sign": (1, -1)},
+    {"lon_units": "degree_W", "sign": (1, -1)},
+    {"lat_units": "degrees_south", "sign": (-1, 1)},
+    {"lat_units": "degreesS", "sign": (-1, 1)},
+    {"shift": -360.0},  # longitudes -236..-224: the -360..0 convention
+])
+def test_maps_counting_west_south_or_from_minus_360_are_read(tmp_path, kw):
+    """A map declaring CF ``degrees_west`` (or ``degrees_south``) was read as east: every
+    track "off the map" (lon -136..-124); one in -360..0 was refused without its name."""
+    track = _track(tmp_path / "t.csv")
+    want, got = tmp_path / "want.csv", tmp_path / "got.csv"
+    assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out", str(want)]) == 0
+    assert main(["sample", "--map", str(_ryukyu_nc(tmp_path / "m.nc", **kw)), "--track",
+                 str(track), "--out", str(got)]) == 0
+    np.testing.assert_allclose(read_track_csv(got)["map"], read_track_csv(want)["map"],
+                               atol=1e-5)
+
+
+@pytest.mark.parametrize("name", ["faa", "FAA (mGal)", "gravity_anomaly", "free_air_anomaly",
+                                  "Free_Air"])
+def test_a_survey_s_anomaly_column_is_the_gravity(tmp_path, name):
+    """``t,lat,lon,faa`` was refused by ``match`` ("needs a 'gravity' (mGal) or
+    'magnetic' (nT) column")."""
+    track = _track(tmp_path / "t.csv", f"t,lat,lon,{name}")
+    got = read_track_csv(track, required=("t", "lat", "lon"))
+    assert got["gravity"].tolist() == [-10, -9, -8, -7, -6]
+    assert got.renamed["gravity"] == name
+
+
+def test_a_gravity_column_beside_an_anomaly_column_is_ambiguous(tmp_path):
+    track = _track(tmp_path / "t.csv", "t,lat,lon,gravity,faa",
+                   [f"{120 * i},{lat},{lon},979700,-10" for i, (lat, lon) in enumerate(ROWS)])
+    with pytest.raises(ValueError, match="columns 'gravity' and 'faa' could both be 'gravity'"):
+        read_track_csv(track, required=("t", "lat", "lon"))
