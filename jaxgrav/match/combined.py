@@ -33,7 +33,6 @@ and the no-harm test (``iccp.max_p_worse``, :func:`p_worse_than_ins`, 131072).
 
 import jax
 import jax.numpy as jnp
-from jax.scipy.special import ndtr
 
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import local_offsets_m
@@ -53,7 +52,12 @@ from jaxgrav.match.gls import (
     track_covariance,
 )
 from jaxgrav.match.iccp import IccpConfig, iccp_fit, local_track_frame
-from jaxgrav.match.integrity import largest_sigma, region_mask, region_sigma
+from jaxgrav.match.integrity import (
+    largest_sigma,
+    p_worse_than_ins,
+    region_mask,
+    region_sigma,
+)
 from jaxgrav.match.offsets import shifted_tracks
 from jaxgrav.match.result import STATUS, MatchResult
 from jaxgrav.prepared import prepare_map
@@ -227,35 +231,6 @@ def match_entropy_iccp(grid, lat, lon, readings, entropy=_DEFAULT_ENTROPY, iccp=
         edge_mass=post.edge_mass.astype(dtype),
         chi2_per_dof=chi2,
     )
-
-
-def p_worse_than_ins(offset_m, covariance_m2):
-    """Probability that the truth lies nearer the INS track than the fix does.
-
-    The truth ``x`` (the offset from the INS track, m) distributed ``N(m, C)`` about
-    the fix ``m``: the fix is worse than the INS track where ``|x − m| > |x|``, the
-    half-plane ``x·m < |m|²/2`` on the INS side of the bisector, whose probability is
-    ``Φ(−|m|² / (2 √(mᵀ C m)))``: 0.5 for a fix on the INS track, small for a fix
-    many of its σ away from it (along the line joining them).
-
-    Parameters
-    ----------
-    offset_m : Array, shape ``(..., 2)``
-        The fix's mean offset from the INS track (m; north, east).
-    covariance_m2 : Array, shape ``(..., 2, 2)``
-        Its covariance (m²).
-
-    Returns
-    -------
-    Array, shape ``(...)``
-        In ``[0, 0.5]``; 0.5 for a zero offset, NaN for a non-finite covariance.
-    """
-    m = jnp.asarray(offset_m)
-    c = jnp.asarray(covariance_m2)
-    mm = jnp.sum(m * m, axis=-1)
-    mcm = jnp.einsum("...i,...ij,...j->...", m, c, m)
-    z = jnp.where(mm > 0, 0.5 * mm / jnp.sqrt(jnp.where(mm > 0, mcm, 1.0)), 0.0)
-    return ndtr(-z)
 
 
 def _moved(p0, rotation, translation):

@@ -135,6 +135,13 @@ class DenseConfig:
         (:func:`~jaxgrav.match.integrity.region_sigma`): the readings did not narrow
         the search enough for a fix, whatever the region's size (traced; ``inf``,
         the default, never rejects).
+    max_p_worse : float
+        The no-harm test: also rejected (status 131072) when the probability, under the
+        fix's Gaussian ``N(fix, covariance_m2)``, that the truth lies nearer the searched
+        (INS) track than the fix exceeds this
+        (:func:`~jaxgrav.match.integrity.p_worse_than_ins`; in ``[0, 0.5]`` or ``inf``,
+        the default: never rejects). The entropy+ICCP matcher's test
+        (``IccpConfig.max_p_worse``), the same rule.
     """
 
     spacing_m: float = 500.0
@@ -164,6 +171,7 @@ class DenseConfig:
     max_second_mode: float = float("inf")
     max_chi2_per_dof: float = float("inf")
     max_edge_mass: float = float("inf")
+    max_p_worse: float = float("inf")
     reading_covariance: object = None
     offset_prior_m2: object = None
     reading_coupling: object = None
@@ -187,6 +195,11 @@ class DenseConfig:
         ratio = concrete(self.max_sigma_ratio)
         if ratio is not None and ratio.dtype != object and not np.all(ratio >= 0):
             raise ValueError(f"max_sigma_ratio must be >= 0 (inf: no test); got {ratio}")
+        worse = concrete(self.max_p_worse)
+        if worse is not None and worse.dtype != object and not np.all(
+                (worse >= 0) & ((worse <= 0.5) | np.isposinf(worse))):
+            raise ValueError(f"max_p_worse must be in [0, 0.5] (a probability; inf: no test); "
+                             f"got {worse}")
         sigma = concrete(self.map_error_mgal)
         if (self.score_model == "white" and sigma is not None and sigma.dtype != object
                 and np.any(sigma > 0)):

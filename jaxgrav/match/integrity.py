@@ -6,7 +6,8 @@ likelihood-weighted posterior of the offset (:func:`~jaxgrav.match.gls.offset_po
 the cell quantisation term, or, when the posterior is narrower than the lattice, the
 Laplace covariance of the Gauss–Newton refinement), the test statistics, and the
 integrity decision of :class:`~jaxgrav.match.dense.DenseConfig`'s thresholds with
-the status bits of :data:`~jaxgrav.match.result.STATUS` (512, 1024, 2048, 4096).
+the status bits of :data:`~jaxgrav.match.result.STATUS` (512, 1024, 2048, 4096,
+131072).
 """
 
 from typing import NamedTuple
@@ -14,12 +15,13 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.scipy.special import ndtr
 
 from jaxgrav._linalg import inv_2x2
 from jaxgrav.match.gls import offset_posterior
 
-__all__ = ["FixQuality", "fix_quality", "largest_sigma", "region_mask", "region_sigma",
-           "region_spread"]
+__all__ = ["FixQuality", "fix_quality", "largest_sigma", "p_worse_than_ins", "region_mask",
+           "region_sigma", "region_spread"]
 
 
 class FixQuality(NamedTuple):
@@ -57,6 +59,35 @@ def largest_sigma(cov):
     """Square root of the larger eigenvalue of 2 × 2 covariances ``(..., 2, 2)`` (m)."""
     a, b, d = cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1]
     return jnp.sqrt(0.5 * (a + d) + jnp.sqrt(0.25 * (a - d) ** 2 + b * b))
+
+
+def p_worse_than_ins(offset_m, covariance_m2):
+    """Probability that the truth lies nearer the INS track than the fix does.
+
+    The truth ``x`` (the offset from the INS track, m) distributed ``N(m, C)`` about
+    the fix ``m``: the fix is worse than the INS track where ``|x − m| > |x|``, the
+    half-plane ``x·m < |m|²/2`` on the INS side of the bisector, whose probability is
+    ``Φ(−|m|² / (2 √(mᵀ C m)))``: 0.5 for a fix on the INS track, small for a fix
+    many of its σ away from it (along the line joining them).
+
+    Parameters
+    ----------
+    offset_m : Array, shape ``(..., 2)``
+        The fix's mean offset from the INS track (m; north, east).
+    covariance_m2 : Array, shape ``(..., 2, 2)``
+        Its covariance (m²).
+
+    Returns
+    -------
+    Array, shape ``(...)``
+        In ``[0, 0.5]``; 0.5 for a zero offset, NaN for a non-finite covariance.
+    """
+    m = jnp.asarray(offset_m)
+    c = jnp.asarray(covariance_m2)
+    mm = jnp.sum(m * m, axis=-1)
+    mcm = jnp.einsum("...i,...ij,...j->...", m, c, m)
+    z = jnp.where(mm > 0, 0.5 * mm / jnp.sqrt(jnp.where(mm > 0, mcm, 1.0)), 0.0)
+    return ndtr(-z)
 
 
 def region_mask(half_size, region):
@@ -163,9 +194,10 @@ def fix_quality(chi2, n_rot, d_n, d_e, best_ne, laplace_m2, final_chi2, dof, fou
     config : DenseConfig
         ``spacing_m``, ``half_size``, ``region``, ``resolved_n_effective``, the thresholds
         ``max_sigma_m``, ``max_sigma_ratio``, ``max_second_mode``, ``max_chi2_per_dof``,
-        ``max_edge_mass``, and ``offset_prior_m2``: with it (a 2 × 2 covariance) the
-        posterior is the likelihood times a Gaussian prior of that covariance about the
-        searched track (an unresolved one: the Laplace Gaussian times the prior).
+        ``max_edge_mass``, ``max_p_worse`` (:func:`p_worse_than_ins` of the fix, 131072),
+        and ``offset_prior_m2``: with it (a 2 × 2 covariance) the posterior is the
+        likelihood times a Gaussian prior of that covariance about the searched track
+        (an unresolved one: the Laplace Gaussian times the prior).
 
     Returns
     -------
@@ -194,10 +226,12 @@ def fix_quality(chi2, n_rot, d_n, d_e, best_ne, laplace_m2, final_chi2, dof, fou
               | jnp.where(post.second_mode_ratio > config.max_second_mode, 1024, 0)
               | jnp.where(chi2_dof > config.max_chi2_per_dof, 2048, 0)
               | jnp.where(post.edge_mass > config.max_edge_mass, 4096, 0))
+    mean_ne = jnp.where(resolved, jnp.stack([post.mean_north_m, post.mean_east_m]), best_ne)
+    status = status | jnp.where(p_worse_than_ins(mean_ne, cov) > config.max_p_worse, 131072, 0)
     status = jnp.where(found, status, 0)
     return FixQuality(
-        mean_north_m=jnp.where(resolved, post.mean_north_m, best_ne[0]),
-        mean_east_m=jnp.where(resolved, post.mean_east_m, best_ne[1]),
+        mean_north_m=mean_ne[0],
+        mean_east_m=mean_ne[1],
         covariance_m2=cov,
         resolved=resolved,
         n_effective=post.n_effective,

@@ -50,7 +50,7 @@ STATUS = {
 }
 """Bit flags of :attr:`MatchResult.status`, for every method (one table).
 
-``dense`` raises 1 and 8, the integrity bits 512, 1024, 2048 and 4096 (a
+``dense`` raises 1 and 8, the integrity bits 512, 1024, 2048, 4096 and 131072 (a
 rejected fix: :attr:`MatchResult.accepted` false), and with survey gaps 32768
 (rejected too); ``chains`` 1, 2, 4, 8, 256 and the
 integrity bits 512, 1024, 2048; ``entropy`` 1, 8 and 32;
@@ -73,7 +73,7 @@ P_IMPLAUSIBLE = 1e-3
 """A fit whose χ² exceeds its (1 − 10⁻³) quantile is flagged (:data:`IMPLAUSIBLE_FIT`)."""
 
 CORRELATION_STATUS = {bit: STATUS[bit] for bit in (1, 2, 4, 8, 256, 512, 1024, 2048, 4096,
-                                                   32768)}
+                                                   32768, 131072)}
 """The bits of the correlation matchers (``dense``, ``chains``): an excerpt of :data:`STATUS`."""
 
 

@@ -26,11 +26,14 @@ __all__ = [
     "iccp_config_for",
 ]
 
-MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0, "max_sigma_ratio": 0.9}
+MAP_ERROR_INTEGRITY = {"fix": "posterior", "max_sigma_m": 3000.0, "max_sigma_ratio": 0.9,
+                       "max_p_worse": 0.3}
 """DenseConfig fields :func:`config_for` sets with a map error (σ > 0): the fix and the
 integrity thresholds, ``max_sigma_m`` chosen by ``examples/map_error_dense.py``,
 ``max_sigma_ratio`` (a fix must narrow the searched disc's own spread by 10 %) by the
-Monte Carlo sweep in the README."""
+Monte Carlo sweep in ``docs/map-error.md``, and the no-harm test of the entropy+ICCP
+matcher (:data:`ICCP_MAP_ERROR_INTEGRITY`'s ``max_p_worse``, the same 0.3; measured on
+the dense matcher with ``examples/dense_region_sweep.py``)."""
 
 WHITE_INTEGRITY = {"max_sigma_ratio": 0.9}
 """DenseConfig fields :func:`config_for` sets without a map error (white-noise score): the
