@@ -26,7 +26,7 @@ from jaxgrav.cli.inputs import (
     whole_number,
 )
 from jaxgrav.cli.match_missing import missing_counts, missing_message
-from jaxgrav.cli.match_search import check_radius_resolved, check_search
+from jaxgrav.cli.match_search import check_radius_resolved, check_search, check_track_moves
 from jaxgrav.cli.match_size import check_fixes_memory
 from jaxgrav.cli.match_status import status_text
 from jaxgrav.cli.sanity import check_readings, fit_check, time_gap_warning
@@ -180,6 +180,7 @@ def _cmd_match(args):
               "the default drift radius")
     check_search(args, grid, radius_deg, track["lat"], source=source)
     check_radius_resolved(grid, radius_deg, n_rows, args.noise, source)
+    check_track_moves(grid, track["lat"], track["lon"], args.noise, f"--track {str(args.track)!r}")
     if args.refine > 1:
         grid = grid.refine(args.refine)
     if field != "gravity" and args.method not in CONTOUR_METHODS:

@@ -13,7 +13,8 @@ import numpy as np
 
 from jaxgrav.sim import DEG_ARC_M
 
-__all__ = ["check_radius_resolved", "check_search", "steepest_slope"]
+__all__ = ["check_radius_resolved", "check_search", "check_track_moves", "steepest_slope",
+           "unresolved"]
 
 _MAX_REFINED_NODES = 2e7
 """Nodes of a refined map above which ``--refine`` is refused (160 MB in float64)."""
@@ -30,26 +31,59 @@ def steepest_slope(grid):
     return max((float(s.max()) for s in finite if s.size), default=0.0)
 
 
-def check_radius_resolved(grid, radius_deg, n_fixes, noise, source):
-    """ValueError for a search disc across which the map, at its steepest, changes by
-    less than ``n_fixes`` readings of ``noise`` can tell (``noise / sqrt(n_fixes)``):
-    every candidate in it fits as the INS track does."""
+def unresolved(grid, span_m, n_fixes, noise):
+    """Whether ``n_fixes`` readings of ``noise`` can tell the map's values ``span_m`` apart.
+
+    They can when the map's steepest slope (:func:`steepest_slope`) changes it across
+    the span by at least what their mean resolves, ``noise / sqrt(n_fixes)``.
+
+    Returns
+    -------
+    text : str or None
+        None when they can; else the reason, ``"the map changes by at most ... can
+        tell (...)"``, for a message.
+    least_m : float
+        The shortest span they can tell (m; 0 for a flat map or noiseless readings).
+    """
     slope = steepest_slope(grid)
     tell = noise / math.sqrt(n_fixes)
-    least_m = tell / (2.0 * slope) if slope > 0 else 0.0
-    if 2.0 * radius_deg * DEG_ARC_M >= least_m:
+    least_m = tell / slope if slope > 0 else 0.0
+    if span_m >= least_m:
+        return None, least_m
+    unit = grid.units or "map units"
+    return (f"the map changes by at most {span_m * slope:.3g} {unit} (its steepest slope is "
+            f"{slope:.3g} {unit}/m), below what {n_fixes} readings of --noise {noise:g} "
+            f"{unit} can tell ({tell:.3g} {unit})"), least_m
+
+
+def check_radius_resolved(grid, radius_deg, n_fixes, noise, source):
+    """ValueError for a search disc across which the map, at its steepest, changes by
+    less than ``n_fixes`` readings of ``noise`` can tell (:func:`unresolved`): every
+    candidate in it fits as the INS track does."""
+    text, least_m = unresolved(grid, 2.0 * radius_deg * DEG_ARC_M, n_fixes, noise)
+    if text is None:
         return
     said = (f"{source} {radius_deg:g} degrees of arc" if source == "--drift-radius"
             else f"{source} ({radius_deg:g} degrees of arc at most)")
-    unit = grid.units or "map units"
     raise ValueError(f"{said} ({radius_deg * DEG_ARC_M:.3g} m) searches a region across which "
-                     f"the map changes by at most {2 * radius_deg * DEG_ARC_M * slope:.3g} "
-                     f"{unit} (its steepest slope is {slope:.3g} {unit}/m), below what "
-                     f"{n_fixes} readings of --noise {noise:g} {unit} can tell ({tell:.3g} "
-                     f"{unit}): every position in it would fit as the INS track does; "
-                     "expected a drift radius of at least "
-                     f"{least_m / DEG_ARC_M:.2g} degrees of arc "
-                     f"({least_m:.2g} m)")
+                     f"{text}: every position in it would fit as the INS track does; expected "
+                     f"a drift radius of at least {least_m / 2 / DEG_ARC_M:.2g} degrees of arc "
+                     f"({least_m / 2:.2g} m)")
+
+
+def check_track_moves(grid, lat, lon, noise, where):
+    """ValueError for a track whose fixes all lie closer together than ``len(lat)``
+    readings of ``noise`` can tell apart on the map (a vessel at anchor reads one map
+    value: the match ran and kept the INS)."""
+    north = (np.max(lat) - np.min(lat)) * DEG_ARC_M
+    east = ((np.max(lon) - np.min(lon)) * DEG_ARC_M * math.cos(math.radians(float(np.mean(lat)))))
+    extent = float(math.hypot(north, east))
+    text, least_m = unresolved(grid, extent, len(lat), noise)
+    if text is not None:
+        raise ValueError(f"{where}: its {len(lat)} fixes lie within {extent:.3g} m of each "
+                         f"other, across which {text}: a track that does not move reads one "
+                         "value of the map and tells no position; matching needs a track "
+                         f"at least {least_m:.2g} m long")
 
 
 def check_search(args, grid, radius_deg, lat, source="--drift-radius"):

@@ -18,11 +18,13 @@ from pathlib import Path
 import jax
 
 from jaxgrav.cli.filter_checks import memory_budget
+from jaxgrav.cli.match_search import unresolved
 from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M, MAX_BIAS_MGAL, check_seed
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match import METHODS
 from jaxgrav.montecarlo import DEFAULT_CHUNK
 from jaxgrav.montecarlo.filter_runs import FILTER_METHODS
+from jaxgrav.scenarios import MatchingScenario
 from jaxgrav.sim import DEG_ARC_M
 
 __all__ = ["BYTES_PER_FIX", "LARGE_RUNS", "PAPER_D_AREA_DEG", "check_drift", "check_options",
@@ -209,6 +211,18 @@ def check_drift(args, grid, kind):
                          f"spans {2 * args.drift:g} degrees, more than "
                          f"{what}, {side:.3g} degrees of arc across; expected a drift below "
                          f"{side / 2:.3g} degrees")
+    if kind != "matcher" or grid is None:  # a filter may start where it is known to be
+        return
+    default = MatchingScenario()  # the matchers' runs (paper A's scenario)
+    noise = default.noise_mgal if args.noise is None else args.noise
+    fixes = default.n_fixes if args.fixes is None else args.fixes
+    text, least_m = unresolved(grid, 2.0 * args.drift * DEG_ARC_M, fixes, noise)
+    if text is not None:  # --drift 1e-12 ran the runs, each fix the INS's
+        raise ValueError(f"--drift {args.drift:g} degrees of arc (the search radius, "
+                         f"{args.drift * DEG_ARC_M:.3g} m) searches a region across which "
+                         f"{text}: every position in it would fit as the INS track does; "
+                         f"expected a --drift of at least {least_m / 2 / DEG_ARC_M:.2g} "
+                         "degrees of arc")
 
 
 def told_from_args(args):

@@ -14,6 +14,7 @@ import numpy as np
 from jaxgrav import executables
 from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import check_map_field, check_out_format, whole_number
+from jaxgrav.cli.match_search import unresolved
 from jaxgrav.constants import KNOT
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import TruthGrid, map_error, truth_grid
@@ -248,6 +249,32 @@ def _check_track_fits(args, scen, grid):
         f"from each edge; at most --n {fit} fits (or give a shorter --dt or a lower speed)")
 
 
+def _drift_radius(args):
+    """The ``drift_radius`` written in the track (degrees of arc)."""
+    return (1.2 * args.drift if args.drift_law == "fixed"
+            else float(rayleigh_quantile(args.drift, args.probability)))
+
+
+def _check_resolved(args, scen, grid):
+    """Refuse a track, or a search radius, shorter than ``--n`` readings of ``--noise``
+    can tell on the map (``--dt 1e-9``, ``--drift 1e-12`` were written, exit 0; jaxgrav
+    match refuses such a radius)."""
+    length = scen.step_m * (args.n - 1)
+    text, least_m = unresolved(grid, length, args.n, args.noise)
+    if text is not None:
+        raise ValueError(f"--n {args.n} fixes every {args.dt:g} s make a track of "
+                         f"{length:.3g} m, along which {text}: it would tell no position; "
+                         f"expected a --dt of at least {args.dt * least_m / length:.2g} s")
+    radius = _drift_radius(args)
+    text, least_m = unresolved(grid, 2.0 * radius * DEG_ARC_M, args.n, args.noise)
+    if text is not None:
+        raise ValueError(f"--drift {args.drift:g} degrees of arc gives the track a drift "
+                         f"radius of {radius * DEG_ARC_M:.3g} m, across whose search region "
+                         f"{text}: jaxgrav match would refuse it; expected a --drift of at "
+                         f"least {args.drift * least_m / (2 * radius * DEG_ARC_M):.2g} "
+                         "degrees of arc")
+
+
 def _check_readings(args, run, grid):
     """Refuse a simulated track whose readings are NaN: off the map, or on missing nodes."""
     bad = ~np.isfinite(np.asarray(run.readings))
@@ -282,6 +309,7 @@ def _cmd_simulate(args):
         n_fixes=args.n, drift_law=args.drift_law,
     )
     _check_track_fits(args, scen, grid)
+    _check_resolved(args, scen, grid)
     scen = dataclasses.replace(scen, region=placement_region(scen))
     model = map_error_from_args(args, grid, allow_nan=True)
     run = executables.call(_matching_program, jax.random.key_data(jax.random.key(args.seed)),
@@ -291,8 +319,7 @@ def _cmd_simulate(args):
     write_track_csv(args.out, {
         "t": truth.t, "lat": run.ins_lat, "lon": run.ins_lon, "gravity": run.readings,
         "v_east": truth.v_east, "v_north": truth.v_north,
-        "drift_radius": np.full(args.n, 1.2 * args.drift if args.drift_law == "fixed"
-                                else float(rayleigh_quantile(args.drift, args.probability))),
+        "drift_radius": np.full(args.n, _drift_radius(args)),
     }, force=args.force)
     if args.truth:
         write_track_csv(args.truth, {"t": truth.t, "lat": truth.lat, "lon": truth.lon},

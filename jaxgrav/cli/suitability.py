@@ -25,7 +25,6 @@ bound says "anywhere on the map" (``precision_m``, ``corr`` and the axis whose 1
 exceeds that size are blanked; the summary says how many).
 """
 
-import math
 import sys
 from pathlib import Path
 
@@ -36,7 +35,7 @@ from matplotlib.colors import LogNorm
 
 from jaxgrav._io import atomic_output, check_outputs
 from jaxgrav.cli.inputs import check_out_format, fill_map_error_length, whole_number
-from jaxgrav.cli.match_search import steepest_slope
+from jaxgrav.cli.match_search import unresolved
 from jaxgrav.cli.simulate import MAX_BIAS_MGAL
 from jaxgrav.constants import DEG
 from jaxgrav.datasets import load_map
@@ -202,19 +201,12 @@ def _check_segment_resolved(grid, args):
     """ValueError for a segment along which the map, at its steepest, changes by less than
     ``--fixes`` readings of ``--noise`` can tell: "no information" at every node
     (``--spacing 1e-6`` ran and wrote such a map, exit 0)."""
-    slope = steepest_slope(grid)
-    tell = args.noise / math.sqrt(args.fixes)
-    least_m = tell / slope / (args.fixes - 1) if slope > 0 else 0.0
-    if args.spacing >= least_m:
-        return
-    unit = grid.units or "map units"
     length = (args.fixes - 1) * args.spacing
-    raise ValueError(f"--spacing {args.spacing:g} m makes a segment of {length:.3g} m, along "
-                     f"which the map changes by at most {length * slope:.3g} {unit} (its "
-                     f"steepest slope is {slope:.3g} {unit}/m), below what {args.fixes} "
-                     f"readings of --noise {args.noise:g} {unit} can tell ({tell:.3g} {unit}): "
-                     "no node could be told from its neighbours; expected a --spacing of at "
-                     f"least {least_m:.2g} m")
+    text, least_m = unresolved(grid, length, args.fixes, args.noise)
+    if text is not None:
+        raise ValueError(f"--spacing {args.spacing:g} m makes a segment of {length:.3g} m, "
+                         f"along which {text}: no node could be told from its neighbours; "
+                         f"expected a --spacing of at least {least_m / (args.fixes - 1):.2g} m")
 
 
 def _check_args(args):

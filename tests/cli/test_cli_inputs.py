@@ -23,7 +23,7 @@ def sim(tmp_path_factory):
 
 def _user_log(path, track):
     """The simulated track as a user's log: semicolons, ISO times, other header names,
-    a text column and the gravity under a name no alias covers."""
+    a text column and the gravity as FAA (free-air anomaly)."""
     rows = ["Time;Latitude;Longitude;ship;FAA;v_east;v_north"]
     for i in range(track["t"].size):
         s = int(track["t"][i])
@@ -41,11 +41,13 @@ def test_match_reads_a_user_log_with_columns(sim, tmp_path):
     ref, out = tmp_path / "ref.json", tmp_path / "r.json"
     assert main(["match", "--map", "ryukyu", "--track", str(d / "t.csv"),
                  "--out", str(ref)]) == 0
-    # without --columns the gravity column is not found, and the message says how
+    # FAA is read as the gravity (an alias since the ninth hunt), or named by --columns
     assert main(["match", "--map", "ryukyu", "--track", str(tmp_path / "log.csv"),
-                 "--out", str(out)]) == 2
+                 "--out", str(tmp_path / "alias.json")]) == 0
     assert main(["match", "--map", "ryukyu", "--track", str(tmp_path / "log.csv"),
                  "--columns", "gravity=FAA", "--out", str(out)]) == 0
+    assert json.loads((tmp_path / "alias.json").read_text())["lat"] == json.loads(
+        out.read_text())["lat"]
     a, b = json.loads(ref.read_text()), json.loads(out.read_text())
     np.testing.assert_allclose(b["lat"], a["lat"], atol=1e-7)
     np.testing.assert_allclose(b["lon"], a["lon"], atol=1e-7)

@@ -167,3 +167,49 @@ def test_a_gravity_column_beside_an_anomaly_column_is_ambiguous(tmp_path):
                    [f"{120 * i},{lat},{lon},979700,-10" for i, (lat, lon) in enumerate(ROWS)])
     with pytest.raises(ValueError, match="columns 'gravity' and 'faa' could both be 'gravity'"):
         read_track_csv(track, required=("t", "lat", "lon"))
+
+
+def test_a_track_that_does_not_move_is_refused_by_match(tmp_path, refused):
+    """A vessel at anchor (every fix at one position) ran ``match`` to "fix rejected ...
+    INS track kept", exit 0: one map value tells no position."""
+    track = _track(tmp_path / "t.csv", rows=[f"{120 * i},29.5,126.5,{-10 + 0.1 * i}"
+                                             for i in range(6)])
+    out = tmp_path / "r.json"
+    refused(["match", "--map", "ryukyu", "--track", track, "--out", out],
+            f"--track '{track}': its 6 fixes lie within 0 m of each other, across which the "
+            "map changes by at most 0 mGal (its steepest slope is 0.0144 mGal/m), below what 6 "
+            "readings of --noise 1 mGal can tell (0.408 mGal): a track that does not move "
+            "reads one value of the map and tells no position; matching needs a track at "
+            "least 28 m long")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--dt", "1e-9"], "--n 30 fixes every 1e-09 s make a track of 2.11e-07 m, along which "
+                       "the map changes by at most 3.03e-09 mGal (its steepest slope is 0.0144 "
+                       "mGal/m), below what 30 readings of --noise 1 mGal can tell (0.183 mGal)"
+                       ": it would tell no position; expected a --dt of at least 0.06 s"),
+    (["--drift", "1e-12"], "--drift 1e-12 degrees of arc gives the track a drift radius of "
+                           "1.33e-07 m, across whose search region the map changes by at most "
+                           "3.83e-09 mGal"),
+])
+def test_simulate_refuses_a_track_or_drift_no_reading_resolves(tmp_path, refused, argv,
+                                                               message):
+    """``simulate --dt 1e-9`` wrote 30 fixes within 0.2 µm, ``--drift 1e-12`` a
+    ``drift_radius`` of 1.2e-12 degrees (jaxgrav match now refuses it), exit 0."""
+    out, truth = tmp_path / "t.csv", tmp_path / "truth.csv"
+    refused(["simulate", "--out", out, "--truth", truth, *argv], message)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_montecarlo_refuses_a_matcher_drift_no_reading_resolves(tmp_path, refused):
+    """``montecarlo --method dense --drift 1e-12`` ran its runs (each fix the INS's)."""
+    out = tmp_path / "m.nc"
+    refused(["montecarlo", "--method", "dense", "--runs", "10", "--drift", "1e-12", "--out",
+             out],
+            "--drift 1e-12 degrees of arc (the search radius, 1.11e-07 m) searches a region "
+            "across which the map changes by at most 3.19e-09 mGal (its steepest slope is "
+            "0.0144 mGal/m), below what 30 readings of --noise 1 mGal can tell (0.183 mGal): "
+            "every position in it would fit as the INS track does; expected a --drift of at "
+            "least 5.7e-05 degrees of arc")
+    assert list(tmp_path.iterdir()) == []
