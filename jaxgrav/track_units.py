@@ -41,22 +41,28 @@ _HEADER_UNITS = {  # column -> unit (lower case, spaces kept) -> factor to the l
           **dict.fromkeys(("ns", "nanosecond", "nanoseconds"), 1e-9),
           **dict.fromkeys(("min", "mins", "minute", "minutes"), 60.0),
           **dict.fromkeys(("h", "hr", "hrs", "hour", "hours"), 3600.0),
-          **dict.fromkeys(("d", "day", "days"), 86400.0)},
-    "lat": {**_DEG, **dict.fromkeys(("rad", "radian", "radians"), 180.0 / np.pi)},
+          **dict.fromkeys(("d", "day", "days"), 86400.0),
+          **dict.fromkeys(("week", "weeks", "wk"), 604800.0)},
+    "lat": {**_DEG, **dict.fromkeys(("rad", "radian", "radians"), 180.0 / np.pi),
+            "arcmin": 1.0 / 60.0, "arcsec": 1.0 / 3600.0},
     "h": {**dict.fromkeys(("m", "metre", "metres", "meter", "meters"), 1.0),
-          "km": 1e3, "cm": 1e-2, "mm": 1e-3, **dict.fromkeys(("ft", "feet"), 0.3048)},
+          "km": 1e3, "cm": 1e-2, "mm": 1e-3, **dict.fromkeys(("ft", "feet"), 0.3048),
+          **dict.fromkeys(("in", "inch", "inches"), 0.0254),
+          **dict.fromkeys(("fathom", "fathoms", "fm"), 1.8288)},
     "v_east": {**dict.fromkeys(("m/s", "m s-1", "ms-1", "m/sec", "m s^-1"), 1.0),
                **dict.fromkeys(("kn", "kt", "kts", "knot", "knots"), 1852.0 / 3600.0),
                **dict.fromkeys(("km/h", "kmh", "kph", "km h-1"), 1.0 / 3.6),
                **dict.fromkeys(("ft/s", "fps", "ft s-1", "ft/sec"), 0.3048),
                **dict.fromkeys(("cm/s", "cm s-1"), 1e-2),
                **dict.fromkeys(("mm/s", "mm s-1"), 1e-3),
-               **dict.fromkeys(("mph", "mi/h"), 0.44704)},
+               **dict.fromkeys(("mph", "mi/h"), 0.44704),
+               **dict.fromkeys(("m/min", "m min-1"), 1.0 / 60.0)},
     "drift_radius": {**_DEG, **dict.fromkeys(("rad", "radian", "radians"), 180.0 / np.pi),
                      **dict.fromkeys(("m", "metre", "metres", "meter", "meters"), _ARC_M),
                      "km": 1e3 * _ARC_M, **dict.fromkeys(("nmi", "nm", "nautical miles"),
                                                          1852.0 * _ARC_M),
-                     **dict.fromkeys(("arcmin", "'"), 1.0 / 60.0)},
+                     **dict.fromkeys(("arcmin", "'"), 1.0 / 60.0),
+                     **dict.fromkeys(("mi", "mile", "miles"), 1609.344 * _ARC_M)},
 }
 _HEADER_UNITS.update(lon=dict(_HEADER_UNITS["lat"]), v_north=_HEADER_UNITS["v_east"])
 for _name, _sign, _words in (("lat", 1.0, ("n", "north")), ("lat", -1.0, ("s", "south")),
@@ -118,12 +124,17 @@ def header_scale(name, header, label):
     unit = since.group(1).strip() if since else unit
     if name in _FIELD_UNITS:
         factor_units = map_units(np.ones(1), unit)
+        if factor_units[1] not in _FIELD_UNITS.values():  # "mGal FAA", "mGal, free-air"
+            factor_units = map_units(np.ones(1), _first_word(unit))
         if factor_units[1] in _FIELD_UNITS.values() and factor_units[1] != _FIELD_UNITS[name]:
             raise ValueError(f"{label}: column {header!r} declares {unit!r}, a unit of "
                              f"{'gravity' if factor_units[1] == 'mGal' else 'magnetic'} "
                              f"fields; column {name!r} holds {_FIELD_UNITS[name]}: rename it "
                              "or name the right column with --columns")
-        return float(factor_units[0][0]) if factor_units[1] == _FIELD_UNITS[name] else 1.0
+        if factor_units[1] == _FIELD_UNITS[name]:
+            return float(factor_units[0][0])
+        _refuse_unknown(name, header, unit, label)
+        return 1.0
     other = {"lat": "lon", "lon": "lat"}.get(name)
     if other and abs(_HEADER_UNITS[other].get(unit.lower(), 0.0)) == 1.0 and (
             unit.lower() not in _HEADER_UNITS[name]):  # "lat (W)": the columns swapped?
@@ -131,7 +142,51 @@ def header_scale(name, header, label):
                          f"{'longitude' if other == 'lon' else 'latitude'} hemisphere, for "
                          f"{'latitudes' if name == 'lat' else 'longitudes'}: name the right "
                          f"column with --columns {name}=COLUMN")
-    return _HEADER_UNITS.get(name, {}).get(unit.lower(), 1.0)
+    table = _HEADER_UNITS.get(name, {})
+    key = unit.lower()
+    scaled = _SCALED.fullmatch(key)  # "lat (1e-7 deg)": a receiver's integer degrees
+    if scaled and scaled.group(2).strip() in table:
+        return 10.0 ** int(scaled.group(1)) * table[scaled.group(2).strip()]
+    if key not in table and _first_word(key) in table:  # "h (m MSL)", "lat (deg WGS84)"
+        key = _first_word(key)
+    if key not in table:
+        _refuse_unknown(name, header, unit, label)
+    return table.get(key, 1.0)
+
+
+def _first_word(unit):
+    words = re.split(r"[\s,;]+", unit.strip())
+    return words[0].lower() if words else ""
+
+
+_UNIT_WORDS = frozenset({
+    "s", "sec", "ms", "us", "ns", "ks", "min", "h", "hr", "d", "day", "days", "week", "weeks",
+    "wk", "yr", "year", "years", "m", "km", "cm", "mm", "um", "ft", "feet", "in", "inch",
+    "inches", "yd", "yard", "yards", "fathom", "fathoms", "fm", "mi", "mile", "miles", "nmi",
+    "kn", "kt", "mph", "deg", "degree", "degrees", "rad", "mrad", "urad", "arcsec", "arcmin",
+    "mas", "grad", "gon", "gal", "mgal", "ugal", "gu", "nt", "ut", "t", "gamma", "tesla"})
+"""Unit words (lower case) a header may declare; one that a column's table does not
+hold is refused instead of read as a note (``h (in)`` was read as metres)."""
+_SCALED = re.compile(r"(?:1e|10\^?)([-+]?\d+)\s*(.+)")  # "1e-7 deg", "10^-7 deg"
+
+
+def _refuse_unknown(name, header, unit, label):
+    """ValueError for a declared ``unit`` that is a unit (a known word, a ratio such as
+    ``m/min``, a scale such as ``0.1 mGal``) but not one of column ``name``'s; a note
+    (``time (UTC)``, ``lat (WGS84)``) passes."""
+    first = _first_word(unit).replace("µ", "u").replace("μ", "u")
+    if not (first in _UNIT_WORDS or re.search(r"[/^*]", first)
+            or re.match(r"[-+]?(\d|\.\d)", first)):
+        return
+    target = {"t": "seconds", "lat": "degrees", "lon": "degrees", "h": "metres",
+              "v_east": "m/s", "v_north": "m/s", "drift_radius": "degrees of arc",
+              **_FIELD_UNITS}[name]
+    known = [u for u in _HEADER_UNITS.get(name, {}) if u.isascii() and len(u) > 1][:5]
+    examples = ", ".join(known) if known else "mGal, uGal, Gal, m/s^2" if (
+        name == "gravity") else "nT, uT"
+    raise ValueError(f"{label}: column {header!r} declares the unit {unit!r}, which jaxgrav "
+                     f"cannot convert to {target}; convert the column to {target}, or declare "
+                     f"a unit it knows (e.g. {examples})")
 
 
 def declared_unit(name, header):

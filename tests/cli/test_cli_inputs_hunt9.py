@@ -5,6 +5,7 @@ in silence, an ambiguous ``"29,512"`` was refused naming the row's first cell, a
 ``match --drift-radius 1e-9`` / ``suitability --spacing 1e-6`` ran. Then the hunt's own
 finds (below them)."""
 
+import math
 import re
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 import xarray as xr
 
 from jaxgrav.cli import main
+from jaxgrav.constants import WGS84_MEAN_RADIUS
 from jaxgrav.datasets import load_map
 from jaxgrav.tracks import read_track_csv
 
@@ -213,3 +215,55 @@ def test_montecarlo_refuses_a_matcher_drift_no_reading_resolves(tmp_path, refuse
             "every position in it would fit as the INS track does; expected a --drift of at "
             "least 5.7e-05 degrees of arc")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("column, header, cell, value", [
+    ("v_east", "v_east (m/min)", "300", 5.0),
+    ("h", "h (in)", "100", 2.54),
+    ("h", "h (fathoms)", "10", 18.288),
+    ("drift_radius", "drift_radius (mi)", "1", math.degrees(1609.344 / WGS84_MEAN_RADIUS)),
+    ("lat", "lat (1e-7 deg)", "295000000", 29.5),
+    ("lat", "lat (arcsec)", "106200", 29.5),
+    ("h", "h (m MSL)", "12", 12.0),  # the unit, then a note
+    ("gravity", "gravity (mGal FAA)", "-10", -10.0),
+])
+def test_header_units_that_were_read_as_notes_are_converted(tmp_path, column, header, cell,
+                                                            value):
+    """``v_east (m/min)`` was read as m/s, ``h (in)`` as metres, ``drift_radius (mi)`` as
+    degrees of arc (a unit the reader did not know was taken for a note), exit 0."""
+    rows = [f"{120 * i},{lat},{lon}" for i, (lat, lon) in enumerate(ROWS)]
+    if column == "lat":
+        track = _track(tmp_path / "t.csv", f"t,{header},lon",
+                       [f"{120 * i},{cell},{lon}" for i, (_, lon) in enumerate(ROWS)])
+    else:
+        track = _track(tmp_path / "t.csv", f"t,lat,lon,{header}",
+                       [f"{r},{cell}" for r in rows])
+    got = read_track_csv(track, required=("t", "lat", "lon"))
+    np.testing.assert_allclose(got[column], value, rtol=1e-6)
+
+
+@pytest.mark.parametrize("header, unit, target", [
+    ("gravity (0.1 mGal)", "0.1 mGal", "mGal"),
+    ("gravity (mGal*10)", "mGal*10", "mGal"),
+    ("t (ks)", "ks", "seconds"),
+    ("v_north (km/s)", "km/s", "m/s"),
+    ("h [yd]", "yd", "metres"),
+])
+def test_header_units_it_cannot_convert_are_refused(tmp_path, header, unit, target):
+    """``gravity (0.1 mGal)`` was read as mGal (readings 10 x too large), exit 0."""
+    columns = f"{header},lat,lon,x" if header.startswith("t ") else f"t,lat,lon,{header}"
+    track = _track(tmp_path / "t.csv", columns,
+                   [f"{120 * i},{lat},{lon},5" for i, (lat, lon) in enumerate(ROWS)])
+    with pytest.raises(ValueError, match=re.escape(
+            f"column {header!r} declares the unit {unit!r}, which jaxgrav cannot convert to "
+            f"{target}; convert the column to {target}, or declare a unit it knows (e.g. ")):
+        read_track_csv(track, required=("t", "lat", "lon"))
+
+
+@pytest.mark.parametrize("header", ["time (UTC)", "t (GPS)", "lat (WGS84)"])
+def test_header_notes_still_pass(tmp_path, header):
+    name = header.split()[0]
+    cols = {"time": "time (UTC),lat,lon", "t": "t (GPS),lat,lon", "lat": "t,lat (WGS84),lon"}
+    track = _track(tmp_path / "t.csv", cols[name],
+                   [f"{120 * i},{lat},{lon}" for i, (lat, lon) in enumerate(ROWS)])
+    assert read_track_csv(track, required=("t", "lat", "lon"))["lat"][0] == 29.5
