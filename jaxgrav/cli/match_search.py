@@ -35,7 +35,10 @@ def unresolved(grid, span_m, n_fixes, noise):
     """Whether ``n_fixes`` readings of ``noise`` can tell the map's values ``span_m`` apart.
 
     They can when the map's steepest slope (:func:`steepest_slope`) changes it across
-    the span by at least what their mean resolves, ``noise / sqrt(n_fixes)``.
+    the span by at least a tenth of their mean's 1-sigma, ``0.1 noise / sqrt(n_fixes)``
+    (below it, the χ² of any two positions in the span differ by less than 0.01: only a
+    meaningless value falls there, e.g. ``--drift-radius 1e-9``; a smooth map with a
+    short span still runs, and says that the readings tell little).
 
     Returns
     -------
@@ -46,14 +49,14 @@ def unresolved(grid, span_m, n_fixes, noise):
         The shortest span they can tell (m; 0 for a flat map or noiseless readings).
     """
     slope = steepest_slope(grid)
-    tell = noise / math.sqrt(n_fixes)
+    tell = 0.1 * noise / math.sqrt(n_fixes)
     least_m = tell / slope if slope > 0 else 0.0
     if span_m >= least_m:
         return None, least_m
     unit = grid.units or "map units"
     return (f"the map changes by at most {span_m * slope:.3g} {unit} (its steepest slope is "
-            f"{slope:.3g} {unit}/m), below what {n_fixes} readings of --noise {noise:g} "
-            f"{unit} can tell ({tell:.3g} {unit})"), least_m
+            f"{slope:.3g} {unit}/m), below a tenth of what {n_fixes} readings of --noise "
+            f"{noise:g} {unit} can tell ({tell:.3g} {unit})"), least_m
 
 
 def check_radius_resolved(grid, radius_deg, n_fixes, noise, source):

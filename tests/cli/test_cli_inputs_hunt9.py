@@ -83,9 +83,9 @@ def test_a_drift_radius_the_readings_cannot_resolve_is_refused(tmp_path, refused
              "--drift-radius", "1e-9"],
             "--drift-radius 1e-09 degrees of arc (0.000111 m) searches a region across which "
             "the map changes by at most 3.19e-06 mGal (its steepest slope is 0.0144 mGal/m), "
-            "below what 5 readings of --noise 1 mGal can tell (0.447 mGal): every position "
-            "in it would fit as the INS track does; expected a drift radius of at least "
-            "0.00014 degrees of arc (16 m)")
+            "below a tenth of what 5 readings of --noise 1 mGal can tell (0.0447 mGal): every "
+            "position in it would fit as the INS track does; expected a drift radius of at "
+            "least 1.4e-05 degrees of arc (1.6 m)")
     assert not out.exists()
 
 
@@ -102,9 +102,9 @@ def test_a_spacing_the_readings_cannot_resolve_is_refused(tmp_path, refused):
     out = tmp_path / "s.nc"
     refused(["suitability", "--map", "ryukyu", "--out", out, "--spacing", "1e-6"],
             "--spacing 1e-06 m makes a segment of 2.9e-05 m, along which the map changes by "
-            "at most 4.16e-07 mGal (its steepest slope is 0.0144 mGal/m), below what 30 "
-            "readings of --noise 1 mGal can tell (0.183 mGal): no node could be told from its "
-            "neighbours; expected a --spacing of at least 0.44 m")
+            "at most 4.16e-07 mGal (its steepest slope is 0.0144 mGal/m), below a tenth of what "
+            "30 readings of --noise 1 mGal can tell (0.0183 mGal): no node could be told from "
+            "its neighbours; expected a --spacing of at least 0.044 m")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -179,18 +179,19 @@ def test_a_track_that_does_not_move_is_refused_by_match(tmp_path, refused):
     out = tmp_path / "r.json"
     refused(["match", "--map", "ryukyu", "--track", track, "--out", out],
             f"--track '{track}': its 6 fixes lie within 0 m of each other, across which the "
-            "map changes by at most 0 mGal (its steepest slope is 0.0144 mGal/m), below what 6 "
-            "readings of --noise 1 mGal can tell (0.408 mGal): a track that does not move "
-            "reads one value of the map and tells no position; matching needs a track at "
-            "least 28 m long")
+            "map changes by at most 0 mGal (its steepest slope is 0.0144 mGal/m), below a tenth "
+            "of what 6 readings of --noise 1 mGal can tell (0.0408 mGal): a track that does "
+            "not move reads one value of the map and tells no position; matching needs a "
+            "track at least 2.8 m long")
     assert not out.exists()
 
 
 @pytest.mark.parametrize("argv, message", [
     (["--dt", "1e-9"], "--n 30 fixes every 1e-09 s make a track of 2.11e-07 m, along which "
                        "the map changes by at most 3.03e-09 mGal (its steepest slope is 0.0144 "
-                       "mGal/m), below what 30 readings of --noise 1 mGal can tell (0.183 mGal)"
-                       ": it would tell no position; expected a --dt of at least 0.06 s"),
+                       "mGal/m), below a tenth of what 30 readings of --noise 1 mGal can tell "
+                       "(0.0183 mGal): it would tell no position; expected a --dt of at "
+                       "least 0.006 s"),
     (["--drift", "1e-12"], "--drift 1e-12 degrees of arc gives the track a drift radius of "
                            "1.33e-07 m, across whose search region the map changes by at most "
                            "3.83e-09 mGal"),
@@ -211,9 +212,9 @@ def test_montecarlo_refuses_a_matcher_drift_no_reading_resolves(tmp_path, refuse
              out],
             "--drift 1e-12 degrees of arc (the search radius, 1.11e-07 m) searches a region "
             "across which the map changes by at most 3.19e-09 mGal (its steepest slope is "
-            "0.0144 mGal/m), below what 30 readings of --noise 1 mGal can tell (0.183 mGal): "
-            "every position in it would fit as the INS track does; expected a --drift of at "
-            "least 5.7e-05 degrees of arc")
+            "0.0144 mGal/m), below a tenth of what 30 readings of --noise 1 mGal can tell "
+            "(0.0183 mGal): every position in it would fit as the INS track does; expected a "
+            "--drift of at least 5.7e-06 degrees of arc")
     assert list(tmp_path.iterdir()) == []
 
 
