@@ -267,12 +267,21 @@ def _check_resolved(args, scen, grid):
                          f"expected a --dt of at least {args.dt * least_m / length:.2g} s")
     radius = _drift_radius(args)
     text, least_m = unresolved(grid, 2.0 * radius * DEG_ARC_M, args.n, args.noise)
-    if text is not None:
-        raise ValueError(f"--drift {args.drift:g} degrees of arc gives the track a drift "
-                         f"radius of {radius * DEG_ARC_M:.3g} m, across whose search region "
-                         f"{text}: jaxgrav match would refuse it; expected a --drift of at "
-                         f"least {args.drift * least_m / (2 * radius * DEG_ARC_M):.2g} "
-                         "degrees of arc")
+    if text is None:
+        return
+    least_deg = least_m / 2.0 / DEG_ARC_M
+    if args.drift_law == "rayleigh" and rayleigh_quantile(args.drift, 0.99) >= least_deg:
+        # --probability 1e-300 was blamed on --drift ("at least 4e+144 degrees")
+        p = -math.expm1(-0.5 * (least_deg / args.drift) ** 2)
+        raise ValueError(f"--probability {args.probability:g} (the quantile of the Rayleigh "
+                         f"drift of --drift {args.drift:g}) gives the track a drift radius of "
+                         f"{radius * DEG_ARC_M:.3g} m, across whose search region {text}: "
+                         f"jaxgrav match would refuse it; expected a --probability of at "
+                         f"least {p:.2g}")
+    raise ValueError(f"--drift {args.drift:g} degrees of arc gives the track a drift "
+                     f"radius of {radius * DEG_ARC_M:.3g} m, across whose search region "
+                     f"{text}: jaxgrav match would refuse it; expected a --drift of at "
+                     f"least {args.drift * least_deg / radius:.2g} degrees of arc")
 
 
 def _check_readings(args, run, grid):

@@ -205,6 +205,17 @@ def test_simulate_refuses_a_track_or_drift_no_reading_resolves(tmp_path, refused
     assert list(tmp_path.iterdir()) == []
 
 
+def test_simulate_names_the_probability_that_makes_the_radius_vanish(tmp_path, refused):
+    """``--probability 1e-300 --drift-law rayleigh`` was blamed on ``--drift`` ("expected a
+    --drift of at least 4e+144 degrees of arc")."""
+    refused(["simulate", "--out", tmp_path / "t.csv", "--drift-law", "rayleigh",
+             "--probability", "1e-300"],
+            "--probability 1e-300 (the quantile of the Rayleigh drift of --drift 0.035) gives "
+            "the track a drift radius of 5.5e-147 m, across whose search region the map "
+            "changes by at most 1.58e-148 mGal")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_montecarlo_refuses_a_matcher_drift_no_reading_resolves(tmp_path, refused):
     """``montecarlo --method dense --drift 1e-12`` ran its runs (each fix the INS's)."""
     out = tmp_path / "m.nc"
