@@ -117,7 +117,13 @@ def header_scale(name, header, label):
         A gravity column declared in a magnetic unit, or a magnetic column in a gravity
         unit (the file and the header named).
     """
-    unit = unit_of(header)[1]
+    base, unit = unit_of(header)
+    if name == "h" and base.lower().replace(" ", "_").startswith(("depth", "water_depth")):
+        # --columns h=depth (as dov's message suggests) read 50 m down as 50 m up
+        raise ValueError(f"{label}: column {header!r} holds depths (metres down, below the "
+                         "sea surface) and h is the height up, in metres above the "
+                         "ellipsoid: give a column of heights, the geoid height minus the "
+                         "depth (a submarine 50 m down where the geoid is at 30 m: h = -20)")
     if unit is None:
         return 1.0
     since = _SINCE.fullmatch(unit)  # "t (hours since 2024-05-01)" was read as seconds

@@ -279,3 +279,16 @@ def test_header_notes_still_pass(tmp_path, header):
     track = _track(tmp_path / "t.csv", cols[name],
                    [f"{120 * i},{lat},{lon}" for i, (lat, lon) in enumerate(ROWS)])
     assert read_track_csv(track, required=("t", "lat", "lon"))["lat"][0] == 29.5
+
+
+@pytest.mark.parametrize("header", ["depth", "Depth (m)", "water_depth"])
+def test_a_depth_given_as_the_height_is_refused(tmp_path, refused, header):
+    """``dov --columns h=depth`` (as the "lacks column h" message suggests) read a
+    submarine 50 m down as 50 m up, exit 0."""
+    track = tmp_path / "d.csv"
+    track.write_text(f"lat,lon,{header}\n34.0,108.5,50\n34.01,108.51,100\n")
+    out = tmp_path / "o.csv"
+    refused(["dov", "--track", track, "--out", out, "--columns", f"h={header}"],
+            f"column {header!r} holds depths (metres down, below the sea surface) and h is "
+            "the height up, in metres above the ellipsoid: give a column of heights")
+    assert not out.exists()
