@@ -1,8 +1,10 @@
 """Dense matcher on a map that is not the truth: white score vs GLS best vs GLS posterior.
 
 The GLS posterior (the default told a map error) is over the disc of the search's reach
-with the 3 km and ``max_sigma_ratio`` tests; ``gls-posterior-square`` is the same over
-the whole square window with the 3 km test alone (the default before the disc).
+with the 3 km, ``max_sigma_ratio`` and no-harm (``max_p_worse``) tests;
+``gls-posterior-ratio`` is the same without the no-harm test (the default before
+2026-12-07), ``gls-posterior-square`` over the whole square window with the 3 km test
+alone (the default before the disc).
 
 Paper A's tracks (:class:`~jaxgrav.scenarios.MatchingScenario` defaults: 30 fixes 2 min
 apart, 10 kn E + 10 kn N, drift 0.035°, 1 mGal noise) on the shipped 2.5′ ``ryukyu``
@@ -43,13 +45,17 @@ def variants(grid, scen, sigma, length, radius_factor=1.0):
     gls = config_for("dense", grid, radius, map_error=map_error(sigma, length))
     best = dataclasses.replace(gls, fix="best")
     inf = float("inf")
+    ratio = dataclasses.replace(gls, max_p_worse=inf)  # before the no-harm test
     return {"white": white,
-            "gls-best": dataclasses.replace(best, max_sigma_m=inf, max_sigma_ratio=inf),
+            "gls-best": dataclasses.replace(best, max_sigma_m=inf, max_sigma_ratio=inf,
+                                            max_p_worse=inf),
             "gls-posterior": gls,
-            "gls-posterior-3km": dataclasses.replace(gls, max_sigma_ratio=inf),
-            "gls-posterior-all": dataclasses.replace(gls, max_sigma_m=inf, max_sigma_ratio=inf),
+            "gls-posterior-ratio": ratio,
+            "gls-posterior-3km": dataclasses.replace(ratio, max_sigma_ratio=inf),
+            "gls-posterior-all": dataclasses.replace(ratio, max_sigma_m=inf,
+                                                     max_sigma_ratio=inf),
             # before the disc: the whole square window, the 3 km test alone
-            "gls-posterior-square": dataclasses.replace(gls, region="square",
+            "gls-posterior-square": dataclasses.replace(ratio, region="square",
                                                         max_sigma_ratio=inf)}
 
 
