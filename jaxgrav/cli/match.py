@@ -29,6 +29,7 @@ from jaxgrav.cli.match_missing import missing_counts, missing_message
 from jaxgrav.cli.match_search import check_radius_resolved, check_search, check_track_moves
 from jaxgrav.cli.match_size import check_fixes_memory
 from jaxgrav.cli.match_status import status_text
+from jaxgrav.cli.positions import check_velocity_units
 from jaxgrav.cli.sanity import check_readings, fit_check, time_gap_warning
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import eotvos_jit
@@ -156,6 +157,8 @@ def _cmd_match(args):
     check_map_field(grid, field, args.map)
     if field == "gravity" and not args.no_eotvos:  # a lone v_east: raw taken as corrected
         check_velocity_columns(track, f"--track {str(args.track)!r}")
+        if "v_east" in track and "v_north" in track:  # knots: a +42 mGal bias, exit 0
+            check_velocity_units(track, where=f"--track {str(args.track)!r}")
         speed_course = speed_course_warning(track, f"--track {str(args.track)!r}")
         if speed_course is not None:
             print(f"warning: {speed_course}", file=sys.stderr)

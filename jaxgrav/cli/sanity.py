@@ -12,9 +12,10 @@ fixes it) readings that cannot be anomalies in the map's units:
 * a level far from the map's (a total field instead of an anomaly, another datum);
 * single readings far outside what the map and the noise allow.
 
-:func:`check_positions` refuses an INS log whose positions jump: a move between two
-rows that the velocity columns do not explain (a position reset, a glitch), which the
-filters' continuous error model cannot represent.
+:func:`check_positions` (:mod:`jaxgrav.cli.positions`, exported here) refuses an INS
+log whose positions jump: a move between two rows that the velocity columns do not
+explain (a position reset, a glitch), which the filters' continuous error model cannot
+represent.
 
 After a run, :func:`fit_check` (matchers: the fix's χ² per degree of freedom) and
 :func:`innovation_check` (filters: the normalised innovations) test the fit against the
@@ -28,8 +29,7 @@ import math
 import numpy as np
 from scipy.special import chdtrc
 
-from jaxgrav.cli.log_clock import check_time_unit
-from jaxgrav.geodesy import local_offsets_m_jit
+from jaxgrav.cli.positions import check_positions
 from jaxgrav.match.result import P_IMPLAUSIBLE, fit_p_value
 from jaxgrav.tracks import csv_line
 
@@ -165,96 +165,6 @@ def check_readings(readings, expected, noise, *, column, where, unit="mGal", cor
             f"map and the noise allow ({z[rows[0]]:g} on line {line(int(rows[0]))}, "
             f"{dev[far][0]:.3g} {unit} from the rest): fill values or spikes? {fix[0].upper()}"
             f"{fix[1:]}")
-
-
-POSITION_JUMP_MS = 1.0
-"""A move between rows that departs from the velocity columns' by more than this (m/s,
-or 10 % of the speed, whichever is larger; at least :data:`POSITION_JUMP_M`, plus a
-quarter of the velocity change for turns) is a jump (:func:`check_positions`)."""
-
-POSITION_JUMP_M = 25.0
-"""The least departure (m) taken as a jump: rounded coordinates (1e-5° is 1.1 m) and
-metre-level position noise of a fast log are not jumps."""
-
-
-def check_positions(track, *, where):
-    """Refuse INS positions that jump between rows (see the module notes).
-
-    Parameters
-    ----------
-    track : mapping
-        ``t`` (s), ``lat``, ``lon`` (degrees), ``v_east``, ``v_north`` (m/s), ``(N,)``;
-        a :class:`~jaxgrav.tracks.TrackTable`'s own file lines name the rows.
-    where : str
-        The file, for messages.
-
-    Raises
-    ------
-    ValueError
-        The first row whose move from the previous one departs from the mean of the two
-        rows' velocities times the step by more than :data:`POSITION_JUMP_MS` (or 10 %
-        of the speed) times the step, at least :data:`POSITION_JUMP_M`, plus a quarter
-        of the velocity change times the step (in a turn the mean velocity cuts the
-        arc's chord short by about ``v Δt θ²/12`` for a heading change θ, which this
-        covers up to θ ≈ 3 rad), with the line, the jump in metres and how many there
-        are; when most steps (at least 3) depart so, the velocity columns are named
-        instead, with their likely unit or a swap (:func:`_velocity_cause`).
-    """
-    t, lat, lon = (np.asarray(track[k], float) for k in ("t", "lat", "lon"))
-    ve, vn = np.asarray(track["v_east"], float), np.asarray(track["v_north"], float)
-    if t.size < 2:
-        return
-    check_time_unit(track, where=where)  # days, hours: moves too short to be called jumps
-    line = getattr(track, "line", csv_line)  # the file's own lines (comments skipped)
-    dt = np.diff(t)
-    north, east = (np.asarray(a) for a in local_offsets_m_jit(lat[1:], lon[1:], lat[:-1], lon[:-1]))
-    miss_n = north - 0.5 * (vn[1:] + vn[:-1]) * dt
-    miss_e = east - 0.5 * (ve[1:] + ve[:-1]) * dt
-    miss = np.hypot(miss_n, miss_e)
-    speed = 0.5 * (np.hypot(ve[1:], vn[1:]) + np.hypot(ve[:-1], vn[:-1]))
-    turn = np.hypot(np.diff(ve), np.diff(vn))
-    allowed = np.maximum(np.maximum(POSITION_JUMP_MS, 0.1 * speed) * dt, POSITION_JUMP_M)
-    jump = np.flatnonzero(miss > allowed + 0.25 * turn * dt)
-    if jump.size >= max(3, dt.size // 2):  # most steps: the velocity columns, not glitches
-        i = int(jump[0])
-        raise ValueError(
-            f"{where}: v_east/v_north disagree with the positions on {jump.size} of "
-            f"{dt.size} steps (first between lines {line(i)} and {line(i + 1)}): "
-            f"{_velocity_cause(north / dt, east / dt, vn, ve)}")
-    if jump.size:
-        i = int(jump[0])
-        raise ValueError(
-            f"{where}: the position jumps by {miss[i]:.4g} m between lines {line(i)} and "
-            f"{line(i + 1)} (t {t[i]:g} -> {t[i + 1]:g} s) beyond what v_east/v_north "
-            f"allow ({jump.size} such jump(s)); a reset or glitch of the INS position: split "
-            "the log there or remove the row")
-
-
-VELOCITY_UNITS = {"knots (× 0.5144 gives m/s)": 1.943844, "km/h (÷ 3.6 gives m/s)": 3.6,
-                  "ft/s (× 0.3048 gives m/s)": 3.28084, "cm/s (÷ 100 gives m/s)": 100.0}
-"""Velocity units a log may hold instead of m/s, by their factor over m/s."""
-
-
-def _velocity_cause(pos_n, pos_e, vn, ve):
-    """What the velocity columns look like against the positions' own speed (m/s per step):
-    another unit (:data:`VELOCITY_UNITS`), east and north swapped, or neither."""
-    mid_n, mid_e = 0.5 * (vn[1:] + vn[:-1]), 0.5 * (ve[1:] + ve[:-1])
-    moving = (np.hypot(pos_n, pos_e) > 0) & (np.hypot(mid_n, mid_e) > 0.1)
-    said = f"the positions move at a median {np.median(np.hypot(pos_n, pos_e)):.3g} m/s, "
-    said += f"the velocity columns say {np.median(np.hypot(mid_n, mid_e)):.3g} m/s"
-    if moving.sum() >= 2:
-        ratio = float(np.median(np.hypot(mid_n, mid_e)[moving] / np.hypot(pos_n, pos_e)[moving]))
-        for unit, factor in VELOCITY_UNITS.items():
-            if abs(ratio / factor - 1.0) < 0.05:
-                return f"{said} (a factor {ratio:.3g}): are they in {unit}?"
-        for unit, factor in (("milliseconds", 1000.0), ("minutes", 1.0 / 60.0)):
-            if abs(ratio / factor - 1.0) < 0.05:
-                return f"{said} (a factor {ratio:.3g}): is column t in {unit}, not seconds?"
-        swapped = np.hypot(pos_n - mid_e, pos_e - mid_n)
-        if np.median(swapped[moving] / np.hypot(pos_n, pos_e)[moving]) < 0.1:
-            return f"{said}, but along the other axis: are v_east and v_north swapped?"
-    return (f"{said}; expected the INS velocity of these rows, east and north, in m/s "
-            "(name the columns with --columns v_east=COLUMN,v_north=COLUMN)")
 
 
 GAP_STEPS = 10.0

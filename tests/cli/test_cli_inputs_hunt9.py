@@ -292,3 +292,36 @@ def test_a_depth_given_as_the_height_is_refused(tmp_path, refused, header):
             f"column {header!r} holds depths (metres down, below the sea surface) and h is "
             "the height up, in metres above the ellipsoid: give a column of heights")
     assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory):
+    """A simulated track (30 fixes 2 min apart, velocities in m/s)."""
+    d = tmp_path_factory.mktemp("sim")
+    assert main(["simulate", "--out", str(d / "t.csv"), "--truth", str(d / "truth.csv")]) == 0
+    return d / "t.csv"
+
+
+@pytest.mark.parametrize("scale, cause", [
+    (1.943844, "(a factor 1.94): are they in knots (× 0.5144 gives m/s)?"),
+    (3.6, "(a factor 3.6): are they in km/h (÷ 3.6 gives m/s)?"),
+    (-1.0, "expected the INS velocity of these rows, east and north, in m/s"),
+])
+def test_match_names_velocity_columns_in_other_units(simulated, tmp_path, refused, scale,
+                                                     cause):
+    """A track with its velocities in knots (or km/h, or negated) was matched with the
+    wrong Eötvös correction: a +42 mGal (+148, -115) bias, status "implausible", exit 0;
+    ``filter`` and ``navigate`` named such columns already."""
+    lines = simulated.read_text().splitlines()
+    rows = [line.split(",") for line in lines[1:]]
+    track = tmp_path / "t.csv"
+    track.write_text("\n".join([lines[0], *(",".join(
+        [*r[:4], f"{float(r[4]) * scale}", f"{float(r[5]) * scale}", *r[6:]]) for r in rows)])
+        + "\n")
+    out = tmp_path / "r.json"
+    err = refused(["match", "--map", "ryukyu", "--track", track, "--out", out],
+                  f"--track '{track}': v_east/v_north disagree with the positions on 29 of 29 "
+                  "steps (first between lines 2 and 3): the positions move at a median 7.27 "
+                  "m/s")
+    assert cause in err
+    assert not out.exists()
