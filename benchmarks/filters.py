@@ -20,6 +20,9 @@ error model, a step every 2 s and a gravimeter reading every 10 s (NaN between),
 * ``pmf-float64``: :func:`~jaxgrav.filters.run_filter` of :func:`~jaxgrav.filters.pmf`
   (default 61 × 61 grid, its error model at each run's mean latitude, one update per
   reading), on fewer runs (``n``); runs/s is what scales.
+* ``pmf-float64-spread32``: the same with its spread's two matrix products in float32
+  (``pmf(spread_dtype=jnp.float32)``; weights, likelihood and moments in float64), and
+  its largest position difference from ``pmf-float64`` (``vs_pmf_float64_max_diff_m``).
 
 Baseline: filterpy's ``UnscentedKalmanFilter`` with ``MerweScaledSigmaPoints(13, α, β,
 κ)``, ``fx = F x``, the same Q and R, and ``hx`` the same point-mass measurement
@@ -432,6 +435,14 @@ def main():
                                               (field, x0, p0, sub), repeats, kind="pmf")
         line(cname("pmf-float64", pmf_chunk), n_pmf, secs, compile_s, outp, chunk=pmf_chunk,
              pmf_grid="61 x 61 cells of 200 m", cpu_options=str(cpu_options_for("pmf")))
+        progress("pmf, spread in float32")
+        compile_s, secs, out32 = time_compiled(
+            monte_carlo_pmf(fl.pmf(spread_dtype=jnp.float32), dt, every, pmf_chunk),
+            (field, x0, p0, sub), repeats, kind="pmf")
+        line(cname("pmf-float64-spread32", pmf_chunk), n_pmf, secs, compile_s, out32,
+             chunk=pmf_chunk, pmf_grid="61 x 61 cells of 200 m",
+             cpu_options=str(cpu_options_for("pmf")),
+             vs_pmf_float64_max_diff_m=float(f"{np.max(np.abs(out32[0] - outp[0])):.3g}"))
 
     # the profile runs on at most 600 steps of the timed runs
     prof_t = min(n_steps, 600)
