@@ -30,6 +30,8 @@ _UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (facto
 }
 _SCALED_UNIT = re.compile(r"(?:1e|10(?=[-+]))([-+]?\d+)(.+)")
 """A normalised unit with a power of ten in front (``10^-5 m/s^2``, ``1e-6 m s-2``)."""
+_NUMBER_UNIT = re.compile(r"\s*(\d*\.?\d+(?:[eE][-+]?\d+)?)\s*[*x×]?\s*([^\d\s^*].*)")
+"""A unit with a plain number in front (``0.1 mGal``, ``10 uGal``)."""
 FILL_VALUES = (-9999.0, 9999.0, -99999.0, 99999.0, -999999.0, 999999.0, -32767.0, 32767.0,
                -32768.0, 65535.0)
 """Fill values a grid may hold without declaring them (no ``_FillValue`` or
@@ -107,7 +109,7 @@ def map_units(values, units):
     """A map's values in the library's units: gravity in mGal, magnetic fields in nT.
 
     The file's CF ``units`` attribute says what the numbers are (``m s-2``, ``Gal``,
-    ``uGal``, ``gu``, ``T``, ``uT`` …); matching, filtering and the readings' checks
+    ``uGal``, ``gu``, ``T``, ``uT``, ``0.1 mGal`` …); matching, filtering and the readings' checks
     work in mGal and nT, so a map in other units is converted, not misread as mGal.
 
     Parameters
@@ -128,6 +130,10 @@ def map_units(values, units):
         (_UNIT_SCALES[scaled.group(2)][0] * 10.0 ** int(scaled.group(1)),
          _UNIT_SCALES[scaled.group(2)][1]) if scaled and scaled.group(2) in _UNIT_SCALES
         else _UNIT_SCALES.get(_unit_key(units), (None, units)))
+    number = _NUMBER_UNIT.fullmatch(str(units))  # "0.1 mGal" (tenths) was read as mGal
+    if factor is None and number and _unit_key(number.group(2)) in _UNIT_SCALES:
+        factor, canonical = _UNIT_SCALES[_unit_key(number.group(2))]
+        factor *= float(number.group(1))
     if factor is None:
         return values, units
     return (values if factor == 1.0 else values * factor), canonical

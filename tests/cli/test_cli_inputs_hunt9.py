@@ -238,11 +238,13 @@ def test_montecarlo_refuses_a_matcher_drift_no_reading_resolves(tmp_path, refuse
     ("lat", "lat (arcsec)", "106200", 29.5),
     ("h", "h (m MSL)", "12", 12.0),  # the unit, then a note
     ("gravity", "gravity (mGal FAA)", "-10", -10.0),
+    ("gravity", "gravity (0.1 mGal)", "-100", -10.0),  # tenths: was read as mGal
 ])
 def test_header_units_that_were_read_as_notes_are_converted(tmp_path, column, header, cell,
                                                             value):
     """``v_east (m/min)`` was read as m/s, ``h (in)`` as metres, ``drift_radius (mi)`` as
-    degrees of arc (a unit the reader did not know was taken for a note), exit 0."""
+    degrees of arc, ``gravity (0.1 mGal)`` as mGal (a unit the reader did not know was
+    taken for a note), exit 0."""
     rows = [f"{120 * i},{lat},{lon}" for i, (lat, lon) in enumerate(ROWS)]
     if column == "lat":
         track = _track(tmp_path / "t.csv", f"t,{header},lon",
@@ -255,14 +257,13 @@ def test_header_units_that_were_read_as_notes_are_converted(tmp_path, column, he
 
 
 @pytest.mark.parametrize("header, unit, target", [
-    ("gravity (0.1 mGal)", "0.1 mGal", "mGal"),
     ("gravity (mGal*10)", "mGal*10", "mGal"),
     ("t (ks)", "ks", "seconds"),
     ("v_north (km/s)", "km/s", "m/s"),
     ("h [yd]", "yd", "metres"),
 ])
 def test_header_units_it_cannot_convert_are_refused(tmp_path, header, unit, target):
-    """``gravity (0.1 mGal)`` was read as mGal (readings 10 x too large), exit 0."""
+    """``gravity (mGal*10)`` was read as mGal, exit 0."""
     columns = f"{header},lat,lon,x" if header.startswith("t ") else f"t,lat,lon,{header}"
     track = _track(tmp_path / "t.csv", columns,
                    [f"{120 * i},{lat},{lon},5" for i, (lat, lon) in enumerate(ROWS)])
@@ -325,3 +326,20 @@ def test_match_names_velocity_columns_in_other_units(simulated, tmp_path, refuse
                   "m/s")
     assert cause in err
     assert not out.exists()
+
+
+def test_a_map_in_tenths_of_a_milligal_is_converted(tmp_path):
+    """A map declaring ``units: 0.1 mGal`` (stored in tenths) was read as mGal with a
+    warning: sampled 10 x too large, exit 0."""
+    grid = load_map("ryukyu")
+    xr.Dataset({"gravity": (("lat", "lon"), 10 * np.asarray(grid.values, float),
+                            {"units": "0.1 mGal"})},
+               coords={"lat": np.asarray(grid.lat), "lon": np.asarray(grid.lon)}
+               ).to_netcdf(tmp_path / "m.nc")
+    track = _track(tmp_path / "t.csv")
+    want, got = tmp_path / "want.csv", tmp_path / "got.csv"
+    assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out", str(want)]) == 0
+    assert main(["sample", "--map", str(tmp_path / "m.nc"), "--track", str(track), "--out",
+                 str(got)]) == 0
+    np.testing.assert_allclose(read_track_csv(got)["map"], read_track_csv(want)["map"],
+                               atol=1e-4)
