@@ -77,6 +77,7 @@ def parse_degrees(cells, name, decimal_comma=False):
             continue
         if decimal_comma:  # "35,5 N", "35°27,7'N" in a semicolon file
             cell = cell.replace(",", ".")
+        cell = cell.replace("\u2212", "-")  # a typeset minus: −35°30'
         try:
             values[i] = float(cell)
         except ValueError:

@@ -57,6 +57,8 @@ _BINARY = {b"CDF": "a NetCDF-3 file", b"\x89HDF": "a NetCDF-4/HDF5 file",
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
 _THOUSANDS = re.compile(r"[+-]?\d{1,3},\d{3}")  # 1,234: a thousands separator, or 1.234?
 _FORTRAN = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)[dD][+-]?\d+")  # 1.5D+01: Fortran's exponent
+_INVISIBLE = dict.fromkeys(map(ord, "\u200b\u200c\u200d\u2060\ufeff"))  # zero-width, BOMs
+_MINUS = str.maketrans({"\u2212": "-", "\ufe63": "-", "\uff0d": "-"})  # −35.5 (typeset)
 _DELIMITER_NAMES = {",": "comma", ";": "semicolon", "\t": "tab", " ": "whitespace", "|": "pipe"}
 _SEP_LINE = re.compile(r'\s*"?sep=([,;\t])"?[,;\t]*\s*', re.IGNORECASE)  # Excel's first line
 
@@ -254,6 +256,7 @@ def read_table(path, label=None):
     if path.is_dir():
         raise ValueError(f"{label} is a folder; expected a CSV file")
     text = _decode(path.read_bytes(), label).rstrip("\x1a")  # a DOS end-of-file mark (^Z)
+    text = text.translate(_INVISIBLE)  # "lat\u200b" (pasted) was "lacks column lat"
     raw = text.splitlines()
     k = next((k for k, ln in enumerate(raw) if ln.strip() and not ln.strip().startswith(
         ("#", ">"))), None)
@@ -391,6 +394,7 @@ def parse_numbers(cells, decimal_comma=False):
         if cell.lower() in NA_TOKENS:
             values[i] = np.nan
             continue
+        cell = cell.translate(_MINUS)  # a typeset minus sign was "not a number"
         try:
             values[i] = float(cell)
         except ValueError:

@@ -343,3 +343,22 @@ def test_a_map_in_tenths_of_a_milligal_is_converted(tmp_path):
                  str(got)]) == 0
     np.testing.assert_allclose(read_track_csv(got)["map"], read_track_csv(want)["map"],
                                atol=1e-4)
+
+
+@pytest.mark.parametrize("text, lat, gravity", [
+    ("t,lat\u200b,lon,gravity\n0,29.5,126.5,-10\n10,29.51,126.51,-9\n", 29.5, -10.0),
+    ("t,lat,lon,gravity\n0,29.5,126.5,\u221210.5\n10,29.51,126.51,\u22129.5\n", 29.5, -10.5),
+    ("t,lat,lon,gravity\n0,\u221229.5,126.5,1\n10,\u221229.51,126.51,2\n", -29.5, 1.0),
+    ("t,lat,lon,gravity\n0,\u221229\u00b030',126.5,1\n10,\u221229\u00b031',126.51,2\n", -29.5,
+     1.0),
+    ("\ufefft,lat,lon,gravity\n0,29.5,126.5,1\n\ufefft,lat,lon,gravity\n10,29.51,126.51,2\n",
+     29.5, 1.0),  # two UTF-8 files joined: the second's byte-order mark mid-file
+])
+def test_invisible_characters_and_typeset_minus_signs_are_read(tmp_path, text, lat, gravity):
+    """A zero-width space after ``lat`` (pasted from a web page) was "lacks column lat;
+    it has t, lat, lon"; a typeset minus (U+2212, ``−10.5``) was "not a number"; a second
+    byte-order mark where two files were joined was "'\\ufefft' is not a number"."""
+    track = tmp_path / "t.csv"
+    track.write_text(text, encoding="utf-8")
+    got = read_track_csv(track, required=("t", "lat", "lon"))
+    assert got["lat"][0] == lat and got["gravity"][0] == gravity
