@@ -36,6 +36,7 @@ from jaxgrav.grid_values import (
     map_units,
     outside_valid_range,
     undeclared_fills,
+    units_attr,
 )
 
 __all__ = ["FILL_VALUES", "LAT_NAMES", "LON_NAMES", "GridArrays", "UndeclaredFillWarning",
@@ -143,7 +144,7 @@ def _is_cf_by_name(v, kind):
 
 def _is_cf_by_units(v, kind):
     """Whether variable ``v``'s ``units`` are CF degrees north (latitude) or east."""
-    return str(v.attrs.get("units", "")).strip().lower() in _CF[kind][1]
+    return units_attr(v.attrs).strip().lower() in _CF[kind][1]
 
 
 def _find_axis(ds, names, kind, label):
@@ -323,8 +324,8 @@ def _cf_grid(ds, var, ndim, exclude, label):
     values = np.asarray(da.transpose(*extra, lat_dim, lon_dim).values)
     lat = np.asarray(ds.variables[lat_name].values)
     lon = np.asarray(ds.variables[lon_name].values)
-    units = str(da.attrs.get("units", ""))
-    lat, lon = (axis_degrees(c, ds.variables[n].attrs.get("units", ""), n, label)
+    units = units_attr(da.attrs)  # "Units", "unit": m s-2 were sampled as mGal, exit 0
+    lat, lon = (axis_degrees(c, units_attr(ds.variables[n].attrs), n, label)
                 for n, c in ((lat_name, lat), (lon_name, lon)))
     return (lat, lon, values, units, da.attrs, da.encoding, var, lat_name, lon_name)
 

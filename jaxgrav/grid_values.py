@@ -16,7 +16,7 @@ import warnings
 import numpy as np
 
 __all__ = ["FILL_VALUES", "UndeclaredFillWarning", "axis_degrees", "map_units",
-           "outside_valid_range", "undeclared_fills"]
+           "outside_valid_range", "undeclared_fills", "units_attr"]
 
 _UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (factor, units)
     **dict.fromkeys(("mgal", "mgals", "milligal", "milligals"), (1.0, "mGal")),
@@ -40,6 +40,15 @@ FILL_VALUES = (-9999.0, 9999.0, -99999.0, 99999.0, -999999.0, 999999.0, -32767.0
 
 _COUNTED_BACK = ("degreew", "degrees", "degreewest", "degreesouth")
 """CF's west and south units, lower case, ``degrees`` → ``degree``, ``_`` dropped."""
+
+
+def units_attr(attrs):
+    """A variable's units: its CF ``units`` attribute, else one spelled ``Units``,
+    ``UNITS`` or ``unit`` (files written by hand or by other tools; ``""`` if none)."""
+    if "units" in attrs:
+        return str(attrs["units"])
+    spelled = [k for k in attrs if str(k).lower() in ("units", "unit")]
+    return str(attrs[spelled[0]]) if spelled else ""
 
 
 def axis_degrees(coord, units, name, label):

@@ -362,3 +362,21 @@ def test_invisible_characters_and_typeset_minus_signs_are_read(tmp_path, text, l
     track.write_text(text, encoding="utf-8")
     got = read_track_csv(track, required=("t", "lat", "lon"))
     assert got["lat"][0] == lat and got["gravity"][0] == gravity
+
+
+@pytest.mark.parametrize("key", ["Units", "UNITS", "unit"])
+def test_a_map_units_attribute_in_another_spelling_is_read(tmp_path, key):
+    """A map in m/s² whose attribute was spelled ``Units`` (or ``unit``) was sampled as
+    mGal, 1e5 x too small, exit 0 (only ``units`` was read)."""
+    grid = load_map("ryukyu")
+    xr.Dataset({"gravity": (("lat", "lon"), 1e-5 * np.asarray(grid.values, float),
+                            {key: "m s-2"})},
+               coords={"lat": np.asarray(grid.lat), "lon": np.asarray(grid.lon)}
+               ).to_netcdf(tmp_path / "m.nc")
+    track = _track(tmp_path / "t.csv")
+    want, got = tmp_path / "want.csv", tmp_path / "got.csv"
+    assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out", str(want)]) == 0
+    assert main(["sample", "--map", str(tmp_path / "m.nc"), "--track", str(track), "--out",
+                 str(got)]) == 0
+    np.testing.assert_allclose(read_track_csv(got)["map"], read_track_csv(want)["map"],
+                               atol=1e-4)
