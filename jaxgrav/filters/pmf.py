@@ -87,8 +87,8 @@ from jaxgrav.filters.pmf_cells import (
     MISSING,
     PMFState,
     cell_fields,
+    cell_summary,
     cell_values,
-    global_moments,
     grid_moments,
     mix_cells,
     sync_gaussian,
@@ -235,6 +235,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         state = PMFState(w, jnp.full(shape, x0[GRAV]), jnp.full(shape, p0[GRAV, GRAV]), centre,
                          x0[:N_STATES], p0[:N_STATES, :N_STATES], *extra, cell=size,
                          pending=no_pending(x0.dtype), cell_cap=cap)
+        state = state._replace(summary=cell_summary(w, cell_fields(state)))
         return sync_gaussian(state, *grid_moments(w, dn, de, cell_m))
 
     def _n_map_states(n):
@@ -291,6 +292,10 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
     def settle(state):
         """Apply the pending prediction: re-centre, spread, the per-cell models; re-size;
         then the position moments of ``x``, ``p`` are the grid's."""
+        state = _settle(state)
+        return state._replace(summary=cell_summary(state.w, cell_fields(state)))
+
+    def _settle(state):  # without the summary (update takes its own after the reading)
         if state.pending is None:
             return state
         pending = state.pending
@@ -315,16 +320,14 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return sync_gaussian(state, mean, cov, mean)
 
     def _info(state, mean, cov, innovation, innovation_var, flags):
-        glob = affine_cells(global_moments(state.w, cell_fields(state)), state.pending)
+        glob = affine_cells(list(state.summary[:-1]), state.pending)  # the settled grid's
         x = state.x.at[GRAV].set(glob[0])
         sigma = jnp.sqrt(jnp.maximum(jnp.diagonal(state.p), 0.0)).at[GRAV].set(
             jnp.sqrt(glob[1]))
         if state.err_mean is not None:  # the map error appended, as the Kalman filters do
             x = jnp.append(x, glob[2])
             sigma = jnp.append(sigma, jnp.sqrt(glob[3]))
-        w = state.w
-        edge = (w[0].sum() + w[-1].sum() + w[1:-1, 0].sum() + w[1:-1, -1].sum()) > EDGE_MASS
-        flags = flags | jnp.where(edge, STATUS_FILTER["grid_edge"], 0)
+        flags = flags | jnp.where(state.summary[-1] > EDGE_MASS, STATUS_FILTER["grid_edge"], 0)
         return StepInfo(x, sigma, cov, innovation, innovation_var, flags.astype(jnp.int32))
 
     def predict(state, step, field, dynamics):
@@ -341,7 +344,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         return state, _info(state, mean, cov, nan, nan, flags)
 
     def update(state, step, field, dynamics):
-        state = settle(_advance(state, dynamics)[0])
+        state = _settle(_advance(state, dynamics)[0])
         w, m, s = state.w, state.bias_mean, state.bias_var
         dn, de = cells(state.centre, state.cell)
         prior_mean = state.x[:2]  # the settled grid's mean
@@ -407,6 +410,7 @@ def pmf(n_cells=61, cell_m=200.0, *, q_pos=4.0, ins=_DEFAULT_INS,
         flags = (jnp.where(~has, STATUS_FILTER["no_reading"], 0)
                  | jnp.where(has & ~jnp.all(on_map), STATUS_FILTER["off_map"], 0))
         used = has & any_on  # no cell on the map: the reading was not used, no innovation
+        state = state._replace(summary=cell_summary(state.w, cell_fields(state)))
         return state, _info(state, mean, cov, jnp.where(used, step.z - z_hat, jnp.nan),
                             jnp.where(used, z_var, jnp.nan), flags)
 

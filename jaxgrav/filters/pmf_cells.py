@@ -29,6 +29,7 @@ __all__ = [
     "MISSING",
     "PMFState",
     "cell_fields",
+    "cell_summary",
     "cell_values",
     "global_moments",
     "grid_moments",
@@ -82,6 +83,10 @@ class PMFState(NamedTuple):
         The largest cell (m, north and east) that resolves the map where the weights
         are, from the last reading (:func:`resolving_cell`); an adaptive grid's cells
         are kept below it. None: no bound (before the first reading, a fixed grid).
+    summary : Array, shape ``(3,)`` or ``(6,)``, or None
+        The cells as last settled or updated (:func:`cell_summary`): their mixture
+        moments and the mass in the outermost cells, which ``predict`` reports without
+        a pass over the cells.
     """
 
     w: jax.Array
@@ -96,6 +101,7 @@ class PMFState(NamedTuple):
     cell: jax.Array | None = None
     pending: jax.Array | None = None
     cell_cap: jax.Array | None = None
+    summary: jax.Array | None = None
 
 
 def grid_moments(w, dn, de, cell_m):
@@ -145,6 +151,12 @@ def global_moments(w, cell):
         out += [em, jnp.sum(w * (cell[3] + (cell[2] - em) ** 2)),
                 jnp.sum(w * (cell[4] + (cell[0] - gm) * (cell[2] - em)))]
     return out
+
+
+def cell_summary(w, cell):
+    """:func:`global_moments` of the cells then the mass in the outermost cells, ``(K + 1,)``."""
+    edge = w[0].sum() + w[-1].sum() + w[1:-1, 0].sum() + w[1:-1, -1].sum()
+    return jnp.stack([*global_moments(w, cell), edge])
 
 
 def with_cells(state, cell):
