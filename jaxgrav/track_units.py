@@ -153,11 +153,38 @@ def header_scale(name, header, label):
     scaled = _SCALED.fullmatch(key)  # "lat (1e-7 deg)": a receiver's integer degrees
     if scaled and scaled.group(2).strip() in table:
         return 10.0 ** int(scaled.group(1)) * table[scaled.group(2).strip()]
+    hemisphere = _hemisphere(name, key, header, label) if name in _HEMISPHERES else None
+    if key not in table and hemisphere is not None:  # "deg. S", "dd S": S was read as N
+        return hemisphere
     if key not in table and _first_word(key) in table:  # "h (m MSL)", "lat (deg WGS84)"
         key = _first_word(key)
     if key not in table:
         _refuse_unknown(name, header, unit, label)
     return table.get(key, 1.0)
+
+
+_HEMISPHERES = {"lat": {"n": 1.0, "north": 1.0, "s": -1.0, "south": -1.0},
+                "lon": {"e": 1.0, "east": 1.0, "w": -1.0, "west": -1.0}}
+_DEGREE_WORDS = ("deg", "degs", "degree", "degrees", "dd", "decimal")
+
+
+def _hemisphere(name, key, header, label):
+    """The sign a position unit's hemisphere word gives (``deg. S``, ``dd S``, ``decimal
+    degrees W``: -1; both, ``N/S``: 1), when its other words are degrees; None otherwise
+    (also for a sign, ``-W``). The other axis's hemisphere (``lat (deg. W)``) is
+    refused."""
+    words = re.findall(r"[a-z]+", key)
+    other = _HEMISPHERES["lon" if name == "lat" else "lat"]
+    signs = [_HEMISPHERES[name][w] for w in words if w in _HEMISPHERES[name]]
+    if any(w in other for w in words) and not signs:
+        raise ValueError(f"{label}: column {header!r} declares {key!r}, a "
+                         f"{'longitude' if name == 'lat' else 'latitude'} hemisphere, for "
+                         f"{'latitudes' if name == 'lat' else 'longitudes'}: name the right "
+                         f"column with --columns {name}=COLUMN")
+    rest = [w for w in words if w not in _HEMISPHERES[name]]
+    if not signs or "+" in key or "-" in key or not all(w in _DEGREE_WORDS for w in rest):
+        return None  # "(-W)": west negative, or west? not guessed
+    return signs[0] if len(set(signs)) == 1 else 1.0  # "N/S": the cells' letters or signs
 
 
 def _first_word(unit):

@@ -380,3 +380,24 @@ def test_a_map_units_attribute_in_another_spelling_is_read(tmp_path, key):
                  str(got)]) == 0
     np.testing.assert_allclose(read_track_csv(got)["map"], read_track_csv(want)["map"],
                                atol=1e-4)
+
+
+@pytest.mark.parametrize("header, sign", [
+    ("lat (deg. S)", -1.0), ("lat (deg.S)", -1.0), ("lat (dd S)", -1.0),
+    ("lat (decimal degrees S)", -1.0), ("lat (S.)", -1.0),
+    ("lat (N/S)", 1.0), ("lat (+N)", 1.0), ("lat (deg. N)", 1.0),
+])
+def test_a_hemisphere_among_other_words_gives_the_sign(tmp_path, header, sign):
+    """``lat (deg. S)`` or ``lat (dd S)`` were read as north (the unit was not known, so
+    taken for a note), exit 0; ``N/S`` and a sign (``+N``) leave the values as they are."""
+    track = _track(tmp_path / "t.csv", f"t,{header},lon",
+                   [f"{120 * i},{lat},{lon}" for i, (lat, lon) in enumerate(ROWS)])
+    assert read_track_csv(track, required=("t", "lat", "lon"))["lat"][0] == sign * 29.5
+
+
+def test_a_longitude_hemisphere_among_latitude_words_is_refused(tmp_path):
+    track = _track(tmp_path / "t.csv", "t,lat (deg. W),lon",
+                   [f"{120 * i},{lat},{lon}" for i, (lat, lon) in enumerate(ROWS)])
+    with pytest.raises(ValueError, match=re.escape(
+            "column 'lat (deg. W)' declares 'deg. w', a longitude hemisphere, for latitudes")):
+        read_track_csv(track, required=("t", "lat", "lon"))
