@@ -12,6 +12,8 @@ import dataclasses
 import numpy as np
 import xarray as xr
 
+from jaxgrav.grid_values import units_attr
+
 __all__ = ["ARCSEC_PER", "METRES_PER", "in_arcsec_and_metres"]
 
 _RAD = 180.0 / np.pi * 3600.0
@@ -57,12 +59,13 @@ def in_arcsec_and_metres(layers, path):
         Naming ``--grid``: deflection units that are no angle, height units that are no
         length this module knows.
     """
-    with xr.open_dataset(path, decode_times=False) as ds:
-        h_units = str(ds["height"].attrs.get("units", "m"))
-    angle = ARCSEC_PER.get(str(layers.units).strip().lower())
+    with xr.open_dataset(path, decode_times=False) as ds:  # "Units", "unit" were ignored
+        h_units = units_attr(ds["height"].attrs) or "m"
+        declared = units_attr(ds[layers.channels[0]].attrs) or str(layers.units)
+    angle = ARCSEC_PER.get(declared.strip().lower())
     if angle is None:
         raise ValueError(f"--grid {str(path)!r}: {layers.channels[0]} declares units "
-                         f"{layers.units!r}, not an angle; expected deflections of the vertical "
+                         f"{declared!r}, not an angle; expected deflections of the vertical "
                          "in arcsec (or rad, urad, mrad, deg, mas)")
     metres = METRES_PER.get(h_units.strip().lower())
     if metres is None:

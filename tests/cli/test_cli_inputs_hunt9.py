@@ -401,3 +401,33 @@ def test_a_longitude_hemisphere_among_latitude_words_is_refused(tmp_path):
     with pytest.raises(ValueError, match=re.escape(
             "column 'lat (deg. W)' declares 'deg. w', a longitude hemisphere, for latitudes")):
         read_track_csv(track, required=("t", "lat", "lon"))
+
+
+def _dov_file(path, key, xi_units, factor, h_units, h_factor):
+    """A 2-layer DOV file on 0-1 N, 10-11 E, heights 0 and 1000 m, its units under ``key``."""
+    lat, lon = np.linspace(0.0, 1.0, 11), np.linspace(10.0, 11.0, 11)
+    values = np.stack([np.stack([np.add.outer(lat, lon) * (k + 1) * (c + 1) for c in range(2)])
+                       for k in range(2)])
+    xr.Dataset({name: (("height", "lat", "lon"), values[:, c] / factor, {key: xi_units})
+                for c, name in enumerate(("xi", "eta"))},
+               coords={"height": ("height", np.array([0.0, 1000.0]) / h_factor,
+                                  {key: h_units}),
+                       "lat": lat, "lon": lon}).to_netcdf(path)
+    return path
+
+
+@pytest.mark.parametrize("key", ["Units", "unit"])
+def test_dov_grid_units_in_another_spelling_are_converted(tmp_path, key):
+    """A ``--grid`` in µrad with heights in km, its attribute spelled ``Units``, was read
+    as arcsec and metres, exit 0."""
+    track = tmp_path / "t.csv"
+    track.write_text("lat,lon,h\n0.5,10.5,500\n0.52,10.55,250\n")
+    outs = []
+    for name, args in (("a", ("units", "arcsec", 1.0, "m", 1.0)),
+                       ("b", (key, "urad", 0.20626480624709636, "km", 1000.0))):
+        grid = _dov_file(tmp_path / f"{name}.nc", *args)
+        outs.append(tmp_path / f"{name}.csv")
+        assert main(["dov", "--track", str(track), "--out", str(outs[-1]), "--grid", str(grid),
+                     "--method", "bilinear-linear"]) == 0
+    a, b = (np.loadtxt(p, delimiter=",", skiprows=1) for p in outs)
+    np.testing.assert_allclose(b, a, rtol=1e-9)
