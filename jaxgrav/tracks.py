@@ -159,7 +159,8 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
         raise ValueError(
             f"{label} lacks column{'s' * (len(missing) > 1)} {listed(missing, 'and')}; it "
             f"has {listed(table.header)}; required: {listed(required)} (names in any case; "
-            f"aliases: time, latitude, longitude; others with --columns {missing[0]}=COLUMN)")
+            f"aliases: time, latitude, longitude; others with --columns {missing[0]}=COLUMN)"
+            + _depth_hint(table.header, missing))
     if not table.rows:
         raise ValueError(f"{label} has a header but no rows")
     track = TrackTable()
@@ -216,6 +217,17 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
         track.order.append(name)
     _check_columns(track, required, allow_nan, label)
     return track
+
+
+def _depth_hint(header, missing):
+    """A message tail when ``h`` is missing and a column holds depths (``--columns
+    h=depth``, which the message suggested, read 50 m down as 50 m up)."""
+    depth = [h for h in header if column_key(h).startswith(("depth", "water_depth"))]
+    if "h" not in missing or not depth:
+        return ""
+    return (f"; column {depth[0]!r} holds depths (metres down), and h is the height up, in "
+            "metres above the ellipsoid: add a column of heights, the geoid height minus "
+            "the depth")
 
 
 def _numbers_as_read(cells, delimiter):

@@ -431,3 +431,15 @@ def test_dov_grid_units_in_another_spelling_are_converted(tmp_path, key):
                      "--method", "bilinear-linear"]) == 0
     a, b = (np.loadtxt(p, delimiter=",", skiprows=1) for p in outs)
     np.testing.assert_allclose(b, a, rtol=1e-9)
+
+
+def test_a_missing_height_beside_a_depth_column_says_how_they_differ(tmp_path, refused):
+    """dov's "lacks column h" told a file with a depth column to give ``--columns
+    h=COLUMN``, which read depths as heights."""
+    track = tmp_path / "d.csv"
+    track.write_text("lat,lon,depth\n34.0,108.5,50\n34.01,108.51,100\n")
+    refused(["dov", "--track", track, "--out", tmp_path / "o.csv"],
+            "(names in any case; aliases: time, latitude, longitude; others with --columns "
+            "h=COLUMN); column 'depth' holds depths (metres down), and h is the height up, in "
+            "metres above the ellipsoid: add a column of heights, the geoid height minus the "
+            "depth")
