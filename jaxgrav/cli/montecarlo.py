@@ -270,7 +270,7 @@ def cmd_montecarlo(args):
         raise ValueError(f"method {args.method!r} does not return {missing}")
     summary = summarize(results, kind)
     print(f"readings: {setting}")
-    print(format_summary(summary))
+    print(format_summary(summary, spec.status_bits))
     if "told_map_error_sigma" in spec.settings:
         told_sigma = spec.settings["told_map_error_sigma"]
         print("matcher told: " + ("no map error (white-noise score)" if not told_sigma else

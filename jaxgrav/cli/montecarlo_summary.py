@@ -5,8 +5,8 @@ import numpy as np
 
 from jaxgrav.montecarlo.fix_metrics import fix_summary
 
-__all__ = ["FAILURE_RATIO", "PERCENTILES", "fix_lines", "format_summary", "summarize",
-           "worse_rate"]
+__all__ = ["FAILURE_RATIO", "PERCENTILES", "fix_lines", "format_summary", "short_label",
+           "status_rates", "summarize", "worse_rate"]
 
 PERCENTILES = (5, 25, 50, 75, 95)
 """Percentiles of the summary table."""
@@ -36,7 +36,9 @@ def summarize(results, kind="matcher"):
         and ``failure_rate`` (error > failure_ratio × INS, or not finite, or the run's
         ``readings_on_map`` false when given: it found no clear start),
         ``flagged_rate`` (status ≠ 0; for a loosely coupled voyage, a fix event other than
-        "accepted"), ``improved_rate`` (error < INS; a returned INS
+        "accepted") and ``status_rates`` (each bit set in some run, as a string, → the
+        share of runs with it: a flag may only inform, :func:`format_summary` names
+        them), ``improved_rate`` (error < INS; a returned INS
         track, equal to it up to rounding, is not improved), ``nonfinite``
         (count: left out of the statistics, counted as failures); with ``nees`` in
         ``results`` also ``nees`` (its statistics) and ``nees_nonfinite``; with
@@ -72,6 +74,7 @@ def summarize(results, kind="matcher"):
         failure_ratio=float(limit),
         failure_rate=float(np.mean(~finite | (err > limit * ins) | ~on_map)),
         flagged_rate=float(np.mean(status != 0)),
+        status_rates=status_rates(status),
         improved_rate=float(np.mean(finite & (err < ins * (1 - 1e-9)))),  # INS track: not
         nonfinite=int((~finite).sum()),
     )
@@ -88,8 +91,30 @@ def summarize(results, kind="matcher"):
     return out
 
 
-def format_summary(s):
-    """A fixed-width table of :func:`summarize`'s output."""
+def status_rates(status):
+    """``{str(bit): share of runs with it}`` for every bit set in some run, in bit order.
+
+    Parameters
+    ----------
+    status : array of int, shape ``(n_runs,)``
+    """
+    status = np.asarray(status).astype(np.int64)
+    seen = int(np.bitwise_or.reduce(status)) if status.size else 0
+    return {str(1 << b): float(np.mean(status & (1 << b) != 0))
+            for b in range(seen.bit_length()) if seen & (1 << b)}
+
+
+def short_label(text, width=90):
+    """The first clause of a status bit's message (up to ``;`` or `` (``), at most
+    ``width`` characters."""
+    head = text.split(";")[0].split(" (")[0].strip()
+    return head if len(head) <= width else head[:width - 1].rstrip() + "…"
+
+
+def format_summary(s, status_bits=None):
+    """A fixed-width table of :func:`summarize`'s output; with ``status_bits`` (bit →
+    meaning, the method's :attr:`~jaxgrav.montecarlo.spec.MethodSpec.status_bits`) a
+    line naming each flag raised and its share of runs."""
     cols = ["mean", *[f"p{p}" for p in PERCENTILES]]
     head = f"{'':<16}" + "".join(f"{'median' if c == 'p50' else c:>10}" for c in cols)
     rows = [head]
@@ -108,6 +133,12 @@ def format_summary(s):
     rows.append(f"failure rate (error > {bound} or not finite): {100 * s['failure_rate']:.1f} %; "
                 f"improved on the INS: {100 * s['improved_rate']:.1f} %; "
                 f"status flagged: {100 * s['flagged_rate']:.1f} %")
+    rates = s.get("status_rates") or {}
+    if rates:
+        names = {str(k): v for k, v in (status_bits or {}).items()}
+        rows.append("  flags raised (share of runs): " + "; ".join(
+            f"{bit}" + (f" {short_label(names[bit])}" if bit in names else "")
+            + f" {100 * r:.1f} %" for bit, r in rates.items()))
     bad = [f"{s[k]} {what}" for k, what in (("nonfinite", "without a finite error (failures)"),
                                            ("nees_nonfinite", "without a finite NEES"))
            if s.get(k)]

@@ -282,6 +282,26 @@ def test_summary_says_what_it_leaves_out_and_what_a_voyage_flags():
     assert summarize(tight, "voyage")["flagged_rate"] == 1.0
 
 
+def test_summary_names_each_flag_raised_and_its_share():
+    """"status flagged: 100 %" alone hid that a flag may only inform (entropy+ICCP's 128:
+    the coarse fix kept) while another rejects: each bit is named with its share."""
+    from jaxgrav.match.result import STATUS
+
+    res = dict(ins_err_m=np.full(4, 300.0), err_m=np.full(4, 90.0),
+               status=np.array([128, 128 | 512, 128, 128 | 131072], np.int32))
+    s = summarize(res)
+    assert s["flagged_rate"] == 1.0
+    assert s["status_rates"] == {"128": 1.0, "512": 0.25, "131072": 0.25}
+    text = format_summary(s, STATUS)
+    line = next(r for r in text.splitlines() if r.startswith("  flags raised"))
+    assert ("128 entropy+ICCP: the ICCP result did not fit significantly better than the "
+            "coarse match 100.0 %") in line
+    assert "512 fix rejected: the posterior of the offset is too wide 25.0 %" in line
+    assert "131072 fix rejected: not shown better than the INS track 25.0 %" in line
+    assert "flags raised" not in format_summary(summarize(dict(res, status=np.zeros(4))))
+    assert "512 25.0 %" in format_summary(s)  # no meanings given: the bits alone
+
+
 @slow
 def test_montecarlo_entropy_iccp(tmp_path):
     out = tmp_path / "b.nc"
