@@ -3,7 +3,7 @@
 ``patrol-12h`` voyages (navigation-grade INS, map error 3 mGal / 10 km) on the shipped
 2.5′ ``ryukyu`` map, navigated by :func:`jaxgrav.navigate.navigate_loose` with the
 settings of ``examples/voyage_loose.py`` (:func:`jaxgrav.navigate.loose_config`: a
-30-fix dense match every hour).
+60-fix dense match every hour, the first on 30 fixes, :data:`jaxgrav.navigate.DENSE_LOOP`).
 
 Lines (JSON, ``_common.emit``):
 
@@ -14,8 +14,10 @@ Lines (JSON, ``_common.emit``):
   that rate; the issue's goal is 1000 × 12 h within 600 s on the 2-core machine).
   ``vmap`` turns the matcher's branches (white or GLS score, refinement) into selects
   that run both sides, so on a CPU the sequential map is the faster batch.
-* ``voyage_loose_share``: the matcher alone on the same number of segments (each
-  voyage's hourly segments, batched with ``vmap``) against the whole loop: the share
+* ``voyage_loose_share``: the matcher alone on the same full segments (each voyage's
+  segments ending every ``stride`` fixes, batched with ``vmap``; the first segments'
+  shorter ones and the segment's own error told are left out) against the whole loop:
+  the share
   of the loop's time spent matching (the rest is the filter, the segment
   corrections and the Eötvös correction).
 
@@ -64,11 +66,13 @@ def main():
     t_batch = t_seq
 
     m, w = cfg.fix_every, cfg.n_fixes * cfg.fix_every
-    n_seg = (scenario.n_steps - 1) // w
+    starts = jnp.arange(0, scenario.n_steps - w, cfg.stride * m)  # full segments' first steps
+    n_seg = starts.shape[0]
+    rows = starts[:, None] + jnp.arange(w)
     ins = voyages.ins
 
     def blocks(a):
-        return a[:, : n_seg * w].reshape(n * n_seg, cfg.n_fixes, m).mean(-1)
+        return a[:, rows].reshape(n * n_seg, cfg.n_fixes, m).mean(-1)
 
     lat, lon, g = blocks(ins.lat), blocks(ins.lon), blocks(voyages.gravity)
     matcher = cfg.matcher

@@ -4,9 +4,11 @@ The voyage issue's setting: ``patrol-12h`` on the shipped 2.5′ ``ryukyu`` map 
 reading every 10 s with 1 mGal noise, navigation-grade INS started 500 m off), each
 voyage's truth the map plus a correlated map error (σ, L below) drawn from its key, and
 the same voyages on a perfect map (best case). The loop (:func:`jaxgrav.navigate.
-navigate_loose`) matches a 1 h segment (30 fixes, each the mean of 12 readings) every
-hour; the matcher is told the map error and the Eötvös error of the filter's velocity
-(at its along-track Schuler length, :func:`jaxgrav.navigate.loose_match.told_error`).
+navigate_loose`) matches a 2 h segment (60 fixes, each the mean of 12 readings) every
+hour, the first after 1 h on a 1 h segment; the matcher is told the map error and the
+Eötvös error of the filter's velocity (the dense matcher: the segment's Eötvös and
+stretch errors given its offset, ``LooseConfig.segment_error``; the others: at its
+along-track Schuler length, :func:`jaxgrav.navigate.loose_match.told_error`).
 
 Printed, one JSON line per setting: hourly RMS radial error of the navigation solution
 and of the free INS (m), the last-hour ratio nav/free and last/second hour, the share
@@ -22,16 +24,17 @@ and the share within the fix's 95 % ellipse (coverage, 0.95 expected), over ever
 ones, by quartile of the matcher's edge mass; and the ideal filter's own hourly RMS
 error and NEES.
 
-``--segment-error linear|conditional`` tells the dense matcher the segment's Eötvös and
-stretch errors as what they are, linear in the filter's error state, marginal or given the
-offset (``LooseConfig.segment_error``);
-``--fix-prior`` weighs its offsets by the filter's prior and gives the posterior back by
-conditioning (``LooseConfig.fix_prior``); ``--n-fixes``, ``--stride`` and
-``--fix-cov-scale`` set the segment and the covariance inflation.
+The loop's settings are :func:`jaxgrav.navigate.loose_config`'s (for the dense matcher
+:data:`jaxgrav.navigate.DENSE_LOOP`: 2 h segments every hour, the first on 1 h, the
+segment's error told given its offset, the filter's prior, the lattice's cell told);
+``--segment-error markov|linear|conditional``, ``--[no-]fix-prior``, ``--[no-]cell-error``,
+``--n-fixes``, ``--stride``, ``--first-n-fixes`` (0: none) and ``--fix-cov-scale`` change
+them (``--segment-error markov`` alone: the old loop, 1 h segments, × 3).
 
-Run: ``python examples/voyage_loose.py [--runs 100] [--sigma 3] [--length 10000]
-[--ins navigation|strategic] [--calibrate] [--smoke] [--segment-error conditional]
-[--fix-prior] [--n-fixes 60 --stride 30] [--fix-cov-scale 1]``.
+Run: ``python examples/voyage_loose.py [--runs 100] [--seed 0] [--sigma 3] [--length 10000]
+[--ins navigation|strategic] [--calibrate] [--smoke] [--matcher dense|chains|entropy+iccp]
+[--segment-error markov] [--no-fix-prior] [--no-cell-error] [--n-fixes 60 --stride 30]
+[--first-n-fixes 30] [--fix-cov-scale 1]``.
 """
 
 import argparse
@@ -47,8 +50,11 @@ from jaxgrav.fields.map_error import map_error
 from jaxgrav.navigate import (
     FIX_EVENTS,
     LOOSE_MATCHERS,
+    SEGMENT_ERRORS,
     LooseConfig,
     error_kf_tables,
+    first_segment_ends,
+    first_tables,
     fix_segment,
     fix_update,
     hourly_rms,
@@ -109,6 +115,8 @@ def calibrate(pm, grid, scenario, model, config, keys, fix_sigma=500.0):
     arguments as :func:`run`."""
     steps = config.stride * config.fix_every
     n_seg = (scenario.n_steps - 1) // steps
+    # segment ends before n_fixes fixes exist: on the first segments' span, if set
+    n_first = first_segment_ends(config, n_seg)
 
     def one(pm, grid, key):
         voyage = voyage_scenario(key, grid, scenario, model)
@@ -117,24 +125,31 @@ def calibrate(pm, grid, scenario, model, config, keys, fix_sigma=500.0):
         p0 = initial_covariance(config.ins, config.sigma_pos_m, config.sigma_vel)
         noise = fix_sigma * jax.random.normal(jax.random.fold_in(key, 1), (n_seg, 2))
 
-        def body(carry, j):
-            x, p = carry
-            x = tables.step_f @ x
-            p = tables.step_f @ p @ tables.step_f.T + tables.step_q
-            end = (j + 1) * steps
-            res, _, _ = fix_segment(config, tables, pm, voyage.ins, voyage.gravity, x, p, end)
-            truth = tables.h_mean @ voyage.ins_error[end]
-            resid = truth - tables.h_mean @ x
-            e = -jnp.stack([res.offset_north_m, res.offset_east_m]) - resid
-            fix_nees = e @ jnp.linalg.solve(res.covariance_m2, e)
-            z = truth + noise[j] - tables.h_mean @ x
-            x, p, _ = fix_update(x, p, z, fix_sigma**2 * jnp.eye(2), tables.h_mean, True)
-            d = voyage.ins_error[end, :2] - x[:2]
-            return (x, p), (jnp.hypot(*e), fix_nees, res.edge_mass, res.accepted,
-                            jnp.hypot(*d), d @ jnp.linalg.solve(p[:2, :2], d))
+        def body(seg):  # seg: the tables of the segment's span (the first ones' shorter)
+            def step(carry, j):
+                x, p = carry
+                x = tables.step_f @ x
+                p = tables.step_f @ p @ tables.step_f.T + tables.step_q
+                end = (j + 1) * steps
+                res, _, _ = fix_segment(config, seg, pm, voyage.ins, voyage.gravity, x, p, end)
+                truth = seg.h_mean @ voyage.ins_error[end]
+                resid = truth - seg.h_mean @ x
+                e = -jnp.stack([res.offset_north_m, res.offset_east_m]) - resid
+                fix_nees = e @ jnp.linalg.solve(res.covariance_m2, e)
+                z = truth + noise[j] - seg.h_mean @ x
+                x, p, _ = fix_update(x, p, z, fix_sigma**2 * jnp.eye(2), seg.h_mean, True)
+                d = voyage.ins_error[end, :2] - x[:2]
+                return (x, p), (jnp.hypot(*e), fix_nees, res.edge_mass, res.accepted,
+                                jnp.hypot(*d), d @ jnp.linalg.solve(p[:2, :2], d))
+            return step
 
-        _, out = jax.lax.scan(body, (jnp.zeros(p0.shape[0]), p0), jnp.arange(n_seg))
-        return out
+        carry, outs = (jnp.zeros(p0.shape[0]), p0), []
+        for seg, js in ((first_tables(config, tables) if n_first else None, range(n_first)),
+                        (tables, range(n_first, n_seg))):
+            if len(js):
+                carry, o = jax.lax.scan(body(seg), carry, jnp.arange(js.start, js.stop))
+                outs.append(o)
+        return jax.tree.map(lambda *a: jnp.concatenate(a), *outs)
 
     f = jax.jit(lambda pm, grid, ks: jax.lax.map(lambda k: one(pm, grid, k), ks))
     err, nees, edge, accepted, kf_err, kf_nees = (np.asarray(a) for a in f(pm, grid, keys))
@@ -169,20 +184,26 @@ def main(argv=None):
     p.add_argument("--smoke", action="store_true", help="2 voyages of 2 h")
     p.add_argument("--matcher", choices=LOOSE_MATCHERS, default="dense",
                    help="the loop's matcher (default dense)")
-    p.add_argument("--segment-error", choices=("markov", "linear", "conditional"),
-                   default="markov",
-                   help="dense: how the filter's own error is told (default markov)")
-    p.add_argument("--fix-prior", action="store_true",
+    p.add_argument("--segment-error", choices=SEGMENT_ERRORS, default=None,
+                   help="dense: how the filter's own error is told (default conditional, "
+                   "loose_config's; markov: the old loop)")
+    p.add_argument("--fix-prior", action=argparse.BooleanOptionalAction, default=None,
                    help="dense: weigh the offsets by the filter's prior")
-    p.add_argument("--n-fixes", type=int, default=LooseConfig.n_fixes, help="fixes per segment")
+    p.add_argument("--cell-error", action=argparse.BooleanOptionalAction, default=None,
+                   help="dense, linear/conditional: tell the lattice's cell")
+    p.add_argument("--n-fixes", type=int, default=None, help="fixes per segment")
     p.add_argument("--stride", type=int, default=None, help="fixes between segment ends "
-                   "(default --n-fixes)")
-    p.add_argument("--fix-cov-scale", type=float, default=LooseConfig.fix_cov_scale)
+                   "(default --n-fixes, or loose_config's)")
+    p.add_argument("--first-n-fixes", type=int, default=None,
+                   help="fixes of the segments before --n-fixes exist (0: not matched)")
+    p.add_argument("--fix-cov-scale", type=float, default=None)
     a = p.parse_args(argv)
-    loop = {"n_fixes": a.n_fixes, "stride": a.stride or a.n_fixes,
-            "fix_cov_scale": a.fix_cov_scale}
-    if a.matcher == "dense":
-        loop.update(segment_error=a.segment_error, fix_prior=a.fix_prior)
+    given = {"segment_error": a.segment_error, "fix_prior": a.fix_prior,
+             "cell_error": a.cell_error, "n_fixes": a.n_fixes,
+             "stride": a.stride or a.n_fixes, "fix_cov_scale": a.fix_cov_scale}
+    loop = {k: v for k, v in given.items() if v is not None}
+    if a.first_n_fixes is not None:
+        loop["first_n_fixes"] = a.first_n_fixes or None
     jax.config.update("jax_enable_x64", True)  # geodesy and 12 h of INS error in float64
     runs, hours = (2, 2.0) if a.smoke else (a.runs, 12.0)
     ins = INS_GRADES[a.ins]
@@ -206,8 +227,11 @@ def main(argv=None):
             continue
         out = run(nav_map, grid, scenario, model, cfg, keys)
         seconds = time.perf_counter() - t0
+        settings = {k: getattr(cfg, k) for k in ("segment_error", "fix_prior", "cell_error",
+                                                 "n_fixes", "stride", "first_n_fixes",
+                                                 "fix_cov_scale")}
         row = {"setting": name, "ins": a.ins, "matcher": a.matcher, "runs": runs, "hours": hours,
-               "map_error_mgal": sigma, **loop, **summarise(*out),
+               "seed": a.seed, "map_error_mgal": sigma, **settings, **summarise(*out),
                "seconds": round(seconds, 1), "runs_per_s": round(runs / seconds, 2)}
         print(json.dumps(row))
         rows[name] = row

@@ -17,13 +17,15 @@ from jaxgrav.navigate.loose import (
     CHAIN_REACH_M,
     FIX_EVENTS,
     LOOSE_MATCHERS,
-    LooseConfig,
     LooseResult,
     eotvos_sigma,
+    first_segment_ends,
+    first_tables,
     fix_segment,
-    loose_config,
+    less_cell,
     navigate_loose,
 )
+from jaxgrav.navigate.loose_config import DENSE_LOOP, SEGMENT_ERRORS, LooseConfig, loose_config
 from jaxgrav.navigate.loose_match import loose_map
 from jaxgrav.navigate.metrics import VoyageErrors, hourly_rms, voyage_errors, voyage_summary
 from jaxgrav.navigate.tight import (
@@ -35,8 +37,10 @@ from jaxgrav.navigate.tight import (
 
 __all__ = [
     "CHAIN_REACH_M",
+    "DENSE_LOOP",
     "FIX_EVENTS",
     "LOOSE_MATCHERS",
+    "SEGMENT_ERRORS",
     "TIGHT_METHODS",
     "ErrorKFTables",
     "LooseConfig",
@@ -46,10 +50,13 @@ __all__ = [
     "VoyageErrors",
     "eotvos_sigma",
     "error_kf_tables",
+    "first_segment_ends",
+    "first_tables",
     "fix_segment",
     "fix_update",
     "hourly_rms",
     "innovation_nis",
+    "less_cell",
     "loose_config",
     "loose_map",
     "navigate_loose",

@@ -19,22 +19,20 @@ reading every ``fix_every · dt`` seconds. What the loop does at each segment en
 
 With sliding segments (``stride < n_fixes``) consecutive fixes share readings; their
 covariance is inflated by ``n_fixes / stride`` so the filter does not count them twice.
+Segment ends before ``n_fixes`` fixes exist match the last ``first_n_fixes`` when that
+is set (:class:`~jaxgrav.navigate.loose_config.LooseConfig`; a second scan of the same
+step, on the shorter span's tables, :func:`first_tables`).
 The whole voyage is one ``lax.scan`` over segment ends; ``vmap`` it over voyages.
 """
 
 import dataclasses
-import math
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
-from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav.geodesy import eotvos
 from jaxgrav.match.correlation import ChainConfig
-from jaxgrav.match.dense import DenseConfig
-from jaxgrav.match.entropy import EntropyConfig
-from jaxgrav.match.iccp_config import IccpConfig
 from jaxgrav.match.integrity import largest_sigma
 from jaxgrav.navigate.error_kf import (
     error_kf_tables,
@@ -43,22 +41,23 @@ from jaxgrav.navigate.error_kf import (
     posterior_update,
     spread,
 )
+from jaxgrav.navigate.loose_config import LooseConfig, loose_config
 from jaxgrav.navigate.loose_match import (
     CHAIN_REACH_M,
     LOOSE_MATCHERS,
     eotvos_sigma,
     match_segment,
-    matcher_config,
     schuler_length_m,
     segment_error_covariance,
 )
 from jaxgrav.prepared import prepare_map
 from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
-from jaxgrav.sim.ins import INSErrorModel, initial_covariance
+from jaxgrav.sim.ins import initial_covariance
 from jaxgrav.sim.trajectory import Track
 
 __all__ = ["CHAIN_REACH_M", "FIX_EVENTS", "LOOSE_MATCHERS", "LooseConfig", "LooseResult",
-           "eotvos_sigma", "fix_segment", "loose_config", "navigate_loose"]
+           "eotvos_sigma", "first_segment_ends", "first_tables", "fix_segment", "less_cell",
+           "loose_config", "navigate_loose"]
 
 FIX_EVENTS = {
     0: "accepted",
@@ -68,168 +67,6 @@ FIX_EVENTS = {
     4: "rejected by the innovation gate (the fix disagrees with the filter)",
 }
 """What happened at each segment end (``LooseResult.fix_event``)."""
-
-
-@pytree_dataclass
-class LooseConfig:
-    """Settings of the loosely coupled loop.
-
-    Attributes
-    ----------
-    matcher : DenseConfig or ChainConfig or tuple of (EntropyConfig, IccpConfig)
-        The matcher's settings: the dense matcher (``spacing_m`` is set per segment from
-        the window), the chain matcher (its window of ``half_size`` map nodes is fixed:
-        pass the map refined to the nodes wanted, see :func:`loose_config`), or the
-        entropy+ICCP matcher (the entropy grid's ``spacing_m`` set
-        the same way, ICCP's ``window_m`` raised to 1.2 × the reach; set
-        ``IccpConfig.bias_sigma`` for the gravimeter bias and the Eötvös error, as
-        :func:`loose_config` does).
-    ins : INSErrorModel
-        The filter's INS error model.
-    sigma_pos_m, sigma_vel : float
-        Initial 1-σ position (m) and velocity (m/s) error per axis.
-    window_p : float
-        Rayleigh quantile the search reaches.
-    min_spacing_m, max_spacing_m : float
-        Bounds of the offset grid's spacing (m); ``max_spacing_m`` is static (the dense
-        matcher compiles only the map reads that spacings up to it need).
-    gate : float
-        Innovation gate on ``νᵀ S⁻¹ ν`` (2 degrees of freedom; 13.8 is the 99.9 % point).
-    fix_sigma_floor_m : float
-        Added in quadrature to each axis of a fix's covariance (m).
-    robust_nis : float
-        A fix whose normalised innovation squared exceeds this has its covariance scaled
-        by ``nis / robust_nis`` before the update (a Huber-like down-weighting: a fix far
-        from the filter moves it less and leaves it less sure); ``inf``: plain update.
-    fix_cov_scale : float
-        The matcher's covariance is multiplied by this before the update: a segment is
-        not a rigid shift of the truth (the filter's residual velocity error stretches
-        and bends it) and its Eötvös error varies along it, which the rigid-offset
-        matcher does not model. Along an ideal filter's states the dense and
-        entropy+ICCP fixes' own covariance covers 89–99 % of their errors
-        (``examples/voyage_loose.py --calibrate``), but in the loop, whose filter is
-        further off, × 1 leaves the dense loop over-confident (position NEES 3.7–6.1 on
-        seeds 0 and 1, against 2.1–2.8 with × 3).
-    fix_every : int
-        INS steps averaged into one fix (static).
-    n_fixes : int
-        Fixes per segment (static, >= 5).
-    stride : int
-        Fixes between segment ends (static; ``n_fixes`` = consecutive segments).
-    segment_error : {"markov", "linear", "conditional"}
-        How the filter's own error is told (static): a Markov error at the Schuler length
-        (:func:`~jaxgrav.navigate.loose_match.told_error`), or (dense only) linear in the
-        state, marginal or given the offset (:func:`~.loose_match.segment_error_covariance`).
-    fix_prior : bool
-        Dense only (static): the offsets weighed by the filter's prior ``H̄ P H̄ᵀ / s``
-        (``s`` the inflation above), the posterior (covariance × ``s``) given to the
-        filter by Gaussian conditioning (:func:`~jaxgrav.navigate.error_kf.
-        posterior_update`; no 1-σ limit, no down-weighting, no floor; gated on the
-        move in prior σ). False: the fix is a measurement of its own.
-    """
-
-    matcher: DenseConfig = DenseConfig()
-    ins: INSErrorModel = INSErrorModel()
-    sigma_pos_m: float = 354.0
-    sigma_vel: float = 0.035
-    window_p: float = 0.999
-    min_spacing_m: float = 100.0
-    max_spacing_m: float = static_field(1500.0)
-    gate: float = 13.8
-    fix_sigma_floor_m: float = 50.0
-    fix_cov_scale: float = 3.0
-    robust_nis: float = 5.99
-    fix_every: int = static_field(12)
-    n_fixes: int = static_field(30)
-    stride: int = static_field(30)
-    segment_error: str = static_field("markov")
-    fix_prior: bool = static_field(False)
-
-    def __post_init__(self):
-        if not (isinstance(self.n_fixes, int) and self.n_fixes >= 5):
-            raise ValueError(f"n_fixes must be an integer >= 5 (a shorter segment cannot be "
-                             f"matched reliably); got {self.n_fixes!r}")
-        for name in ("fix_every", "stride"):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and v >= 1):
-                raise ValueError(f"{name} must be an integer >= 1; got {v!r}")
-        m = self.matcher
-        if not (isinstance(m, (DenseConfig, ChainConfig)) or (
-                isinstance(m, tuple) and len(m) == 2 and isinstance(m[0], EntropyConfig)
-                and isinstance(m[1], IccpConfig))):
-            raise TypeError("matcher must be a DenseConfig, a ChainConfig or a tuple "
-                            f"(EntropyConfig, IccpConfig); got {type(m).__name__}")
-        if not (isinstance(self.max_spacing_m, int | float) and self.max_spacing_m > 0):
-            raise ValueError(f"max_spacing_m must be a number > 0 (static); got "
-                             f"{self.max_spacing_m!r}")
-        dense_only = self.segment_error != "markov" or self.fix_prior
-        if self.segment_error not in ("markov", "linear", "conditional") or (
-                dense_only and not isinstance(m, DenseConfig)):
-            raise ValueError("segment_error must be 'markov' or, dense only, 'linear' or "
-                             f"'conditional' (fix_prior: dense only); got {self.segment_error!r}")
-        if self.stride > self.n_fixes:
-            raise ValueError(f"stride must be at most n_fixes = {self.n_fixes} (segments may "
-                             f"overlap, not leave gaps); got {self.stride}")
-
-
-def loose_config(ins=INSErrorModel(), map_error_mgal=3.0, map_error_length_m=10000.0,  # noqa: B008
-                 noise_mgal=1.0, matcher="dense", grid=None, step_m=None,
-                 chain_reach_m=CHAIN_REACH_M, **changes):
-    """The loop's settings used by the examples, ``navigate`` and ``montecarlo``.
-
-    Every matcher is told the map error with the Eötvös error of the filter's velocity at
-    its along-track Schuler length, as one Markov error
-    (:func:`~jaxgrav.navigate.loose_match.told_error`, set per segment by
-    :func:`~jaxgrav.navigate.loose_match.match_segment`). The dense matcher: the GLS score,
-    a posterior-mean fix, fixes with a 1-σ
-    above 3 km or more than 20 % of the posterior mass on the search edge rejected,
-    rotations within ±3° (the dense matcher: five); its reading noise is
-    ``noise_mgal / √fix_every`` (a fix averages ``fix_every`` readings).
-    ``entropy+iccp`` (the same integrity settings): a 41 × 41 entropy grid (H_CY), ICCP
-    as the fine stage of
-    :func:`~jaxgrav.match.sizing.iccp_config_for` on ``grid`` (window at least a map
-    cell's diagonal, ten least-squares steps), the reading bias (gravimeter offset,
-    Eötvös error) marginalised with a flat prior. ``chains``: paper A's search
-    (:func:`~jaxgrav.match.sizing.config_for`) on the nodes of ``grid`` (pass the map
-    refined to the nodes wanted, :func:`~jaxgrav.navigate.loose_match.loose_map`), its
-    window fixed at ``chain_reach_m`` about each fix (the loop cannot widen it per segment
-    as it does the other matchers' grids: a segment whose Rayleigh reach is larger is still
-    matched in that window, and the fix's edge test and the innovation gate are what guard
-    it), the difference score (the reading bias drops out), the GLS posterior fix, a fix
-    with more than
-    :data:`~jaxgrav.navigate.loose_match.LOOSE_MAX_EDGE_MASS` of its posterior on the
-    window's edge rejected.
-
-    Parameters
-    ----------
-    ins : INSErrorModel
-        The filter's INS error model.
-    map_error_mgal, map_error_length_m : float
-        The map error told to the matcher (mGal, m); 0: the white-noise matcher.
-    noise_mgal : float
-        1-σ of one reading (mGal).
-    matcher : {"dense", "chains", "entropy+iccp"}
-    grid : Grid or PreparedMap, optional
-        The map (``entropy+iccp``: its cell sizes ICCP's window; ``chains``: the map the
-        loop will be given, whose nodes are the chains' candidates).
-    step_m : float, optional
-        ``chains``: the largest distance between consecutive fixes (m; the platform's
-        top speed × ``fix_every`` × the log's step), which sizes the chain search's
-        displacement stencil; None: the pairwise search over candidate slots.
-    chain_reach_m : float
-        ``chains``: the window's reach about each fix (m).
-    **changes
-        Other :class:`LooseConfig` fields (``fix_every``, ``n_fixes``, ``stride``,
-        ``sigma_pos_m`` …).
-
-    Returns
-    -------
-    LooseConfig
-    """
-    fix_every = changes.get("fix_every", LooseConfig.fix_every)
-    config = matcher_config(matcher, noise_mgal / math.sqrt(fix_every), map_error_mgal,
-                            map_error_length_m, grid, step_m, chain_reach_m)
-    return LooseConfig(matcher=config, ins=ins, **changes)
 
 
 class LooseResult(NamedTuple):
@@ -282,8 +119,9 @@ def _blocks(a, m):
 
 
 def _segment(cfg, tables, ins, gravity, x, end):
-    """The corrected segment ending at INS step ``end``: fix positions and readings."""
-    w = cfg.n_fixes * cfg.fix_every
+    """The corrected segment ending at INS step ``end``: fix positions and readings (the
+    segment spans ``tables.backward``'s steps)."""
+    w = tables.backward.shape[0]
     start = jnp.maximum(end - w, 0)
     take = lambda a: jax.lax.dynamic_slice_in_dim(a, start, w)  # noqa: E731
     err = jnp.einsum("kij,j->ki", tables.backward, x)
@@ -293,6 +131,66 @@ def _segment(cfg, tables, ins, gravity, x, end):
     return (*(_blocks(a, cfg.fix_every) for a in (lat, lon, g, v_e, v_n)), end - w >= 0)
 
 
+def _inflation(cfg):
+    """The fix covariance's factor: ``fix_cov_scale`` × the readings' reuse by overlapping
+    segments (``n_fixes / stride``)."""
+    return cfg.fix_cov_scale * cfg.n_fixes / cfg.stride
+
+
+def _cell(cfg, reach):
+    """The dense lattice's spacing for a search of ``reach`` (m), as
+    :func:`~jaxgrav.navigate.loose_match.match_segment` sets it."""
+    return jnp.clip(reach / cfg.matcher.half_size, cfg.min_spacing_m, cfg.max_spacing_m)
+
+
+def less_cell(cov, q):
+    """A lattice posterior's covariance without the cell's variance counted twice.
+
+    With ``LooseConfig.cell_error`` the likelihood already holds the offset's place within
+    a cell (``q = spacing²/12`` per axis), and the posterior's quantisation term adds it
+    again: each eigenvalue ``λ`` of ``cov`` becomes ``max(λ − q, q)`` — the term taken
+    off along the axes the lattice resolves, a posterior no narrower than the cell along
+    the others (closed form, no LAPACK call).
+
+    Parameters
+    ----------
+    cov : Array, shape ``(2, 2)``
+        Symmetric (m²).
+    q : Array
+        The cell's variance per axis (m²).
+
+    Returns
+    -------
+    Array, shape ``(2, 2)``
+    """
+    a, b, d = cov[0, 0], 0.5 * (cov[0, 1] + cov[1, 0]), cov[1, 1]
+    rad = jnp.sqrt(0.25 * (a - d) ** 2 + b * b)
+    big, small = 0.5 * (a + d) + rad, 0.5 * (a + d) - rad
+    angle = 0.5 * jnp.arctan2(2.0 * b, a - d)  # of the larger eigenvalue's axis
+    u = jnp.stack([jnp.cos(angle), jnp.sin(angle)])
+    v = jnp.stack([-u[1], u[0]])
+    return (jnp.maximum(big - q, q) * jnp.outer(u, u)
+            + jnp.maximum(small - q, q) * jnp.outer(v, v))
+
+
+def first_tables(config, tables):
+    """The tables of the first segments' shorter span (``LooseConfig.first_n_fixes``).
+
+    Parameters
+    ----------
+    config : LooseConfig
+    tables : ErrorKFTables
+        Of the voyage, for ``n_fixes`` fixes.
+
+    Returns
+    -------
+    ErrorKFTables
+        ``backward`` and ``h_mean`` for the last ``first_n_fixes`` fixes.
+    """
+    backward = tables.backward[-config.first_n_fixes * config.fix_every:]
+    return tables._replace(backward=backward, h_mean=jnp.mean(backward[:, :2, :], axis=0))
+
+
 def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     """Match the segment that ends at INS step ``end``, as the loop does.
 
@@ -300,7 +198,9 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     ----------
     config : LooseConfig
     tables : ErrorKFTables
-        Of the voyage (:func:`~jaxgrav.navigate.error_kf.error_kf_tables`).
+        Of the voyage (:func:`~jaxgrav.navigate.error_kf.error_kf_tables`); its
+        ``backward`` spans the segment (``n_fixes · fix_every`` steps, or the first
+        segments' span, :func:`first_tables`).
     grid : Grid or PreparedMap
     ins : Track
         The INS-indicated track, shape ``(N,)`` per field.
@@ -331,14 +231,19 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     sig_e = eotvos_sigma(jnp.mean(lat), ins.v_east[end], ins.v_north[end], p[2:4, 2:4])
     length_e = schuler_length_m(jnp.hypot(ins.v_east[end], ins.v_north[end]), jnp.mean(lat))
     extra = coupling = None  # "markov": the Eötvös error told at its Schuler length
-    if cfg.segment_error != "markov":
-        b = tables.backward[:, :4].reshape(cfg.n_fixes, cfg.fix_every, 4, -1).mean(1)
-        extra, coupling = segment_error_covariance(prepare_map(grid), lat, lon, v_e, v_n, b,
-                                                   h_mean, p, cfg.segment_error == "conditional")
-        extra, sig_e = jnp.where(jnp.isfinite(extra), extra, 0.0), jnp.zeros_like(sig_e)
     matcher = cfg.matcher
+    if cfg.segment_error != "markov":
+        b = tables.backward[:, :4].reshape(lat.shape[0], cfg.fix_every, 4, -1).mean(1)
+        cell = 0.0
+        if cfg.cell_error:
+            cell = _cell(cfg, reach)
+            matcher = dataclasses.replace(matcher, resolved_n_effective=0.0)
+        extra, coupling = segment_error_covariance(prepare_map(grid), lat, lon, v_e, v_n, b,
+                                                   h_mean, p, cfg.segment_error == "conditional",
+                                                   cell)
+        extra, sig_e = jnp.where(jnp.isfinite(extra), extra, 0.0), jnp.zeros_like(sig_e)
     if cfg.fix_prior:  # the filter's prior on the offsets, tempered by the inflation
-        prior = h_mean @ p @ h_mean.T / (cfg.fix_cov_scale * cfg.n_fixes / cfg.stride)
+        prior = h_mean @ p @ h_mean.T / _inflation(cfg)
         matcher = dataclasses.replace(matcher, offset_prior_m2=0.5 * (prior + prior.T),
                                       max_sigma_m=jnp.inf)
     res = match_segment(matcher, grid, lat, lon, jnp.where(jnp.isfinite(g), g, 0.0), reach,
@@ -350,11 +255,13 @@ def _fix(cfg, tables, grid, ins, gravity, x, p, end):
     """Match the segment ending at ``end`` and update the filter with the fix."""
     h_mean = tables.h_mean
     res, reach, usable = fix_segment(cfg, tables, grid, ins, gravity, x, p, end)
-    complete = end - cfg.n_fixes * cfg.fix_every >= 0
+    complete = end - tables.backward.shape[0] >= 0
     offset = jnp.stack([res.offset_north_m, res.offset_east_m])
-    inflate = cfg.fix_cov_scale * cfg.n_fixes / cfg.stride
     floor = 0.0 if cfg.fix_prior else cfg.fix_sigma_floor_m**2
-    r = (res.covariance_m2 * inflate + floor * jnp.eye(2)).astype(p.dtype)
+    cov = res.covariance_m2
+    if cfg.cell_error:  # the cell's variance is in the likelihood already
+        cov = less_cell(cov, _cell(cfg, reach) ** 2 / 12.0)
+    r = (cov * _inflation(cfg) + floor * jnp.eye(2)).astype(p.dtype)
     good = usable & res.accepted & jnp.all(jnp.isfinite(r))
     r = jnp.where(jnp.isfinite(r), r, jnp.eye(2))
     if cfg.fix_prior:
@@ -368,6 +275,14 @@ def _fix(cfg, tables, grid, ins, gravity, x, p, end):
     event = jnp.select([~complete, ~usable, ~res.accepted, ~gated], [1, 2, 3, 4], 0)
     status = jnp.where(usable, res.status, 0)
     return x_new, p_new, (event, status, offset, r, reach, jnp.where(usable, nis, jnp.nan))
+
+
+def first_segment_ends(cfg, n_seg):
+    """How many of ``n_seg`` segment ends are matched on the first segments' span (static):
+    those before ``n_fixes`` fixes exist, when ``first_n_fixes`` is set; else 0."""
+    if cfg.first_n_fixes is None:
+        return 0
+    return min(-(-cfg.n_fixes // cfg.stride) - 1, n_seg)
 
 
 @jax.jit
@@ -401,16 +316,28 @@ def navigate_loose(grid, voyage, config):
     p0 = initial_covariance(cfg.ins, cfg.sigma_pos_m, cfg.sigma_vel)
     x0 = jnp.zeros(p0.shape[0], p0.dtype)
 
-    def step(carry, j):
-        x, p = carry
-        xs, pos_cov = spread(tables, x, p)
-        x_pred = tables.step_f @ x
-        p_pred = tables.step_f @ p @ tables.step_f.T + tables.step_q
-        end = (j + 1) * steps_between
-        x_new, p_new, events = _fix(cfg, tables, grid, ins_p, grav_p, x_pred, p_pred, end)
-        return (x_new, p_new), (xs, pos_cov, events)
+    def step(seg_tables):
+        def body(carry, j):
+            x, p = carry
+            xs, pos_cov = spread(tables, x, p)
+            x_pred = tables.step_f @ x
+            p_pred = tables.step_f @ p @ tables.step_f.T + tables.step_q
+            end = (j + 1) * steps_between
+            x_new, p_new, events = _fix(cfg, seg_tables, grid, ins_p, grav_p, x_pred, p_pred,
+                                        end)
+            return (x_new, p_new), (xs, pos_cov, events)
+        return body
 
-    (x_end, p_end), (xs, pos_cov, events) = jax.lax.scan(step, (x0, p0), jnp.arange(n_seg))
+    # the first segment ends on the first segments' shorter span, then the full one
+    n_first = first_segment_ends(cfg, n_seg)
+    carry, out = (x0, p0), []
+    for seg_tables, js in ((first_tables(cfg, tables) if n_first else None,
+                            jnp.arange(n_first)), (tables, jnp.arange(n_first, n_seg))):
+        if js.shape[0]:
+            carry, o = jax.lax.scan(step(seg_tables), carry, js)
+            out.append(o)
+    (x_end, p_end) = carry
+    xs, pos_cov, events = jax.tree.map(lambda *a: jnp.concatenate(a), *out)
     xs = jnp.concatenate([xs.reshape(-1, x0.shape[0]), x_end[None]])[:n]
     pos_cov = jnp.concatenate([pos_cov.reshape(-1, 2, 2), p_end[None, :2, :2]])[:n]
     lat, lon = _shift(ins.lat, ins.lon, xs[:, 0], xs[:, 1])

@@ -149,7 +149,7 @@ def told_error(map_sigma, map_length_m, eotvos_sigma, eotvos_length_m, order=2):
 
 
 def segment_error_covariance(grid, lat, lon, v_east, v_north, backward, h_mean, p,
-                             conditional=False):
+                             conditional=False, cell_m=0.0):
     """Covariance (mGal²) of a corrected segment's reading error that the filter's error explains.
 
     Along a segment corrected with the filter's estimate, the residual INS error at fix k
@@ -179,6 +179,10 @@ def segment_error_covariance(grid, lat, lon, v_east, v_north, backward, h_mean, 
         matcher's offset ``o`` is (``H̄ e = −o``): covariance ``G P_c Gᵀ`` with
         ``P_c = P − P H̄ᵀ S⁻¹ H̄ P`` and mean ``K o``, ``K = −G P H̄ᵀ S⁻¹``
         (``S = H̄ P H̄ᵀ``).
+    cell_m : float or Array
+        The matcher's lattice spacing (m): the offset's place within a cell, uniform
+        (``cell_m²/12`` per axis), read through the map's gradient, is added,
+        ``cell_m²/12 ∇m ∇mᵀ``; 0 (default): nothing.
 
     Returns
     -------
@@ -199,7 +203,7 @@ def segment_error_covariance(grid, lat, lon, v_east, v_north, backward, h_mean, 
         s_inv = inv_2x2(h_mean @ ph)
         coupling = -(g @ ph) @ s_inv
         p = p - ph @ s_inv @ ph.T
-    c = g @ p @ g.T
+    c = g @ p @ g.T + jnp.asarray(cell_m, g.dtype) ** 2 / 12.0 * (grad @ grad.T)
     return 0.5 * (c + c.T), coupling
 
 
