@@ -29,6 +29,7 @@ from jaxgrav.cli.montecarlo_summary import (
     worse_rate,
 )
 from jaxgrav.cli.montecarlo_voyage import (
+    add_loop_options,
     plot_voyage_tracks,
     plot_voyages,
     tracks_path,
@@ -143,6 +144,7 @@ def add_parser(subparsers):
     m.add_argument("--ins", choices=sorted(INS_GRADES), default=None,
                    help="voyage methods: the INS, navigation (0.01 deg/h, 25 ug, default) or "
                         "strategic (jaxgrav's default INSErrorModel)")
+    add_loop_options(m)
     m.add_argument("--no-progress", action="store_true", help="no progress bar")
     m.add_argument("--force", action="store_true", help="overwrite existing outputs")
     m.set_defaults(func=cmd_montecarlo)
@@ -223,7 +225,9 @@ def cmd_montecarlo(args):
                          f"{args.method}: paper D's point masses have no grid to draw a map "
                          "error on")
     extra = {}
-    for name, value in (("--hours", args.hours), ("--ins", args.ins)):
+    for name, value in (("--hours", args.hours), ("--ins", args.ins),
+                        ("--segment-error", args.segment_error), ("--fix-prior", args.fix_prior),
+                        ("--first-n-fixes", args.first_n_fixes)):
         if value is not None and kind != "voyage":
             raise ValueError(f"{name} is an option of the voyage methods "
                              f"({', '.join(VOYAGE_METHODS)}); got --method {args.method}")

@@ -1,5 +1,6 @@
 """The voyage methods of ``jaxgrav montecarlo``: their options, summary lines and figure."""
 
+import argparse
 import json
 import math
 
@@ -7,15 +8,32 @@ import jax
 import matplotlib.pyplot as plt
 import numpy as np
 
+from jaxgrav.cli.inputs import whole_number
 from jaxgrav.cli.voyage import MAX_HOURS
 from jaxgrav.montecarlo.voyage_runs import SERIES_EVERY_S, TOLD, voyage_tracks
-from jaxgrav.navigate import voyage_summary
+from jaxgrav.navigate import SEGMENT_ERRORS, voyage_summary
 from jaxgrav.plot import plot_map, plot_voyage_errors, save_figure
 from jaxgrav.scenarios import INS_GRADES
 
-__all__ = ["plot_voyage_tracks", "plot_voyages", "tracks_path", "voyage_attrs", "voyage_lines",
-           "voyage_options"]
+__all__ = ["add_loop_options", "plot_voyage_tracks", "plot_voyages", "tracks_path",
+           "voyage_attrs", "voyage_lines", "voyage_options"]
 
+
+def add_loop_options(parser):
+    """``--segment-error``, ``--[no-]fix-prior`` and ``--first-n-fixes``: voyage-dense's loop
+    settings."""
+    parser.add_argument("--segment-error", choices=SEGMENT_ERRORS, default=None,
+                        help="voyage-dense: how the loop tells the matcher the filter's own "
+                             "error: conditional (default: the segment's Eotvos and stretch "
+                             "errors given its offset, 2 h segments every hour), linear, or "
+                             "markov (the old loop: 1 h segments, a Markov error at the "
+                             "Schuler length)")
+    parser.add_argument("--fix-prior", action=argparse.BooleanOptionalAction, default=None,
+                        help="voyage-dense: weigh the offsets by the filter's prior (default "
+                             "on, off with --segment-error markov)")
+    parser.add_argument("--first-n-fixes", type=whole_number, default=None,
+                        help="voyage-dense: the segment ends before a whole segment match the "
+                             "last N fixes (e.g. 30: the first fix after 1 h; default none)")
 
 
 def voyage_options(args):
@@ -33,8 +51,14 @@ def voyage_options(args):
                          f"{args.method}; got {told!r}")
     if args.map_error_order not in (None, 1, 2):
         raise ValueError(f"--map-error-order must be 1 or 2; got {args.map_error_order}")
+    loop = {k: v for k, v in (("segment_error", args.segment_error),
+                              ("fix_prior", args.fix_prior),
+                              ("first_n_fixes", args.first_n_fixes)) if v is not None}
+    if loop and args.method != "voyage-dense":
+        raise ValueError(f"--segment-error, --fix-prior and --first-n-fixes are options of "
+                         f"--method voyage-dense; got --method {args.method}")
     return dict(map_error_told=told, map_error_order=args.map_error_order, hours=args.hours,
-                ins=INS_GRADES[args.ins or "navigation"])
+                ins=INS_GRADES[args.ins or "navigation"], **loop)
 
 
 def _km(values):

@@ -27,13 +27,22 @@ dense matcher (or paper A's iso-point chains on the map refined to 0.005° nodes
 paper B's entropy coarse search and ICCP fine match, the reading bias marginalised) on
 the filter-corrected track (:mod:`jaxgrav.cli.navigate_loose`); accepted fixes update
 the 13-state INS error Kalman filter (:func:`jaxgrav.navigate.navigate_loose`).
-The readings are Eötvös-corrected with the filter's velocity, the one rule of the
-navigation loop. Where the log leaves the map, the fixes stop (event 2) and the
-solution continues on the INS with a growing σ.
+``dense`` runs :data:`jaxgrav.navigate.DENSE_LOOP` by default: 2 h segments (60 fixes)
+every hour (the first fix after 2 h; ``--first-n-fixes 30``: after 1 h, on the last 30
+fixes), the matcher told the segment's Eötvös and stretch errors given its offset
+(``--segment-error conditional``), its offsets weighed by the filter's prior
+(``--fix-prior``) and its lattice's cell; ``--segment-error markov`` is the old loop
+(1 h segments, the Eötvös error told as a Markov error). A log too short for its first
+segment is written as the INS with the filter's growing σ, and a warning says that no
+fix could be made (so does one on which no fix was accepted). The readings are
+Eötvös-corrected with the filter's velocity, the one rule of the navigation loop. Where
+the log leaves the map, the fixes stop (event 2) and the solution continues on the INS
+with a growing σ.
 
-The default is ``--method ukf``: on the documented 12 h patrols (``docs/voyages.md``) the
-tightly coupled UKF ends the last hour at 0.06 × the free INS's error where the loosely
-coupled loop ends at 0.84 (3 mGal map error, the same 100 voyages).
+The default is ``--method ukf``: on the documented 12 h patrols (``docs/voyages.md``,
+1000 patrols, 3 mGal map error) the tightly coupled UKF ends the last hour at 0.105 ×
+the free INS's error, the dense loop at 0.121 (the old loop, ``--segment-error markov``,
+at 0.96 on 100).
 
 ``--method ukf|ekf|gsf|rbpf|pmf`` (tightly coupled, :func:`jaxgrav.navigate.navigate_tight`):
 every reading updates the INS error filter; the readings are Eötvös-corrected with the
@@ -51,6 +60,7 @@ filters predict through gaps up to ``--max-gap`` s (the INS interpolated, no rea
 the loose loop needs every row. The output has the log's own rows.
 """
 
+import argparse
 import sys
 
 import jax
@@ -91,7 +101,9 @@ from jaxgrav.cli.simulate import check_seed
 from jaxgrav.filters import STATUS_FILTER, map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
+    DENSE_LOOP,
     LOOSE_MATCHERS,
+    SEGMENT_ERRORS,
     TIGHT_METHODS,
     TightConfig,
     navigate_tight,
@@ -120,7 +132,8 @@ DEFAULT_PARTICLES = 500
 
 LOOSE_DEFAULTS = {"fix_every": 12, "n_fixes": 30}
 """``--fix-every`` and ``--n-fixes`` of the loosely coupled methods when not given
-(``--stride`` defaults to ``--n-fixes``)."""
+(``--stride`` defaults to ``--n-fixes``); ``--method dense`` takes
+:data:`~jaxgrav.navigate.DENSE_LOOP`'s segments unless ``--segment-error markov``."""
 
 
 def add_parser(sub):
@@ -163,10 +176,22 @@ def add_parser(sub):
                         f"{LOOSE_DEFAULTS['fix_every']})")
     p.add_argument("--n-fixes", type=whole_number, default=None,
                    help=f"loosely coupled methods: fixes per segment (>= 5, default "
-                        f"{LOOSE_DEFAULTS['n_fixes']})")
+                        f"{LOOSE_DEFAULTS['n_fixes']}; dense {DENSE_LOOP['n_fixes']})")
     p.add_argument("--stride", type=whole_number, default=None,
                    help="loosely coupled methods: fixes between segment ends (default = "
-                        "--n-fixes: consecutive)")
+                        f"--n-fixes: consecutive; dense {DENSE_LOOP['stride']})")
+    p.add_argument("--first-n-fixes", type=whole_number, default=None,
+                   help="loosely coupled methods: the segment ends before --n-fixes fixes "
+                        "exist match the last N fixes (5 to --n-fixes; default none: the "
+                        "first fix waits for a whole segment, 2 h with dense)")
+    p.add_argument("--segment-error", choices=SEGMENT_ERRORS, default=None,
+                   help="dense: how the loop tells the matcher the filter's own error: "
+                        "conditional (default: the segment's Eotvos and stretch errors given "
+                        "its offset), linear, or markov (the old loop: 1 h segments, a Markov "
+                        "error at the Schuler length)")
+    p.add_argument("--fix-prior", action=argparse.BooleanOptionalAction, default=None,
+                   help="dense: weigh the offsets by the filter's prior (default on, off with "
+                        "--segment-error markov)")
     add_missing_option(p)
     p.add_argument("--max-gap", type=float, default=60.0,
                    help="longest gap between rows (s) the tightly coupled filters predict "
@@ -216,7 +241,12 @@ def _method_options(args):
         if getattr(args, name) is not None and args.method != "rbpf":
             raise ValueError(f"--{name} is for --method rbpf; got --method {args.method}")
     check_missing_option(args)
-    loose = [f"--{k.replace('_', '-')}" for k in ("fix_every", "n_fixes", "stride")
+    for name in ("segment_error", "fix_prior"):
+        if getattr(args, name) is not None and args.method != "dense":
+            raise ValueError(f"--{name.replace('_', '-')} is for --method dense; got --method "
+                             f"{args.method}")
+    loose = [f"--{k.replace('_', '-')}" for k in ("fix_every", "n_fixes", "stride",
+                                                   "first_n_fixes")
              if getattr(args, k) is not None]
     warning = None
     if loose and args.method in TIGHT_METHODS:
@@ -225,9 +255,13 @@ def _method_options(args):
                    "and ignores them")
     args.particles = DEFAULT_PARTICLES if args.particles is None else args.particles
     args.seed = 0 if args.seed is None else args.seed
+    # dense: DENSE_LOOP's segments (2 h every hour) unless markov or --n-fixes is given
+    dense = args.method == "dense" and args.segment_error != "markov" and args.n_fixes is None
     for k, v in LOOSE_DEFAULTS.items():
+        v = DENSE_LOOP.get(k, v) if dense else v
         setattr(args, k, v if getattr(args, k) is None else getattr(args, k))
-    args.stride = args.n_fixes if args.stride is None else args.stride
+    if args.stride is None:
+        args.stride = DENSE_LOOP["stride"] if dense else args.n_fixes
     return warning
 
 
@@ -255,6 +289,9 @@ def cmd_navigate(args):
                          f"reliably); got {args.n_fixes}")
     if args.stride > args.n_fixes:
         raise ValueError(f"--stride must be at most --n-fixes {args.n_fixes}; got {args.stride}")
+    if args.first_n_fixes is not None and not 5 <= args.first_n_fixes <= args.n_fixes:
+        raise ValueError(f"--first-n-fixes must be from 5 to --n-fixes {args.n_fixes}; got "
+                         f"{args.first_n_fixes}")
     check_outputs([args.out], force=args.force, names=["--out"],
                   inputs={"--track": args.track, "--map": args.map})
     check_out_format(args.out, "CSV")
@@ -275,11 +312,6 @@ def cmd_navigate(args):
         track, grid, args.max_gap, args.max_speed, map_name=f"map --map {str(args.map)!r}",
         gaps=f"--method {args.method} needs every row (a tightly coupled --method, e.g. ukf, "
              "predicts through gaps)" if args.method in LOOSE_MATCHERS else None)
-    segment_rows = args.n_fixes * args.fix_every
-    if args.method in LOOSE_MATCHERS and len(track["t"]) <= segment_rows:
-        raise ValueError(f"track file {track.path!r} has {len(track['t'])} rows; one segment "
-                         f"of --n-fixes {args.n_fixes} x --fix-every {args.fix_every} needs "
-                         f"more than {segment_rows}")
     log = Track(*(np.asarray(track[k]) for k in ("t", "lat", "lon", "v_east", "v_north")))
     gravity = np.asarray(track["gravity"])
     if args.method in LOOSE_MATCHERS:

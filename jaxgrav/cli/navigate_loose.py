@@ -19,7 +19,7 @@ from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.tracks import write_track_csv
 
-__all__ = ["check_fix_blocks", "run_loose"]
+__all__ = ["check_fix_blocks", "first_fix_rows", "no_fix_warning", "run_loose"]
 
 
 def run_loose(args, log, voyage, grid, track, steps, n_missing, n_off):
@@ -35,21 +35,63 @@ def run_loose(args, log, voyage, grid, track, steps, n_missing, n_off):
     # chains: the largest distance between fixes sizes the search's displacement stencil
     step = (float(np.max(np.hypot(log.v_east, log.v_north))) * args.fix_every * steps.dt
             if chains else None)
+    loop = {k: getattr(args, k) for k in ("segment_error", "fix_prior", "first_n_fixes")
+            if getattr(args, k, None) is not None}
     cfg = loose_config(INS_GRADES[args.ins], args.map_error, args.map_error_length, args.noise,
                        matcher=args.method, grid=nav_map, step_m=step,
                        sigma_pos_m=args.sigma_pos, sigma_vel=args.sigma_vel,
-                       fix_every=args.fix_every, n_fixes=args.n_fixes, stride=args.stride)
+                       fix_every=args.fix_every, n_fixes=args.n_fixes, stride=args.stride,
+                       **loop)
     # not through executables: the loop's kept program crashes XLA:CPU when loaded
     # (jaxlib 0.10.2; its trial never passes), so keeping it would only cost a compile.
     # chains read the refined map's nodes: no spline to prepare
     res = navigate_loose(nav_map, voyage, cfg) if chains else _loose(grid, voyage, cfg)
     _write(args, log, res, cfg, track)
-    events = np.asarray(res.fix_event)
+    n = len(voyage.ins.t)
+    # the segment ends within the log (the last, padded one may fall beyond it)
+    events = np.asarray(res.fix_event)[_end_rows(cfg, res.fix_event.shape[0]) < n]
     counts = ", ".join(f"{int(np.sum(events == k))} {FIX_EVENTS[k].split(':')[0]}"
                        for k in FIX_EVENTS if np.any(events == k))
-    print(f"wrote {args.out}: {len(voyage.ins.t)} rows, {events.size} segment ends ({counts}); "
+    print(f"wrote {args.out}: {n} rows, {events.size} segment ends ({counts or 'none'}); "
           f"{n_missing} missing reading(s) skipped, {n_off} row(s) off the map (not aided)"
           f"; {steps.describe()}")
+    warning = no_fix_warning(cfg, n, events)
+    if warning is not None:
+        print(f"warning: {warning}", file=sys.stderr)
+
+
+def _end_rows(cfg, n_ends):
+    """The rows at which the loop's segment ends fall (the fix applies from there)."""
+    return (np.arange(n_ends) + 1) * cfg.stride * cfg.fix_every
+
+
+def first_fix_rows(cfg):
+    """Rows a log needs beyond the first row for its first fix: the first segment end whose
+    segment (``first_n_fixes`` or ``n_fixes`` fixes of ``fix_every`` rows) is complete."""
+    first = cfg.first_n_fixes or cfg.n_fixes
+    return -(-first // cfg.stride) * cfg.stride * cfg.fix_every
+
+
+def no_fix_warning(cfg, n_rows, events):
+    """The warning for a log on which no fix was accepted (None if one was): too short for
+    its first segment, or every segment end not matched or rejected (the counts).
+
+    ``events`` are the fix events of the segment ends within the log."""
+    if np.any(events == 0):
+        return None
+    need = first_fix_rows(cfg)
+    if n_rows <= need:
+        first = cfg.first_n_fixes or cfg.n_fixes
+        return (f"no fix could be made: the log has {n_rows} rows and its first segment "
+                f"({first} fixes of --fix-every {cfg.fix_every} rows, ending at a segment end "
+                f"every --stride {cfg.stride} fixes) needs more than {need}; the output is the "
+                "INS with the filter's growing 1-sigma, not aided"
+                + ("" if cfg.first_n_fixes else "; --first-n-fixes N matches the last N fixes "
+                   "at the segment ends before a whole segment"))
+    counts = ", ".join(f"{int(np.sum(events == k))} {FIX_EVENTS[k]}" for k in FIX_EVENTS
+                       if np.any(events == k))
+    return (f"no fix was accepted ({counts}); the output is the INS with the filter's "
+            "growing 1-sigma, not aided")
 
 
 @jax.jit
@@ -78,7 +120,7 @@ def _write(args, ins, res, cfg, track):
     """The navigation CSV: every row, fix columns on the rows that end a segment."""
     n = len(ins.t)
     sd = np.sqrt(np.diagonal(np.asarray(res.cov_north_east), axis1=1, axis2=2))
-    rows = (np.arange(res.fix_event.shape[0]) + 1) * cfg.stride * cfg.fix_every
+    rows = _end_rows(cfg, res.fix_event.shape[0])
     keep = rows < n
     fix = {k: np.full(n, np.nan) for k in ("fix_event", "fix_status", "fix_north", "fix_east")}
     fix["fix_event"][rows[keep]] = np.asarray(res.fix_event)[keep]

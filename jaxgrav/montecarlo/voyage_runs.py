@@ -48,6 +48,7 @@ from jaxgrav.montecarlo.spec import (
 from jaxgrav.navigate import (
     FIX_EVENTS,
     LOOSE_MATCHERS,
+    SEGMENT_ERRORS,
     TIGHT_METHODS,
     LooseConfig,
     TightConfig,
@@ -149,7 +150,8 @@ def voyage_tracks(key, pm, grid, scenario, model, config):
 
 def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None, map_error=None,
                    map_error_told="state", map_error_order=None, hours=None,
-                   ins=NAVIGATION_GRADE):
+                   ins=NAVIGATION_GRADE, segment_error=None, fix_prior=None,
+                   first_n_fixes=None):
     """The :class:`~jaxgrav.montecarlo.spec.MethodSpec` of a voyage method.
 
     Parameters
@@ -177,6 +179,18 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
         Length of each voyage (default 12).
     ins : INSErrorModel
         The INS (simulated and told to the navigator); default navigation grade.
+    segment_error : {"markov", "linear", "conditional"}, optional
+        ``voyage-dense`` only: how the loop tells the matcher the filter's own error
+        (:attr:`~jaxgrav.navigate.LooseConfig.segment_error`); default
+        :func:`~jaxgrav.navigate.loose_config`'s (conditional, with the rest of
+        :data:`~jaxgrav.navigate.DENSE_LOOP`; ``"markov"``: the old loop).
+    fix_prior : bool, optional
+        ``voyage-dense`` only: the offsets weighed by the filter's prior
+        (:attr:`~jaxgrav.navigate.LooseConfig.fix_prior`); default ``loose_config``'s.
+    first_n_fixes : int, optional
+        ``voyage-dense`` only: the segment ends before a whole segment match the last
+        that many fixes (:attr:`~jaxgrav.navigate.LooseConfig.first_n_fixes`); default
+        none.
 
     Returns
     -------
@@ -197,6 +211,13 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
                          f"{map_error_told!r}")
     if map_error_order not in (None, 1, 2):
         raise ValueError(f"map_error_order must be 1 or 2; got {map_error_order!r}")
+    loop = {k: v for k, v in (("segment_error", segment_error), ("fix_prior", fix_prior),
+                              ("first_n_fixes", first_n_fixes)) if v is not None}
+    if loop and kind != "voyage-dense":
+        raise ValueError(f"{' and '.join(loop)} are settings of voyage-dense's loop; got {kind}")
+    if segment_error is not None and segment_error not in SEGMENT_ERRORS:
+        raise ValueError(f"segment_error must be one of {', '.join(SEGMENT_ERRORS)}; got "
+                         f"{segment_error!r}")
     grid = default_grid() if grid is None else grid
     # land masked (the map's or a truth grid's): a run's route is drawn again (up to 16
     # times) until it reads no missing node (a complete map: the same voyages as one try)
@@ -230,7 +251,7 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
         length = 10000.0 if told is None else float(told.length_m)
         step = scenario.speed * LooseConfig.fix_every * scenario.dt  # between fixes (m)
         config = loose_config(scenario.ins, sigma, length, scenario.noise_mgal,
-                              matcher=name, grid=pm, step_m=step, sigma_pos_m=sigma_pos)
+                              matcher=name, grid=pm, step_m=step, sigma_pos_m=sigma_pos, **loop)
         fn, bits = voyage_dense_run, {1 << k: v for k, v in FIX_EVENTS.items()}
     else:
         default = 1 if name == "pmf" else told.order if told is not None else None
@@ -240,11 +261,17 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
                              method=kind.removeprefix("voyage-"))
         fn, bits = voyage_tight_run, {v: k for k, v in STATUS_FILTER.items() if v}
     settings = dict(description=f"{scenario.hours:g} h patrols, navigated "
-                    + (f"loosely coupled (hourly {name} fixes)" if loose else
+                    + (f"loosely coupled (hourly {name} fixes, {config.segment_error} segment "
+                       "error" + (", the filter's prior" if config.fix_prior else "") + ")"
+                       if loose else
                        f"tightly coupled ({name})"),
                     hours=scenario.hours, dt=scenario.dt, noise_mgal=scenario.noise_mgal,
                     pos_error_m=scenario.pos_error_m, map_error_told=map_error_told,
-                    series_every_s=SERIES_EVERY_S, **map_error_settings(model))
+                    series_every_s=SERIES_EVERY_S, **map_error_settings(model),
+                    **({"segment_error": config.segment_error, "fix_prior": int(config.fix_prior),
+                        "fixes_per_segment": config.n_fixes, "fixes_between_ends": config.stride,
+                        "first_segment_fixes": config.first_n_fixes or 0}
+                       if loose else {}))
     return MethodSpec(fn, (pm, grid, scenario, model, config), settings, bits,
                       cpu_options_for(kind))
 

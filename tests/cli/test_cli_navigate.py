@@ -84,6 +84,44 @@ def test_missing_readings_are_counted_not_fatal(voyage_log, tmp_path, capsys):
     assert "3 missing reading(s) skipped" in capsys.readouterr().out
 
 
+@pytest.mark.long
+def test_a_log_shorter_than_the_first_segment_says_no_fix_could_be_made(voyage_log, tmp_path,
+                                                                        capsys):
+    """1.5 h of log, segments of 100 fixes of 6 rows (the first segment end at row 600):
+    the INS is written with its growing 1-σ, and a warning says that no fix could be
+    made, why, and that --first-n-fixes would make one."""
+    out = tmp_path / "n.csv"
+    assert main(["navigate", "--track", str(voyage_log[0]), "--out", str(out), "--method",
+                 "dense", "--fix-every", "6", "--n-fixes", "100", "--stride", "100"]) == 0
+    said = capsys.readouterr()
+    assert "541 rows, 0 segment ends (none)" in said.out
+    assert ("warning: no fix could be made: the log has 541 rows and its first segment (100 "
+            "fixes of --fix-every 6 rows") in said.err and "needs more than 600" in said.err
+    assert "--first-n-fixes N matches the last N fixes" in said.err
+    nav = read_track_csv(out, ("t", "sigma_north", "fix_event"), allow_nan=("fix_event",))
+    assert len(nav["t"]) == 541 and not np.isfinite(nav["fix_event"]).any()
+    assert nav["sigma_north"][-1] > nav["sigma_north"][0]
+    # the same log with the first segment end on its last 30 fixes (--stride 30 ends at
+    # row 180): fixes are made
+    assert main(["navigate", "--track", str(voyage_log[0]), "--out", str(out), "--force",
+                 "--method", "dense", "--fix-every", "6", "--n-fixes", "60", "--stride", "30",
+                 "--first-n-fixes", "30"]) == 0
+    said = capsys.readouterr()
+    assert "541 rows, 3 segment ends" in said.out and "no fix" not in said.err
+
+
+def test_the_no_fix_warning_names_the_events():
+    from jaxgrav.cli.navigate_loose import first_fix_rows, no_fix_warning
+    from jaxgrav.navigate import LooseConfig
+    cfg = LooseConfig(n_fixes=60, stride=30, first_n_fixes=30)
+    assert first_fix_rows(cfg) == 360 and first_fix_rows(LooseConfig(n_fixes=60, stride=30)) == 720
+    assert no_fix_warning(cfg, 5000, np.array([3, 0, 4])) is None
+    said = no_fix_warning(cfg, 5000, np.array([3, 4, 4]))
+    assert said.startswith("no fix was accepted (1 rejected by the matcher's integrity test, "
+                           "2 rejected by the innovation gate")
+    assert "needs more than 360" in no_fix_warning(cfg, 300, np.array([], int))
+
+
 def _edited(log, tmp_path, edit):
     track = read_track_csv(log, ("t", "lat", "lon", "v_east", "v_north", "gravity"))
     cols = {k: np.asarray(track[k]).copy() for k in ("t", "lat", "lon", "v_east", "v_north",
@@ -129,8 +167,10 @@ def test_bad_logs_are_named(voyage_log, tmp_path, capsys, edit, message):
     (["--stride", "40"], "--stride must be at most --n-fixes"),
     (["--sigma-pos", "-1"], "--sigma-pos must be a finite value > 0"),
     (["--map-error", "nan"], "--map-error must be a finite value >= 0"),
-    (["--n-fixes", "100", "--stride", "100", "--method", "dense"],
-     "one segment of --n-fixes 100"),
+    (["--segment-error", "markov"], "--segment-error is for --method dense; got --method ukf"),
+    (["--method", "chains", "--no-fix-prior"], "--fix-prior is for --method dense"),
+    (["--method", "dense", "--first-n-fixes", "70"], "--first-n-fixes must be from 5 to "
+                                                     "--n-fixes 60; got 70"),
     (["--method", "rbpf", "--particles", "1"], "--particles must be an integer >= 100"),
 ])
 def test_bad_options_are_named(voyage_log, tmp_path, capsys, args, message):

@@ -12,7 +12,7 @@ from jaxgrav import montecarlo
 from jaxgrav.cli import main
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.montecarlo.voyage_runs import voyage_builder, voyage_tracks
-from jaxgrav.navigate import hourly_rms, navigate_tight, voyage_errors
+from jaxgrav.navigate import DENSE_LOOP, hourly_rms, navigate_tight, voyage_errors
 from jaxgrav.scenarios import voyage_scenario
 
 MODEL = map_error(3.0, 10000.0)
@@ -88,11 +88,62 @@ def test_loose_runs_record_their_fix_events(kind):
     ({"map_error_order": 3}, ValueError, "map_error_order must be 1 or 2"),
     ({"noise": -1.0}, ValueError, "noise must be a positive reading"),
     ({"kind": "voyage-pf"}, ValueError, "kind must be one of voyage-dense"),
+    ({"segment_error": "markov"}, ValueError, "segment_error are settings of voyage-dense"),
+    ({"kind": "voyage-chains", "fix_prior": True}, ValueError, "fix_prior are settings of"),
+    ({"kind": "voyage-dense", "segment_error": "exact"}, ValueError,
+     "segment_error must be one of markov, linear, conditional"),
 ])
 def test_bad_builder_options_are_named(options, error, message):
     kw = {"kind": "voyage-ukf", **options}
     with pytest.raises(error, match=message):
         voyage_builder(None, **kw)
+
+
+def test_voyage_dense_runs_the_dense_loop_by_default_and_markov_on_request():
+    config = voyage_builder(None, kind="voyage-dense").args[-1]
+    assert {k: getattr(config, k) for k in DENSE_LOOP} == DENSE_LOOP
+    spec = voyage_builder(None, kind="voyage-dense", segment_error="markov")
+    old = spec.args[-1]
+    assert (old.segment_error, old.fix_prior, old.n_fixes, old.stride, old.cell_error,
+            old.first_n_fixes) == ("markov", False, 30, 30, False, None)
+    assert spec.settings["segment_error"] == "markov" and spec.settings["fix_prior"] == 0
+    no_prior = voyage_builder(None, kind="voyage-dense", fix_prior=False).args[-1]
+    assert not no_prior.fix_prior and no_prior.segment_error == "conditional"
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--method", "voyage-ukf", "--segment-error", "markov"],
+     "--segment-error, --fix-prior and --first-n-fixes are options of --method voyage-dense"),
+    (["--method", "dense", "--fix-prior"], "--fix-prior is an option of the voyage methods"),
+])
+def test_cli_loop_options_are_voyage_dense_only(tmp_path, capsys, args, message):
+    out = tmp_path / "v.nc"
+    assert main(["montecarlo", *args, "--runs", "2", "--no-progress", "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err and not out.exists()
+
+
+@pytest.mark.long
+@pytest.mark.parametrize("loop", [[], ["--first-n-fixes", "30"], ["--segment-error", "markov"]])
+def test_cli_voyage_dense_runs_its_loop(tmp_path, capsys, loop):
+    """montecarlo --method voyage-dense end to end: by default 2 h segments every hour (on
+    a 2 h patrol the 1 h end is not matched, event 1), the settings stored;
+    --first-n-fixes 30: the 1 h end matched on its 30 fixes; --segment-error markov: the
+    old loop (1 h segments, both ends matched)."""
+    out = tmp_path / "v.nc"
+    assert main(["montecarlo", "--method", "voyage-dense", "--runs", "2", "--hours", "2",
+                 "--map-error", "3", "--no-progress", "--out", str(out), *loop]) == 0
+    said = capsys.readouterr().out
+    assert "last hour / free INS" in said and "NEES mean" in said
+    ds = xr.open_dataset(out)
+    events = ds["fix_event"].values
+    assert events.shape == (2, 2) and np.all(events[:, 1] != 1)
+    assert np.all((events[:, 0] == 1) == (loop == []))
+    markov = "markov" in loop
+    assert ds.attrs["setting_segment_error"] == ("markov" if markov else "conditional")
+    assert ds.attrs["setting_fixes_per_segment"] == (30 if markov else 60)
+    assert ds.attrs["setting_fix_prior"] == (0 if markov else 1)
+    assert ds.attrs["setting_first_segment_fixes"] == (30 if "30" in loop else 0)
+    ds.close()
 
 
 @pytest.mark.long
