@@ -308,7 +308,8 @@ def navigate_loose(grid, voyage, config):
     m = cfg.fix_every
     steps_between = cfg.stride * m
     n_seg = -(-(n - 1) // steps_between)
-    pad = n_seg * steps_between + 1 - n
+    # to the last segment end, and at least one segment's span (a voyage shorter than it)
+    pad = max(n_seg * steps_between + 1, cfg.n_fixes * m) - n
     ins_p = Track(*(jnp.concatenate([a, jnp.repeat(a[-1:], pad)]) for a in ins))
     grav_p = jnp.concatenate([voyage.gravity, jnp.full((pad,), jnp.nan, voyage.gravity.dtype)])
     dt = (ins.t[-1] - ins.t[0]) / (ins.t.shape[0] - 1)  # the mean step, not the first's
