@@ -164,9 +164,13 @@ def less_cell(cov, q):
     Array, shape ``(2, 2)``
     """
     a, b, d = cov[0, 0], 0.5 * (cov[0, 1] + cov[1, 0]), cov[1, 1]
-    rad = jnp.sqrt(0.25 * (a - d) ** 2 + b * b)
+    # an isotropic cov has no axis (any gives the same result), and the derivatives of
+    # √ and arctan2 at 0 are not finite there: the double wheres keep the gradient finite
+    round_ = (b == 0) & (a == d)
+    rad = jnp.where(round_, 0.0, jnp.sqrt(jnp.where(round_, 1.0, 0.25 * (a - d) ** 2 + b * b)))
     big, small = 0.5 * (a + d) + rad, 0.5 * (a + d) - rad
-    angle = 0.5 * jnp.arctan2(2.0 * b, a - d)  # of the larger eigenvalue's axis
+    # the larger eigenvalue's axis
+    angle = 0.5 * jnp.arctan2(jnp.where(round_, 0.0, 2.0 * b), jnp.where(round_, 1.0, a - d))
     u = jnp.stack([jnp.cos(angle), jnp.sin(angle)])
     v = jnp.stack([-u[1], u[0]])
     return (jnp.maximum(big - q, q) * jnp.outer(u, u)

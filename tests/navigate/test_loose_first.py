@@ -144,3 +144,15 @@ def test_the_cell_is_not_counted_twice_nor_the_fix_narrower_than_it():
     np.testing.assert_allclose(out, rot @ np.diag([9e4 - 100.0, 100.0]) @ rot.T, rtol=1e-6,
                                atol=1e-6)
     assert np.all(np.linalg.eigvalsh(out) >= 100.0 - 1e-6)
+
+
+def test_less_cell_has_a_finite_gradient_at_a_round_covariance():
+    """An isotropic covariance has no axis (arctan2(0, 0)): the value is max(λ − q, q) I
+    and its derivative finite, equal to central differences (the suite runs in x64)."""
+    from jaxgrav.navigate import less_cell
+    weights = jnp.array([[1.0, 0.3], [0.3, 2.0]])
+    f = lambda s: jnp.sum(less_cell(s * jnp.eye(2), 100.0) * weights)  # noqa: E731
+    np.testing.assert_allclose(less_cell(900.0 * jnp.eye(2), 100.0), 800.0 * np.eye(2))
+    g = float(jax.grad(f)(900.0))
+    fd = (float(f(900.0 + 1e-3)) - float(f(900.0 - 1e-3))) / 2e-3
+    assert np.isfinite(g) and g == pytest.approx(fd, rel=1e-6) and g == pytest.approx(3.0)
