@@ -45,8 +45,11 @@ def test_a_run_is_the_navigator_on_the_same_voyage(tight):
     np.testing.assert_allclose(res["hourly_err_m"][1], hourly_rms(err.nav_m, scenario.dt),
                                rtol=rel)
     # the NEES divides by the stated covariance, whose batched and single-run rounding
-    # differ (the RBPF's mixture of 500 particles): 1e-6 relative apart here
-    assert float(res["nees"][1]) == pytest.approx(float(jnp.mean(err.nees)), rel=1e-5)
+    # differ (the RBPF's mixture of 500 particles, its resampling carrying them on): 1e-6
+    # relative apart here until the map's coefficients became one compiled program
+    # (2026-12-07, other last bits), 1.8e-5 since
+    assert float(res["nees"][1]) == pytest.approx(float(jnp.mean(err.nees)),
+                                                  rel=1e-4 if config.method == "rbpf" else 1e-5)
     assert res["err_series_m"].shape == (2, 7)  # every 10 min over 1 h, start included
     assert np.all(res["status"] == 0)
     # the tracks of the figure are that run's: truth, free INS and the navigation solution
