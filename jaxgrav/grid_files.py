@@ -33,6 +33,7 @@ from jaxgrav.grid_values import (
     FILL_VALUES,
     UndeclaredFillWarning,
     axis_degrees,
+    eastward_longitudes,
     map_units,
     outside_valid_range,
     undeclared_fills,
@@ -370,8 +371,7 @@ def _checked_axes(lat, lon, label, lat_name, lon_name):
         raise ValueError(f"{label}: coordinate value {float(value):g} is not a latitude/"
                          "longitude in degrees (projected coordinates in metres?); jaxgrav "
                          "reads geographic grids: reproject it first (e.g. gmt grdproject -I)")
-    if lon.min() < -180.0 and lon.max() <= 0.0:  # -236..-224: the -360..0 convention
-        lon = lon + 360.0
+    lon = eastward_longitudes(lon)  # -236..-224: the -360..0 convention
     joined = contiguous_longitudes(lon)
     if joined is not lon:
         try:  # a 360° jump only: use the joined axis; otherwise name the file's own values

@@ -6,8 +6,9 @@ missing, with an :class:`UndeclaredFillWarning`; :func:`outside_valid_range` rea
 outside a declared CF ``valid_range`` / ``valid_min`` / ``valid_max`` as missing, as CF
 says they are; :func:`map_units` converts a gravity or magnetic map declared in other
 units (``m s-2``, ``uGal``, ``uT`` …) to mGal or nT; :func:`axis_degrees` reads a
-coordinate's units (CF ``degrees_west``/``degrees_south`` count the other way). Used by
-:func:`jaxgrav.grid_files.read_netcdf`.
+coordinate's units (CF ``degrees_west``/``degrees_south`` count the other way) and
+:func:`eastward_longitudes` the −360…0 convention. Used by
+:func:`jaxgrav.grid_files.read_netcdf` (and the last by the track reader too).
 """
 
 import re
@@ -15,7 +16,8 @@ import warnings
 
 import numpy as np
 
-__all__ = ["FILL_VALUES", "UndeclaredFillWarning", "axis_degrees", "map_units",
+__all__ = ["FILL_VALUES", "UndeclaredFillWarning", "axis_degrees", "eastward_longitudes",
+           "map_units",
            "outside_valid_range", "undeclared_fills", "units_attr"]
 
 _UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (factor, units)
@@ -49,6 +51,29 @@ def units_attr(attrs):
         return str(attrs["units"])
     spelled = [k for k in attrs if str(k).lower() in ("units", "unit")]
     return str(attrs[spelled[0]]) if spelled else ""
+
+
+def eastward_longitudes(lon):
+    """Longitudes in the −360…0 convention (every value at most 0°, some below −180°)
+    shifted by +360° into 0…360; others returned unchanged (degrees).
+
+    The one rule of the map and track readers: −233.5 is 126.5° E (a value below −180°
+    has no other reading; maps were shifted, tracks refused).
+
+    Parameters
+    ----------
+    lon : numpy.ndarray, shape ``(n,)``
+        Longitudes (degrees), finite.
+
+    Returns
+    -------
+    numpy.ndarray, shape ``(n,)``
+        ``lon + 360`` in the −360…0 convention, else ``lon`` itself.
+    """
+    lon = np.asarray(lon)
+    if lon.size and lon.min() < -180.0 and lon.max() <= 0.0 and lon.min() >= -360.0:
+        return lon + 360.0
+    return lon
 
 
 def axis_degrees(coord, units, name, label):

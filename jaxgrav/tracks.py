@@ -23,7 +23,8 @@ What the reader accepts (parsing of the text: :mod:`jaxgrav.track_files`):
   :func:`~jaxgrav.track_times.parse_datetime`), which become seconds since the first row
   (the text is kept in the column ``time``); times of day are joined to a ``date``
   column; times must increase: a repeated or earlier time is refused with its line;
-- longitudes in the 0–360 or the ±180 convention; a track crossing 0° or 180° is made
+- longitudes in the 0–360, the ±180 or the −360…0 convention (as maps:
+  :func:`~jaxgrav.grid_values.eastward_longitudes`); a track crossing 0° or 180° is made
   contiguous (359.5, 0.5 → −0.5, 0.5), as maps are (:func:`~jaxgrav.grid_axes.
   contiguous_longitudes`); latitudes must lie within ±90°;
 - extra numeric columns (in the dict) and text columns (in :attr:`TrackTable.text`).
@@ -36,6 +37,7 @@ import numpy as np
 
 from jaxgrav._io import atomic_output
 from jaxgrav.grid_axes import contiguous_longitudes
+from jaxgrav.grid_values import eastward_longitudes
 from jaxgrav.track_columns import ALIASES, listed, match_columns, parse_columns
 from jaxgrav.track_degrees import nmea_hint
 from jaxgrav.track_files import column_key, comma_hint, parse_degrees, parse_numbers, read_table
@@ -283,15 +285,15 @@ def _check_columns(track, required, allow_nan, label):
                              f"{track['lat'][i]:g} is outside [-90, 90] degrees"
                              f"{swapped or nmea_hint(track['lat'], i)}")
     if "lon" in track:
-        lon = track["lon"]
+        lon = track["lon"].copy()
+        ok = np.isfinite(lon)
+        lon[ok] = eastward_longitudes(lon[ok])  # -233.5: 126.5 E, as maps are read
         bad = np.flatnonzero(np.isinf(lon) | (lon < -180.0) | (lon > 360.0))
         if bad.size:
             i = int(bad[0])
             raise ValueError(f"{label}, line {lines[i]}, column "
                              f"{track.renamed.get('lon', 'lon')!r}: longitude {lon[i]:g} is "
                              f"outside [-180, 360] degrees{nmea_hint(lon, i)}")
-        ok = np.isfinite(lon)
-        lon = lon.copy()
         lon[ok] = contiguous_longitudes(lon[ok])
         track["lon"] = lon
 

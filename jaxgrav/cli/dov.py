@@ -13,7 +13,6 @@ import xarray as xr
 
 from jaxgrav import dov
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.dov_units import in_arcsec_and_metres
 from jaxgrav.cli.inputs import add_track_option, check_out_format, read_track
 from jaxgrav.dov import DEFAULT_METHOD, HARMONIC_GAP_LIMIT, METHODS
 from jaxgrav.grid_files import check_netcdf_file
@@ -184,7 +183,10 @@ def cmd_dov(args):
             text = str(err)
             raise ValueError(f"--grid {text}" if text.startswith(repr(str(args.grid)))
                              else f"--grid {args.grid!r}: {text}") from None
-        layers = in_arcsec_and_metres(layers, args.grid)  # radians were written as arcsec
+        if layers.units != "arcsec":  # converted from any angle (jaxgrav.dov.units)
+            raise ValueError(f"--grid {str(args.grid)!r}: {layers.channels[0]} declares units "
+                             f"{layers.units!r}, not an angle; expected deflections of the "
+                             "vertical in arcsec (or rad, urad, mrad, deg, mas)")
         own = np.asarray(layers.heights, float)
         # a count that differs was NumPy's "operands could not be broadcast together"
         if heights is not None and (len(heights) != own.size or not np.allclose(heights, own)):

@@ -37,7 +37,7 @@ def steepest_slope(grid):
 _ROWS = 256
 
 
-def unresolved(grid, span_m, n_fixes, noise):
+def unresolved(grid, span_m, n_fixes, noise, noise_option="--noise"):
     """Whether ``n_fixes`` readings of ``noise`` can tell the map's values ``span_m`` apart.
 
     They can when the map's steepest slope (:func:`steepest_slope`) changes it across
@@ -45,6 +45,9 @@ def unresolved(grid, span_m, n_fixes, noise):
     (below it, the χ² of any two positions in the span differ by less than 0.01: only a
     meaningless value falls there, e.g. ``--drift-radius 1e-9``; a smooth map with a
     short span still runs, and says that the readings tell little).
+
+    ``noise_option`` is the option that set ``noise``, named in the text (``filter``'s
+    ``--sigma-gravity``).
 
     Returns
     -------
@@ -61,7 +64,7 @@ def unresolved(grid, span_m, n_fixes, noise):
         return None, least_m
     unit = grid.units or "map units"
     return (f"the map changes by at most {span_m * slope:.3g} {unit} (its steepest slope is "
-            f"{slope:.3g} {unit}/m), below a tenth of what {n_fixes} readings of --noise "
+            f"{slope:.3g} {unit}/m), below a tenth of what {n_fixes} readings of {noise_option} "
             f"{noise:g} {unit} can tell ({tell:.3g} {unit})"), least_m
 
 

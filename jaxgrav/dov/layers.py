@@ -18,6 +18,7 @@ from jaxgrav import datasets
 from jaxgrav._io import atomic_output
 from jaxgrav._pytree import pytree_dataclass, static_field
 from jaxgrav._validate import check_finite
+from jaxgrav.dov.units import declared_units, in_arcsec_and_metres
 from jaxgrav.fields.harmonics import synthesize_grid
 from jaxgrav.fields.pointmass import deflection
 from jaxgrav.grid import Grid
@@ -170,7 +171,16 @@ class LayeredGrid(GeographicAxes):
 
         Every data variable on those three dimensions becomes a channel (``xi`` and
         ``eta`` first when present), as :meth:`to_netcdf` and the shipped
-        ``qinling`` file write them.
+        ``qinling`` file write them. Channels declared in an angle unit (CF ``units`` or
+        ``Units``, ``UNITS``, ``unit``; none: arcsec) are converted to arcsec, heights
+        in km or ft to metres (:mod:`jaxgrav.dov.units`); other channel units are kept.
+
+        Raises
+        ------
+        FileNotFoundError
+            No such file.
+        ValueError
+            Other dimensions, no channel, heights in units of no length.
         """
         path = Path(path)
         if not path.exists():
@@ -189,8 +199,11 @@ class LayeredGrid(GeographicAxes):
             vals = np.stack(
                 [ds[v].transpose("height", "lat", "lon").values for v in names], axis=1
             )
-            units = str(ds[names[0]].attrs.get("units", "arcsec"))
-            return cls.from_arrays(ds["lat"].values, ds["lon"].values, ds["height"].values,
+            # "Units", "unit" and heights in km were ignored (read as arcsec and m)
+            vals, heights, units = in_arcsec_and_metres(
+                vals, np.asarray(ds["height"].values, float), *declared_units(ds, names[0]),
+                repr(str(path)))
+            return cls.from_arrays(ds["lat"].values, ds["lon"].values, heights,
                                    vals, channels=names, units=units)
 
     def to_netcdf(self, path, *, attrs=None, force=False):

@@ -1,0 +1,120 @@
+"""Inputs found by the tenth issue-19 hunt (2026-12-07, helper-79).
+
+The last hunt's leftovers first: a track in the −360…0 longitude convention was refused
+(maps in it were read), ``filter --sigma-pos 1e-9`` ran pmf on a grid nanometres across,
+and :meth:`jaxgrav.dov.LayeredGrid.from_netcdf` read only a ``units`` attribute, in
+neither km nor ft. Then the hunt's own finds (below them)."""
+
+import json
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from jaxgrav.cli import main
+from jaxgrav.dov import LayeredGrid
+from jaxgrav.tracks import read_track_csv
+
+ROWS = [(29.5 + 0.0056 * i, 126.5 + 0.0068 * i) for i in range(8)]
+
+
+def _track(path, header="t,lat,lon,gravity", rows=None, lon_shift=0.0):
+    rows = rows if rows is not None else [f"{120 * i},{lat},{lon + lon_shift:.4f},{-10 + i}"
+                                          for i, (lat, lon) in enumerate(ROWS)]
+    path.write_text(header + "\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def _log(path, n=30, dt=2.0, gap_after=None):
+    """A ``filter`` log on the shipped map: ``n`` rows every ``dt`` s heading north-east,
+    a reading every row, one gap of 4 steps after row ``gap_after``."""
+    t = dt * np.arange(n, dtype=float)
+    if gap_after is not None:
+        t[gap_after + 1:] += 4 * dt
+    rows = [f"{t[i]:g},{29.5 + 1e-4 * i:.5f},{126.5 + 1e-4 * i:.5f},{-10 + 0.1 * i:.2f}"
+            for i in range(n)]
+    return _track(path, rows=rows)
+
+
+# --- the last hunt's leftovers ----------------------------------------------------------
+
+def test_a_track_in_the_minus_360_convention_is_read_as_maps_are(tmp_path):
+    """``lon`` −233.5 (126.5° E written as −360…0, as some survey software exports) was
+    refused "outside [-180, 360]" with a NMEA hint, while a map in that convention was
+    read."""
+    east = read_track_csv(_track(tmp_path / "e.csv"), required=("t", "lat", "lon"))
+    west = read_track_csv(_track(tmp_path / "w.csv", lon_shift=-360.0),
+                          required=("t", "lat", "lon"))
+    np.testing.assert_allclose(west["lon"], east["lon"], atol=1e-9)
+    assert west.cells["lon"][0] == "-233.5"  # passed through to outputs as written
+
+
+def test_match_on_a_minus_360_track_equals_the_east_track(tmp_path):
+    outs = []
+    for name, shift in (("e", 0.0), ("w", -360.0)):
+        track = _track(tmp_path / f"{name}.csv", lon_shift=shift)
+        outs.append(tmp_path / f"{name}.json")
+        assert main(["match", "--map", "ryukyu", "--track", str(track), "--out",
+                     str(outs[-1])]) == 0
+    east, west = (json.loads(p.read_text()) for p in outs)
+    assert east["offset_north_m"] == pytest.approx(west["offset_north_m"], abs=1e-6)
+    assert east["offset_east_m"] == pytest.approx(west["offset_east_m"], abs=1e-6)
+
+
+def test_a_track_beyond_both_conventions_is_still_refused(tmp_path):
+    track = _track(tmp_path / "t.csv", rows=["0,29.5,-200", "10,29.5,10"])
+    with pytest.raises(ValueError, match="longitude -200 is outside"):
+        read_track_csv(track, required=("t", "lat", "lon"))
+
+
+def test_pmf_sigma_pos_the_map_cannot_resolve_is_refused(tmp_path, refused):
+    """``filter --method pmf --sigma-pos 1e-9`` ran: the grid (±4 σ, fixed) was 8 nm
+    across, every row at its edge, "final 1-sigma 0 m" with a 1.4 km true error, exit 0."""
+    out = tmp_path / "o.csv"
+    refused(["filter", "--map", "ryukyu", "--track", _log(tmp_path / "log.csv"), "--out", out,
+             "--method", "pmf", "--sigma-pos", "1e-9"],
+            "--sigma-pos 1e-09 m makes pmf's grid 8e-09 m across (±4 sigma, the region it "
+            "searches), across which the map changes by at most 1.15e-10 mGal (its steepest "
+            "slope is 0.0144 mGal/m), below a tenth of what 30 readings of --sigma-gravity 1 "
+            "mGal can tell (0.0183 mGal): no cell could be told from another; expected a "
+            "--sigma-pos of at least 0.16 m")
+    assert not out.exists()
+
+
+def test_a_tiny_max_gap_refuses_any_gap_by_name(tmp_path, refused):
+    """``--max-gap 1e-9`` is kept: it says "predict through no gap", and a log with one
+    is refused naming it (a log without gaps runs as with the default)."""
+    refused(["filter", "--map", "ryukyu", "--track", _log(tmp_path / "log.csv", gap_after=9),
+             "--out", tmp_path / "o.csv", "--max-gap", "1e-9"],
+            "a gap of 10 s on lines 11-12 (t 18 -> 28 s) is longer than --max-gap 1e-09 s")
+
+
+def _layers(path, key, xi_units, xi_factor, h_units, h_factor):
+    lat, lon = np.linspace(0.0, 1.0, 6), np.linspace(10.0, 11.0, 6)
+    values = np.stack([np.stack([np.add.outer(lat, lon) * (k + 1) * (c + 1) for c in range(2)])
+                       for k in range(2)])
+    xr.Dataset({name: (("height", "lat", "lon"), values[:, c] / xi_factor, {key: xi_units})
+                for c, name in enumerate(("xi", "eta"))},
+               coords={"height": ("height", np.array([0.0, 1000.0]) / h_factor,
+                                  {key: h_units}),
+                       "lat": lat, "lon": lon}).to_netcdf(path)
+    return values
+
+
+@pytest.mark.parametrize("key", ["units", "Units", "UNITS", "unit"])
+def test_layered_grid_from_netcdf_converts_declared_units(tmp_path, key):
+    """Outside the command line the layers read only ``units`` and never converted:
+    µrad were taken for arcsec, heights in km for metres."""
+    values = _layers(tmp_path / "g.nc", key, "urad", 0.20626480624709636, "km", 1000.0)
+    layers = LayeredGrid.from_netcdf(tmp_path / "g.nc")
+    assert layers.units == "arcsec"
+    np.testing.assert_allclose(np.asarray(layers.heights), [0.0, 1000.0])
+    np.testing.assert_allclose(np.asarray(layers.values), values, rtol=1e-12)
+
+
+def test_layered_grid_keeps_channels_of_another_kind_and_refuses_odd_heights(tmp_path):
+    _layers(tmp_path / "g.nc", "units", "mGal", 1.0, "m", 1.0)
+    assert LayeredGrid.from_netcdf(tmp_path / "g.nc").units == "mGal"
+    _layers(tmp_path / "h.nc", "units", "arcsec", 1.0, "s", 1.0)
+    with pytest.raises(ValueError, match="height declares units 's'; expected layer heights"):
+        LayeredGrid.from_netcdf(tmp_path / "h.nc")
