@@ -1,6 +1,7 @@
 """Track file columns: the header names each column goes by, and ``--columns``.
 
-:data:`ALIASES` lists the names (any case) accepted for each canonical column;
+:data:`ALIASES` (defined in :mod:`jaxgrav.track_units`, whose ``name_unit`` headers
+follow it) lists the names (any case) accepted for each canonical column;
 :func:`match_columns` finds each wanted column in a header, refusing a header in which
 two columns could both be one (``lat`` beside ``latitude``: which one is the position?);
 :func:`parse_columns` reads ``--columns lat=LAT,lon=LON``. For
@@ -10,24 +11,9 @@ two columns could both be one (``lat`` beside ``latitude``: which one is the pos
 import re
 
 from jaxgrav.track_files import column_key
+from jaxgrav.track_units import ALIASES
 
 __all__ = ["ALIASES", "listed", "match_columns", "parse_columns"]
-
-ALIASES = {
-    "t": ("t", "time", "timestamp", "datetime"),
-    "lat": ("lat", "latitude"),
-    "lon": ("lon", "longitude", "long", "lng"),
-    "h": ("h", "height"),
-    # a survey's anomaly column under its own name was "needs a 'gravity' column"
-    "gravity": ("gravity", "gravity_anomaly", "free_air_anomaly", "free_air", "faa", "grav"),
-    "magnetic": ("magnetic", "magnetic_anomaly", "mag_anomaly", "total_field_anomaly"),
-    # "ve, vn" logs ran as if without velocities: raw readings taken as Eötvös-corrected
-    "v_east": ("v_east", "ve", "v_e", "vel_east", "velocity_east", "east_velocity", "veast"),
-    "v_north": ("v_north", "vn", "v_n", "vel_north", "velocity_north", "north_velocity",
-                "vnorth"),
-}
-"""Header names (any case) accepted for each column, in order of preference."""
-
 
 def parse_columns(text):
     """Parse ``--columns lat=LAT,lon=LON`` into ``{"lat": "LAT", "lon": "LON"}``.

@@ -16,21 +16,39 @@ import numpy as np
 from jaxgrav.constants import WGS84_MEAN_RADIUS
 from jaxgrav.grid_files import map_units
 
-__all__ = ["UNIT_SUFFIX", "declared_unit", "header_scale", "unit_of"]
+__all__ = ["ALIASES", "UNIT_SUFFIX", "declared_unit", "header_scale", "unit_of"]
 
 UNIT_SUFFIX = re.compile(r"\s*[(\[][^()\[\]]*[)\]]\s*$")
 """A ``(unit)`` or ``[unit]`` at the end of a header."""
 
-_SNAKE_UNITS = {  # a header (lower case) -> the units an "_unit" ending may give it
-    **dict.fromkeys(("lat", "latitude", "lon", "longitude", "long", "lng"),
-                    ("deg", "degs", "degrees", "rad")),
-    **dict.fromkeys(("t", "time", "timestamp"),
-                    ("s", "sec", "secs", "ms", "us", "ns", "min", "h", "hr", "hrs")),
-    **dict.fromkeys(("h", "height", "alt", "altitude", "elev", "elevation"),  # alt_ft was m
-                    ("m", "km", "ft", "cm", "mm")),
+ALIASES = {
+    "t": ("t", "time", "timestamp", "datetime"),
+    "lat": ("lat", "latitude"),
+    "lon": ("lon", "longitude", "long", "lng"),
+    "h": ("h", "height"),
+    # a survey's anomaly column under its own name was "needs a 'gravity' column"
+    "gravity": ("gravity", "gravity_anomaly", "free_air_anomaly", "free_air", "faa", "grav"),
+    "magnetic": ("magnetic", "magnetic_anomaly", "mag_anomaly", "total_field_anomaly"),
+    # "ve, vn" logs ran as if without velocities: raw readings taken as Eötvös-corrected
+    "v_east": ("v_east", "ve", "v_e", "vel_east", "velocity_east", "east_velocity", "veast"),
+    "v_north": ("v_north", "vn", "v_n", "vel_north", "velocity_north", "north_velocity",
+                "vnorth"),
+}
+"""Header names (any case) accepted for each column, in order of preference."""
+
+_SNAKE_BY_COLUMN = {  # a column -> the units an "_unit" ending of any of its names may give it
+    "lat": ("deg", "degs", "degrees", "rad"), "lon": ("deg", "degs", "degrees", "rad"),
+    "t": ("s", "sec", "secs", "ms", "us", "ns", "min", "h", "hr", "hrs"),
+    "h": ("m", "km", "ft", "cm", "mm"),
     "gravity": ("mgal", "ugal", "µgal", "gal", "gu"), "magnetic": ("nt", "ut", "µt"),
+    "v_east": ("kn", "kt", "kts", "kmh", "kph", "mph", "fps"),
     "drift_radius": ("deg", "m", "km", "nmi"),
 }
+_SNAKE_UNITS = {  # by header name (lower case): every alias ("faa_mgal" was no column)
+    name: _SNAKE_BY_COLUMN.get(column.replace("north", "east"), ())
+    for column, names in (*ALIASES.items(), ("h", ("alt", "altitude", "elev", "elevation")),
+                          ("drift_radius", ("drift_radius",)))
+    for name in names}
 _SINCE = re.compile(r"(.+?)\s+since\s+.*", re.IGNORECASE)  # CF "hours since 2024-05-01"
 _DEG = dict.fromkeys(("deg", "degs", "degree", "degrees", "°", "decimal degrees", "dd"), 1.0)
 _ARC_M = 180.0 / (math.pi * WGS84_MEAN_RADIUS)  # degrees of arc per metre

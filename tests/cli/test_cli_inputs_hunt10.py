@@ -118,3 +118,23 @@ def test_layered_grid_keeps_channels_of_another_kind_and_refuses_odd_heights(tmp
     _layers(tmp_path / "h.nc", "units", "arcsec", 1.0, "s", 1.0)
     with pytest.raises(ValueError, match="height declares units 's'; expected layer heights"):
         LayeredGrid.from_netcdf(tmp_path / "h.nc")
+
+
+# --- the hunt's own finds ---------------------------------------------------------------
+
+@pytest.mark.parametrize("header, name, factor", [
+    ("t,lat,lon,faa_mgal", "gravity", 1.0), ("t,lat,lon,free_air_anomaly_mgal", "gravity", 1.0),
+    ("t,lat,lon,grav_ugal", "gravity", 1e-3), ("t,lat,lon,mag_anomaly_nt", "magnetic", 1.0),
+    ("t,lat,lon,ve_kn", "v_east", 1852.0 / 3600.0),
+    ("t,lat,lon,v_north_kts", "v_north", 1852.0 / 3600.0),
+    ("timestamp_min,lat,lon", "t", 60.0)])
+def test_a_unit_ending_on_any_alias_is_read(tmp_path, header, name, factor):
+    """``faa_mgal`` (a survey's anomaly with its unit) was "needs a 'gravity' column" and
+    ``ve_kn`` passed through unread: the ``name_unit`` endings knew the canonical names
+    only (``gravity_mgal``), not the aliases the reader accepts (``faa``, ``ve``)."""
+    track = _track(tmp_path / "t.csv", header, ["0,29.5,126.5,2", "1,29.51,126.51,4"]
+                   if header.count(",") == 3 else ["0,29.5,126.5", "1,29.51,126.51"])
+    got = read_track_csv(track, required=("t", "lat", "lon"), optional=(name,))
+    column = -1 if name != "t" else 0
+    values = [float(r.split(",")[column]) for r in track.read_text().splitlines()[1:]]
+    np.testing.assert_allclose(got[name], np.asarray(values) * factor)
