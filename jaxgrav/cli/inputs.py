@@ -35,6 +35,7 @@ __all__ = [
     "add_map_error_var_option",
     "add_missing_option",
     "add_track_option",
+    "check_bicubic_nodes",
     "check_map_field",
     "check_missing_option",
     "check_out_format",
@@ -196,6 +197,18 @@ def kept_columns(track, columns):
     return {first: columns[first], **kept, **{k: columns[k] for k in rest}, **extra}
 
 
+def check_bicubic_nodes(grid, source, where=""):
+    """ValueError naming ``source`` (e.g. ``--map 'x.nc'``) for a map with fewer than 4
+    nodes along an axis (``where``: the part read, e.g. " where the track needs it"):
+    bicubic interpolation needs 4 (``simulate-voyage`` ended in the interpolator's "needs
+    at least 4 nodes per axis; got 2", naming no file)."""
+    shape = (np.size(grid.lat), np.size(grid.lon))
+    if min(shape) < 4:
+        raise ValueError(f"{source} has {shape[0]} x {shape[1]} nodes (lat x lon){where}; "
+                         "bicubic interpolation needs at least 4 along each axis: give a "
+                         "larger map")
+
+
 def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False,
               field="gravity", bicubic=True):
     """The ``--map`` of a command, cut to what ``track`` needs, and ``--map-error-var``'s σ.
@@ -242,11 +255,8 @@ def track_map(args, track, margin_m, *, error_reach_m=None, sigma_given=False,
     loaded = map_for_track(args.map, args.var, track["lat"], track["lon"], margin_m,
                            max_missing=MAX_MISSING, option="--map", error_var=error_var)
     grid, err = (loaded, None) if error_var is None else loaded
-    shape = (np.size(grid.lat), np.size(grid.lon))
-    if bicubic and min(shape) < 4:  # was "bicubic interpolation needs at least 4 nodes per axis"
-        raise ValueError(f"--map {str(args.map)!r} has {shape[0]} x {shape[1]} nodes (lat x lon) "
-                         "where the track needs it; bicubic interpolation needs at least 4 "
-                         "along each axis: give a larger map")
+    if bicubic:
+        check_bicubic_nodes(grid, f"--map {str(args.map)!r}", " where the track needs it")
     if field is not None:
         check_map_field(grid, field, args.map)
     if error_var is None:

@@ -33,7 +33,7 @@ import numpy as np
 
 from jaxgrav import executables
 from jaxgrav._io import check_outputs
-from jaxgrav.cli.inputs import check_map_field, check_out_format
+from jaxgrav.cli.inputs import check_bicubic_nodes, check_map_field, check_out_format
 from jaxgrav.cli.simulate import (
     add_map_error_options,
     check_seed,
@@ -100,6 +100,7 @@ def cmd_simulate_voyage(args):
         check_out_format(args.truth, "CSV", "--truth")
     grid = load_map(args.map, args.var, allow_nan=True)  # missing nodes: checked on the route
     check_map_field(grid, "gravity", args.map)  # nT were written as gravity
+    check_bicubic_nodes(grid, f"--map {str(args.map)!r}")
     try:
         check_region_covered(grid, scenario.region, f"--map {args.map}")
         own = ""

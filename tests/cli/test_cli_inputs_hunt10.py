@@ -12,6 +12,7 @@ import pytest
 import xarray as xr
 
 from jaxgrav.cli import main
+from jaxgrav.datasets import load_map
 from jaxgrav.dov import LayeredGrid
 from jaxgrav.tracks import read_track_csv
 
@@ -138,3 +139,23 @@ def test_a_unit_ending_on_any_alias_is_read(tmp_path, header, name, factor):
     column = -1 if name != "t" else 0
     values = [float(r.split(",")[column]) for r in track.read_text().splitlines()[1:]]
     np.testing.assert_allclose(got[name], np.asarray(values) * factor)
+
+
+def _small_map(path, rows):
+    """The shipped map's nodes near 29.5 N 126.5 E, ``rows`` rows of 36 columns."""
+    grid = load_map("ryukyu")
+    lat, lon, values = (np.asarray(a) for a in (grid.lat, grid.lon, grid.values))
+    i, j = np.searchsorted(lat, 29.4), np.searchsorted(lon, 126.0)
+    xr.Dataset({"z": (("lat", "lon"), values[i:i + rows, j:j + 36], {"units": "mGal"})},
+               coords={"lat": lat[i:i + rows], "lon": lon[j:j + 36]}).to_netcdf(path)
+    return path
+
+
+def test_simulate_voyage_on_a_two_row_map_names_the_map(tmp_path, refused):
+    """A 2-row map ended in the interpolator's "bicubic interpolation needs at least 4
+    nodes per axis; got 2" (no option, no file), as ``sample`` and ``match`` did not."""
+    grid = _small_map(tmp_path / "m.nc", 2)
+    refused(["simulate-voyage", "--map", grid, "--out", tmp_path / "v.csv", "--hours", "1"],
+            f"--map '{grid}' has 2 x 36 nodes (lat x lon); bicubic interpolation needs at "
+            "least 4 along each axis: give a larger map")
+    assert not (tmp_path / "v.csv").exists()
