@@ -36,9 +36,11 @@ __all__ = [
     "kbest_start",
     "kbest_step",
     "kmin",
+    "step_bounds",
     "step_compatibility",
     "step_ok",
     "step_region",
+    "step_within",
 ]
 
 
@@ -104,8 +106,14 @@ def step_ok(sn, se, step_north, step_east, step_tol_m, angle_tol_deg):
     ``step_tol_m`` of the INS step's, direction within ``angle_tol_deg`` plus
     ``asin(step_tol_m / |INS step|)``.
     """
-    lo, hi, dir_sq, obtuse, any_dir = _step_bounds(step_north, step_east, step_tol_m,
-                                                   angle_tol_deg)
+    bounds = step_bounds(step_north, step_east, step_tol_m, angle_tol_deg)
+    return step_within(sn, se, step_north, step_east, bounds)
+
+
+def step_within(sn, se, step_north, step_east, bounds):
+    """:func:`step_ok` with the per-step constants of :func:`step_bounds` given, so that
+    a scan over steps can compute them for every step before the loop."""
+    lo, hi, dir_sq, obtuse, any_dir = bounds
     # |len - ins_len| <= tol and (angle <= tol <=> s·d >= |s||d| cos(tol)), on squares:
     # no square root or arc function per pair
     len_sq = sn * sn + se * se
@@ -188,10 +196,16 @@ def step_region(step_north, step_east, step_tol_m, angle_tol_deg):
     return jnp.maximum(ins_len - step_tol_m, 0.0), ins_len + step_tol_m, half_angle, ins_len
 
 
-def _step_bounds(step_north, step_east, step_tol_m, angle_tol_deg):
-    """Per-step constants of :func:`step_ok`: bounds on the squared step length,
-    ``(|d| cos tol)²``, whether the direction tolerance exceeds 90° and whether it
-    admits every direction."""
+def step_bounds(step_north, step_east, step_tol_m, angle_tol_deg):
+    """Per-step constants of :func:`step_ok` (any broadcast shapes).
+
+    Returns
+    -------
+    tuple of Array
+        ``(lo, hi, dir_sq, obtuse, any_dir)``: bounds on the squared step length (m²),
+        ``(|d| cos tol)²`` (m²), whether the direction tolerance exceeds 90° and
+        whether it admits every direction.
+    """
     lo, hi, tol, ins_len = step_region(step_north, step_east, step_tol_m, angle_tol_deg)
     cos_tol = jnp.cos(tol)
     return lo * lo, hi * hi, (ins_len * cos_tol) ** 2, cos_tol < 0, tol >= jnp.pi
