@@ -16,6 +16,7 @@ an overflow flag. On overflow the best-fitting points (smallest
 ``|g − M| / δ_k``) are kept and the flag is raised; nothing is dropped silently.
 """
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -156,7 +157,9 @@ def _window_misfit(grid, lat, lon, readings, half_size, delta, slope_factor):
     v = win.values
     pad = jnp.pad(v, ((0, 0), (1, 1), (1, 1)), mode="edge")
     shifts = [pad[:, 1 + a : 1 + a + s, 1 + b : 1 + b + s] for a in (-1, 0, 1) for b in (-1, 0, 1)]
-    spread = jnp.max(jnp.abs(jnp.stack(shifts) - v[None]), axis=0)
+    # a running maximum, one elementwise kernel: stacking the 9 slices first made XLA:CPU
+    # copy them into a (9, N, s, s) array, ~85 % of the candidates' time
+    spread = functools.reduce(jnp.maximum, [jnp.abs(x - v) for x in shifts])
     tol = jnp.asarray(delta)[..., None, None] + 0.75 * slope_factor * spread
     misfit = jnp.abs(jnp.asarray(readings)[:, None, None] - win.values) / tol  # (N, s, s)
     return win, node_lat, node_lon, misfit
