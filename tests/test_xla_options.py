@@ -1,6 +1,8 @@
 """jaxgrav's XLA compiler options: which platforms get them, that they reach XLA, and that
 results do not change."""
 
+import gc
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -99,3 +101,20 @@ def test_the_command_programs_get_the_options(monkeypatch):
     monkeypatch.setattr(xla_options, "compiler_options", lambda *a, **k: {"xla_no_such_option": 1})
     with pytest.raises(jax.errors.JaxRuntimeError, match="xla_no_such_option"):
         executables.call(jax.jit(lambda x: x * 3.0), jnp.ones(3))
+
+
+def test_gc_paused_restores_the_collector():
+    assert gc.isenabled()
+    with xla_options.gc_paused():
+        assert not gc.isenabled()
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        with xla_options.gc_paused():
+            assert not gc.isenabled()
+        assert not gc.isenabled()  # off before: left off
+    finally:
+        gc.enable()
+    with pytest.raises(RuntimeError), xla_options.gc_paused():
+        raise RuntimeError("inside")
+    assert gc.isenabled()

@@ -48,7 +48,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from tqdm.auto import tqdm
 
 from jaxgrav._io import atomic_output
-from jaxgrav.xla_options import CPU_OPTIONS, check_cpu_options, compiler_options
+from jaxgrav.xla_options import CPU_OPTIONS, check_cpu_options, compiler_options, gc_paused
 
 __all__ = ["DEFAULT_CHUNK", "RUN_AXIS", "run", "to_dataset", "write_netcdf"]
 
@@ -220,7 +220,8 @@ def run(fn, key, n_runs, *, chunk=None, devices=None, progress=True, args=(),
         if part.shape[0] < size:  # pad with copies of the first key; results dropped
             part = np.concatenate([part, np.repeat(part[:1], size - part.shape[0], 0)])
         data = jax.make_array_from_callback(part.shape, key_sharding, lambda idx: part[idx])
-        return batched(data, *args)
+        with gc_paused():  # the first call traces and compiles (jaxgrav.xla_options)
+            return batched(data, *args)
 
     results = None
     bar = None
