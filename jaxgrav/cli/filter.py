@@ -91,7 +91,7 @@ from jaxgrav.cli.sanity import (
     implausible_rows,
     innovation_check,
 )
-from jaxgrav.cli.simulate import check_seed
+from jaxgrav.cli.simulate import check_map_error_size, check_seed
 from jaxgrav.fields.pointmass import paper_d
 from jaxgrav.fields.pointmass_fit import load_point_masses
 from jaxgrav.filters import STATUS_FILTER, status_messages_filter
@@ -340,6 +340,7 @@ def cmd_filter(args):
                              f"{args.method}")
         check_particles(args.particles)
     me_sigma, me_length = map_error_args(args)
+    check_map_error_size(me_sigma)
     if args.map_error_var is not None and args.map is None:
         raise ValueError("--map-error-var needs --map (a point-mass model has no uncertainty "
                          "grid)")

@@ -31,6 +31,7 @@ from jaxgrav.cli.match_size import check_fixes_memory
 from jaxgrav.cli.match_status import status_text
 from jaxgrav.cli.positions import check_velocity_units
 from jaxgrav.cli.sanity import check_readings, fit_check, time_gap_warning
+from jaxgrav.cli.simulate import check_map_error_size
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.match import (
@@ -339,6 +340,7 @@ def _check_match_args(args):
         bad("--refine", args.refine, "an integer factor >= 1")
     if not (math.isfinite(args.map_error) and args.map_error >= 0):
         bad("--map-error", args.map_error, "a finite standard deviation >= 0 (mGal)")
+    check_map_error_size(args.map_error)
     fill_map_error_length(args, args.map_error != 0 or args.map_error_var is not None)
     if not (math.isfinite(args.map_error_length) and args.map_error_length > 0):
         bad("--map-error-length", args.map_error_length, "a finite correlation length > 0 (m)")

@@ -19,7 +19,12 @@ import jax
 
 from jaxgrav.cli.filter_checks import memory_budget
 from jaxgrav.cli.match_search import unresolved
-from jaxgrav.cli.simulate import DEFAULT_MAP_ERROR_LENGTH_M, MAX_BIAS_MGAL, check_seed
+from jaxgrav.cli.simulate import (
+    DEFAULT_MAP_ERROR_LENGTH_M,
+    MAX_BIAS_MGAL,
+    check_map_error_size,
+    check_seed,
+)
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.match import METHODS
 from jaxgrav.montecarlo import DEFAULT_CHUNK
@@ -246,6 +251,7 @@ def told_from_args(args):
     if not (math.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"--told-map-error SIGMA must be a finite standard deviation >= 0 "
                          f"(map units, 0 = white-noise matcher); got {sigma!r}")
+    check_map_error_size(sigma, "--told-map-error SIGMA")
     length = nums[1] if len(nums) == 2 else (
         DEFAULT_MAP_ERROR_LENGTH_M if args.map_error_length is None else args.map_error_length)
     if sigma > 0 and not (math.isfinite(length) and length > 0):

@@ -97,7 +97,7 @@ from jaxgrav.cli.sanity import (
     implausible_rows,
     innovation_check,
 )
-from jaxgrav.cli.simulate import check_seed
+from jaxgrav.cli.simulate import check_map_error_size, check_seed
 from jaxgrav.filters import STATUS_FILTER, map_error_state, status_messages_filter
 from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
@@ -275,6 +275,7 @@ def cmd_navigate(args):
     check_positive("--noise", args.noise, "mGal")
     if args.map_error is not None:
         check_positive("--map-error", args.map_error, "mGal", allow_zero=True)
+        check_map_error_size(args.map_error)
     check_positive("--map-error-length", args.map_error_length, "m")
     check_positive("--max-gap", args.max_gap, "s")
     check_positive("--max-speed", args.max_speed, "m/s")

@@ -26,7 +26,7 @@ from jaxgrav.sim import DEG_ARC_M, rayleigh_quantile
 from jaxgrav.tracks import write_track_csv
 
 __all__ = ["DEFAULT_MAP_ERROR_LENGTH_M", "MAX_BIAS_MGAL", "MAX_MAP_ERROR", "MAX_SEED",
-           "add_map_error_options", "add_parser", "check_seed", "check_simulated_map_error",
+           "add_map_error_options", "add_parser", "check_map_error_size", "check_seed",
            "describe_map_error", "map_error_from_args"]
 
 DEFAULT_MAP_ERROR_LENGTH_M = 10000.0
@@ -52,11 +52,13 @@ def check_seed(seed):
                          f"got {seed}")
 
 
-def check_simulated_map_error(sigma):
-    """ValueError naming ``--map-error`` when a simulator is asked to draw a map error
-    above :data:`MAX_MAP_ERROR` (``sigma`` None or at most that passes)."""
+def check_map_error_size(sigma, option="--map-error"):
+    """ValueError naming ``option`` for a map error above :data:`MAX_MAP_ERROR`, drawn by a
+    simulator or told to a matcher or filter (``match``, ``filter``, ``navigate`` and
+    ``montecarlo --told-map-error`` took 1e9 and ran every fix rejected); ``sigma`` None
+    or at most that passes."""
     if sigma is not None and sigma > MAX_MAP_ERROR:
-        raise ValueError(f"--map-error must be at most {MAX_MAP_ERROR:g} (map units; a marine "
+        raise ValueError(f"{option} must be at most {MAX_MAP_ERROR:g} (map units; a marine "
                          "gravity map's error is a few mGal, a magnetic map's tens of nT); "
                          f"got {sigma:g}")
 
@@ -108,7 +110,7 @@ def map_error_from_args(args, grid, *, allow_nan=False, length_alone=False):
     if length is not None and not (math.isfinite(length) and length > 0):
         raise ValueError(f"--map-error-length must be a finite correlation length > 0 (m); "
                          f"got {length!r}")
-    check_simulated_map_error(sigma)
+    check_map_error_size(sigma)
     if length is not None and not sigma and not length_alone:  # was ignored, silently
         raise ValueError(f"--map-error-length {length:g} is the correlation length of the "
                          "drawn map error, and no --map-error is given: add --map-error "

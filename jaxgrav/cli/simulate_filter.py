@@ -14,7 +14,7 @@ import numpy as np
 
 from jaxgrav._io import check_outputs
 from jaxgrav.cli.inputs import check_map_field, check_out_format, map_error_args, whole_number
-from jaxgrav.cli.simulate import check_seed, check_simulated_map_error
+from jaxgrav.cli.simulate import check_map_error_size, check_seed
 from jaxgrav.cli.voyage import MAX_HOURS
 from jaxgrav.datasets import load_map
 from jaxgrav.fields.map_error import map_error
@@ -156,7 +156,7 @@ def cmd_simulate_filter(args):
                          f"rows of --minutes {args.minutes:g} every --dt {args.dt:g} s; expected "
                          f"at most {n - 1} rows between readings")
     me_sigma, me_length = map_error_args(args)
-    check_simulated_map_error(me_sigma)
+    check_map_error_size(me_sigma)
     if args.map is None and args.var is not None:  # was ignored, silently
         raise ValueError(f"--var {args.var} names a variable of --map; without --map the "
                          "readings come from paper D's point masses: give --map or leave "

@@ -159,3 +159,21 @@ def test_simulate_voyage_on_a_two_row_map_names_the_map(tmp_path, refused):
             f"--map '{grid}' has 2 x 36 nodes (lat x lon); bicubic interpolation needs at "
             "least 4 along each axis: give a larger map")
     assert not (tmp_path / "v.csv").exists()
+
+
+@pytest.mark.parametrize("command, option", [
+    ("match", "--map-error"), ("filter", "--map-error"), ("navigate", "--map-error"),
+    ("montecarlo", "--told-map-error")])
+def test_a_told_map_error_beyond_any_map_s_is_refused(tmp_path, refused, command, option):
+    """A map error told to a matcher or filter was not capped as a drawn one is (1000 map
+    units): ``match --map-error 1e9`` ran, every fix rejected, "score 3.72e-19", exit 0."""
+    log = _log(tmp_path / "log.csv")
+    out = tmp_path / ("o.json" if command == "match" else "o.nc" if command == "montecarlo"
+                      else "o.csv")
+    argv = (["montecarlo", "--method", "dense", "--runs", "3"] if command == "montecarlo"
+            else [command, "--track", log])
+    refused(argv + ["--map", "ryukyu", "--out", out, option, "1e9"],
+            f"{option}{' SIGMA' if command == 'montecarlo' else ''} must be at most 1000 (map "
+            "units; a marine gravity map's error is a few mGal, a magnetic map's tens of nT); "
+            "got 1e+09")
+    assert not out.exists()
