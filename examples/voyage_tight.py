@@ -21,10 +21,16 @@ Printed, one JSON line per setting: the figures of
 :func:`jaxgrav.navigate.voyage_summary` (hourly RMS of the navigation solution and of
 the free INS, last-hour ratio, last over second hour, share of voyages worse than the
 free INS in some hour from the second on, NEES), the share of readings used, runs/s.
+With ``--bound``, for the perfect map and the told map error, the posterior Cramér–Rao
+bound along each voyage (:func:`jaxgrav.navigate.voyage_bound`: the same model, the
+measurement row at the true position): its hourly RMS over voyages, its last hour over
+the free INS's and over its second hour, the filter's last hour over it (and the median
+voyage's), and the share of voyages whose bound exceeds the free INS's error in some
+hour from the second on — where no estimator is expected to beat the INS.
 
 Run: ``python examples/voyage_tight.py [--runs 100] [--method ukf|ekf|gsf|rbpf] [--order 1|2]
 [--sigma 3] [--length 10000] [--ins navigation|strategic] [--png FILE] [--tracks-png FILE]
-[--smoke]``.
+[--bound] [--smoke]``.
 """
 
 import argparse
@@ -45,6 +51,7 @@ from jaxgrav.navigate import (
     TightConfig,
     hourly_rms,
     navigate_tight,
+    voyage_bound,
     voyage_errors,
     voyage_summary,
 )
@@ -59,24 +66,43 @@ SETTINGS = ("perfect map", "map error, told", "map error, not told",
             "map error, told, Eötvös velocity ignored")
 
 
-def _one(pm, grid, key, scenario, model, config):
+def _one(pm, grid, key, scenario, model, config, bound):
     voyage = voyage_scenario(key, grid, scenario, model)
     res = navigate_tight(pm, voyage, config, jax.random.fold_in(key, 1))  # rbpf's draws
     err = voyage_errors(voyage, res.nav, res.cov_north_east)
     sigma = jnp.sqrt(jnp.trace(res.cov_north_east, axis1=1, axis2=2))
     used = jnp.mean((res.status == 0) & jnp.isfinite(voyage.gravity))  # status 0: updated
     series = (err.nav_m[::EVERY], err.free_m[::EVERY], sigma[::EVERY])
+    # the bound's RMS per hour (its mean square over the hour, as hourly_rms of an error)
+    bound_h = (hourly_rms(voyage_bound(pm, voyage, config).position_rms, scenario.dt)
+               if bound else jnp.zeros(0))
     return (hourly_rms(err.nav_m, scenario.dt), hourly_rms(err.free_m, scenario.dt),
-            err.nees.mean(), used, series)
+            err.nees.mean(), used, series, bound_h)
 
 
-def run(grid, scenario, model, config, keys, batch=50):
+def run(grid, scenario, model, config, keys, batch=50, bound=False):
     """Simulate and filter voyages in one compiled call, ``batch`` voyages at a time
-    batched with ``vmap`` (4 × a loop on the 2-core machine, ``benchmarks/voyage_tight.py``)."""
+    batched with ``vmap`` (4 × a loop on the 2-core machine, ``benchmarks/voyage_tight.py``);
+    with ``bound``, each voyage's Cramér–Rao bound per hour too (m)."""
     pm = prepare_map(grid)
     f = jax.jit(lambda pm, grid, ks: jax.lax.map(
-        lambda k: _one(pm, grid, k, scenario, model, config), ks, batch_size=batch))
+        lambda k: _one(pm, grid, k, scenario, model, config, bound), ks, batch_size=batch))
     return jax.tree.map(np.asarray, f(pm, grid, keys))
+
+
+def bound_figures(nav, free, bound):
+    """The bound beside the filter and the free INS (hourly RMS over voyages)."""
+    rms = lambda a: np.sqrt(np.mean(a**2, axis=0))  # noqa: E731
+    b, f, n = rms(bound), rms(free), rms(nav)
+    return {"bound_hourly_rms_m": np.round(b, 1).tolist(),
+            "bound_last_hour_ratio": float(b[-1] / f[-1]),
+            "bound_last_over_second_hour": float(b[-1] / b[1]) if b.size > 1 else None,
+            "nav_over_bound_last_hour": float(n[-1] / b[-1]),
+            "median_voyage_nav_over_bound_last_hour": float(np.median(nav[:, -1] / bound[:, -1])),
+            # a voyage whose bound exceeds its free INS's error: no estimator is expected
+            # to beat the INS there, however it is built
+            "bound_above_free_some_hour": float(np.mean(np.any(bound[:, 1:] > free[:, 1:],
+                                                               axis=1)))}
 
 
 def tracks_figure(grid, scenario, model, config, key, path, title, force):
@@ -122,6 +148,9 @@ def main(argv=None):
                    help="the first voyage of 'map error, told' on the map: truth, free INS, "
                         "navigation")
     p.add_argument("--force", action="store_true", help="overwrite --png and --tracks-png")
+    p.add_argument("--bound", action="store_true",
+                   help="the posterior Cramér–Rao bound along each voyage beside the filter "
+                        "(settings 'perfect map' and 'map error, told')")
     p.add_argument("--smoke", action="store_true", help="2 voyages of 2 h")
     p.add_argument("--pmf-cell", type=float, default=100.0,
                    help="--method pmf: the (first) cell size, m (default 100)")
@@ -141,7 +170,9 @@ def main(argv=None):
         cfg = config_for(setting, ins, model, a.method, a.order, pmf_cell_m=a.pmf_cell,
                          pmf_span=a.pmf_span)
         t0 = time.perf_counter()
-        nav, free, nees, used, series = run(grid, scenario, truth, cfg, keys)
+        bound = a.bound and setting in ("perfect map", "map error, told")
+        nav, free, nees, used, series, bound_h = run(grid, scenario, truth, cfg, keys,
+                                                     bound=bound)
         seconds = time.perf_counter() - t0
         row = {"setting": setting, "method": a.method, "ins": a.ins, "runs": runs,
                "hours": hours, "map_error_mgal": 0.0 if truth is None else a.sigma,
@@ -149,6 +180,7 @@ def main(argv=None):
                **({"pmf_cell_m": a.pmf_cell, "pmf_span": a.pmf_span} if a.method == "pmf"
                   else {}),
                **voyage_summary(nav, free, nees),
+               **(bound_figures(nav, free, bound_h) if bound else {}),
                "readings_used": float(np.mean(used)), "seconds": round(seconds, 1),
                "runs_per_s": round(runs / seconds, 2)}
         print(json.dumps(row))

@@ -2,8 +2,9 @@
 
 Loosely coupled (:func:`navigate_loose`: matcher fixes as position measurements of the
 INS error Kalman filter) and tightly coupled (the gravity filters on the readings
-directly) navigation over a :class:`~jaxgrav.sim.voyage_log.Voyage`, and the voyage
-figures (:func:`voyage_errors`, :func:`hourly_rms`).
+directly) navigation over a :class:`~jaxgrav.sim.voyage_log.Voyage`, the voyage
+figures (:func:`voyage_errors`, :func:`hourly_rms`) and the bound no estimator beats on a
+simulated voyage (:func:`voyage_bound`).
 """
 
 from jaxgrav.navigate.error_kf import (
@@ -33,6 +34,7 @@ from jaxgrav.navigate.tight import (
     TightConfig,
     TightResult,
     navigate_tight,
+    voyage_bound,
 )
 
 __all__ = [
@@ -62,6 +64,7 @@ __all__ = [
     "navigate_loose",
     "navigate_tight",
     "spread",
+    "voyage_bound",
     "voyage_errors",
     "voyage_summary",
 ]

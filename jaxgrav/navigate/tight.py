@@ -70,6 +70,7 @@ from jaxgrav.filters import (
     eotvos_part,
     gaussian_sum,
     gravity_measurement,
+    pcrlb,
     pmf,
     rbpf,
     run_filter,
@@ -81,7 +82,8 @@ from jaxgrav.sim.drift import apply_drift
 from jaxgrav.sim.ins import VEL, INSErrorModel, initial_covariance, transition
 from jaxgrav.sim.trajectory import Track
 
-__all__ = ["MOVING_MS", "TIGHT_METHODS", "TightConfig", "TightResult", "navigate_tight"]
+__all__ = ["MOVING_MS", "TIGHT_METHODS", "TightConfig", "TightResult", "navigate_tight",
+           "voyage_bound"]
 
 MOVING_MS = 0.5
 """Rows slower than this (m/s) are at rest: the readings-per-cell count of the curvature
@@ -255,6 +257,40 @@ def _cell_m(grid):
     return (dy * dx) ** 0.5
 
 
+class _Model(NamedTuple):
+    """The filter's model of one voyage: dynamics, prior, measurement, steps."""
+
+    dynamics: Dynamics
+    x0: jax.Array
+    p0: jax.Array
+    measurement: object
+    steps: Step
+    sailing: jax.Array
+
+
+def _model(cfg, voyage):
+    """The model every tightly coupled filter and the bound use (see the module notes)."""
+    ins = voyage.ins
+    dt = (ins.t[-1] - ins.t[0]) / (ins.t.shape[0] - 1)  # the mean step, not the first's
+    f, q = transition(cfg.ins, jnp.mean(ins.lat), dt)
+    p0 = initial_covariance(cfg.ins, cfg.sigma_pos_m, cfg.sigma_vel)
+    x0 = jnp.zeros(p0.shape[0], p0.dtype)
+    # the map error decorrelates at the distance sailed per time (the mean speed; the
+    # median of a log mostly in port was 0: an error that never decorrelates while sailing)
+    rows = jnp.hypot(ins.v_east, ins.v_north)
+    speed = jnp.mean(rows)
+    dynamics, x0, p0, meas = augment(cfg.map_error, Dynamics(f, q, dt), x0, p0, speed,
+                                     gravity_measurement)
+    moving = rows > MOVING_MS
+    sailing = jnp.sum(jnp.where(moving, rows, 0.0)) / jnp.maximum(jnp.sum(moving), 1)
+    z = voyage.gravity + eotvos(ins.lat, ins.v_east, ins.v_north)
+    h_lin = None
+    if cfg.eotvos_velocity:
+        h_lin = eotvos_part(eotvos_jacobian(ins.lat, ins.v_east, ins.v_north), x0.shape[0])
+    r = jnp.full(z.shape, jnp.asarray(cfg.noise_mgal, z.dtype) ** 2)
+    return _Model(dynamics, x0, p0, meas, Step(ins.lat, ins.lon, z, r, h_lin), sailing)
+
+
 @jax.jit
 def navigate_tight(grid, voyage, config, key=None):
     """Tightly coupled map-aided navigation over one voyage (see the module notes).
@@ -277,38 +313,50 @@ def navigate_tight(grid, voyage, config, key=None):
     """
     cfg = config
     ins = voyage.ins
-    dt = (ins.t[-1] - ins.t[0]) / (ins.t.shape[0] - 1)  # the mean step, not the first's
-    f, q = transition(cfg.ins, jnp.mean(ins.lat), dt)
-    p0 = initial_covariance(cfg.ins, cfg.sigma_pos_m, cfg.sigma_vel)
-    x0 = jnp.zeros(p0.shape[0], p0.dtype)
-    # the map error decorrelates at the distance sailed per time (the mean speed; the
-    # median of a log mostly in port was 0: an error that never decorrelates while sailing)
-    rows = jnp.hypot(ins.v_east, ins.v_north)
-    speed = jnp.mean(rows)
-    dynamics, x0, p0, meas = augment(cfg.map_error, Dynamics(f, q, dt), x0, p0, speed,
-                                     gravity_measurement)
-    moving = rows > MOVING_MS
-    sailing = jnp.sum(jnp.where(moving, rows, 0.0)) / jnp.maximum(jnp.sum(moving), 1)
-    n_state = x0.shape[0]
-    z = voyage.gravity + eotvos(ins.lat, ins.v_east, ins.v_north)
-    h_lin = None
-    if cfg.eotvos_velocity:
-        h_lin = eotvos_part(eotvos_jacobian(ins.lat, ins.v_east, ins.v_north), n_state)
-    r = jnp.full(z.shape, jnp.asarray(cfg.noise_mgal, z.dtype) ** 2)
-    steps = Step(ins.lat, ins.lon, z, r, h_lin)
+    m = _model(cfg, voyage)
     # readings per map cell: steps per cell times the share of steps with a reading
     # (a log with INS rows every second and a reading every tenth shares a cell's
     # linearisation error among a tenth as many readings)
     share = jnp.mean(jnp.isfinite(voyage.gravity))
     count = (cfg.curvature_cells * _cell_m(grid) * share
-             / (jnp.maximum(sailing, MOVING_MS) * dt))  # per cell while sailing
-    filt = _filter(cfg, meas, count)
+             / (jnp.maximum(m.sailing, MOVING_MS) * m.dynamics.dt))  # per cell while sailing
+    filt = _filter(cfg, m.measurement, count)
     if cfg.method == "rbpf" and key is None:
         key = jax.random.PRNGKey(0)
-    _, infos = run_filter(filt, grid, dynamics, x0, p0, steps,
+    _, infos = run_filter(filt, grid, m.dynamics, m.x0, m.p0, m.steps,
                           key=key if cfg.method == "rbpf" else None)
     xs = infos.x
     lat, lon = apply_drift(ins.lat, ins.lon, -xs[:, 0], -xs[:, 1])
     nav = Track(ins.t, lat, lon, ins.v_east - xs[:, VEL.start + 1], ins.v_north - xs[:, VEL.start])
     return TightResult(nav, infos.p_pos, xs, infos.sigma, infos.innovation,
                        infos.innovation_var, infos.status)
+
+
+@jax.jit
+def voyage_bound(grid, voyage, config):
+    """The posterior Cramér–Rao bound of the position along one simulated voyage.
+
+    Tichavský's recursion (:func:`~jaxgrav.filters.pcrlb`) with the tightly coupled
+    filters' own model — ``config``'s INS error model, prior, reading noise, map-error
+    state and Eötvös part — and the measurement row at the voyage's **true** error
+    state: the covariance no estimator of this model can beat on this voyage, loosely or
+    tightly coupled (the loosely coupled loop uses the same readings). No linearisation
+    error, no curvature term, no gate: ``config.method`` and its settings are unused.
+
+    Parameters
+    ----------
+    grid : Grid or PreparedMap
+        The anomaly map the filters use (mGal).
+    voyage : Voyage
+        A simulated voyage (``ins_error`` is read: the true INS error, the filter's
+        sign convention).
+    config : TightConfig
+
+    Returns
+    -------
+    PCRLBResult
+        Per step: the bound on the error covariance (the filter's state order) and
+        ``position_rms`` = √(B_nn + B_ee) (m).
+    """
+    m = _model(config, voyage)
+    return pcrlb(grid, m.dynamics, m.p0, m.steps, voyage.ins_error[:, :2], m.measurement)

@@ -45,10 +45,13 @@ def test_voyage_tight_smoke(capsys, tmp_path):
     png = tmp_path / "tight.png"
     tracks = tmp_path / "tracks.png"
     rows = mod.main(["--smoke", "--settings", "map error, told", "--png", str(png),
-                     "--tracks-png", str(tracks)])
+                     "--tracks-png", str(tracks), "--bound"])
     assert png.stat().st_size > 10_000 and set(rows) == {"map error, told"}
     assert tracks.stat().st_size > 10_000
     r = rows["map error, told"]
     assert len(r["hourly_rms_nav_m"]) == 2 and np.isfinite(r["nees"])
     assert r["readings_used"] > 0.9 and r["runs"] == 2
+    # the bound: one RMS per hour, below the free INS, the filter not far from it
+    assert len(r["bound_hourly_rms_m"]) == 2
+    assert 0 < r["bound_last_hour_ratio"] < 1 and r["nav_over_bound_last_hour"] > 0.5
     assert '"setting": "map error, told"' in capsys.readouterr().out

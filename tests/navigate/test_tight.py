@@ -16,7 +16,8 @@ from scipy.interpolate import RectBivariateSpline
 from jaxgrav.constants import DEG
 from jaxgrav.filters import STATUS_FILTER, Dynamics, augment, map_error_state
 from jaxgrav.geodesy import eotvos, eotvos_jacobian, meridian_radius, prime_vertical_radius
-from jaxgrav.navigate import TightConfig, navigate_tight, voyage_errors
+from jaxgrav.grid import Grid
+from jaxgrav.navigate import TightConfig, navigate_tight, voyage_bound, voyage_errors
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import NAVIGATION_GRADE, voyage_preset, voyage_scenario
 from jaxgrav.sim.ins import initial_covariance, transition
@@ -193,6 +194,40 @@ def test_jit_without_retrace_and_vmap_equals_loop(smooth_grid, voyages):
     navigate_tight(pm, v, dataclasses.replace(CONFIG, gate=25.0, noise_mgal=2.0,
                                               sigma_pos_m=500.0))
     assert navigate_tight._cache_size() == before
+
+
+@pytest.mark.long
+def test_the_bound_is_the_ekf_covariance_on_a_plane_map():
+    """On a plane map the EKF's Jacobian is the same at its estimate as at the truth, so its
+    covariance is the bound's recursion exactly; with a map-error state and the Eötvös part."""
+    lat, lon = np.linspace(29.5, 30.5, 101), np.linspace(129.5, 130.5, 101)
+    plane = Grid.from_arrays(lat, lon, 200.0 * (lat[:, None] - 30.0) - 100.0 * (lon - 130.0),
+                             units="mGal")
+    sc = voyage_preset("patrol-12h", ins=NAVIGATION_GRADE, hours=1.0,
+                       region=(29.6, 30.4, 129.6, 130.4), leg_m=20000.0, margin_deg=0.1,
+                       pos_error_m=1000.0, vel_error=0.3)
+    v = voyage_scenario(jax.random.key(3), plane, sc)
+    pm = prepare_map(plane)
+    cfg = dataclasses.replace(CONFIG, method="ekf", map_error=map_error_state(2.0, 20000.0))
+    bound = voyage_bound(pm, v, cfg)
+    res = navigate_tight(pm, v, cfg)
+    assert not np.any(np.asarray(bound.off_map))
+    np.testing.assert_allclose(bound.cov[:, :2, :2], res.cov_north_east, rtol=1e-7, atol=1e-6)
+
+
+@pytest.mark.long
+def test_the_bound_falls_with_readings_and_bounds_the_ukf(smooth_grid, voyages):
+    """On the information-rich map the readings take the bound far below the INS's own
+    covariance (the bound without readings), and the UKF does not beat it on average."""
+    pm = prepare_map(smooth_grid)
+    v = _first(voyages)
+    bound = np.asarray(voyage_bound(pm, v, CONFIG).position_rms)
+    blind = v._replace(gravity=jnp.full_like(v.gravity, jnp.nan))
+    free = np.asarray(voyage_bound(pm, blind, CONFIG).position_rms)
+    assert np.all(np.isfinite(bound)) and bound[-1] < 0.2 * free[-1]
+    res = navigate_tight(pm, v, CONFIG)
+    ukf = np.sqrt(np.trace(np.asarray(res.cov_north_east), axis1=1, axis2=2))
+    assert np.mean(ukf[-360:]) >= 0.9 * np.mean(bound[-360:])
 
 
 @pytest.mark.parametrize(("change", "error", "message"), [
