@@ -36,6 +36,7 @@ from jaxgrav.grid_values import (
     eastward_longitudes,
     map_units,
     outside_valid_range,
+    rolled_columns,
     undeclared_fills,
     units_attr,
 )
@@ -301,8 +302,9 @@ def read_netcdf(path, var=None, *, ndim=None, exclude=()):
         values = values.astype(float)
     values = undeclared_fills(outside_valid_range(values, attrs, encoding), label, var)
     values, units = map_units(values, units)
-    return GridArrays(*_checked_axes(lat, lon, label, lat_name, lon_name), values, str(var),
-                      units)
+    lat, lon = _checked_axes(lat, lon, label, lat_name, lon_name)
+    lon, order = rolled_columns(lon, label)  # -280..80: global from another meridian
+    return GridArrays(lat, lon, values if order is None else values[..., order], str(var), units)
 
 
 def _cf_grid(ds, var, ndim, exclude, label):

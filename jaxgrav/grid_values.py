@@ -6,8 +6,9 @@ missing, with an :class:`UndeclaredFillWarning`; :func:`outside_valid_range` rea
 outside a declared CF ``valid_range`` / ``valid_min`` / ``valid_max`` as missing, as CF
 says they are; :func:`map_units` converts a gravity or magnetic map declared in other
 units (``m s-2``, ``uGal``, ``uT`` …) to mGal or nT; :func:`axis_degrees` reads a
-coordinate's units (CF ``degrees_west``/``degrees_south`` count the other way) and
-:func:`eastward_longitudes` the −360…0 convention. Used by
+coordinate's units (CF ``degrees_west``/``degrees_south`` count the other way),
+:func:`eastward_longitudes` the −360…0 convention and :func:`rolled_columns` a global grid
+stored from another meridian. Used by
 :func:`jaxgrav.grid_files.read_netcdf` (and the last by the track reader too).
 """
 
@@ -16,9 +17,17 @@ import warnings
 
 import numpy as np
 
-__all__ = ["FILL_VALUES", "UndeclaredFillWarning", "axis_degrees", "eastward_longitudes",
-           "map_units",
-           "outside_valid_range", "undeclared_fills", "units_attr"]
+__all__ = [
+    "FILL_VALUES",
+    "UndeclaredFillWarning",
+    "axis_degrees",
+    "eastward_longitudes",
+    "map_units",
+    "outside_valid_range",
+    "rolled_columns",
+    "undeclared_fills",
+    "units_attr",
+]
 
 _UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (factor, units)
     **dict.fromkeys(("mgal", "mgals", "milligal", "milligals"), (1.0, "mGal")),
@@ -74,6 +83,48 @@ def eastward_longitudes(lon):
     if lon.size and lon.min() < -180.0 and lon.max() <= 0.0 and lon.min() >= -360.0:
         return lon + 360.0
     return lon
+
+
+def rolled_columns(lon, label):
+    """Contiguous regular longitudes brought within [−180, 360], and the column order.
+
+    A regional grid is shifted by 360° where that brings it within (350 … 370: −10 …
+    10); a global grid stored from another meridian (GFDL MOM's −280 … 80, a rolled 20 …
+    379.5) is rolled to start within ±180° (it ended in the grid's "lon must lie within
+    [-180, 360]", naming no file); a repeated seam column is dropped. A regional grid
+    beyond that range has no such reading and is refused.
+
+    Parameters
+    ----------
+    lon : numpy.ndarray, shape ``(nx,)``
+        Longitudes (degrees), regular, without 360° jumps, either order.
+    label : str
+        The file, for the message.
+
+    Returns
+    -------
+    lon : numpy.ndarray, shape ``(m,)``
+        Within [−180, 360] (ascending when rolled).
+    order : numpy.ndarray of int, shape ``(m,)``, or None
+        The columns to take, in order (``m`` is ``nx`` or ``nx − 1``); None: as stored.
+    """
+    lon = np.asarray(lon)  # its own type: float32 axes are checked with float32's rounding
+    if lon.min() >= -180.0 - 1e-9 and lon.max() <= 360.0 + 1e-9:
+        return lon, None
+    for shift in (-360.0, 360.0):  # 350 .. 370: -10 .. 10
+        if lon.min() + shift >= -180.0 - 1e-9 and lon.max() + shift <= 360.0 + 1e-9:
+            return lon + shift, None
+    step = abs(float(lon[1] - lon[0]))
+    if lon.size * step < 360.0 - 1e-6 * step:
+        raise ValueError(f"{label}: longitudes {lon.min():g} .. {lon.max():g} reach beyond "
+                         "-180 .. 360 degrees on a map that is not global, and no shift by 360 "
+                         "degrees brings them within; expected a map within -180 .. 360 (cut "
+                         "it to the region needed)")
+    if lon.size * step > 360.0 + 0.5 * step:  # the seam stored twice
+        lon = lon[:-1]
+    wrapped = np.mod(lon + 180.0, 360.0) - 180.0
+    order = np.argsort(wrapped, kind="stable")
+    return wrapped[order], order
 
 
 def axis_degrees(coord, units, name, label):

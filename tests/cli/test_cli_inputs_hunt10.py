@@ -172,8 +172,47 @@ def test_a_told_map_error_beyond_any_map_s_is_refused(tmp_path, refused, command
                       else "o.csv")
     argv = (["montecarlo", "--method", "dense", "--runs", "3"] if command == "montecarlo"
             else [command, "--track", log])
-    refused(argv + ["--map", "ryukyu", "--out", out, option, "1e9"],
+    refused([*argv, "--map", "ryukyu", "--out", out, option, "1e9"],
             f"{option}{' SIGMA' if command == 'montecarlo' else ''} must be at most 1000 (map "
             "units; a marine gravity map's error is a few mGal, a magnetic map's tens of nT); "
             "got 1e+09")
     assert not out.exists()
+
+
+def _field(lat, lon):
+    return (50 * np.sin(np.radians(lat) * 3) * np.cos(np.radians(lon) * 2)
+            + 20 * np.sin(np.radians(lon) * 5))
+
+
+@pytest.mark.parametrize("lon", [np.arange(-280.0, 80.01, 2.0),  # GFDL MOM, seam twice
+                                 np.arange(20.0, 378.01, 2.0),  # rolled, from 20 E
+                                 np.arange(20.0, 378.01, 2.0)[::-1],
+                                 np.arange(355.0, 365.01, 0.5)])  # regional across 0 as 360
+def test_a_map_stored_from_another_meridian_is_read(tmp_path, lon):
+    """A global map from −280 to 80 (or 20 to 378) ended in the grid's "lon must lie
+    within [-180, 360] and span at most 360 degrees; got -340.0 .. 18.0", naming no file;
+    a regional 355 … 365 the same."""
+    lat = np.arange(-20.0, 40.01, 2.0)
+    path = tmp_path / "m.nc"
+    xr.Dataset({"z": (("lat", "lon"), _field(*np.meshgrid(lat, lon, indexing="ij")),
+                      {"units": "mGal"})}, coords={"lat": lat, "lon": lon}).to_netcdf(path)
+    track = _track(tmp_path / "t.csv", "t,lat,lon",
+                   [f"{60 * i},{10 + 0.5 * i},{v:g}" for i, v in enumerate((359.0, 0.5, 1.5))])
+    out = tmp_path / "s.csv"
+    assert main(["sample", "--map", str(path), "--track", str(track), "--out", str(out),
+                 "--method", "bilinear"]) == 0
+    got = np.loadtxt(out, delimiter=",", skiprows=1)
+    # bilinear between 2-degree nodes of a field of 72-degree waves: h^2/8 |f''| < 0.2 mGal
+    # (a column taken from the wrong side of the seam is off by tens of mGal)
+    np.testing.assert_allclose(got[:, -1], _field(got[:, 1], got[:, 2]), atol=0.2)
+
+
+def test_a_regional_map_beyond_every_convention_is_named(tmp_path, refused):
+    lat, lon = np.arange(0.0, 10.01, 1.0), np.arange(-190.0, 10.01, 1.0)
+    path = tmp_path / "m.nc"
+    xr.Dataset({"z": (("lat", "lon"), np.zeros((lat.size, lon.size)), {"units": "mGal"})},
+               coords={"lat": lat, "lon": lon}).to_netcdf(path)
+    track = _track(tmp_path / "t.csv", "t,lat,lon", ["0,5,5", "60,5.1,5.1"])
+    refused(["sample", "--map", path, "--track", track, "--out", tmp_path / "s.csv"],
+            f"map '{path}': longitudes -190 .. 10 reach beyond -180 .. 360 degrees on a map "
+            "that is not global, and no shift by 360 degrees brings them within")
