@@ -9,7 +9,6 @@ import math
 import sys
 
 import numpy as np
-import xarray as xr
 
 from jaxgrav import dov
 from jaxgrav._io import check_outputs
@@ -80,18 +79,6 @@ def _parse_heights(text):
                          f"in m above the ellipsoid; got "
                          f"{vals[0] if vals[0] < LOWEST_LAYER_M else vals[-1]:g}")
     return vals
-
-
-def _check_layer_dims(path):
-    """ValueError naming ``--grid`` when the file lacks a height, lat or lon dimension (was
-    "needs dimensions ('height', 'lat', 'lon'); it has ('lat', 'lon')", Python tuples)."""
-    with xr.open_dataset(path, decode_times=False) as ds:
-        dims = list(ds.dims)
-    missing = [d for d in ("height", "lat", "lon") if d not in dims]
-    if missing:
-        raise ValueError(f"--grid {str(path)!r} has dimensions {', '.join(dims) or 'none'}; "
-                         f"expected height, lat, lon (xi and eta in arcsec on layers at heights "
-                         f"in m, as the shipped qinling file), missing {', '.join(missing)}")
 
 
 def _check_points(args, track, layers):
@@ -176,7 +163,6 @@ def cmd_dov(args):
         # a CSV or an empty file ended in xarray's three-line "did not find a match in any
         # of xarray's currently installed IO backends"; the layers' own errors named no option
         check_netcdf_file(args.grid, what="--grid")
-        _check_layer_dims(args.grid)
         try:
             layers = dov.LayeredGrid.from_netcdf(args.grid)
         except ValueError as err:

@@ -23,6 +23,7 @@ from jaxgrav.fields.harmonics import synthesize_grid
 from jaxgrav.fields.pointmass import deflection
 from jaxgrav.grid import Grid
 from jaxgrav.grid_axes import GeographicAxes
+from jaxgrav.grid_files import LAT_NAMES, LON_NAMES
 
 __all__ = ["PAPER_HEIGHTS", "LayeredGrid", "paper_c_layers"]
 
@@ -169,6 +170,8 @@ class LayeredGrid(GeographicAxes):
     def from_netcdf(cls, path):
         """Read layers: variables on (``height``, ``lat``, ``lon``), ``height`` in m.
 
+        The dimensions may also be called ``altitude``, ``latitude``/``y`` and
+        ``longitude``/``x`` (any case), and the layers stored from the top down.
         Every data variable on those three dimensions becomes a channel (``xi`` and
         ``eta`` first when present), as :meth:`to_netcdf` and the shipped
         ``qinling`` file write them. Channels declared in an angle unit (CF ``units`` or
@@ -186,12 +189,7 @@ class LayeredGrid(GeographicAxes):
         if not path.exists():
             raise FileNotFoundError(f"grid file {str(path)!r} does not exist")
         with xr.open_dataset(path) as ds:
-            for d in ("height", "lat", "lon"):
-                if d not in ds.dims:
-                    raise ValueError(
-                        f"{str(path)!r} needs dimensions ('height', 'lat', 'lon'); it has "
-                        f"{tuple(ds.dims)}"
-                    )
+            ds = _canonical_dims(ds, repr(str(path)))
             names = [v for v in ds.data_vars if set(ds[v].dims) == {"height", "lat", "lon"}]
             names = sorted(names, key=lambda v: (v not in ("xi", "eta"), v != "xi", v))
             if not names:
@@ -203,6 +201,8 @@ class LayeredGrid(GeographicAxes):
             vals, heights, units = in_arcsec_and_metres(
                 vals, np.asarray(ds["height"].values, float), *declared_units(ds, names[0]),
                 repr(str(path)))
+            order = np.argsort(heights, kind="stable")  # layers stored from the top down
+            vals, heights = vals[order], heights[order]
             return cls.from_arrays(ds["lat"].values, ds["lon"].values, heights,
                                    vals, channels=names, units=units)
 
@@ -248,6 +248,28 @@ class LayeredGrid(GeographicAxes):
         return (f"LayeredGrid({self.channels} {tuple(self.values.shape)} {self.units!r}, "
                 f"heights {np.asarray(self.heights).tolist()} m, lat {s:g}..{n:g} step "
                 f"{self.dlat:g}, lon {w:g}..{e:g} step {self.dlon:g})")
+
+
+HEIGHT_NAMES = ("height", "altitude", "alt", "elevation")
+"""Accepted names of a layers file's height dimension (any case), in order of preference."""
+
+
+def _canonical_dims(ds, label):
+    """``ds`` with its height, latitude and longitude dimensions named ``height``, ``lat``
+    and ``lon`` (``latitude``, ``altitude``, ``y`` … were refused: "needs dimensions"); a
+    ValueError naming ``label`` and what is missing otherwise."""
+    lower = {str(d).lower(): d for d in ds.dims}
+    found = {}
+    for key, names in (("height", HEIGHT_NAMES), ("lat", LAT_NAMES), ("lon", LON_NAMES)):
+        hit = next((lower[n] for n in names if n in lower), None)
+        if hit is not None:
+            found[hit] = key
+    missing = [k for k in ("height", "lat", "lon") if k not in found.values()]
+    if missing:
+        raise ValueError(f"{label} has dimensions {', '.join(map(str, ds.dims)) or 'none'}; "
+                         "expected height, lat, lon (xi and eta in arcsec on layers at heights "
+                         "in m, as the shipped qinling file), missing " + ", ".join(missing))
+    return ds.rename({d: k for d, k in found.items() if d != k})
 
 
 def paper_c_layers(heights=PAPER_HEIGHTS, *, spacing_arcmin=3.0, nmax=None):

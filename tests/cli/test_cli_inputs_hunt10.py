@@ -216,3 +216,27 @@ def test_a_regional_map_beyond_every_convention_is_named(tmp_path, refused):
     refused(["sample", "--map", path, "--track", track, "--out", tmp_path / "s.csv"],
             f"map '{path}': longitudes -190 .. 10 reach beyond -180 .. 360 degrees on a map "
             "that is not global, and no shift by 360 degrees brings them within")
+
+
+@pytest.mark.parametrize("dims, flip", [(("height", "lat", "lon"), True),
+                                        (("altitude", "latitude", "longitude"), False),
+                                        (("Height", "y", "x"), True)])
+def test_dov_layers_named_otherwise_or_stored_top_down_are_read(tmp_path, dims, flip):
+    """A --grid with ``latitude``/``longitude`` (or ``altitude``) dimensions was refused
+    ("missing lat, lon"), as maps are not; layers stored from the top down were refused
+    as "heights must be strictly ascending"."""
+    lat, lon = np.linspace(0.0, 1.0, 11), np.linspace(10.0, 11.0, 11)
+    values = np.stack([np.stack([np.add.outer(lat, lon) * (k + 1) * (c + 1) for c in range(2)])
+                       for k in range(3)])
+    heights = np.array([0.0, 1000.0, 5000.0])
+    outs = []
+    for name, (d, f) in (("a", (("height", "lat", "lon"), False)), ("b", (dims, flip))):
+        k = slice(None, None, -1 if f else 1)
+        xr.Dataset({c: (d, values[k, i], {"units": "arcsec"}) for i, c in enumerate(("xi", "eta"))},
+                   coords={d[0]: (d[0], heights[k], {"units": "m"}), d[1]: lat,
+                           d[2]: lon}).to_netcdf(tmp_path / f"{name}.nc")
+        outs.append(tmp_path / f"{name}.csv")
+        track = _track(tmp_path / "t.csv", "lat,lon,h", ["0.5,10.5,500", "0.52,10.55,2500"])
+        assert main(["dov", "--grid", str(tmp_path / f"{name}.nc"), "--track", str(track),
+                     "--out", str(outs[-1])]) == 0
+    assert outs[0].read_text() == outs[1].read_text()
