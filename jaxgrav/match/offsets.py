@@ -11,8 +11,12 @@ so it stays one branch under ``vmap`` over tracks), or samples every shifted fix
 its own when none does.
 """
 
+import functools
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxgrav._fusion import computed_once
 from jaxgrav.constants import DEG
@@ -79,6 +83,34 @@ def _lattice_fits(grid, half_size, spacing_m, block):
         & (extent / (n_min * grid.dlon) <= min(block, grid.nx) - 2)
         & (0.5 * extent / n_min < 180.0 - 0.5 * span_lon)
     )
+
+
+class _Geometry(NamedTuple):
+    """The static node geometry :func:`_lattice_fits` reads (a Grid's fields)."""
+
+    lat0: float
+    dlat: float
+    ny: int
+    dlon: float
+    nx: int
+
+
+def _fits_each(geometry, half_size, spacing_m, blocks):
+    return jnp.stack([_lattice_fits(_Geometry(*geometry), half_size, spacing_m, b)
+                      for b in blocks])
+
+
+@functools.lru_cache(maxsize=64)
+def _static_fits(geometry, half_size, spacing_m, blocks):
+    """:func:`_lattice_fits` of each block at a static spacing, as Python booleans.
+
+    Compiled as one small program and run at once, also inside a trace (evaluated op
+    by op there, its ~20 operations had each been compiled on its own: 0.35 s CPU in
+    every trace of the voyages' dense loop); cached per geometry and settings.
+    """
+    program = jax.jit(_fits_each, static_argnums=(0, 1, 2, 3)).lower(
+        geometry, half_size, spacing_m, blocks).compile()
+    return tuple(bool(f) for f in np.asarray(program()))
 
 
 def _lattice_blocks(grid, config):
@@ -183,9 +215,8 @@ def offset_scores(table, grid, frame, readings, w, prior, d_1d, d_n, d_e, rot, c
     if config.spacing_bound_m is not None:
         # the blocks beyond the first that fits every spacing up to the bound, and the
         # points, are never taken: not compiled (under vmap every branch would also run)
-        with jax.ensure_compile_time_eval():
-            fit = [bool(_lattice_fits(grid, config.half_size, config.spacing_bound_m, b))
-                   for b in blocks]
+        fit = list(_static_fits((grid.lat0, grid.dlat, grid.ny, grid.dlon, grid.nx),
+                                config.half_size, float(config.spacing_bound_m), tuple(blocks)))
         if any(fit):
             branches = branches[:fit.index(True) + 1]
     index = jnp.asarray(len(branches) - 1, jnp.int32)  # the last, unless a block fits
