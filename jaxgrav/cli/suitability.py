@@ -46,8 +46,10 @@ from jaxgrav.sim import DEG_ARC_M
 
 __all__ = ["STATUS", "add_parser", "cmd_suitability"]
 
-_UNITS = dict(precision_m="m", sigma_north_m="m", sigma_east_m="m", corr="1", std="mGal",
-              slope_std="mGal/km", roughness="mGal", entropy="nat", correlation_length_m="m")
+_UNITS = dict(precision_m="m", sigma_north_m="m", sigma_east_m="m", corr="1", std="{u}",
+              slope_std="{u}/km", roughness="{u}", entropy="nat", correlation_length_m="m")
+"""The variables' units, ``{u}`` the map's (mGal; nT on a magnetic map: they were
+labelled mGal)."""
 _LONG = dict(
     precision_m="predicted RMS radial error of the fix of a segment starting here (CRLB)",
     sigma_north_m="CRLB 1-sigma of the offset, north", sigma_east_m="CRLB 1-sigma, east",
@@ -74,9 +76,11 @@ def add_parser(subparsers):
                    help="readings per segment (at least 3; default 30)")
     s.add_argument("--spacing", type=float, default=1200.0,
                    help="distance between readings (m, default 1200)")
-    s.add_argument("--noise", type=float, default=1.0, help="reading noise 1-sigma (mGal)")
+    s.add_argument("--noise", type=float, default=1.0,
+                   help="reading noise 1-sigma (mGal; nT on a magnetic map)")
     s.add_argument("--map-error", type=float, default=0.0, metavar="SIGMA",
-                   help="the map's error 1-sigma (mGal, default 0: the map is the truth)")
+                   help="the map's error 1-sigma (mGal, nT on a magnetic map; default 0: "
+                        "the map is the truth)")
     s.add_argument("--map-error-length", type=float, default=None, metavar="L",
                    help="its correlation length along the track (m, default 10000)")
     s.add_argument("--window", type=whole_number, default=None, metavar="NODES",
@@ -100,6 +104,7 @@ def cmd_suitability(args):
                   inputs={"--map": args.map})
     check_out_format(args.out, "NetCDF")
     grid = load_map(args.map, args.var, allow_nan=True)
+    unit = "nT" if grid.units == "nT" else "mGal"  # a map without units: gravity
     if grid.n_missing == np.asarray(grid.values).size:
         raise ValueError(f"--map {args.map} has no value: every node is missing (NaN)")
     side = min(np.asarray(grid.values).shape[-2:])
@@ -135,7 +140,7 @@ def cmd_suitability(args):
     coords = dict(lat=("lat", np.asarray(grid.lat), {"units": "degrees_north"}),
                   lon=("lon", np.asarray(grid.lon), {"units": "degrees_east"}))
     ds = xr.Dataset({k: (("lat", "lon"), np.asarray(v, np.float64),
-                         {"units": _UNITS[k], "long_name": _LONG[k]})
+                         {"units": _UNITS[k].format(u=unit), "long_name": _LONG[k]})
                      for k, v in fields.items()}, coords=coords)
     ds["status"] = (("lat", "lon"), status.astype(np.int8), {
         "long_name": "why a node has no bound (0: it has one)",
@@ -143,13 +148,14 @@ def cmd_suitability(args):
         "flag_meanings": " ".join(STATUS[k] for k in sorted(STATUS))})
     ds.attrs.update(command="jaxgrav " + " ".join(sys.argv[1:]), map=str(args.map),
                     heading_deg=args.heading, n_fixes=args.fixes, spacing_m=args.spacing,
-                    noise_mgal=args.noise, map_error_mgal=args.map_error,
+                    **{f"noise_{unit.lower()}": args.noise,
+                       f"map_error_{unit.lower()}": args.map_error},
                     map_error_length_m=args.map_error_length,
                     no_information_above_m=round(size_m),
                     comment="nodes without a bound are missing values; status says why")
     with atomic_output(args.out, force=args.force) as tmp:
         ds.to_netcdf(tmp)
-    _plot(grid, suit, args, png)
+    _plot(grid, suit, args, png, unit)
     print(_summary(args, png, suit, status, size_m))
 
 
@@ -237,7 +243,7 @@ def _check_args(args):
         raise ValueError(f"--window must be an odd number of nodes >= 3; got {args.window}")
 
 
-def _plot(grid, suit, args, png):
+def _plot(grid, suit, args, png, unit):
     lon, lat = np.asarray(grid.lon), np.asarray(grid.lat)
     fig, axes = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
     p = suit.precision_m
@@ -249,10 +255,10 @@ def _plot(grid, suit, args, png):
                         interpolation="nearest")
     fig.colorbar(im, ax=axes[0], label="predicted precision (m, CRLB)")
     axes[0].set_title(f"{args.fixes} fixes {args.spacing:g} m apart, heading {args.heading:g}°,"
-                      f"\nnoise {args.noise:g} mGal, map error {args.map_error:g} mGal")
+                      f"\nnoise {args.noise:g} {unit}, map error {args.map_error:g} {unit}")
     im = axes[1].imshow(suit.descriptors["std"], origin="lower", extent=extent, cmap="magma",
                         interpolation="nearest")
-    fig.colorbar(im, ax=axes[1], label="window std (mGal)")
+    fig.colorbar(im, ax=axes[1], label=f"window std ({unit})")
     axes[1].set_title("map standard deviation over the window")
     for ax in axes:
         ax.set_xlabel("longitude (°)")

@@ -240,3 +240,19 @@ def test_dov_layers_named_otherwise_or_stored_top_down_are_read(tmp_path, dims, 
         assert main(["dov", "--grid", str(tmp_path / f"{name}.nc"), "--track", str(track),
                      "--out", str(outs[-1])]) == 0
     assert outs[0].read_text() == outs[1].read_text()
+
+
+def test_suitability_of_a_magnetic_map_is_labelled_in_nt(tmp_path):
+    """``suitability`` on an nT map wrote its window std, roughness and noise as mGal (and
+    titled the PNG so); they are in the map's units."""
+    path = _small_map(tmp_path / "g.nc", 36)
+    with xr.open_dataset(path) as ds:
+        mag = ds.load()
+    mag["z"].attrs["units"] = "nT"
+    mag.to_netcdf(tmp_path / "m.nc")
+    out = tmp_path / "s.nc"
+    assert main(["suitability", "--map", str(tmp_path / "m.nc"), "--out", str(out),
+                 "--fixes", "10"]) == 0
+    with xr.open_dataset(out) as ds:
+        assert ds["std"].attrs["units"] == "nT" and ds["slope_std"].attrs["units"] == "nT/km"
+        assert ds.attrs["noise_nt"] == 1.0 and "noise_mgal" not in ds.attrs
