@@ -70,6 +70,7 @@ from jaxgrav.match.correlation import (  # noqa: E402
     ChainConfig,
     chain_tolerances,
     match_chains,
+    pair_cost,
 )
 from jaxgrav.match.dense import (  # noqa: E402
     DenseConfig,
@@ -78,7 +79,12 @@ from jaxgrav.match.dense import (  # noqa: E402
 )
 from jaxgrav.match.dense_batch import match_dense_batch  # noqa: E402
 from jaxgrav.match.lattice import lattice_values  # noqa: E402
-from jaxgrav.match.lattice_chains import stencil_size_for  # noqa: E402
+from jaxgrav.match.lattice_chains import (  # noqa: E402
+    eliminate_lattice,
+    lattice_steps,
+    search_lattice,
+    stencil_size_for,
+)
 from jaxgrav.match.scoring import decreasing_weights  # noqa: E402
 
 BENCH = "match_correlation"
@@ -445,7 +451,7 @@ def run_chain(grid, tracks, batches, quick, profile):
             **stats,
             **chain_agreement(out, base, range(len(base))),
         )
-    return fine, pairwise, out
+    return fine, pairwise, stats
 
 
 # --------------------------------------------------------------------------- profile
@@ -526,9 +532,46 @@ def profile_dense(grid, tracks, cfg, m, b, quick):
                   numpy_refinement_share=round(1 - t_nore / t_all, 3))
 
 
-def profile_chain(fine, tracks, cfg, b, quick):
+def _stencil_parts(k):
+    """The stencil path's steps, each with those before it: lattice candidates, their
+    elimination (both directions), the search (count and programme in one forward scan,
+    then the backward elimination) and the whole matcher."""
+
+    def prepare(grid, a, b_, c):
+        cands, origin = candidates.lattice_candidates(grid, a, b_, c, half_size=k.half_size,
+                                                      delta=k.delta, slope_factor=k.node_allowance)
+        steps = candidates.local_offsets_m(a[1:], b_[1:], a[:-1], b_[:-1])
+        tol = chain_tolerances(grid, a, k)
+        return cands, lattice_steps(grid, cands, origin, a, steps, *tol, k.stencil_size), tol
+
+    def cands(grid, a, b_, c):
+        return prepare(grid, a, b_, c)[0].mask
+
+    def elim(grid, a, b_, c):
+        cs, geo, tol = prepare(grid, a, b_, c)
+        return eliminate_lattice(cs, geo, *tol)
+
+    def search(grid, a, b_, c):
+        cs, geo, tol = prepare(grid, a, b_, c)
+        w = decreasing_weights(a.shape[0], k.weight_decay)
+        pair = pair_cost(c, w[:-1] / jnp.sum(w[:-1]))
+        return search_lattice(cs, geo, *tol, jnp.zeros(cs.value.shape), pair, k.k_best)
+
+    def batched(f):
+        return lambda grid, la, lo, gg, _k: jax.vmap(f, in_axes=(None, 0, 0, 0))(grid, la, lo, gg)
+
+    return {"stencil_lattice_candidates": batched(cands),
+            "stencil_candidates_elimination": batched(elim),
+            "stencil_candidates_search": batched(search),
+            "stencil_full": jax.vmap(match_chains, in_axes=(None, 0, 0, 0, None))}
+
+
+def profile_chain(fine, tracks, cfg, stats, b, quick):
+    """Time the parts of the pairwise search (``cfg``) and of the stencil search the
+    benchmark times (``stencil_*`` parts), at batch ``b``, with XLA's cost analysis."""
     _, _, lat, lon, g = tracks
     args = (fine, jnp.asarray(lat[:b]), jnp.asarray(lon[:b]), jnp.asarray(g[:b]), cfg)
+    stencil = stencil_config(cfg, stats)
 
     def cands_of(grid, a, b_, c, k):
         return candidates.iso_candidates(grid, a, b_, c, half_size=k.half_size,
@@ -564,7 +607,9 @@ def profile_chain(fine, tracks, cfg, b, quick):
         "iso_elimination_count": elim_count,
         "full": jax.vmap(match_chains, in_axes=(None, 0, 0, 0, None)),
     }
-    timed = _time_parts({name: (f, args) for name, f in parts.items()}, 2)
+    timed = _time_parts({name: (f, args) for name, f in parts.items()}
+                        | {name: (f, (*args[:4], stencil))
+                           for name, f in _stencil_parts(stencil).items()}, 2)
     for name, (t, compiled, _) in timed.items():
         print_profile("chain", name, b, t, **_cost(compiled, b))
     cnt = np.asarray(timed["iso_candidates"][2])
@@ -611,11 +656,11 @@ def main():
     if "chain" in paths:
         if args.profile_only:
             fine = grid.refine(8)
-            cfg, _ = chain_config(fine, tracks, args.quick)
+            cfg, stats = chain_config(fine, tracks, args.quick)
         else:
-            fine, cfg, _ = run_chain(grid, tracks, batches, args.quick, profile)
+            fine, cfg, stats = run_chain(grid, tracks, batches, args.quick, profile)
         if profile:
-            profile_chain(fine, tracks, cfg, min(max(batches), 100), args.quick)
+            profile_chain(fine, tracks, cfg, stats, min(max(batches), 100), args.quick)
 
 if __name__ == "__main__":
     main()
