@@ -11,7 +11,7 @@ import re
 
 import numpy as np
 
-__all__ = ["NA_TOKENS", "nmea_hint", "parse_degrees"]
+__all__ = ["NA_TOKENS", "join_position_parts", "nmea_hint", "parse_degrees"]
 
 NA_TOKENS = frozenset({"", "nan", "na", "n/a", "null", "none", "#n/a", "-", "--"})
 """Cells (lower case) read as a missing value (NaN): also a spreadsheet's ``#N/A`` and a
@@ -105,3 +105,72 @@ def nmea_hint(values, i):
     return (f"; it looks like NMEA ddmm.mmmm (degrees x 100 + minutes): {next(shown)} is "
             f"{deg:.0f} deg {next(shown)}' = {deg + minutes / 60.0:.6g} degrees; convert the "
             "column to decimal degrees")
+
+
+_PART_WORDS = {"min": ("min", "mins", "minute", "minutes"),
+               "sec": ("sec", "secs", "second", "seconds")}
+_PART_SCALE = {"min": 1.0 / 60.0, "sec": 1.0 / 3600.0}
+_LETTERS = {"lat": {"N": 1.0, "S": -1.0}, "lon": {"E": 1.0, "W": -1.0}}
+
+
+def _part_names(aliases, part):
+    """Header keys (lower case) of a position's minutes or seconds column: ``lat_min``,
+    ``latmin``, ``latitude minutes`` …"""
+    return {f"{a}{sep}{w}" for a in aliases for sep in ("_", "", " ", "-")
+            for w in _PART_WORDS[part]}
+
+
+def join_position_parts(track, keys, aliases, label):
+    """Positions written in parts, joined into signed decimal degrees (in place).
+
+    Survey exports write a latitude as whole degrees beside a minutes column (``lat_deg,
+    lat_min``; also seconds) and GPS exports beside a hemisphere column (``lat, N/S``):
+    the degrees alone were read and the rest passed through (a track in 29° 30' was
+    sampled at 29°, one at 35° S at 35° N, exit 0). A minutes or seconds column named
+    after the position (``lat_min``, ``latitude_minutes``, ``lat_sec``), all in [0, 60),
+    is added to degrees that are all whole, with their sign (else it is some other
+    column, e.g. a minimum, and passed through); a text column right after the position
+    holding only its hemisphere letters (``N``/``S``; ``E``/``W``) gives the sign.
+
+    Parameters
+    ----------
+    track : jaxgrav.tracks.TrackTable
+        As read, ``lat``/``lon`` in degrees; its ``order`` the columns in file order.
+    keys : dict of str to str
+        Each column name in ``track`` → its header key (lower case, unit dropped).
+    aliases : dict of str to tuple of str
+        The position columns' header names (``ALIASES``).
+    label : str
+        The file, for messages.
+
+    Raises
+    ------
+    ValueError
+        A hemisphere letter beside a negative position.
+    """
+    for name in ("lat", "lon"):
+        if name not in track:
+            continue
+        values = degrees = track[name]
+        for part in ("min", "sec"):
+            wanted = _part_names(aliases[name], part)
+            cols = [c for c in track.order if c in track and keys.get(c) in wanted]
+            if not cols:
+                continue
+            extra, ok = track[cols[0]], np.isfinite(degrees)
+            if (np.any(degrees[ok] != np.round(degrees[ok]))  # lat_min: a minimum latitude?
+                    or np.any((extra[ok] < 0) | (extra[ok] >= 60))):
+                continue
+            values = values + np.copysign(extra * _PART_SCALE[part], degrees)  # -0 deg 30'
+        j = track.order.index(name)
+        after = track.order[j + 1] if j + 1 < len(track.order) else None
+        cells = track.text.get(after)
+        if cells is not None:
+            letters = np.char.upper(np.char.strip(cells.astype(str)))
+            if letters.size and set(letters.tolist()) <= set(_LETTERS[name]):
+                if np.any(values < 0):
+                    raise ValueError(f"{label}: column {after!r} gives {name!r} a hemisphere, "
+                                     "and the column has negative values too; give one of "
+                                     "the two")
+                values = values * np.vectorize(_LETTERS[name].get)(letters)
+        track[name] = values

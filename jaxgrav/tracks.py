@@ -39,7 +39,7 @@ from jaxgrav._io import atomic_output
 from jaxgrav.grid_axes import contiguous_longitudes
 from jaxgrav.grid_values import eastward_longitudes
 from jaxgrav.track_columns import ALIASES, listed, match_columns, parse_columns
-from jaxgrav.track_degrees import nmea_hint
+from jaxgrav.track_degrees import join_position_parts, nmea_hint
 from jaxgrav.track_files import column_key, comma_hint, parse_degrees, parse_numbers, read_table
 from jaxgrav.track_times import DATE_COLUMN, check_time_steps, iso_seconds
 from jaxgrav.track_units import header_scale
@@ -170,6 +170,7 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
     track.lines = np.asarray(table.lines)
     track.renamed = {k: table.header[j] for k, j in found.items() if table.header[j] != k}
     canonical = {j: k for k, j in found.items()}
+    keys = {}  # each column's header key, for the positions' parts
     lines = table.lines
     for j, header in enumerate(table.header):
         name = canonical.get(j, header)
@@ -212,11 +213,13 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
             track[name] = values
             if j not in canonical and name not in KNOWN_COLUMNS:
                 track.cells[name] = np.asarray(cells, dtype=str)
-            elif name == "lon":  # passed through as read (the reader makes it contiguous)
-                track.cells[name] = np.asarray(
-                    [np.format_float_positional(v, trim="-") if np.isfinite(v) else ""
-                     for v in values], dtype=str)
+        keys[name] = column_key(header)
         track.order.append(name)
+    join_position_parts(track, keys, ALIASES, label)  # "lat_deg, lat_min", "lat, N/S"
+    if "lon" in track:  # passed through as read (the reader makes it contiguous)
+        track.cells["lon"] = np.asarray(
+            [np.format_float_positional(v, trim="-") if np.isfinite(v) else ""
+             for v in track["lon"]], dtype=str)
     _check_columns(track, required, allow_nan, label)
     return track
 

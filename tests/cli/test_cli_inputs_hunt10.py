@@ -256,3 +256,33 @@ def test_suitability_of_a_magnetic_map_is_labelled_in_nt(tmp_path):
     with xr.open_dataset(out) as ds:
         assert ds["std"].attrs["units"] == "nT" and ds["slope_std"].attrs["units"] == "nT/km"
         assert ds.attrs["noise_nt"] == 1.0 and "noise_mgal" not in ds.attrs
+
+
+@pytest.mark.parametrize("header, rows, lat, lon", [
+    ("t,lat_deg,lat_min,lon_deg,lon_min", ["0,29,30.0,-126,30.0", "60,-0,30,-126,30.6"],
+     [29.5, -0.5], [-126.5, -126.51]),
+    ("t,Latitude,Latitude Minutes,Latitude Seconds,lon", ["0,29,30,36,126.5", "60,29,31,0,126.6"],
+     [29.51, 29.0 + 31 / 60], [126.5, 126.6]),
+    ("t,lat,N/S,lon,E/W", ["0,29.5,S,126.5,W", "60,-0.0,N,126.6,W"], [-29.5, 0.0],
+     [-126.5, -126.6]),
+])
+def test_positions_written_in_parts_are_joined(tmp_path, header, rows, lat, lon):
+    """``lat_deg, lat_min`` read the whole degrees and passed the minutes through (a track
+    in 29° 30' sampled at 29°), and a ``N/S`` column after the latitude was passed through
+    (35° S sampled at 35° N), exit 0."""
+    got = read_track_csv(_track(tmp_path / "t.csv", header, rows), required=("t", "lat", "lon"))
+    np.testing.assert_allclose(got["lat"], lat, rtol=1e-12)
+    np.testing.assert_allclose(got["lon"], lon, rtol=1e-12)
+
+
+def test_a_minimum_latitude_column_is_not_taken_for_minutes(tmp_path):
+    track = _track(tmp_path / "t.csv", "t,lat,lat_min,lon", ["0,29.5,29,126.5", "60,29.6,29,126.6"])
+    got = read_track_csv(track, required=("t", "lat", "lon"))
+    np.testing.assert_allclose(got["lat"], [29.5, 29.6])
+
+
+def test_a_hemisphere_column_beside_negative_positions_is_refused(tmp_path):
+    track = _track(tmp_path / "t.csv", "t,lat,ns,lon", ["0,-29.5,S,126.5", "60,29.6,N,126.6"])
+    with pytest.raises(ValueError, match="column 'ns' gives 'lat' a hemisphere, and the column "
+                                         "has negative values too"):
+        read_track_csv(track, required=("t", "lat", "lon"))
