@@ -25,7 +25,7 @@ ALIASES = {
     "t": ("t", "time", "timestamp", "datetime"),
     "lat": ("lat", "latitude"),
     "lon": ("lon", "longitude", "long", "lng"),
-    "h": ("h", "height"),
+    "h": ("h", "height", "altitude", "alt"),
     # a survey's anomaly column under its own name was "needs a 'gravity' column"
     "gravity": ("gravity", "gravity_anomaly", "free_air_anomaly", "free_air", "faa", "grav"),
     "magnetic": ("magnetic", "magnetic_anomaly", "mag_anomaly", "total_field_anomaly"),

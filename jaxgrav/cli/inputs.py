@@ -108,7 +108,28 @@ def read_track(args, required, optional=(), allow_nan=()):
     track = read_track_csv(args.track, required, optional, allow_nan=allow_nan,
                            columns=columns)
     _epoch_times(track)
+    if "h" in track and "h" not in required:
+        _height_warning(track, args.track)
     return track
+
+
+FLIGHT_HEIGHT_M = 300.0
+"""Height (m) beyond which a track's ``h`` is named (a ship's deck, the geoid: < 100 m)."""
+
+
+def _height_warning(track, path):
+    """A warning for a track whose ``h`` column puts it far above or below the map's
+    surface: the commands other than ``dov`` read the map there (an airborne survey at 5
+    km was matched against the sea-level map, exit 0, in silence)."""
+    h = np.asarray(track["h"], float)
+    h = h[np.isfinite(h)]
+    if not h.size or np.max(np.abs(h)) <= FLIGHT_HEIGHT_M:
+        return
+    far = float(h[np.argmax(np.abs(h))])
+    print(f"warning: column {track.renamed.get('h', 'h')!r} of --track {str(path)!r} puts the "
+          f"track at heights up to {far:g} m; the map is read at its own surface, where the "
+          "anomaly is sharper than at that height: continue the map to the track's height "
+          "first (e.g. GMT grdfft -C), or drop the column if it is no height", file=sys.stderr)
 
 
 def _epoch_times(track):

@@ -286,3 +286,25 @@ def test_a_hemisphere_column_beside_negative_positions_is_refused(tmp_path):
     with pytest.raises(ValueError, match="column 'ns' gives 'lat' a hemisphere, and the column "
                                          "has negative values too"):
         read_track_csv(track, required=("t", "lat", "lon"))
+
+
+@pytest.mark.parametrize("header, height", [("h", "5000"), ("altitude_ft", "16000")])
+def test_a_track_flown_far_above_the_map_is_warned_of(tmp_path, capsys, header, height):
+    """An airborne survey at 5 km (``h``, or ``altitude`` in feet, which was no column)
+    was sampled and matched against the sea-level map in silence."""
+    rows = [f"{120 * i},{lat},{lon},{height}" for i, (lat, lon) in enumerate(ROWS)]
+    track = _track(tmp_path / "t.csv", f"t,lat,lon,{header}", rows)
+    assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out",
+                 str(tmp_path / "s.csv")]) == 0
+    err = capsys.readouterr().err
+    assert (f"warning: column '{header}' of --track '{track}' puts the track at heights up to "
+            f"{float(height) * (0.3048 if 'ft' in header else 1):g} m; the map is read at its "
+            "own surface") in err
+
+
+def test_a_ship_s_antenna_height_is_not_warned_of(tmp_path, capsys):
+    rows = [f"{120 * i},{lat},{lon},35.2" for i, (lat, lon) in enumerate(ROWS)]
+    track = _track(tmp_path / "t.csv", "t,lat,lon,alt", rows)
+    assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out",
+                 str(tmp_path / "s.csv")]) == 0
+    assert "warning" not in capsys.readouterr().err
