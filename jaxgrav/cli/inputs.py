@@ -127,9 +127,10 @@ def _height_warning(track, path):
         return
     far = float(h[np.argmax(np.abs(h))])
     print(f"warning: column {track.renamed.get('h', 'h')!r} of --track {str(path)!r} puts the "
-          f"track at heights up to {far:g} m; the map is read at its own surface, where the "
-          "anomaly is sharper than at that height: continue the map to the track's height "
-          "first (e.g. GMT grdfft -C), or drop the column if it is no height", file=sys.stderr)
+          f"track at heights up to {far:g} m; the map is read at its own surface, not at "
+          "that height (the anomaly there is smoother above, sharper below): continue the "
+          "map to the track's height first (e.g. GMT grdfft -C), or drop the column if it is "
+          "no height", file=sys.stderr)
 
 
 def _epoch_times(track):
