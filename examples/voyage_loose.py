@@ -28,8 +28,10 @@ The loop's settings are :func:`jaxgrav.navigate.loose_config`'s (for the dense m
 :data:`jaxgrav.navigate.DENSE_LOOP`: 2 h segments every hour, the first on 1 h, the
 segment's error told given its offset, the filter's prior, the lattice's cell told);
 ``--segment-error markov|linear|conditional``, ``--[no-]fix-prior``, ``--[no-]cell-error``,
-``--n-fixes``, ``--stride``, ``--first-n-fixes`` (0: none) and ``--fix-cov-scale`` change
-them (``--segment-error markov`` alone: the old loop, 1 h segments, × 3).
+``--n-fixes``, ``--stride``, ``--first-n-fixes`` (0: none), ``--fix-cov-scale`` and
+``--[no-]shape-update`` (the segment's readings update the state given the fix,
+:mod:`jaxgrav.navigate.loose_shape`) change them (``--segment-error markov`` alone: the old
+loop, 1 h segments, × 3).
 
 Run: ``python examples/voyage_loose.py [--runs 100] [--seed 0] [--sigma 3] [--length 10000]
 [--ins navigation|strategic] [--calibrate] [--smoke] [--matcher dense|chains|entropy+iccp]
@@ -197,10 +199,13 @@ def main(argv=None):
     p.add_argument("--first-n-fixes", type=int, default=None,
                    help="fixes of the segments before --n-fixes exist (0: not matched)")
     p.add_argument("--fix-cov-scale", type=float, default=None)
+    p.add_argument("--shape-update", action=argparse.BooleanOptionalAction, default=None,
+                   help="dense: the segment's readings update the state given the fix")
     a = p.parse_args(argv)
     given = {"segment_error": a.segment_error, "fix_prior": a.fix_prior,
              "cell_error": a.cell_error, "n_fixes": a.n_fixes,
-             "stride": a.stride or a.n_fixes, "fix_cov_scale": a.fix_cov_scale}
+             "stride": a.stride or a.n_fixes, "fix_cov_scale": a.fix_cov_scale,
+             "shape_update": a.shape_update}
     loop = {k: v for k, v in given.items() if v is not None}
     if a.first_n_fixes is not None:
         loop["first_n_fixes"] = a.first_n_fixes or None
@@ -229,7 +234,7 @@ def main(argv=None):
         seconds = time.perf_counter() - t0
         settings = {k: getattr(cfg, k) for k in ("segment_error", "fix_prior", "cell_error",
                                                  "n_fixes", "stride", "first_n_fixes",
-                                                 "fix_cov_scale")}
+                                                 "fix_cov_scale", "shape_update")}
         row = {"setting": name, "ins": a.ins, "matcher": a.matcher, "runs": runs, "hours": hours,
                "seed": a.seed, "map_error_mgal": sigma, **settings, **summarise(*out),
                "seconds": round(seconds, 1), "runs_per_s": round(runs / seconds, 2)}

@@ -15,7 +15,10 @@ reading every ``fix_every · dt`` seconds. What the loop does at each segment en
    max_spacing_m]``;
 4. an accepted fix (matcher integrity, then the innovation gate) updates the filter
    with the fix's own covariance; a rejected one is skipped and its reason recorded
-   (:data:`FIX_EVENTS`); a segment with a missing reading or off the map is not matched.
+   (:data:`FIX_EVENTS`); a segment with a missing reading or off the map is not matched;
+5. with ``LooseConfig.shape_update``, the segment's readings then update the rest of the
+   state given the fix's offset (:mod:`~jaxgrav.navigate.loose_shape`), and a fix whose
+   readings do not fit the segment at its offset is rejected.
 
 With sliding segments (``stride < n_fixes``) consecutive fixes share readings; their
 covariance is inflated by ``n_fixes / stride`` so the filter does not count them twice.
@@ -50,6 +53,7 @@ from jaxgrav.navigate.loose_match import (
     schuler_length_m,
     segment_error_covariance,
 )
+from jaxgrav.navigate.loose_shape import SHAPE_GATE_P, chi2_quantile, shape_update
 from jaxgrav.prepared import prepare_map
 from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
 from jaxgrav.sim.ins import initial_covariance
@@ -65,6 +69,7 @@ FIX_EVENTS = {
     2: "not matched: a reading is missing or the segment leaves the map",
     3: "rejected by the matcher's integrity test",
     4: "rejected by the innovation gate (the fix disagrees with the filter)",
+    5: "rejected: the readings do not fit the segment at the fix (shape test)",
 }
 """What happened at each segment end (``LooseResult.fix_event``)."""
 
@@ -94,6 +99,11 @@ class LooseResult(NamedTuple):
         Search reach of the segment (m).
     nis : Array, shape ``(C,)``
         Normalised innovation squared of the fix (NaN where not matched).
+    shape_nis : Array, shape ``(C,)``
+        With ``LooseConfig.shape_update``: the segment's readings' ``νᵀ S⁻¹ ν`` given the
+        fix (χ²(``n_fixes``) expected; above its
+        :data:`~jaxgrav.navigate.loose_shape.SHAPE_GATE_P` quantile the update was
+        skipped); NaN where no fix was accepted or without it.
     """
 
     nav: Track
@@ -106,6 +116,7 @@ class LooseResult(NamedTuple):
     fix_cov_m2: jax.Array
     reach_m: jax.Array
     nis: jax.Array
+    shape_nis: jax.Array
 
 
 def _shift(lat, lon, d_n, d_e):
@@ -276,9 +287,19 @@ def _fix(cfg, tables, grid, ins, gravity, x, p, end):
         x_new, p_new, _ = fix_update(x, p, -offset, r, h_mean, good)
     gated = good & (nis <= cfg.gate)
     x_new, p_new = jnp.where(gated, x_new, x), jnp.where(gated, p_new, p)
-    event = jnp.select([~complete, ~usable, ~res.accepted, ~gated], [1, 2, 3, 4], 0)
+    shape_nis, fits = jnp.full_like(nis, jnp.nan), jnp.asarray(True)
+    if cfg.shape_update:  # a fix whose readings do not fit the matched segment is rejected
+        lat, lon, g, v_e, v_n, _ = _segment(cfg, tables, ins, gravity, x, end)
+        b = tables.backward[:, :4].reshape(lat.shape[0], cfg.fix_every, 4, -1).mean(1)
+        x_new, p_new, shape_nis = shape_update(prepare_map(grid), cfg.matcher, lat, lon, g, v_e,
+                                               v_n, b, h_mean, x, x_new, p_new, offset,
+                                               _inflation(cfg), gated)
+        fits = ~(shape_nis > chi2_quantile(SHAPE_GATE_P, lat.shape[0]))
+        x_new, p_new = jnp.where(fits, x_new, x), jnp.where(fits, p_new, p)
+    event = jnp.select([~complete, ~usable, ~res.accepted, ~gated, ~fits], [1, 2, 3, 4, 5], 0)
     status = jnp.where(usable, res.status, 0)
-    return x_new, p_new, (event, status, offset, r, reach, jnp.where(usable, nis, jnp.nan))
+    return x_new, p_new, (event, status, offset, r, reach, jnp.where(usable, nis, jnp.nan),
+                          shape_nis)
 
 
 def first_segment_ends(cfg, n_seg):
@@ -347,6 +368,5 @@ def navigate_loose(grid, voyage, config):
     pos_cov = jnp.concatenate([pos_cov.reshape(-1, 2, 2), p_end[None, :2, :2]])[:n]
     lat, lon = _shift(ins.lat, ins.lon, xs[:, 0], xs[:, 1])
     nav = Track(ins.t, lat, lon, ins.v_east - xs[:, 3], ins.v_north - xs[:, 2])
-    event, status, offset, r, reach, nis = events
     fix_time = ins_p.t[0] + (jnp.arange(n_seg) + 1) * steps_between * dt
-    return LooseResult(nav, pos_cov, xs, fix_time, event, status, offset, r, reach, nis)
+    return LooseResult(nav, pos_cov, xs, fix_time, *events)

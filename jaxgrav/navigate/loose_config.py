@@ -104,6 +104,15 @@ class LooseConfig:
         unresolved fix falls back on the Gauss–Newton refinement, which does not know the
         offset's coupling: on the perfect map a few voyages in a hundred took a wrong fix
         with a ~0.2 km σ and were lost (position NEES 4–22 over 200 patrols).
+    shape_update : bool
+        Dense with ``segment_error`` ``"linear"`` or ``"conditional"`` (static): after an
+        accepted fix, the segment's readings update the rest of the filter's state given
+        the fix's offset (the Eötvös error of the residual velocity, the segment's
+        stretch, the gravimeter's bias: :func:`~jaxgrav.navigate.loose_shape.
+        shape_update`), their noise × the same inflation as the fix's; a fix whose
+        readings do not fit the segment at its offset (``νᵀ S⁻¹ ν`` above the
+        :data:`~jaxgrav.navigate.loose_shape.SHAPE_GATE_P` quantile of χ²(n)) is
+        rejected (event 5).
     first_n_fixes : int or None
         Static. Segment ends before ``n_fixes`` fixes exist match the last
         ``first_n_fixes`` (>= 5) instead, once that many exist (the first fix of 2 h
@@ -129,6 +138,7 @@ class LooseConfig:
     fix_prior: bool = static_field(False)
     cell_error: bool = static_field(False)
     first_n_fixes: int | None = static_field(None)
+    shape_update: bool = static_field(False)
 
     def __post_init__(self):
         if not (isinstance(self.n_fixes, int) and self.n_fixes >= 5):
@@ -156,6 +166,10 @@ class LooseConfig:
                                     and isinstance(m, DenseConfig)):
             raise ValueError("cell_error needs the dense matcher and segment_error 'linear' or "
                              "'conditional' (the map's gradient along the segment)")
+        if self.shape_update and not (self.segment_error != "markov"
+                                      and isinstance(m, DenseConfig)):
+            raise ValueError("shape_update needs the dense matcher and segment_error 'linear' "
+                             "or 'conditional' (the segment's error linear in the state)")
         first = self.first_n_fixes
         if first is not None and not (isinstance(first, int) and 5 <= first <= self.n_fixes):
             raise ValueError(f"first_n_fixes must be None or an integer from 5 to n_fixes = "
