@@ -103,7 +103,13 @@ def _loose(grid, voyage, cfg):
 def check_fix_blocks(gravity, fix_every, path):
     """The loose loop averages ``--fix-every`` rows into a fix and does not match a
     segment with a missing one: refuse a log where most blocks miss a reading (a reading
-    every few rows: no segment was ever matched, exit 0), warn where some do."""
+    every few rows: no segment was ever matched, exit 0), warn where some do; refuse a
+    block longer than the log (``--fix-every 1e9`` ended in NumPy's "Mean of empty slice"
+    and an out-of-memory error for 217 TB)."""
+    if fix_every > len(gravity):
+        raise ValueError(f"--fix-every {fix_every} rows is longer than --track {path!r} "
+                         f"({len(gravity)} rows): no fix could be averaged; expected at most "
+                         f"{len(gravity)} rows a fix")
     m = len(gravity) // fix_every * fix_every
     holed = ~np.all(np.isfinite(gravity[:m].reshape(-1, fix_every)), axis=1)
     if holed.mean() > 0.5:

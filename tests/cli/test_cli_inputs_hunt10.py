@@ -308,3 +308,18 @@ def test_a_ship_s_antenna_height_is_not_warned_of(tmp_path, capsys):
     assert main(["sample", "--map", "ryukyu", "--track", str(track), "--out",
                  str(tmp_path / "s.csv")]) == 0
     assert "warning" not in capsys.readouterr().err
+
+
+def test_navigate_refuses_a_fix_block_longer_than_the_log(tmp_path, refused):
+    """``navigate --method dense --fix-every 1e9`` printed NumPy's "Mean of empty slice"
+    and failed out of memory (217 TB), exit 1."""
+    dlon = 50.0 / (111_320.0 * np.cos(np.radians(29.5)))  # 5 m/s east, rows 10 s apart
+    rows = [f"{10 * i},29.5,{126.5 + dlon * i:.7f},5.0,0.0,{-10 + 0.1 * i:.2f}"
+            for i in range(40)]
+    log = _track(tmp_path / "log.csv", "t,lat,lon,v_east,v_north,gravity", rows)
+    out = tmp_path / "n.csv"
+    refused(["navigate", "--map", "ryukyu", "--track", log, "--out", out, "--method", "dense",
+             "--fix-every", "1e9"],
+            f"--fix-every 1000000000 rows is longer than --track '{log}' (40 rows): no fix could "
+            "be averaged; expected at most 40 rows a fix")
+    assert not out.exists()
