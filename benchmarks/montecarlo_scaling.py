@@ -44,7 +44,9 @@ run adds float32 cases (``jax_enable_x64`` off).
   options are faster). ``--methods`` limits the methods. The compile rows split each
   setting's first call into ``*_trace``, ``*_lower`` and ``*_xla`` seconds (JAX's
   ``jax.monitoring`` durations of tracing, lowering to MLIR and XLA's compile, summed over
-  every program the call ran, the key split's too).
+  every program the call ran, the key split's too), and give the compile's process CPU
+  time, ``*_cpu_s`` (first call − second call, both cores: steadier than the wall time on
+  a loaded machine; XLA compiles on up to two threads, tracing and lowering on one).
 
 Run ``python benchmarks/montecarlo_scaling.py [--quick | --compile-only [--against
 defaults|emitters] [--methods M ...]]``. Absolute
@@ -96,8 +98,10 @@ def child(spec):
     key = jax.random.key(0)
     out = {"devices": len(jax.devices())}
 
+    cpu = {}  # process CPU time (s) of the last go(): XLA compiles on both cores
+
     def go(n_runs, ch, spec_=m):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         # the method's own XLA options, or the other setting (the baseline of
         # --compile-only): XLA's defaults, or level 2 for a method whose own are the defaults
         options = spec_.cpu_options
@@ -105,9 +109,11 @@ def child(spec):
             options = tuple(tuple(kv) for kv in spec["other_options"])
         montecarlo.run(spec_.fn, key, n_runs, chunk=ch, progress=False, args=spec_.args,
                        cpu_options=options)
+        cpu["s"] = time.process_time() - c0
         return time.perf_counter() - t0
 
     out["first_s"] = go(chunk, chunk)  # trace + compile + one chunk
+    out["first_cpu_s"] = cpu["s"]
     # the first call's share of tracing, lowering and XLA compiling (every program it ran)
     out["first_trace_s"], out["first_lower_s"], out["first_xla_s"] = (
         round(seconds[e], 3) for e in (TRACE_EVENT, LOWER_EVENT, COMPILE_EVENT))
@@ -116,6 +122,7 @@ def child(spec):
         other = montecarlo_methods.build(method, grid, noise=1.5)  # new parameter values
         before = len(events)
         out["second_s"] = go(chunk, chunk, other)
+        out["second_cpu_s"] = cpu["s"]
         new = events[before:]
         out["traces_second_call"] = sum(e == TRACE_EVENT for e, _ in new)
         out["compiles_second_call"] = sum(e == COMPILE_EVENT for e, _ in new)
@@ -183,6 +190,8 @@ def compile_options_rows(emit, methods, chunk, against):
             jc, xc = (r[k]["first_s"] - r[k]["second_s"] for k in ("jaxgrav", "other"))
             emit("montecarlo_options", f"{method} chunk={chunk} compile", chunk, jc, label, xc,
                  recompiled=r["jaxgrav"]["recompiled"],
+                 **{f"{k}_cpu_s": round(r[k]["first_cpu_s"] - r[k]["second_cpu_s"], 3)
+                    for k in ("jaxgrav", "other")},
                  **{f"{k}_{part}": r[k][f"first_{part}_s"] for k in ("jaxgrav", "other")
                     for part in ("trace", "lower", "xla")})
             emit("montecarlo_options", f"{method} chunk={chunk} run", chunk,
