@@ -24,6 +24,7 @@ from jaxgrav.fields.pointmass import deflection
 from jaxgrav.grid import Grid
 from jaxgrav.grid_axes import GeographicAxes
 from jaxgrav.grid_files import LAT_NAMES, LON_NAMES
+from jaxgrav.grid_values import axis_degrees, eastward_longitudes, units_attr
 
 __all__ = ["PAPER_HEIGHTS", "LayeredGrid", "paper_c_layers"]
 
@@ -171,7 +172,9 @@ class LayeredGrid(GeographicAxes):
         """Read layers: variables on (``height``, ``lat``, ``lon``), ``height`` in m.
 
         The dimensions may also be called ``altitude``, ``latitude``/``y`` and
-        ``longitude``/``x`` (any case), and the layers stored from the top down.
+        ``longitude``/``x`` (any case), and the layers stored from the top down;
+        coordinates in CF ``degrees_west``/``degrees_south`` or the −360…0 convention
+        are read as the map reader reads them.
         Every data variable on those three dimensions becomes a channel (``xi`` and
         ``eta`` first when present), as :meth:`to_netcdf` and the shipped
         ``qinling`` file write them. Channels declared in an angle unit (CF ``units`` or
@@ -203,7 +206,10 @@ class LayeredGrid(GeographicAxes):
                 repr(str(path)))
             order = np.argsort(heights, kind="stable")  # layers stored from the top down
             vals, heights = vals[order], heights[order]
-            return cls.from_arrays(ds["lat"].values, ds["lon"].values, heights,
+            # the map reader's rules: degrees_west/south (were read as east), -360..0
+            lat, lon = (axis_degrees(ds[c].values, units_attr(ds[c].attrs), c, repr(str(path)))
+                        for c in ("lat", "lon"))
+            return cls.from_arrays(lat, eastward_longitudes(lon), heights,
                                    vals, channels=names, units=units)
 
     def to_netcdf(self, path, *, attrs=None, force=False):

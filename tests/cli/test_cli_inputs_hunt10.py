@@ -323,3 +323,20 @@ def test_navigate_refuses_a_fix_block_longer_than_the_log(tmp_path, refused):
             f"--fix-every 1000000000 rows is longer than --track '{log}' (40 rows): no fix could "
             "be averaged; expected at most 40 rows a fix")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("lon, attrs", [(-np.linspace(126.0, 127.0, 11), {"units": "degrees_west"}),
+                                        (np.linspace(126.0, 127.0, 11) - 360.0, {})])
+def test_dov_layers_read_longitudes_as_maps_are(tmp_path, lon, attrs):
+    """Layers in CF ``degrees_west`` were read as east (every track point "outside the
+    layered grid"), as the map reader does not; also the −360…0 convention."""
+    lat, east = np.linspace(0.0, 1.0, 11), np.linspace(126.0, 127.0, 11)
+    field = np.add.outer(lat, east)
+    values = np.stack([np.stack([field * (k + 1) * (c + 1) for c in range(2)]) for k in range(2)])
+    xr.Dataset({c: (("height", "lat", "lon"), values[:, i], {"units": "arcsec"})
+                for i, c in enumerate(("xi", "eta"))},
+               coords={"height": ("height", [0.0, 1000.0], {"units": "m"}), "lat": lat,
+                       "lon": ("lon", lon, attrs)}).to_netcdf(tmp_path / "g.nc")
+    layers = LayeredGrid.from_netcdf(tmp_path / "g.nc")
+    assert tuple(float(v) for v in layers.extent[:2]) == pytest.approx((126.0, 127.0))
+    np.testing.assert_allclose(np.asarray(layers.values)[0, 0], field, rtol=1e-12)
