@@ -5,10 +5,11 @@ reading every 10 s with 1 mGal noise, navigation-grade INS started 500 m off), e
 voyage's truth the map plus a correlated map error (σ, L below) drawn from its key, and
 the same voyages on a perfect map (best case). The loop (:func:`jaxgrav.navigate.
 navigate_loose`) matches a 2 h segment (60 fixes, each the mean of 12 readings) every
-hour, the first after 1 h on a 1 h segment; the matcher is told the map error and the
-Eötvös error of the filter's velocity (the dense matcher: the segment's Eötvös and
-stretch errors given its offset, ``LooseConfig.segment_error``; the others: at its
-along-track Schuler length, :func:`jaxgrav.navigate.loose_match.told_error`).
+hour, the first after 2 h; the matcher is told the map error and the Eötvös error of
+the filter's velocity (the dense matcher: the segment's Eötvös and stretch errors given
+its offset, ``LooseConfig.segment_error``, and its readings then update the rest of the
+state given the fix, ``LooseConfig.shape_update``; the others: at its along-track
+Schuler length, :func:`jaxgrav.navigate.loose_match.told_error`).
 
 Printed, one JSON line per setting: hourly RMS radial error of the navigation solution
 and of the free INS (m), the last-hour ratio nav/free and last/second hour, the share
@@ -25,8 +26,9 @@ ones, by quartile of the matcher's edge mass; and the ideal filter's own hourly 
 error and NEES.
 
 The loop's settings are :func:`jaxgrav.navigate.loose_config`'s (for the dense matcher
-:data:`jaxgrav.navigate.DENSE_LOOP`: 2 h segments every hour, the first on 1 h, the
-segment's error told given its offset, the filter's prior, the lattice's cell told);
+:data:`jaxgrav.navigate.DENSE_LOOP`: 2 h segments every hour, the first after 2 h, the
+segment's error told given its offset, the filter's prior, the lattice's cell told, the
+segment's readings updating the state given the fix);
 ``--segment-error markov|linear|conditional``, ``--[no-]fix-prior``, ``--[no-]cell-error``,
 ``--n-fixes``, ``--stride``, ``--first-n-fixes`` (0: none), ``--fix-cov-scale`` and
 ``--[no-]shape-update`` (the segment's readings update the state given the fix,

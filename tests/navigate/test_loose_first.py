@@ -23,7 +23,7 @@ from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import NAVIGATION_GRADE
 
 FIELDS = ("segment_error", "fix_prior", "n_fixes", "stride", "fix_cov_scale", "cell_error",
-          "first_n_fixes")
+          "first_n_fixes", "shape_update")
 
 
 def _loop(cfg):
@@ -35,9 +35,11 @@ def test_the_dense_default_is_the_conditional_loop_and_markov_the_old_one():
     old = loose_config(segment_error="markov")
     assert _loop(old) == {"segment_error": "markov", "fix_prior": False, "n_fixes": 30,
                           "stride": 30, "fix_cov_scale": 3.0, "cell_error": False,
-                          "first_n_fixes": None}
+                          "first_n_fixes": None, "shape_update": False}
     assert loose_config(fix_prior=False).fix_prior is False  # a change overrides
     assert loose_config(segment_error="linear").cell_error  # the rest of DENSE_LOOP
+    assert loose_config(segment_error="linear").shape_update
+    assert not loose_config(shape_update=False).shape_update
     assert loose_config(n_fixes=20, stride=20).first_n_fixes is None
     assert loose_config(first_n_fixes=30).first_n_fixes == 30
     assert loose_config(segment_error="markov", n_fixes=60, first_n_fixes=30).first_n_fixes == 30
