@@ -127,6 +127,13 @@ def rolled_columns(lon, label):
     return wrapped[order], order
 
 
+_ARC_UNITS = {**dict.fromkeys(("arcmin", "arc_minutes", "arc-minutes", "arcminutes",
+                                "minutes of arc"), 1.0 / 60.0),
+              **dict.fromkeys(("arcsec", "arc_seconds", "arc-seconds", "arcseconds",
+                               "seconds of arc"), 1.0 / 3600.0)}
+"""Degrees per unit of a coordinate declared in minutes or seconds of arc."""
+
+
 def axis_degrees(coord, units, name, label):
     """A latitude or longitude coordinate in degrees north or east.
 
@@ -137,7 +144,8 @@ def axis_degrees(coord, units, name, label):
     units : str
         Its ``units`` attribute: CF's ``degrees_west`` or ``degrees_south`` (also
         ``degree_W``, ``degreesS`` …) are negated (they were read as east and north: a
-        map of the Americas in degrees west was "off the map" of every track).
+        map of the Americas in degrees west was "off the map" of every track);
+        ``arcmin``/``arcsec`` are converted to degrees.
     name, label : str
         The coordinate and the file, for the message.
 
@@ -151,6 +159,9 @@ def axis_degrees(coord, units, name, label):
         raise ValueError(f"{label}: coordinate {name!r} is in {declared!r}; jaxgrav "
                          "reads latitudes and longitudes in degrees: convert them "
                          "(x 180/pi) and set units 'degrees_north'/'degrees_east'")
+    scale = _ARC_UNITS.get(declared.lower())  # arc-minutes were "projected coordinates?"
+    if scale is not None:
+        return coord * scale
     key = declared.lower().replace("degrees", "degree").replace("_", "")
     return -coord if key in _COUNTED_BACK else coord
 

@@ -340,3 +340,22 @@ def test_dov_layers_read_longitudes_as_maps_are(tmp_path, lon, attrs):
     layers = LayeredGrid.from_netcdf(tmp_path / "g.nc")
     assert tuple(float(v) for v in layers.extent[:2]) == pytest.approx((126.0, 127.0))
     np.testing.assert_allclose(np.asarray(layers.values)[0, 0], field, rtol=1e-12)
+
+
+@pytest.mark.parametrize("units, factor", [("arcmin", 60.0), ("arc_seconds", 3600.0)])
+def test_map_coordinates_in_minutes_of_arc_are_read(tmp_path, units, factor):
+    """A map whose axes declare ``arcmin`` was refused: "coordinate value 1740 is not a
+    latitude/longitude in degrees (projected coordinates in metres?)"."""
+    path = _small_map(tmp_path / "d.nc", 36)
+    with xr.open_dataset(path) as ds:
+        arc = ds.load()
+    arc = arc.assign_coords(lat=("lat", arc.lat.values * factor, {"units": units}),
+                            lon=("lon", arc.lon.values * factor, {"units": units}))
+    arc.to_netcdf(tmp_path / "a.nc")
+    track = _track(tmp_path / "t.csv")
+    outs = [tmp_path / "d.csv", tmp_path / "a.csv"]
+    for grid, out in zip((path, tmp_path / "a.nc"), outs, strict=True):
+        assert main(["sample", "--map", str(grid), "--track", str(track), "--out",
+                     str(out)]) == 0
+    a, b = (np.loadtxt(p, delimiter=",", skiprows=1)[:, -1] for p in outs)
+    np.testing.assert_allclose(b, a, rtol=1e-6)
