@@ -34,6 +34,7 @@ import statistics
 import jax
 import jax.numpy as jnp
 
+from jaxgrav._linalg import inv_2x2
 from jaxgrav.constants import DEG
 from jaxgrav.geodesy import (
     eotvos_jacobian,
@@ -41,7 +42,7 @@ from jaxgrav.geodesy import (
     meridian_radius,
     prime_vertical_radius,
 )
-from jaxgrav.match.gls import track_covariance
+from jaxgrav.match.gls import gls_whitener, track_covariance
 from jaxgrav.sim.drift import apply_drift
 from jaxgrav.sim.ins import GRAV
 
@@ -148,11 +149,13 @@ def shape_update(grid, matcher, lat, lon, g, v_east, v_north, backward, h_mean, 
          + curv_cov) * noise_scale
     ph = p @ h_mean.T
     s_bar = h_mean @ ph
-    p_c = p - ph @ jnp.linalg.solve(0.5 * (s_bar + s_bar.T), ph.T)
+    p_c = p - ph @ inv_2x2(0.5 * (s_bar + s_bar.T)) @ ph.T
     s = h @ p @ h.T + r
-    s = 0.5 * (s + s.T)
-    gain = jnp.linalg.solve(s, h @ p_c.T).T  # P_c Hᵀ S⁻¹, (13, n)
-    nis = nu @ jnp.linalg.solve(s, nu)
+    # no LAPACK call: batched under vmap, LAPACK solves deadlock XLA:CPU (jaxgrav._linalg)
+    inv_chol = gls_whitener(0.5 * (s + s.T)).inv_chol  # L⁻¹, S = L Lᵀ
+    a_w, nu_w = inv_chol @ h, inv_chol @ nu
+    gain = p_c @ a_w.T @ inv_chol  # P_c Hᵀ S⁻¹, (13, n)
+    nis = nu_w @ nu_w
     a = jnp.eye(x.shape[0], dtype=p.dtype) - gain @ h
     p_new = a @ p @ a.T + gain @ r @ gain.T
     x_new = x + gain @ nu
