@@ -227,7 +227,8 @@ def cmd_montecarlo(args):
     extra = {}
     for name, value in (("--hours", args.hours), ("--ins", args.ins),
                         ("--segment-error", args.segment_error), ("--fix-prior", args.fix_prior),
-                        ("--first-n-fixes", args.first_n_fixes)):
+                        ("--first-n-fixes", args.first_n_fixes),
+                        ("--shape-update", args.shape_update)):
         if value is not None and kind != "voyage":
             raise ValueError(f"{name} is an option of the voyage methods "
                              f"({', '.join(VOYAGE_METHODS)}); got --method {args.method}")

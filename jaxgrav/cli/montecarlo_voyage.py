@@ -20,8 +20,8 @@ __all__ = ["add_loop_options", "plot_voyage_tracks", "plot_voyages", "tracks_pat
 
 
 def add_loop_options(parser):
-    """``--segment-error``, ``--[no-]fix-prior`` and ``--first-n-fixes``: voyage-dense's loop
-    settings."""
+    """``--segment-error``, ``--[no-]fix-prior``, ``--first-n-fixes`` and
+    ``--[no-]shape-update``: voyage-dense's loop settings."""
     parser.add_argument("--segment-error", choices=SEGMENT_ERRORS, default=None,
                         help="voyage-dense: how the loop tells the matcher the filter's own "
                              "error: conditional (default: the segment's Eotvos and stretch "
@@ -34,6 +34,10 @@ def add_loop_options(parser):
     parser.add_argument("--first-n-fixes", type=whole_number, default=None,
                         help="voyage-dense: the segment ends before a whole segment match the "
                              "last N fixes (e.g. 30: the first fix after 1 h; default none)")
+    parser.add_argument("--shape-update", action=argparse.BooleanOptionalAction, default=None,
+                        help="voyage-dense: after an accepted fix the segment's readings update "
+                             "the rest of the INS error state given the fix (default on, off "
+                             "with --segment-error markov)")
 
 
 def voyage_options(args):
@@ -53,10 +57,11 @@ def voyage_options(args):
         raise ValueError(f"--map-error-order must be 1 or 2; got {args.map_error_order}")
     loop = {k: v for k, v in (("segment_error", args.segment_error),
                               ("fix_prior", args.fix_prior),
-                              ("first_n_fixes", args.first_n_fixes)) if v is not None}
+                              ("first_n_fixes", args.first_n_fixes),
+                              ("shape_update", args.shape_update)) if v is not None}
     if loop and args.method != "voyage-dense":
-        raise ValueError(f"--segment-error, --fix-prior and --first-n-fixes are options of "
-                         f"--method voyage-dense; got --method {args.method}")
+        raise ValueError(f"--segment-error, --fix-prior, --first-n-fixes and --shape-update are "
+                         f"options of --method voyage-dense; got --method {args.method}")
     return dict(map_error_told=told, map_error_order=args.map_error_order, hours=args.hours,
                 ins=INS_GRADES[args.ins or "navigation"], **loop)
 

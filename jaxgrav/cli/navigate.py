@@ -192,6 +192,10 @@ def add_parser(sub):
     p.add_argument("--fix-prior", action=argparse.BooleanOptionalAction, default=None,
                    help="dense: weigh the offsets by the filter's prior (default on, off with "
                         "--segment-error markov)")
+    p.add_argument("--shape-update", action=argparse.BooleanOptionalAction, default=None,
+                   help="dense: after an accepted fix the segment's readings update the rest "
+                        "of the INS error state given the fix (default on, off with "
+                        "--segment-error markov)")
     add_missing_option(p)
     p.add_argument("--max-gap", type=float, default=60.0,
                    help="longest gap between rows (s) the tightly coupled filters predict "
@@ -241,7 +245,7 @@ def _method_options(args):
         if getattr(args, name) is not None and args.method != "rbpf":
             raise ValueError(f"--{name} is for --method rbpf; got --method {args.method}")
     check_missing_option(args)
-    for name in ("segment_error", "fix_prior"):
+    for name in ("segment_error", "fix_prior", "shape_update"):
         if getattr(args, name) is not None and args.method != "dense":
             raise ValueError(f"--{name.replace('_', '-')} is for --method dense; got --method "
                              f"{args.method}")

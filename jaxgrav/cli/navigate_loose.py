@@ -35,7 +35,8 @@ def run_loose(args, log, voyage, grid, track, steps, n_missing, n_off):
     # chains: the largest distance between fixes sizes the search's displacement stencil
     step = (float(np.max(np.hypot(log.v_east, log.v_north))) * args.fix_every * steps.dt
             if chains else None)
-    loop = {k: getattr(args, k) for k in ("segment_error", "fix_prior", "first_n_fixes")
+    loop = {k: getattr(args, k) for k in ("segment_error", "fix_prior", "first_n_fixes",
+                                          "shape_update")
             if getattr(args, k, None) is not None}
     cfg = loose_config(INS_GRADES[args.ins], args.map_error, args.map_error_length, args.noise,
                        matcher=args.method, grid=nav_map, step_m=step,

@@ -151,7 +151,7 @@ def voyage_tracks(key, pm, grid, scenario, model, config):
 def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None, map_error=None,
                    map_error_told="state", map_error_order=None, hours=None,
                    ins=NAVIGATION_GRADE, segment_error=None, fix_prior=None,
-                   first_n_fixes=None):
+                   first_n_fixes=None, shape_update=None):
     """The :class:`~jaxgrav.montecarlo.spec.MethodSpec` of a voyage method.
 
     Parameters
@@ -191,6 +191,10 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
         ``voyage-dense`` only: the segment ends before a whole segment match the last
         that many fixes (:attr:`~jaxgrav.navigate.LooseConfig.first_n_fixes`); default
         none.
+    shape_update : bool, optional
+        ``voyage-dense`` only: the segment's readings update the rest of the state given
+        each accepted fix (:attr:`~jaxgrav.navigate.LooseConfig.shape_update`); default
+        ``loose_config``'s.
 
     Returns
     -------
@@ -212,7 +216,8 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
     if map_error_order not in (None, 1, 2):
         raise ValueError(f"map_error_order must be 1 or 2; got {map_error_order!r}")
     loop = {k: v for k, v in (("segment_error", segment_error), ("fix_prior", fix_prior),
-                              ("first_n_fixes", first_n_fixes)) if v is not None}
+                              ("first_n_fixes", first_n_fixes), ("shape_update", shape_update))
+            if v is not None}
     if loop and kind != "voyage-dense":
         raise ValueError(f"{' and '.join(loop)} are settings of voyage-dense's loop; got {kind}")
     if segment_error is not None and segment_error not in SEGMENT_ERRORS:
@@ -262,7 +267,8 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
         fn, bits = voyage_tight_run, {v: k for k, v in STATUS_FILTER.items() if v}
     settings = dict(description=f"{scenario.hours:g} h patrols, navigated "
                     + (f"loosely coupled (hourly {name} fixes, {config.segment_error} segment "
-                       "error" + (", the filter's prior" if config.fix_prior else "") + ")"
+                       "error" + (", the filter's prior" if config.fix_prior else "")
+                       + (", the segment's shape" if config.shape_update else "") + ")"
                        if loose else
                        f"tightly coupled ({name})"),
                     hours=scenario.hours, dt=scenario.dt, noise_mgal=scenario.noise_mgal,
@@ -270,7 +276,8 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
                     series_every_s=SERIES_EVERY_S, **map_error_settings(model),
                     **({"segment_error": config.segment_error, "fix_prior": int(config.fix_prior),
                         "fixes_per_segment": config.n_fixes, "fixes_between_ends": config.stride,
-                        "first_segment_fixes": config.first_n_fixes or 0}
+                        "first_segment_fixes": config.first_n_fixes or 0,
+                        "shape_update": int(config.shape_update)}
                        if loose else {}))
     return MethodSpec(fn, (pm, grid, scenario, model, config), settings, bits,
                       cpu_options_for(kind))

@@ -169,6 +169,7 @@ def test_bad_logs_are_named(voyage_log, tmp_path, capsys, edit, message):
     (["--map-error", "nan"], "--map-error must be a finite value >= 0"),
     (["--segment-error", "markov"], "--segment-error is for --method dense; got --method ukf"),
     (["--method", "chains", "--no-fix-prior"], "--fix-prior is for --method dense"),
+    (["--method", "chains", "--no-shape-update"], "--shape-update is for --method dense"),
     (["--method", "dense", "--first-n-fixes", "70"], "--first-n-fixes must be from 5 to "
                                                      "--n-fixes 60; got 70"),
     (["--method", "rbpf", "--particles", "1"], "--particles must be an integer >= 100"),

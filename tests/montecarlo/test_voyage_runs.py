@@ -112,11 +112,17 @@ def test_voyage_dense_runs_the_dense_loop_by_default_and_markov_on_request():
     assert spec.settings["segment_error"] == "markov" and spec.settings["fix_prior"] == 0
     no_prior = voyage_builder(None, kind="voyage-dense", fix_prior=False).args[-1]
     assert not no_prior.fix_prior and no_prior.segment_error == "conditional"
+    assert voyage_builder(None, kind="voyage-dense").settings["shape_update"] == 1
+    no_shape = voyage_builder(None, kind="voyage-dense", shape_update=False)
+    assert not no_shape.args[-1].shape_update and no_shape.settings["shape_update"] == 0
 
 
 @pytest.mark.parametrize(("args", "message"), [
     (["--method", "voyage-ukf", "--segment-error", "markov"],
-     "--segment-error, --fix-prior and --first-n-fixes are options of --method voyage-dense"),
+     "--segment-error, --fix-prior, --first-n-fixes and --shape-update are options of --method "
+     "voyage-dense"),
+    (["--method", "voyage-ukf", "--no-shape-update"],
+     "--shape-update are options of --method voyage-dense"),
     (["--method", "dense", "--fix-prior"], "--fix-prior is an option of the voyage methods"),
 ])
 def test_cli_loop_options_are_voyage_dense_only(tmp_path, capsys, args, message):
@@ -146,6 +152,7 @@ def test_cli_voyage_dense_runs_its_loop(tmp_path, capsys, loop):
     assert ds.attrs["setting_fixes_per_segment"] == (30 if markov else 60)
     assert ds.attrs["setting_fix_prior"] == (0 if markov else 1)
     assert ds.attrs["setting_first_segment_fixes"] == (30 if "30" in loop else 0)
+    assert ds.attrs["setting_shape_update"] == (0 if markov else 1)
     ds.close()
 
 
