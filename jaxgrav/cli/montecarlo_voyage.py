@@ -1,6 +1,5 @@
 """The voyage methods of ``jaxgrav montecarlo``: their options, summary lines and figure."""
 
-import argparse
 import json
 import math
 
@@ -9,9 +8,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from jaxgrav.cli.inputs import whole_number
+from jaxgrav.cli.navigate_loose import add_dense_loop_options
 from jaxgrav.cli.voyage import MAX_HOURS
 from jaxgrav.montecarlo.voyage_runs import SERIES_EVERY_S, TOLD, voyage_tracks
-from jaxgrav.navigate import SEGMENT_ERRORS, voyage_summary
+from jaxgrav.navigate import voyage_summary
 from jaxgrav.plot import plot_map, plot_voyage_errors, save_figure
 from jaxgrav.scenarios import INS_GRADES
 
@@ -22,22 +22,10 @@ __all__ = ["add_loop_options", "plot_voyage_tracks", "plot_voyages", "tracks_pat
 def add_loop_options(parser):
     """``--segment-error``, ``--[no-]fix-prior``, ``--first-n-fixes`` and
     ``--[no-]shape-update``: voyage-dense's loop settings."""
-    parser.add_argument("--segment-error", choices=SEGMENT_ERRORS, default=None,
-                        help="voyage-dense: how the loop tells the matcher the filter's own "
-                             "error: conditional (default: the segment's Eotvos and stretch "
-                             "errors given its offset, 2 h segments every hour), linear, or "
-                             "markov (the old loop: 1 h segments, a Markov error at the "
-                             "Schuler length)")
-    parser.add_argument("--fix-prior", action=argparse.BooleanOptionalAction, default=None,
-                        help="voyage-dense: weigh the offsets by the filter's prior (default "
-                             "on, off with --segment-error markov)")
+    add_dense_loop_options(parser, "voyage-dense")
     parser.add_argument("--first-n-fixes", type=whole_number, default=None,
                         help="voyage-dense: the segment ends before a whole segment match the "
                              "last N fixes (e.g. 30: the first fix after 1 h; default none)")
-    parser.add_argument("--shape-update", action=argparse.BooleanOptionalAction, default=None,
-                        help="voyage-dense: after an accepted fix the segment's readings update "
-                             "the rest of the INS error state given the fix (default on, off "
-                             "with --segment-error markov)")
 
 
 def voyage_options(args):

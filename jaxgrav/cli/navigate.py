@@ -60,7 +60,6 @@ filters predict through gaps up to ``--max-gap`` s (the INS interpolated, no rea
 the loose loop needs every row. The output has the log's own rows.
 """
 
-import argparse
 import sys
 
 import jax
@@ -90,7 +89,7 @@ from jaxgrav.cli.inputs import (
     track_map,
     whole_number,
 )
-from jaxgrav.cli.navigate_loose import check_fix_blocks, run_loose
+from jaxgrav.cli.navigate_loose import add_dense_loop_options, check_fix_blocks, run_loose
 from jaxgrav.cli.sanity import (
     check_positions,
     check_readings,
@@ -103,7 +102,6 @@ from jaxgrav.geodesy import eotvos_jit
 from jaxgrav.navigate import (
     DENSE_LOOP,
     LOOSE_MATCHERS,
-    SEGMENT_ERRORS,
     TIGHT_METHODS,
     TightConfig,
     navigate_tight,
@@ -184,18 +182,7 @@ def add_parser(sub):
                    help="loosely coupled methods: the segment ends before --n-fixes fixes "
                         "exist match the last N fixes (5 to --n-fixes; default none: the "
                         "first fix waits for a whole segment, 2 h with dense)")
-    p.add_argument("--segment-error", choices=SEGMENT_ERRORS, default=None,
-                   help="dense: how the loop tells the matcher the filter's own error: "
-                        "conditional (default: the segment's Eotvos and stretch errors given "
-                        "its offset), linear, or markov (the old loop: 1 h segments, a Markov "
-                        "error at the Schuler length)")
-    p.add_argument("--fix-prior", action=argparse.BooleanOptionalAction, default=None,
-                   help="dense: weigh the offsets by the filter's prior (default on, off with "
-                        "--segment-error markov)")
-    p.add_argument("--shape-update", action=argparse.BooleanOptionalAction, default=None,
-                   help="dense: after an accepted fix the segment's readings update the rest "
-                        "of the INS error state given the fix (default on, off with "
-                        "--segment-error markov)")
+    add_dense_loop_options(p, "dense")
     add_missing_option(p)
     p.add_argument("--max-gap", type=float, default=60.0,
                    help="longest gap between rows (s) the tightly coupled filters predict "

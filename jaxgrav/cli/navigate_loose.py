@@ -7,6 +7,7 @@ its displacement stencil sized for the log's fastest row between fixes and its w
 fixed at :data:`~jaxgrav.navigate.CHAIN_REACH_M` about each fix.
 """
 
+import argparse
 import sys
 
 import jax
@@ -14,12 +15,31 @@ import numpy as np
 
 from jaxgrav.cli.inputs import kept_columns
 from jaxgrav.match.sizing import chain_grid
-from jaxgrav.navigate import FIX_EVENTS, loose_config, navigate_loose
+from jaxgrav.navigate import FIX_EVENTS, SEGMENT_ERRORS, loose_config, navigate_loose
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.tracks import write_track_csv
 
-__all__ = ["check_fix_blocks", "first_fix_rows", "no_fix_warning", "run_loose"]
+__all__ = ["add_dense_loop_options", "check_fix_blocks", "first_fix_rows", "no_fix_warning",
+           "run_loose"]
+
+
+def add_dense_loop_options(parser, method):
+    """``--segment-error``, ``--[no-]fix-prior`` and ``--[no-]shape-update``: the dense loop's
+    settings, as ``navigate --method dense`` and ``montecarlo --method voyage-dense`` (the
+    ``method`` their help names) take them."""
+    parser.add_argument("--segment-error", choices=SEGMENT_ERRORS, default=None,
+                        help=f"{method}: how the loop tells the matcher the filter's own error: "
+                             "conditional (default: the segment's Eotvos and stretch errors "
+                             "given its offset, 2 h segments every hour), linear, or markov "
+                             "(the old loop: 1 h segments, a Markov error at the Schuler length)")
+    parser.add_argument("--fix-prior", action=argparse.BooleanOptionalAction, default=None,
+                        help=f"{method}: weigh the offsets by the filter's prior (default on, "
+                             "off with --segment-error markov)")
+    parser.add_argument("--shape-update", action=argparse.BooleanOptionalAction, default=None,
+                        help=f"{method}: after an accepted fix the segment's readings update the "
+                             "rest of the INS error state given the fix (default on, off with "
+                             "--segment-error markov)")
 
 
 def run_loose(args, log, voyage, grid, track, steps, n_missing, n_off):
