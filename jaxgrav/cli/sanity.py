@@ -21,7 +21,9 @@ After a run, :func:`fit_check` (matchers: the fix's χ² per degree of freedom) 
 :func:`innovation_check` (filters: the normalised innovations) test the fit against the
 stated noise and return a warning when it is statistically implausible (p < 10⁻³): the
 result is then not trustworthy as stated (a wrong map, unit, noise, or an untold map
-error).
+error). :func:`implausible_rows` (the rule of
+:mod:`jaxgrav.navigate.innovation_blocks`, exported here, which the voyage Monte Carlo
+methods count per run) flags the rows of the blocks of readings whose innovations fail.
 """
 
 import math
@@ -31,6 +33,7 @@ from scipy.special import chdtrc
 
 from jaxgrav.cli.positions import check_positions
 from jaxgrav.match.result import P_IMPLAUSIBLE, fit_p_value
+from jaxgrav.navigate.innovation_blocks import INNOVATION_BLOCK, implausible_rows
 from jaxgrav.tracks import csv_line
 
 __all__ = ["FILL_VALUES", "GAP_STEPS", "INNOVATION_BLOCK", "P_IMPLAUSIBLE", "check_positions",
@@ -40,10 +43,6 @@ __all__ = ["FILL_VALUES", "GAP_STEPS", "INNOVATION_BLOCK", "P_IMPLAUSIBLE", "che
 FILL_VALUES = (-9999.0, 9999.0, -99999.0, 99999.0, -999999.0, 999999.0, -32767.0, 32767.0,
                -32768.0)
 """Common fill values of geophysical files, refused as readings (and ``|v| ≥ 1e20``)."""
-
-INNOVATION_BLOCK = 60
-"""Readings per block of :func:`implausible_rows` (10 min at a reading every 10 s)."""
-
 
 _UNIT_HINTS = {
     "mGal": "m/s² (× 1e5 gives mGal), µGal (× 1e-3 gives mGal) or Gal (× 1e3)",
@@ -267,39 +266,6 @@ def innovation_check(innovation, innovation_sigma, noise_option="--sigma-gravity
                     "readings do not fit the map as stated; state the map's error "
                     f"(--map-error), a larger {noise_option}, or check the map and the "
                     "units; the stated 1-sigma is not trustworthy")
-
-
-def implausible_rows(innovation, innovation_sigma, block=INNOVATION_BLOCK):
-    """Rows whose block of innovations is implausible for the filter's predicted variance.
-
-    The readings used are cut into consecutive blocks of ``block`` (the last one takes
-    the remainder); a block whose summed normalised innovations squared exceed the
-    ``1 − P_IMPLAUSIBLE`` quantile of χ²(k) flags every row from its first reading to
-    its last. Blocks do not overlap, so a consistent filter flags a block with
-    probability 10⁻³ (about one 12 h run in 14 at a reading every 10 s).
-
-    Parameters
-    ----------
-    innovation, innovation_sigma : array_like, shape ``(N,)``
-        Reading minus prediction and its predicted 1-σ (NaN where no reading was used).
-    block : int
-        Readings per block.
-
-    Returns
-    -------
-    Array of bool, shape ``(N,)``
-    """
-    used, z2 = _used_nis(innovation, innovation_sigma)
-    flagged = np.zeros(np.shape(innovation)[0] + 1, int)
-    if used.size == 0:
-        return flagged[:-1].astype(bool)
-    starts = np.arange(0, used.size, block)
-    nis = np.add.reduceat(z2, starts)
-    bad = chdtrc(np.diff(np.append(starts, used.size)), nis) < P_IMPLAUSIBLE
-    first, last = used[starts[bad]], used[np.minimum(starts[bad] + block, used.size) - 1]
-    np.add.at(flagged, first, 1)
-    np.add.at(flagged, last + 1, -1)
-    return np.cumsum(flagged[:-1]) > 0
 
 
 def _used_nis(innovation, innovation_sigma):

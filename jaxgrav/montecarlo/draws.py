@@ -49,7 +49,11 @@ _OTHER_ATTRS = {
                                                 "solution every series_every_s seconds"),
     "fix_event": dict(units="1", long_name="what happened at each segment end (0 accepted, 1 "
                                            "no fix yet, 2 not matched, 3 rejected by the "
-                                           "matcher, 4 rejected by the innovation gate)"),
+                                           "matcher, 4 rejected by the innovation gate, 5 "
+                                           "rejected by the segment's shape test)"),
+    "implausible_blocks": dict(units="1", long_name="blocks of 60 readings whose innovations "
+                                                    "fail the filter's chi-square test "
+                                                    "(p < 1e-3)"),
     "fix_time_s": dict(units="s", long_name="time of each segment end from the voyage's "
                                             "start"),
 }

@@ -23,9 +23,14 @@ otherwise) whose readings see the map plus the run's map error, and returns, bes
                            map node (on a map with missing nodes the route is drawn again,
                            :data:`~jaxgrav.montecarlo.matcher_runs.MISSING_MAP_START_TRIES`
                            times, until it reads none)
-``status``                 tightly coupled: the filter's status bits OR-ed over the voyage;
+``status``                 tightly coupled: the filter's status bits OR-ed over the voyage,
+                           with ``implausible_fit`` set when a block of its innovations is
+                           implausible (:func:`~jaxgrav.navigate.innovation_blocks`, the
+                           rule ``jaxgrav navigate`` flags a real log's rows with);
                            loosely coupled: bit ``k`` set when a fix event ``k`` of
                            :data:`~jaxgrav.navigate.FIX_EVENTS` happened (bit 0: accepted)
+``implausible_blocks``     tightly coupled: the number of those blocks (a consistent filter
+                           fails one in 1000)
 """
 
 import functools
@@ -53,6 +58,7 @@ from jaxgrav.navigate import (
     LooseConfig,
     TightConfig,
     hourly_rms,
+    implausible_block_count,
     loose_config,
     loose_map,
     navigate_loose,
@@ -112,8 +118,11 @@ def voyage_tight_run(key, pm, grid, scenario, model, config):
     """
     voyage = voyage_scenario(key, grid, scenario, model)
     res = navigate_tight(pm, voyage, config, jax.random.fold_in(key, 1))
-    status = jax.lax.reduce(res.status, jnp.int32(0), jax.lax.bitwise_or, (0,))
-    return _metrics(voyage, res.nav, res.cov_north_east, scenario.dt, status)
+    blocks = implausible_block_count(res.innovation, jnp.sqrt(res.innovation_var))
+    status = jax.lax.reduce(res.status, jnp.int32(0), jax.lax.bitwise_or, (0,)) | jnp.where(
+        blocks > 0, STATUS_FILTER["implausible_fit"], 0)
+    out = _metrics(voyage, res.nav, res.cov_north_east, scenario.dt, status)
+    return {**out, "implausible_blocks": blocks}
 
 
 def voyage_dense_run(key, pm, grid, scenario, model, config):

@@ -3,7 +3,8 @@
 Loosely coupled (:func:`navigate_loose`: matcher fixes as position measurements of the
 INS error Kalman filter) and tightly coupled (the gravity filters on the readings
 directly) navigation over a :class:`~jaxgrav.sim.voyage_log.Voyage`, the voyage
-figures (:func:`voyage_errors`, :func:`hourly_rms`) and the bound no estimator beats on a
+figures (:func:`voyage_errors`, :func:`hourly_rms`), the block test of a filter's
+innovations (:func:`innovation_blocks`) and the bound no estimator beats on a
 simulated voyage (:func:`voyage_bound`).
 """
 
@@ -13,6 +14,13 @@ from jaxgrav.navigate.error_kf import (
     fix_update,
     innovation_nis,
     spread,
+)
+from jaxgrav.navigate.innovation_blocks import (
+    INNOVATION_BLOCK,
+    InnovationBlocks,
+    implausible_block_count,
+    implausible_rows,
+    innovation_blocks,
 )
 from jaxgrav.navigate.loose import (
     CHAIN_REACH_M,
@@ -41,10 +49,12 @@ __all__ = [
     "CHAIN_REACH_M",
     "DENSE_LOOP",
     "FIX_EVENTS",
+    "INNOVATION_BLOCK",
     "LOOSE_MATCHERS",
     "SEGMENT_ERRORS",
     "TIGHT_METHODS",
     "ErrorKFTables",
+    "InnovationBlocks",
     "LooseConfig",
     "LooseResult",
     "TightConfig",
@@ -57,6 +67,9 @@ __all__ = [
     "fix_segment",
     "fix_update",
     "hourly_rms",
+    "implausible_block_count",
+    "implausible_rows",
+    "innovation_blocks",
     "innovation_nis",
     "less_cell",
     "loose_config",

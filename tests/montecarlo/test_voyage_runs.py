@@ -12,7 +12,13 @@ from jaxgrav import montecarlo
 from jaxgrav.cli import main
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.montecarlo.voyage_runs import voyage_builder, voyage_tracks
-from jaxgrav.navigate import DENSE_LOOP, hourly_rms, navigate_tight, voyage_errors
+from jaxgrav.navigate import (
+    DENSE_LOOP,
+    hourly_rms,
+    implausible_block_count,
+    navigate_tight,
+    voyage_errors,
+)
 from jaxgrav.scenarios import voyage_scenario
 
 MODEL = map_error(3.0, 10000.0)
@@ -52,6 +58,9 @@ def test_a_run_is_the_navigator_on_the_same_voyage(tight):
                                                   rel=1e-4 if config.method == "rbpf" else 1e-5)
     assert res["err_series_m"].shape == (2, 7)  # every 10 min over 1 h, start included
     assert np.all(res["status"] == 0)
+    # the block test of the innovations, as navigate flags a log's rows with it
+    assert int(res["implausible_blocks"][1]) == int(implausible_block_count(
+        nav.innovation, jnp.sqrt(nav.innovation_var)))
     # the tracks of the figure are that run's: truth, free INS and the navigation solution
     tracks = voyage_tracks(key, *spec.args)
     np.testing.assert_allclose(tracks["navigation"][0], nav.nav.lat, rtol=0, atol=1e-12)
@@ -143,7 +152,10 @@ def test_cli_voyage_dense_runs_its_loop(tmp_path, capsys, loop):
                  "--map-error", "3", "--no-progress", "--out", str(out), *loop]) == 0
     said = capsys.readouterr().out
     assert "last hour / free INS" in said and "NEES mean" in said
+    assert "innovations implausible" in said
     ds = xr.open_dataset(out)
+    assert ds.attrs["summary_voyage_implausible_share"] == float(
+        np.mean(ds["implausible_blocks"].values > 0))
     events = ds["fix_event"].values
     assert events.shape == (2, 2) and np.all(events[:, 1] != 1)
     assert np.all((events[:, 0] == 1) == (loop == []))
@@ -163,7 +175,10 @@ def test_cli_voyage_method_writes_results_and_figure(tmp_path, capsys):
                  "--map-error", "3", "--no-progress", "--out", str(out)]) == 0
     said = capsys.readouterr().out
     assert "last hour / free INS" in said and "NEES mean" in said
+    assert "innovations implausible" in said
     ds = xr.open_dataset(out)
+    assert ds.attrs["summary_voyage_implausible_share"] == float(
+        np.mean(ds["implausible_blocks"].values > 0))
     assert ds["hourly_err_m"].shape == (2, 1) and ds.attrs["method"] == "voyage-ukf"
     assert "--hours 1" in ds.attrs["command"]
     assert ds["start_lat"].attrs["units"] == "degrees_north"
