@@ -29,7 +29,7 @@ _EQUATOR_M_PER_DEG = 6335439.327 * DEG
 degrees computed with it are never too small."""
 
 
-def regular_axis(coord, name, source=None):
+def regular_axis(coord, name, source=None, resolution=0.0):
     """Validate a 1-D regular coordinate (degrees).
 
     Parameters
@@ -41,6 +41,8 @@ def regular_axis(coord, name, source=None):
         The axis in messages (``"lat"``, ``"x"``).
     source : str, optional
         Where the axis comes from, leading the messages (e.g. ``"map 'gebco.nc'"``).
+    resolution : float
+        Precision of the stored nodes (a packed ``scale_factor``): steps may be off by it.
 
     Returns
     -------
@@ -88,7 +90,7 @@ def regular_axis(coord, name, source=None):
     mean = (coord[-1] - coord[0]) / (coord.size - 1)
     typical = float(np.median(step))  # the step most nodes have: the odd one is named
     eps = np.finfo(raw.dtype).eps if raw.dtype.kind == "f" else np.finfo(float).eps
-    tol = max(1e-6 * abs(mean) + 1e-9, 16.0 * eps * float(np.max(np.abs(coord))))
+    tol = max(1e-6 * abs(mean) + 1e-9, 16 * eps * float(np.max(np.abs(coord))), 1.01 * resolution)
     irregular = np.flatnonzero(np.abs(step - typical) > tol)
     if irregular.size or abs(mean - typical) > tol:
         i = int(irregular[0]) if irregular.size else int(np.argmax(np.abs(step - typical)))

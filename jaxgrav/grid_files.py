@@ -15,8 +15,7 @@ gravity or magnetic map declared in other units (CF ``units`` ``m s-2``, ``uGal`
 ``uT`` …) is converted to mGal or nT (:func:`map_units`); see :mod:`jaxgrav.grid_values`.
 It returns plain arrays; :meth:`Grid.from_netcdf` and :func:`jaxgrav.datasets.load_map`
 build the grid. :func:`write_netcdf` writes a grid with CF ``lat``/``lon`` coordinates,
-atomically. Both are package-internal: use the :class:`~jaxgrav.grid.Grid` methods or
-``load_map``.
+atomically. Both are package-internal: use the ``Grid`` methods or ``load_map``.
 """
 
 import re
@@ -39,6 +38,7 @@ from jaxgrav.grid_values import (
     rolled_columns,
     undeclared_fills,
     units_attr,
+    unpacked_axis,
 )
 
 __all__ = ["FILL_VALUES", "LAT_NAMES", "LON_NAMES", "GridArrays", "UndeclaredFillWarning",
@@ -325,8 +325,7 @@ def _cf_grid(ds, var, ndim, exclude, label):
             f"(latitude, longitude): extract one level of {extra[0]!r} first (e.g. "
             f"ncks -d {extra[0]},0 IN OUT)")
     values = np.asarray(da.transpose(*extra, lat_dim, lon_dim).values)
-    lat = np.asarray(ds.variables[lat_name].values)
-    lon = np.asarray(ds.variables[lon_name].values)
+    lat, lon = (unpacked_axis(ds.variables[n], n, label) for n in (lat_name, lon_name))
     units = units_attr(da.attrs)  # "Units", "unit": m s-2 were sampled as mGal, exit 0
     lat, lon = (axis_degrees(c, units_attr(ds.variables[n].attrs), n, label)
                 for n, c in ((lat_name, lat), (lon_name, lon)))
@@ -366,13 +365,18 @@ def _checked_axes(lat, lon, label, lat_name, lon_name):
         if c.dtype.kind not in "iuf":
             raise ValueError(f"{label}: coordinate {name!r} holds {c.dtype} values; expected "
                              "degrees")
-    regular_axis(lat, str(lat_name), label)
     far = np.abs(lat.astype(float)) > 90.0
     if far.any() or np.any(np.abs(lon.astype(float) - 180.0) > 540.0):
-        value = lat[far][0] if far.any() else lon[np.abs(lon - 180.0) > 540.0][0]
+        name, c = (lat_name, lat) if far.any() else (lon_name, lon)
+        value = c[far][0] if far.any() else c[np.abs(c - 180.0) > 540.0][0]
+        # whole degrees x 1e7 were named "irregular" (step 416666, not 416667)
+        e7 = (np.all(np.round(c) == c) and np.abs(c).max() / 1e7 <= (90 if far.any() else 360))
         raise ValueError(f"{label}: coordinate value {float(value):g} is not a latitude/"
                          "longitude in degrees (projected coordinates in metres?); jaxgrav "
-                         "reads geographic grids: reproject it first (e.g. gmt grdproject -I)")
+                         "reads geographic grids: reproject it first (e.g. gmt grdproject -I)"
+                         + (f"; whole degrees x 1e7? declare it: e.g. ncatted -a scale_factor,"
+                            f"{name},c,d,1e-7" if e7 else ""))
+    regular_axis(lat, str(lat_name), label)
     lon = eastward_longitudes(lon)  # -236..-224: the -360..0 convention
     joined = contiguous_longitudes(lon)
     if joined is not lon:

@@ -7,8 +7,9 @@ outside a declared CF ``valid_range`` / ``valid_min`` / ``valid_max`` as missing
 says they are; :func:`map_units` converts a gravity or magnetic map declared in other
 units (``m s-2``, ``uGal``, ``uT`` …) to mGal or nT; :func:`axis_degrees` reads a
 coordinate's units (CF ``degrees_west``/``degrees_south`` count the other way),
-:func:`eastward_longitudes` the −360…0 convention and :func:`rolled_columns` a global grid
-stored from another meridian. Used by
+:func:`eastward_longitudes` the −360…0 convention, :func:`rolled_columns` a global grid
+stored from another meridian and :func:`unpacked_axis` coordinates packed as integers.
+Used by
 :func:`jaxgrav.grid_files.read_netcdf` (and the last by the track reader too).
 """
 
@@ -16,6 +17,8 @@ import re
 import warnings
 
 import numpy as np
+
+from jaxgrav.grid_axes import regular_axis
 
 __all__ = [
     "FILL_VALUES",
@@ -27,6 +30,7 @@ __all__ = [
     "rolled_columns",
     "undeclared_fills",
     "units_attr",
+    "unpacked_axis",
 ]
 
 _UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (factor, units)
@@ -34,7 +38,8 @@ _UNIT_SCALES = {  # a map's declared units, normalised (see _unit_key) -> (facto
     **dict.fromkeys(("gal", "gals"), (1e3, "mGal")),
     **dict.fromkeys(("ugal", "microgal", "microgals"), (1e-3, "mGal")),
     **dict.fromkeys(("ms-2", "m/s2", "m/s/s", "ms-1s-1"), (1e5, "mGal")),
-    **dict.fromkeys(("gu", "um/s2", "ums-2"), (0.1, "mGal")),  # gravity units, µm/s²
+    **dict.fromkeys(("gu", "um/s2", "ums-2", "gravityunit", "gravityunits"),  # µm/s²
+                    (0.1, "mGal")),  # "gravity units" was read as mGal: 10 x too large
     **dict.fromkeys(("nt", "nanotesla", "gamma", "gammas"), (1.0, "nT")),
     **dict.fromkeys(("ut", "microtesla"), (1e3, "nT")),
     **dict.fromkeys(("t", "tesla"), (1e9, "nT")),
@@ -273,3 +278,29 @@ def outside_valid_range(values, attrs, encoding):
         low, high = sorted((low * scale + offset, high * scale + offset))
     outside = (values < low) | (values > high)
     return np.where(outside, np.nan, values) if outside.any() else values
+
+
+def unpacked_axis(v, name, label):
+    """A coordinate's nodes, regular again when they were packed as integers.
+
+    Parameters
+    ----------
+    v : xarray.Variable
+        The coordinate variable (decoded; its ``encoding`` says how it was stored).
+    name, label : str
+        The coordinate and the file, for messages.
+
+    Returns
+    -------
+    numpy.ndarray, shape ``(n,)``
+        ``v``'s values; for integers packed with a ``scale_factor`` (``int32`` × 1e-6
+        degrees), checked regular to within that quantum and returned as the regular axis
+        they round (the rounding was refused as an "irregular step").
+    """
+    values = np.asarray(v.values)
+    stored = np.dtype(v.encoding.get("dtype", values.dtype))
+    if stored.kind not in "iu" or "scale_factor" not in v.encoding or values.size < 2:
+        return values
+    quantum = abs(float(np.ravel(v.encoding["scale_factor"])[0]))
+    regular_axis(values, str(name), label, resolution=quantum)
+    return np.linspace(float(values[0]), float(values[-1]), values.size)

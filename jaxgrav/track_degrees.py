@@ -4,14 +4,15 @@
 N``, ``N35.4619``, ``127.71W``) or in degrees, minutes and seconds (``35°27.716'N``,
 ``35 27 43.2 S``) as signed decimal degrees, for :func:`jaxgrav.tracks.read_track_csv`
 (through :mod:`jaxgrav.track_files`, which exports it); :func:`nmea_hint` names a
-column written as NMEA's ``ddmm.mmmm`` (degrees × 100 + minutes).
+column written as NMEA's ``ddmm.mmmm`` (degrees × 100 + minutes), :func:`e7_hint` one
+of whole degrees × 1e7.
 """
 
 import re
 
 import numpy as np
 
-__all__ = ["NA_TOKENS", "join_position_parts", "nmea_hint", "parse_degrees"]
+__all__ = ["NA_TOKENS", "e7_hint", "join_position_parts", "nmea_hint", "parse_degrees"]
 
 NA_TOKENS = frozenset({"", "nan", "na", "n/a", "null", "none", "#n/a", "-", "--"})
 """Cells (lower case) read as a missing value (NaN): also a spreadsheet's ``#N/A`` and a
@@ -105,6 +106,20 @@ def nmea_hint(values, i):
     return (f"; it looks like NMEA ddmm.mmmm (degrees x 100 + minutes): {next(shown)} is "
             f"{deg:.0f} deg {next(shown)}' = {deg + minutes / 60.0:.6g} degrees; convert the "
             "column to decimal degrees")
+
+
+def e7_hint(values, i, name):
+    """A message tail when the angles ``values`` (a ``lat`` or ``lon`` column, value ``i``
+    out of range) are whole numbers that, divided by 1e7, are degrees: ``degE7``, as
+    MAVLink, PX4 and Google's location history write positions; else ``""``."""
+    v = np.abs(np.asarray(values, dtype=float))
+    v = v[np.isfinite(v)]
+    limit = 90.0 if name == "lat" else 360.0
+    if not v.size or np.any(v != np.round(v)) or v.max() / 1e7 > limit:
+        return ""
+    return (f"; whole numbers of degrees x 1e7 (degE7, as MAVLink and Google's location "
+            f"history write them)? {float(values[i]):.0f} would be {float(values[i]) / 1e7:.7g} "
+            f"degrees: declare it in the header, e.g. '{name} (1e-7 deg)' or '{name}_e7'")
 
 
 _PART_WORDS = {"min": ("min", "mins", "minute", "minutes"),

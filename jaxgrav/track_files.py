@@ -11,8 +11,8 @@ their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
   and title lines above the header (``Survey leg 3``: at most half its cells);
 - the delimiter is sniffed from the header line: a tab, else ``|`` when it has more of
   them than of ``,`` and ``;``, else ``;`` when it has at least as many as ``,``, else
-  ``,``, else runs of whitespace (``.xyz``, ``.txt``; GMT ``>``
-  segment lines skipped); quoted fields may hold the delimiter;
+  ``,``, else runs of whitespace (``.xyz``, ``.txt``; GMT ``>`` segment lines skipped);
+  quoted fields may hold the delimiter; NMEA sentences and XML (GPX) are refused;
 - a units row under the header (``s,deg,deg,mGal``) is joined to it (``t (s)``, ...);
   a repeated header line (two files joined) is skipped;
 - a first line that is all numbers is data, not a header: the header is then the comment
@@ -24,9 +24,8 @@ their file line numbers, for :func:`jaxgrav.tracks.read_track_csv`:
 ``gravity [m/s^2]``, ``lat (rad)``, ``v_east (kn)``) as the factor to the library's units.
 :func:`parse_numbers` reads one column of cells as float64 (empty, ``nan``, ``NA``,
 ``N/A``, ``#N/A``, ``null``, ``-`` as NaN; a decimal comma accepted when the delimiter
-is not a comma; Fortran's ``1.5D+01``);
-:func:`parse_degrees` reads latitudes and longitudes with hemisphere letters or in
-degrees, minutes and seconds (``35°27.716'N``).
+is not a comma; ``1,234.5``; Fortran's ``1.5D+01``); :func:`parse_degrees` reads
+latitudes and longitudes with hemisphere letters or in DMS (``35°27.716'N``).
 """
 
 import bz2
@@ -56,10 +55,14 @@ _BINARY = {b"CDF": "a NetCDF-3 file", b"\x89HDF": "a NetCDF-4/HDF5 file",
            b"PK": "a zip/xlsx archive", b"\xd0\xcf\x11\xe0": "an old Excel/Office file"}
 _DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+([eE][+-]?\d+)?")
 _THOUSANDS = re.compile(r"[+-]?\d{1,3},\d{3}")  # 1,234: a thousands separator, or 1.234?
+_GROUPED = re.compile(r"[+-]?\d{1,3}(,\d{3})+\.\d*")  # "1,234.5": the comma groups thousands
+_GROUPED_DOT = re.compile(r"[+-]?\d{1,3}(\.\d{3})+,\d*")  # "1.234,5", the decimal comma's
 _FORTRAN = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)[dD][+-]?\d+")  # 1.5D+01: Fortran's exponent
 _INVISIBLE = dict.fromkeys(map(ord, "\u200b\u200c\u200d\u2060\ufeff"))  # zero-width, BOMs
 _MINUS = str.maketrans({"\u2212": "-", "\ufe63": "-", "\uff0d": "-"})  # −35.5 (typeset)
 _DELIMITER_NAMES = {",": "comma", ";": "semicolon", "\t": "tab", " ": "whitespace", "|": "pipe"}
+_NMEA = re.compile(r"[$!][A-Z]{5},")  # $GPGGA, $GNRMC, !AIVDM: a GPS receiver's raw log
+_NOT_TABLES = {**dict.fromkeys("$!", ("NMEA 0183 sentences", "nmea")), "<": ("XML (GPX?)", "gpx")}
 _SEP_LINE = re.compile(r'\s*"?sep=([,;\t])"?[,;\t]*\s*', re.IGNORECASE)  # Excel's first line
 
 
@@ -267,6 +270,11 @@ def read_table(path, label=None):
         raise ValueError(f"{label} looks like JSON (it starts with {first[:20]!r}), not a "
                          "track; a track is a CSV (or whitespace-separated) text file with a "
                          "header row, e.g. t,lat,lon,gravity")
+    if _NMEA.match(first) or first.startswith("<"):  # were "column 'M' appears twice"
+        what, fmt = _NOT_TABLES[first[0]]
+        raise ValueError(f"{label} holds {what} ({first[:16]!r}...), not a table; convert it "
+                         f"to a CSV first (e.g. gpsbabel -i {fmt} -f IN -o unicsv -F OUT.csv, "
+                         "whose Date, Time, Latitude, Longitude jaxgrav reads)")
     if declared:  # "sep=;": the delimiter, declared; blanked so line numbers stay the file's
         text = "\n".join([*raw[:k], "", *raw[k + 1:]])
     title = [] if declared else _preamble(raw, k)
@@ -378,8 +386,8 @@ def parse_numbers(cells, decimal_comma=False):
     cells : sequence of str
         Trimmed cells.
     decimal_comma : bool
-        Also accept ``1,5`` for 1.5 (files whose delimiter is not a comma); without it a
-        decimal comma is read only when it cannot be a thousands separator (``"29,5"``
+        Also accept ``1,5`` for 1.5, ``1.234,5`` for 1234.5 (``1,234.5`` always); without
+        it a decimal comma is read only when it cannot be a thousands separator (``"29,5"``
         quoted in a comma-separated file, not ``"1,234"``).
 
     Returns
@@ -402,6 +410,9 @@ def parse_numbers(cells, decimal_comma=False):
             if _DECIMAL_COMMA.fullmatch(cell) and (decimal_comma
                                                     or not _THOUSANDS.fullmatch(cell)):
                 values[i] = float(cell.replace(",", "."))
+            elif _GROUPED.fullmatch(cell) or (decimal_comma and _GROUPED_DOT.fullmatch(cell)):
+                sep = "," if _GROUPED.fullmatch(cell) else "."  # "1,234.5" was "not a number"
+                values[i] = float(cell.replace(sep, "").replace(",", "."))
             elif _FORTRAN.fullmatch(cell):  # was "not a number"
                 values[i] = float(cell.replace("D", "e").replace("d", "e"))
             else:

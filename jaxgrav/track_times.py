@@ -14,11 +14,15 @@ import re
 
 import numpy as np
 
-__all__ = ["DATE_COLUMN", "MAX_EPOCH_SECONDS", "UNIX_SECONDS_FROM", "check_time_steps",
-           "epoch_unit", "iso_seconds", "parse_datetime", "time_units"]
+__all__ = ["DATE_COLUMN", "DATE_COLUMNS", "MAX_EPOCH_SECONDS", "UNIX_SECONDS_FROM",
+           "check_time_steps", "epoch_unit", "iso_seconds", "parse_datetime", "time_units"]
 
 DATE_COLUMN = "date"
-"""A column (any case) whose dates are joined to a time column holding times of day."""
+"""A column (any case) whose dates are joined to a time column holding times of day
+(also :data:`DATE_COLUMNS`)."""
+
+DATE_COLUMNS = (DATE_COLUMN, "datum", "fecha")
+"""Every name of such a column: German and Spanish exports' too."""
 
 MAX_EPOCH_SECONDS = 1e11
 """Largest plausible time in seconds: 1e11 s after 1970-01-01 is the year 5138. Larger
@@ -37,6 +41,10 @@ _EPOCH_UNITS = ((1e17, 1e-9, "nanoseconds", "ns"), (1e14, 1e-6, "microseconds", 
 _YEAR_S = 365.2425 * 86400.0
 
 _SLASH_DATE = re.compile(r"^(\d{4})([/-])(\d{1,2})\2(\d{1,2})(?=$|[ T])")  # 2024/5/1, 2024-5-1
+_DOTTED = re.compile(r"^(\d{1,2})\.(\d{1,2})\.(\d{4})(?=$|[ T])")  # 01.05.2024: day.month.year
+_AM_PM = re.compile(r"(.*?[T ])?(\d{1,2})(:\d{2}(?::\d{2}(?:[.,]\d*)?)?)\s*([ap])\.?m\.?(\s.*)?",
+                    re.IGNORECASE)  # "2024-05-01 01:30:00 PM": a 12-hour clock
+_NAMED_REASONS = ("leap second", "year last", "day.month", "AM/PM")  # told in messages
 _YEAR_LAST = re.compile(r"^\d{1,2}([/.-])\d{1,2}\1\d{2,4}(?=$|[ T])")  # 05/01/2024: ambiguous
 _MIDNIGHT = re.compile(r"(?<=[T ])24:00(:00([.,]0*)?)?(?=$|[^\d:.,])")  # ISO's end of a day
 _SPACED_OFFSET = re.compile(r"(?<=\d)\s+([+-]\d{2}(:?\d{2})?)$")  # "12:00:00.000 +0000"
@@ -63,7 +71,10 @@ def parse_datetime(cell):
     day of the year of survey logs) and ISO's ``24:00:00``, the end of a day (the next
     day's ``00:00:00``). ValueError for anything else; its text says so for a time of day
     without a date (``12:00:00``, a log that keeps the date in another column) and for a
-    date with the year last (``05/01/2024``: day/month or month/day, not guessed).
+    date with the year last (``05/01/2024``: day/month or month/day, not guessed); a
+    date with dots and a four-digit year is day.month.year (``01.05.2024``, as German,
+    Russian and other European software writes it); a 12-hour time with ``AM``/``PM``
+    after a year-first date (``2024-05-01 01:30:00 PM``) is read as 13:30.
     Fractions of a second finer than a microsecond are cut to microseconds.
 
     A leap second, ``2016-12-31T23:59:60Z`` (a UTC log across one, e.g. a GNSS receiver's),
@@ -74,6 +85,19 @@ def parse_datetime(cell):
     """
     text = _SLASH_DATE.sub(lambda m: f"{m[1]}-{int(m[3]):02d}-{int(m[4]):02d}", cell.strip())
     text = _ORDINAL.sub(_ordinal, text, count=1) if _ORDINAL.match(text) else text
+    dotted = _DOTTED.match(text)
+    if dotted:  # 01.05.2024, as German, Russian, ... software writes: was "ambiguous"
+        day, month = int(dotted[1]), int(dotted[2])
+        if not 1 <= month <= 12:
+            raise ValueError(f"a date with dots is day.month.year, and {month} is no month")
+        text = f"{dotted[3]}-{month:02d}-{day:02d}" + text[dotted.end():]
+    am_pm = _AM_PM.fullmatch(text)
+    if am_pm and not _YEAR_LAST.match(text):  # was "neither a number nor ... ISO-8601"
+        hour = int(am_pm[2])
+        if not 1 <= hour <= 12:
+            raise ValueError(f"a 12-hour time (AM/PM) has hours 1 to 12, not {hour}")
+        hour = hour % 12 + 12 * (am_pm[4].lower() == "p")
+        text = f"{am_pm[1] or ''}{hour:02d}{am_pm[3]}{am_pm[5] or ''}"
     if _YEAR_LAST.match(text):
         raise ValueError("a date with the year last, day/month or month/day: ambiguous; "
                          "write it year first, e.g. 2024-05-01")
@@ -129,7 +153,7 @@ def iso_seconds(cells, lines, label, header, dates=None):
         except ValueError as err:  # a clock time: "12:00:00 ... a time of day without a date"
             clock = (f" ({err}: join the date to it, or give it a column named "
                      f"{DATE_COLUMN!r})") if "time of day" in str(err) else (
-                f" ({err})" if "leap second" in str(err) or "year last" in str(err) else "")
+                f" ({err})" if any(w in str(err) for w in _NAMED_REASONS) else "")
             raise ValueError(
                 f"{label}, line {line}, column {header!r}: {shown!r} is neither a number "
                 f"(seconds) nor an ISO-8601 date-time (e.g. 2024-05-01T12:00:00Z){clock}; "

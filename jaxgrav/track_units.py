@@ -1,7 +1,8 @@
 """Units declared in the headers of track and log files (``t (min)``, ``gravity [m/s^2]``).
 
 :func:`header_scale` reads the unit a header declares, ``name (unit)``, ``name [unit]``
-or ``name_unit`` (``lat_deg``, ``time_s``: :func:`unit_of`), as the factor to the
+or ``name_unit`` (``lat_deg``, ``time_s``; ``latitudeE7``, ``lon_e7``: degrees × 1e7, as
+Google's location history and MAVLink write them: :func:`unit_of`), as the factor to the
 library's unit of that column: seconds, degrees, metres, m/s, degrees of arc for
 ``drift_radius``, mGal and nT (the map units of :func:`jaxgrav.grid_files.map_units`).
 CF-style ``UNIT since DATE`` reads as ``UNIT`` (``t (hours since 2024-05-01)``: 3600). A
@@ -21,13 +22,15 @@ __all__ = ["ALIASES", "UNIT_SUFFIX", "declared_unit", "header_scale", "unit_of"]
 UNIT_SUFFIX = re.compile(r"\s*[(\[][^()\[\]]*[)\]]\s*$")
 """A ``(unit)`` or ``[unit]`` at the end of a header."""
 
-ALIASES = {
-    "t": ("t", "time", "timestamp", "datetime"),
-    "lat": ("lat", "latitude"),
-    "lon": ("lon", "longitude", "long", "lng"),
-    "h": ("h", "height", "altitude", "alt"),
+ALIASES = {  # German and Spanish exports' names last ("Breite;Länge" needed --columns)
+    "t": ("t", "time", "timestamp", "datetime", "utc", "utc_time", "zeit", "zeitstempel"),
+    "lat": ("lat", "latitude", "breite", "breitengrad", "latitud"),
+    "lon": ("lon", "longitude", "long", "lng", "länge", "laenge", "längengrad",
+            "laengengrad", "longitud"),
+    "h": ("h", "height", "altitude", "alt", "höhe", "hoehe"),
     # a survey's anomaly column under its own name was "needs a 'gravity' column"
-    "gravity": ("gravity", "gravity_anomaly", "free_air_anomaly", "free_air", "faa", "grav"),
+    "gravity": ("gravity", "gravity_anomaly", "free_air_anomaly", "free_air", "faa", "grav",
+                "schwere", "schwereanomalie", "freiluftanomalie"),
     "magnetic": ("magnetic", "magnetic_anomaly", "mag_anomaly", "total_field_anomaly"),
     # "ve, vn" logs ran as if without velocities: raw readings taken as Eötvös-corrected
     "v_east": ("v_east", "ve", "v_e", "vel_east", "velocity_east", "east_velocity", "veast"),
@@ -38,7 +41,8 @@ ALIASES = {
 
 _SNAKE_BY_COLUMN = {  # a column -> the units an "_unit" ending of any of its names may give it
     "lat": ("deg", "degs", "degrees", "rad"), "lon": ("deg", "degs", "degrees", "rad"),
-    "t": ("s", "sec", "secs", "ms", "us", "ns", "min", "h", "hr", "hrs"),
+    "t": ("s", "sec", "secs", "ms", "us", "ns", "min", "h", "hr", "hrs",
+          "utc", "gmt"),  # "Time_UTC": a note, as "time (UTC)"
     "h": ("m", "km", "ft", "cm", "mm"),
     "gravity": ("mgal", "ugal", "µgal", "gal", "gu"), "magnetic": ("nt", "ut", "µt"),
     "v_east": ("kn", "kt", "kts", "kmh", "kph", "mph", "fps"),
@@ -49,6 +53,7 @@ _SNAKE_UNITS = {  # by header name (lower case): every alias ("faa_mgal" was no 
     for column, names in (*ALIASES.items(), ("h", ("alt", "altitude", "elev", "elevation")),
                           ("drift_radius", ("drift_radius",)))
     for name in names}
+_E7 = re.compile(r"(.+?)_?e7", re.IGNORECASE)  # "latitudeE7", "lat_e7": degrees x 1e7
 _SINCE = re.compile(r"(.+?)\s+since\s+.*", re.IGNORECASE)  # CF "hours since 2024-05-01"
 _DEG = dict.fromkeys(("deg", "degs", "degree", "degrees", "°", "decimal degrees", "dd"), 1.0)
 _ARC_M = 180.0 / (math.pi * WGS84_MEAN_RADIUS)  # degrees of arc per metre
@@ -62,7 +67,8 @@ _HEADER_UNITS = {  # column -> unit (lower case, spaces kept) -> factor to the l
           **dict.fromkeys(("d", "day", "days"), 86400.0),
           **dict.fromkeys(("week", "weeks", "wk"), 604800.0)},
     "lat": {**_DEG, **dict.fromkeys(("rad", "radian", "radians"), 180.0 / np.pi),
-            "arcmin": 1.0 / 60.0, "arcsec": 1.0 / 3600.0},
+            "arcmin": 1.0 / 60.0, "arcsec": 1.0 / 3600.0,
+            **dict.fromkeys(("dege7", "deg e7", "deg*1e7", "deg x 1e7"), 1e-7)},
     "h": {**dict.fromkeys(("m", "metre", "metres", "meter", "meters"), 1.0),
           "km": 1e3, "cm": 1e-2, "mm": 1e-3, **dict.fromkeys(("ft", "feet"), 0.3048),
           **dict.fromkeys(("in", "inch", "inches"), 0.0254),
@@ -96,7 +102,8 @@ def unit_of(header):
     """A header's name and the unit it declares: ``lat (deg)`` or ``lat [deg]`` → ``("lat",
     "deg")``; ``lat_deg``, ``time_s``, ``height_m``, ``gravity_mgal`` → the same, for the
     names and units of :data:`_SNAKE_UNITS` (``lat_s`` stays a name: ``s`` is no unit of
-    latitudes); ``(header, None)`` when it declares none.
+    latitudes); ``latitudeE7``, ``lat_e7`` → ``("latitude", "1e-7 deg")``; ``(header,
+    None)`` when it declares none.
     """
     text = str(header).strip()
     found = UNIT_SUFFIX.search(text)
@@ -105,6 +112,9 @@ def unit_of(header):
     base, sep, unit = text.rpartition("_")
     if sep and unit.lower() in _SNAKE_UNITS.get(base.strip().lower(), ()):
         return base.strip(), unit  # "lat_deg" was no latitude: "lacks columns lat and lon"
+    e7 = _E7.fullmatch(text)  # Google's "latitudeE7", MAVLink's degE7: was no column
+    if e7 and e7.group(1).lower() in (*ALIASES["lat"], *ALIASES["lon"]):
+        return e7.group(1), "1e-7 deg"
     return text, None
 
 

@@ -39,9 +39,9 @@ from jaxgrav._io import atomic_output
 from jaxgrav.grid_axes import contiguous_longitudes
 from jaxgrav.grid_values import eastward_longitudes
 from jaxgrav.track_columns import ALIASES, listed, match_columns, parse_columns
-from jaxgrav.track_degrees import join_position_parts, nmea_hint
+from jaxgrav.track_degrees import e7_hint, join_position_parts, nmea_hint
 from jaxgrav.track_files import column_key, comma_hint, parse_degrees, parse_numbers, read_table
-from jaxgrav.track_times import DATE_COLUMN, check_time_steps, iso_seconds
+from jaxgrav.track_times import DATE_COLUMNS, check_time_steps, iso_seconds
 from jaxgrav.track_units import header_scale
 
 __all__ = ["ALIASES", "KNOWN_COLUMNS", "TAB_SUFFIXES", "TrackTable", "csv_line", "parse_columns",
@@ -183,7 +183,7 @@ def read_track_csv(path, required=(), optional=(), *, allow_nan=(), columns=None
                              "is not a number, as the column's other times are (seconds); "
                              "give every time as a number, or every one as a date-time")
         if bad is not None and name == "t":
-            day = [k for k, h in enumerate(table.header) if column_key(h) == DATE_COLUMN]
+            day = [k for k, h in enumerate(table.header) if column_key(h) in DATE_COLUMNS]
             dates = [r[day[0]] for r in table.rows] if day and day[0] != j else None
             values, track.time_origin = iso_seconds(cells, lines, label, header, dates)
             text_name = header if header != "t" else "time"
@@ -286,7 +286,8 @@ def _check_columns(track, required, allow_nan, label):
             raise ValueError(f"{label}, line {lines[i]}, column "
                              f"{track.renamed.get('lat', 'lat')!r}: latitude "
                              f"{track['lat'][i]:g} is outside [-90, 90] degrees"
-                             f"{swapped or nmea_hint(track['lat'], i)}")
+                             f"{swapped or nmea_hint(track['lat'], i)}"
+                             f"{e7_hint(track['lat'], i, 'lat')}")
     if "lon" in track:
         lon = track["lon"].copy()
         ok = np.isfinite(lon)
@@ -296,7 +297,8 @@ def _check_columns(track, required, allow_nan, label):
             i = int(bad[0])
             raise ValueError(f"{label}, line {lines[i]}, column "
                              f"{track.renamed.get('lon', 'lon')!r}: longitude {lon[i]:g} is "
-                             f"outside [-180, 360] degrees{nmea_hint(lon, i)}")
+                             f"outside [-180, 360] degrees{nmea_hint(lon, i)}"
+                             f"{e7_hint(track['lon'], i, 'lon')}")
         lon[ok] = contiguous_longitudes(lon[ok])
         track["lon"] = lon
 

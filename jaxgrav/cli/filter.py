@@ -61,6 +61,7 @@ from jaxgrav.cli.filter_checks import (
     MIN_PARTICLES,
     check_on_map,
     check_particles,
+    check_pmf_span,
     check_sigma,
     check_sigma_pos,
     check_sigma_vel,
@@ -84,7 +85,6 @@ from jaxgrav.cli.inputs import (
     track_map,
     whole_number,
 )
-from jaxgrav.cli.match_search import unresolved
 from jaxgrav.cli.sanity import (
     check_positions,
     check_readings,
@@ -237,21 +237,6 @@ def _field(args, track, sigma_given):
     return grid, f"map {args.map}", 0.0, sigma_var
 
 
-def _check_pmf_span(grid, sigma_pos, n_readings, sigma_gravity):
-    """ValueError for a pmf grid (±``PMF_SPAN_SIGMA`` ``--sigma-pos``, the region it
-    searches, fixed) across which the map cannot tell positions apart (``--sigma-pos
-    1e-9`` wrote a 1-sigma of 0 m, every row at the grid's edge), by the rule of
-    ``match --drift-radius`` (:func:`~jaxgrav.cli.match_search.unresolved`)."""
-    span = 2.0 * PMF_SPAN_SIGMA * sigma_pos
-    text, least_m = unresolved(grid, span, n_readings, sigma_gravity, "--sigma-gravity")
-    if text is not None:
-        raise ValueError(f"--sigma-pos {sigma_pos:g} m makes pmf's grid {span:.3g} m across "
-                         f"(±{PMF_SPAN_SIGMA:g} sigma, the region it searches), across which "
-                         f"{text}: no cell could be told from another; expected a --sigma-pos "
-                         f"of at least {least_m / (2.0 * PMF_SPAN_SIGMA):.2g} m (the other "
-                         "methods grow their 1-sigma from any start)")
-
-
 def _eotvos(args, track, g):
     """The readings Eötvös-corrected by the one rule (module notes), the filter's ``∂E/∂v``
     (None: not carried) and a note for the summary line."""
@@ -345,8 +330,8 @@ def cmd_filter(args):
         raise ValueError("--map-error-var needs --map (a point-mass model has no uncertainty "
                          "grid)")
     field, field_name, offset, sigma_var = _field(args, track, sigma_given=me_sigma > 0)
-    if args.method == "pmf" and args.map is not None:
-        _check_pmf_span(field, args.sigma_pos, int(np.isfinite(g).sum()), args.sigma_gravity)
+    if args.method == "pmf":  # a point-mass model ran "final 1-sigma 0 m" with 1e-9
+        check_pmf_span(field, args.sigma_pos, lat, lon, g, args.sigma_gravity)
     if sigma_var is not None:
         me_sigma = sigma_var
     fogm = (map_error_state(me_sigma, me_length, args.map_error_order) if me_sigma > 0

@@ -1,10 +1,10 @@
 """Checks of ``jaxgrav filter``'s inputs and of what its readings can tell.
 
 The one-line errors of :mod:`jaxgrav.cli.filter` (particle count, standard
-deviations, the track on the map), the map as the filters evaluate it at the INS
-positions, and two warnings that a run cannot give a trustworthy answer: a map too flat
-to tell the position (:func:`information_warning` from :func:`gradient_at_ins`) and
-readings offset from the map by more than the filter's
+deviations, the track on the map, a pmf grid the map cannot resolve), the map as the
+filters evaluate it at the INS positions, and two warnings that a run cannot give a
+trustworthy answer: a map too flat to tell the position (:func:`information_warning` from
+:func:`gradient_at_ins`) and readings offset from the map by more than the filter's
 gravimeter bias allows (:func:`offset_warning`).
 """
 
@@ -15,8 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrav.cli.match_search import unresolved
 from jaxgrav.constants import DEG
 from jaxgrav.filters import map_anomaly
+from jaxgrav.filters.api import PMF_SPAN_SIGMA
 from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.track_units import unit_of
 from jaxgrav.tracks import csv_line
@@ -31,6 +33,7 @@ __all__ = [
     "OFFSET_SIGMAS",
     "check_on_map",
     "check_particles",
+    "check_pmf_span",
     "check_positive",
     "check_sigma",
     "check_sigma_pos",
@@ -220,6 +223,29 @@ def map_at_ins(field, lat, lon):
     (:func:`~jaxgrav.filters.map_anomaly`; mGal, NaN off a map or in a cell with a missing
     node), shape of ``lat``."""
     return np.asarray(_map_anomaly(field, jnp.asarray(lat), jnp.asarray(lon)))
+
+
+def check_pmf_span(field, sigma_pos, lat, lon, g, sigma_gravity):
+    """ValueError for a pmf grid (±``PMF_SPAN_SIGMA`` ``--sigma-pos``, the region it
+    searches, fixed) across which the map cannot tell positions apart (``--sigma-pos
+    1e-9`` wrote a 1-sigma of 0 m, every row at the grid's edge), by the rule of
+    ``match --drift-radius`` (:func:`~jaxgrav.cli.match_search.unresolved`): a map's
+    steepest slope, a point-mass model's steepest gradient at the readings' INS
+    positions (``lat``, ``lon``, ``g``: the log's columns, degrees and mGal)."""
+    span = 2.0 * PMF_SPAN_SIGMA * sigma_pos
+    read = np.isfinite(g)
+    slope = None
+    if not hasattr(field, "values"):  # point masses: no nodes to difference
+        north, east = gradient_at_ins(field, lat[read], lon[read])
+        slope = float(np.nanmax(np.hypot(north, east), initial=0.0))
+    text, least_m = unresolved(field if slope is None else None, span, int(read.sum()),
+                               sigma_gravity, "--sigma-gravity", slope=slope)
+    if text is not None:
+        raise ValueError(f"--sigma-pos {sigma_pos:g} m makes pmf's grid {span:.3g} m across "
+                         f"(±{PMF_SPAN_SIGMA:g} sigma, the region it searches), across which "
+                         f"{text}: no cell could be told from another; expected a --sigma-pos "
+                         f"of at least {least_m / (2.0 * PMF_SPAN_SIGMA):.2g} m (the other "
+                         "methods grow their 1-sigma from any start)")
 
 
 def gradient_at_ins(field, lat, lon, step_m=500.0):

@@ -54,8 +54,9 @@ from jaxgrav.fields import egm2008
 from jaxgrav.grid_files import UndeclaredFillWarning
 from jaxgrav.scenarios.paper_c import paper_c_trajectory
 
-__all__ = ["NEGATIVE_LIST", "STDIN_NAME", "build_parser", "check_map_names",
-           "check_special_outputs", "joined_negative_lists", "main", "stdin_named"]
+__all__ = ["NEGATIVE_LIST", "PATH_OPTIONS", "STDIN_NAME", "build_parser", "check_map_names",
+           "check_special_outputs", "expand_home", "joined_negative_lists", "main",
+           "stdin_named"]
 
 
 def _enable_x64():
@@ -159,6 +160,20 @@ def joined_negative_lists(argv):
     return out
 
 
+PATH_OPTIONS = ("out", "truth", "track", "map", "truth_map", "grid", "dir", "point_masses")
+"""The arguments (``argparse`` names) that are file or folder paths."""
+
+
+def expand_home(args):
+    """Path options written ``--out=~/r.json``: ``~`` made the home folder, as the shell
+    does only at the start of a word (``--out ~/r.json``); it wrote into a new folder
+    named ``~`` under the working one, exit 0."""
+    for name in PATH_OPTIONS:
+        value = getattr(args, name, None)
+        if isinstance(value, str) and value.startswith("~"):
+            setattr(args, name, os.path.expanduser(value))
+
+
 def check_special_outputs(args):
     """ValueError when ``--out`` or ``--truth`` names an existing device, pipe or socket, or
     a path option (``--out``, ``--track``, ``--map``, ...) is an empty string.
@@ -170,7 +185,7 @@ def check_special_outputs(args):
     """
     expected = {"map": "a NetCDF file or a shipped map's name", "point_masses": "paper-d "
                 "or a MODEL.json file", "truth_map": "a NetCDF file or a shipped map's name"}
-    for name in ("out", "truth", "track", "map", "truth_map", "grid", "dir", "point_masses"):
+    for name in PATH_OPTIONS:
         # --out '' was "--out '' is a folder" or "PosixPath('.') has an empty name", and the
         # demo wrote into the working folder; --map '' read as "map '.' is a folder"
         if getattr(args, name, None) == "":
@@ -277,6 +292,7 @@ def main(argv=None):
         if getattr(args, "track", None) == "-":
             _stdin_track(args)
             sys.stderr = _StdinNamed(stderr)
+        expand_home(args)
         check_special_outputs(args)
         check_map_names(args)
         args.func(args)

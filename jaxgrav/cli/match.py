@@ -34,6 +34,7 @@ from jaxgrav.cli.sanity import check_readings, fit_check, time_gap_warning
 from jaxgrav.cli.simulate import check_map_error_size
 from jaxgrav.fields.map_error import map_error
 from jaxgrav.geodesy import eotvos_jit
+from jaxgrav.grid_values import map_units
 from jaxgrav.match import (
     ENTROPY_HALF_SIZE,
     IMPLAUSIBLE_FIT,
@@ -44,6 +45,7 @@ from jaxgrav.match import (
 )
 from jaxgrav.match.api import MAP_ERROR_METHODS, MASKED, missing_reading
 from jaxgrav.sim import DEG_ARC_M
+from jaxgrav.track_units import unit_of
 
 __all__ = ["CONTOUR_METHODS", "ENTROPY_HALF_SIZE", "add_parsers", "check_search"]
 
@@ -144,11 +146,9 @@ def _cmd_match(args):
                          f"match needs at least {MIN_FIXES} fixes")
     check_fixes_memory(args.method, n_rows, f"--track {str(args.track)!r}")
     fields = [f for f in FIELD_UNITS if f in track]
-    if not fields:
-        raise ValueError(f"track file {str(args.track)!r} needs a 'gravity' (mGal) or "
-                         f"'magnetic' (nT) column; it has {', '.join(track.order)} (name "
-                         "the readings' column with --columns gravity=COLUMN)")
     radius_deg = _drift_radius(args, track)
+    if not fields:
+        raise ValueError(_no_readings(args, track, radius_deg))
     grid, sigma_var = track_map(args, track, radius_deg * DEG_ARC_M,
                                 sigma_given=args.map_error > 0, field=None)
     # a survey file with both columns is matched on the one the map's units name (a map
@@ -250,7 +250,8 @@ def _cmd_match(args):
     cov = np.asarray(result.covariance_m2, float)
     r.update(accepted=bool(result.accepted), covariance_m2=cov.tolist(),
              sigma_north_m=float(np.sqrt(cov[0, 0])), sigma_east_m=float(np.sqrt(cov[1, 1])),
-             map_error_mgal=args.map_error, map_error_length_m=args.map_error_length,
+             **{f"map_error_{_unit_key(unit)}": args.map_error},  # nT was map_error_mgal
+             map_error_length_m=args.map_error_length,
              map_error_var=args.map_error_var)
     r.update(method=args.method, missing=args.missing, missing_read_as=read_as, **gap,
              field=field, map=str(args.map),
@@ -267,6 +268,30 @@ def _cmd_match(args):
           f"{float(result.score):.3g}{score_unit}")
     for msg in r["status_messages"]:
         print(f"warning: {msg}", file=sys.stderr)
+
+
+def _no_readings(args, track, radius_deg):
+    """The message for a track without a gravity or magnetic column: the ``--columns`` to
+    give names the column whose header declares a field's unit (``RMI (nT)``), else the
+    field of the map's units (it said ``--columns gravity=COLUMN`` on an nT map)."""
+    declared = [(name, kind) for name in track.order if unit_of(name)[1]
+                for kind in [map_units(np.ones(1), unit_of(name)[1])[1]]
+                if kind in FIELD_UNITS.values()]
+    field = {u: f for f, u in FIELD_UNITS.items()}
+    if declared:
+        name, kind = declared[0]
+        hint = (f"column {name!r} declares {kind}: if it holds the readings, give "
+                f"--columns {field[kind]}='{name}'")
+    else:
+        try:
+            units = track_map(args, track, radius_deg * DEG_ARC_M, field=None)[0].units
+        except ValueError:
+            units = None
+        which = field.get(units, "gravity")
+        hint = ((f"--map {str(args.map)!r} is in {units}: " if which != "gravity" else "")
+                + f"name the readings' column with --columns {which}=COLUMN")
+    return (f"track file {str(args.track)!r} needs a 'gravity' (mGal) or 'magnetic' (nT) "
+            f"column; it has {', '.join(track.order)} ({hint})")
 
 
 def _eotvos_twice(bias, correction, noise):
@@ -312,7 +337,12 @@ def _units(method, unit):
                       if method == "entropy" else f"{unit}^2 (weighted mean squared residual)"),
             "bias": unit, "covariance_m2": "m^2 (north, east)", "sigma_north_m": "m",
             "sigma_east_m": "m", "chi2_per_dof": "1", "drift_radius_deg": "degrees of arc",
-            "map_error_mgal": unit, "map_error_length_m": "m"}
+            f"map_error_{_unit_key(unit)}": unit, "map_error_length_m": "m"}
+
+
+def _unit_key(unit):
+    """A unit as a key suffix: ``mgal`` or ``nt`` (``map_error_nt`` on a magnetic map)."""
+    return unit.lower()
 
 
 def _check_match_args(args):

@@ -37,7 +37,7 @@ def steepest_slope(grid):
 _ROWS = 256
 
 
-def unresolved(grid, span_m, n_fixes, noise, noise_option="--noise"):
+def unresolved(grid, span_m, n_fixes, noise, noise_option="--noise", *, slope=None):
     """Whether ``n_fixes`` readings of ``noise`` can tell the map's values ``span_m`` apart.
 
     They can when the map's steepest slope (:func:`steepest_slope`) changes it across
@@ -47,7 +47,9 @@ def unresolved(grid, span_m, n_fixes, noise, noise_option="--noise"):
     short span still runs, and says that the readings tell little).
 
     ``noise_option`` is the option that set ``noise``, named in the text (``filter``'s
-    ``--sigma-gravity``).
+    ``--sigma-gravity``). ``slope`` (map units per m) replaces the grid's steepest one
+    for a field without nodes (a point-mass model: its steepest gradient along the
+    track); ``grid`` then only gives the units (``None``: mGal).
 
     Returns
     -------
@@ -57,13 +59,16 @@ def unresolved(grid, span_m, n_fixes, noise, noise_option="--noise"):
     least_m : float
         The shortest span they can tell (m; 0 for a flat map or noiseless readings).
     """
-    slope = steepest_slope(grid)
+    given = slope
+    slope = steepest_slope(grid) if given is None else float(given)
     tell = 0.1 * noise / math.sqrt(n_fixes)
     least_m = tell / slope if slope > 0 else 0.0
     if span_m >= least_m:
         return None, least_m
-    unit = grid.units or "map units"
-    return (f"the map changes by at most {span_m * slope:.3g} {unit} (its steepest slope is "
+    unit = getattr(grid, "units", None) or ("map units" if grid is not None else "mGal")
+    what = "the map" if given is None else "the field"
+    steepest = "steepest slope" if given is None else "steepest gradient along the track"
+    return (f"{what} changes by at most {span_m * slope:.3g} {unit} (its {steepest} is "
             f"{slope:.3g} {unit}/m), below a tenth of what {n_fixes} readings of {noise_option} "
             f"{noise:g} {unit} can tell ({tell:.3g} {unit})"), least_m
 

@@ -159,6 +159,14 @@ def _plot_errors(results, summary, title, path, force, label="matched",
     save_figure(fig, path, force=force)
 
 
+def _in_map_units(key, grid):
+    """A setting's name with its unit suffix in the map's units: ``noise_mgal`` is
+    ``noise_nt`` on a magnetic (nT) map (the value was nT, the name said mGal)."""
+    if grid is not None and grid.units == "nT" and key.endswith("_mgal"):
+        return key[:-len("_mgal")] + "_nt"
+    return key
+
+
 def _split_cpu(n):
     """Ask for ``n`` CPU devices if JAX has not started its backend yet (else no-op)."""
     if "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", ""):
@@ -310,7 +318,7 @@ def cmd_montecarlo(args):
         jax_version=jax.__version__, jaxgrav_version=__version__,
         command=_command(args),
         status_bits=json.dumps({str(k): v for k, v in spec.status_bits.items()}),
-        **{f"setting_{k}": v for k, v in spec.settings.items()},
+        **{f"setting_{_in_map_units(k, grid)}": v for k, v in spec.settings.items()},
         **{f"summary_{k}": v for k, v in summary.items() if not isinstance(v, dict)},
         **{f"summary_{k}": v for k, v in fix_summary(results).items()},
         **({"summary_worse_rate": worse_rate(results)} if kind == "matcher" else {}),

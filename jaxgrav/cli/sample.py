@@ -65,8 +65,9 @@ def cmd_sample(args):
     cols[args.column] = values
     write_track_csv(args.out, cols, force=args.force)
     n = int(placed.sum())
+    units = f"in {grid.units}" if grid.units else "no units declared"  # mGal converted?
     print(f"wrote {args.out}: {n} sample{'s' * (n != 1)} of "
-          f"{grid.name or 'map'} ({args.method})")
+          f"{grid.name or 'map'} ({units}, {args.method})")
     if not placed.all():
         print(f"warning: {int((~placed).sum())} of {placed.size} rows have no position (first "
               f"on line {track.line(int(np.flatnonzero(~placed)[0]))}); their {args.column!r} "
