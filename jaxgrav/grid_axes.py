@@ -5,9 +5,9 @@ static ``lat0``, ``dlat``, ``lon0``, ``dlon`` its node coordinates, extent, spac
 metres, the fractional node index of points, the inside mask, the count of missing
 (NaN) nodes and the part of the map a track needs (:meth:`~GeographicAxes.finite_region`,
 seamless across 0°/360° on global grids); it is the base of :class:`jaxgrav.grid.Grid`
-and :class:`jaxgrav.dov.LayeredGrid`. :func:`regular_axis` validates a coordinate axis and
-:func:`contiguous_longitudes` removes 360° jumps from longitudes (both package-internal,
-shared by the map and track readers).
+and :class:`jaxgrav.dov.LayeredGrid`. :func:`regular_axis` validates a coordinate axis
+(package-internal, shared by the map readers; longitudes without 360° jumps:
+:func:`jaxgrav.grid_values.contiguous_longitudes`).
 """
 
 import dataclasses
@@ -22,7 +22,7 @@ from jaxgrav import interp
 from jaxgrav.constants import DEG, WGS84_A, WGS84_E2
 from jaxgrav.geodesy import meridian_radius, prime_vertical_radius
 
-__all__ = ["GeographicAxes", "contiguous_longitudes", "regular_axis"]
+__all__ = ["GeographicAxes", "regular_axis"]
 
 _EQUATOR_M_PER_DEG = 6335439.327 * DEG
 """Metres per degree of latitude at the equator (the smallest on WGS84): margins in
@@ -42,7 +42,8 @@ def regular_axis(coord, name, source=None, resolution=0.0):
     source : str, optional
         Where the axis comes from, leading the messages (e.g. ``"map 'gebco.nc'"``).
     resolution : float
-        Precision of the stored nodes (a packed ``scale_factor``): steps may be off by it.
+        Precision of the stored nodes (a packed ``scale_factor``): steps may be off by it
+        (also by the last decimal of nodes written with 3 to 8 decimals, :func:`_rounding`).
 
     Returns
     -------
@@ -88,6 +89,7 @@ def regular_axis(coord, name, source=None, resolution=0.0):
         raise ValueError(f"{what}; values {order} up to {name}[{i}] = {coord[i]:.10g}, then "
                          f"{name}[{i + 1}] = {coord[i + 1]:.10g} goes back (unsorted)")
     mean = (coord[-1] - coord[0]) / (coord.size - 1)
+    resolution = max(resolution, _rounding(coord, mean))
     typical = float(np.median(step))  # the step most nodes have: the odd one is named
     eps = np.finfo(raw.dtype).eps if raw.dtype.kind == "f" else np.finfo(float).eps
     tol = max(1e-6 * abs(mean) + 1e-9, 16 * eps * float(np.max(np.abs(coord))), 1.01 * resolution)
@@ -99,45 +101,20 @@ def regular_axis(coord, name, source=None, resolution=0.0):
                          f"regular {typical:.6g} ({max(irregular.size, 1)} irregular step(s))")
     flipped = bool(sign < 0)
     first = coord[-1] if flipped else coord[0]
+    if resolution > 0:  # rounded or packed nodes: the regular axis through their middle
+        first = np.mean(coord) - abs(mean) * (coord.size - 1) / 2
     return float(first), float(abs(mean)), flipped
 
 
-def contiguous_longitudes(lon):
-    """Longitudes without 360° jumps: each step taken the short way round (degrees).
-
-    The result equals ``lon`` plus a multiple of 360° at each point, shifted as a whole
-    by ∓360° when it would leave [−180, 360]. A regional map across 0° stored in the
-    0–360 convention (350 … 358, 0 … 10) becomes −10 … 10; a rolled global grid (180 …
-    359.5, 0 … 179.5) becomes −180 … 179.5; a track crossing 0° given in 0–360 (359.5,
-    0.5) becomes −0.5, 0.5; one crossing 180° given in ±180 (179.5, −179.5) becomes
-    179.5, 180.5. Points with no jump are returned unchanged.
-
-    Parameters
-    ----------
-    lon : array_like, shape ``(n,)``
-        Longitudes (degrees), finite, in either convention.
-
-    Returns
-    -------
-    numpy.ndarray, shape ``(n,)``
-        Longitudes in the input's float type (float64 for integers); ``lon`` itself when
-        it has no jump.
-    """
-    lon = np.asarray(lon).reshape(-1)
-    if lon.dtype.kind != "f":
-        lon = lon.astype(float)
-    if lon.size < 2:
-        return lon
-    step = np.diff(lon)
-    turns = np.concatenate([[0], np.cumsum((step < -180.0).astype(int) - (step > 180.0))])
-    if not turns.any():
-        return lon
-    out = lon + (360.0 * turns).astype(lon.dtype)
-    if out.max() > 360.0 + 1e-9:
-        out = out - 360.0
-    elif out.min() < -180.0 - 1e-9:
-        out = out + 360.0
-    return out
+def _rounding(coord, mean):
+    """``10**-d`` for nodes all written with ``d`` decimals (3 to 8) on an axis whose step
+    has more (2.5' as 29.416667, 29.458333: the rounding was refused as irregular); else
+    0. A step of ``d`` decimals (0.001) leaves no rounding to forgive."""
+    for d in range(3, 9):
+        if np.all(np.abs(coord - np.round(coord, d)) <= 4 * np.finfo(float).eps * np.abs(coord)):
+            unit = 10.0 ** -d
+            return unit if abs(mean - round(mean, d)) > unit / (coord.size - 1) else 0.0
+    return 0.0
 
 
 class GeographicAxes:

@@ -27,11 +27,12 @@ import numpy as np
 import xarray as xr
 
 from jaxgrav._io import atomic_output
-from jaxgrav.grid_axes import contiguous_longitudes, regular_axis
+from jaxgrav.grid_axes import regular_axis
 from jaxgrav.grid_values import (
     FILL_VALUES,
     UndeclaredFillWarning,
     axis_degrees,
+    contiguous_longitudes,
     eastward_longitudes,
     map_units,
     outside_valid_range,

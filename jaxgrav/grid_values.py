@@ -7,7 +7,8 @@ outside a declared CF ``valid_range`` / ``valid_min`` / ``valid_max`` as missing
 says they are; :func:`map_units` converts a gravity or magnetic map declared in other
 units (``m s-2``, ``uGal``, ``uT`` …) to mGal or nT; :func:`axis_degrees` reads a
 coordinate's units (CF ``degrees_west``/``degrees_south`` count the other way),
-:func:`eastward_longitudes` the −360…0 convention, :func:`rolled_columns` a global grid
+:func:`eastward_longitudes` the −360…0 convention, :func:`contiguous_longitudes`
+removes 360° jumps (maps and tracks), :func:`rolled_columns` a global grid
 stored from another meridian and :func:`unpacked_axis` coordinates packed as integers.
 Used by
 :func:`jaxgrav.grid_files.read_netcdf` (and the last by the track reader too).
@@ -24,6 +25,7 @@ __all__ = [
     "FILL_VALUES",
     "UndeclaredFillWarning",
     "axis_degrees",
+    "contiguous_longitudes",
     "eastward_longitudes",
     "map_units",
     "outside_valid_range",
@@ -304,3 +306,41 @@ def unpacked_axis(v, name, label):
     quantum = abs(float(np.ravel(v.encoding["scale_factor"])[0]))
     regular_axis(values, str(name), label, resolution=quantum)
     return np.linspace(float(values[0]), float(values[-1]), values.size)
+
+
+def contiguous_longitudes(lon):
+    """Longitudes without 360° jumps: each step taken the short way round (degrees).
+
+    The result equals ``lon`` plus a multiple of 360° at each point, shifted as a whole
+    by ∓360° when it would leave [−180, 360]. A regional map across 0° stored in the
+    0–360 convention (350 … 358, 0 … 10) becomes −10 … 10; a rolled global grid (180 …
+    359.5, 0 … 179.5) becomes −180 … 179.5; a track crossing 0° given in 0–360 (359.5,
+    0.5) becomes −0.5, 0.5; one crossing 180° given in ±180 (179.5, −179.5) becomes
+    179.5, 180.5. Points with no jump are returned unchanged.
+
+    Parameters
+    ----------
+    lon : array_like, shape ``(n,)``
+        Longitudes (degrees), finite, in either convention.
+
+    Returns
+    -------
+    numpy.ndarray, shape ``(n,)``
+        Longitudes in the input's float type (float64 for integers); ``lon`` itself when
+        it has no jump.
+    """
+    lon = np.asarray(lon).reshape(-1)
+    if lon.dtype.kind != "f":
+        lon = lon.astype(float)
+    if lon.size < 2:
+        return lon
+    step = np.diff(lon)
+    turns = np.concatenate([[0], np.cumsum((step < -180.0).astype(int) - (step > 180.0))])
+    if not turns.any():
+        return lon
+    out = lon + (360.0 * turns).astype(lon.dtype)
+    if out.max() > 360.0 + 1e-9:
+        out = out - 360.0
+    elif out.min() < -180.0 - 1e-9:
+        out = out + 360.0
+    return out

@@ -44,7 +44,7 @@ from typing import NamedTuple
 import numpy as np
 
 from jaxgrav.track_degrees import NA_TOKENS, parse_degrees
-from jaxgrav.track_units import unit_of
+from jaxgrav.track_units import name_key, unit_of
 
 __all__ = ["NA_TOKENS", "Table", "column_key", "comma_hint", "parse_degrees", "parse_numbers",
            "read_table"]
@@ -96,10 +96,9 @@ class Table(NamedTuple):
 
 
 def column_key(name):
-    """How a header matches a column name: trimmed, lower case, a ``(unit)``/``[unit]``
-    suffix or a unit ending (``lat_deg``) dropped (``"Gravity [mGal]"`` → ``"gravity"``;
-    :func:`~jaxgrav.track_units.unit_of`)."""
-    return unit_of(name)[0].lower()
+    """How a header matches a column name: its unit dropped (``"Gravity [mGal]"``,
+    ``lat_deg``: :func:`~jaxgrav.track_units.unit_of`), then as ``name_key`` spells it."""
+    return name_key(unit_of(name)[0])
 
 
 _COMPRESSED = {b"\x1f\x8b": ("gzip", ".gz", gzip.decompress),

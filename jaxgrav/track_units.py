@@ -17,13 +17,14 @@ import numpy as np
 from jaxgrav.constants import WGS84_MEAN_RADIUS
 from jaxgrav.grid_files import map_units
 
-__all__ = ["ALIASES", "UNIT_SUFFIX", "declared_unit", "header_scale", "unit_of"]
+__all__ = ["ALIASES", "UNIT_SUFFIX", "declared_unit", "header_scale", "name_key", "unit_of"]
 
 UNIT_SUFFIX = re.compile(r"\s*[(\[][^()\[\]]*[)\]]\s*$")
 """A ``(unit)`` or ``[unit]`` at the end of a header."""
 
 ALIASES = {  # German and Spanish exports' names last ("Breite;Länge" needed --columns)
-    "t": ("t", "time", "timestamp", "datetime", "utc", "utc_time", "zeit", "zeitstempel"),
+    "t": ("t", "time", "timestamp", "datetime", "date_time", "utc", "utc_time", "zeit",
+          "zeitstempel"),
     "lat": ("lat", "latitude", "breite", "breitengrad", "latitud"),
     "lon": ("lon", "longitude", "long", "lng", "länge", "laenge", "längengrad",
             "laengengrad", "longitud"),
@@ -53,6 +54,7 @@ _SNAKE_UNITS = {  # by header name (lower case): every alias ("faa_mgal" was no 
     for column, names in (*ALIASES.items(), ("h", ("alt", "altitude", "elev", "elevation")),
                           ("drift_radius", ("drift_radius",)))
     for name in names}
+_SPACES = re.compile(r"[\s\-]+")
 _E7 = re.compile(r"(.+?)_?e7", re.IGNORECASE)  # "latitudeE7", "lat_e7": degrees x 1e7
 _SINCE = re.compile(r"(.+?)\s+since\s+.*", re.IGNORECASE)  # CF "hours since 2024-05-01"
 _DEG = dict.fromkeys(("deg", "degs", "degree", "degrees", "°", "decimal degrees", "dd"), 1.0)
@@ -102,20 +104,27 @@ def unit_of(header):
     """A header's name and the unit it declares: ``lat (deg)`` or ``lat [deg]`` → ``("lat",
     "deg")``; ``lat_deg``, ``time_s``, ``height_m``, ``gravity_mgal`` → the same, for the
     names and units of :data:`_SNAKE_UNITS` (``lat_s`` stays a name: ``s`` is no unit of
-    latitudes); ``latitudeE7``, ``lat_e7`` → ``("latitude", "1e-7 deg")``; ``(header,
-    None)`` when it declares none.
+    latitudes), also after a space (``Gravity mGal``); ``latitudeE7``, ``lat_e7`` →
+    ``("latitude", "1e-7 deg")``; ``(header, None)`` when it declares none.
     """
     text = str(header).strip()
     found = UNIT_SUFFIX.search(text)
     if found:
         return text[:found.start()].strip(), found.group(0).strip()[1:-1].strip()
-    base, sep, unit = text.rpartition("_")
-    if sep and unit.lower() in _SNAKE_UNITS.get(base.strip().lower(), ()):
-        return base.strip(), unit  # "lat_deg" was no latitude: "lacks columns lat and lon"
+    for sep in ("_", " "):  # "lat_deg", "Gravity mGal": were no latitude, no gravity
+        base, found, unit = text.rpartition(sep)
+        if found and unit.lower() in _SNAKE_UNITS.get(name_key(base), ()):
+            return base.strip(), unit
     e7 = _E7.fullmatch(text)  # Google's "latitudeE7", MAVLink's degE7: was no column
-    if e7 and e7.group(1).lower() in (*ALIASES["lat"], *ALIASES["lon"]):
+    if e7 and name_key(e7.group(1)) in (*ALIASES["lat"], *ALIASES["lon"]):
         return e7.group(1), "1e-7 deg"
     return text, None
+
+
+def name_key(name):
+    """A header name as the aliases spell it: trimmed, lower case, runs of spaces and
+    hyphens as one ``_`` (``"Free-air Anomaly"`` → ``"free_air_anomaly"``)."""
+    return _SPACES.sub("_", str(name).strip().lower())
 
 
 def header_scale(name, header, label):

@@ -25,7 +25,7 @@ What the reader accepts (parsing of the text: :mod:`jaxgrav.track_files`):
   column; times must increase: a repeated or earlier time is refused with its line;
 - longitudes in the 0–360, the ±180 or the −360…0 convention (as maps:
   :func:`~jaxgrav.grid_values.eastward_longitudes`); a track crossing 0° or 180° is made
-  contiguous (359.5, 0.5 → −0.5, 0.5), as maps are (:func:`~jaxgrav.grid_axes.
+  contiguous (359.5, 0.5 → −0.5, 0.5), as maps are (:func:`~jaxgrav.grid_values.
   contiguous_longitudes`); latitudes must lie within ±90°;
 - extra numeric columns (in the dict) and text columns (in :attr:`TrackTable.text`).
 """
@@ -36,8 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxgrav._io import atomic_output
-from jaxgrav.grid_axes import contiguous_longitudes
-from jaxgrav.grid_values import eastward_longitudes
+from jaxgrav.grid_values import contiguous_longitudes, eastward_longitudes
 from jaxgrav.track_columns import ALIASES, listed, match_columns, parse_columns
 from jaxgrav.track_degrees import e7_hint, join_position_parts, nmea_hint
 from jaxgrav.track_files import column_key, comma_hint, parse_degrees, parse_numbers, read_table

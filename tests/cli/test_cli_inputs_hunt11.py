@@ -285,3 +285,47 @@ def test_a_home_folder_after_an_equals_sign_is_the_home_folder(tmp_path, monkeyp
     _track(home / "t.csv")
     assert main(["sample", "--map", "ryukyu", "--track=~/t.csv", "--out=~/s.csv"]) == 0
     assert (home / "s.csv").is_file() and list(work.iterdir()) == []
+
+
+@pytest.mark.parametrize("decimals", [6, 4])
+def test_map_coordinates_written_with_few_decimals_are_read(tmp_path, decimals):
+    """A 2.5' map whose coordinates were written with 6 decimals (29.416667, 29.458333: an
+    ASCII grid converted with ``%.6f``) was refused: "the step ... is 0.041666, not the
+    regular 0.041667"."""
+    path = _small_map(tmp_path / "f.nc")
+    with xr.open_dataset(path) as ds:
+        m = ds.load()
+    m.assign_coords(lat=np.round(m.lat.values, decimals),
+                    lon=np.round(m.lon.values, decimals)).to_netcdf(tmp_path / "r.nc")
+    track = _track(tmp_path / "t.csv")
+    # half the last decimal, 5.6 m at 4 decimals, where the map changes by 0.015 mGal/m
+    np.testing.assert_allclose(_sampled(tmp_path, tmp_path / "r.nc", track, "r.csv"),
+                               _sampled(tmp_path, path, track, "f.csv"), atol=0.1 ** decimals * 30)
+
+
+def test_an_axis_irregular_beyond_its_decimals_is_still_refused(tmp_path, refused):
+    """A step of 0.1 written with 3 decimals has no rounding to forgive: 0.301 is a node
+    out of place."""
+    lat, lon = np.round(np.arange(29.4, 30.01, 0.1), 3), np.round(np.arange(126.0, 126.61, 0.1), 3)
+    lat[3] += 0.001
+    xr.Dataset({"z": (("lat", "lon"), np.zeros((lat.size, lon.size)), {"units": "mGal"})},
+               coords={"lat": lat, "lon": lon}).to_netcdf(tmp_path / "m.nc")
+    refused(["sample", "--map", tmp_path / "m.nc", "--track", _track(tmp_path / "t.csv"),
+             "--out", tmp_path / "s.csv"],
+            "lat must be strictly monotonic and regularly spaced; the step from lat[2] = 29.6 "
+            "to lat[3] = 29.701 is 0.101, not the regular 0.1")
+
+
+@pytest.mark.parametrize("header", ["Time s,Latitude deg,Longitude deg,Gravity mGal",
+                                    "Date Time,Lat,Lon,Free-air Anomaly",
+                                    "time,lat,lon,Gravity Anomaly (mGal)"])
+def test_names_in_words_and_units_after_a_space_are_columns(tmp_path, header):
+    """``Latitude deg``, ``Gravity mGal`` (a unit after a space), ``Free-air Anomaly`` and
+    ``Date Time`` (words for ``free_air_anomaly``, ``date_time``) were "lacks columns"."""
+    t = "2024-05-01 12:0{}" if header.startswith("Date") else "{}"
+    rows = [f"{t.format(i)},29.{5 + i},126.5,{i - 10}" for i in range(3)]
+    got = read_track_csv(_track(tmp_path / "t.csv", header, rows),
+                         required=("t", "lat", "lon", "gravity"))
+    np.testing.assert_allclose(got["t"], [0.0, 1.0, 2.0] if t == "{}" else [0.0, 60.0, 120.0])
+    np.testing.assert_allclose(got["lat"], [29.5, 29.6, 29.7])
+    np.testing.assert_allclose(got["gravity"], [-10.0, -9.0, -8.0])
