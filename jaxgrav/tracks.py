@@ -254,9 +254,11 @@ def _check_columns(track, required, allow_nan, label):
             i = int(np.flatnonzero(bad)[0])
             what = ("missing, NaN or infinite" if np.isinf(track[name]).any()  # 1e400
                     else "missing or NaN")
+            cut = ("; it is the last line, and only that one: was the file cut short while "
+                   "being written?" if bad.sum() == 1 and i == bad.size - 1 > 0 else "")
             raise ValueError(
                 f"{label}, column {name!r} has {int(bad.sum())} {what} value(s), "
-                f"first on line {lines[i]}; this column must be complete")
+                f"first on line {lines[i]}; this column must be complete{cut}")
         # "no reading" is an empty cell; inf was read as one
         inf = np.flatnonzero(np.isinf(track[name])) if name in allow_nan else ()
         if len(inf):

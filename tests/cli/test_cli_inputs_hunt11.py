@@ -329,3 +329,14 @@ def test_names_in_words_and_units_after_a_space_are_columns(tmp_path, header):
     np.testing.assert_allclose(got["t"], [0.0, 1.0, 2.0] if t == "{}" else [0.0, 60.0, 120.0])
     np.testing.assert_allclose(got["lat"], [29.5, 29.6, 29.7])
     np.testing.assert_allclose(got["gravity"], [-10.0, -9.0, -8.0])
+
+
+def test_a_log_cut_short_on_its_last_line_says_so(tmp_path, refused):
+    """A log copied while still being written ends mid-line (``120,29.5``): the message
+    named only "column 'lon' has 1 missing or NaN value(s), first on line 4"."""
+    track = tmp_path / "t.csv"
+    track.write_text("t,lat,lon,gravity\n0,29.5,126.5,-10\n60,29.51,126.51,-9\n120,29.5")
+    refused(["match", "--map", "ryukyu", "--track", track, "--out", tmp_path / "r.json"],
+            f"track file {str(track)!r}, column 'lon' has 1 missing or NaN value(s), first on "
+            "line 4; this column must be complete; it is the last line, and only that one: "
+            "was the file cut short while being written?")
