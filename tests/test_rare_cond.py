@@ -45,6 +45,25 @@ def test_vmap_equals_the_loop_below_at_and_over_the_capacity(taken):
     assert np.all(np.asarray(batched)[~np.asarray(preds)] == np.asarray(xs)[~np.asarray(preds)])
 
 
+def test_batched_each_side_is_traced_once_more_than_alone():
+    # custom_vmap traces the one-run lax.cond (each side once); the batched rule then
+    # once more: the blocks run in one loop, not a branch per case (a 3-way switch held
+    # the true side twice and the false side three times: compile time)
+    traced = {"true": 0, "false": 0}
+
+    def doubled(x):
+        traced["true"] += 1
+        return 2.0 * x
+
+    def same(x):
+        traced["false"] += 1
+        return x
+
+    jax.jit(jax.vmap(lambda p, x: rare_cond(p, doubled, same, x, share=0.25))).lower(
+        jnp.zeros(8, bool), jnp.ones((8, 3)))
+    assert traced == {"true": 2, "false": 2}
+
+
 def test_one_run_is_lax_cond_and_compiles_once():
     traces = []
 
