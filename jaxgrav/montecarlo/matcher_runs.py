@@ -33,6 +33,7 @@ from jaxgrav.montecarlo.spec import (
     told_map_error,
     told_settings,
 )
+from jaxgrav.prepared import PreparedMap, as_grid, prepare_map
 from jaxgrav.scenarios import MatchingScenario, matching_scenario
 from jaxgrav.scenarios.paper_b import PaperBScenario, paper_b_scenario
 from jaxgrav.sim import DEG_ARC_M, track_error_m
@@ -278,11 +279,22 @@ def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=
 
 
 # ----------------------------------------------------------------- entropy, ICCP (B)
+def _paper_b_truth(grid, map_error):
+    """The field a paper-B run's readings sample: the map itself (its prepared bicubic
+    sampler when ``grid`` is a PreparedMap: the same values, its coefficients not
+    computed again), or, with a map error, the Grid the error is drawn on."""
+    if map_error is None and isinstance(grid, PreparedMap):
+        return grid.sampler("bicubic")
+    return as_grid(grid)
+
+
 def entropy_iccp_run(key, grid, scenario, entropy, iccp, map_error=None):
     """One paper-B run: simulate (:func:`~jaxgrav.match.entropy_iccp.paper_b_scenario`), match.
 
-    ``map_error`` as :func:`dense_run`: the readings' truth, drawn per run; the matchers
-    use ``grid``.
+    ``grid`` is a Grid or a :class:`~jaxgrav.prepared.PreparedMap` (what
+    :func:`paper_b_builder` passes: the map's spline coefficients computed once, outside
+    the runs' compiled program). ``map_error`` as :func:`dense_run`: the readings'
+    truth, drawn per run; the matchers use ``grid``.
 
     Returns
     -------
@@ -290,7 +302,7 @@ def entropy_iccp_run(key, grid, scenario, entropy, iccp, map_error=None):
         ``ins_err_m``, ``err_m`` (m), ``status`` (int32), ``score`` (mean squared
         misfit), ``rotation_deg`` (estimated heading correction).
     """
-    run = paper_b_scenario(key, grid, scenario, map_error)
+    run = paper_b_scenario(key, _paper_b_truth(grid, map_error), scenario, map_error)
     r = match_entropy_iccp(grid, run.ins_lat, run.ins_lon, run.readings, entropy, iccp)
     return _b_metrics(run, r)
 
@@ -298,13 +310,13 @@ def entropy_iccp_run(key, grid, scenario, entropy, iccp, map_error=None):
 def entropy_run(key, grid, scenario, entropy, map_error=None):
     """One paper-B run matched by the entropy coarse stage alone; as :func:`entropy_iccp_run`
     (``rotation_deg`` is 0: the stage only shifts the track)."""
-    run = paper_b_scenario(key, grid, scenario, map_error)
+    run = paper_b_scenario(key, _paper_b_truth(grid, map_error), scenario, map_error)
     return _b_metrics(run, match_entropy(grid, run.ins_lat, run.ins_lon, run.readings, entropy))
 
 
 def iccp_run(key, grid, scenario, iccp, map_error=None):
     """One paper-B run matched by ICCP alone from the INS track; as :func:`entropy_iccp_run`."""
-    run = paper_b_scenario(key, grid, scenario, map_error)
+    run = paper_b_scenario(key, _paper_b_truth(grid, map_error), scenario, map_error)
     return _b_metrics(run, match_iccp(grid, run.ins_lat, run.ins_lon, run.readings, iccp))
 
 
@@ -351,7 +363,12 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
     Returns
     -------
     MethodSpec
-        On a ``grid`` with missing (land) nodes its scenario's ``start_tries`` is
+        Its ``args`` start with the :class:`~jaxgrav.prepared.PreparedMap` of ``grid``
+        (the spline coefficients computed here, once: inside the runs' program they
+        were 22 of entropy+iccp's 346 fused kernels, compiled with every chunk
+        function; the runs are the same to the bit). On a ``grid`` with missing (land)
+        nodes its
+        scenario's ``start_tries`` is
         :data:`MISSING_MAP_START_TRIES` (each run's start and heading drawn again until
         its true track reads no missing node; ``readings_on_map`` per run), else 1.
     """
@@ -378,7 +395,7 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
                     drift_deg=drift, offset_min_deg=scen.offset_min_deg, noise_mgal=noise,
                     n_fixes=n, dt_s=scen.dt, rotation_deg=scen.rotation_deg,
                     **map_error_settings(map_error), **told_settings(told, source))
-    args = (grid, scen)
+    args = (prepare_map(grid), scen)  # the spline coefficients once, not in every chunk
     if stage != "iccp":
         ent = entropy_config_for(grid, reach_m, max_half_size=20)
         settings["entropy_half_size"] = ent.half_size
