@@ -17,6 +17,7 @@ particles' own weighted covariance (the regularised particle filter of Musso, Ou
 shrunk towards the mean so that the mean and covariance are kept (Liu & West 2001).
 """
 
+import itertools
 import math
 
 import jax
@@ -180,8 +181,10 @@ def particle_summary(log_w, x, extra_var=None):
     Parameters
     ----------
     log_w : Array, shape ``(N,)``
-    x : Array, shape ``(N, d)``
-        Particles (position error first).
+    x : Array, shape ``(N, d)``, or tuple of arrays, shapes ``(N, d_i)``
+        Particles (position error first); a tuple is taken as its parts joined along
+        the states (``d = Σ d_i``, the first part holding at least the two position
+        states), without forming the joined ``(N, d)`` array.
     extra_var : Array, shape ``(d,)``, optional
         Added to the variances (a Rao–Blackwellised filter's shared Kalman part).
 
@@ -191,12 +194,17 @@ def particle_summary(log_w, x, extra_var=None):
     p_pos : Array, shape ``(2, 2)``
     """
     w = jnp.exp(log_w)
-    mean = w @ x
-    dx = x - mean
-    var = w @ dx**2
+    means, variances, dx_pos = [], [], None
+    for part in (x if isinstance(x, tuple) else (x,)):
+        m = w @ part
+        dx = part - m
+        means.append(m)
+        variances.append(w @ dx**2)
+        dx_pos = dx[:, :2] if dx_pos is None else dx_pos
+    mean, var = (a[0] if len(a) == 1 else jnp.concatenate(a) for a in (means, variances))
     if extra_var is not None:
         var = var + extra_var
-    p_pos = (w[:, None] * dx[:, :2]).T @ dx[:, :2]
+    p_pos = (w[:, None] * dx_pos).T @ dx_pos
     return mean, jnp.sqrt(jnp.clip(var, 0.0, None)), 0.5 * (p_pos + p_pos.T)
 
 
@@ -209,8 +217,11 @@ def resample_regularised(keys, log_w, x, resampler, roughening, ess_threshold):
         For the resampling and for the regularisation.
     log_w : Array, shape ``(N,)``
         Normalised log-weights.
-    x : Array, shape ``(N, d)``
-        The particles (all the states that are copied and spread together).
+    x : Array, shape ``(N, d)``, or tuple of arrays, shapes ``(N, d_i)``
+        The particles (all the states that are copied and spread together); a tuple
+        is joined along the states (``d = Σ d_i``) inside the resampling branch only
+        and returned as a tuple of the same shapes (a Rao–Blackwellised filter's
+        positions and means: no ``(N, d)`` copy made at the steps that do not resample).
     resampler : callable
         ``(key, log_w) -> indices`` (:data:`RESAMPLERS`).
     roughening : float
@@ -220,28 +231,35 @@ def resample_regularised(keys, log_w, x, resampler, roughening, ess_threshold):
 
     Returns
     -------
-    x : Array, shape ``(N, d)``
+    x : Array, shape ``(N, d)``, or tuple of arrays
+        As given.
     log_w : Array, shape ``(N,)``
         Equal weights where resampled, else the inputs unchanged.
     """
-    n, d = x.shape
+    parts = x if isinstance(x, tuple) else (x,)
+    n, d = parts[0].shape[0], sum(a.shape[1] for a in parts)
+    ends = tuple(itertools.accumulate(a.shape[1] for a in parts))
     k_idx, k_rough = keys
     # one dtype for both branches (float32 particles with float64 weights or a NumPy
     # float64 bandwidth would make the branches differ, which lax.cond refuses)
-    dtype = jnp.result_type(x, log_w)
-    x, log_w = x.astype(dtype), log_w.astype(dtype)
+    dtype = jnp.result_type(*parts, log_w)
+    parts, log_w = tuple(a.astype(dtype) for a in parts), log_w.astype(dtype)
 
     def resampled(op):
-        k_idx, k_rough, log_w, x = op
+        k_idx, k_rough, log_w, parts = op
+        x = parts[0] if len(parts) == 1 else jnp.concatenate(parts, axis=1)
         mean, cov = weighted_moments(log_w, x)
         moved = roughen(k_rough, x[resampler(k_idx, log_w)], mean, cov,
-                        roughening * kernel_bandwidth(n, d))
-        return moved.astype(dtype), jnp.full_like(log_w, -jnp.log(n))
+                        roughening * kernel_bandwidth(n, d)).astype(dtype)
+        return (tuple(moved[:, e - a.shape[1]:e] for a, e in zip(parts, ends, strict=True)),
+                jnp.full_like(log_w, -jnp.log(n)))
 
     # a branch, so a single run skips the work when the weights are fine; under vmap
     # only the runs that resample do it (2-3 % of paper D's steps per run)
     do = effective_sample_size(log_w) < ess_threshold * n
-    return rare_cond(do, resampled, lambda op: (op[3], op[2]), (k_idx, k_rough, log_w, x))
+    out, log_w = rare_cond(do, resampled, lambda op: (op[3], op[2]),
+                           (k_idx, k_rough, log_w, parts))
+    return (out if isinstance(x, tuple) else out[0]), log_w
 
 
 def roughen(key, x, mean, cov, bandwidth):

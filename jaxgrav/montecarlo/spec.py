@@ -53,19 +53,20 @@ def cpu_options_for(kind):
     """XLA options on CPU of a method's runs (:attr:`MethodSpec.cpu_options`).
 
     :data:`~jaxgrav.xla_options.CPU_OPTIONS` (LLVM ``-O2``, XLA's elemental kernel
-    emitters), except the point-mass filter's (``pmf``, ``voyage-pmf``) and the voyages'
-    Rao–Blackwellised particle filter's (``voyage-rbpf``):
+    emitters), except the point-mass filter's (``pmf``, ``voyage-pmf``):
     :data:`~jaxgrav.xla_options.FUSION_EMITTER_OPTIONS` (``-O2``, XLA's fusion emitters),
-    since their runs were 28 % (``pmf``) and 65 % (``voyage-rbpf``) slower with the
-    elemental emitters (16 runs in one chunk, twice; ``python
-    benchmarks/montecarlo_scaling.py --compile-only --against emitters`` measures it).
-    ``voyage-rbpf`` is still 4–9 % slower with them (CPU time of 16 patrols, 2026-12-07).
-    The paper-D ``rbpf`` took the fusion emitters until 2026-12-07, when its predicted
-    readings became one dot (:func:`~jaxgrav.filters.rbpf`): with the elemental emitters
-    its 16 runs then took 3.2 s CPU against 4.2 s before with the fusion emitters, and
-    XLA compiled them in half the CPU time (5.2 against 10 s).
+    since its runs were 28 % slower with the elemental emitters (16 runs in one chunk,
+    twice; ``python benchmarks/montecarlo_scaling.py --compile-only --against emitters``
+    measures it). The Rao–Blackwellised particle filter took the fusion emitters too
+    until its runs stopped joining positions and means into one array at every step
+    (paper D's ``rbpf`` until 2026-12-07, ``voyage-rbpf`` until 2026-12-08): the
+    elemental emitters join a concatenation element by element, several times slower.
+    Since then ``voyage-rbpf``'s runs are as fast with them (half-hour voyages, 16 runs,
+    best of 3 process CPU 0.50 s against 0.54 s before with the fusion emitters, load
+    ~11; 50 patrols with a 3 mGal map error, compile included, 158 against 234 s at
+    load 12–14) and XLA compiles them in 26–36 % less CPU time (572 against 734 kernels).
     """
-    if kind == "voyage-rbpf" or kind.removeprefix("voyage-") == "pmf":
+    if kind.removeprefix("voyage-") == "pmf":
         return FUSION_EMITTER_OPTIONS
     return CPU_OPTIONS
 

@@ -26,6 +26,8 @@ from jaxgrav.filters import (
 from jaxgrav.filters.model import Dynamics
 from jaxgrav.filters.particles import (
     kernel_bandwidth,
+    particle_summary,
+    resample_regularised,
     roughen,
     standard_normal,
     weighted_moments,
@@ -343,3 +345,25 @@ def test_bad_settings_are_clear_errors():
     _, infos = run_filter(pf(16), _linear_field, dyn, x0, p0,
                           steps._replace(r=jnp.zeros(3)), key=jax.random.PRNGKey(0))
     assert np.all(np.asarray(infos.status)[[0, 2]] & STATUS_FILTER["covariance_failed"])
+
+
+@pytest.mark.parametrize("degenerate", [False, True])
+def test_particles_in_parts_are_the_joined_particles(degenerate):
+    # a Rao-Blackwellised filter passes positions and means apart (no joined copy at
+    # every step); the summary and the resampling are those of the joined array
+    k1, k2, k3 = jax.random.split(jax.random.PRNGKey(7), 3)
+    x = jax.random.normal(k1, (64, 5)) * jnp.arange(1.0, 6.0)
+    log_w = jax.nn.log_softmax((8.0 if degenerate else 0.1) * jax.random.normal(k2, (64,)))
+    extra = jnp.linspace(0.0, 1.0, 5)
+    for got, want in zip(particle_summary(log_w, (x[:, :2], x[:, 2:]), extra),
+                         particle_summary(log_w, x, extra), strict=True):
+        np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-12, atol=1e-12)
+    keys = tuple(jax.random.split(k3))
+    (pos, rest), lw = resample_regularised(keys, log_w, (x[:, :2], x[:, 2:]),
+                                           systematic_resample, 1.0, 0.5)
+    joined, lw_joined = resample_regularised(keys, log_w, x, systematic_resample, 1.0, 0.5)
+    assert pos.shape == (64, 2) and rest.shape == (64, 3)
+    np.testing.assert_allclose(np.asarray(jnp.concatenate([pos, rest], 1)),
+                               np.asarray(joined), rtol=1e-12, atol=1e-12)  # to rounding
+    np.testing.assert_array_equal(np.asarray(lw), np.asarray(lw_joined))
+    assert bool(jnp.all(lw == -jnp.log(64.0))) == degenerate
