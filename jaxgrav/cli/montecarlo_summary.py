@@ -43,7 +43,11 @@ def summarize(results, kind="matcher"):
         (count: left out of the statistics, counted as failures); with ``nees`` in
         ``results`` also ``nees`` (its statistics) and ``nees_nonfinite``; with
         ``bound_m`` (the PCRLB) its statistics and ``rms_to_bound``, the RMS error over
-        runs divided by the RMS bound (≥ 1 up to Monte Carlo noise; 1 is efficient).
+        runs divided by the RMS bound (≥ 1 up to Monte Carlo noise; 1 is efficient);
+        with ``implausible_blocks`` (a filter's blocks of innovations that fail their χ²
+        test, :func:`~jaxgrav.navigate.innovation_blocks`) ``implausible_rate`` (runs
+        with one) and ``implausible_failed_rate`` (that share among the failed runs; NaN
+        without any).
     """
     if kind not in FAILURE_RATIO:
         raise ValueError(f"kind must be one of {sorted(FAILURE_RATIO)}; got {kind!r}")
@@ -66,13 +70,14 @@ def summarize(results, kind="matcher"):
         status = status & ~1  # is "accepted", which flags nothing
     # a run whose true track read a missing map node (no clear start found) fails
     on_map = np.asarray(results.get("readings_on_map", np.ones(err.shape, bool)), bool)
+    failed = ~finite | (err > limit * ins) | ~on_map
     out = dict(
         runs=int(err.size),
         ins_err_m=stats(ins),
         err_m=stats(err),
         ratio=stats(ratio),
         failure_ratio=float(limit),
-        failure_rate=float(np.mean(~finite | (err > limit * ins) | ~on_map)),
+        failure_rate=float(np.mean(failed)),
         flagged_rate=float(np.mean(status != 0)),
         status_rates=status_rates(status),
         improved_rate=float(np.mean(finite & (err < ins * (1 - 1e-9)))),  # INS track: not
@@ -82,6 +87,11 @@ def summarize(results, kind="matcher"):
         nees = np.asarray(results["nees"], float)
         out["nees"] = stats(nees)
         out["nees_nonfinite"] = int((~np.isfinite(nees)).sum())
+    if "implausible_blocks" in results:
+        flagged = np.asarray(results["implausible_blocks"]) > 0
+        out["implausible_rate"] = float(np.mean(flagged))
+        out["implausible_failed_rate"] = (float(np.mean(flagged[failed])) if failed.any()
+                                          else float("nan"))
     if "bound_m" in results:
         bound = np.asarray(results["bound_m"], float)
         out["bound_m"] = stats(bound)
@@ -139,6 +149,13 @@ def format_summary(s, status_bits=None):
         rows.append("  flags raised (share of runs): " + "; ".join(
             f"{bit}" + (f" {short_label(names[bit])}" if bit in names else "")
             + f" {100 * r:.1f} %" for bit, r in rates.items()))
+    if "implausible_rate" in s:
+        failed = round(s["failure_rate"] * s["runs"])
+        rows.append(f"innovations implausible (a block of 60 readings fails chi-square, p < "
+                    f"1e-3; a consistent filter fails one block in 1000): "
+                    f"{100 * s['implausible_rate']:.1f} % of runs"
+                    + (f", {100 * s['implausible_failed_rate']:.0f} % of the {failed} failed "
+                       "runs" if failed else ""))
     bad = [f"{s[k]} {what}" for k, what in (("nonfinite", "without a finite error (failures)"),
                                            ("nees_nonfinite", "without a finite NEES"))
            if s.get(k)]

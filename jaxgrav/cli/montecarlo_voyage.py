@@ -80,26 +80,9 @@ def voyage_lines(results):
         parts.append("one whole hour, no second: the last / second hour ratio needs --hours 3 "
                      "or more, the hours from the second --hours 2")
     parts.append(f"NEES mean {vs['nees']:.2f} (median {vs['nees_median']:.2f}, 2 expected)")
-    lines = (f"hourly RMS (km) navigation: {_km(vs['hourly_rms_nav_m'])}; free INS: "
-             f"{_km(vs['hourly_rms_free_m'])}\n" + ", ".join(parts))
-    if "implausible_blocks" in results:
-        lines += "\n" + _flag_line(results)
-    return lines
+    return (f"hourly RMS (km) navigation: {_km(vs['hourly_rms_nav_m'])}; free INS: "
+            f"{_km(vs['hourly_rms_free_m'])}\n" + ", ".join(parts))
 
-
-def _flag_line(results):
-    """What the tightly coupled filter's innovations announce: the share of voyages with an
-    implausible block, and of the voyages the filter lost in the last hour."""
-    flagged = np.asarray(results["implausible_blocks"]) > 0
-    nav, free = np.asarray(results["err_m"], float), np.asarray(results["ins_err_m"], float)
-    lost = ~(nav <= free)  # worse than the free INS in the last hour (or non-finite)
-    line = (f"innovations implausible (a block of 60 readings fails chi-square, p < 1e-3, "
-            f"as navigate flags a log's rows; a consistent filter fails one block in 1000) in "
-            f"{100 * flagged.mean():.1f} % of voyages")
-    if lost.any():
-        line += (f"; {100 * flagged[lost].mean():.0f} % of the {lost.sum()} voyages worse "
-                 "than the free INS in the last hour")
-    return line
 
 
 
@@ -107,8 +90,6 @@ def voyage_attrs(results):
     """The voyage figures of :func:`~jaxgrav.navigate.voyage_summary` as NetCDF attributes
     (``summary_voyage_*``; the hourly lists as JSON text)."""
     vs = voyage_summary(results["hourly_err_m"], results["hourly_ins_err_m"], results["nees"])
-    if "implausible_blocks" in results:
-        vs["implausible_share"] = float(np.mean(np.asarray(results["implausible_blocks"]) > 0))
     return {f"summary_voyage_{k}": json.dumps(v) if isinstance(v, list) else v
             for k, v in vs.items()}
 

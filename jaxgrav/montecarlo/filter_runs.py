@@ -51,6 +51,7 @@ __all__ = [
 from jaxgrav.montecarlo.draws import scenario_draws
 from jaxgrav.montecarlo.matcher_runs import MISSING_MAP_START_TRIES
 from jaxgrav.montecarlo.spec import MethodSpec, check_settings, cpu_options_for
+from jaxgrav.navigate import implausible_block_count
 from jaxgrav.scenarios import (
     FilterScenario,
     filter_scenario,
@@ -105,6 +106,15 @@ def _with_bound(metrics, run, field, dynamics, steps, p0, meas, every):
                 **scenario_draws(run.truth.lat, run.truth.lon, run.ins_lat, run.ins_lon))
 
 
+def _flag_innovations(metrics, infos):
+    """``metrics`` plus ``implausible_blocks`` (blocks of the run's innovations that fail
+    :func:`~jaxgrav.navigate.innovation_blocks`' χ² test, the rule ``jaxgrav filter``
+    flags a log's rows with), its ``implausible_fit`` bit OR-ed into ``status``."""
+    blocks = implausible_block_count(infos.innovation, jnp.sqrt(infos.innovation_var))
+    status = metrics["status"] | jnp.where(blocks > 0, STATUS_FILTER["implausible_fit"], 0)
+    return dict(metrics, status=status.astype(jnp.int32), implausible_blocks=blocks)
+
+
 def _kalman_run(key, field, scenario, make, guard=False, map_error=None, told=None,
                 particles=False):
     run = filter_scenario(key, field, scenario, map_error)
@@ -116,8 +126,8 @@ def _kalman_run(key, field, scenario, make, guard=False, map_error=None, told=No
                           key=fkey)
     if guard:
         infos = guard_run(infos, dynamics, p0, GuardConfig())
-    return _with_bound(run_metrics(run, infos), run, field, dynamics, steps, p0, meas,
-                       scenario.reading_every)
+    return _with_bound(_flag_innovations(run_metrics(run, infos), infos), run, field, dynamics,
+                       steps, p0, meas, scenario.reading_every)
 
 
 def ukf_run(key, field, scenario, map_error=None, told=None):
@@ -140,8 +150,10 @@ def ukf_run(key, field, scenario, map_error=None, told=None):
     dict
         ``ins_err_m``, ``err_m`` (RMS position error over the second half of the
         run, m), ``status`` (OR of the steps' :data:`~jaxgrav.filters.STATUS_FILTER`
-        flags without ``no_reading``; int32), ``nees`` (mean position NEES over the
-        second half; 2 for a consistent filter), ``bound_m`` (the posterior
+        flags without ``no_reading``, with ``implausible_fit`` when a block of 60
+        innovations fails the χ² test of :func:`~jaxgrav.navigate.innovation_blocks`;
+        int32), ``implausible_blocks`` (the number of such blocks), ``nees`` (mean
+        position NEES over the second half; 2 for a consistent filter), ``bound_m`` (the posterior
         Cramér–Rao bound of the position error, :func:`~jaxgrav.filters.pcrlb` with the
         model the filter is told, RMS over the second half, m), ``readings_on_map``
         (bool: every reading finite, the true track read no missing map node) and the
@@ -222,7 +234,8 @@ def pmf_run(key, field, scenario, map_error=None, told=None):
     t = steps.z.shape[0]
     # the bound is of the 13-state model the other filters are told, not the PMF's grid
     bound_dyn, bound_steps, _, bound_p0, meas = _told_steps(run, scenario, told)
-    return _with_bound(run_metrics(run, jax.tree.map(lambda a: a[:t], infos)), run, field,
+    infos = jax.tree.map(lambda a: a[:t], infos)
+    return _with_bound(_flag_innovations(run_metrics(run, infos), infos), run, field,
                        bound_dyn, bound_steps, bound_p0, meas, every)
 
 

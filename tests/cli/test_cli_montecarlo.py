@@ -183,6 +183,8 @@ def test_montecarlo_filter_summary_uses_no_harm_bound(tmp_path, capsys):
         assert a["summary_failure_rate"] == pytest.approx(float(np.mean(ratio > 1.05)))
         _every_variable_described(ds)
         assert np.all(np.isfinite(ds["start_lat"])) and np.all(np.isfinite(ds["start_lon"]))
+        # the block test of the innovations, per run and summarised
+        assert a["summary_implausible_rate"] == float(np.mean(ds["implausible_blocks"] > 0))
 
 
 @pytest.mark.long
@@ -280,6 +282,23 @@ def test_summary_says_what_it_leaves_out_and_what_a_voyage_flags():
     assert summarize(loose, "voyage")["flagged_rate"] == pytest.approx(2 / 3)
     tight = {k: v for k, v in loose.items() if k != "fix_event"}  # filter flags: all count
     assert summarize(tight, "voyage")["flagged_rate"] == 1.0
+
+
+def test_summary_says_how_many_failed_runs_the_innovations_announce():
+    res = dict(ins_err_m=np.full(5, 300.0), err_m=np.array([90.0, 400, 500, 90, np.nan]),
+               status=np.zeros(5, np.int32), nees=np.full(5, 2.0),
+               implausible_blocks=np.array([0, 3, 0, 1, 2]))
+    s = summarize(res, "filter")  # failed: 400, 500 and the non-finite one
+    assert s["implausible_rate"] == pytest.approx(3 / 5)
+    assert s["implausible_failed_rate"] == pytest.approx(2 / 3)
+    assert ("innovations implausible (a block of 60 readings fails chi-square, p < 1e-3; a "
+            "consistent filter fails one block in 1000): 60.0 % of runs, 67 % of the 3 "
+            "failed runs") in format_summary(s)
+    none_failed = summarize(dict(res, err_m=np.full(5, 90.0)), "filter")
+    assert np.isnan(none_failed["implausible_failed_rate"])
+    assert format_summary(none_failed).endswith("60.0 % of runs")
+    assert "innovations" not in format_summary(summarize(
+        {k: v for k, v in res.items() if k != "implausible_blocks"}, "filter"))
 
 
 def test_summary_names_each_flag_raised_and_its_share():

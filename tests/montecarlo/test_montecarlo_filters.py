@@ -58,7 +58,8 @@ def test_every_filter_runs_in_the_monte_carlo_runner(kind):
     spec = montecarlo_methods.build(kind, n_fixes=N_FIXES)
     r = montecarlo.run(spec.fn, jax.random.key(1), 2, chunk=2, args=spec.args, progress=False)
     assert set(r) == {*montecarlo_methods.METRICS, "nees", "bound_m", "readings_on_map",
-                      *DRAW_ATTRS}
+                      "implausible_blocks", *DRAW_ATTRS}
+    assert r["implausible_blocks"].shape == (2,) and np.all(r["implausible_blocks"] >= 0)
     for k in ("ins_err_m", "err_m", "nees", "bound_m"):
         assert r[k].shape == (2,) and np.all(np.isfinite(r[k])) and np.all(r[k] > 0), (k, r)
     assert r["status"].dtype == np.int32
