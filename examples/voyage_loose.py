@@ -28,17 +28,20 @@ error and NEES.
 The loop's settings are :func:`jaxgrav.navigate.loose_config`'s (for the dense matcher
 :data:`jaxgrav.navigate.DENSE_LOOP`: 2 h segments every hour, the first after 2 h, the
 segment's error told given its offset, the filter's prior, the lattice's cell told, the
-segment's readings updating the state given the fix);
+segment's readings updating the state given the fix, a run of failed fixes widening the
+filter's covariance);
 ``--segment-error markov|linear|conditional``, ``--[no-]fix-prior``, ``--[no-]cell-error``,
 ``--n-fixes``, ``--stride``, ``--first-n-fixes`` (0: none), ``--fix-cov-scale`` and
 ``--[no-]shape-update`` (the segment's readings update the state given the fix,
-:mod:`jaxgrav.navigate.loose_shape`) change them (``--segment-error markov`` alone: the old
-loop, 1 h segments, × 3).
+:mod:`jaxgrav.navigate.loose_shape`), ``--reacquire-after`` (0: never) and
+``--reacquire-inflation`` (a run of failed fixes widens the covariance,
+:mod:`jaxgrav.navigate.loose_reacquire`) change them (``--segment-error markov`` alone: the
+old loop, 1 h segments, × 3).
 
 Run: ``python examples/voyage_loose.py [--runs 100] [--seed 0] [--sigma 3] [--length 10000]
 [--ins navigation|strategic] [--calibrate] [--smoke] [--matcher dense|chains|entropy+iccp]
 [--segment-error markov] [--no-fix-prior] [--no-cell-error] [--n-fixes 60 --stride 30]
-[--first-n-fixes 30] [--fix-cov-scale 1]``.
+[--first-n-fixes 30] [--fix-cov-scale 1] [--reacquire-after 0]``.
 """
 
 import argparse
@@ -203,6 +206,11 @@ def main(argv=None):
     p.add_argument("--fix-cov-scale", type=float, default=None)
     p.add_argument("--shape-update", action=argparse.BooleanOptionalAction, default=None,
                    help="dense: the segment's readings update the state given the fix")
+    p.add_argument("--reacquire-after", type=int, default=None,
+                   help="failed fixes in a row after which each widens the covariance "
+                   "(0: never; dense default 1)")
+    p.add_argument("--reacquire-inflation", type=float, default=None,
+                   help="the covariance's factor per such failure (dense default 16)")
     a = p.parse_args(argv)
     given = {"segment_error": a.segment_error, "fix_prior": a.fix_prior,
              "cell_error": a.cell_error, "n_fixes": a.n_fixes,
@@ -211,6 +219,10 @@ def main(argv=None):
     loop = {k: v for k, v in given.items() if v is not None}
     if a.first_n_fixes is not None:
         loop["first_n_fixes"] = a.first_n_fixes or None
+    if a.reacquire_after is not None:
+        loop["reacquire_after"] = a.reacquire_after or None
+    if a.reacquire_inflation is not None:
+        loop["reacquire_inflation"] = a.reacquire_inflation
     jax.config.update("jax_enable_x64", True)  # geodesy and 12 h of INS error in float64
     runs, hours = (2, 2.0) if a.smoke else (a.runs, 12.0)
     ins = INS_GRADES[a.ins]
@@ -236,7 +248,8 @@ def main(argv=None):
         seconds = time.perf_counter() - t0
         settings = {k: getattr(cfg, k) for k in ("segment_error", "fix_prior", "cell_error",
                                                  "n_fixes", "stride", "first_n_fixes",
-                                                 "fix_cov_scale", "shape_update")}
+                                                 "fix_cov_scale", "shape_update",
+                                                 "reacquire_after", "reacquire_inflation")}
         row = {"setting": name, "ins": a.ins, "matcher": a.matcher, "runs": runs, "hours": hours,
                "seed": a.seed, "map_error_mgal": sigma, **settings, **summarise(*out),
                "seconds": round(seconds, 1), "runs_per_s": round(runs / seconds, 2)}

@@ -18,7 +18,10 @@ reading every ``fix_every · dt`` seconds. What the loop does at each segment en
    (:data:`FIX_EVENTS`); a segment with a missing reading or off the map is not matched;
 5. with ``LooseConfig.shape_update``, the segment's readings then update the rest of the
    state given the fix's offset (:mod:`~jaxgrav.navigate.loose_shape`), and a fix whose
-   readings do not fit the segment at its offset is rejected.
+   readings do not fit the segment at its offset is rejected;
+6. with ``LooseConfig.reacquire_after``, a run of failed fixes (on the window's edge, or
+   not fitting the segment) widens the filter's covariance, so that the next window
+   reaches a truth the filter had lost (:mod:`~jaxgrav.navigate.loose_reacquire`).
 
 With sliding segments (``stride < n_fixes``) consecutive fixes share readings; their
 covariance is inflated by ``n_fixes / stride`` so the filter does not count them twice.
@@ -53,6 +56,7 @@ from jaxgrav.navigate.loose_match import (
     schuler_length_m,
     segment_error_covariance,
 )
+from jaxgrav.navigate.loose_reacquire import reacquire
 from jaxgrav.navigate.loose_shape import SHAPE_GATE_P, chi2_quantile, shape_update
 from jaxgrav.prepared import prepare_map
 from jaxgrav.sim.drift import apply_drift, rayleigh_quantile
@@ -266,8 +270,9 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     return res, reach, usable
 
 
-def _fix(cfg, tables, grid, ins, gravity, x, p, end):
-    """Match the segment ending at ``end`` and update the filter with the fix."""
+def _fix(cfg, tables, grid, ins, gravity, x, p, end, run):
+    """Match the segment ending at ``end`` and update the filter with the fix (``run``:
+    failed fixes in a row before it, :mod:`~jaxgrav.navigate.loose_reacquire`)."""
     h_mean = tables.h_mean
     res, reach, usable = fix_segment(cfg, tables, grid, ins, gravity, x, p, end)
     complete = end - tables.backward.shape[0] >= 0
@@ -291,11 +296,18 @@ def _fix(cfg, tables, grid, ins, gravity, x, p, end):
     if cfg.shape_update:  # a fix whose readings do not fit the matched segment is rejected
         lat, lon, g, v_e, v_n, _ = _segment(cfg, tables, ins, gravity, x, end)
         b = tables.backward[:, :4].reshape(lat.shape[0], cfg.fix_every, 4, -1).mean(1)
+        x_gated, p_gated = x_new, p_new
         x_new, p_new, shape_nis = shape_update(prepare_map(grid), cfg.matcher, lat, lon, g, v_e,
                                                v_n, b, h_mean, x, x_new, p_new, offset,
                                                _inflation(cfg), gated)
         fits = ~(shape_nis > chi2_quantile(SHAPE_GATE_P, lat.shape[0]))
         x_new, p_new = jnp.where(fits, x_new, x), jnp.where(fits, p_new, p)
+        if cfg.reacquire_after is not None and cfg.reacquire_skip_shape:
+            # the fix that ends a run of failures: tested, but if its readings fit it
+            # updates the filter by itself (the filter was off by more than it said: the
+            # linearised shape update from there is not to be trusted)
+            found = fits & (run >= cfg.reacquire_after)
+            x_new, p_new = jnp.where(found, x_gated, x_new), jnp.where(found, p_gated, p_new)
     event = jnp.select([~complete, ~usable, ~res.accepted, ~gated, ~fits], [1, 2, 3, 4, 5], 0)
     status = jnp.where(usable, res.status, 0)
     return x_new, p_new, (event, status, offset, r, reach, jnp.where(usable, nis, jnp.nan),
@@ -344,25 +356,26 @@ def navigate_loose(grid, voyage, config):
 
     def step(seg_tables):
         def body(carry, j):
-            x, p = carry
+            x, p, lost = carry
             xs, pos_cov = spread(tables, x, p)
             x_pred = tables.step_f @ x
             p_pred = tables.step_f @ p @ tables.step_f.T + tables.step_q
             end = (j + 1) * steps_between
             x_new, p_new, events = _fix(cfg, seg_tables, grid, ins_p, grav_p, x_pred, p_pred,
-                                        end)
-            return (x_new, p_new), (xs, pos_cov, events)
+                                        end, lost)
+            p_new, lost = reacquire(cfg, p_new, lost, events[0], events[1])
+            return (x_new, p_new, lost), (xs, pos_cov, events)
         return body
 
     # the first segment ends on the first segments' shorter span, then the full one
     n_first = first_segment_ends(cfg, n_seg)
-    carry, out = (x0, p0), []
+    carry, out = (x0, p0, jnp.zeros((), jnp.int32)), []
     for seg_tables, js in ((first_tables(cfg, tables) if n_first else None,
                             jnp.arange(n_first)), (tables, jnp.arange(n_first, n_seg))):
         if js.shape[0]:
             carry, o = jax.lax.scan(step(seg_tables), carry, js)
             out.append(o)
-    (x_end, p_end) = carry
+    x_end, p_end, _ = carry
     xs, pos_cov, events = jax.tree.map(lambda *a: jnp.concatenate(a), *out)
     xs = jnp.concatenate([xs.reshape(-1, x0.shape[0]), x_end[None]])[:n]
     pos_cov = jnp.concatenate([pos_cov.reshape(-1, 2, 2), p_end[None, :2, :2]])[:n]

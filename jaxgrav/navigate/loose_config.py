@@ -23,7 +23,7 @@ SEGMENT_ERRORS = ("markov", "linear", "conditional")
 
 DENSE_LOOP = {"segment_error": "conditional", "fix_prior": True, "n_fixes": 60, "stride": 30,
               "fix_cov_scale": 1.0, "cell_error": True, "first_n_fixes": None,
-              "shape_update": True}
+              "shape_update": True, "reacquire_after": 1, "reacquire_inflation": 16.0}
 """The dense matcher's loop settings of :func:`loose_config` (unless ``segment_error``
 is ``"markov"``): 2 h segments every hour (the first fix after 2 h), the segment's
 Eötvös and stretch errors told given its offset, the offsets weighed by the filter's
@@ -32,7 +32,11 @@ segment's readings updating the rest of the state given the fix (``shape_update`
 1000 patrols with the 3 mGal map error told the last hour went from 0.121 / 0.128 to
 0.099 / 0.083 of the free INS on seeds 0 / 1; on the perfect map from 0.058 / 0.077 to
 0.160 / 0.075, a few fast-drifting voyages whose segments the linear model does not fit
-left unaided, ``docs/voyages.md``). A first fix
+left unaided, ``docs/voyages.md``), and a fix on the window's edge or not fitting the
+segment widening the filter's covariance × 16 (``reacquire_after`` 1,
+``reacquire_inflation`` 16: :mod:`~jaxgrav.navigate.loose_reacquire`; those voyages
+found again: the perfect map's last hour 0.013 / 0.032 of the free INS on seeds 0 / 1,
+the 3 mGal rows 0.088 / 0.083). A first fix
 after 1 h (``first_n_fixes=30``) aids the second hour but, on 1000 patrols with the
 3 mGal map error, left the last hour and the share of voyages worse than the free INS
 worse (``docs/voyages.md``), so it is an option."""
@@ -119,6 +123,21 @@ class LooseConfig:
         readings do not fit the segment at its offset (``νᵀ S⁻¹ ν`` above the
         :data:`~jaxgrav.navigate.loose_shape.SHAPE_GATE_P` quantile of χ²(n)) is
         rejected (event 5).
+    reacquire_after : int or None
+        Static. After this many failed fixes in a row (on the window's edge or misfitting,
+        disagreeing with the filter, or not fitting the segment's shape:
+        :func:`~jaxgrav.navigate.loose_reacquire.lost_fix`), each further failure
+        multiplies the filter's covariance by ``reacquire_inflation`` (no wider than the
+        widest window the matcher can search), and the fix that ends such a run is not
+        followed by the shape update (with ``reacquire_skip_shape``):
+        :mod:`~jaxgrav.navigate.loose_reacquire`. None: never.
+    reacquire_inflation : float
+        The covariance's factor per failure of such a run (>= 1).
+    reacquire_skip_shape : bool
+        Static; with ``reacquire_after`` and ``shape_update``: the fix that ends a run of
+        failures updates the filter by itself — its readings must still pass the shape
+        test, but do not update the rest of the state (the filter was off by more than it
+        said, so the segment bends more than the linear model allows).
     first_n_fixes : int or None
         Static. Segment ends before ``n_fixes`` fixes exist match the last
         ``first_n_fixes`` (>= 5) instead, once that many exist (the first fix of 2 h
@@ -145,6 +164,9 @@ class LooseConfig:
     cell_error: bool = static_field(False)
     first_n_fixes: int | None = static_field(None)
     shape_update: bool = static_field(False)
+    reacquire_after: int | None = static_field(None)
+    reacquire_inflation: float = 16.0
+    reacquire_skip_shape: bool = static_field(True)
 
     def __post_init__(self):
         if not (isinstance(self.n_fixes, int) and self.n_fixes >= 5):
@@ -180,6 +202,14 @@ class LooseConfig:
         if first is not None and not (isinstance(first, int) and 5 <= first <= self.n_fixes):
             raise ValueError(f"first_n_fixes must be None or an integer from 5 to n_fixes = "
                              f"{self.n_fixes}; got {first!r}")
+        after = self.reacquire_after
+        if after is not None and not (isinstance(after, int) and after >= 1):
+            raise ValueError(f"reacquire_after must be None or an integer >= 1 (failed fixes "
+                             f"in a row); got {after!r}")
+        if isinstance(self.reacquire_inflation, int | float) and not (
+                self.reacquire_inflation >= 1.0):
+            raise ValueError(f"reacquire_inflation must be a number >= 1 (the covariance's "
+                             f"factor); got {self.reacquire_inflation!r}")
         if self.stride > self.n_fixes:
             raise ValueError(f"stride must be at most n_fixes = {self.n_fixes} (segments may "
                              f"overlap, not leave gaps); got {self.stride}")

@@ -23,7 +23,7 @@ from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import NAVIGATION_GRADE
 
 FIELDS = ("segment_error", "fix_prior", "n_fixes", "stride", "fix_cov_scale", "cell_error",
-          "first_n_fixes", "shape_update")
+          "first_n_fixes", "shape_update", "reacquire_after", "reacquire_inflation")
 
 
 def _loop(cfg):
@@ -35,7 +35,9 @@ def test_the_dense_default_is_the_conditional_loop_and_markov_the_old_one():
     old = loose_config(segment_error="markov")
     assert _loop(old) == {"segment_error": "markov", "fix_prior": False, "n_fixes": 30,
                           "stride": 30, "fix_cov_scale": 3.0, "cell_error": False,
-                          "first_n_fixes": None, "shape_update": False}
+                          "first_n_fixes": None, "shape_update": False,
+                          "reacquire_after": None, "reacquire_inflation": 16.0}
+    assert loose_config(reacquire_after=None).reacquire_after is None
     assert loose_config(fix_prior=False).fix_prior is False  # a change overrides
     assert loose_config(segment_error="linear").cell_error  # the rest of DENSE_LOOP
     assert loose_config(segment_error="linear").shape_update
