@@ -8,7 +8,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from jaxgrav.cli.inputs import whole_number
-from jaxgrav.cli.navigate_loose import add_dense_loop_options
+from jaxgrav.cli.navigate_loose import add_dense_loop_options, reacquire_options
 from jaxgrav.cli.voyage import MAX_HOURS
 from jaxgrav.montecarlo.voyage_runs import SERIES_EVERY_S, TOLD, voyage_tracks
 from jaxgrav.navigate import voyage_summary
@@ -20,8 +20,9 @@ __all__ = ["add_loop_options", "plot_voyage_tracks", "plot_voyages", "tracks_pat
 
 
 def add_loop_options(parser):
-    """``--segment-error``, ``--[no-]fix-prior``, ``--first-n-fixes`` and
-    ``--[no-]shape-update``: voyage-dense's loop settings."""
+    """``--segment-error``, ``--[no-]fix-prior``, ``--first-n-fixes``,
+    ``--[no-]shape-update``, ``--reacquire-after`` and ``--reacquire-inflation``:
+    voyage-dense's loop settings."""
     add_dense_loop_options(parser, "voyage-dense")
     parser.add_argument("--first-n-fixes", type=whole_number, default=None,
                         help="voyage-dense: the segment ends before a whole segment match the "
@@ -47,9 +48,12 @@ def voyage_options(args):
                               ("fix_prior", args.fix_prior),
                               ("first_n_fixes", args.first_n_fixes),
                               ("shape_update", args.shape_update)) if v is not None}
-    if loop and args.method != "voyage-dense":
-        raise ValueError(f"--segment-error, --fix-prior, --first-n-fixes and --shape-update are "
-                         f"options of --method voyage-dense; got --method {args.method}")
+    if (loop or args.reacquire_after is not None or args.reacquire_inflation is not None) and (
+            args.method != "voyage-dense"):
+        raise ValueError(f"--segment-error, --fix-prior, --first-n-fixes, --shape-update and "
+                         f"--reacquire-after / --reacquire-inflation are options of --method "
+                         f"voyage-dense; got --method {args.method}")
+    loop |= reacquire_options(args, never=0)
     return dict(map_error_told=told, map_error_order=args.map_error_order, hours=args.hours,
                 ins=INS_GRADES[args.ins or "navigation"], **loop)
 

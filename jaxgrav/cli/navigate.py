@@ -233,7 +233,8 @@ def _method_options(args):
         if getattr(args, name) is not None and args.method != "rbpf":
             raise ValueError(f"--{name} is for --method rbpf; got --method {args.method}")
     check_missing_option(args)
-    for name in ("segment_error", "fix_prior", "shape_update"):
+    for name in ("segment_error", "fix_prior", "shape_update", "reacquire_after",
+                 "reacquire_inflation"):
         if getattr(args, name) is not None and args.method != "dense":
             raise ValueError(f"--{name.replace('_', '-')} is for --method dense; got --method "
                              f"{args.method}")

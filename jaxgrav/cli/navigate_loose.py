@@ -8,12 +8,13 @@ fixed at :data:`~jaxgrav.navigate.CHAIN_REACH_M` about each fix.
 """
 
 import argparse
+import math
 import sys
 
 import jax
 import numpy as np
 
-from jaxgrav.cli.inputs import kept_columns
+from jaxgrav.cli.inputs import kept_columns, whole_number
 from jaxgrav.match.sizing import chain_grid
 from jaxgrav.navigate import FIX_EVENTS, SEGMENT_ERRORS, loose_config, navigate_loose
 from jaxgrav.prepared import prepare_map
@@ -21,13 +22,14 @@ from jaxgrav.scenarios import INS_GRADES
 from jaxgrav.tracks import write_track_csv
 
 __all__ = ["add_dense_loop_options", "check_fix_blocks", "first_fix_rows", "no_fix_warning",
-           "run_loose"]
+           "reacquire_options", "run_loose"]
 
 
 def add_dense_loop_options(parser, method):
-    """``--segment-error``, ``--[no-]fix-prior`` and ``--[no-]shape-update``: the dense loop's
-    settings, as ``navigate --method dense`` and ``montecarlo --method voyage-dense`` (the
-    ``method`` their help names) take them."""
+    """``--segment-error``, ``--[no-]fix-prior``, ``--[no-]shape-update``,
+    ``--reacquire-after`` and ``--reacquire-inflation``: the dense loop's settings, as
+    ``navigate --method dense`` and ``montecarlo --method voyage-dense`` (the ``method``
+    their help names) take them."""
     parser.add_argument("--segment-error", choices=SEGMENT_ERRORS, default=None,
                         help=f"{method}: how the loop tells the matcher the filter's own error: "
                              "conditional (default: the segment's Eotvos and stretch errors "
@@ -40,6 +42,35 @@ def add_dense_loop_options(parser, method):
                         help=f"{method}: after an accepted fix the segment's readings update the "
                              "rest of the INS error state given the fix (default on, off with "
                              "--segment-error markov)")
+    parser.add_argument("--reacquire-after", type=whole_number, default=None, metavar="N",
+                        help=f"{method}: after N fixes in a row rejected on the window's edge or "
+                             "for not fitting the segment, widen the filter's covariance by "
+                             "--reacquire-inflation at each further one until a fix is "
+                             "accepted (default 1; 0: never; never with --segment-error markov)")
+    parser.add_argument("--reacquire-inflation", type=float, default=None, metavar="X",
+                        help=f"{method}: the covariance's factor of --reacquire-after (>= 1, "
+                             "default 16; no wider than the matcher's widest window)")
+
+
+def reacquire_options(args, never=None):
+    """The re-acquisition settings of ``--reacquire-after`` / ``--reacquire-inflation`` as
+    :class:`~jaxgrav.navigate.LooseConfig` fields (only those given; ``--reacquire-after
+    0`` becomes ``never``: None for ``loose_config``, 0 for ``voyage_builder``).
+    ValueError naming the option for a negative count, an inflation below 1 or not
+    finite."""
+    out = {}
+    if args.reacquire_after is not None:
+        if args.reacquire_after < 0:
+            raise ValueError(f"--reacquire-after must be a number of failed fixes in a row, 1 "
+                             f"or more (0: never); got {args.reacquire_after}")
+        out["reacquire_after"] = args.reacquire_after or never
+    if args.reacquire_inflation is not None:
+        x = args.reacquire_inflation
+        if not (math.isfinite(x) and x >= 1.0):
+            raise ValueError(f"--reacquire-inflation must be a finite factor >= 1 (the "
+                             f"filter's covariance is multiplied by it); got {x!r}")
+        out["reacquire_inflation"] = float(x)
+    return out
 
 
 def run_loose(args, log, voyage, grid, track, steps, n_missing, n_off):
@@ -57,7 +88,7 @@ def run_loose(args, log, voyage, grid, track, steps, n_missing, n_off):
             if chains else None)
     loop = {k: getattr(args, k) for k in ("segment_error", "fix_prior", "first_n_fixes",
                                           "shape_update")
-            if getattr(args, k, None) is not None}
+            if getattr(args, k, None) is not None} | reacquire_options(args)
     cfg = loose_config(INS_GRADES[args.ins], args.map_error, args.map_error_length, args.noise,
                        matcher=args.method, grid=nav_map, step_m=step,
                        sigma_pos_m=args.sigma_pos, sigma_vel=args.sigma_vel,

@@ -160,7 +160,8 @@ def voyage_tracks(key, pm, grid, scenario, model, config):
 def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None, map_error=None,
                    map_error_told="state", map_error_order=None, hours=None,
                    ins=NAVIGATION_GRADE, segment_error=None, fix_prior=None,
-                   first_n_fixes=None, shape_update=None):
+                   first_n_fixes=None, shape_update=None, reacquire_after=None,
+                   reacquire_inflation=None):
     """The :class:`~jaxgrav.montecarlo.spec.MethodSpec` of a voyage method.
 
     Parameters
@@ -204,6 +205,11 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
         ``voyage-dense`` only: the segment's readings update the rest of the state given
         each accepted fix (:attr:`~jaxgrav.navigate.LooseConfig.shape_update`); default
         ``loose_config``'s.
+    reacquire_after, reacquire_inflation : int or None, float, optional
+        ``voyage-dense`` only: widen the filter's covariance after that many failed
+        fixes in a row (:attr:`~jaxgrav.navigate.LooseConfig.reacquire_after`; None
+        given here keeps ``loose_config``'s default, pass 0 for never) and by what
+        factor; default ``loose_config``'s.
 
     Returns
     -------
@@ -225,8 +231,12 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
     if map_error_order not in (None, 1, 2):
         raise ValueError(f"map_error_order must be 1 or 2; got {map_error_order!r}")
     loop = {k: v for k, v in (("segment_error", segment_error), ("fix_prior", fix_prior),
-                              ("first_n_fixes", first_n_fixes), ("shape_update", shape_update))
+                              ("first_n_fixes", first_n_fixes), ("shape_update", shape_update),
+                              ("reacquire_after", reacquire_after),
+                              ("reacquire_inflation", reacquire_inflation))
             if v is not None}
+    if loop.get("reacquire_after") == 0:
+        loop["reacquire_after"] = None  # never
     if loop and kind != "voyage-dense":
         raise ValueError(f"{' and '.join(loop)} are settings of voyage-dense's loop; got {kind}")
     if segment_error is not None and segment_error not in SEGMENT_ERRORS:
@@ -277,7 +287,8 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
     settings = dict(description=f"{scenario.hours:g} h patrols, navigated "
                     + (f"loosely coupled (hourly {name} fixes, {config.segment_error} segment "
                        "error" + (", the filter's prior" if config.fix_prior else "")
-                       + (", the segment's shape" if config.shape_update else "") + ")"
+                       + (", the segment's shape" if config.shape_update else "")
+                       + (", re-acquiring" if config.reacquire_after else "") + ")"
                        if loose else
                        f"tightly coupled ({name})"),
                     hours=scenario.hours, dt=scenario.dt, noise_mgal=scenario.noise_mgal,
@@ -286,7 +297,9 @@ def voyage_builder(grid=None, *, kind, drift_deg=None, noise=None, n_fixes=None,
                     **({"segment_error": config.segment_error, "fix_prior": int(config.fix_prior),
                         "fixes_per_segment": config.n_fixes, "fixes_between_ends": config.stride,
                         "first_segment_fixes": config.first_n_fixes or 0,
-                        "shape_update": int(config.shape_update)}
+                        "shape_update": int(config.shape_update),
+                        "reacquire_after": config.reacquire_after or 0,
+                        "reacquire_inflation": float(config.reacquire_inflation)}
                        if loose else {}))
     return MethodSpec(fn, (pm, grid, scenario, model, config), settings, bits,
                       cpu_options_for(kind))

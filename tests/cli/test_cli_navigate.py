@@ -170,6 +170,10 @@ def test_bad_logs_are_named(voyage_log, tmp_path, capsys, edit, message):
     (["--segment-error", "markov"], "--segment-error is for --method dense; got --method ukf"),
     (["--method", "chains", "--no-fix-prior"], "--fix-prior is for --method dense"),
     (["--method", "chains", "--no-shape-update"], "--shape-update is for --method dense"),
+    (["--method", "chains", "--reacquire-after", "2"], "--reacquire-after is for --method "
+                                                       "dense; got --method chains"),
+    (["--method", "dense", "--reacquire-inflation", "0.5"], "--reacquire-inflation must be a "
+                                                           "finite factor >= 1"),
     (["--method", "dense", "--first-n-fixes", "70"], "--first-n-fixes must be from 5 to "
                                                      "--n-fixes 60; got 70"),
     (["--method", "rbpf", "--particles", "1"], "--particles must be an integer >= 100"),

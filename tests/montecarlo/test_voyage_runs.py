@@ -124,14 +124,29 @@ def test_voyage_dense_runs_the_dense_loop_by_default_and_markov_on_request():
     assert voyage_builder(None, kind="voyage-dense").settings["shape_update"] == 1
     no_shape = voyage_builder(None, kind="voyage-dense", shape_update=False)
     assert not no_shape.args[-1].shape_update and no_shape.settings["shape_update"] == 0
+    # re-acquisition: on by default (after one failed fix, x 16), 0 turns it off
+    default = voyage_builder(None, kind="voyage-dense")
+    assert default.args[-1].reacquire_after == 1 and default.settings["reacquire_after"] == 1
+    never = voyage_builder(None, kind="voyage-dense", reacquire_after=0, reacquire_inflation=4.0)
+    assert never.args[-1].reacquire_after is None and never.settings["reacquire_after"] == 0
+    assert never.settings["reacquire_inflation"] == 4.0 and "re-acquiring" not in (
+        never.settings["description"])
 
 
 @pytest.mark.parametrize(("args", "message"), [
     (["--method", "voyage-ukf", "--segment-error", "markov"],
-     "--segment-error, --fix-prior, --first-n-fixes and --shape-update are options of --method "
-     "voyage-dense"),
+     "--segment-error, --fix-prior, --first-n-fixes, --shape-update and --reacquire-after / "
+     "--reacquire-inflation are options of --method voyage-dense"),
     (["--method", "voyage-ukf", "--no-shape-update"],
-     "--shape-update are options of --method voyage-dense"),
+     "--reacquire-inflation are options of --method voyage-dense"),
+    (["--method", "voyage-ukf", "--reacquire-after", "2"],
+     "--reacquire-inflation are options of --method voyage-dense"),
+    (["--method", "voyage-dense", "--reacquire-inflation", "nan"],
+     "--reacquire-inflation must be a finite factor >= 1 (the filter's covariance is "
+     "multiplied by it); got nan"),
+    (["--method", "voyage-dense", "--reacquire-after", "-2"],
+     "--reacquire-after must be a number of failed fixes in a row, 1 or more (0: never); "
+     "got -2"),
     (["--method", "dense", "--fix-prior"], "--fix-prior is an option of the voyage methods"),
 ])
 def test_cli_loop_options_are_voyage_dense_only(tmp_path, capsys, args, message):
@@ -164,6 +179,7 @@ def test_cli_voyage_dense_runs_its_loop(tmp_path, capsys, loop):
     assert ds.attrs["setting_fix_prior"] == (0 if markov else 1)
     assert ds.attrs["setting_first_segment_fixes"] == (30 if "30" in loop else 0)
     assert ds.attrs["setting_shape_update"] == (0 if markov else 1)
+    assert ds.attrs["setting_reacquire_after"] == (0 if markov else 1)
     ds.close()
 
 
