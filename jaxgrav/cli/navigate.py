@@ -42,7 +42,7 @@ with a growing σ.
 The default is ``--method ukf``: it aids from the first reading and predicts through
 gaps. On the documented 12 h patrols with a 3 mGal map error (``docs/voyages.md``, 1000
 patrols, seeds 0 / 1) it ends the last hour at 0.105 / 0.121 × the free INS's error;
-``--method dense`` ends it at 0.099 / 0.083 and holds the error flat from hour to hour,
+``--method dense`` ends it at 0.088 / 0.083 and holds the error flat from hour to hour,
 but makes its first fix only after 2 h (``--first-n-fixes 30``: 1 h) and needs every row.
 
 ``--method ukf|ekf|gsf|rbpf|pmf`` (tightly coupled, :func:`jaxgrav.navigate.navigate_tight`):
