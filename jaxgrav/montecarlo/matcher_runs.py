@@ -57,9 +57,8 @@ __all__ = [
 
 
 MISSING_MAP_START_TRIES = 16
-"""Random starts (true tracks) a run tries on a map with missing nodes: the
-``start_tries`` the builders of paper A's, B's and D's methods set then
-(:func:`~jaxgrav.scenarios.paper_a.first_clear_draw`)."""
+"""Random starts (true tracks) a run tries on a map with missing nodes: the builders' (A, B,
+D) ``start_tries`` then (:func:`~jaxgrav.scenarios.paper_a.first_clear_draw`)."""
 
 
 # ------------------------------------------------------------ metrics of every matcher
@@ -280,9 +279,8 @@ def chains_builder(grid, *, drift_deg=None, noise=None, n_fixes=None, map_error=
 
 # ----------------------------------------------------------------- entropy, ICCP (B)
 def _paper_b_truth(grid, map_error):
-    """The field a paper-B run's readings sample: the map itself (its prepared bicubic
-    sampler when ``grid`` is a PreparedMap: the same values, its coefficients not
-    computed again), or, with a map error, the Grid the error is drawn on."""
+    """The field a paper-B run's readings sample: the map (a PreparedMap's bicubic
+    sampler, not prepared again) or, with a map error, the Grid the error is drawn on."""
     if map_error is None and isinstance(grid, PreparedMap):
         return grid.sampler("bicubic")
     return as_grid(grid)
@@ -291,10 +289,8 @@ def _paper_b_truth(grid, map_error):
 def entropy_iccp_run(key, grid, scenario, entropy, iccp, map_error=None):
     """One paper-B run: simulate (:func:`~jaxgrav.match.entropy_iccp.paper_b_scenario`), match.
 
-    ``grid`` is a Grid or a :class:`~jaxgrav.prepared.PreparedMap` (what
-    :func:`paper_b_builder` passes: the map's spline coefficients computed once, outside
-    the runs' compiled program). ``map_error`` as :func:`dense_run`: the readings'
-    truth, drawn per run; the matchers use ``grid``.
+    ``grid``: a Grid or the PreparedMap :func:`paper_b_builder` passes. ``map_error`` as
+    :func:`dense_run`: the readings' truth, drawn per run; the matchers use ``grid``.
 
     Returns
     -------
@@ -364,13 +360,10 @@ def paper_b_builder(grid, *, stage="entropy+iccp", drift_deg=None, noise=None, n
     -------
     MethodSpec
         Its ``args`` start with the :class:`~jaxgrav.prepared.PreparedMap` of ``grid``
-        (the spline coefficients computed here, once: inside the runs' program they
-        were 22 of entropy+iccp's 346 fused kernels, compiled with every chunk
-        function; the runs are the same to the bit). On a ``grid`` with missing (land)
-        nodes its
-        scenario's ``start_tries`` is
-        :data:`MISSING_MAP_START_TRIES` (each run's start and heading drawn again until
-        its true track reads no missing node; ``readings_on_map`` per run), else 1.
+        (spline coefficients computed once, not in every chunk's program: 22 of
+        entropy+iccp's 346 kernels). On a ``grid`` with missing nodes its scenario's
+        ``start_tries`` is :data:`MISSING_MAP_START_TRIES` (a run's start and heading
+        drawn until its track reads no missing node; ``readings_on_map``), else 1.
     """
     fn, label = _B_RUNS[stage]
     grid = default_grid() if grid is None else grid
