@@ -21,12 +21,12 @@ the point-mass filter's runs, 28 % slower (1.70 → 2.19 s for 16 of paper D's r
 twice) and the Rao–Blackwellised particle filter's, 65 % slower (16 patrols; since its
 predicted readings are one product, 2026-12-07, paper D's RBPF runs faster with the
 elemental emitters; since its steps no longer join positions and means into one array,
-2026-12-08, the voyages' RBPF runs as fast with them).
+2026-12-08, the voyages' RBPF is 16 % slower with them on 12 h patrols).
 
 So :data:`CPU_OPTIONS` (``-O2``, elemental emitters) is what jaxgrav compiles with on
 CPU where it compiles a program itself: the Monte Carlo runner
-(:func:`jaxgrav.montecarlo.run`; the point-mass filter's methods ask for
-:data:`FUSION_EMITTER_OPTIONS`,
+(:func:`jaxgrav.montecarlo.run`; the point-mass filter's methods and ``voyage-rbpf``
+ask for :data:`FUSION_EMITTER_OPTIONS`,
 :func:`jaxgrav.montecarlo.spec.cpu_options_for`) and the command line's programs
 (:mod:`jaxgrav.executables`; one command's run is short next to its compile, so
 :data:`CPU_OPTIONS` is used there for every method). Other platforms keep XLA's
@@ -64,8 +64,9 @@ CPU_OPTIONS = (("xla_backend_optimization_level", 2), ("xla_cpu_use_fusion_emitt
 LLVM ``-O2`` and XLA's elemental kernel emitters."""
 
 FUSION_EMITTER_OPTIONS = (("xla_backend_optimization_level", 2),)
-"""LLVM ``-O2`` with XLA's (default) MLIR fusion emitters, for the point-mass filter,
-whose runs are slower with the elemental emitters."""
+"""LLVM ``-O2`` with XLA's (default) MLIR fusion emitters, for the point-mass and the
+voyages' Rao–Blackwellised particle filters, whose runs are slower with the elemental
+emitters."""
 
 XLA_DEFAULTS = ()
 """No options: XLA's own defaults (``-O3``, fusion emitters), for a program measured to

@@ -53,20 +53,23 @@ def cpu_options_for(kind):
     """XLA options on CPU of a method's runs (:attr:`MethodSpec.cpu_options`).
 
     :data:`~jaxgrav.xla_options.CPU_OPTIONS` (LLVM ``-O2``, XLA's elemental kernel
-    emitters), except the point-mass filter's (``pmf``, ``voyage-pmf``):
+    emitters), except the point-mass filter's (``pmf``, ``voyage-pmf``) and the voyages'
+    Rao–Blackwellised particle filter's (``voyage-rbpf``):
     :data:`~jaxgrav.xla_options.FUSION_EMITTER_OPTIONS` (``-O2``, XLA's fusion emitters),
-    since its runs were 28 % slower with the elemental emitters (16 runs in one chunk,
-    twice; ``python benchmarks/montecarlo_scaling.py --compile-only --against emitters``
-    measures it). The Rao–Blackwellised particle filter took the fusion emitters too
-    until its runs stopped joining positions and means into one array at every step
-    (paper D's ``rbpf`` until 2026-12-07, ``voyage-rbpf`` until 2026-12-08): the
-    elemental emitters join a concatenation element by element, several times slower.
-    Since then ``voyage-rbpf``'s runs are as fast with them (half-hour voyages, 16 runs,
-    best of 3 process CPU 0.50 s against 0.54 s before with the fusion emitters, load
-    ~11; 50 patrols with a 3 mGal map error, compile included, 158 against 234 s at
-    load 12–14) and XLA compiles them in 26–36 % less CPU time (572 against 734 kernels).
+    since their runs were 28 % (``pmf``) and 65 % (``voyage-rbpf``) slower with the
+    elemental emitters (16 runs in one chunk, twice; ``python
+    benchmarks/montecarlo_scaling.py --compile-only --against emitters`` measures it).
+    Since ``voyage-rbpf``'s steps stopped joining positions and means into one array
+    (2026-12-08) the gap is smaller: 16 patrols of 12 h, 7.68 s with the elemental
+    emitters against 6.44 s with the fusion emitters, compile 8.54 against 8.94 s (load
+    ~1; half-hour voyages at load ~11 had shown 0.50 against 0.54 s CPU the other way),
+    so it keeps the fusion emitters. The paper-D ``rbpf`` took the fusion emitters until
+    2026-12-07, when its predicted readings became one dot
+    (:func:`~jaxgrav.filters.rbpf`): with the elemental emitters its 16 runs then took
+    3.2 s CPU against 4.2 s before with the fusion emitters, and XLA compiled them in half
+    the CPU time (5.2 against 10 s).
     """
-    if kind.removeprefix("voyage-") == "pmf":
+    if kind == "voyage-rbpf" or kind.removeprefix("voyage-") == "pmf":
         return FUSION_EMITTER_OPTIONS
     return CPU_OPTIONS
 
