@@ -50,6 +50,7 @@ from jaxgrav.navigate import (
     TIGHT_METHODS,
     TightConfig,
     hourly_rms,
+    loose_config,
     navigate_tight,
     voyage_bound,
     voyage_errors,
@@ -74,8 +75,9 @@ def _one(pm, grid, key, scenario, model, config, bound):
     used = jnp.mean((res.status == 0) & jnp.isfinite(voyage.gravity))  # status 0: updated
     series = (err.nav_m[::EVERY], err.free_m[::EVERY], sigma[::EVERY])
     # the bound's RMS per hour (its mean square over the hour, as hourly_rms of an error)
+    # (without: a placeholder of one value; a zero-size output breaks lax.map's batches)
     bound_h = (hourly_rms(voyage_bound(pm, voyage, config).position_rms, scenario.dt)
-               if bound else jnp.zeros(0))
+               if bound else jnp.zeros(1))
     return (hourly_rms(err.nav_m, scenario.dt), hourly_rms(err.free_m, scenario.dt),
             err.nees.mean(), used, series, bound_h)
 
@@ -121,11 +123,18 @@ def tracks_figure(grid, scenario, model, config, key, path, title, force):
     save_figure(fig, path, force=force)
 
 
-def config_for(setting, ins, model, method, order, **pmf):
-    """The filter of one setting (see the module notes); ``pmf``: TightConfig's pmf_* fields."""
+def config_for(setting, ins, model, method, order, reacquire=None, **pmf):
+    """The filter of one setting (see the module notes); ``pmf``: TightConfig's pmf_* fields;
+    ``reacquire``: None, or a dict of TightConfig's ``reacquire_*`` settings (the loop's
+    dense matcher told the setting's map error, its fix not weighed by the filter's prior)."""
     cfg = TightConfig(ins=ins, method=method, **pmf)
-    if setting in ("map error, told", "map error, told, Eötvös velocity ignored"):
+    told = setting in ("map error, told", "map error, told, Eötvös velocity ignored")
+    if told:
         cfg = dataclasses.replace(cfg, map_error=matched_state(model, order))
+    if reacquire is not None:
+        loop = loose_config(ins, float(model.sigma) if told else 0.0, float(model.length_m),
+                            cfg.noise_mgal, fix_prior=False)
+        cfg = dataclasses.replace(cfg, reacquire=loop, **reacquire)
     if setting == "map error, told, Eötvös velocity ignored":
         cfg = dataclasses.replace(cfg, eotvos_velocity=False)
     return cfg
@@ -152,6 +161,16 @@ def main(argv=None):
                    help="the posterior Cramér–Rao bound along each voyage beside the filter "
                         "(settings 'perfect map' and 'map error, told')")
     p.add_argument("--smoke", action="store_true", help="2 voyages of 2 h")
+    p.add_argument("--reacquire", action="store_true",
+                   help="ukf/ekf: check the filter every hour with the loop's dense matcher over "
+                        "the last 2 h and reset it to the fix where it is lost")
+    p.add_argument("--reacquire-sigma", type=float, nargs="+", default=None,
+                   help="--reacquire: the position sigma (m) opened for each stage's window "
+                        "(default: TightConfig's)")
+    p.add_argument("--reacquire-gate", type=float, default=None,
+                   help="--reacquire: chi2(2) above which a fix resets the filter")
+    p.add_argument("--reacquire-ratio", type=float, default=None,
+                   help="--reacquire: filter sigma over fix sigma above which a fix resets it")
     p.add_argument("--pmf-cell", type=float, default=100.0,
                    help="--method pmf: the (first) cell size, m (default 100)")
     p.add_argument("--pmf-span", type=float, default=4.0,
@@ -164,17 +183,26 @@ def main(argv=None):
     scenario = voyage_preset("patrol-12h", ins=ins, hours=hours)
     keys = jax.random.split(jax.random.key(a.seed), runs)
     model = map_error(a.sigma, a.length)
+    reacquire = None
+    if a.reacquire:
+        reacquire = {k: v for k, v in (
+            ("reacquire_sigma_m", None if a.reacquire_sigma is None else tuple(a.reacquire_sigma)),
+            ("reacquire_gate", a.reacquire_gate), ("reacquire_ratio", a.reacquire_ratio))
+            if v is not None}
     rows = {}
     for setting in a.settings:
         truth = None if setting == "perfect map" else model
-        cfg = config_for(setting, ins, model, a.method, a.order, pmf_cell_m=a.pmf_cell,
-                         pmf_span=a.pmf_span)
+        cfg = config_for(setting, ins, model, a.method, a.order, reacquire,
+                         pmf_cell_m=a.pmf_cell, pmf_span=a.pmf_span)
         t0 = time.perf_counter()
         bound = a.bound and setting in ("perfect map", "map error, told")
         nav, free, nees, used, series, bound_h = run(grid, scenario, truth, cfg, keys,
                                                      bound=bound)
         seconds = time.perf_counter() - t0
         row = {"setting": setting, "method": a.method, "ins": a.ins, "runs": runs,
+               **({"reacquire": {k: np.asarray(getattr(cfg, k)).tolist() for k in (
+                   "reacquire_sigma_m", "reacquire_sigma_vel", "reacquire_gate",
+                   "reacquire_ratio")}} if a.reacquire else {}),
                "hours": hours, "map_error_mgal": 0.0 if truth is None else a.sigma,
                "map_error_length_m": a.length, "order": a.order,
                **({"pmf_cell_m": a.pmf_cell, "pmf_span": a.pmf_span} if a.method == "pmf"
