@@ -44,6 +44,7 @@ from jaxgrav.navigate.tight import (
     navigate_tight,
     voyage_bound,
 )
+from jaxgrav.navigate.tight_reacquire import REACQUIRE_EVENTS, Reacquisition
 
 __all__ = [
     "CHAIN_REACH_M",
@@ -51,12 +52,14 @@ __all__ = [
     "FIX_EVENTS",
     "INNOVATION_BLOCK",
     "LOOSE_MATCHERS",
+    "REACQUIRE_EVENTS",
     "SEGMENT_ERRORS",
     "TIGHT_METHODS",
     "ErrorKFTables",
     "InnovationBlocks",
     "LooseConfig",
     "LooseResult",
+    "Reacquisition",
     "TightConfig",
     "TightResult",
     "VoyageErrors",
