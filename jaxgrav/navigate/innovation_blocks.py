@@ -67,7 +67,12 @@ def innovation_blocks(innovation, innovation_sigma, block=INNOVATION_BLOCK):
     -------
     InnovationBlocks
     """
+    if not (isinstance(block, int) and block >= 1):
+        raise ValueError(f"block must be a whole number of readings >= 1; got {block!r}")
     nu, s = jnp.asarray(innovation), jnp.asarray(innovation_sigma)
+    if nu.ndim != 1 or s.shape != nu.shape:
+        raise ValueError(f"innovation and innovation_sigma must be 1-D of one length; got "
+                         f"shapes {nu.shape} and {s.shape}")
     n = nu.shape[0]
     slots = -(-n // block)
     used = jnp.isfinite(nu) & jnp.isfinite(s) & (s > 0)

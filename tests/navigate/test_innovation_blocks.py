@@ -81,3 +81,10 @@ def test_traced_once_and_vmap_equals_the_loop():
     assert len(traces) == 1  # one trace for every run of the same length
     np.testing.assert_array_equal(np.asarray(jax.vmap(count)(nu, s)), looped)
     assert min(looped) >= 1
+
+
+def test_bad_arguments_are_named():
+    with pytest.raises(ValueError, match="block must be a whole number of readings >= 1; got 0"):
+        innovation_blocks(np.ones(4), np.ones(4), 0)
+    with pytest.raises(ValueError, match=r"1-D of one length; got shapes \(4,\) and \(3,\)"):
+        innovation_blocks(np.ones(4), np.ones(3))
