@@ -64,8 +64,8 @@ from jaxgrav.sim.ins import initial_covariance
 from jaxgrav.sim.trajectory import Track
 
 __all__ = ["CHAIN_REACH_M", "FIX_EVENTS", "LOOSE_MATCHERS", "LooseConfig", "LooseResult",
-           "eotvos_sigma", "first_segment_ends", "first_tables", "fix_segment", "less_cell",
-           "loose_config", "navigate_loose"]
+           "corrected_segment", "eotvos_sigma", "first_segment_ends", "first_tables",
+           "fix_segment", "less_cell", "loose_config", "navigate_loose"]
 
 FIX_EVENTS = {
     0: "accepted",
@@ -133,9 +133,10 @@ def _blocks(a, m):
     return jnp.mean(a.reshape(-1, m), axis=1)
 
 
-def _segment(cfg, tables, ins, gravity, x, end):
-    """The corrected segment ending at INS step ``end``: fix positions and readings (the
-    segment spans ``tables.backward``'s steps)."""
+def corrected_segment(cfg, tables, ins, gravity, x, end):
+    """The corrected segment ending at INS step ``end``: fix positions, Eötvös-corrected
+    readings and velocities (block means of ``cfg.fix_every`` steps; the segment spans
+    ``tables.backward``'s steps), and whether the segment is complete."""
     w = tables.backward.shape[0]
     start = jnp.maximum(end - w, 0)
     take = lambda a: jax.lax.dynamic_slice_in_dim(a, start, w)  # noqa: E731
@@ -241,7 +242,7 @@ def fix_segment(config, tables, grid, ins, gravity, x, p, end):
     """
     cfg = config
     h_mean = tables.h_mean
-    lat, lon, g, v_e, v_n, complete = _segment(cfg, tables, ins, gravity, x, end)
+    lat, lon, g, v_e, v_n, complete = corrected_segment(cfg, tables, ins, gravity, x, end)
     sigma = largest_sigma(h_mean @ p @ h_mean.T)  # closed form: no LAPACK call
     reach = rayleigh_quantile(sigma, cfg.window_p)
     # bilinear: NaN exactly where bicubic is (off the map, a cell with a missing corner)
@@ -294,7 +295,7 @@ def _fix(cfg, tables, grid, ins, gravity, x, p, end, run):
     x_new, p_new = jnp.where(gated, x_new, x), jnp.where(gated, p_new, p)
     shape_nis, fits = jnp.full_like(nis, jnp.nan), jnp.asarray(True)
     if cfg.shape_update:  # a fix whose readings do not fit the matched segment is rejected
-        lat, lon, g, v_e, v_n, _ = _segment(cfg, tables, ins, gravity, x, end)
+        lat, lon, g, v_e, v_n, _ = corrected_segment(cfg, tables, ins, gravity, x, end)
         b = tables.backward[:, :4].reshape(lat.shape[0], cfg.fix_every, 4, -1).mean(1)
         x_gated, p_gated = x_new, p_new
         x_new, p_new, shape_nis = shape_update(prepare_map(grid), cfg.matcher, lat, lon, g, v_e,

@@ -44,12 +44,10 @@ import jax.numpy as jnp
 
 from jaxgrav.filters.model import FilterState, prepare_field
 from jaxgrav.filters.precision import in_update_precision
-from jaxgrav.geodesy import eotvos
 from jaxgrav.navigate.error_kf import error_kf_tables, fix_update, innovation_nis
-from jaxgrav.navigate.loose import fix_segment, less_cell
+from jaxgrav.navigate.loose import corrected_segment, fix_segment, less_cell
 from jaxgrav.navigate.loose_shape import shape_update
 from jaxgrav.prepared import prepare_map
-from jaxgrav.sim.drift import apply_drift
 from jaxgrav.sim.trajectory import Track
 
 __all__ = ["REACQUIRE_EVENTS", "Reacquisition", "open_covariance", "run_reacquiring"]
@@ -119,19 +117,6 @@ def _pad(a, n, fill=None):
     """``a`` padded along its first axis to ``n`` rows (its last row, or ``fill``)."""
     tail = a[-1:] if fill is None else jnp.full((1, *a.shape[1:]), fill, a.dtype)
     return jnp.concatenate([a, jnp.repeat(tail, n - a.shape[0], axis=0)])
-
-
-def _corrected_segment(lc, tables, ins, gravity, x, end):
-    """The segment of ``tables.backward``'s span ending at ``end``, corrected with ``x``, as
-    the loop's fixes: positions, Eötvös-corrected readings, velocities, block means of
-    ``fix_every`` steps."""
-    w = tables.backward.shape[0]
-    take = lambda a: jax.lax.dynamic_slice_in_dim(a, jnp.maximum(end - w, 0), w)  # noqa: E731
-    err = jnp.einsum("kij,j->ki", tables.backward, x)
-    lat, lon = apply_drift(take(ins.lat), take(ins.lon), -err[:, 0], -err[:, 1])
-    v_e, v_n = take(ins.v_east) - err[:, 3], take(ins.v_north) - err[:, 2]
-    g = take(gravity) + eotvos(lat, v_e, v_n)
-    return tuple(jnp.mean(a.reshape(-1, lc.fix_every), axis=1) for a in (lat, lon, g, v_e, v_n))
 
 
 def run_reacquiring(filt, grid, dynamics, x0, p0, steps, ins, gravity, loose, *, gate, ratio,
@@ -221,7 +206,7 @@ def run_reacquiring(filt, grid, dynamics, x0, p0, steps, ins, gravity, loose, *,
         x_open = x.at[13:].set(x0[13:])
         x_new, p_new, _ = fix_update(x_open, opened, nu, r, h_full, reset)
         if lc.shape_update:  # the segment's readings given the fix: velocity, tilt, bias
-            lat, lon, g, v_e, v_n = _corrected_segment(lc, tables, ins_p, grav_p, x[:13], end)
+            lat, lon, g, v_e, v_n, _ = corrected_segment(lc, tables, ins_p, grav_p, x[:13], end)
             b = tables.backward[:, :4].reshape(lat.shape[0], lc.fix_every, 4, -1).mean(1)
             x13, p13, _ = shape_update(grid, lc.matcher, lat, lon,
                                        jnp.where(jnp.isfinite(g), g, 0.0), v_e, v_n, b,

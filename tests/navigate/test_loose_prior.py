@@ -22,7 +22,7 @@ from jaxgrav.navigate import (
     voyage_errors,
 )
 from jaxgrav.navigate.error_kf import posterior_update
-from jaxgrav.navigate.loose import _segment
+from jaxgrav.navigate.loose import corrected_segment
 from jaxgrav.navigate.loose_match import segment_error_covariance
 from jaxgrav.prepared import prepare_map
 from jaxgrav.scenarios import NAVIGATION_GRADE
@@ -140,10 +140,10 @@ def test_the_segment_error_covariance_is_the_eotvos_error_of_the_state_on_a_flat
     x0 = jnp.zeros(13)
 
     def readings(x):
-        return _segment(cfg, tables, ins, jnp.zeros(w + 1), x, w)[2]
+        return corrected_segment(cfg, tables, ins, jnp.zeros(w + 1), x, w)[2]
 
     jac = jax.jacfwd(readings)(x0)
-    lat_f, lon_f, _, v_e, v_n, _ = _segment(cfg, tables, ins, jnp.zeros(w + 1), x0, w)
+    lat_f, lon_f, _, v_e, v_n, _ = corrected_segment(cfg, tables, ins, jnp.zeros(w + 1), x0, w)
     b = tables.backward[:, :4].reshape(n_fix, every, 4, -1).mean(1)
     c, none = segment_error_covariance(prepare_map(flat), lat_f, lon_f, v_e, v_n, b,
                                        tables.h_mean, p)
